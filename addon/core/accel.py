@@ -1,0 +1,5 @@
+"""Optional numba kernels (placeholder until implemented)."""
+
+
+def available():
+    return False

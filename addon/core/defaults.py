@@ -1,0 +1,55 @@
+"""Every default of the project in one place: the paper scenario, ground truth, GA sizes.
+
+Units: metres, kilograms, seconds. World Z is up (as in Blender).
+"""
+import math
+
+GRAVITY = (0.0, 0.0, -9.81)
+
+# --- the cloth (SPEC 2): 10 cm square, 16 x 16 point masses, 450 triangles, 705 springs
+GRID_N = 16
+CLOTH_SIDE = 0.10
+CLOTH_HEIGHT = 0.10          # the held corners sit at z = 0.10 m, cloth centred on the z axis
+
+# --- ground truth parameters of the synthetic experiment (per point mass / per spring)
+# m: 2.5 g cloth / 256 points; k chosen so the hanging cloth stretches ~10 % near the held corners;
+# l: the flat grid spacing; d: viscous damping so the swing visibly decays within 1.5 s.
+GT_PARAMS = {"m": 1.0e-5, "k": 10.0, "l": CLOTH_SIDE / (GRID_N - 1), "d": 2.0e-5}
+
+# --- simulation (SPEC 2): semi-implicit Euler, damping treated implicitly.
+DT_SAFETY = 0.35             # dt <= DT_SAFETY * sqrt(m / k); the bound for a 6-spring node is ~0.58
+SETTLE_TIME = 0.5            # seconds of settling under gravity with all handles held, before t = 0
+SETTLE_DAMPING_RATE = 40.0   # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
+EXPLODE_FACTOR = 10.0        # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded
+MAX_STRAIN = 5.0             # a spring longer than (1 + MAX_STRAIN) * rest length = exploded
+
+# --- capture (SPEC 5): 30 shapes every 0.05 s, train on even tenths, test on the odd twentieths
+FRAME_TIMES = [round(0.05 * i, 2) for i in range(1, 31)]
+TRAIN_TIMES = [round(0.10 * i, 2) for i in range(1, 16)]
+TEST_TIMES = [round(0.05 + 0.10 * i, 2) for i in range(15)]
+RELEASED_CORNER = 0          # vertex index of the corner released at t = 0
+NOISE_FRACTION = 0.05        # fraction of boundary pixels flipped
+IMAGE_H, IMAGE_W = 480, 640
+DEFAULT_RIG = "lab18"
+TABLE1_CAMERAS = [1, 2, 4, 8, 16]
+TABLE2_CAMERAS = [2, 4, 8]
+TABLE2_RESOLUTIONS = [(60, 80), (120, 160), (240, 320)]
+FIG8_SHAPES = [3, 5, 7, 9, 11, 13, 15]
+
+# --- the paper's numbers (SPEC 5), printed beside ours
+PAPER_TABLE1 = {1: (6.243, 5.999), 2: (3.495, 4.328), 4: (3.051, 3.399), 8: (1.893, 2.740), 16: (0.767, 2.160)}
+PAPER_TABLE2 = {(60, 80): {2: 5.1243, 4: 3.1907, 8: 2.4966},
+                (120, 160): {2: 4.7966, 4: 3.1548, 8: 2.4185},
+                (240, 320): {2: 4.0927, 4: 2.9281, 8: 2.2197}}
+
+# --- search space. m is fixed from the (weighed) cloth mass: SPEC 2, identifiability.
+# Bounds are for k, l, d given m; the optimiser works in log space for all three.
+SEARCH_BOUNDS = {"k": (0.5, 50.0), "l": (0.6 * GT_PARAMS["l"], 1.4 * GT_PARAMS["l"]), "d": (2.0e-6, 2.0e-4)}
+LOG_SCALED = {"k": True, "l": True, "d": True}
+
+# --- optimisers (SPEC 7)
+N_FREE = 3
+GA_POPULATION = 20 * N_FREE       # MGG population ~ 20 n
+GA_CHILDREN = 10 * N_FREE         # SPX children per family ~ 10 n
+CMA_POPSIZE = 4 + int(3 * math.log(N_FREE))
+FIT_EVALUATIONS = 3000            # default evaluation budget of one fit

@@ -1,0 +1,250 @@
+"""The mass-spring cloth (SPEC 2), its parameters, the manipulation, and identifiability.
+
+Grid: ``ny x nx`` point masses, vertex ``(i, j)`` (row i, column j) has index ``i * nx + j``.
+Every quad ``(i, j)..(i+1, j+1)`` is split along the diagonal ``(i, j)-(i+1, j+1)`` into two
+triangles; springs lie on every triangle edge: ``ny (nx-1)`` horizontal, ``(ny-1) nx`` vertical and
+``(ny-1)(nx-1)`` diagonal. For 16 x 16: 450 triangles, 240 + 240 + 225 = 705 springs.
+
+Parameters (per point mass / per spring): point mass ``m`` [kg], spring coefficient ``k`` [N/m],
+natural length ``l`` [m] of the grid-aligned springs (diagonals rest at ``sqrt(2) l``), viscous
+damping ``d`` [N s/m] (force ``-d v_i``). The equations of motion divided by ``m`` only contain
+``k/m``, ``d/m`` and ``l``: those are what silhouettes can identify (see ``identifiable``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import defaults as D
+from .errors import ClothFitError
+
+PARAM_NAMES = ("m", "k", "l", "d")
+
+
+@dataclass
+class Params:
+    m: float
+    k: float
+    l: float
+    d: float
+
+    def as_dict(self):
+        return {n: float(getattr(self, n)) for n in PARAM_NAMES}
+
+    @classmethod
+    def from_dict(cls, d, source="parameters"):
+        try:
+            p = cls(*(float(d[n]) for n in PARAM_NAMES))
+        except KeyError as e:
+            raise ClothFitError(f"{source}: missing parameter {e.args[0]!r} (need m, k, l, d)") from None
+        except (TypeError, ValueError) as e:
+            raise ClothFitError(f"{source}: parameters must be numbers ({e})") from None
+        p.check(source)
+        return p
+
+    def check(self, source="parameters"):
+        for n in PARAM_NAMES:
+            v = getattr(self, n)
+            if not math.isfinite(v):
+                raise ClothFitError(f"{source}: {n} = {v} is not finite")
+        if self.m <= 0 or self.k <= 0 or self.l <= 0:
+            raise ClothFitError(f"{source}: m, k and l must be positive (m={self.m}, k={self.k}, l={self.l})")
+        if self.d < 0:
+            raise ClothFitError(f"{source}: damping d = {self.d} must be >= 0")
+
+    def identifiable(self):
+        return identifiable(self.as_dict())
+
+
+def identifiable(p: dict) -> dict:
+    """The combinations the motion depends on: k/m [1/s^2], d/m [1/s], l [m]."""
+    return {"k_over_m": p["k"] / p["m"], "d_over_m": p["d"] / p["m"], "l": p["l"]}
+
+
+def identifiable_errors(est: dict, true: dict) -> dict:
+    """Relative recovery error [%] of each identifiable quantity."""
+    a, b = identifiable(est), identifiable(true)
+    return {k: 100.0 * abs(a[k] - b[k]) / abs(b[k]) for k in a}
+
+
+class ClothGrid:
+    """Topology and rest geometry of the sheet."""
+
+    def __init__(self, nx: int = D.GRID_N, ny: int | None = None, side: float = D.CLOTH_SIDE,
+                 height: float = D.CLOTH_HEIGHT, side_y: float | None = None):
+        ny = nx if ny is None else ny
+        if nx < 2 or ny < 2:
+            raise ClothFitError(f"cloth grid must be at least 2 x 2, got {nx} x {ny}")
+        if not (side > 0):
+            raise ClothFitError(f"cloth side must be positive, got {side}")
+        self.nx, self.ny = int(nx), int(ny)
+        self.side = float(side)
+        self.side_y = float(side if side_y is None else side_y)
+        self.height = float(height)
+        self.spacing = self.side / (self.nx - 1)
+        xs = np.linspace(-self.side / 2, self.side / 2, self.nx)
+        ys = np.linspace(-self.side_y / 2, self.side_y / 2, self.ny)
+        X, Y = np.meshgrid(xs, ys)  # (ny, nx)
+        self.rest = np.stack([X, Y, np.full_like(X, self.height)], -1).reshape(-1, 3)
+        idx = np.arange(self.nx * self.ny).reshape(self.ny, self.nx)
+        a = idx[:-1, :-1].ravel()
+        b = idx[:-1, 1:].ravel()
+        c = idx[1:, :-1].ravel()
+        dd = idx[1:, 1:].ravel()
+        # two triangles per quad, split along (i,j)-(i+1,j+1), counter-clockwise seen from +z
+        self.triangles = np.concatenate([np.stack([a, b, dd], 1), np.stack([a, dd, c], 1)]).astype(np.int32)
+        h = np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1)
+        v = np.stack([idx[:-1, :].ravel(), idx[1:, :].ravel()], 1)
+        g = np.stack([a, dd], 1)
+        self.springs = np.concatenate([h, v, g]).astype(np.int32)
+        # rest length of each spring in units of l
+        self.rest_factor = np.concatenate([np.ones(len(h)), np.ones(len(v)), np.full(len(g), math.sqrt(2.0))])
+
+    @property
+    def n_vertices(self):
+        return self.nx * self.ny
+
+    def corners(self):
+        """Indices of the four corners: (0,0), (0,nx-1), (ny-1,0), (ny-1,nx-1)."""
+        nx, ny = self.nx, self.ny
+        return [0, nx - 1, (ny - 1) * nx, ny * nx - 1]
+
+    def to_dict(self):
+        return {"nx": self.nx, "ny": self.ny, "side": self.side, "side_y": self.side_y, "height": self.height}
+
+    @classmethod
+    def from_dict(cls, d, source="cloth"):
+        try:
+            return cls(int(d.get("nx", D.GRID_N)), int(d.get("ny", d.get("nx", D.GRID_N))),
+                       float(d.get("side", D.CLOTH_SIDE)), float(d.get("height", D.CLOTH_HEIGHT)),
+                       None if d.get("side_y") is None else float(d["side_y"]))
+        except (TypeError, ValueError, AttributeError) as e:
+            raise ClothFitError(f"{source}: bad cloth description {d!r} ({e})") from None
+
+
+@dataclass
+class Handle:
+    """A grid vertex whose position is prescribed.
+
+    ``times``/``positions`` give a piecewise-linear trajectory (held at the first position
+    before ``times[0]`` and at the last after ``times[-1]``); a single key = a fixed point.
+    After ``release_time`` (if given) the vertex is free.
+    """
+    vertex: int
+    times: np.ndarray
+    positions: np.ndarray
+    release_time: float | None = None
+
+    def __post_init__(self):
+        self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        self.positions = np.asarray(self.positions, dtype=np.float64).reshape(-1, 3)
+        if self.times.size != self.positions.shape[0] or self.times.size == 0:
+            raise ClothFitError(f"handle on vertex {self.vertex}: {self.times.size} times but "
+                                f"{self.positions.shape[0]} positions")
+        if np.any(np.diff(self.times) <= 0):
+            raise ClothFitError(f"handle on vertex {self.vertex}: key times must increase, got {self.times.tolist()}")
+        if not np.all(np.isfinite(self.positions)) or not np.all(np.isfinite(self.times)):
+            raise ClothFitError(f"handle on vertex {self.vertex}: non-finite key")
+
+    def position(self, t):
+        """Positions at times ``t`` (array) -> ``t.shape + (3,)``."""
+        t = np.asarray(t, dtype=np.float64)
+        if self.times.size == 1:
+            return np.broadcast_to(self.positions[0], t.shape + (3,)).copy()
+        return np.stack([np.interp(t, self.times, self.positions[:, a]) for a in range(3)], -1)
+
+    def velocity(self, t):
+        t = np.asarray(t, dtype=np.float64)
+        out = np.zeros(t.shape + (3,))
+        if self.times.size == 1:
+            return out
+        seg = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, self.times.size - 2)
+        vel = np.diff(self.positions, axis=0) / np.diff(self.times)[:, None]
+        inside = (t >= self.times[0]) & (t < self.times[-1])
+        out[inside] = vel[seg[inside]]
+        return out
+
+    def held(self, t):
+        t = np.asarray(t, dtype=np.float64)
+        if self.release_time is None:
+            return np.ones(t.shape, dtype=bool)
+        return t < self.release_time
+
+    def to_dict(self):
+        d = {"vertex": int(self.vertex), "times": self.times.tolist(), "positions": self.positions.tolist()}
+        if self.release_time is not None:
+            d["release_time"] = float(self.release_time)
+        return d
+
+    @classmethod
+    def from_dict(cls, d, n_vertices=None, source="handle"):
+        try:
+            v = int(d["vertex"])
+            h = cls(v, d.get("times", [0.0]), d["positions"], None if d.get("release_time") is None else float(d["release_time"]))
+        except KeyError as e:
+            raise ClothFitError(f"{source}: missing {e.args[0]!r}") from None
+        except (TypeError, ValueError) as e:
+            raise ClothFitError(f"{source}: bad handle {d!r} ({e})") from None
+        if n_vertices is not None and not (0 <= v < n_vertices):
+            raise ClothFitError(f"{source}: vertex {v} outside the grid (0..{n_vertices - 1})")
+        return h
+
+
+@dataclass
+class Scenario:
+    """A cloth, its handles, the settling phase and the capture times: one manipulation."""
+    grid: ClothGrid
+    handles: list
+    frame_times: np.ndarray
+    settle_time: float = D.SETTLE_TIME
+    gravity: np.ndarray = field(default_factory=lambda: np.array(D.GRAVITY))
+
+    def __post_init__(self):
+        self.frame_times = np.asarray(self.frame_times, dtype=np.float64).reshape(-1)
+        self.gravity = np.asarray(self.gravity, dtype=np.float64).reshape(3)
+        if self.frame_times.size == 0:
+            raise ClothFitError("scenario: no frame times")
+        if np.any(np.diff(self.frame_times) <= 0):
+            raise ClothFitError(f"scenario: frame times must increase, got {self.frame_times.tolist()}")
+        if self.frame_times[0] < 0:
+            raise ClothFitError(f"scenario: frame times must be >= 0 (t = 0 ends the settling), got {self.frame_times[0]}")
+        if self.settle_time < 0:
+            raise ClothFitError(f"scenario: settle_time {self.settle_time} must be >= 0")
+        seen = set()
+        for h in self.handles:
+            if not (0 <= h.vertex < self.grid.n_vertices):
+                raise ClothFitError(f"scenario: handle vertex {h.vertex} outside the grid (0..{self.grid.n_vertices - 1})")
+            if h.vertex in seen:
+                raise ClothFitError(f"scenario: vertex {h.vertex} has two handles")
+            seen.add(h.vertex)
+
+    def to_dict(self):
+        return {"cloth": self.grid.to_dict(), "handles": [h.to_dict() for h in self.handles],
+                "frame_times": self.frame_times.tolist(), "settle_time": self.settle_time,
+                "gravity": self.gravity.tolist()}
+
+    @classmethod
+    def from_dict(cls, d, source="scenario"):
+        grid = ClothGrid.from_dict(d.get("cloth", {}), source=f"{source} cloth")
+        hs = d.get("handles")
+        if not isinstance(hs, list):
+            raise ClothFitError(f"{source}: 'handles' must be a list")
+        handles = [Handle.from_dict(h, grid.n_vertices, f"{source} handle #{i}") for i, h in enumerate(hs)]
+        if "frame_times" not in d:
+            raise ClothFitError(f"{source}: missing 'frame_times'")
+        return cls(grid, handles, d["frame_times"], float(d.get("settle_time", D.SETTLE_TIME)),
+                   d.get("gravity", D.GRAVITY))
+
+    def with_frames(self, times):
+        return Scenario(self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity)
+
+
+def paper_scenario(grid: ClothGrid | None = None, frame_times=None, released_corner: int = D.RELEASED_CORNER):
+    """SPEC 5: all four corners held at the flat square, settle, release one corner at t = 0."""
+    grid = grid or ClothGrid()
+    handles = []
+    for ci, v in enumerate(grid.corners()):
+        handles.append(Handle(v, [0.0], grid.rest[v][None], 0.0 if v == grid.corners()[released_corner] else None))
+    return Scenario(grid, handles, D.FRAME_TIMES if frame_times is None else frame_times)

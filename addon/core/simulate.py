@@ -1,0 +1,257 @@
+"""Population simulator of the mass-spring cloth (vectorised numpy over candidates).
+
+Integrator (part of the model, documented in the README):
+
+* semi-implicit (symplectic) Euler with the viscous damping treated implicitly::
+
+      v <- (v + dt * (g + sum_j (k/m) (|p_j - p_i| - l_ij) e_ij)) / (1 + dt * d/m)
+      p <- p + dt * v
+
+  held handles are then set to their prescribed position and velocity;
+* per candidate, every interval between consecutive event times (start of settling, 0, release
+  times, handle keys, frame times) is split into equal substeps no longer than
+  ``DT_SAFETY * sqrt(m/k)`` (the stability bound of a node with 6 springs is about 0.58 sqrt(m/k));
+* before t = 0 the cloth settles for ``settle_time`` with every handle held and damping rate
+  ``max(d/m, SETTLE_DAMPING_RATE)``: the rest shape does not depend on d, this only gets there fast;
+* a candidate whose state goes non-finite, stretches a spring beyond ``1 + MAX_STRAIN`` times its
+  rest length, or flies further than ``EXPLODE_FACTOR`` cloth sizes away is flagged ``exploded``
+  and frozen: never an exception.
+
+Only k/m, d/m and l enter the equations (``model.identifiable``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import defaults as D
+from .errors import ClothFitError
+from .model import Scenario
+
+
+@dataclass
+class SimResult:
+    positions: np.ndarray   # (P, F, V, 3), NaN for exploded candidates
+    exploded: np.ndarray    # (P,) bool
+    substeps: np.ndarray    # (P,) total number of integration steps per candidate
+    reason: list            # per candidate: "" or why it was flagged
+
+
+def _as_params(params):
+    """(P, 4) array of m, k, l, d from a Params, dict, list of those or an array."""
+    if hasattr(params, "as_dict"):
+        params = [params]
+    elif isinstance(params, dict):
+        params = [params]
+    arr = []
+    for p in params:
+        if hasattr(p, "as_dict"):
+            p = p.as_dict()
+        if isinstance(p, dict):
+            p = [p["m"], p["k"], p["l"], p["d"]]
+        arr.append(np.asarray(p, dtype=np.float64).reshape(4))
+    arr = np.array(arr, dtype=np.float64).reshape(-1, 4)
+    return arr
+
+
+def event_times(scenario: Scenario) -> np.ndarray:
+    ev = {-scenario.settle_time, 0.0}
+    ev.update(float(t) for t in scenario.frame_times)
+    for h in scenario.handles:
+        ev.update(float(t) for t in h.times if -scenario.settle_time < t <= scenario.frame_times[-1])
+        if h.release_time is not None and -scenario.settle_time < h.release_time <= scenario.frame_times[-1]:
+            ev.add(float(h.release_time))
+    ev = np.array(sorted(ev))
+    return ev[ev >= -scenario.settle_time - 1e-15]
+
+
+def substeps_for(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY) -> np.ndarray:
+    """Number of substeps per candidate for an interval of length ``seg_len``."""
+    m, k = params[:, 0], params[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dt_max = safety * np.sqrt(m / k)
+    dt_max = np.where(np.isfinite(dt_max) & (dt_max > 0), dt_max, np.inf)
+    n = np.ceil(seg_len / dt_max - 1e-9)
+    return np.maximum(n, 1).astype(np.int64)
+
+
+MAX_TOTAL_STEPS = 2_000_000
+
+
+def check_params(params: np.ndarray):
+    bad = ~np.all(np.isfinite(params), axis=1) | (params[:, 0] <= 0) | (params[:, 1] <= 0) | (params[:, 2] <= 0) | (params[:, 3] < 0)
+    return bad
+
+
+def simulate(scenario: Scenario, params, backend: str = "auto") -> SimResult:
+    """Simulate a population; ``params`` is one or many (m, k, l, d). See the module doc."""
+    P = _as_params(params)
+    if backend == "auto":
+        from . import accel
+        backend = "numba" if accel.available() else "numpy"
+    if backend == "numba":
+        from . import accel
+        return accel.simulate(scenario, P)
+    if backend != "numpy":
+        raise ClothFitError(f"unknown simulation backend {backend!r} (numpy, numba, auto)")
+    return simulate_numpy(scenario, P)
+
+
+def _handle_tables(scenario):
+    hv = np.array([h.vertex for h in scenario.handles], dtype=np.int64)
+    return hv
+
+
+def handle_state(scenario, t):
+    """Positions (..., H, 3), velocities and held mask (..., H) of the handles at times ``t``."""
+    t = np.asarray(t, dtype=np.float64)
+    pos = np.stack([h.position(t) for h in scenario.handles], -2) if scenario.handles else np.zeros(t.shape + (0, 3))
+    vel = np.stack([h.velocity(t) for h in scenario.handles], -2) if scenario.handles else np.zeros(t.shape + (0, 3))
+    held = np.stack([h.held(t) | (t < 0) for h in scenario.handles], -1) if scenario.handles else np.zeros(t.shape + (0,), bool)
+    return pos, vel, held
+
+
+def initial_state(scenario, n):
+    x = np.broadcast_to(scenario.grid.rest, (n,) + scenario.grid.rest.shape).copy()
+    t0 = -scenario.settle_time
+    if scenario.handles:
+        pos, _, _ = handle_state(scenario, np.array(t0))
+        hv = _handle_tables(scenario)
+        x[:, hv] = pos
+    return x, np.zeros_like(x)
+
+
+def explosion_limits(scenario):
+    g = scenario.grid
+    size = max(g.side, g.side_y)
+    if scenario.handles:
+        centre = np.mean([h.positions.mean(0) for h in scenario.handles], axis=0)
+        span = max(np.ptp(np.concatenate([h.positions for h in scenario.handles]), axis=0).max(), 0.0)
+    else:
+        centre = g.rest.mean(0)
+        span = 0.0
+    return centre, D.EXPLODE_FACTOR * (size + span)
+
+
+def simulate_numpy(scenario: Scenario, P: np.ndarray) -> SimResult:
+    grid = scenario.grid
+    nP = P.shape[0]
+    ny, nx = grid.ny, grid.nx
+    bad_param = check_params(P)
+    Pw = P.copy()
+    Pw[bad_param] = [1.0, 1.0, 1.0, 0.0]
+    kap = (Pw[:, 1] / Pw[:, 0])[:, None, None, None]
+    beta = Pw[:, 3] / Pw[:, 0]
+    L = Pw[:, 2][:, None, None]
+    sq2 = math.sqrt(2.0)
+    g = scenario.gravity
+    hv = _handle_tables(scenario)
+    hi, hj = hv // nx, hv % nx
+    centre, limit = explosion_limits(scenario)
+
+    x, v = initial_state(scenario, nP)
+    x = x.reshape(nP, ny, nx, 3)
+    v = v.reshape(nP, ny, nx, 3)
+    exploded = bad_param.copy()
+    reason = ["invalid parameters" if b else "" for b in bad_param]
+    out = np.full((nP, scenario.frame_times.size, ny * nx, 3), np.nan)
+    steps_total = np.zeros(nP, dtype=np.int64)
+    ev = event_times(scenario)
+    frame_idx = {round(float(t), 12): i for i, t in enumerate(scenario.frame_times)}
+    F = np.empty_like(x)
+
+    for a, b in zip(ev[:-1], ev[1:]):
+        seg = b - a
+        nsub = substeps_for(Pw, seg)
+        if steps_total.max() + nsub.max() > MAX_TOTAL_STEPS:
+            raise ClothFitError(f"simulation needs more than {MAX_TOTAL_STEPS} steps: k/m = {kap.max():.3g} is too stiff")
+        dt = seg / nsub
+        settling = b <= 0.0
+        rate = np.maximum(beta, D.SETTLE_DAMPING_RATE) if settling else beta
+        damp = 1.0 / (1.0 + dt * rate)
+        for s in range(int(nsub.max())):
+            active = (s < nsub) & ~exploded
+            if not active.any():
+                break
+            dta = np.where(active, dt, 0.0)
+            F[:] = g
+            d = x[:, :, 1:] - x[:, :, :-1]
+            ln = np.sqrt(np.einsum("...i,...i->...", d, d))[..., None]
+            f = kap * (1.0 - L[..., None] / np.maximum(ln, 1e-12)) * d
+            F[:, :, :-1] += f
+            F[:, :, 1:] -= f
+            d = x[:, 1:, :] - x[:, :-1, :]
+            ln = np.sqrt(np.einsum("...i,...i->...", d, d))[..., None]
+            f = kap * (1.0 - L[..., None] / np.maximum(ln, 1e-12)) * d
+            F[:, :-1, :] += f
+            F[:, 1:, :] -= f
+            d = x[:, 1:, 1:] - x[:, :-1, :-1]
+            ln = np.sqrt(np.einsum("...i,...i->...", d, d))[..., None]
+            f = kap * (1.0 - sq2 * L[..., None] / np.maximum(ln, 1e-12)) * d
+            F[:, :-1, :-1] += f
+            F[:, 1:, 1:] -= f
+            dtb = dta[:, None, None, None]
+            v = (v + dtb * F) * np.where(active, damp, 1.0)[:, None, None, None]
+            x = x + dtb * v
+            if hv.size:
+                tc = a + (s + 1) * dt
+                pos, vel, held = handle_state(scenario, tc)  # (P, H, 3), (P, H)
+                if settling:
+                    held = np.ones_like(held)
+                m = (held & active[:, None])
+                if m.any():
+                    pi, hk = np.nonzero(m)
+                    x[pi, hi[hk], hj[hk]] = pos[pi, hk]
+                    v[pi, hi[hk], hj[hk]] = vel[pi, hk]
+        steps_total += np.where(exploded, 0, nsub)
+        # explosion checks once per interval
+        flat = x.reshape(nP, -1, 3)
+        fin = np.all(np.isfinite(flat), axis=(1, 2)) & np.all(np.isfinite(v.reshape(nP, -1)), axis=1)
+        far = np.zeros(nP, bool)
+        far[fin] = np.abs(flat[fin] - centre).max(axis=(1, 2)) > limit
+        strain = np.zeros(nP, bool)
+        if fin.any():
+            strain[fin] = _max_strain(x[fin], Pw[fin, 2]) > 1.0 + D.MAX_STRAIN
+        newbad = ~exploded & (~fin | far | strain)
+        for p in np.nonzero(newbad)[0]:
+            reason[p] = f"exploded before t = {b:.3f} s (" + ("non-finite state" if not fin[p] else "flew away" if far[p] else "spring overstretched") + ")"
+        exploded |= newbad
+        x[exploded] = 0.0
+        v[exploded] = 0.0
+        fi = frame_idx.get(round(float(b), 12))
+        if fi is not None:
+            ok = ~exploded
+            out[ok, fi] = x[ok].reshape(ok.sum(), -1, 3)
+    out[exploded] = np.nan
+    return SimResult(out, exploded, steps_total, reason)
+
+
+def _max_strain(x, L):
+    """Largest length / rest-length ratio over the springs, per candidate."""
+    r = []
+    for d, fac in ((x[:, :, 1:] - x[:, :, :-1], 1.0), (x[:, 1:, :] - x[:, :-1, :], 1.0),
+                   (x[:, 1:, 1:] - x[:, :-1, :-1], math.sqrt(2.0))):
+        ln = np.sqrt((d * d).sum(-1)).reshape(len(x), -1).max(1)
+        r.append(ln / (fac * L))
+    return np.max(r, axis=0)
+
+
+def spring_energy(x: np.ndarray, grid, k: float, l: float) -> float:
+    """Elastic energy of one configuration ``x`` (V, 3): sum 1/2 k (|e| - l_ij)^2."""
+    s = grid.springs
+    ln = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1)
+    return float(0.5 * k * np.sum((ln - l * grid.rest_factor) ** 2))
+
+
+def spring_forces(x: np.ndarray, grid, k: float, l: float) -> np.ndarray:
+    """Spring forces on each vertex of one configuration (V, 3), from the spring list."""
+    s = grid.springs
+    d = x[s[:, 1]] - x[s[:, 0]]
+    ln = np.linalg.norm(d, axis=1)
+    f = (k * (ln - l * grid.rest_factor) / np.maximum(ln, 1e-12))[:, None] * d
+    F = np.zeros_like(x)
+    np.add.at(F, s[:, 0], f)
+    np.add.at(F, s[:, 1], -f)
+    return F
