@@ -1,5 +1,338 @@
-"""Optional numba kernels (placeholder until implemented)."""
+"""Optional numba kernels for the two hot loops: the simulator and the silhouette comparison.
+
+The numpy code in ``simulate.py`` and ``raster.py`` is the reference and runs everywhere (inside
+Blender too, which does not ship numba). When numba is importable, these kernels compute the same
+quantities with the same formulas (tests check the agreement) an order of magnitude faster, and
+run the candidates of a population in parallel threads. Set ``CLOTHFIT_NO_NUMBA=1`` to disable.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from . import defaults as D
+
+try:  # pragma: no cover - depends on the environment
+    if os.environ.get("CLOTHFIT_NO_NUMBA"):
+        raise ImportError("disabled by CLOTHFIT_NO_NUMBA")
+    import numba
+    from numba import njit, prange
+    _HAVE = True
+except ImportError:  # pragma: no cover
+    numba = None
+    _HAVE = False
 
 
-def available():
-    return False
+def available() -> bool:
+    return _HAVE
+
+
+REASONS = ["", "invalid parameters", "non-finite state", "flew away", "spring overstretched", "too many steps"]
+
+if _HAVE:
+    _jit = dict(cache=True, nogil=True, fastmath=False)
+
+    @njit(**_jit)
+    def _handle_at(h, t, key_start, key_times, key_pos, out_p, out_v):
+        k0 = key_start[h]
+        k1 = key_start[h + 1]
+        n = k1 - k0
+        for a in range(3):
+            out_v[a] = 0.0
+        if n == 1 or t <= key_times[k0]:
+            for a in range(3):
+                out_p[a] = key_pos[k0, a]
+            if n > 1 and t == key_times[k0]:
+                s = (key_pos[k0 + 1] - key_pos[k0]) / (key_times[k0 + 1] - key_times[k0])
+                for a in range(3):
+                    out_v[a] = s[a]
+            return
+        if t >= key_times[k1 - 1]:
+            for a in range(3):
+                out_p[a] = key_pos[k1 - 1, a]
+            return
+        j = k0
+        while key_times[j + 1] <= t:
+            j += 1
+        w = (t - key_times[j]) / (key_times[j + 1] - key_times[j])
+        for a in range(3):
+            out_p[a] = key_pos[j, a] + w * (key_pos[j + 1, a] - key_pos[j, a])
+            out_v[a] = (key_pos[j + 1, a] - key_pos[j, a]) / (key_times[j + 1] - key_times[j])
+
+    @njit(**_jit)
+    def _max_strain(x, springs, rest_factor, L):
+        r = 0.0
+        for s in range(springs.shape[0]):
+            i = springs[s, 0]
+            j = springs[s, 1]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2 = x[j, 2] - x[i, 2]
+            q = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / (rest_factor[s] * L)
+            if q > r:
+                r = q
+        return r
+
+    @njit(**_jit)
+    def simulate_one(par, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+                     events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
+                     max_strain, max_steps, out):
+        """Simulate one candidate; writes frames into ``out`` (F, V, 3). Returns (code, steps)."""
+        m, k, L, dmp = par[0], par[1], par[2], par[3]
+        if not (math.isfinite(m) and math.isfinite(k) and math.isfinite(L) and math.isfinite(dmp)) \
+                or m <= 0 or k <= 0 or L <= 0 or dmp < 0:
+            return 1, 0
+        kap = k / m
+        beta = dmp / m
+        V = rest.shape[0]
+        x = rest.copy()
+        v = np.zeros_like(x)
+        F = np.zeros_like(x)
+        p = np.zeros(3)
+        pv = np.zeros(3)
+        H = hv.shape[0]
+        for h in range(H):
+            _handle_at(h, events[0], key_start, key_times, key_pos, p, pv)
+            for a in range(3):
+                x[hv[h], a] = p[a]
+        dt_max = safety * math.sqrt(m / k)
+        steps = 0
+        for e in range(events.shape[0] - 1):
+            a0 = events[e]
+            b0 = events[e + 1]
+            seg = b0 - a0
+            nsub = max(1, int(math.ceil(seg / dt_max - 1e-9)))
+            if steps + nsub > max_steps:
+                return 5, steps
+            dt = seg / nsub
+            settling = b0 <= 0.0
+            rate = max(beta, settle_rate) if settling else beta
+            damp = 1.0 / (1.0 + dt * rate)
+            for s in range(nsub):
+                for i in range(V):
+                    F[i, 0] = gravity[0]
+                    F[i, 1] = gravity[1]
+                    F[i, 2] = gravity[2]
+                for q in range(springs.shape[0]):
+                    i = springs[q, 0]
+                    j = springs[q, 1]
+                    d0 = x[j, 0] - x[i, 0]
+                    d1 = x[j, 1] - x[i, 1]
+                    d2 = x[j, 2] - x[i, 2]
+                    ln = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                    c = kap * (1.0 - rest_factor[q] * L / max(ln, 1e-12))
+                    F[i, 0] += c * d0
+                    F[i, 1] += c * d1
+                    F[i, 2] += c * d2
+                    F[j, 0] -= c * d0
+                    F[j, 1] -= c * d1
+                    F[j, 2] -= c * d2
+                for i in range(V):
+                    for a in range(3):
+                        v[i, a] = (v[i, a] + dt * F[i, a]) * damp
+                        x[i, a] = x[i, a] + dt * v[i, a]
+                tc = a0 + (s + 1) * dt
+                for h in range(H):
+                    if settling or tc < release[h]:
+                        _handle_at(h, tc, key_start, key_times, key_pos, p, pv)
+                        for a in range(3):
+                            x[hv[h], a] = p[a]
+                            v[hv[h], a] = pv[a]
+            steps += nsub
+            # explosion checks once per interval
+            far = 0.0
+            for i in range(V):
+                for a in range(3):
+                    if not (math.isfinite(x[i, a]) and math.isfinite(v[i, a])):
+                        return 2, steps
+                    dd = abs(x[i, a] - centre[a])
+                    if dd > far:
+                        far = dd
+            if far > limit:
+                return 3, steps
+            if _max_strain(x, springs, rest_factor, L) > 1.0 + max_strain:
+                return 4, steps
+            f = frame_of_event[e + 1]
+            if f >= 0:
+                out[f] = x
+        return 0, steps
+
+    @njit(**_jit)
+    def _project(X, K, R, t, dist, uv, ok):
+        V = X.shape[0]
+        has_dist = False
+        for q in range(5):
+            if dist[q] != 0.0:
+                has_dist = True
+        for i in range(V):
+            xc = R[0, 0] * X[i, 0] + R[0, 1] * X[i, 1] + R[0, 2] * X[i, 2] + t[0]
+            yc = R[1, 0] * X[i, 0] + R[1, 1] * X[i, 1] + R[1, 2] * X[i, 2] + t[1]
+            zc = R[2, 0] * X[i, 0] + R[2, 1] * X[i, 1] + R[2, 2] * X[i, 2] + t[2]
+            if not (zc > 1e-9) or not math.isfinite(zc):
+                ok[i] = False
+                uv[i, 0] = np.nan
+                uv[i, 1] = np.nan
+                continue
+            ok[i] = True
+            x = xc / zc
+            y = yc / zc
+            if has_dist:
+                k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+                r2 = x * x + y * y
+                radial = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+                xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+                yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+                x = xd
+                y = yd
+            uv[i, 0] = K[0, 0] * x + K[0, 1] * y + K[0, 2]
+            uv[i, 1] = K[1, 1] * y + K[1, 2]
+
+    @njit(**_jit)
+    def _raster_count(uv, ok, tris, Hh, Ww, obs, off, scratch, touched):
+        """Fill triangles (pixel-centre sampling) into ``scratch``; count model and overlap pixels."""
+        nmod = 0
+        inter = 0
+        nt = 0
+        for q in range(tris.shape[0]):
+            a = tris[q, 0]
+            b = tris[q, 1]
+            c = tris[q, 2]
+            if not (ok[a] and ok[b] and ok[c]):
+                continue
+            ymin = min(uv[a, 1], uv[b, 1], uv[c, 1])
+            ymax = max(uv[a, 1], uv[b, 1], uv[c, 1])
+            r0 = max(int(math.ceil(ymin)), 0)
+            r1 = min(int(math.floor(ymax)), Hh - 1)
+            for r in range(r0, r1 + 1):
+                y = float(r)
+                xl = np.inf
+                xr = -np.inf
+                for e in range(3):
+                    if e == 0:
+                        i0, i1 = a, b
+                    elif e == 1:
+                        i0, i1 = b, c
+                    else:
+                        i0, i1 = c, a
+                    ya = uv[i0, 1]
+                    yb = uv[i1, 1]
+                    if ya == yb:
+                        continue
+                    if y >= min(ya, yb) and y <= max(ya, yb):
+                        xa = uv[i0, 0]
+                        xx = xa + (y - ya) * (uv[i1, 0] - xa) / (yb - ya)
+                        if xx < xl:
+                            xl = xx
+                        if xx > xr:
+                            xr = xx
+                if xr < xl:
+                    continue
+                c0 = max(int(math.ceil(xl)), 0)
+                c1 = min(int(math.floor(xr)), Ww - 1)
+                base = r * Ww
+                for col in range(c0, c1 + 1):
+                    idx = base + col
+                    if scratch[idx] == 0:
+                        scratch[idx] = 1
+                        touched[nt] = idx
+                        nt += 1
+                        nmod += 1
+                        inter += obs[off + idx]
+        for i in range(nt):
+            scratch[touched[i]] = 0
+        return nmod, inter
+
+    @njit(**_jit)
+    def eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris, scratch, touched, out):
+        """E_sil for every camera c and frame f of one simulated candidate: out[c, f]."""
+        C = Ks.shape[0]
+        Fn = X.shape[0]
+        V = X.shape[1]
+        uv = np.empty((V, 2))
+        ok = np.empty(V, dtype=np.bool_)
+        for c in range(C):
+            for f in range(Fn):
+                _project(X[f], Ks[c], Rs[c], ts[c], dists[c], uv, ok)
+                nmod, inter = _raster_count(uv, ok, tris, Hs[c], Ws[c], obs, offs[c, f], scratch, touched)
+                out[c, f] = (areas[c, f] + nmod - 2 * inter) / areas[c, f]
+
+    @njit(parallel=True, cache=True, nogil=True)
+    def simulate_population(P, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+                            events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
+                            max_strain, max_steps, out, codes, steps):
+        for p in prange(P.shape[0]):
+            code, st = simulate_one(P[p], rest, springs, rest_factor, hv, key_start, key_times, key_pos,
+                                    release, events, frame_of_event, n_frames, gravity, settle_rate, safety,
+                                    centre, limit, max_strain, max_steps, out[p])
+            codes[p] = code
+            steps[p] = st
+
+    @njit(parallel=True, cache=True, nogil=True)
+    def objective_population(P, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+                             events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
+                             max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris,
+                             max_hw, esil, codes):
+        """Simulate and score every candidate: esil[p, c, f]; codes[p] != 0 = exploded."""
+        V = rest.shape[0]
+        for p in prange(P.shape[0]):
+            X = np.zeros((n_frames, V, 3))
+            code, st = simulate_one(P[p], rest, springs, rest_factor, hv, key_start, key_times, key_pos,
+                                    release, events, frame_of_event, n_frames, gravity, settle_rate, safety,
+                                    centre, limit, max_strain, max_steps, X)
+            codes[p] = code
+            if code != 0:
+                continue
+            scratch = np.zeros(max_hw, dtype=np.uint8)
+            touched = np.empty(max_hw, dtype=np.int64)
+            eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris, scratch, touched, esil[p])
+
+
+def scenario_arrays(scenario):
+    """Flatten a Scenario into the plain arrays the kernels take."""
+    from .simulate import event_times, explosion_limits
+    grid = scenario.grid
+    hs = scenario.handles
+    hv = np.array([h.vertex for h in hs], dtype=np.int64)
+    key_start = np.zeros(len(hs) + 1, dtype=np.int64)
+    for i, h in enumerate(hs):
+        key_start[i + 1] = key_start[i] + h.times.size
+    key_times = np.concatenate([h.times for h in hs]) if hs else np.zeros(1)
+    key_pos = np.concatenate([h.positions for h in hs]) if hs else np.zeros((1, 3))
+    release = np.array([np.inf if h.release_time is None else h.release_time for h in hs], dtype=np.float64)
+    ev = event_times(scenario)
+    frame_of_event = np.full(ev.size, -1, dtype=np.int64)
+    lookup = {round(float(t), 12): i for i, t in enumerate(scenario.frame_times)}
+    for e, t in enumerate(ev):
+        frame_of_event[e] = lookup.get(round(float(t), 12), -1)
+    centre, limit = explosion_limits(scenario)
+    return dict(rest=np.ascontiguousarray(grid.rest, dtype=np.float64),
+                springs=np.ascontiguousarray(grid.springs, dtype=np.int64),
+                rest_factor=np.ascontiguousarray(grid.rest_factor, dtype=np.float64),
+                hv=hv, key_start=key_start, key_times=np.ascontiguousarray(key_times, dtype=np.float64),
+                key_pos=np.ascontiguousarray(key_pos, dtype=np.float64), release=release,
+                events=ev, frame_of_event=frame_of_event, n_frames=int(scenario.frame_times.size),
+                gravity=np.asarray(scenario.gravity, dtype=np.float64), settle_rate=float(D.SETTLE_DAMPING_RATE),
+                safety=float(D.DT_SAFETY), centre=np.asarray(centre, dtype=np.float64), limit=float(limit),
+                max_strain=float(D.MAX_STRAIN), max_steps=int(2_000_000))
+
+
+_ORDER = ["rest", "springs", "rest_factor", "hv", "key_start", "key_times", "key_pos", "release", "events",
+          "frame_of_event", "n_frames", "gravity", "settle_rate", "safety", "centre", "limit", "max_strain",
+          "max_steps"]
+
+
+def simulate(scenario, P):
+    from .simulate import SimResult
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 4)
+    a = scenario_arrays(scenario)
+    V = a["rest"].shape[0]
+    out = np.zeros((P.shape[0], a["n_frames"], V, 3))
+    codes = np.zeros(P.shape[0], dtype=np.int64)
+    steps = np.zeros(P.shape[0], dtype=np.int64)
+    simulate_population(P, *[a[k] for k in _ORDER], out, codes, steps)
+    exploded = codes != 0
+    out[exploded] = np.nan
+    reason = [REASONS[c] for c in codes]
+    return SimResult(out, exploded, steps, reason)

@@ -13,11 +13,13 @@ CLOTH_HEIGHT = 0.10          # the held corners sit at z = 0.10 m, cloth centred
 
 # --- ground truth parameters of the synthetic experiment (per point mass / per spring)
 # m: 2.5 g cloth / 256 points; k chosen so the hanging cloth stretches ~10 % near the held corners;
-# l: the flat grid spacing; d: viscous damping so the swing visibly decays within 1.5 s.
-GT_PARAMS = {"m": 1.0e-5, "k": 10.0, "l": CLOTH_SIDE / (GRID_N - 1), "d": 2.0e-5}
+# l: the flat grid spacing; d: viscous damping, d/m = 5 /s. With d/m <= 3 /s this bending-free sheet is
+# chaotic after release (round-off of 1e-15 grows to millimetres within 1 s: measured, see README), so the
+# ground truth sits in the damped, reproducible regime; the search space still includes the chaotic one.
+GT_PARAMS = {"m": 1.0e-5, "k": 10.0, "l": CLOTH_SIDE / (GRID_N - 1), "d": 5.0e-5}
 
 # --- simulation (SPEC 2): semi-implicit Euler, damping treated implicitly.
-DT_SAFETY = 0.35             # dt <= DT_SAFETY * sqrt(m / k); the bound for a 6-spring node is ~0.58
+DT_SAFETY = 0.5              # dt <= DT_SAFETY * sqrt(m / k); Gershgorin bound for a node with 6 springs: 2/sqrt(12) = 0.577
 SETTLE_TIME = 0.5            # seconds of settling under gravity with all handles held, before t = 0
 SETTLE_DAMPING_RATE = 40.0   # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
 EXPLODE_FACTOR = 10.0        # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded
@@ -42,10 +44,11 @@ PAPER_TABLE2 = {(60, 80): {2: 5.1243, 4: 3.1907, 8: 2.4966},
                 (120, 160): {2: 4.7966, 4: 3.1548, 8: 2.4185},
                 (240, 320): {2: 4.0927, 4: 2.9281, 8: 2.2197}}
 
-# --- search space. m is fixed from the (weighed) cloth mass: SPEC 2, identifiability.
-# Bounds are for k, l, d given m; the optimiser works in log space for all three.
-SEARCH_BOUNDS = {"k": (0.5, 50.0), "l": (0.6 * GT_PARAMS["l"], 1.4 * GT_PARAMS["l"]), "d": (2.0e-6, 2.0e-4)}
-LOG_SCALED = {"k": True, "l": True, "d": True}
+# --- search space. m is fixed from the (weighed) cloth mass: SPEC 2, identifiability. The optimiser
+# searches the identifiable quantities, all in log scale: k/m [1/s^2], d/m [1/s], and l relative to the
+# capture's grid spacing; k = (k/m) m and d = (d/m) m are reported for the given m.
+SEARCH_BOUNDS = {"k_over_m": (5.0e4, 5.0e6), "d_over_m": (0.2, 50.0), "l_rel": (0.6, 1.4)}
+LOG_SCALED = {"k_over_m": True, "d_over_m": True, "l_rel": True}
 
 # --- optimisers (SPEC 7)
 N_FREE = 3

@@ -165,8 +165,11 @@ def simulate_numpy(scenario: Scenario, P: np.ndarray) -> SimResult:
     for a, b in zip(ev[:-1], ev[1:]):
         seg = b - a
         nsub = substeps_for(Pw, seg)
-        if steps_total.max() + nsub.max() > MAX_TOTAL_STEPS:
-            raise ClothFitError(f"simulation needs more than {MAX_TOTAL_STEPS} steps: k/m = {kap.max():.3g} is too stiff")
+        stiff = ~exploded & (steps_total + nsub > MAX_TOTAL_STEPS)
+        for p in np.nonzero(stiff)[0]:
+            reason[p] = f"too many steps (k/m = {kap[p, 0, 0, 0]:.3g} is too stiff)"
+        exploded |= stiff
+        nsub = np.where(exploded, 1, nsub)
         dt = seg / nsub
         settling = b <= 0.0
         rate = np.maximum(beta, D.SETTLE_DAMPING_RATE) if settling else beta

@@ -1,0 +1,46 @@
+"""Scores of a parameter set on a capture: silhouette error per image, shape error where known."""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import ClothFitError
+from .fitting import resample_silhouette
+from .metrics import shape_error_mm
+from .model import Params
+from .objective import SilhouetteObjective
+from .simulate import simulate
+
+
+def evaluate(capture, params, cameras=None, times=None, resolution=None, backend="auto") -> dict:
+    """Mean ``E_sil x 100`` over the images of ``cameras`` (indices) at ``times`` and, if the capture
+    has ground-truth shapes, the mean vertex distance [mm] per shape and overall."""
+    p = Params.from_dict(params, "parameters to evaluate")
+    cams = list(range(len(capture.cameras))) if cameras is None else [int(c) for c in cameras]
+    if not cams:
+        raise ClothFitError("evaluate: no camera selected")
+    times = list(capture.frame_times) if times is None else list(times)
+    fidx = [capture.frame_index(t) for t in times]
+    tt = [float(capture.frame_times[i]) for i in fidx]
+    sc = capture.scenario.with_frames(tt)
+    camobjs = [capture.cameras[c] for c in cams]
+    observed = [[capture.load_silhouette(c, f) for f in fidx] for c in cams]
+    if resolution is not None:
+        camobjs = [c.resized(*resolution) for c in camobjs]
+        observed = [[resample_silhouette(o, *resolution) for o in oc] for oc in observed]
+    obj = SilhouetteObjective(sc, camobjs, observed, backend=backend)
+    esil, exploded = obj.per_image(np.array([[p.m, p.k, p.l, p.d]]))
+    out = {"cameras": [capture.cameras[c].name for c in cams], "times": tt,
+           "exploded": bool(exploded[0]),
+           "silhouette_error_pct": float(100 * esil[0].mean()),
+           "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
+           "silhouette_error_pct_per_time": (100 * esil[0].mean(0)).tolist()}
+    if capture.shapes is not None:
+        sim = simulate(sc, [p], backend=backend)
+        true = capture.shapes[fidx]
+        if sim.exploded[0]:
+            se = np.full(len(fidx), np.inf)
+        else:
+            se = shape_error_mm(sim.positions[0], true)
+        out["shape_error_mm"] = float(se.mean())
+        out["shape_error_mm_per_time"] = se.tolist()
+    return out

@@ -1,0 +1,117 @@
+"""The fitness of a population: simulate every candidate, rasterise, compare (eq. 6, 7).
+
+``SilhouetteObjective`` holds the observed silhouettes of the chosen cameras and frames and returns,
+for a population of parameter sets, ``E_all`` (sum of ``E_sil`` over all images) or the per-image
+``E_sil``. A candidate that explodes or goes non-finite scores ``inf`` (the worst), never an error.
+The numba kernels (``accel``) are used when available, else the numpy reference path.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import accel
+from .errors import ClothFitError
+from .raster import rasterize_window
+from .simulate import simulate_numpy
+
+
+class SilhouetteObjective:
+    def __init__(self, scenario, cameras, observed, backend: str = "auto", names=None):
+        """``scenario.frame_times`` are the observed times; ``observed[c][f]`` a bool (H_c, W_c) image
+        of camera ``cameras[c]`` at ``scenario.frame_times[f]``."""
+        self.scenario = scenario
+        self.cameras = list(cameras)
+        C, F = len(self.cameras), scenario.frame_times.size
+        if len(observed) != C:
+            raise ClothFitError(f"objective: {len(observed)} silhouette lists for {C} cameras")
+        self.areas = np.zeros((C, F))
+        obs = []
+        for c, cam in enumerate(self.cameras):
+            if len(observed[c]) != F:
+                raise ClothFitError(f"objective: camera '{cam.name}' has {len(observed[c])} silhouettes for {F} frames")
+            for f in range(F):
+                o = np.asarray(observed[c][f], dtype=bool)
+                nm = names[c][f] if names else f"camera '{cam.name}' frame {f}"
+                if o.shape != (cam.height, cam.width):
+                    raise ClothFitError(f"{nm}: silhouette is {o.shape[0]}x{o.shape[1]} but camera '{cam.name}' is "
+                                        f"{cam.height}x{cam.width}")
+                a = int(o.sum())
+                if a == 0:
+                    raise ClothFitError(f"{nm}: observed silhouette is empty")
+                self.areas[c, f] = a
+                obs.append(o)
+        self.observed = [[obs[c * F + f] for f in range(F)] for c in range(C)]
+        if backend == "auto":
+            backend = "numba" if accel.available() else "numpy"
+        if backend not in ("numba", "numpy"):
+            raise ClothFitError(f"unknown backend {backend!r} (numba, numpy, auto)")
+        self.backend = backend
+        self.evaluations = 0
+        if backend == "numba":
+            sizes = [c.height * c.width for c in self.cameras]
+            self._offs = np.zeros((C, F), dtype=np.int64)
+            o = 0
+            for c in range(C):
+                for f in range(F):
+                    self._offs[c, f] = o
+                    o += sizes[c]
+            self._obs = np.concatenate([x.ravel() for x in obs]).astype(np.uint8)
+            self._arrays = accel.scenario_arrays(scenario)
+            self._Ks = np.array([c.K for c in self.cameras])
+            self._Rs = np.array([c.R for c in self.cameras])
+            self._ts = np.array([c.t for c in self.cameras])
+            d = np.zeros((C, 5))
+            for i, c in enumerate(self.cameras):
+                if c.dist.size > 5 and np.any(c.dist[5:] != 0):
+                    raise ClothFitError(f"camera '{c.name}': only 5 distortion coefficients (k1 k2 p1 p2 k3) are "
+                                        f"supported in the fitter; undistort the silhouettes first")
+                d[i, :min(5, c.dist.size)] = c.dist[:5]
+            self._dists = d
+            self._Hs = np.array([c.height for c in self.cameras], dtype=np.int64)
+            self._Ws = np.array([c.width for c in self.cameras], dtype=np.int64)
+            self._maxhw = int(max(sizes))
+            self._tris = np.ascontiguousarray(scenario.grid.triangles, dtype=np.int64)
+
+    @property
+    def n_images(self):
+        return int(self.areas.size)
+
+    def per_image(self, P):
+        """``(esil (P, C, F), exploded (P,))``; exploded candidates have ``inf`` everywhere."""
+        P = np.ascontiguousarray(np.asarray(P, dtype=np.float64).reshape(-1, 4))
+        C, F = self.areas.shape
+        self.evaluations += P.shape[0]
+        if self.backend == "numba":
+            esil = np.full((P.shape[0], C, F), np.inf)
+            codes = np.zeros(P.shape[0], dtype=np.int64)
+            a = self._arrays
+            accel.objective_population(P, *[a[k] for k in accel._ORDER], self._Ks, self._Rs, self._ts, self._dists,
+                                       self._Hs, self._Ws, self._obs, self._offs, self.areas, self._tris, self._maxhw,
+                                       esil, codes)
+            exploded = codes != 0
+            esil[exploded] = np.inf
+            return esil, exploded
+        sim = simulate_numpy(self.scenario, P)
+        esil = np.full((P.shape[0], C, F), np.inf)
+        tris = self.scenario.grid.triangles
+        for p in range(P.shape[0]):
+            if sim.exploded[p]:
+                continue
+            for c, cam in enumerate(self.cameras):
+                uv = cam.project(sim.positions[p])  # (F, V, 2)
+                for f in range(F):
+                    esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f])
+        return esil, sim.exploded
+
+    @staticmethod
+    def _esil_numpy(uv, tris, cam, obs, area):
+        r0, c0, win = rasterize_window(uv, tris, cam.height, cam.width)
+        nmod = int(win.sum())
+        inter = int(np.count_nonzero(obs[r0:r0 + win.shape[0], c0:c0 + win.shape[1]] & win)) if nmod else 0
+        return (area + nmod - 2 * inter) / area
+
+    def __call__(self, P):
+        esil, exploded = self.per_image(P)
+        e = esil.sum(axis=(1, 2))
+        e[exploded | ~np.isfinite(e)] = np.inf
+        return e
