@@ -1,0 +1,141 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The "Cloth Fit" sidebar tab of the 3D viewport: one small draw function per section."""
+from __future__ import annotations
+
+import bpy
+
+from ..core.model import identifiable
+
+
+def draw_rig(layout, scene, p):
+    layout.prop(p, "rig_source", expand=True)
+    if p.rig_source == "PRESET":
+        layout.prop(p, "rig_preset")
+    else:
+        col = layout.column(align=True)
+        for name in ("ring_cameras", "ring_elevation", "ring_distance", "ring_target_z", "ring_fx"):
+            col.prop(p, name)
+        row = layout.row(align=True)
+        row.prop(p, "ring_width")
+        row.prop(p, "ring_height")
+    layout.operator("clothfit.build_rig", icon="OUTLINER_OB_CAMERA")
+
+
+def draw_cloth(layout, scene, p):
+    col = layout.column(align=True)
+    col.prop(p, "cloth_nx")
+    col.prop(p, "cloth_side")
+    col.prop(p, "cloth_height")
+    layout.prop(p, "released_corner")
+    layout.operator("clothfit.build_cloth", icon="MESH_GRID")
+    if p.cloth_object is not None:
+        layout.label(text=f"Cloth: {p.cloth_object.name}", icon="OBJECT_DATA")
+
+
+def draw_simulation(layout, scene, p):
+    col = layout.column(align=True)
+    for name in ("m", "k", "l", "d"):
+        col.prop(p, name)
+    n = p.cloth_nx * p.cloth_nx
+    layout.label(text=f"Cloth mass m x {n} = {1000 * p.m * n:.3g} g")
+    layout.prop(p, "settle_time")
+    layout.prop(p, "frame_times")
+    layout.operator("clothfit.simulate", icon="PHYSICS")
+
+
+def draw_observations(layout, scene, p):
+    layout.prop(p, "capture_dir")
+    row = layout.row(align=True)
+    row.prop(p, "noise")
+    row.prop(p, "noise_seed")
+    layout.operator("clothfit.render_silhouettes", icon="RENDER_STILL")
+    layout.operator("clothfit.load_capture", icon="FILE_FOLDER")
+    layout.prop(p, "view_frame")
+
+
+def draw_fitting(layout, scene, p):
+    col = layout.column(align=True)
+    col.prop(p, "train_cameras")
+    col.prop(p, "train_times")
+    col.prop(p, "optimizer")
+    col.prop(p, "seed")
+    col.prop(p, "max_evaluations")
+    col.prop(p, "fit_resolution")
+    layout.prop(p, "fit_cloth_mass")
+    if p.fit_running:
+        layout.prop(p, "fit_progress", text="Progress", slider=True)
+        layout.label(text=f"Generation {p.fit_generation}, {p.fit_evaluations} evaluations", icon="TIME")
+        layout.label(text="Esc cancels and keeps the best")
+    else:
+        layout.operator("clothfit.fit", icon="PLAY")
+    if p.fit_status:
+        layout.label(text=p.fit_status)
+
+
+def draw_results(layout, scene, p):
+    if not p.fit_has_result:
+        layout.label(text="No fit yet")
+    else:
+        layout.label(text=f"Best E_all {p.fit_best_error:.4g} (mean E_sil {p.fit_best_pct:.3f} %)")
+        col = layout.column(align=True)
+        col.label(text=f"m = {p.fit_best_m:.4g} kg (fixed from the cloth mass)")
+        col.label(text=f"k = {p.fit_best_k:.4g} N/m")
+        col.label(text=f"l = {1000 * p.fit_best_l:.4g} mm")
+        col.label(text=f"d = {p.fit_best_d:.4g} N s/m")
+        if p.fit_best_m > 0:
+            ident = identifiable({"m": p.fit_best_m, "k": p.fit_best_k, "l": p.fit_best_l, "d": p.fit_best_d})
+            box = layout.box()
+            box.label(text="Observable from silhouettes:")
+            box.label(text=f"k/m = {ident['k_over_m']:.5g} 1/s^2")
+            box.label(text=f"d/m = {ident['d_over_m']:.5g} 1/s")
+            box.label(text=f"l = {1000 * ident['l']:.4g} mm")
+        layout.operator("clothfit.apply_fit", icon="CHECKMARK")
+    layout.prop(p, "overlay_source")
+    layout.operator("clothfit.overlays", icon="IMAGE_RGB_ALPHA")
+    if p.overlay_dir:
+        layout.label(text=f"Overlay mean E_sil {p.overlay_error:.3f} %")
+    if p.result_path:
+        layout.label(text=f"Result: {bpy.path.basename(p.result_path)}", icon="FILE")
+
+
+SECTIONS = (
+    ("rig", "Rig", draw_rig),
+    ("cloth", "Cloth", draw_cloth),
+    ("simulation", "Simulation", draw_simulation),
+    ("observations", "Observations", draw_observations),
+    ("fitting", "Fitting", draw_fitting),
+    ("results", "Results", draw_results),
+)
+
+
+class _Base:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Cloth Fit"
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and hasattr(context.scene, "clothfit")
+
+
+class CLOTHFIT_PT_main(_Base, bpy.types.Panel):
+    bl_label = "Silhouette Cloth Fit"
+    bl_idname = "CLOTHFIT_PT_main"
+
+    def draw(self, context):
+        p = context.scene.clothfit
+        if p.fit_running:
+            self.layout.label(text=f"Fitting... {100 * p.fit_progress:.0f} %", icon="SORTTIME")
+
+
+def _section_panel(key, label, func):
+    def draw(self, context):
+        self.layout.use_property_split = False
+        func(self.layout, context.scene, context.scene.clothfit)
+    return type(f"CLOTHFIT_PT_{key}", (_Base, bpy.types.Panel), {
+        "bl_label": label, "bl_idname": f"CLOTHFIT_PT_{key}", "bl_parent_id": "CLOTHFIT_PT_main",
+        "bl_options": set() if key in ("rig", "fitting", "results") else {"DEFAULT_CLOSED"},
+        "draw": draw, "__doc__": f"Cloth Fit: {label}"})
+
+
+CLASSES = (CLOTHFIT_PT_main,) + tuple(_section_panel(*s) for s in SECTIONS)

@@ -1,0 +1,129 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""All scene state of Cloth Fit: one PropertyGroup at ``scene.clothfit`` (saved with the .blend).
+
+Defaults come from ``core/defaults.py`` (the paper's scenario and ground truth). Blender stores
+float properties in single precision: the fit's exact numbers are in the result JSON.
+"""
+from __future__ import annotations
+
+import bpy
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
+                       StringProperty)
+
+from ..core import defaults as D
+
+OPTIMIZERS = [("spx-mgg", "SPX + MGG", "Real-coded GA: simplex crossover, minimal generation gap (the paper's)"),
+              ("cma-es", "CMA-ES", "Covariance matrix adaptation evolution strategy")]
+RESOLUTIONS = [("FULL", "Full", "Fit at the capture's resolution"),
+               ("240x320", "240 x 320", "Fit at 240 x 320 (H x W)"),
+               ("120x160", "120 x 160", "Fit at 120 x 160 (H x W)"),
+               ("60x80", "60 x 80", "Fit at 60 x 80 (H x W)")]
+
+
+def _times_default():
+    t = D.FRAME_TIMES
+    step = round(t[1] - t[0], 6)
+    return f"{t[0]:g}:{t[-1]:g}:{step:g}"
+
+
+def _view_frame_update(self, context):
+    from . import api
+    try:
+        api.show_observations(context.scene, self.view_frame)
+    except Exception:  # a UI update callback must never raise
+        pass
+
+
+class ClothFitProperties(bpy.types.PropertyGroup):
+    # ------------------------------------------------------------------ rig
+    rig_source: EnumProperty(name="Rig", items=[
+        ("PRESET", "Preset", "A camera rig file from rigs/ (or a path to a cameras JSON)"),
+        ("RING", "Ring", "A parametric ring of cameras around the cloth")], default="PRESET")
+    rig_preset: StringProperty(name="Preset", default=D.DEFAULT_RIG,
+                               description="Rig preset name in rigs/ (lab18, ring8) or a path to a cameras JSON")
+    ring_cameras: IntProperty(name="Cameras", default=8, min=1, max=64)
+    ring_elevation: FloatProperty(name="Elevation", default=25.0, min=-89.0, max=89.0, description="Degrees")
+    ring_distance: FloatProperty(name="Distance", default=0.5, min=0.01, unit="LENGTH")
+    ring_target_z: FloatProperty(name="Target Height", default=0.06, unit="LENGTH")
+    ring_fx: FloatProperty(name="Focal (px)", default=1000.0, min=1.0)
+    ring_width: IntProperty(name="Width", default=D.IMAGE_W, min=4, max=16384)
+    ring_height: IntProperty(name="Height", default=D.IMAGE_H, min=4, max=16384)
+
+    # ---------------------------------------------------------------- cloth
+    cloth_nx: IntProperty(name="Grid", default=D.GRID_N, min=2, max=128, description="Point masses per side")
+    cloth_side: FloatProperty(name="Side", default=D.CLOTH_SIDE, min=1e-4, unit="LENGTH", precision=4)
+    cloth_height: FloatProperty(name="Height", default=D.CLOTH_HEIGHT, unit="LENGTH", precision=4,
+                                description="Height of the held corners")
+    released_corner: IntProperty(name="Released Corner", default=D.RELEASED_CORNER, min=0, max=3,
+                                 description="Corner released at t = 0 (0..3; the other three stay held)")
+    cloth_object: PointerProperty(name="Cloth", type=bpy.types.Object)
+
+    # ----------------------------------------------------------- simulation
+    m: FloatProperty(name="m", default=D.GT_PARAMS["m"], min=1e-12, precision=6, unit="MASS",
+                     description="Point mass [kg]")
+    k: FloatProperty(name="k", default=D.GT_PARAMS["k"], min=1e-9, precision=4,
+                     description="Spring coefficient [N/m]")
+    l: FloatProperty(name="l", default=D.GT_PARAMS["l"], min=1e-9, precision=5, unit="LENGTH",
+                     description="Natural length of the grid springs [m] (diagonals: sqrt(2) l)")
+    d: FloatProperty(name="d", default=D.GT_PARAMS["d"], min=0.0, precision=6,
+                     description="Viscous damping [N s/m]")
+    settle_time: FloatProperty(name="Settle", default=D.SETTLE_TIME, min=0.0, unit="TIME_ABSOLUTE",
+                               description="Settling time before t = 0, all handles held")
+    frame_times: StringProperty(name="Times", default=_times_default(),
+                                description="Capture times in seconds: start:stop:step or a comma list")
+
+    # --------------------------------------------------------- observations
+    capture_dir: StringProperty(name="Capture", subtype="DIR_PATH", default="//clothfit_capture/",
+                                description="Capture directory (capture.json, cameras.json, sil/...)")
+    noise: FloatProperty(name="Noise", default=D.NOISE_FRACTION, min=0.0, max=1.0, precision=3,
+                         description="Fraction of boundary pixels flipped in rendered silhouettes")
+    noise_seed: IntProperty(name="Noise Seed", default=0, min=0)
+    view_frame: IntProperty(name="Show Frame", default=0, min=0, update=_view_frame_update,
+                            description="Capture frame whose silhouettes the cameras show as background")
+
+    # -------------------------------------------------------------- fitting
+    train_cameras: IntProperty(name="Training Cameras", default=8, min=1, max=64,
+                               description="Cameras used for fitting (spread around the rig); the rest are held out")
+    train_times: EnumProperty(name="Training Times", items=[
+        ("PAPER", "Paper", "t = 0.10, 0.20, ... (those present in the capture)"),
+        ("ALL", "All", "Every frame of the capture")], default="PAPER")
+    optimizer: EnumProperty(name="Optimiser", items=OPTIMIZERS, default="spx-mgg")
+    seed: IntProperty(name="Seed", default=0, min=0)
+    max_evaluations: IntProperty(name="Budget", default=D.FIT_EVALUATIONS, min=1,
+                                 description="Maximum number of model evaluations")
+    fit_resolution: EnumProperty(name="Resolution", items=RESOLUTIONS, default="FULL")
+    fit_cloth_mass: FloatProperty(name="Cloth Mass", default=0.0, min=0.0, unit="MASS", precision=6,
+                                  description="Weighed cloth mass (0 = the capture's); fixes m, since only "
+                                              "k/m, d/m and l are observable")
+
+    # --------------------------------------------------- live status/results
+    fit_running: BoolProperty(name="Running", default=False)
+    fit_progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR")
+    fit_generation: IntProperty(name="Generation", default=0)
+    fit_evaluations: IntProperty(name="Evaluations", default=0)
+    fit_best_error: FloatProperty(name="Best E_all", default=0.0, precision=5)
+    fit_best_pct: FloatProperty(name="Mean E_sil %", default=0.0, precision=4)
+    fit_has_result: BoolProperty(name="Has Result", default=False)
+    fit_best_m: FloatProperty(name="m", default=0.0, precision=6, unit="MASS")
+    fit_best_k: FloatProperty(name="k", default=0.0, precision=4)
+    fit_best_l: FloatProperty(name="l", default=0.0, precision=5, unit="LENGTH")
+    fit_best_d: FloatProperty(name="d", default=0.0, precision=6)
+    fit_status: StringProperty(name="Status", default="")
+    result_path: StringProperty(name="Result", subtype="FILE_PATH", default="")
+    overlay_source: EnumProperty(name="Model", items=[
+        ("BLENDER", "Blender", "Model silhouettes rendered by Blender from the baked cloth"),
+        ("CORE", "Core", "Model silhouettes from the core rasteriser (fast)")], default="BLENDER")
+    overlay_dir: StringProperty(name="Overlays", subtype="DIR_PATH", default="")
+    overlay_error: FloatProperty(name="Overlay E_sil %", default=0.0, precision=4)
+
+
+CLASSES = (ClothFitProperties,)
+
+
+def register_scene_property():
+    bpy.types.Scene.clothfit = PointerProperty(type=ClothFitProperties)
+
+
+def unregister_scene_property():
+    if hasattr(bpy.types.Scene, "clothfit"):
+        del bpy.types.Scene.clothfit
