@@ -1,0 +1,647 @@
+"""Calibrated cameras in and out: OpenCV FileStorage (YAML/JSON/XML) and COLMAP text models.
+
+Our :class:`~.camera.Camera` is OpenCV's pinhole: ``x_cam = R X + t``, +Z forward, +Y down, pixel
+centres at integer coordinates, distortion in OpenCV's order ``(k1, k2, p1, p2[, k3, ...])``.
+
+OpenCV FileStorage files (``.yml``/``.yaml``/``.json``/``.xml``)
+    Read: one camera at the top level, or several cameras as a ``cameras`` sequence of maps, or
+    as top-level maps (the key is the camera's name). Per camera we accept the spellings people
+    actually write: ``camera_matrix`` / ``cameraMatrix`` / ``K`` / ``intrinsic`` /
+    ``intrinsic_matrix`` / ``M``; ``distortion_coefficients`` / ``dist_coeffs`` / ``distCoeffs``
+    / ``dist`` / ``D``; extrinsics ``R`` (3x3) and ``t`` / ``T`` / ``tvec``, or ``rvec``
+    (Rodrigues) and ``tvec``; image size ``image_width`` + ``image_height`` / ``width`` +
+    ``height`` / ``image_size`` or ``imageSize`` ([w, h]). Matrices may be ``!!opencv-matrix``
+    nodes or plain (nested) lists. A YAML file without OpenCV's ``%YAML:1.0`` header is read
+    too. A camera without extrinsics is an error (we need calibrated poses); a file without an
+    image size needs ``width``/``height`` from the caller.
+    Write: one file with a ``cameras`` sequence (``write_opencv``) or one file per camera
+    (``write_opencv_dir``), each camera with ``name``, ``image_width``, ``image_height``,
+    ``camera_matrix``, ``distortion_coefficients``, ``R``, ``rvec`` and ``tvec``. When a file
+    holds both ``R`` and ``rvec`` they must agree (1e-6) or we refuse it.
+
+COLMAP text models (a folder with ``cameras.txt`` and ``images.txt``)
+    Camera models SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV; COLMAP's
+    distortion of these models is OpenCV's with the same coefficients (SIMPLE_RADIAL ``k`` = k1;
+    RADIAL ``k1, k2``; OPENCV ``k1, k2, p1, p2``; FULL_OPENCV ``k1, k2, p1, p2, k3, k4, k5, k6``,
+    the rational model). Every line of ``images.txt`` ``IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID
+    NAME`` (followed by its 2D-points line) becomes one Camera: COLMAP's pose is world-to-camera,
+    the same as ours. The camera's name is the image name's stem (``cam03.png`` -> ``cam03``); if
+    stems collide (``cam03/0001.png``, ``cam04/0001.png``) the path without extension with ``/``
+    turned into ``_`` is used.
+
+    **Pixel convention.** COLMAP puts the centre of the top-left pixel at (0.5, 0.5); we (and
+    OpenCV) put it at (0, 0). So ``cx_ours = cx_colmap - 0.5`` and ``cy_ours = cy_colmap - 0.5``
+    on import, and ``+ 0.5`` on export. Focal lengths and distortion are unchanged.
+    Export writes PINHOLE (no distortion), OPENCV (up to 4 coefficients or k3 = 0) or
+    FULL_OPENCV, ``images.txt`` with ``<name>.png`` image names and an empty ``points3D.txt``.
+
+Distortion: :meth:`Camera.project` applies the OpenCV distortion model, so a capture can keep
+distorted silhouettes with distorted cameras (the fitter projects vertices with distortion;
+triangle edges stay straight between projected vertices, which is accurate for small triangles).
+Or undistort the silhouettes with :func:`undistort_silhouette` and use the camera without
+distortion.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+
+import numpy as np
+
+from .camera import Camera, load_cameras, save_cameras
+from .errors import ClothFitError
+
+_K_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsic", "intrinsic_matrix", "intrinsics", "M")
+_D_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "distortion", "dist", "D")
+_R_KEYS = ("R", "rotation_matrix", "rotation")
+_T_KEYS = ("t", "T", "tvec", "translation")
+_RVEC_KEYS = ("rvec", "rvecs", "rotation_vector")
+
+OPENCV_EXTS = (".yml", ".yaml", ".json", ".xml")
+
+
+# ============================================================== OpenCV FileStorage: read
+
+def _open_storage(path: str):
+    import cv2
+    if not os.path.isfile(path):
+        raise ClothFitError(f"calibration file not found: {path}")
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            text = f.read()
+    except OSError as e:
+        raise ClothFitError(f"calibration file {path} is unreadable: {e}") from None
+    if not text.strip():
+        raise ClothFitError(f"calibration file {path} is empty")
+    ext = os.path.splitext(path)[1].lower()
+    if ext in (".yml", ".yaml") and not text.lstrip().startswith("%YAML"):
+        text = "%YAML:1.0\n---\n" + text  # OpenCV insists on its header; plain YAML is common
+    try:
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY |
+                             (cv2.FILE_STORAGE_FORMAT_JSON if ext == ".json" else 0))
+        ok = fs.isOpened()
+    except cv2.error as e:
+        raise ClothFitError(f"calibration file {path} could not be parsed by OpenCV FileStorage: "
+                            f"{str(e).strip().splitlines()[-1]}") from None
+    except Exception as e:  # cv2 raises SystemError on some syntax errors
+        raise ClothFitError(f"calibration file {path} could not be parsed by OpenCV FileStorage ({e})") from None
+    if not ok:
+        raise ClothFitError(f"calibration file {path} could not be opened by OpenCV FileStorage")
+    return fs
+
+
+def _node_to_py(node):
+    """A FileNode as Python data: maps -> dict, seqs -> list, opencv-matrix -> ndarray."""
+    if node.isMap():
+        keys = list(node.keys())
+        if {"rows", "cols", "data"} <= set(keys):
+            rows, cols = int(node.getNode("rows").real()), int(node.getNode("cols").real())
+            data = np.array(_node_to_py(node.getNode("data")), dtype=np.float64).reshape(-1)
+            if data.size != rows * cols:
+                raise ValueError(f"matrix of {rows}x{cols} has {data.size} values")
+            return data.reshape(rows, cols)
+        return {k: _node_to_py(node.getNode(k)) for k in keys}
+    if node.isSeq():
+        return [_node_to_py(node.at(i)) for i in range(node.size())]
+    if node.isInt():
+        return int(node.real())
+    if node.isReal():
+        return float(node.real())
+    if node.isString():
+        return node.string()
+    return None
+
+
+def _first(d: dict, keys):
+    for k in keys:
+        if k in d and d[k] is not None:
+            return k, d[k]
+    return None, None
+
+
+def _looks_like_camera(d) -> bool:
+    return isinstance(d, dict) and _first(d, _K_KEYS)[0] is not None
+
+
+def _array(value, what, where, sizes=None, shape=None):
+    try:
+        a = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{where}: {what} is not numeric: {value!r}") from None
+    if shape is not None:
+        if a.size != int(np.prod(shape)):
+            raise ClothFitError(f"{where}: {what} must have {int(np.prod(shape))} values ({shape}), got shape {a.shape}")
+        a = a.reshape(shape)
+    else:
+        a = a.reshape(-1)
+        if sizes is not None and a.size not in sizes:
+            raise ClothFitError(f"{where}: {what} must have {' or '.join(map(str, sizes))} values, got {a.size}")
+    if not np.all(np.isfinite(a)):
+        raise ClothFitError(f"{where}: {what} has non-finite values: {a.tolist()}")
+    return a
+
+
+def _image_size(d, where, width, height):
+    w = h = None
+    for kw, kh in (("image_width", "image_height"), ("width", "height"), ("imageWidth", "imageHeight")):
+        if kw in d and kh in d:
+            w, h = d[kw], d[kh]
+            break
+    if w is None:
+        _, size = _first(d, ("image_size", "imageSize", "img_size", "resolution"))
+        if size is not None:
+            s = _array(size, "image_size", where, sizes=(2,))
+            w, h = s[0], s[1]  # OpenCV's cv::Size order: width, height
+    if w is None:
+        w, h = width, height
+    if w is None or h is None:
+        raise ClothFitError(f"{where}: no image size (image_width/image_height or image_size); give width and height")
+    try:
+        w, h = int(round(float(w))), int(round(float(h)))
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{where}: image size {w!r} x {h!r} is not numeric") from None
+    if w <= 0 or h <= 0:
+        raise ClothFitError(f"{where}: image size {w} x {h} must be positive")
+    return w, h
+
+
+def _camera_from_mapping(d: dict, name: str, where: str, width=None, height=None) -> Camera:
+    import cv2
+    kk, K = _first(d, _K_KEYS)
+    if kk is None:
+        raise ClothFitError(f"{where}: no camera matrix (looked for {', '.join(_K_KEYS)})")
+    K = _array(K, kk, where, shape=(3, 3))
+    dk, dist = _first(d, _D_KEYS)
+    dist = np.zeros(0) if dk is None else _array(dist, dk, where, sizes=(0, 4, 5, 8, 12, 14))
+    rk, R = _first(d, _R_KEYS)
+    vk, rvec = _first(d, _RVEC_KEYS)
+    tk, t = _first(d, _T_KEYS)
+    if rk is None and vk is None:
+        raise ClothFitError(f"{where}: no extrinsics (need R or rvec, and t/tvec); the camera pose must be calibrated")
+    if tk is None:
+        raise ClothFitError(f"{where}: no translation (looked for {', '.join(_T_KEYS)})")
+    t = _array(t, tk, where, sizes=(3,))
+    if rk is not None:
+        R = _array(R, rk, where, shape=(3, 3))
+        if vk is not None:
+            Rv = cv2.Rodrigues(_array(rvec, vk, where, sizes=(3,)))[0]
+            if np.abs(Rv - R).max() > 1e-6:
+                raise ClothFitError(f"{where}: {rk} and {vk} disagree (max difference {np.abs(Rv - R).max():.2e})")
+    else:
+        R = cv2.Rodrigues(_array(rvec, vk, where, sizes=(3,)))[0]
+    w, h = _image_size(d, where, width, height)
+    cam_name = d.get("name") if isinstance(d.get("name"), str) and d.get("name") else name
+    cam = Camera.__new__(Camera)
+    cam.K, cam.R, cam.t, cam.dist, cam.width, cam.height, cam.name = K, R, t, dist, w, h, str(cam_name)
+    cam.validate(where)
+    return cam
+
+
+def read_opencv(path: str, width: int | None = None, height: int | None = None) -> list:
+    """Cameras of one OpenCV FileStorage file (one camera or several, see the module doc)."""
+    fs = _open_storage(path)
+    try:
+        root = _node_to_py(fs.root())
+    except (ValueError, TypeError) as e:
+        raise ClothFitError(f"calibration file {path}: {e}") from None
+    finally:
+        fs.release()
+    if not isinstance(root, dict) or not root:
+        raise ClothFitError(f"calibration file {path}: expected a map of camera data at the top level")
+    stem = os.path.splitext(os.path.basename(path))[0]
+    if _looks_like_camera(root):
+        return [_camera_from_mapping(root, stem, f"{path}", width, height)]
+    entries = []
+    if isinstance(root.get("cameras"), list):
+        for i, c in enumerate(root["cameras"]):
+            if not isinstance(c, dict):
+                raise ClothFitError(f"calibration file {path}: cameras[{i}] is not a map")
+            entries.append((f"cam{i:02d}", c, f"{path} cameras[{i}]"))
+    else:
+        for k, v in root.items():
+            if _looks_like_camera(v):
+                entries.append((k, v, f"{path} camera '{k}'"))
+    if not entries:
+        raise ClothFitError(f"calibration file {path}: no camera found (no camera matrix under any of "
+                            f"{', '.join(_K_KEYS)}, and no 'cameras' list)")
+    cams = [_camera_from_mapping(v, k, where, width, height) for k, v, where in entries]
+    _check_unique(cams, path)
+    return cams
+
+
+def read_opencv_dir(folder: str, width: int | None = None, height: int | None = None) -> list:
+    """One camera per OpenCV file in ``folder`` (sorted by file name; the stem names the camera)."""
+    files = sorted(f for f in os.listdir(folder) if os.path.splitext(f)[1].lower() in OPENCV_EXTS)
+    if not files:
+        raise ClothFitError(f"camera folder {folder}: no OpenCV calibration files ({', '.join(OPENCV_EXTS)})")
+    cams = []
+    for f in files:
+        cams.extend(read_opencv(os.path.join(folder, f), width, height))
+    _check_unique(cams, folder)
+    return cams
+
+
+def _check_unique(cams, where):
+    names = [c.name for c in cams]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ClothFitError(f"{where}: camera names are not unique: {', '.join(dup)}")
+
+
+# ============================================================= OpenCV FileStorage: write
+
+def _safe_key(name: str) -> str:
+    k = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return k if k and k[0].isalpha() else "cam_" + k
+
+
+def _write_camera(fs, cam: Camera):
+    import cv2
+    fs.write("name", cam.name)
+    fs.write("image_width", int(cam.width))
+    fs.write("image_height", int(cam.height))
+    fs.write("camera_matrix", cam.K)
+    fs.write("distortion_coefficients", (cam.dist if cam.dist.size else np.zeros(5)).reshape(1, -1))
+    fs.write("R", cam.R)
+    fs.write("rvec", cv2.Rodrigues(cam.R)[0].reshape(3, 1))
+    fs.write("tvec", cam.t.reshape(3, 1))
+
+
+def _storage_for_write(path: str):
+    import cv2
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in OPENCV_EXTS:
+        raise ClothFitError(f"OpenCV calibration file {path}: extension must be one of {', '.join(OPENCV_EXTS)}")
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_WRITE)
+    if not fs.isOpened():
+        raise ClothFitError(f"cannot write OpenCV calibration file {path}")
+    return fs
+
+
+def write_opencv(path: str, cameras) -> str:
+    """All cameras in one FileStorage file (format from the extension: .yml/.yaml/.json/.xml)."""
+    import cv2
+    fs = _storage_for_write(path)
+    fs.write("camera_count", len(cameras))
+    fs.write("convention", "x_cam = R X + t; +Z forward, +Y down; pixel centres at integers (OpenCV)")
+    fs.startWriteStruct("cameras", cv2.FileNode_SEQ)
+    for c in cameras:
+        fs.startWriteStruct("", cv2.FileNode_MAP)
+        _write_camera(fs, c)
+        fs.endWriteStruct()
+    fs.endWriteStruct()
+    fs.release()
+    return path
+
+
+def write_opencv_dir(folder: str, cameras, ext: str = ".yml") -> list:
+    """One FileStorage file per camera, ``<folder>/<name>.yml`` (name made file-safe)."""
+    os.makedirs(folder, exist_ok=True)
+    out = []
+    for c in cameras:
+        p = os.path.join(folder, _safe_key(c.name) + ext)
+        fs = _storage_for_write(p)
+        _write_camera(fs, c)
+        fs.release()
+        out.append(p)
+    return out
+
+
+# ======================================================================== COLMAP
+
+# model name -> (number of params, how they map to fx, fy, cx, cy, dist)
+COLMAP_MODELS = {
+    "SIMPLE_PINHOLE": 3,   # f, cx, cy
+    "PINHOLE": 4,          # fx, fy, cx, cy
+    "SIMPLE_RADIAL": 4,    # f, cx, cy, k
+    "RADIAL": 5,           # f, cx, cy, k1, k2
+    "OPENCV": 8,           # fx, fy, cx, cy, k1, k2, p1, p2
+    "FULL_OPENCV": 12,     # fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6
+}
+COLMAP_PIXEL_OFFSET = 0.5  # COLMAP's pixel centres are at +0.5: cx_ours = cx_colmap - 0.5
+
+
+def _colmap_lines(path):
+    if not os.path.isfile(path):
+        raise ClothFitError(f"COLMAP model file not found: {path}")
+    try:
+        with open(path, encoding="utf-8") as f:
+            raw = f.read().splitlines()
+    except (OSError, UnicodeDecodeError) as e:
+        raise ClothFitError(f"COLMAP model file {path} is unreadable: {e}") from None
+    return [(i + 1, ln) for i, ln in enumerate(raw)]
+
+
+def colmap_to_intrinsics(model: str, params, where="COLMAP camera"):
+    """``K`` (our pixel convention) and OpenCV ``dist`` from a COLMAP camera model."""
+    if model not in COLMAP_MODELS:
+        raise ClothFitError(f"{where}: camera model {model} is not supported (supported: {', '.join(COLMAP_MODELS)})")
+    p = [float(v) for v in params]
+    if len(p) != COLMAP_MODELS[model]:
+        raise ClothFitError(f"{where}: model {model} needs {COLMAP_MODELS[model]} parameters, got {len(p)}")
+    if model in ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL"):
+        fx = fy = p[0]
+        cx, cy = p[1], p[2]
+        rest = p[3:]
+    else:
+        fx, fy, cx, cy = p[:4]
+        rest = p[4:]
+    if model == "SIMPLE_RADIAL":
+        dist = [rest[0], 0.0, 0.0, 0.0]
+    elif model == "RADIAL":
+        dist = [rest[0], rest[1], 0.0, 0.0]
+    elif model == "OPENCV":
+        dist = rest[:4]
+    elif model == "FULL_OPENCV":
+        dist = rest[:8]
+    else:
+        dist = []
+    K = np.array([[fx, 0.0, cx - COLMAP_PIXEL_OFFSET], [0.0, fy, cy - COLMAP_PIXEL_OFFSET], [0.0, 0.0, 1.0]])
+    return K, np.array(dist, dtype=np.float64)
+
+
+def intrinsics_to_colmap(cam: Camera):
+    """(model, params) of a Camera in COLMAP's convention (the model that represents it exactly)."""
+    if abs(cam.K[0, 1]) > 1e-12:
+        raise ClothFitError(f"camera '{cam.name}': COLMAP models have no skew, K[0,1] = {cam.K[0, 1]}")
+    fx, fy = cam.K[0, 0], cam.K[1, 1]
+    cx, cy = cam.K[0, 2] + COLMAP_PIXEL_OFFSET, cam.K[1, 2] + COLMAP_PIXEL_OFFSET
+    d = cam.dist
+    if d.size == 0 or not np.any(d != 0):
+        return "PINHOLE", [fx, fy, cx, cy]
+    if d.size > 8 and np.any(d[8:] != 0):
+        raise ClothFitError(f"camera '{cam.name}': distortion with {d.size} coefficients (thin prism / tilt) "
+                            "has no COLMAP model")
+    if d.size <= 4 or (d.size >= 5 and not np.any(d[4:] != 0)):
+        dd = np.zeros(4)
+        dd[:min(4, d.size)] = d[:4]
+        return "OPENCV", [fx, fy, cx, cy, *dd.tolist()]
+    dd = np.zeros(8)
+    dd[:min(8, d.size)] = d[:8]
+    return "FULL_OPENCV", [fx, fy, cx, cy, *dd.tolist()]
+
+
+def _quat_to_R(q):
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _R_to_quat(R):
+    """Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd's method)."""
+    tr = np.trace(R)
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+def _is_points_line(s: str) -> bool:
+    toks = s.split()
+    if len(toks) % 3:
+        return False
+    try:
+        [float(v) for v in toks]
+    except ValueError:
+        return False
+    return True
+
+
+def read_colmap(folder: str) -> list:
+    """Cameras of a COLMAP text model folder (``cameras.txt`` + ``images.txt``), one per image."""
+    cpath = os.path.join(folder, "cameras.txt")
+    ipath = os.path.join(folder, "images.txt")
+    intr = {}
+    for ln, line in _colmap_lines(cpath):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = s.split()
+        where = f"{cpath} line {ln}"
+        if len(parts) < 4:
+            raise ClothFitError(f"{where}: expected 'CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]', got {s!r}")
+        try:
+            cid, w, h = int(parts[0]), int(parts[2]), int(parts[3])
+            params = [float(v) for v in parts[4:]]
+        except ValueError:
+            raise ClothFitError(f"{where}: non-numeric camera entry {s!r}") from None
+        K, dist = colmap_to_intrinsics(parts[1], params, where)
+        if cid in intr:
+            raise ClothFitError(f"{where}: camera id {cid} defined twice")
+        intr[cid] = (K, dist, w, h, where)
+    if not intr:
+        raise ClothFitError(f"{cpath}: no cameras")
+    images = []
+    lines = [(ln, l.strip()) for ln, l in _colmap_lines(ipath)]
+    lines = [(ln, s) for ln, s in lines if not s.startswith("#")]
+    i = 0
+    while i < len(lines):
+        ln, s = lines[i]
+        if not s:
+            i += 1
+            continue
+        parts = s.split(maxsplit=9)
+        where = f"{ipath} line {ln}"
+        if len(parts) < 10:
+            raise ClothFitError(f"{where}: expected 'IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME', got {s!r}")
+        try:
+            q = np.array([float(v) for v in parts[1:5]])
+            t = np.array([float(v) for v in parts[5:8]])
+            cid = int(parts[8])
+        except ValueError:
+            raise ClothFitError(f"{where}: non-numeric image entry {s!r}") from None
+        if not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-12:
+            raise ClothFitError(f"{where}: quaternion {q.tolist()} is not a rotation")
+        if cid not in intr:
+            raise ClothFitError(f"{where}: camera id {cid} is not in {cpath}")
+        images.append((parts[9].strip(), _quat_to_R(q), t, cid, where))
+        i += 1
+        if i < len(lines) and _is_points_line(lines[i][1]):
+            i += 1  # the POINTS2D line that follows an image line (often empty)
+    if not images:
+        raise ClothFitError(f"{ipath}: no images")
+    stems = [os.path.splitext(os.path.basename(n))[0] for n, *_ in images]
+    if len(set(stems)) != len(stems):
+        stems = [os.path.splitext(n)[0].replace("\\", "/").replace("/", "_") for n, *_ in images]
+    cams = []
+    for name, (_, R, t, cid, where) in zip(stems, images):
+        K, dist, w, h, _ = intr[cid]
+        cam = Camera.__new__(Camera)
+        cam.K, cam.R, cam.t, cam.dist, cam.width, cam.height, cam.name = K.copy(), R, t, dist.copy(), w, h, name
+        cam.validate(where)
+        cams.append(cam)
+    _check_unique(cams, ipath)
+    return cams
+
+
+def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
+    """A COLMAP text model: one COLMAP camera and one image (``<name><image_ext>``) per Camera."""
+    os.makedirs(folder, exist_ok=True)
+    with open(os.path.join(folder, "cameras.txt"), "w") as f:
+        f.write("# Camera list with one line of data per camera:\n")
+        f.write("#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n")
+        f.write(f"# Number of cameras: {len(cameras)}\n")
+        f.write("# Written by Silhouette Cloth Fit: principal point in COLMAP's convention (pixel centres at +0.5)\n")
+        for i, c in enumerate(cameras):
+            model, params = intrinsics_to_colmap(c)
+            f.write(f"{i + 1} {model} {c.width} {c.height} " + " ".join(repr(float(p)) for p in params) + "\n")
+    with open(os.path.join(folder, "images.txt"), "w") as f:
+        f.write("# Image list with two lines of data per image:\n")
+        f.write("#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n")
+        f.write("#   POINTS2D[] as (X, Y, POINT3D_ID)\n")
+        f.write(f"# Number of images: {len(cameras)}, mean observations per image: 0\n")
+        for i, c in enumerate(cameras):
+            q = _R_to_quat(c.R)
+            vals = " ".join(repr(float(v)) for v in (*q, *c.t))
+            f.write(f"{i + 1} {vals} {i + 1} {c.name}{image_ext}\n\n")
+    with open(os.path.join(folder, "points3D.txt"), "w") as f:
+        f.write("# 3D point list with one line of data per point:\n")
+        f.write("#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n")
+        f.write("# Number of points: 0, mean track length: 0\n")
+    return folder
+
+
+# ============================================================ one entry point each way
+
+FORMATS = ("auto", "json", "opencv", "opencv-dir", "colmap")
+
+
+def detect_format(path: str) -> str:
+    if os.path.isdir(path):
+        if os.path.isfile(os.path.join(path, "cameras.txt")) and os.path.isfile(os.path.join(path, "images.txt")):
+            return "colmap"
+        if os.path.isdir(os.path.join(path, "sparse", "0")) and os.path.isfile(os.path.join(path, "sparse", "0", "cameras.txt")):
+            return "colmap"
+        return "opencv-dir"
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".txt":
+        return "colmap"
+    if ext == ".json":
+        # our own cameras JSON has a "cameras" list of objects with K/R/t; OpenCV JSON otherwise
+        try:
+            import json
+            with open(path) as f:
+                d = json.load(f)
+            cams = d.get("cameras") if isinstance(d, dict) else None
+            if isinstance(cams, list) and cams and isinstance(cams[0], dict) and "K" in cams[0] and "width" in cams[0]:
+                return "json"
+        except (OSError, ValueError):
+            pass
+        return "opencv"
+    if ext in OPENCV_EXTS:
+        return "opencv"
+    raise ClothFitError(f"cannot tell the camera file format of {path} (use a .yml/.yaml/.json/.xml file, "
+                        "a COLMAP model folder or name the format)")
+
+
+def import_cameras(path: str, fmt: str = "auto", width: int | None = None, height: int | None = None) -> list:
+    """Cameras from any supported file or folder.
+
+    ``fmt``: ``auto`` (by extension/content), ``json`` (our cameras JSON, see ``camera.py``),
+    ``opencv`` (one FileStorage file), ``opencv-dir`` (a folder of FileStorage files, one camera
+    each), ``colmap`` (a text model folder, or its ``cameras.txt``/``images.txt``).
+    ``width``/``height`` are only used when an OpenCV file gives no image size.
+    """
+    if fmt not in FORMATS:
+        raise ClothFitError(f"camera format {fmt!r} unknown (one of {', '.join(FORMATS)})")
+    if not os.path.exists(path):
+        raise ClothFitError(f"camera file or folder not found: {path}")
+    if fmt == "auto":
+        fmt = detect_format(path)
+    if fmt == "json":
+        return load_cameras(path)
+    if fmt == "opencv":
+        return read_opencv(path, width, height)
+    if fmt == "opencv-dir":
+        if not os.path.isdir(path):
+            raise ClothFitError(f"{path} is not a folder (format opencv-dir)")
+        return read_opencv_dir(path, width, height)
+    folder = path if os.path.isdir(path) else os.path.dirname(path)
+    if not os.path.isfile(os.path.join(folder, "cameras.txt")) and os.path.isfile(os.path.join(folder, "sparse", "0", "cameras.txt")):
+        folder = os.path.join(folder, "sparse", "0")
+    return read_colmap(folder)
+
+
+def export_cameras(cameras, path: str, fmt: str = "auto") -> str:
+    """Write cameras: ``json`` (ours), ``opencv`` (one file), ``opencv-dir`` (a file per camera),
+    ``colmap`` (a text model folder). ``auto``: a path ending in .json -> json, .yml/.yaml/.xml
+    -> opencv, anything else (a folder) -> colmap."""
+    if fmt not in FORMATS:
+        raise ClothFitError(f"camera format {fmt!r} unknown (one of {', '.join(FORMATS)})")
+    if not cameras:
+        raise ClothFitError("no cameras to export")
+    if fmt == "auto":
+        ext = os.path.splitext(path)[1].lower()
+        fmt = "json" if ext == ".json" else "opencv" if ext in OPENCV_EXTS else "colmap"
+    if fmt == "json":
+        save_cameras(path, cameras)
+    elif fmt == "opencv":
+        write_opencv(path, cameras)
+    elif fmt == "opencv-dir":
+        write_opencv_dir(path, cameras)
+    else:
+        write_colmap(path, cameras)
+    return path
+
+
+# ==================================================================== distortion
+
+def undistort_maps(camera: Camera):
+    """cv2.remap maps from the undistorted image (same K, no distortion) into the distorted one."""
+    import cv2
+    if camera.dist.size == 0 or not np.any(camera.dist != 0):
+        return None
+    return cv2.initUndistortRectifyMap(camera.K, camera.dist, None, camera.K,
+                                       (camera.width, camera.height), cv2.CV_32FC1)
+
+
+def undistort_silhouette(mask: np.ndarray, camera: Camera, maps=None) -> np.ndarray:
+    """The silhouette the same camera would see without lens distortion (nearest-neighbour remap).
+
+    Returns a boolean ``(H, W)`` mask for ``undistorted_camera(camera)``. Pixels that map outside
+    the distorted image are background. ``maps`` may be passed from :func:`undistort_maps` to
+    undistort many masks of one camera quickly.
+    """
+    import cv2
+    m = np.asarray(mask)
+    if m.shape[:2] != (camera.height, camera.width):
+        raise ClothFitError(f"undistort: silhouette is {m.shape[0]}x{m.shape[1]} but camera '{camera.name}' "
+                            f"images {camera.height}x{camera.width}")
+    maps = undistort_maps(camera) if maps is None else maps
+    if maps is None:
+        return m.astype(bool)
+    out = cv2.remap(m.astype(np.uint8), maps[0], maps[1], interpolation=cv2.INTER_NEAREST,
+                    borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return out > 0
+
+
+def undistorted_camera(camera: Camera) -> Camera:
+    """The same camera without distortion (what :func:`undistort_silhouette` images)."""
+    return Camera(camera.K.copy(), camera.R.copy(), camera.t.copy(), camera.width, camera.height,
+                  camera.name, np.zeros(0))
+
+
+def undistort_image(image: np.ndarray, camera: Camera, interpolation=None) -> np.ndarray:
+    """Undistort a colour/grey image (bilinear by default), e.g. for overlays."""
+    import cv2
+    maps = undistort_maps(camera)
+    if maps is None:
+        return image
+    return cv2.remap(image, maps[0], maps[1], interpolation=cv2.INTER_LINEAR if interpolation is None else interpolation,
+                     borderMode=cv2.BORDER_CONSTANT)
