@@ -289,7 +289,7 @@ if _HAVE:
             eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris, scratch, touched, esil[p])
 
 
-def scenario_arrays(scenario):
+def scenario_arrays(scenario, safety=D.DT_SAFETY):
     """Flatten a Scenario into the plain arrays the kernels take."""
     from .simulate import event_times, explosion_limits
     grid = scenario.grid
@@ -314,7 +314,7 @@ def scenario_arrays(scenario):
                 key_pos=np.ascontiguousarray(key_pos, dtype=np.float64), release=release,
                 events=ev, frame_of_event=frame_of_event, n_frames=int(scenario.frame_times.size),
                 gravity=np.asarray(scenario.gravity, dtype=np.float64), settle_rate=float(D.SETTLE_DAMPING_RATE),
-                safety=float(D.DT_SAFETY), centre=np.asarray(centre, dtype=np.float64), limit=float(limit),
+                safety=float(safety), centre=np.asarray(centre, dtype=np.float64), limit=float(limit),
                 max_strain=float(D.MAX_STRAIN), max_steps=int(2_000_000))
 
 
@@ -323,10 +323,10 @@ _ORDER = ["rest", "springs", "rest_factor", "hv", "key_start", "key_times", "key
           "max_steps"]
 
 
-def simulate(scenario, P):
+def simulate(scenario, P, safety=D.DT_SAFETY):
     from .simulate import SimResult
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 4)
-    a = scenario_arrays(scenario)
+    a = scenario_arrays(scenario, safety)
     V = a["rest"].shape[0]
     out = np.zeros((P.shape[0], a["n_frames"], V, 3))
     codes = np.zeros(P.shape[0], dtype=np.int64)

@@ -20,6 +20,8 @@ GT_PARAMS = {"m": 1.0e-5, "k": 10.0, "l": CLOTH_SIDE / (GRID_N - 1), "d": 5.0e-5
 
 # --- simulation (SPEC 2): semi-implicit Euler, damping treated implicitly.
 DT_SAFETY = 0.5              # dt <= DT_SAFETY * sqrt(m / k); Gershgorin bound for a node with 6 springs: 2/sqrt(12) = 0.577
+TRUTH_DT_SAFETY = 0.125      # synthetic ground truth is simulated with a 4x finer step than the fitter's model,
+                             # so that the fit cannot profit from sharing the truth's discretisation exactly
 SETTLE_TIME = 0.5            # seconds of settling under gravity with all handles held, before t = 0
 SETTLE_DAMPING_RATE = 40.0   # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
 EXPLODE_FACTOR = 10.0        # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded

@@ -109,9 +109,10 @@ class FitJob:
         bounds = {k: tuple(v) for k, v in cfg.bounds.items()}
         self.space = SearchSpace(list(FREE_NAMES), bounds, {k: D.LOG_SCALED.get(k, True) for k in FREE_NAMES})
         kw = {}
+        is_cma = cfg.optimizer.lower() in ("cma", "cma-es")
         if cfg.population:
-            kw["population"] = cfg.population
-        if cfg.children:
+            kw["popsize" if is_cma else "population"] = cfg.population
+        if cfg.children and not is_cma:
             kw["children"] = cfg.children
         self.opt = make_optimizer(cfg.optimizer, self.space, cfg.seed, **kw)
         self.started = time.time()
@@ -200,7 +201,7 @@ class FitJob:
             "resolution": self.config.resolution,
             "evaluations": self.evaluations, "generations": self.generation,
             "exploded_candidates": self.exploded,
-            "best_E_all": self.best_error, "best_E_sil_mean_pct": 100.0 * self.best_error / n_img,
+            "best_E_all": _finite(self.best_error), "best_E_sil_mean_pct": _finite(100.0 * self.best_error / n_img),
             "n_train_images": n_img,
             "params": bp,
             "identifiable": identifiable(bp) if bp else None,
@@ -208,7 +209,7 @@ class FitJob:
             "note": "m is not observable from silhouettes (only k/m, d/m and l are): m is fixed and k, d scale with it",
             "finished": self.finished, "cancelled": self.cancelled, "error": self.error,
             "elapsed_s": self.elapsed, "backend": self.objective.backend,
-            "history": [[int(a), float(b)] for a, b in self.opt.history],
+            "history": [[int(a), float(b) if math.isfinite(b) else None] for a, b in self.opt.history],
         }
         gt = (self.capture.meta or {}).get("true_params")
         if gt and bp:
@@ -248,6 +249,10 @@ class FitJob:
         if job.evaluations >= job.config.max_evaluations:
             job.finished = True
         return job
+
+
+def _finite(x):
+    return float(x) if math.isfinite(x) else None
 
 
 def _atomic_json(path, obj):

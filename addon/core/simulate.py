@@ -85,18 +85,20 @@ def check_params(params: np.ndarray):
     return bad
 
 
-def simulate(scenario: Scenario, params, backend: str = "auto") -> SimResult:
-    """Simulate a population; ``params`` is one or many (m, k, l, d). See the module doc."""
+def simulate(scenario: Scenario, params, backend: str = "auto", safety: float = D.DT_SAFETY) -> SimResult:
+    """Simulate a population; ``params`` is one or many (m, k, l, d). See the module doc.
+    ``safety`` scales the time step (``dt <= safety * sqrt(m/k)``); synthetic ground truth uses a
+    finer step than the fitter (``defaults.TRUTH_DT_SAFETY``)."""
     P = _as_params(params)
     if backend == "auto":
         from . import accel
         backend = "numba" if accel.available() else "numpy"
     if backend == "numba":
         from . import accel
-        return accel.simulate(scenario, P)
+        return accel.simulate(scenario, P, safety)
     if backend != "numpy":
         raise ClothFitError(f"unknown simulation backend {backend!r} (numpy, numba, auto)")
-    return simulate_numpy(scenario, P)
+    return simulate_numpy(scenario, P, safety)
 
 
 def _handle_tables(scenario):
@@ -135,7 +137,7 @@ def explosion_limits(scenario):
     return centre, D.EXPLODE_FACTOR * (size + span)
 
 
-def simulate_numpy(scenario: Scenario, P: np.ndarray) -> SimResult:
+def simulate_numpy(scenario: Scenario, P: np.ndarray, safety: float = D.DT_SAFETY) -> SimResult:
     grid = scenario.grid
     nP = P.shape[0]
     ny, nx = grid.ny, grid.nx
@@ -164,7 +166,7 @@ def simulate_numpy(scenario: Scenario, P: np.ndarray) -> SimResult:
 
     for a, b in zip(ev[:-1], ev[1:]):
         seg = b - a
-        nsub = substeps_for(Pw, seg)
+        nsub = substeps_for(Pw, seg, safety)
         stiff = ~exploded & (steps_total + nsub > MAX_TOTAL_STEPS)
         for p in np.nonzero(stiff)[0]:
             reason[p] = f"too many steps (k/m = {kap[p, 0, 0, 0]:.3g} is too stiff)"

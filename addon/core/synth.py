@@ -23,7 +23,7 @@ def noise_rng(seed: int, cam: int, frame: int) -> np.random.Generator:
 
 
 def synth_capture(root, params=None, rig=D.DEFAULT_RIG, noise=D.NOISE_FRACTION, resolution=None, seed=0,
-                  scenario=None, cameras=None):
+                  scenario=None, cameras=None, truth_dt_safety=D.TRUTH_DT_SAFETY):
     """Simulate ``params`` (default: ground truth) on ``scenario`` (default: the paper's) and write a
     capture with ``noise`` boundary noise to ``root``. Returns the Capture."""
     p = Params.from_dict(params or D.GT_PARAMS, "ground-truth parameters")
@@ -31,7 +31,7 @@ def synth_capture(root, params=None, rig=D.DEFAULT_RIG, noise=D.NOISE_FRACTION, 
     cams = cameras if cameras is not None else load_rig(rig)
     if resolution is not None:
         cams = [c.resized(int(resolution[0]), int(resolution[1])) for c in cams]
-    sim = simulate(scenario, [p])
+    sim = simulate(scenario, [p], safety=truth_dt_safety)
     if sim.exploded[0]:
         raise ClothFitError(f"ground-truth parameters {p.as_dict()} make the simulation explode: {sim.reason[0]}")
     X = sim.positions[0]
@@ -48,5 +48,5 @@ def synth_capture(root, params=None, rig=D.DEFAULT_RIG, noise=D.NOISE_FRACTION, 
             row.append(s)
         sils.append(row)
     meta = {"generator": "synth (core rasteriser)", "true_params": p.as_dict(), "noise_fraction": noise,
-            "seed": seed, "rig": rig if cameras is None else "custom"}
+            "seed": seed, "truth_dt_safety": truth_dt_safety, "rig": rig if cameras is None else "custom"}
     return write_capture(root, cams, scenario, sils, shapes=X, cloth_mass=p.m * scenario.grid.n_vertices, meta=meta)

@@ -1,0 +1,285 @@
+"""Command line: ``python -m addon <command> ...`` (no Blender needed except for ``blender-*``).
+
+Commands: synth, fit, evaluate, overlay, paper, bench, extract, import-cameras, export-cameras, rig.
+Every error from bad input is one line naming the file or value (exit code 2), never a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from .core import defaults as D
+from .core.errors import ClothFitError
+
+
+def _floats(s):
+    return [float(x) for x in s.split(",") if x.strip()] if s else None
+
+
+def _ints(s):
+    return [int(x) for x in s.split(",") if x.strip()] if s else None
+
+
+def _res(s):
+    if not s:
+        return None
+    try:
+        h, w = (int(x) for x in s.lower().split("x"))
+    except ValueError:
+        raise ClothFitError(f"resolution {s!r} must look like HxW, e.g. 120x160") from None
+    return [h, w]
+
+
+def _params(args):
+    if getattr(args, "params", None):
+        p = args.params
+        if os.path.isfile(p):
+            with open(p) as f:
+                d = json.load(f)
+            d = d.get("params", d)
+        else:
+            try:
+                d = json.loads(p)
+            except json.JSONDecodeError:
+                raise ClothFitError(f"--params {p!r} is neither a file nor JSON") from None
+        return d
+    return dict(D.GT_PARAMS)
+
+
+def _cams(capture, spec):
+    """Camera selection: None = all; "n:4" = 4 spread cameras; "0,3,5" indices; names allowed."""
+    from .core.camera import select_training
+    if not spec:
+        return None
+    if spec.startswith("n:") or spec.startswith("spread:"):
+        n = int(spec.split(":")[1])
+        return select_training(capture.cameras, n)[0]
+    if spec.startswith("heldout:"):
+        n = int(spec.split(":")[1])
+        return select_training(capture.cameras, n)[1]
+    out = []
+    for tok in spec.split(","):
+        tok = tok.strip()
+        out.append(int(tok) if tok.isdigit() else capture.camera_index(tok))
+    return out
+
+
+def _times(spec):
+    if not spec:
+        return None
+    if spec == "train":
+        return list(D.TRAIN_TIMES)
+    if spec == "test":
+        return list(D.TEST_TIMES)
+    return _floats(spec)
+
+
+class Progress:
+    """A one-line text progress bar on stderr."""
+
+    def __init__(self, enabled=True, width=30):
+        self.enabled = enabled and sys.stderr.isatty() or os.environ.get("CLOTHFIT_PROGRESS") == "1"
+        self.width = width
+        self.t0 = time.time()
+        self.last = 0
+
+    def __call__(self, job):
+        if not self.enabled:
+            return False
+        now = time.time()
+        if now - self.last < 0.2 and not job.finished:
+            return False
+        self.last = now
+        n = int(self.width * job.progress)
+        bp = job.best_params or {}
+        err = job.best_error / job.objective.n_images * 100 if job.best_params else float("nan")
+        sys.stderr.write(f"\r[{'#' * n}{'.' * (self.width - n)}] gen {job.generation} evals {job.evaluations} "
+                         f"E_sil {err:.3f}% k {bp.get('k', 0):.4g} l {bp.get('l', 0):.4g} d {bp.get('d', 0):.4g} "
+                         f"{now - self.t0:.0f}s ")
+        sys.stderr.flush()
+        return False
+
+    def done(self):
+        if self.enabled:
+            sys.stderr.write("\n")
+
+
+def cmd_synth(a):
+    from .core.synth import synth_capture
+    cap = synth_capture(a.out, _params(a), rig=a.rig, noise=a.noise, resolution=_res(a.resolution), seed=a.seed)
+    print(f"wrote capture {a.out}: {len(cap.cameras)} cameras x {len(cap.frame_times)} frames")
+
+
+def cmd_fit(a):
+    from .core.capture import load_capture
+    from .core.fitting import FitConfig, FitJob
+    ck = a.checkpoint or (a.out + ".checkpoint.json")
+    if a.resume and os.path.isfile(ck):
+        job = FitJob.resume(ck)
+        if a.max_evaluations:
+            job.config.max_evaluations = a.max_evaluations
+            job.finished = job.evaluations >= a.max_evaluations
+        print(f"resumed {ck} at {job.evaluations} evaluations", file=sys.stderr)
+    else:
+        cap = load_capture(a.capture)
+        cfg = FitConfig(train_cameras=_cams(cap, a.cameras), train_times=_times(a.times), optimizer=a.optimizer,
+                        seed=a.seed, max_evaluations=a.max_evaluations or D.FIT_EVALUATIONS,
+                        resolution=_res(a.resolution), cloth_mass=a.cloth_mass, backend=a.backend,
+                        population=a.population, target_error=a.target)
+        job = FitJob(cap, cfg, checkpoint=ck)
+    bar = Progress(not a.quiet)
+    try:
+        job.run(callback=bar)
+    except KeyboardInterrupt:
+        job.cancel()
+        print("\ncancelled: keeping the best result so far", file=sys.stderr)
+    finally:
+        bar.done()
+        job.save_result(a.out)
+    r = job.result()
+    print(json.dumps({k: r[k] for k in ("params", "identifiable", "best_E_sil_mean_pct", "evaluations",
+                                        "elapsed_s", "cancelled") if k in r}, indent=1))
+    if "identifiable_error_pct" in r:
+        print("recovery error [%]:", json.dumps(r["identifiable_error_pct"]))
+    print(f"wrote {a.out}")
+
+
+def cmd_evaluate(a):
+    from .core.capture import load_capture
+    from .core.evaluate import evaluate
+    cap = load_capture(a.capture)
+    r = evaluate(cap, _params(a), cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
+    s = f"silhouette error {r['silhouette_error_pct']:.3f} % over {len(r['cameras'])} cameras x {len(r['times'])} frames"
+    if "shape_error_mm" in r:
+        s += f"; shape error {r['shape_error_mm']:.3f} mm"
+    print(s)
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(r, f, indent=1)
+
+
+def cmd_overlay(a):
+    from .core.capture import load_capture
+    from .core.overlay import capture_overlays
+    cap = load_capture(a.capture)
+    paths = capture_overlays(cap, _params(a), a.out, cameras=_cams(cap, a.cameras), times=_times(a.times))
+    print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
+
+
+def cmd_paper(a):
+    from .core.experiment import run_paper
+    run_paper(a.json, quick=a.quick, out_dir=a.out, seed=a.seed, optimizer=a.optimizer,
+              max_evaluations=a.max_evaluations, only=a.only)
+
+
+def cmd_bench(a):
+    from .core.bench import run_bench
+    run_bench(a.json, quick=a.quick)
+
+
+def cmd_rig(a):
+    from .core.camera import load_rig, spread_order
+    cams = load_rig(a.rig)
+    order = spread_order(cams)
+    print(f"{len(cams)} cameras; training order (spread rule): {[cams[i].name for i in order]}")
+
+
+def cmd_extract(a):
+    from .core import extract
+    extract.main(a.rest)
+
+
+def cmd_calib(a, which):
+    from .core import calib_io
+    calib_io.main([which] + a.rest)
+
+
+def build_parser():
+    p = argparse.ArgumentParser(prog="python -m addon", description="Silhouette Cloth Fit: cloth parameters from multi-view silhouettes")
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    s = sub.add_parser("synth", help="make a synthetic capture from ground-truth parameters")
+    s.add_argument("--out", required=True)
+    s.add_argument("--rig", default=D.DEFAULT_RIG)
+    s.add_argument("--params", help="JSON or a JSON file with m, k, l, d (default: the built-in ground truth)")
+    s.add_argument("--noise", type=float, default=D.NOISE_FRACTION, help="fraction of boundary pixels flipped")
+    s.add_argument("--resolution", help="HxW, default: the rig's")
+    s.add_argument("--seed", type=int, default=0)
+    s.set_defaults(fn=cmd_synth)
+
+    s = sub.add_parser("fit", help="fit the model to a capture")
+    s.add_argument("capture")
+    s.add_argument("--out", default="out/fit.json")
+    s.add_argument("--cameras", help="'n:16' (spread rule), indices or names, default all")
+    s.add_argument("--times", help="'train', 'test' or comma list of times; default all")
+    s.add_argument("--optimizer", default="spx-mgg", help="spx-mgg or cma-es")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--max-evaluations", type=int, default=None)
+    s.add_argument("--population", type=int, default=None)
+    s.add_argument("--target", type=float, default=None, help="stop when mean E_sil per image falls below this fraction")
+    s.add_argument("--resolution", help="fit at HxW (silhouettes area-resampled)")
+    s.add_argument("--cloth-mass", type=float, default=None, help="total cloth mass [kg] (fixes m)")
+    s.add_argument("--checkpoint", help="default: OUT.checkpoint.json; written every generation")
+    s.add_argument("--resume", action="store_true", help="continue from the checkpoint")
+    s.add_argument("--backend", default="auto", choices=["auto", "numba", "numpy"])
+    s.add_argument("--quiet", action="store_true")
+    s.set_defaults(fn=cmd_fit)
+
+    s = sub.add_parser("evaluate", help="silhouette and shape error of parameters on a capture")
+    s.add_argument("capture")
+    s.add_argument("--params", help="result JSON file, or JSON with m, k, l, d (default ground truth)")
+    s.add_argument("--cameras")
+    s.add_argument("--times")
+    s.add_argument("--resolution")
+    s.add_argument("--json")
+    s.set_defaults(fn=cmd_evaluate)
+
+    s = sub.add_parser("overlay", help="observed vs model silhouette images and a contact sheet")
+    s.add_argument("capture")
+    s.add_argument("--params")
+    s.add_argument("--out", default="out/overlays")
+    s.add_argument("--cameras")
+    s.add_argument("--times")
+    s.set_defaults(fn=cmd_overlay)
+
+    s = sub.add_parser("paper", help="the paper's Table 1, Fig. 8 and Table 2 protocol")
+    s.add_argument("--json", required=True)
+    s.add_argument("--out", default="out/paper")
+    s.add_argument("--quick", action="store_true")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--optimizer", default=None)
+    s.add_argument("--max-evaluations", type=int, default=None)
+    s.add_argument("--only", default=None, help="comma list of parts: table1, fig8, table2, optimizers")
+    s.set_defaults(fn=cmd_paper)
+
+    s = sub.add_parser("bench", help="speed figures")
+    s.add_argument("--json", required=True)
+    s.add_argument("--quick", action="store_true")
+    s.set_defaults(fn=cmd_bench)
+
+    s = sub.add_parser("rig", help="show a rig preset and its training-camera order")
+    s.add_argument("rig", nargs="?", default=D.DEFAULT_RIG)
+    s.set_defaults(fn=cmd_rig)
+
+    s = sub.add_parser("extract", help="silhouettes from camera images (see --help)", add_help=False)
+    s.add_argument("rest", nargs=argparse.REMAINDER)
+    s.set_defaults(fn=cmd_extract)
+    for nm in ("import-cameras", "export-cameras"):
+        s = sub.add_parser(nm, help="camera calibration files (OpenCV YAML/JSON, COLMAP)", add_help=False)
+        s.add_argument("rest", nargs=argparse.REMAINDER)
+        s.set_defaults(fn=lambda a, nm=nm: cmd_calib(a, nm))
+    return p
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser().parse_args(argv)
+    try:
+        args.fn(args)
+    except ClothFitError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0

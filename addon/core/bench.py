@@ -1,0 +1,98 @@
+"""``python -m addon bench --json FILE``: speed figures against the targets of issue 2.
+
+* candidate evaluations per second on the full paper workload: simulate one candidate over the
+  settling phase and 1.5 s, rasterise and compare its silhouettes for 16 cameras x 15 training
+  shapes at 480 x 640 (population batches, numba kernels when available, numpy reference path too);
+* the split between simulation and silhouettes;
+* the wall time of one whole 16-camera fit (the protocol's budget) -> target under 120 s.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import tempfile
+import time
+
+import numpy as np
+
+from . import accel
+from . import defaults as D
+from .camera import select_training
+from .capture import load_capture
+from .experiment import DEFAULT_OPTIMIZER, FULL, QUICK
+from .fitting import FitConfig, FitJob
+from .model import Params, paper_scenario
+from .objective import SilhouetteObjective
+from .raster import silhouette
+from .simulate import simulate
+from .synth import synth_capture
+
+TARGET_EVALS_PER_S = 50.0
+TARGET_FIT_S = 120.0
+
+
+def _rate(fn, n_items, min_time=2.0):
+    fn()  # warm-up (jit compilation, caches)
+    t0 = time.perf_counter()
+    reps = 0
+    while True:
+        fn()
+        reps += 1
+        dt = time.perf_counter() - t0
+        if dt >= min_time:
+            return reps * n_items / dt
+
+
+def run_bench(json_path, quick=False):
+    S = QUICK if quick else FULL
+    tmp = tempfile.mkdtemp(prefix="clothfit_bench_")
+    cap = synth_capture(os.path.join(tmp, "cap"), seed=0)
+    cap = load_capture(cap.root)
+    train, _ = select_training(cap.cameras, 16)
+    fidx = [cap.frame_index(t) for t in D.TRAIN_TIMES]
+    obs = [[cap.load_silhouette(c, f) for f in fidx] for c in train]
+    sc = cap.scenario.with_frames(D.TRAIN_TIMES)
+    cams = [cap.cameras[c] for c in train]
+    gt = Params(**cap.meta["true_params"])
+    rng = np.random.default_rng(0)
+    pop = 14  # a CMA-ES-sized batch (our fits ask 7..30 candidates per generation)
+    P = np.array([[gt.m, gt.k * f1, gt.l * f2, gt.d * f3] for f1, f2, f3 in rng.uniform(0.9, 1.1, (pop, 3))])
+    out = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "numba": accel.available()},
+           "workload": "16 cameras x 15 shapes at 480x640, settle 0.5 s + 1.5 s of motion, 705 springs",
+           "targets": {"evals_per_s": TARGET_EVALS_PER_S, "fit_seconds": TARGET_FIT_S}}
+    backends = ["numba", "numpy"] if accel.available() else ["numpy"]
+    for be in backends:
+        obj = SilhouetteObjective(sc, cams, obs, backend=be)
+        Pb = P if be == "numba" else P[:4]
+        r = _rate(lambda: obj(Pb), len(Pb), min_time=2.0 if be == "numba" else 1.0)
+        s = _rate(lambda: simulate(sc, Pb, backend=be), len(Pb), min_time=1.0)
+        out[be] = {"evals_per_s": r, "sim_only_per_s": s,
+                   "silhouette_share_pct": max(0.0, 100.0 * (1 - r / s)), "ratio_to_target": r / TARGET_EVALS_PER_S}
+        print(f"[{be}] candidate evaluations/s: {r:.1f} (target {TARGET_EVALS_PER_S:.0f}, ratio {r / TARGET_EVALS_PER_S:.2f}); "
+              f"simulation alone {s:.1f}/s; silhouettes take {out[be]['silhouette_share_pct']:.0f} % of the time", flush=True)
+    X = simulate(sc, [gt]).positions[0]
+    t0 = time.perf_counter()
+    n = 0
+    for c in cams[:4]:
+        for f in range(X.shape[0]):
+            silhouette(c, X[f], sc.grid.triangles)
+            n += 1
+    out["numpy_full_frame_silhouette_ms"] = 1000 * (time.perf_counter() - t0) / n
+    print(f"numpy full-frame silhouette (480x640): {out['numpy_full_frame_silhouette_ms']:.2f} ms", flush=True)
+    evals = S["evals"]
+    t0 = time.perf_counter()
+    job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, optimizer=DEFAULT_OPTIMIZER,
+                                max_evaluations=evals, seed=0))
+    job.run()
+    wall = time.perf_counter() - t0
+    out["fit"] = {"optimizer": DEFAULT_OPTIMIZER, "evaluations": job.evaluations, "wall_s": wall,
+                  "evals_per_s": job.evaluations / wall, "ratio_to_target": wall / TARGET_FIT_S,
+                  "best_E_sil_pct": 100 * job.best_error / job.objective.n_images}
+    print(f"16-camera fit ({DEFAULT_OPTIMIZER}, {job.evaluations} evaluations): {wall:.1f} s wall "
+          f"(target {TARGET_FIT_S:.0f} s, ratio {wall / TARGET_FIT_S:.2f}), best training E_sil "
+          f"{out['fit']['best_E_sil_pct']:.3f} %", flush=True)
+    os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
+    with open(json_path, "w") as f:
+        json.dump(out, f, indent=1)
+    return out
