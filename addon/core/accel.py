@@ -32,7 +32,7 @@ def available() -> bool:
 REASONS = ["", "invalid parameters", "non-finite state", "flew away", "spring overstretched", "too many steps"]
 
 if _HAVE:
-    _jit = dict(cache=True, nogil=True, fastmath=False)
+    _jit = dict(cache=True, nogil=True, fastmath=True)
 
     @njit(**_jit)
     def _handle_at(h, t, key_start, key_times, key_pos, out_p, out_v):
@@ -62,6 +62,56 @@ if _HAVE:
             out_v[a] = (key_pos[j + 1, a] - key_pos[j, a]) / (key_times[j + 1] - key_times[j])
 
     @njit(**_jit)
+    def _spring(x, i, j, c, out, q):
+        d0 = x[j, 0] - x[i, 0]
+        d1 = x[j, 1] - x[i, 1]
+        d2 = x[j, 2] - x[i, 2]
+        ln = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        w = c[0] * (1.0 - c[1] / max(ln, 1e-12))
+        out[q, 0] = w * d0
+        out[q, 1] = w * d1
+        out[q, 2] = w * d2
+
+    @njit(**_jit)
+    def _grid_forces(x, F, fh, fv, fd, nx, ny, kap, L, g):
+        """Per-unit-mass forces, in the same order as simulate_numpy: gravity, then the
+        horizontal, vertical and diagonal spring families, each computed then scattered."""
+        ch = np.array([kap, L])
+        cd = np.array([kap, math.sqrt(2.0) * L])
+        for i in range(ny):
+            for j in range(nx - 1):
+                _spring(x, i * nx + j, i * nx + j + 1, ch, fh, i * (nx - 1) + j)
+        for i in range(ny - 1):
+            for j in range(nx):
+                _spring(x, i * nx + j, (i + 1) * nx + j, ch, fv, i * nx + j)
+        for i in range(ny - 1):
+            for j in range(nx - 1):
+                _spring(x, i * nx + j, (i + 1) * nx + j + 1, cd, fd, i * (nx - 1) + j)
+        for q in range(x.shape[0]):
+            F[q, 0] = g[0]
+            F[q, 1] = g[1]
+            F[q, 2] = g[2]
+        for i in range(ny):
+            for j in range(nx - 1):
+                q = i * (nx - 1) + j
+                for a in range(3):
+                    F[i * nx + j, a] += fh[q, a]
+                for a in range(3):
+                    F[i * nx + j + 1, a] -= fh[q, a]
+        for i in range(ny - 1):
+            for j in range(nx):
+                q = i * nx + j
+                for a in range(3):
+                    F[i * nx + j, a] += fv[q, a]
+                    F[(i + 1) * nx + j, a] -= fv[q, a]
+        for i in range(ny - 1):
+            for j in range(nx - 1):
+                q = i * (nx - 1) + j
+                for a in range(3):
+                    F[i * nx + j, a] += fd[q, a]
+                    F[(i + 1) * nx + j + 1, a] -= fd[q, a]
+
+    @njit(**_jit)
     def _max_strain(x, springs, rest_factor, L):
         r = 0.0
         for s in range(springs.shape[0]):
@@ -76,7 +126,7 @@ if _HAVE:
         return r
 
     @njit(**_jit)
-    def simulate_one(par, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+    def simulate_one(par, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
                      events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
                      max_strain, max_steps, out):
         """Simulate one candidate; writes frames into ``out`` (F, V, 3). Returns (code, steps)."""
@@ -90,6 +140,9 @@ if _HAVE:
         x = rest.copy()
         v = np.zeros_like(x)
         F = np.zeros_like(x)
+        fh = np.zeros((ny * (nx - 1), 3))
+        fv = np.zeros(((ny - 1) * nx, 3))
+        fd = np.zeros(((ny - 1) * (nx - 1), 3))
         p = np.zeros(3)
         pv = np.zeros(3)
         H = hv.shape[0]
@@ -111,24 +164,7 @@ if _HAVE:
             rate = max(beta, settle_rate) if settling else beta
             damp = 1.0 / (1.0 + dt * rate)
             for s in range(nsub):
-                for i in range(V):
-                    F[i, 0] = gravity[0]
-                    F[i, 1] = gravity[1]
-                    F[i, 2] = gravity[2]
-                for q in range(springs.shape[0]):
-                    i = springs[q, 0]
-                    j = springs[q, 1]
-                    d0 = x[j, 0] - x[i, 0]
-                    d1 = x[j, 1] - x[i, 1]
-                    d2 = x[j, 2] - x[i, 2]
-                    ln = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                    c = kap * (1.0 - rest_factor[q] * L / max(ln, 1e-12))
-                    F[i, 0] += c * d0
-                    F[i, 1] += c * d1
-                    F[i, 2] += c * d2
-                    F[j, 0] -= c * d0
-                    F[j, 1] -= c * d1
-                    F[j, 2] -= c * d2
+                _grid_forces(x, F, fh, fv, fd, nx, ny, kap, L, gravity)
                 for i in range(V):
                     for a in range(3):
                         v[i, a] = (v[i, a] + dt * F[i, a]) * damp
@@ -194,7 +230,10 @@ if _HAVE:
         """Fill triangles (pixel-centre sampling) into ``scratch``; count model and overlap pixels."""
         nmod = 0
         inter = 0
-        nt = 0
+        rmin = Hh
+        rmax = -1
+        cmin = Ww
+        cmax = -1
         for q in range(tris.shape[0]):
             a = tris[q, 0]
             b = tris[q, 1]
@@ -231,17 +270,31 @@ if _HAVE:
                     continue
                 c0 = max(int(math.ceil(xl)), 0)
                 c1 = min(int(math.floor(xr)), Ww - 1)
+                if c1 < c0:
+                    continue
                 base = r * Ww
-                for col in range(c0, c1 + 1):
-                    idx = base + col
-                    if scratch[idx] == 0:
-                        scratch[idx] = 1
-                        touched[nt] = idx
-                        nt += 1
-                        nmod += 1
-                        inter += obs[off + idx]
-        for i in range(nt):
-            scratch[touched[i]] = 0
+                scratch[base + c0:base + c1 + 1] = 1
+                if r < rmin:
+                    rmin = r
+                if r > rmax:
+                    rmax = r
+                if c0 < cmin:
+                    cmin = c0
+                if c1 > cmax:
+                    cmax = c1
+        if rmax < rmin:
+            return 0, 0
+        for r in range(rmin, rmax + 1):
+            base = r * Ww
+            sm = 0
+            si = 0
+            for col in range(cmin, cmax + 1):
+                sv = scratch[base + col]
+                sm += sv
+                si += sv & obs[off + base + col]
+            nmod += sm
+            inter += si
+            scratch[base + cmin:base + cmax + 1] = 0
         return nmod, inter
 
     @njit(**_jit)
@@ -259,18 +312,18 @@ if _HAVE:
                 out[c, f] = (areas[c, f] + nmod - 2 * inter) / areas[c, f]
 
     @njit(parallel=True, cache=True, nogil=True)
-    def simulate_population(P, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+    def simulate_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
                             events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
                             max_strain, max_steps, out, codes, steps):
         for p in prange(P.shape[0]):
-            code, st = simulate_one(P[p], rest, springs, rest_factor, hv, key_start, key_times, key_pos,
+            code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos,
                                     release, events, frame_of_event, n_frames, gravity, settle_rate, safety,
                                     centre, limit, max_strain, max_steps, out[p])
             codes[p] = code
             steps[p] = st
 
     @njit(parallel=True, cache=True, nogil=True)
-    def objective_population(P, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+    def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
                              events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
                              max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris,
                              max_hw, esil, codes):
@@ -278,14 +331,14 @@ if _HAVE:
         V = rest.shape[0]
         for p in prange(P.shape[0]):
             X = np.zeros((n_frames, V, 3))
-            code, st = simulate_one(P[p], rest, springs, rest_factor, hv, key_start, key_times, key_pos,
+            code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos,
                                     release, events, frame_of_event, n_frames, gravity, settle_rate, safety,
                                     centre, limit, max_strain, max_steps, X)
             codes[p] = code
             if code != 0:
                 continue
             scratch = np.zeros(max_hw, dtype=np.uint8)
-            touched = np.empty(max_hw, dtype=np.int64)
+            touched = np.empty(1, dtype=np.int64)
             eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris, scratch, touched, esil[p])
 
 
@@ -307,7 +360,7 @@ def scenario_arrays(scenario, safety=D.DT_SAFETY):
     for e, t in enumerate(ev):
         frame_of_event[e] = lookup.get(round(float(t), 12), -1)
     centre, limit = explosion_limits(scenario)
-    return dict(rest=np.ascontiguousarray(grid.rest, dtype=np.float64),
+    return dict(nx=int(grid.nx), ny=int(grid.ny), rest=np.ascontiguousarray(grid.rest, dtype=np.float64),
                 springs=np.ascontiguousarray(grid.springs, dtype=np.int64),
                 rest_factor=np.ascontiguousarray(grid.rest_factor, dtype=np.float64),
                 hv=hv, key_start=key_start, key_times=np.ascontiguousarray(key_times, dtype=np.float64),
@@ -318,7 +371,7 @@ def scenario_arrays(scenario, safety=D.DT_SAFETY):
                 max_strain=float(D.MAX_STRAIN), max_steps=int(2_000_000))
 
 
-_ORDER = ["rest", "springs", "rest_factor", "hv", "key_start", "key_times", "key_pos", "release", "events",
+_ORDER = ["nx", "ny", "rest", "springs", "rest_factor", "hv", "key_start", "key_times", "key_pos", "release", "events",
           "frame_of_event", "n_frames", "gravity", "settle_rate", "safety", "centre", "limit", "max_strain",
           "max_steps"]
 
