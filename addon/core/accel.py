@@ -226,10 +226,15 @@ if _HAVE:
             uv[i, 1] = K[1, 1] * y + K[1, 2]
 
     @njit(**_jit)
-    def _raster_count(uv, ok, tris, Hh, Ww, obs, off, scratch, touched):
-        """Fill triangles (pixel-centre sampling) into ``scratch``; count model and overlap pixels."""
-        nmod = 0
-        inter = 0
+    def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, srow, sc0, sc1, cnt, start, oc0, oc1, cntc, trow, tc0, tc1):
+        """Model pixel count and overlap with the observation, from row spans only.
+
+        Every triangle is cut into one span per pixel row (pixel-centre sampling, as raster.py);
+        spans are sorted by (row, column) with two counting sorts, merged into their union row by
+        row, and each union span's overlap with the observed silhouette is read from the
+        observation's per-row prefix sums: the cost grows with the number of spans, not pixels.
+        """
+        n = 0
         rmin = Hh
         rmax = -1
         cmin = Ww
@@ -240,76 +245,128 @@ if _HAVE:
             c = tris[q, 2]
             if not (ok[a] and ok[b] and ok[c]):
                 continue
-            ymin = min(uv[a, 1], uv[b, 1], uv[c, 1])
-            ymax = max(uv[a, 1], uv[b, 1], uv[c, 1])
-            r0 = max(int(math.ceil(ymin)), 0)
-            r1 = min(int(math.floor(ymax)), Hh - 1)
+            # scanline set-up: vertices sorted by y; the long edge 0-2 and the short edges 0-1, 1-2
+            xa, ya, xb, yb, xc, yc = uv[a, 0], uv[a, 1], uv[b, 0], uv[b, 1], uv[c, 0], uv[c, 1]
+            if ya > yb:
+                xa, ya, xb, yb = xb, yb, xa, ya
+            if yb > yc:
+                xb, yb, xc, yc = xc, yc, xb, yb
+            if ya > yb:
+                xa, ya, xb, yb = xb, yb, xa, ya
+            if yc == ya:
+                continue
+            r0 = max(int(math.ceil(ya)), 0)
+            r1 = min(int(math.floor(yc)), Hh - 1)
+            sl = (xc - xa) / (yc - ya)
+            s01 = (xb - xa) / (yb - ya) if yb > ya else 0.0
+            s12 = (xc - xb) / (yc - yb) if yc > yb else 0.0
             for r in range(r0, r1 + 1):
                 y = float(r)
-                xl = np.inf
-                xr = -np.inf
-                for e in range(3):
-                    if e == 0:
-                        i0, i1 = a, b
-                    elif e == 1:
-                        i0, i1 = b, c
-                    else:
-                        i0, i1 = c, a
-                    ya = uv[i0, 1]
-                    yb = uv[i1, 1]
-                    if ya == yb:
-                        continue
-                    if y >= min(ya, yb) and y <= max(ya, yb):
-                        xa = uv[i0, 0]
-                        xx = xa + (y - ya) * (uv[i1, 0] - xa) / (yb - ya)
-                        if xx < xl:
-                            xl = xx
-                        if xx > xr:
-                            xr = xx
-                if xr < xl:
-                    continue
+                x1 = xa + (y - ya) * sl
+                if y < yb:
+                    x2 = xa + (y - ya) * s01
+                else:
+                    x2 = xb + (y - yb) * s12
+                xl = min(x1, x2)
+                xr = max(x1, x2)
                 c0 = max(int(math.ceil(xl)), 0)
                 c1 = min(int(math.floor(xr)), Ww - 1)
                 if c1 < c0:
                     continue
-                base = r * Ww
-                scratch[base + c0:base + c1 + 1] = 1
+                if n >= srow.shape[0]:
+                    return -1, -1
+                srow[n] = r
+                sc0[n] = c0
+                sc1[n] = c1
+                n += 1
                 if r < rmin:
                     rmin = r
                 if r > rmax:
                     rmax = r
                 if c0 < cmin:
                     cmin = c0
-                if c1 > cmax:
-                    cmax = c1
-        if rmax < rmin:
+                if c0 > cmax:
+                    cmax = c0
+        if n == 0:
             return 0, 0
+        # sort the spans by (row, start column): counting sort by column, then a stable one by row
+        for x in range(cmin, cmax + 2):
+            cntc[x] = 0
+        for k in range(n):
+            cntc[sc0[k] + 1] += 1
+        for x in range(cmin + 1, cmax + 2):
+            cntc[x] += cntc[x - 1]
+        for k in range(n):
+            pos = cntc[sc0[k]]
+            cntc[sc0[k]] = pos + 1
+            trow[pos] = srow[k]
+            tc0[pos] = sc0[k]
+            tc1[pos] = sc1[k]
+        for r in range(rmin, rmax + 2):
+            cnt[r] = 0
+        for k in range(n):
+            cnt[trow[k] + 1] += 1
+        start[rmin] = 0
         for r in range(rmin, rmax + 1):
-            base = r * Ww
-            sm = 0
-            si = 0
-            for col in range(cmin, cmax + 1):
-                sv = scratch[base + col]
-                sm += sv
-                si += sv & obs[off + base + col]
-            nmod += sm
-            inter += si
-            scratch[base + cmin:base + cmax + 1] = 0
+            start[r + 1] = start[r] + cnt[r + 1]
+        for r in range(rmin, rmax + 1):
+            cnt[r] = start[r]
+        for k in range(n):
+            r = trow[k]
+            pos = cnt[r]
+            oc0[pos] = tc0[k]
+            oc1[pos] = tc1[k]
+            cnt[r] = pos + 1
+        # merge each row's sorted spans into their union; overlap with the observation from the
+        # observation's per-row prefix sums (over its bounding box)
+        br0, br1, bc0, bc1 = bb[0], bb[1], bb[2], bb[3]
+        bw1 = bc1 - bc0 + 2
+        nmod = 0
+        inter = 0
+        for r in range(rmin, rmax + 1):
+            s0 = start[r]
+            s1 = start[r + 1]
+            if s1 == s0:
+                continue
+            inrow = r >= br0 and r <= br1
+            base = pofs + (r - br0) * bw1
+            ca = oc0[s0]
+            cb = oc1[s0]
+            for i in range(s0 + 1, s1 + 1):
+                last = i == s1
+                if not last and oc0[i] <= cb + 1:
+                    if oc1[i] > cb:
+                        cb = oc1[i]
+                    continue
+                nmod += cb - ca + 1
+                if inrow:
+                    x0 = max(ca, bc0)
+                    x1 = min(cb, bc1)
+                    if x1 >= x0:
+                        inter += pre[base + x1 - bc0 + 1] - pre[base + x0 - bc0]
+                if not last:
+                    ca = oc0[i]
+                    cb = oc1[i]
         return nmod, inter
 
     @njit(**_jit)
-    def eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris, scratch, touched, out):
+    def eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work, out):
         """E_sil for every camera c and frame f of one simulated candidate: out[c, f]."""
         C = Ks.shape[0]
         Fn = X.shape[0]
         V = X.shape[1]
         uv = np.empty((V, 2))
         ok = np.empty(V, dtype=np.bool_)
+        srow, sc0, sc1, cnt, start, oc0, oc1, cntc, trow, tc0, tc1 = work
         for c in range(C):
             for f in range(Fn):
                 _project(X[f], Ks[c], Rs[c], ts[c], dists[c], uv, ok)
-                nmod, inter = _raster_count(uv, ok, tris, Hs[c], Ws[c], obs, offs[c, f], scratch, touched)
-                out[c, f] = (areas[c, f] + nmod - 2 * inter) / areas[c, f]
+                nmod, inter = _span_count(uv, ok, tris, Hs[c], Ws[c], pre, pofs[c, f], bbs[c, f], srow, sc0, sc1,
+                                          cnt, start, oc0, oc1, cntc, trow, tc0, tc1)
+                if nmod < 0:
+                    out[c, f] = np.inf
+                else:
+                    out[c, f] = (areas[c, f] + nmod - 2 * inter) / areas[c, f]
 
     @njit(parallel=True, cache=True, nogil=True)
     def simulate_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
@@ -325,8 +382,8 @@ if _HAVE:
     @njit(parallel=True, cache=True, nogil=True)
     def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
                              events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
-                             max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris,
-                             max_hw, esil, codes):
+                             max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris,
+                             max_h, max_w, span_cap, esil, codes):
         """Simulate and score every candidate: esil[p, c, f]; codes[p] != 0 = exploded."""
         V = rest.shape[0]
         for p in prange(P.shape[0]):
@@ -337,9 +394,13 @@ if _HAVE:
             codes[p] = code
             if code != 0:
                 continue
-            scratch = np.zeros(max_hw, dtype=np.uint8)
-            touched = np.empty(1, dtype=np.int64)
-            eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, obs, offs, areas, tris, scratch, touched, esil[p])
+            work = (np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
+                    np.empty(span_cap, dtype=np.int32), np.zeros(max_h + 2, dtype=np.int64),
+                    np.zeros(max_h + 2, dtype=np.int64), np.empty(span_cap, dtype=np.int32),
+                    np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
+                    np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
+                    np.empty(span_cap, dtype=np.int32))
+            eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work, esil[p])
 
 
 def scenario_arrays(scenario, safety=D.DT_SAFETY):

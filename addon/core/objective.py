@@ -48,14 +48,24 @@ class SilhouetteObjective:
         self.backend = backend
         self.evaluations = 0
         if backend == "numba":
-            sizes = [c.height * c.width for c in self.cameras]
-            self._offs = np.zeros((C, F), dtype=np.int64)
-            o = 0
+            # per image: bounding box of the observed silhouette and per-row prefix sums inside it
+            self._pofs = np.zeros((C, F), dtype=np.int64)
+            self._bbs = np.zeros((C, F, 4), dtype=np.int64)
+            pres, o = [], 0
             for c in range(C):
                 for f in range(F):
-                    self._offs[c, f] = o
-                    o += sizes[c]
-            self._obs = np.concatenate([x.ravel() for x in obs]).astype(np.uint8)
+                    im = obs[c * F + f]
+                    rows = np.flatnonzero(im.any(1))
+                    cols = np.flatnonzero(im.any(0))
+                    r0, r1, c0, c1 = rows[0], rows[-1], cols[0], cols[-1]
+                    crop = im[r0:r1 + 1, c0:c1 + 1].astype(np.int32)
+                    pre = np.zeros((crop.shape[0], crop.shape[1] + 1), dtype=np.int32)
+                    np.cumsum(crop, axis=1, out=pre[:, 1:])
+                    self._pofs[c, f] = o
+                    self._bbs[c, f] = (r0, r1, c0, c1)
+                    pres.append(pre.ravel())
+                    o += pre.size
+            self._pre = np.concatenate(pres)
             self._arrays = accel.scenario_arrays(scenario)
             self._Ks = np.array([c.K for c in self.cameras])
             self._Rs = np.array([c.R for c in self.cameras])
@@ -69,7 +79,9 @@ class SilhouetteObjective:
             self._dists = d
             self._Hs = np.array([c.height for c in self.cameras], dtype=np.int64)
             self._Ws = np.array([c.width for c in self.cameras], dtype=np.int64)
-            self._maxhw = int(max(sizes))
+            self._maxh = int(max(c.height for c in self.cameras))
+            self._maxw = int(max(c.width for c in self.cameras))
+            self._span_cap = int(scenario.grid.triangles.shape[0] * (self._maxh + 1))
             self._tris = np.ascontiguousarray(scenario.grid.triangles, dtype=np.int64)
 
     @property
@@ -86,7 +98,8 @@ class SilhouetteObjective:
             codes = np.zeros(P.shape[0], dtype=np.int64)
             a = self._arrays
             accel.objective_population(P, *[a[k] for k in accel._ORDER], self._Ks, self._Rs, self._ts, self._dists,
-                                       self._Hs, self._Ws, self._obs, self._offs, self.areas, self._tris, self._maxhw,
+                                       self._Hs, self._Ws, self._pre, self._pofs, self._bbs, self.areas, self._tris,
+                                       self._maxh, self._maxw, self._span_cap,
                                        esil, codes)
             exploded = codes != 0
             esil[exploded] = np.inf

@@ -1,0 +1,41 @@
+# Silhouette Cloth Fit: every command sets up its own environment first.
+#   make demo   - the paper scenario on the built-in lab18 rig: Blender-rendered observations, fit,
+#                 tables and overlays under out/
+#   make test   - the whole test suite (pure core + Blender layer through the bpy module)
+#   make bench  - speed figures (out/bench.json)
+#   make paper  - the full paper protocol (Table 1, Fig. 8, Table 2, optimisers; out/paper.json)
+PYTHON ?= python3.11
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: venv demo test bench paper extension clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements.txt
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (bpy 4.5 needs Python 3.11); set PYTHON=..."; exit 2; }
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r requirements.txt
+	touch $(STAMP)
+
+demo: venv
+	$(PY) demo_blend/build_demo.py --out out/demo
+	$(PY) -m addon paper --quick --json out/paper_quick.json --out out/paper_quick --only table1
+	@echo "demo done: see out/demo/ (Blender-rendered capture, fit, overlays) and out/paper_quick.json"
+
+test: venv
+	$(PY) -m pytest -q tests
+
+bench: venv
+	$(PY) -m addon bench --json out/bench.json
+
+paper: venv
+	$(PY) -m addon paper --json out/paper.json --out out/paper
+
+extension: venv
+	$(PY) tools/build_extension.py
+
+clean:
+	rm -rf out dist
