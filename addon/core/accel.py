@@ -32,7 +32,7 @@ def available() -> bool:
 REASONS = ["", "invalid parameters", "non-finite state", "flew away", "spring overstretched", "too many steps"]
 
 if _HAVE:
-    _jit = dict(cache=True, nogil=True, fastmath=True)
+    _jit = dict(cache=True, nogil=True, fastmath=False)
 
     @njit(**_jit)
     def _handle_at(h, t, key_start, key_times, key_pos, out_p, out_v):
@@ -112,6 +112,43 @@ if _HAVE:
                     F[(i + 1) * nx + j + 1, a] -= fd[q, a]
 
     @njit(**_jit)
+    def _family(X, Fb, n, off, rl, kap, mask):
+        """Forces of one spring family: pairs (q, q + off) for q < n, masked (0 = no spring)."""
+        for q in range(n):
+            d0 = X[0, q + off] - X[0, q]
+            d1 = X[1, q + off] - X[1, q]
+            d2 = X[2, q + off] - X[2, q]
+            ln = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            w = kap * (1.0 - rl / max(ln, 1e-12)) * mask[q]
+            Fb[0, q] = w * d0
+            Fb[1, q] = w * d1
+            Fb[2, q] = w * d2
+
+    @njit(**_jit)
+    def _scatter(F, Fb, n, off):
+        for a in range(3):
+            for q in range(n):
+                F[a, q] += Fb[a, q]
+            for q in range(n):
+                F[a, q + off] -= Fb[a, q]
+
+    @njit(**_jit)
+    def _soa_forces(X, F, Fb, mh, mv, md, nx, V, kap, L, g):
+        """Per-unit-mass forces on a structure-of-arrays state X (3, V), in the order of
+        simulate_numpy: gravity, then horizontal, vertical and diagonal springs. Each family is
+        one contiguous loop over vertex pairs (q, q + offset) with a 0/1 mask for pairs that
+        would wrap around a row end, so the loops vectorise."""
+        for a in range(3):
+            for q in range(V):
+                F[a, q] = g[a]
+        _family(X, Fb, V - 1, 1, L, kap, mh)
+        _scatter(F, Fb, V - 1, 1)
+        _family(X, Fb, V - nx, nx, L, kap, mv)
+        _scatter(F, Fb, V - nx, nx)
+        _family(X, Fb, V - nx - 1, nx + 1, math.sqrt(2.0) * L, kap, md)
+        _scatter(F, Fb, V - nx - 1, nx + 1)
+
+    @njit(**_jit)
     def _max_strain(x, springs, rest_factor, L):
         r = 0.0
         for s in range(springs.shape[0]):
@@ -137,19 +174,24 @@ if _HAVE:
         kap = k / m
         beta = dmp / m
         V = rest.shape[0]
-        x = rest.copy()
-        v = np.zeros_like(x)
-        F = np.zeros_like(x)
-        fh = np.zeros((ny * (nx - 1), 3))
-        fv = np.zeros(((ny - 1) * nx, 3))
-        fd = np.zeros(((ny - 1) * (nx - 1), 3))
+        X = np.ascontiguousarray(rest.T)
+        Vv = np.zeros((3, V))
+        F = np.zeros((3, V))
+        Fb = np.zeros((3, V))
+        mh = np.ones(V)
+        md = np.ones(V)
+        for q in range(V):
+            if q % nx == nx - 1:
+                mh[q] = 0.0
+                md[q] = 0.0
+        mv = np.ones(V)
         p = np.zeros(3)
         pv = np.zeros(3)
         H = hv.shape[0]
         for h in range(H):
             _handle_at(h, events[0], key_start, key_times, key_pos, p, pv)
             for a in range(3):
-                x[hv[h], a] = p[a]
+                X[a, hv[h]] = p[a]
         dt_max = safety * math.sqrt(m / k)
         steps = 0
         for e in range(events.shape[0] - 1):
@@ -164,35 +206,36 @@ if _HAVE:
             rate = max(beta, settle_rate) if settling else beta
             damp = 1.0 / (1.0 + dt * rate)
             for s in range(nsub):
-                _grid_forces(x, F, fh, fv, fd, nx, ny, kap, L, gravity)
-                for i in range(V):
-                    for a in range(3):
-                        v[i, a] = (v[i, a] + dt * F[i, a]) * damp
-                        x[i, a] = x[i, a] + dt * v[i, a]
+                _soa_forces(X, F, Fb, mh, mv, md, nx, V, kap, L, gravity)
+                for a in range(3):
+                    for i in range(V):
+                        Vv[a, i] = (Vv[a, i] + dt * F[a, i]) * damp
+                        X[a, i] = X[a, i] + dt * Vv[a, i]
                 tc = a0 + (s + 1) * dt
                 for h in range(H):
                     if settling or tc < release[h]:
                         _handle_at(h, tc, key_start, key_times, key_pos, p, pv)
                         for a in range(3):
-                            x[hv[h], a] = p[a]
-                            v[hv[h], a] = pv[a]
+                            X[a, hv[h]] = p[a]
+                            Vv[a, hv[h]] = pv[a]
             steps += nsub
             # explosion checks once per interval
             far = 0.0
-            for i in range(V):
-                for a in range(3):
-                    if not (math.isfinite(x[i, a]) and math.isfinite(v[i, a])):
+            for a in range(3):
+                for i in range(V):
+                    if not (math.isfinite(X[a, i]) and math.isfinite(Vv[a, i])):
                         return 2, steps
-                    dd = abs(x[i, a] - centre[a])
+                    dd = abs(X[a, i] - centre[a])
                     if dd > far:
                         far = dd
             if far > limit:
                 return 3, steps
-            if _max_strain(x, springs, rest_factor, L) > 1.0 + max_strain:
+            xt = X.T
+            if _max_strain(xt, springs, rest_factor, L) > 1.0 + max_strain:
                 return 4, steps
             f = frame_of_event[e + 1]
             if f >= 0:
-                out[f] = x
+                out[f] = xt
         return 0, steps
 
     @njit(**_jit)
