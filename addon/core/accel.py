@@ -198,20 +198,28 @@ if _HAVE:
             a0 = events[e]
             b0 = events[e + 1]
             seg = b0 - a0
-            nsub = max(1, int(math.ceil(seg / dt_max - 1e-9)))
+            n_full = int(math.floor(seg / dt_max))
+            rem = seg - n_full * dt_max
+            if rem <= 1e-12 * seg:
+                rem = 0.0
+            nsub = n_full + (1 if rem > 0.0 else 0)
             if steps + nsub > max_steps:
                 return 5, steps
-            dt = seg / nsub
             settling = b0 <= 0.0
             rate = max(beta, settle_rate) if settling else beta
-            damp = 1.0 / (1.0 + dt * rate)
             for s in range(nsub):
+                if s < n_full:
+                    dt = dt_max
+                    tc = a0 + (s + 1) * dt_max
+                else:
+                    dt = rem
+                    tc = b0
+                damp = 1.0 / (1.0 + dt * rate)
                 _soa_forces(X, F, Fb, mh, mv, md, nx, V, kap, L, gravity)
                 for a in range(3):
                     for i in range(V):
                         Vv[a, i] = (Vv[a, i] + dt * F[a, i]) * damp
                         X[a, i] = X[a, i] + dt * Vv[a, i]
-                tc = a0 + (s + 1) * dt
                 for h in range(H):
                     if settling or tc < release[h]:
                         _handle_at(h, tc, key_start, key_times, key_pos, p, pv)

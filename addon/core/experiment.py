@@ -36,7 +36,7 @@ from .synth import synth_capture
 
 FULL = dict(evals=2500, fig8_cameras=[2, 16], opt_seeds=5, opt_evals=2000, opt_cameras=4)
 QUICK = dict(evals=700, fig8_cameras=[4], opt_seeds=2, opt_evals=600, opt_cameras=4)
-DEFAULT_OPTIMIZER = "cma-es"
+DEFAULT_OPTIMIZER = D.DEFAULT_OPTIMIZER
 
 
 def noise_floor(capture, cams, times):

@@ -86,6 +86,7 @@ class ExtractOptions:
     close_radius: int = 2             # morphological closing radius [px] (0 = off)
     keep_largest: bool = True
     fill_holes: bool = True
+    refine_radius: int = 2            # boundary refinement to half the local contrast, px (0 = off)
     min_area: int = 50                # a silhouette smaller than this = nothing found
     allow_empty: bool = False         # nothing found: warning + empty silhouette instead of an error
     undistort: bool = False           # undistort silhouettes, write cameras without distortion
@@ -112,7 +113,7 @@ class ExtractOptions:
             raise ClothFitError(f"shadow ratio {self.shadow_min} must be within (0, 1] (1 = no shadow model)")
         if not (self.noise_k > 0):
             raise ClothFitError(f"noise factor {self.noise_k} must be positive")
-        if self.blur < 0 or self.open_radius < 0 or self.close_radius < 0 or self.min_area < 0:
+        if self.blur < 0 or min(self.open_radius, self.close_radius, self.refine_radius, self.min_area) < 0:
             raise ClothFitError(f"blur {self.blur}, open radius {self.open_radius}, close radius "
                                 f"{self.close_radius} and min area {self.min_area} must be >= 0")
         return self
@@ -257,8 +258,38 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
     return mask | holes
 
 
-def clean_mask(raw: np.ndarray, opts: ExtractOptions):
-    """Opening, closing, largest component, hole filling. Returns (final, steps dict, info dict)."""
+def refine_boundary(mask: np.ndarray, diff: np.ndarray, radius: int, floor: float = 0.0) -> np.ndarray:
+    """Move the silhouette's boundary to where the difference falls to half the local object level.
+
+    An edge in the image (anti-aliased, lens-blurred, and blurred by ``blur``) is a ramp between
+    the background's difference (~0) and the object's; a global threshold puts the boundary on
+    the ramp wherever it crosses the threshold: outside the true edge for high-contrast parts,
+    inside it for low-contrast ones. Half the local object level is the edge itself (a symmetric
+    blur keeps the half-way point of a step in place) and does not depend on the threshold.
+    The local level is the mean difference of the object's interior (the mask eroded by 2 px)
+    in a ``(4 radius + 5)`` px window; only pixels within ``radius`` px of the boundary change,
+    and only where an interior is near. ``floor``: a pixel never becomes object below it.
+    """
+    import cv2
+    if radius <= 0 or not mask.any():
+        return mask
+    m8 = mask.astype(np.uint8)
+    inner = cv2.erode(m8, _disk(2)).astype(np.float32)
+    if not inner.any():
+        return mask
+    win = 4 * radius + 5
+    num = cv2.boxFilter(diff.astype(np.float32) * inner, -1, (win, win), normalize=False)
+    den = cv2.boxFilter(inner, -1, (win, win), normalize=False)
+    band = (cv2.dilate(m8, _disk(radius)) > 0) & ~(cv2.erode(m8, _disk(radius)) > 0) & (den > 0.5)
+    level = num / np.maximum(den, 1e-6)
+    out = mask.copy()
+    out[band] = diff[band] > np.maximum(0.5 * level[band], floor)
+    return out
+
+
+def clean_mask(raw: np.ndarray, opts: ExtractOptions, diff: np.ndarray | None = None, floor: float = 0.0):
+    """Opening, closing, largest component, hole filling, boundary refinement (needs ``diff``).
+    Returns (final, steps dict, info dict)."""
     import cv2
     steps = {"threshold": raw}
     m = raw.astype(np.uint8)
@@ -285,6 +316,14 @@ def clean_mask(raw: np.ndarray, opts: ExtractOptions):
     final = m > 0
     if opts.fill_holes and final.any():
         final = fill_holes(final)
+    if diff is not None and opts.refine_radius > 0 and final.any():
+        final = refine_boundary(final, diff, opts.refine_radius, floor)
+        n, lab, stats, _ = cv2.connectedComponentsWithStats(final.astype(np.uint8), connectivity=8)
+        if opts.keep_largest and n > 2:
+            final = lab == (int(np.argmax(stats[1:, cv2.CC_STAT_AREA])) + 1)
+        if opts.fill_holes and final.any():
+            final = fill_holes(final)
+    steps["refine"] = final
     steps["final"] = final
     return final, steps, info
 
@@ -384,7 +423,7 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
             masks.append(None)
             continue
         raw = d > thr
-        final, steps, info = clean_mask(raw, opts)
+        final, steps, info = clean_mask(raw, opts, d, stats["noise"])
         area = int(final.sum())
         fr_rep = {"frame": fname, "area": area, "raw_area": int(raw.sum()), "components": info["components"],
                   "dropped_area": info["dropped_area"], "max_difference": float(d.max())}
@@ -433,7 +472,7 @@ def _write_debug(folder, fi, fname, d, thr, steps, frame):
     stem = f"{fi:03d}"
     scaled = np.clip(d * (128.0 / max(thr, 1e-6)), 0, 255).astype(np.uint8)
     _write_png(os.path.join(folder, f"{stem}_1_difference.png"), scaled)
-    for k, key in enumerate(("threshold", "open", "close", "largest", "final")):
+    for k, key in enumerate(("threshold", "open", "close", "largest", "refine", "final")):
         _write_png(os.path.join(folder, f"{stem}_{k + 2}_{key}.png"), steps[key].astype(np.uint8) * 255)
     f = as_float_image(frame)
     f = np.clip(f, 0, 255).astype(np.uint8)
@@ -441,7 +480,7 @@ def _write_debug(folder, fi, fname, d, thr, steps, frame):
         f = cv2.cvtColor(f, cv2.COLOR_GRAY2BGR)
     contours, _ = cv2.findContours(steps["final"].astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     cv2.drawContours(f, contours, -1, (0, 0, 255), 1)
-    _write_png(os.path.join(folder, f"{stem}_7_overlay.png"), f)
+    _write_png(os.path.join(folder, f"{stem}_8_overlay.png"), f)
 
 
 def _write_histogram(path, diffs, stats, w=512, h=200):
@@ -717,6 +756,8 @@ def add_arguments(parser):
     parser.add_argument("--close", type=int, default=ExtractOptions.close_radius, dest="close_radius")
     parser.add_argument("--no-largest", action="store_true", help="keep every component")
     parser.add_argument("--no-fill-holes", action="store_true")
+    parser.add_argument("--refine", type=int, default=ExtractOptions.refine_radius, dest="refine_radius",
+                        help="boundary refinement radius [px] (0 = off)")
     parser.add_argument("--min-area", type=int, default=ExtractOptions.min_area)
     parser.add_argument("--allow-empty", action="store_true", help="nothing found = warning + empty silhouette")
     parser.add_argument("--undistort", action="store_true", help="undistort silhouettes, write cameras without distortion")
@@ -739,7 +780,8 @@ def options_from_args(args) -> ExtractOptions:
                           shadow_min=args.shadow_min,
                           noise_k=args.noise_k, blur=args.blur, open_radius=args.open_radius,
                           close_radius=args.close_radius, keep_largest=not args.no_largest,
-                          fill_holes=not args.no_fill_holes, min_area=args.min_area,
+                          fill_holes=not args.no_fill_holes, refine_radius=args.refine_radius,
+                          min_area=args.min_area,
                           allow_empty=args.allow_empty, undistort=args.undistort,
                           debug_dir=args.debug_dir).check()
 

@@ -33,7 +33,7 @@ FREE_NAMES = ("k_over_m", "d_over_m", "l_rel")
 class FitConfig:
     train_cameras: list | None = None     # camera indices (None = all)
     train_times: list | None = None       # frame times (None = all of the capture's)
-    optimizer: str = "spx-mgg"
+    optimizer: str = D.DEFAULT_OPTIMIZER
     seed: int = 0
     max_evaluations: int = D.FIT_EVALUATIONS
     target_error: float | None = None     # stop when E_all per image falls below this

@@ -8,9 +8,13 @@ Integrator (part of the model, documented in the README):
       p <- p + dt * v
 
   held handles are then set to their prescribed position and velocity;
-* per candidate, every interval between consecutive event times (start of settling, 0, release
-  times, handle keys, frame times) is split into equal substeps no longer than
-  ``DT_SAFETY * sqrt(m/k)`` (the stability bound of a node with 6 springs is about 0.58 sqrt(m/k));
+* per candidate, the step is ``dt = DT_SAFETY * sqrt(m/k)`` (the stability bound of a node with
+  6 springs is 2/sqrt(12) = 0.58 sqrt(m/k)); every interval between consecutive event times (start
+  of settling, 0, release times, handle keys, frame times) is covered by whole steps of ``dt`` and
+  one shorter remainder step that lands exactly on the event. Unlike "split the interval into
+  ceil(len/dt) equal steps", this makes the simulated motion a *continuous* function of k/m: the
+  number of steps never jumps (measured: the equal-split rule made a 1e-4 relative change of k move
+  the cloth by 0.1 mm, a 0.6 % silhouette-error cliff for the optimiser);
 * before t = 0 the cloth settles for ``settle_time`` with every handle held and damping rate
   ``max(d/m, SETTLE_DAMPING_RATE)``: the rest shape does not depend on d, this only gets there fast;
 * a candidate whose state goes non-finite, stretches a spring beyond ``1 + MAX_STRAIN`` times its
@@ -67,14 +71,22 @@ def event_times(scenario: Scenario) -> np.ndarray:
     return ev[ev >= -scenario.settle_time - 1e-15]
 
 
-def substeps_for(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY) -> np.ndarray:
-    """Number of substeps per candidate for an interval of length ``seg_len``."""
+def step_plan(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY):
+    """Per candidate: step ``dt``, number of whole steps, remainder step (0 = none) for an interval."""
     m, k = params[:, 0], params[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
-        dt_max = safety * np.sqrt(m / k)
-    dt_max = np.where(np.isfinite(dt_max) & (dt_max > 0), dt_max, np.inf)
-    n = np.ceil(seg_len / dt_max - 1e-9)
-    return np.maximum(n, 1).astype(np.int64)
+        dt = safety * np.sqrt(m / k)
+    dt = np.where(np.isfinite(dt) & (dt > 0), dt, seg_len)
+    n_full = np.floor(seg_len / dt).astype(np.int64)
+    rem = seg_len - n_full * dt
+    rem = np.where(rem > 1e-12 * seg_len, rem, 0.0)
+    return dt, n_full, rem
+
+
+def substeps_for(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY) -> np.ndarray:
+    """Number of integration steps per candidate for an interval of length ``seg_len``."""
+    _, n_full, rem = step_plan(params, seg_len, safety)
+    return n_full + (rem > 0)
 
 
 MAX_TOTAL_STEPS = 2_000_000
@@ -166,21 +178,22 @@ def simulate_numpy(scenario: Scenario, P: np.ndarray, safety: float = D.DT_SAFET
 
     for a, b in zip(ev[:-1], ev[1:]):
         seg = b - a
-        nsub = substeps_for(Pw, seg, safety)
+        dtf, n_full, rem = step_plan(Pw, seg, safety)
+        nsub = n_full + (rem > 0)
         stiff = ~exploded & (steps_total + nsub > MAX_TOTAL_STEPS)
         for p in np.nonzero(stiff)[0]:
             reason[p] = f"too many steps (k/m = {kap[p, 0, 0, 0]:.3g} is too stiff)"
         exploded |= stiff
-        nsub = np.where(exploded, 1, nsub)
-        dt = seg / nsub
+        nsub = np.where(exploded, 0, nsub)
         settling = b <= 0.0
         rate = np.maximum(beta, D.SETTLE_DAMPING_RATE) if settling else beta
-        damp = 1.0 / (1.0 + dt * rate)
-        for s in range(int(nsub.max())):
+        for s in range(int(nsub.max(initial=0))):
             active = (s < nsub) & ~exploded
             if not active.any():
                 break
+            dt = np.where(s < n_full, dtf, rem)
             dta = np.where(active, dt, 0.0)
+            damp = 1.0 / (1.0 + dta * rate)
             F[:] = g
             d = x[:, :, 1:] - x[:, :, :-1]
             ln = np.sqrt(np.einsum("...i,...i->...", d, d))[..., None]
@@ -198,10 +211,10 @@ def simulate_numpy(scenario: Scenario, P: np.ndarray, safety: float = D.DT_SAFET
             F[:, :-1, :-1] += f
             F[:, 1:, 1:] -= f
             dtb = dta[:, None, None, None]
-            v = (v + dtb * F) * np.where(active, damp, 1.0)[:, None, None, None]
+            v = (v + dtb * F) * damp[:, None, None, None]
             x = x + dtb * v
             if hv.size:
-                tc = a + (s + 1) * dt
+                tc = np.where(s < n_full, a + (s + 1) * dtf, b)
                 pos, vel, held = handle_state(scenario, tc)  # (P, H, 3), (P, H)
                 if settling:
                     held = np.ones_like(held)
