@@ -449,14 +449,6 @@ def overlay_path(cap, ci, fi):
     return os.path.join(cap.root, OVERLAY_DIR, cap.cameras[ci].name, f"{fi:03d}.png")
 
 
-def _overlay_funcs():
-    try:
-        from ..core.overlay import contact_sheet, overlay_image
-    except ImportError:  # core module not there: local fallbacks with the same colours
-        from .overlay_fallback import contact_sheet, overlay_image
-    return overlay_image, contact_sheet
-
-
 def model_masks_core(scene, cap, frame_indices):
     from ..core.raster import silhouette
     from ..core.simulate import simulate as core_simulate
@@ -498,9 +490,9 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
     """Observed vs. model silhouettes per camera and frame -> ``<capture>/overlays/<cam>/<f>.png``,
     a contact sheet of all cameras at one frame, E_sil per image in ``overlays/summary.json``;
     cameras show their overlay as background. Returns the summary dict."""
-    import cv2
     from ..core.capture import load_capture as core_load
     from ..core.metrics import e_sil
+    from ..core.overlay import contact_sheet, label, overlay_image, write_rgb
     p = props(scene)
     cap = core_load(capture_dir(scene))
     fidx = list(range(cap.n_frames)) if frame_indices is None else [int(i) for i in frame_indices]
@@ -509,7 +501,6 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
             raise ClothFitError(f"overlay frame index {i} outside 0..{cap.n_frames - 1}")
     source = source or p.overlay_source
     model = (model_masks_blender if source == "BLENDER" else model_masks_core)(scene, cap, fidx)
-    overlay_image, contact_sheet = _overlay_funcs()
     errs = np.zeros((cap.n_cameras, len(fidx)))
     sheet_fi = fidx[len(fidx) // 2] if sheet_frame is None else int(sheet_frame)
     tiles = []
@@ -522,17 +513,15 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
                                     f"in size")
             errs[ci, k] = e_sil(obs, mod, name=cap.silhouette_path(ci, fi))
             img = overlay_image(obs, mod)
-            path = overlay_path(cap, ci, fi)
-            os.makedirs(os.path.dirname(path), exist_ok=True)
-            cv2.imwrite(path, img)
+            write_rgb(overlay_path(cap, ci, fi), img)
             if fi == sheet_fi:
-                tiles.append(img)
+                tiles.append(label(img, f"{c.name} t={cap.frame_times[fi]:.2f} E={100 * errs[ci, k]:.2f}%"))
     out_dir = os.path.join(cap.root, OVERLAY_DIR)
     sheet_path = None
     if tiles:
         sheet = contact_sheet(tiles, cols=min(6, len(tiles)))
         sheet_path = os.path.join(out_dir, "contact_sheet.png")
-        cv2.imwrite(sheet_path, sheet)
+        write_rgb(sheet_path, sheet)
         img = _load_image("clothfit contact sheet", sheet_path)
         img.use_fake_user = False
     summary = {"source": source, "params": params_from_scene(scene).as_dict(),

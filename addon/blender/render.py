@@ -12,7 +12,9 @@ pixels, so each render is written to a PNG and read back (PNG rows run top-down,
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
+import sys
 import tempfile
 
 import bpy
@@ -83,11 +85,46 @@ def silhouette_render(scene, objects):
                 pass
 
 
+@contextlib.contextmanager
+def quiet_stdout():
+    """Silence Blender's per-render "Fra:... / Saved: ..." lines (C-level stdout).
+
+    Set CLOTHFIT_RENDER_VERBOSE=1 to keep them. Does nothing when stdout has no file descriptor."""
+    if os.environ.get("CLOTHFIT_RENDER_VERBOSE"):
+        yield
+        return
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        yield
+        return
+    libc = None
+    try:
+        libc = ctypes.CDLL(None)
+    except OSError:
+        pass
+    sys.stdout.flush()
+    if libc is not None:
+        libc.fflush(None)
+    saved = os.dup(fd)
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, fd)
+    try:
+        yield
+    finally:
+        if libc is not None:
+            libc.fflush(None)
+        os.dup2(saved, fd)
+        os.close(saved)
+        os.close(null)
+
+
 def render_to_file(scene, camera_obj, path):
     """Render the scene through ``camera_obj`` to ``path`` (PNG). The caller sets the format."""
     scene.camera = camera_obj
     scene.render.filepath = path
-    bpy.ops.render.render(write_still=True, scene=scene.name)
+    with quiet_stdout():
+        bpy.ops.render.render(write_still=True, scene=scene.name)
     if not os.path.isfile(path):
         raise ClothFitError(f"Blender did not write the render {path}")
     return path
