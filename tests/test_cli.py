@@ -1,0 +1,179 @@
+import sys, os; sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+"""The headless CLI ``python -m addon`` in a subprocess: synth, fit, evaluate, overlay, and one-line
+errors (exit code 2, no traceback) for bad input."""
+
+import json
+import shutil
+import subprocess
+
+import cv2
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def run(*args, timeout=300):
+    env = dict(os.environ)
+    env.pop("CLOTHFIT_PROGRESS", None)
+    p = subprocess.run([sys.executable, "-m", "addon", *[str(a) for a in args]], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=timeout)
+    return p.returncode, p.stdout, p.stderr
+
+
+def assert_one_line_error(rc, out, err, *needles):
+    assert rc == 2, (rc, out, err)
+    assert "Traceback" not in err, err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: "), err
+    for n in needles:
+        assert str(n) in lines[0], (n, err)
+
+
+@pytest.fixture(scope="module")
+def cap(tmp_path_factory):
+    root = tmp_path_factory.mktemp("cli") / "cap"
+    rc, out, err = run("synth", "--out", root, "--resolution", "60x80")
+    assert rc == 0, err
+    assert "18 cameras x 30 frames" in out
+    return root
+
+
+def test_synth_writes_a_capture(cap):
+    from addon.core.capture import load_capture
+    c = load_capture(str(cap), validate=True)       # every silhouette file readable, sizes right
+    assert c.n_cameras == 18 and c.n_frames == 30
+    assert all((k.height, k.width) == (60, 80) for k in c.cameras)
+    assert c.shapes is not None and c.shapes.shape == (30, 256, 3)
+    assert c.meta["true_params"]["k"] == 10.0
+
+
+@pytest.fixture(scope="module")
+def fit_json(cap):
+    out = cap.parent / "fit.json"
+    rc, so, err = run("fit", cap, "--out", out, "--max-evaluations", 60, "--cameras", "n:2",
+                      "--times", "0.1,0.2,0.3", "--optimizer", "cma-es", "--quiet")
+    assert rc == 0, err
+    assert "Traceback" not in err
+    assert f"wrote {out}" in so
+    return out
+
+
+def test_fit_writes_a_result_with_params(fit_json, cap):
+    with open(fit_json) as f:
+        r = json.load(f)
+    p = r["params"]
+    assert set(p) == {"m", "k", "l", "d"} and all(v > 0 for v in p.values())
+    assert r["evaluations"] >= 60 and r["optimizer"] == "cma-es"
+    assert r["train_times"] == [0.1, 0.2, 0.3]
+    assert len(r["train_camera_indices"]) == 2
+    assert r["n_train_images"] == 6
+    assert r["identifiable"]["k_over_m"] == pytest.approx(p["k"] / p["m"])
+    assert r["best_E_sil_mean_pct"] is not None and r["best_E_sil_mean_pct"] < 50
+    assert "identifiable_error_pct" in r
+    assert os.path.isfile(str(fit_json) + ".checkpoint.json")
+
+
+def test_evaluate_prints_a_silhouette_error(fit_json, cap, tmp_path):
+    js = tmp_path / "ev.json"
+    rc, out, err = run("evaluate", cap, "--params", fit_json, "--cameras", "heldout:2", "--times", "0.15,0.25",
+                       "--json", js)
+    assert rc == 0, err
+    assert "silhouette error" in out and "16 cameras x 2 frames" in out and "shape error" in out
+    with open(js) as f:
+        r = json.load(f)
+    assert len(r["cameras"]) == 16 and r["times"] == [0.15, 0.25]
+    assert r["silhouette_error_pct"] > 0
+    # the ground truth (default --params) scores better than a wrong k
+    rc, out_gt, _ = run("evaluate", cap, "--cameras", "0,5", "--times", "0.5", "--json", tmp_path / "gt.json")
+    rc2, _, _ = run("evaluate", cap, "--cameras", "0,5", "--times", "0.5",
+                    "--params", '{"m": 1e-5, "k": 14.0, "l": 0.0066667, "d": 5e-5}', "--json", tmp_path / "bad.json")
+    assert rc == rc2 == 0
+    with open(tmp_path / "gt.json") as f, open(tmp_path / "bad.json") as g:
+        assert json.load(f)["silhouette_error_pct"] < json.load(g)["silhouette_error_pct"]
+
+
+def test_overlay_writes_images(fit_json, cap, tmp_path):
+    out = tmp_path / "ov"
+    rc, so, err = run("overlay", cap, "--params", fit_json, "--out", out, "--cameras", "cam00,3",
+                      "--times", "0.1,0.2")
+    assert rc == 0, err
+    assert "wrote 5 images" in so
+    for cam in ("cam00", "cam03"):
+        for f in ("001", "003"):
+            img = cv2.imread(str(out / cam / f"{f}.png"))
+            assert img is not None and img.shape == (60, 80, 3)
+    assert cv2.imread(str(out / "contact_sheet.png")) is not None
+
+
+# ------------------------------------------------------------------ bad input
+
+def test_missing_capture_dir(tmp_path):
+    missing = tmp_path / "no_such_capture"
+    rc, out, err = run("fit", missing, "--out", tmp_path / "f.json", "--quiet")
+    assert_one_line_error(rc, out, err, missing)
+    rc, out, err = run("evaluate", missing)
+    assert_one_line_error(rc, out, err, missing)
+
+
+def test_corrupt_capture_json(cap, tmp_path):
+    bad = tmp_path / "bad"
+    shutil.copytree(cap, bad)
+    (bad / "capture.json").write_text('{"format": "silhouette-cloth-fit/capture", "version": ')
+    rc, out, err = run("fit", bad, "--out", tmp_path / "f.json", "--quiet")
+    assert_one_line_error(rc, out, err, bad / "capture.json", "invalid JSON")
+    rc, out, err = run("overlay", bad, "--out", tmp_path / "ov")
+    assert_one_line_error(rc, out, err, bad / "capture.json")
+
+
+def test_bad_resolution(cap, tmp_path):
+    rc, out, err = run("synth", "--out", tmp_path / "s", "--resolution", "60by80")
+    assert_one_line_error(rc, out, err, "60by80")
+    assert not (tmp_path / "s" / "capture.json").exists()
+    rc, out, err = run("fit", cap, "--out", tmp_path / "f.json", "--resolution", "12", "--max-evaluations", 5)
+    assert_one_line_error(rc, out, err, "'12'")
+
+
+def test_unknown_optimizer(cap, tmp_path):
+    rc, out, err = run("fit", cap, "--out", tmp_path / "f.json", "--optimizer", "simplex", "--max-evaluations", 5,
+                       "--cameras", "0", "--times", "0.1")
+    assert_one_line_error(rc, out, err, "simplex")
+
+
+def test_bad_values_named(cap, tmp_path):
+    rc, out, err = run("evaluate", cap, "--times", "0.12")
+    assert_one_line_error(rc, out, err, "0.12")
+    rc, out, err = run("evaluate", cap, "--params", '{"m": 1e-5, "k": -3, "l": 0.0066, "d": 0}')
+    assert_one_line_error(rc, out, err, "k=-3")
+    rc, out, err = run("evaluate", cap, "--cameras", "camXX")
+    assert_one_line_error(rc, out, err, "camXX")
+    rc, out, err = run("fit", cap, "--out", tmp_path / "f.json", "--cameras", "n:40", "--quiet")
+    assert_one_line_error(rc, out, err, "40")
+
+
+@pytest.mark.xfail(strict=True, reason="BUG: cli._params (addon/cli.py ~line 41) calls json.load on a --params FILE "
+                                       "without catching json.JSONDecodeError: a corrupt parameters file gives a "
+                                       "traceback and exit code 1 instead of 'error: <file> ...' and exit 2")
+def test_corrupt_params_file(cap, tmp_path):
+    p = tmp_path / "params.json"
+    p.write_text('{"m": 1e-5, "k": ')
+    rc, out, err = run("evaluate", cap, "--params", p)
+    assert_one_line_error(rc, out, err, p)
+
+
+@pytest.mark.xfail(strict=True, reason="BUG: cli._floats / cli._cams (addon/cli.py ~lines 19-60) convert --times and "
+                                       "--cameras 'n:X' with float()/int() without catching ValueError: a typo gives a "
+                                       "traceback (exit 1) instead of a one-line error naming the value (exit 2)")
+@pytest.mark.parametrize("opt,value", [("--times", "0.1,abc"), ("--cameras", "n:x")])
+def test_non_numeric_times_or_camera_count(cap, opt, value):
+    rc, out, err = run("evaluate", cap, opt, value)
+    assert_one_line_error(rc, out, err, value.split(",")[-1].split(":")[-1])
+
+
+@pytest.mark.xfail(strict=True, reason="BUG: cli._cams does not range-check camera indices and evaluate.evaluate / "
+                                       "overlay.capture_overlays index capture.cameras[c] directly: '--cameras 99' "
+                                       "gives an IndexError traceback (FitJob checks it, evaluate/overlay do not)")
+def test_camera_index_out_of_range(cap):
+    rc, out, err = run("evaluate", cap, "--cameras", "99")
+    assert_one_line_error(rc, out, err, "99")
