@@ -57,19 +57,44 @@ def test_auto_threshold_finds_blob_and_ignores_shadow():
     assert not res.errors
     assert iou(res.masks[0], truth) > 0.98
     rep = res.report
-    assert rep["mode"] == "auto" and rep["threshold"] == pytest.approx(max(rep["otsu"], rep["noise"]))
+    assert rep["mode"] == "auto" and rep["threshold"] == pytest.approx(max(rep["noise"], X.MIN_AUTO_THRESHOLD))
     assert rep["frames"][0]["area"] == res.masks[0].sum()
 
 
-def test_chroma_weighting_matters_against_shadows():
-    """Plain YUV difference with full luma weight and no shadow model takes the shadow in."""
+def test_chroma_weighting_and_shadow_model_against_shadows():
+    """Plain YUV difference with full luma weight and no shadow model takes the (hard-edged)
+    shadow in; weighing luma down helps at Otsu's (high) threshold; the shadow model removes it
+    at the noise threshold."""
     bg, _, fr, truth = scene()
-    plain = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=1.0, shadow_min=1.0)).masks[0]
-    weighted = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=0.35, shadow_min=1.0)).masks[0]
-    shadow_model = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=1.0, shadow_min=0.5)).masks[0]
+    plain = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=1.0, shadow_min=1.0, threshold="otsu")).masks[0]
+    weighted = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=0.35, shadow_min=1.0,
+                                                             threshold="otsu")).masks[0]
+    no_model = X.extract_camera([bg], [fr], X.ExtractOptions(shadow_min=1.0)).masks[0]
+    per_pixel = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=1.0, shadow_min=0.5,
+                                                              shadow_window=1)).masks[0]
     assert iou(plain, truth) < 0.8
     assert iou(weighted, truth) > 0.97
-    assert iou(shadow_model, truth) > 0.97
+    assert iou(no_model, truth) < 0.8
+    assert iou(per_pixel, truth) > 0.97
+
+
+def test_windowed_shadow_model_sees_texture_under_a_uniform_object():
+    """A uniform grey patch over a textured background, exactly as dark as a shadow would make the
+    background on average: per pixel it passes for a shadow, per window it does not."""
+    rng = np.random.default_rng(5)
+    h, w = 60, 80
+    bg = np.repeat(_smooth(rng, h, w, 60, 220, 3, ch=1)[..., None], 3, -1)
+    bg[..., 2] *= 1.15   # a warm tint
+    fr = bg.copy()
+    truth = np.zeros((h, w), bool)
+    truth[20:40, 25:55] = True
+    fr[truth] = 0.7 * bg[truth].mean(0)
+    bg8, fr8 = np.clip(bg, 0, 255).astype(np.uint8), np.clip(fr, 0, 255).astype(np.uint8)
+    d1 = X.difference(X.bgr_to_yuv(fr8.astype(np.float32)), X.bgr_to_yuv(bg8.astype(np.float32)), 0.35, 0, 0.5, 1)
+    d9 = X.difference(X.bgr_to_yuv(fr8.astype(np.float32)), X.bgr_to_yuv(bg8.astype(np.float32)), 0.35, 0, 0.5, 9)
+    inner = np.zeros_like(truth)
+    inner[24:36, 29:51] = True
+    assert np.median(d9[inner]) > 3 * np.median(d1[inner])
 
 
 def test_shadow_model_closed_form_is_the_minimum():
@@ -117,7 +142,7 @@ def test_cleanup_keeps_largest_fills_holes_and_removes_specks():
     assert final[11:39, 11:39].all() and abs(int(final.sum()) - 900) <= 4   # the opening rounds corners
     assert not final[:10].any() and not final[40:].any()
     assert info["components"] == 2 and info["dropped_area"] > 0
-    assert set(steps) == {"threshold", "open", "close", "largest", "final"}
+    assert set(steps) == {"threshold", "open", "close", "largest", "refine", "final"}
     keep_all, _, _ = X.clean_mask(raw, X.ExtractOptions(keep_largest=False, fill_holes=False,
                                                             close_radius=0))
     assert keep_all[51, 61] and not keep_all[21, 21]
@@ -213,7 +238,8 @@ def test_extract_capture_end_to_end(tmp_path):
     assert os.path.isfile(os.path.join(out, X.REPORT_JSON))
     assert cap.meta["extraction"]["thresholds"].keys() == {"cam00", "cam01"}
     names = sorted(os.listdir(os.path.join(dbg, "cam00")))
-    for step in ("1_difference", "2_threshold", "3_open", "4_close", "5_largest", "6_final", "7_overlay"):
+    for step in ("1_difference", "2_threshold", "3_open", "4_close", "5_largest", "6_refine", "7_final",
+                 "8_overlay"):
         assert f"000_{step}.png" in names
     assert "histogram.png" in names
     assert "threshold" in X.format_report(rep)
@@ -304,3 +330,16 @@ def test_cli_glue(tmp_path, capsys):
     bad = p.parse_args([root, "-o", out, "--camera-threshold", "cam01"])
     with pytest.raises(ClothFitError, match="NAME=VALUE"):
         X.run_args(bad)
+
+
+def test_boundary_refinement_moves_edge_to_half_contrast():
+    yy, xx = np.mgrid[0:80, 0:80]
+    disk = (xx - 40.0) ** 2 + (yy - 38.0) ** 2 < 15.0 ** 2
+    d = cv2.GaussianBlur(disk.astype(np.float32) * 60.0, (0, 0), 1.5)
+    fat = d > 4.0                                # a low (noise-level) threshold on a blurred edge
+    thin = d > 50.0                              # a high one
+    for m in (fat, thin):
+        assert iou(m, disk) < 0.93
+        r = X.refine_boundary(m, d, 2)
+        assert iou(r, disk) > 0.98
+    assert X.refine_boundary(fat, d, 0) is fat

@@ -7,27 +7,39 @@ threshold by hand; we add what real footage needs (all pure numpy + cv2, no bpy)
 1. **Difference** ``D = sqrt((w_Y dY)^2 + dU^2 + dV^2)`` per pixel between the frame and the
    background (the mean of the background plates when there are several), with
    ``Y = 0.299 R + 0.587 G + 0.114 B``, ``U = 0.492 (B - Y)``, ``V = 0.877 (R - Y)`` on the 0..255
-   scale, each channel's difference smoothed by a Gaussian of ``blur`` px first (sensor noise).
+   scale; both images are smoothed by a Gaussian of ``blur`` px first (sensor noise; default 1).
    **Chroma weighting against shadows**: a shadow or a change of exposure mostly changes
    brightness, so ``w_Y`` (``luma_weight``, default 0.35) weighs luma down against chroma.
-   **Shadow model** (``shadow_min``, default 0.5; 1 = off): a shadow scales the background's
-   Y, U and V by the same factor (YUV is linear in RGB), so the frame is compared with the
-   background dimmed by the best factor ``a`` in ``[shadow_min, 1]``:
-   ``D = min_a |f - a b|_w`` (closed form). Grey images have no chroma: there ``D = |dY|``
-   and no shadow model (a shadow cannot be told from a darker object without chroma).
+   **Shadow model** (``shadow_min``, default 0.6; 1 = off): a shadow scales the background's
+   Y, U and V by the same factor (YUV is linear in RGB), so the frame is also compared with the
+   background dimmed by a factor ``a`` in ``[shadow_min, 1]``, and ``D`` is the smaller of the two
+   differences. Shadows are smooth, so ``a`` is one least-squares factor per ``shadow_window`` px
+   window centred on the pixel (default 9): a uniform cloth over a textured table does not pass
+   for a shadow, because the table's texture would have to persist under a shadow. (At a hard
+   shadow edge the window straddles lit and shadowed background: a thin line of difference
+   remains there; ``shadow_window=1``, one factor per pixel, suits hard-edged shadows better.) Grey images have no chroma: there
+   ``D = |dY|`` and no shadow model (a shadow cannot be told from a darker object).
 2. **Threshold, one per camera** (cameras differ in exposure and noise; a fixed camera's noise
    does not change over the frames):
    * ``noise``: a noise model of the background difference. With two or more background plates
      the plate-to-plate difference (scaled to the frame-to-mean-background noise) is pure noise;
      with one plate the difference images of the camera's frames are used (mostly background).
-     Threshold = ``median + noise_k * 1.4826 * MAD`` of that noise difference.
+     Threshold = ``median + noise_k * 1.4826 * MAD`` of that noise difference (``noise_k`` 6).
    * ``otsu``: Otsu's threshold on the histogram of all difference images of the camera.
-   * ``auto`` (default): ``max(otsu, noise)``: Otsu separates object from background, the noise
-     threshold is the floor below which nothing can be told apart from noise.
+   * ``auto`` (default): the noise threshold, never below ``MIN_AUTO_THRESHOLD`` (2 levels).
+     Measured on the photoreal footage (``docs/real_footage.md``) it beats Otsu clearly: Otsu
+     lands between the bright parts of the cloth and the background and loses the low-contrast
+     parts (cloth in its own shade); the noise threshold detects everything that is not noise and
+     the boundary refinement (step 3) puts the edge back where it belongs.
    * a number: that threshold (difference units, 0..255 scale); ``thresholds={camera: value}``
      overrides it per camera.
 3. **Clean-up**: morphological opening (``open_radius`` px: removes specks) then closing
-   (``close_radius`` px: bridges small gaps), keep the largest 8-connected component, fill holes.
+   (``close_radius`` px: bridges small gaps), keep the largest 8-connected component, fill holes,
+   then **boundary refinement** (``refine_radius`` px, default 2): within that distance of the
+   boundary a pixel is object when its difference exceeds half the local object level (the mean
+   difference of the nearby interior). A low threshold on a blurred difference makes silhouettes
+   fat by about a pixel at high-contrast edges; the half-level point of a blurred edge is the edge
+   itself, whatever the threshold and the blur.
 4. **Checks** per file, never a silent empty silhouette: unreadable/corrupt image, image size
    different from the camera's (or from its background), missing background, missing camera
    folder, frame count different from the frame times are errors; a frame where nothing
@@ -37,8 +49,8 @@ threshold by hand; we add what real footage needs (all pure numpy + cv2, no bpy)
    reported together, before anything is written.
 5. **Debug images** (``debug_dir``): per camera and frame the difference image (scaled so the
    threshold is mid-grey), the raw threshold, after opening, after closing, the largest component,
-   the final silhouette, and an overlay of its outline on the frame; per camera a histogram of
-   the difference with the noise, Otsu and chosen thresholds.
+   after refinement, the final silhouette, and an overlay of its outline on the frame; per camera
+   a histogram of the difference with the noise, Otsu and chosen thresholds.
 
 Footage layout read by :func:`extract_capture`::
 
@@ -71,6 +83,7 @@ BACKGROUND_PREFIXES = ("background", "bg")
 FOOTAGE_JSON = "footage.json"
 REPORT_JSON = "extract_report.json"
 THRESHOLD_MODES = ("auto", "otsu", "noise")
+MIN_AUTO_THRESHOLD = 2.0   # "auto" never goes below this difference (0..255 scale): noise-free renders
 MAX_LISTED_ERRORS = 25
 
 
@@ -79,9 +92,10 @@ class ExtractOptions:
     threshold: object = "auto"        # "auto" | "otsu" | "noise" | a number (difference units)
     thresholds: dict = field(default_factory=dict)   # per camera name -> number (overrides)
     luma_weight: float = 0.35         # weight of dY against dU, dV (chroma weighting vs shadows)
-    shadow_min: float = 0.5           # background dimmed down to this ratio counts as shadow (1 = off)
+    shadow_min: float = 0.6           # background dimmed down to this ratio counts as shadow (1 = off)
+    shadow_window: int = 9            # px: one dimming ratio per window (shadows are smooth; 1 = per pixel)
     noise_k: float = 6.0              # noise threshold = median + noise_k * robust sigma
-    blur: float = 0.0                 # Gaussian sigma [px] on both images before differencing (0 = off)
+    blur: float = 1.0                 # Gaussian sigma [px] on both images before differencing (0 = off)
     open_radius: int = 1              # morphological opening radius [px] (0 = off)
     close_radius: int = 2             # morphological closing radius [px] (0 = off)
     keep_largest: bool = True
@@ -170,7 +184,7 @@ def bgr_to_yuv(img: np.ndarray) -> np.ndarray:
 
 
 def difference(frame_yuv: np.ndarray, bg_yuv: np.ndarray, luma_weight: float, blur: float,
-               shadow_min: float = 1.0) -> np.ndarray:
+               shadow_min: float = 1.0, shadow_window: int = 1) -> np.ndarray:
     """The weighted YUV difference image ``D`` (float32 ``(H, W)``).
 
     With ``shadow_min < 1`` the frame is compared with the background dimmed by the best ratio
@@ -189,13 +203,21 @@ def difference(frame_yuv: np.ndarray, bg_yuv: np.ndarray, luma_weight: float, bl
         return np.abs(f[:, :, 0] - b[:, :, 0])
     w = np.array([luma_weight, 1.0, 1.0], np.float32)
     fw, bw = f * w, b * w
-    if shadow_min < 1.0:
-        a = (fw * bw).sum(-1) / np.maximum((bw * bw).sum(-1), 1e-6)
-        a = np.clip(a, shadow_min, 1.0)[:, :, None]
-    else:
-        a = 1.0
-    d = fw - a * bw
-    return np.sqrt((d * d).sum(-1))
+    d0 = fw - bw
+    plain = np.sqrt((d0 * d0).sum(-1))
+    if shadow_min >= 1.0:
+        return plain
+    fb = (fw * bw).sum(-1)
+    bb = (bw * bw).sum(-1)
+    if shadow_window <= 1:
+        a = np.clip(fb / np.maximum(bb, 1e-6), shadow_min, 1.0)[:, :, None]
+        d = fw - a * bw
+        return np.minimum(plain, np.sqrt((d * d).sum(-1)))
+    # a shadow dims smoothly: one least-squares ratio per window
+    w = int(shadow_window)
+    a = np.clip(cv2.boxFilter(fb, -1, (w, w)) / np.maximum(cv2.boxFilter(bb, -1, (w, w)), 1e-6), shadow_min, 1.0)
+    d = fw - a[:, :, None] * bw
+    return np.minimum(plain, np.sqrt((d * d).sum(-1)))
 
 
 # ====================================================================== thresholds
@@ -354,7 +376,7 @@ def camera_thresholds(diffs, noise_sample, opts: ExtractOptions, name: str):
     elif opts.threshold == "noise":
         thr, mode = thr_noise, "noise"
     else:
-        thr, mode = (thr_noise if not math.isfinite(otsu) else max(otsu, thr_noise)), "auto"
+        thr, mode = max(thr_noise, MIN_AUTO_THRESHOLD), "auto"
     if not math.isfinite(thr):
         thr = thr_noise
     return {"threshold": float(thr), "mode": mode, "otsu": float(otsu), "noise": float(thr_noise),
@@ -392,7 +414,7 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
     noise_sample = None
     if len(yuv_bgs) >= 2:
         scale = math.sqrt((1.0 + 1.0 / len(yuv_bgs)) / 2.0)
-        noise_sample = _sample(difference(yuv_bgs[0], yuv_bgs[1], opts.luma_weight, opts.blur, opts.shadow_min) * scale)
+        noise_sample = _sample(difference(yuv_bgs[0], yuv_bgs[1], opts.luma_weight, opts.blur, opts.shadow_min, opts.shadow_window) * scale)
     diffs = []
     for fname, fr in zip(frame_names, frames):
         f = as_float_image(fr, f"camera '{name}' {fname}")
@@ -406,14 +428,14 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
                           f"is {'grey' if bgs[0].ndim == 2 else 'colour'}")
             diffs.append(None)
             continue
-        diffs.append(difference(bgr_to_yuv(f), bg, opts.luma_weight, opts.blur, opts.shadow_min))
+        diffs.append(difference(bgr_to_yuv(f), bg, opts.luma_weight, opts.blur, opts.shadow_min, opts.shadow_window))
     good = [d for d in diffs if d is not None]
     if not good:
         return CameraResult(name, [], report, errors or [f"camera '{name}': no foreground frames"], warnings)
     stats = camera_thresholds(good, noise_sample, opts, name)
     thr = stats["threshold"]
     report.update(stats)
-    if stats["mode"] in ("auto", "otsu") and stats["otsu"] < stats["noise"]:
+    if stats["mode"] == "otsu" and stats["otsu"] < stats["noise"]:
         warnings.append(f"camera '{name}': Otsu's threshold {stats['otsu']:.2f} is below the noise threshold "
                         f"{stats['noise']:.2f}; the object is weak against the background noise")
     masks = []
