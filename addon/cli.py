@@ -15,12 +15,13 @@ from .core import defaults as D
 from .core.errors import ClothFitError
 
 
-def _floats(s):
-    return [float(x) for x in s.split(",") if x.strip()] if s else None
-
-
-def _ints(s):
-    return [int(x) for x in s.split(",") if x.strip()] if s else None
+def _floats(s, what="--times"):
+    if not s:
+        return None
+    try:
+        return [float(x) for x in s.split(",") if x.strip()]
+    except ValueError:
+        raise ClothFitError(f"{what} {s!r} must be a comma-separated list of numbers") from None
 
 
 def _res(s):
@@ -37,9 +38,16 @@ def _params(args):
     if getattr(args, "params", None):
         p = args.params
         if os.path.isfile(p):
-            with open(p) as f:
-                d = json.load(f)
+            try:
+                with open(p) as f:
+                    d = json.load(f)
+            except (OSError, json.JSONDecodeError) as e:
+                raise ClothFitError(f"--params file {p} is not valid JSON: {e}") from None
+            if not isinstance(d, dict):
+                raise ClothFitError(f"--params file {p} must hold an object")
             d = d.get("params", d)
+            if not isinstance(d, dict):
+                raise ClothFitError(f"--params file {p}: 'params' is empty (a fit that never evaluated?)")
         else:
             try:
                 d = json.loads(p)
@@ -54,16 +62,23 @@ def _cams(capture, spec):
     from .core.camera import select_training
     if not spec:
         return None
-    if spec.startswith("n:") or spec.startswith("spread:"):
-        n = int(spec.split(":")[1])
-        return select_training(capture.cameras, n)[0]
-    if spec.startswith("heldout:"):
-        n = int(spec.split(":")[1])
-        return select_training(capture.cameras, n)[1]
+    if spec.startswith(("n:", "spread:", "heldout:")):
+        try:
+            n = int(spec.split(":")[1])
+        except ValueError:
+            raise ClothFitError(f"--cameras {spec!r}: the count after ':' must be an integer") from None
+        train, held = select_training(capture.cameras, n)
+        return held if spec.startswith("heldout:") else train
     out = []
     for tok in spec.split(","):
         tok = tok.strip()
-        out.append(int(tok) if tok.isdigit() else capture.camera_index(tok))
+        if tok.isdigit():
+            c = int(tok)
+            if not 0 <= c < len(capture.cameras):
+                raise ClothFitError(f"--cameras: index {c} outside 0..{len(capture.cameras) - 1}")
+            out.append(c)
+        else:
+            out.append(capture.camera_index(tok))
     return out
 
 

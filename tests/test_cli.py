@@ -152,9 +152,6 @@ def test_bad_values_named(cap, tmp_path):
     assert_one_line_error(rc, out, err, "40")
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: cli._params (addon/cli.py ~line 41) calls json.load on a --params FILE "
-                                       "without catching json.JSONDecodeError: a corrupt parameters file gives a "
-                                       "traceback and exit code 1 instead of 'error: <file> ...' and exit 2")
 def test_corrupt_params_file(cap, tmp_path):
     p = tmp_path / "params.json"
     p.write_text('{"m": 1e-5, "k": ')
@@ -162,18 +159,12 @@ def test_corrupt_params_file(cap, tmp_path):
     assert_one_line_error(rc, out, err, p)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: cli._floats / cli._cams (addon/cli.py ~lines 19-60) convert --times and "
-                                       "--cameras 'n:X' with float()/int() without catching ValueError: a typo gives a "
-                                       "traceback (exit 1) instead of a one-line error naming the value (exit 2)")
 @pytest.mark.parametrize("opt,value", [("--times", "0.1,abc"), ("--cameras", "n:x")])
 def test_non_numeric_times_or_camera_count(cap, opt, value):
     rc, out, err = run("evaluate", cap, opt, value)
     assert_one_line_error(rc, out, err, value.split(",")[-1].split(":")[-1])
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: cli._cams does not range-check camera indices and evaluate.evaluate / "
-                                       "overlay.capture_overlays index capture.cameras[c] directly: '--cameras 99' "
-                                       "gives an IndexError traceback (FitJob checks it, evaluate/overlay do not)")
 def test_camera_index_out_of_range(cap):
     rc, out, err = run("evaluate", cap, "--cameras", "99")
     assert_one_line_error(rc, out, err, "99")

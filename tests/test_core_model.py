@@ -257,9 +257,6 @@ def test_absurd_candidate_is_flagged_not_raised(backend, kind, short_paper, shor
         assert np.abs(r.positions[p] - ref).max() < 1e-6
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: simulate.simulate_numpy (simulate.py ~line 244) `x[ok].reshape(ok.sum(), -1, 3)` raises "
-                                       "ValueError when every candidate of the population is exploded (0 rows cannot "
-                                       "be reshaped with -1)")
 def test_numpy_population_of_only_bad_candidates_is_flagged_not_raised(short_paper):
     r = S.simulate(short_paper, [[-1.0, 10.0, GT["l"], 0.0]], backend="numpy")
     assert r.exploded.tolist() == [True]
@@ -329,10 +326,6 @@ def test_released_corner_moves_after_release_and_not_before(backend):
     assert np.all(np.diff(dist[after]) > 0)    # it keeps falling away over the next 0.2 s
 
 
-@pytest.mark.xfail(strict=True, reason="BUG (minor): a handle is released one integrator substep early: the substep "
-                                       "that ENDS at release_time is integrated with the vertex free "
-                                       "(model.Handle.held `t < release_time` used by simulate_numpy, accel.simulate_one `tc < release[h]`), so "
-                                       "at t = release_time the corner has already moved (0.25 mm here)")
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_released_corner_is_still_at_its_hold_position_at_the_release_time(backend):
     g, hs, sc, p = _handle_scenario()

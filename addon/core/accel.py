@@ -221,7 +221,7 @@ if _HAVE:
                         Vv[a, i] = (Vv[a, i] + dt * F[a, i]) * damp
                         X[a, i] = X[a, i] + dt * Vv[a, i]
                 for h in range(H):
-                    if settling or tc < release[h]:
+                    if settling or tc <= release[h]:
                         _handle_at(h, tc, key_start, key_times, key_pos, p, pv)
                         for a in range(3):
                             X[a, hv[h]] = p[a]
@@ -296,6 +296,8 @@ if _HAVE:
             c = tris[q, 2]
             if not (ok[a] and ok[b] and ok[c]):
                 continue
+            if (uv[b, 0] - uv[a, 0]) * (uv[c, 1] - uv[a, 1]) - (uv[c, 0] - uv[a, 0]) * (uv[b, 1] - uv[a, 1]) == 0.0:
+                continue  # zero-area triangle
             # scanline set-up: vertices sorted by y; the long edge 0-2 and the short edges 0-1, 1-2
             xa, ya, xb, yb, xc, yc = uv[a, 0], uv[a, 1], uv[b, 0], uv[b, 1], uv[c, 0], uv[c, 1]
             if ya > yb:

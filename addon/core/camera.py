@@ -187,7 +187,7 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)):
     upv = np.asarray(up, dtype=np.float64)
     if abs(np.dot(z, upv / np.linalg.norm(upv))) > 0.999:
         upv = np.array([0.0, 1.0, 0.0])
-    x = np.cross(z, -upv)  # +Y is down in the image, so "down" = -up
+    x = np.cross(z, upv)  # x = y × z with y (image down) = -up, i.e. x = z × up
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     R = np.stack([x, y, z])

@@ -170,7 +170,7 @@ class Handle:
         t = np.asarray(t, dtype=np.float64)
         if self.release_time is None:
             return np.ones(t.shape, dtype=bool)
-        return t < self.release_time
+        return t <= self.release_time  # held up to and including the release instant
 
     def to_dict(self):
         d = {"vertex": int(self.vertex), "times": self.times.tolist(), "positions": self.positions.tolist()}

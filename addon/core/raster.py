@@ -6,6 +6,8 @@ triangle. That is what Blender does with anti-aliasing off (one sample at each p
 is *not* what ``cv2.fillPoly`` does (it also fills pixels an edge merely touches, which makes every
 silhouette about half a pixel fatter all round).
 
+Zero-area (degenerate) triangles cover nothing.
+
 Implementation: each triangle is cut into horizontal spans, one per pixel row whose centre line it
 crosses; spans are accumulated in a difference buffer and a cumulative sum over each row gives the
 coverage count. Everything is vectorised over the triangles; triangles with a vertex behind the
@@ -20,6 +22,10 @@ def triangle_spans(pts: np.ndarray, tris: np.ndarray, height: int, width: int):
     """Row spans of all triangles: arrays ``row, x_start, x_end`` (inclusive, clipped to the image)."""
     P = pts[tris]  # (T, 3, 2)
     ok = np.all(np.isfinite(P), axis=(1, 2))
+    with np.errstate(invalid="ignore"):
+        area2 = ((P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1])
+                 - (P[:, 2, 0] - P[:, 0, 0]) * (P[:, 1, 1] - P[:, 0, 1]))
+    ok &= area2 != 0  # zero-area triangles cover nothing (as in Blender)
     P = P[ok]
     if P.shape[0] == 0:
         e = np.zeros(0, dtype=np.int64)
@@ -83,6 +89,8 @@ def reference_fill(pts, tris, height, width):
         a, b, c = (np.asarray(pts[i], dtype=np.float64) for i in t)
         if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(np.isfinite(c))):
             continue
+        if (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]) == 0:
+            continue  # zero-area triangle: covers nothing
 
         def cross(p, q1, q2):
             return (q2[0] - q1[0]) * (p[:, 1] - q1[1]) - (q2[1] - q1[1]) * (p[:, 0] - q1[0])

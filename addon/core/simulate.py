@@ -241,7 +241,8 @@ def simulate_numpy(scenario: Scenario, P: np.ndarray, safety: float = D.DT_SAFET
         fi = frame_idx.get(round(float(b), 12))
         if fi is not None:
             ok = ~exploded
-            out[ok, fi] = x[ok].reshape(ok.sum(), -1, 3)
+            if ok.any():
+                out[ok, fi] = x[ok].reshape(int(ok.sum()), ny * nx, 3)
     out[exploded] = np.nan
     return SimResult(out, exploded, steps_total, reason)
 
