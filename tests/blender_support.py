@@ -1,0 +1,72 @@
+"""Shared fixtures of the tests/test_blender_*.py files (real ``bpy`` module).
+
+``factory`` (autouse in those files) resets Blender to an empty factory scene before and after
+each test; the add-on is registered once per session. ``small_capture`` is a capture rendered by
+Blender once per session: a 4-camera ring at 160 x 120, three capture times.
+"""
+import os
+
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import addon  # noqa: E402
+from addon.blender import registration  # noqa: E402
+
+
+def ensure_registered():
+    if not registration.is_registered():
+        addon.register()
+
+
+@pytest.fixture()
+def factory():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    ensure_registered()
+    yield bpy.context.scene
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def small_settings(scene, capture_dir=None):
+    """A quick scene: ring of 4 cameras at 160 x 120, 3 capture times, short settling."""
+    p = scene.clothfit
+    p.rig_source = "RING"
+    p.ring_cameras = 4
+    p.ring_elevation = 30.0
+    p.ring_distance = 0.5
+    p.ring_fx = 250.0
+    p.ring_width, p.ring_height = 160, 120
+    p.frame_times = "0.1:0.3:0.1"
+    p.settle_time = 0.3
+    p.noise = 0.0
+    p.train_cameras = 2
+    p.train_times = "ALL"
+    p.max_evaluations = 40
+    if capture_dir:
+        p.capture_dir = str(capture_dir)
+    return p
+
+
+@pytest.fixture(scope="session")
+def small_capture(tmp_path_factory):
+    """Directory of a Blender-rendered capture (small_settings), made once per session."""
+    root = tmp_path_factory.mktemp("blender_capture") / "cap"
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    ensure_registered()
+    scene = bpy.context.scene
+    small_settings(scene, root)
+    for op in ("build_rig", "build_cloth", "simulate", "render_silhouettes"):
+        assert getattr(bpy.ops.clothfit, op)() == {"FINISHED"}
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert os.path.isfile(root / "capture.json")
+    return root
+
+
+def run_error(op, **kw):
+    """Run ``bpy.ops.clothfit.<op>`` expecting an ERROR report; return its message."""
+    with pytest.raises(RuntimeError) as ei:
+        getattr(bpy.ops.clothfit, op)(**kw)
+    msg = str(ei.value)
+    assert "Traceback" not in msg, msg
+    assert msg.startswith("Error: "), msg
+    return msg
