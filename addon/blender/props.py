@@ -20,6 +20,10 @@ RESOLUTIONS = [("FULL", "Full", "Fit at the capture's resolution"),
                ("60x80", "60 x 80", "Fit at 60 x 80 (H x W)")]
 
 
+# Blender 4.5 warns about "//" paths unless the property says it supports them (option new in 4.5)
+PATH_OPTIONS = {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (4, 5, 0) else set()
+
+
 def _times_default():
     t = D.FRAME_TIMES
     step = round(t[1] - t[0], 6)
@@ -73,7 +77,7 @@ class ClothFitProperties(bpy.types.PropertyGroup):
                                 description="Capture times in seconds: start:stop:step or a comma list")
 
     # --------------------------------------------------------- observations
-    capture_dir: StringProperty(name="Capture", subtype="DIR_PATH", default="//clothfit_capture/",
+    capture_dir: StringProperty(name="Capture", subtype="DIR_PATH", options=PATH_OPTIONS, default="//clothfit_capture/",
                                 description="Capture directory (capture.json, cameras.json, sil/...)")
     noise: FloatProperty(name="Noise", default=D.NOISE_FRACTION, min=0.0, max=1.0, precision=3,
                          description="Fraction of boundary pixels flipped in rendered silhouettes")
@@ -109,11 +113,11 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     fit_best_l: FloatProperty(name="l", default=0.0, precision=5, unit="LENGTH")
     fit_best_d: FloatProperty(name="d", default=0.0, precision=6)
     fit_status: StringProperty(name="Status", default="")
-    result_path: StringProperty(name="Result", subtype="FILE_PATH", default="")
+    result_path: StringProperty(name="Result", subtype="FILE_PATH", options=PATH_OPTIONS, default="")
     overlay_source: EnumProperty(name="Model", items=[
         ("BLENDER", "Blender", "Model silhouettes rendered by Blender from the baked cloth"),
         ("CORE", "Core", "Model silhouettes from the core rasteriser (fast)")], default="BLENDER")
-    overlay_dir: StringProperty(name="Overlays", subtype="DIR_PATH", default="")
+    overlay_dir: StringProperty(name="Overlays", subtype="DIR_PATH", options=PATH_OPTIONS, default="")
     overlay_error: FloatProperty(name="Overlay E_sil %", default=0.0, precision=4)
 
 

@@ -1,0 +1,235 @@
+"""Registration, every operator on a fresh factory scene, bad input reported, save/reload."""
+import json
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from blender_support import bpy, ensure_registered, factory, run_error, small_capture, small_settings  # noqa: F401
+
+import addon  # noqa: E402
+from addon.blender import registration  # noqa: E402
+from addon.blender import scene as S  # noqa: E402
+
+pytestmark = pytest.mark.usefixtures("factory")
+
+OPERATORS = ["build_rig", "build_cloth", "simulate", "render_silhouettes", "load_capture", "fit", "apply_fit",
+             "overlays"]
+
+
+def test_register_unregister_twice():
+    assert registration.is_registered()
+    for _ in range(2):
+        addon.unregister()
+        assert not hasattr(bpy.types.Scene, "clothfit")
+        assert not hasattr(bpy.types, "CLOTHFIT_PT_main")
+        with pytest.raises(KeyError):
+            bpy.ops.clothfit.build_rig.get_rna_type()
+        addon.register()
+        assert hasattr(bpy.context.scene, "clothfit")
+        assert bpy.ops.clothfit.build_rig.get_rna_type().identifier == "CLOTHFIT_OT_build_rig"
+    for op in OPERATORS:
+        assert getattr(bpy.ops.clothfit, op).get_rna_type().identifier == f"CLOTHFIT_OT_{op}"
+    for sec in ("main", "rig", "cloth", "simulation", "observations", "fitting", "results"):
+        assert hasattr(bpy.types, f"CLOTHFIT_PT_{sec}")
+
+
+def test_every_operator_on_a_fresh_scene(tmp_path):
+    scene = bpy.context.scene
+    p = small_settings(scene, tmp_path / "cap")
+    assert bpy.ops.clothfit.build_rig() == {"FINISHED"}
+    objs = S.rig_objects(scene)
+    assert len(objs) == 4 and S.render_size(scene) == (160, 120)
+    assert bpy.data.collections[S.RIG_COLLECTION].objects[0].type == "CAMERA"
+    assert bpy.ops.clothfit.build_cloth() == {"FINISHED"}
+    cloth = p.cloth_object
+    assert len(cloth.data.vertices) == 256 and len(cloth.data.polygons) == 450
+    assert {g.name for g in cloth.vertex_groups} >= {"handles", "handle_00_released", "handle_01"}
+    assert bpy.ops.clothfit.simulate() == {"FINISHED"}
+    keys = cloth.data.shape_keys.key_blocks
+    assert [k.name for k in keys] == ["Basis", "t=0.000", "t=0.100", "t=0.200", "t=0.300"]
+    # the timeline scrubs: at the frame of t = 0.2 the evaluated mesh is that shape
+    scene.frame_set(S.frame_of_time(scene, 0.2))
+    np.testing.assert_allclose(S.evaluated_positions(cloth), S.baked_positions(cloth, [0.2])[0], atol=1e-6)
+    scene.frame_set(S.frame_of_time(scene, 0.1) + 1)  # between two shapes: a blend, not a shape
+    mid = S.evaluated_positions(cloth)
+    a, b = S.baked_positions(cloth, [0.1, 0.2])
+    assert not np.allclose(mid, a) and not np.allclose(mid, b)
+    assert bpy.ops.clothfit.render_silhouettes() == {"FINISHED"}
+    cap_dir = tmp_path / "cap"
+    assert (cap_dir / "capture.json").is_file()
+    assert len(list((cap_dir / "sil").rglob("*.png"))) == 12
+    assert bpy.ops.clothfit.load_capture() == {"FINISHED"}
+    cam0 = S.rig_objects(scene)[0]
+    assert cam0.data.show_background_images and cam0.data.background_images[0].image is not None
+    assert bpy.ops.clothfit.fit() == {"FINISHED"}
+    assert p.fit_has_result and not p.fit_running and p.fit_evaluations >= 40
+    res = json.loads((cap_dir / "fit_result.json").read_text())
+    assert res["finished"] and not res["cancelled"]
+    assert res["params"]["k"] == pytest.approx(p.fit_best_k, rel=1e-6)
+    assert bpy.ops.clothfit.apply_fit() == {"FINISHED"}
+    assert p.k == pytest.approx(res["params"]["k"], rel=1e-6)
+    assert p.d == pytest.approx(res["params"]["d"], rel=1e-6)
+    assert bpy.ops.clothfit.overlays() == {"FINISHED"}
+    summary = json.loads((cap_dir / "overlays" / "summary.json").read_text())
+    assert np.array(summary["E_sil_pct"]).shape == (4, 3)
+    assert os.path.isfile(summary["contact_sheet"])
+    assert p.overlay_error == pytest.approx(summary["mean_E_sil_pct"], rel=1e-5)
+    assert "clothfit contact sheet" in bpy.data.images
+
+
+def test_overlays_core_source_and_ground_truth_agree(small_capture):
+    """Overlays of the true parameters on a Blender-rendered capture: near-zero error either way."""
+    scene = bpy.context.scene
+    small_settings(scene, small_capture)
+    assert bpy.ops.clothfit.load_capture() == {"FINISHED"}
+    scene.clothfit.overlay_source = "CORE"
+    assert bpy.ops.clothfit.overlays() == {"FINISHED"}
+    assert scene.clothfit.overlay_error < 1.0   # core rasteriser vs Blender renders, same shapes
+
+
+def test_save_and_reload_keeps_all_properties(tmp_path):
+    scene = bpy.context.scene
+    p = small_settings(scene)
+    bpy.ops.clothfit.build_cloth()
+    values = {}
+    for prop in p.bl_rna.properties:
+        ident = prop.identifier
+        if ident in ("rna_type", "name") or prop.is_readonly:
+            continue
+        if prop.type == "POINTER":
+            continue
+        if prop.type == "ENUM":
+            items = [i.identifier for i in prop.enum_items]
+            v = items[-1] if getattr(p, ident) != items[-1] else items[0]
+        elif prop.type == "BOOLEAN":
+            v = not getattr(p, ident)
+        elif prop.type == "INT":
+            v = min(prop.hard_max, getattr(p, ident) + 3)
+        elif prop.type == "FLOAT":
+            v = min(prop.hard_max, max(prop.hard_min, getattr(p, ident) * 0.5 + 0.125))
+        elif prop.type == "STRING":
+            v = "/tmp/x_" + ident if prop.subtype in ("DIR_PATH", "FILE_PATH") else "0.1, 0.2, 0.35"
+        else:
+            raise AssertionError(f"untested property type {prop.type} of {ident}")
+        if ident == "view_frame":
+            p["view_frame"] = v  # skip the update callback (no capture here)
+        else:
+            setattr(p, ident, v)
+        values[ident] = getattr(p, ident)
+    path = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert bpy.context.scene.clothfit.cloth_object is None
+    bpy.ops.wm.open_mainfile(filepath=path)
+    q = bpy.context.scene.clothfit
+    for ident, v in values.items():
+        got = getattr(q, ident)
+        if isinstance(v, float):
+            assert got == pytest.approx(v, rel=1e-6), ident
+        else:
+            assert got == v, ident
+    assert q.cloth_object is not None and q.cloth_object.name == S.CLOTH_NAME
+
+
+def test_baked_cloth_survives_save_reload(tmp_path):
+    scene = bpy.context.scene
+    small_settings(scene)
+    bpy.ops.clothfit.build_cloth()
+    bpy.ops.clothfit.simulate()
+    f = S.frame_of_time(scene, 0.3)
+    scene.frame_set(f)
+    before = S.evaluated_positions(scene.clothfit.cloth_object)
+    path = str(tmp_path / "baked.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    scene.frame_set(f)
+    np.testing.assert_allclose(S.evaluated_positions(scene.clothfit.cloth_object), before, atol=1e-7)
+
+
+# ================================================================ bad input
+
+def test_no_camera_in_rig(tmp_path):
+    small_settings(bpy.context.scene, tmp_path / "c")
+    bpy.ops.clothfit.build_cloth()
+    bpy.ops.clothfit.simulate()
+    assert "no camera in the rig" in run_error("render_silhouettes")
+
+
+def test_rig_preset_missing():
+    p = bpy.context.scene.clothfit
+    p.rig_preset = "no_such_rig"
+    assert "rig 'no_such_rig' not found" in run_error("build_rig")
+
+
+def test_cloth_missing_or_edited(tmp_path):
+    scene = bpy.context.scene
+    small_settings(scene, tmp_path / "c")
+    assert "cloth object is missing" in run_error("simulate")
+    bpy.ops.clothfit.build_cloth()
+    obj = scene.clothfit.cloth_object
+    import bmesh
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    bm.verts.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.verts[17]], context="VERTS")
+    bm.to_mesh(obj.data)
+    bm.free()
+    assert "topology was edited" in run_error("simulate")
+    bpy.ops.clothfit.build_cloth()
+    obj = scene.clothfit.cloth_object
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    bmesh.ops.join_triangles(bm, faces=bm.faces[:], angle_face_threshold=3.2, angle_shape_threshold=3.2)
+    bm.to_mesh(obj.data)
+    bm.free()
+    assert "topology was edited" in run_error("simulate")
+    bpy.data.objects.remove(scene.clothfit.cloth_object)
+    assert "cloth object is missing" in run_error("simulate")
+
+
+def test_capture_dir_missing_files(tmp_path, small_capture):
+    bad = tmp_path / "bad"
+    shutil.copytree(small_capture, bad)
+    victim = bad / "sil" / "cam00" / "001.png"   # camera 0 is always a training camera
+    victim.unlink()
+    p = small_settings(bpy.context.scene, bad)
+    msg = run_error("load_capture")
+    assert victim.name in msg and "not found" in msg
+    msg = run_error("fit")
+    assert victim.name in msg
+    p.capture_dir = str(tmp_path / "nowhere")
+    assert "no capture.json" in run_error("load_capture") or "not found" in run_error("load_capture")
+    p.capture_dir = "//relative_capture"
+    assert "not saved yet" in run_error("load_capture")
+
+
+def test_image_size_mismatch(tmp_path, small_capture):
+    import cv2
+    bad = tmp_path / "bad"
+    shutil.copytree(small_capture, bad)
+    victim = sorted((bad / "sil").rglob("*.png"))[2]
+    img = np.zeros((60, 80), np.uint8)
+    img[20:30, 30:40] = 255
+    cv2.imwrite(str(victim), img)
+    bpy.context.scene.clothfit.capture_dir = str(bad)
+    msg = run_error("load_capture")
+    assert "60 x 80" in msg and "120 x 160" in msg and victim.name in msg
+
+
+def test_apply_fit_without_result(tmp_path):
+    small_settings(bpy.context.scene, tmp_path)
+    assert "no fit result" in run_error("apply_fit")
+
+
+def test_bad_frame_times_and_unstable_parameters(tmp_path):
+    p = small_settings(bpy.context.scene, tmp_path)
+    bpy.ops.clothfit.build_cloth()
+    p.frame_times = "0.1:zero:0.1"
+    assert "frame times" in run_error("simulate")
+    p.frame_times = "0.1, 0.2"
+    p.k = 1e6
+    p.m = 1e-9
+    assert "simulation needs more than" in run_error("simulate") or "unstable" in run_error("simulate")
