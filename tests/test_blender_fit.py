@@ -1,0 +1,88 @@
+"""The fit operator's step path: the modal handler functions driven with TIMER / ESC events."""
+import json
+
+import pytest
+
+from blender_support import bpy, factory, small_capture, small_settings  # noqa: F401
+
+from addon.blender import api, ops  # noqa: E402
+
+pytestmark = pytest.mark.usefixtures("factory")
+
+
+def _start(scene, capture_dir, budget=40):
+    p = small_settings(scene, capture_dir)
+    p.max_evaluations = budget
+    return ops.begin_modal(bpy.context)
+
+
+def test_modal_steps_to_completion(small_capture):
+    scene = bpy.context.scene
+    sess = _start(scene, small_capture, budget=120)  # initial population (60) + a few generations
+    p = scene.clothfit
+    assert p.fit_running
+    states = []
+    errors = []
+    for _ in range(1000):
+        assert ops.modal_tick(bpy.context, sess, "MOUSEMOVE")[0] == "RUNNING"  # other events pass through
+        state, level, msg = ops.modal_tick(bpy.context, sess, "TIMER")
+        states.append(state)
+        errors.append(p.fit_best_error)
+        if state != "RUNNING":
+            break
+    assert states[-1] == "FINISHED" and level == "INFO" and "Fit finished" in msg
+    assert len(states) == sess.job.generation >= 2
+    # the panel's live fields followed every generation; the best never got worse
+    assert all(b <= a + 1e-12 for a, b in zip(errors, errors[1:]))
+    assert not p.fit_running and p.fit_progress == 1.0 and p.fit_evaluations == sess.job.evaluations
+    assert sess.timer is None
+    res = json.loads((small_capture / "fit_result.json").read_text())
+    assert res["finished"] and not res["cancelled"]
+
+
+def test_escape_cancels_and_keeps_best(small_capture):
+    scene = bpy.context.scene
+    sess = _start(scene, small_capture, budget=10_000)
+    for _ in range(2):
+        assert ops.modal_tick(bpy.context, sess, "TIMER")[0] == "RUNNING"
+    best = dict(sess.job.best_params)
+    state, level, msg = ops.modal_tick(bpy.context, sess, "ESC")
+    assert state == "CANCELLED" and level == "WARNING"
+    assert "cancelled at generation 2" in msg and "kept" in msg
+    p = scene.clothfit
+    assert not p.fit_running and p.fit_has_result
+    assert p.fit_best_k == pytest.approx(best["k"], rel=1e-6)
+    res = json.loads((small_capture / "fit_result.json").read_text())
+    assert res["cancelled"] and res["params"] == pytest.approx(best)
+    # the kept result can be applied (needs a cloth: build it)
+    bpy.ops.clothfit.build_cloth()
+    assert bpy.ops.clothfit.apply_fit() == {"FINISHED"}
+    assert p.k == pytest.approx(best["k"], rel=1e-6)
+
+
+def test_cancel_before_first_generation(small_capture):
+    sess = _start(bpy.context.scene, small_capture)
+    state, level, msg = ops.modal_tick(bpy.context, sess, "ESC")
+    assert state == "CANCELLED" and level == "WARNING" and "no result" in msg
+    assert not bpy.context.scene.clothfit.fit_running
+
+
+def test_second_fit_while_running_is_refused(small_capture):
+    sess = _start(bpy.context.scene, small_capture)
+    with pytest.raises(RuntimeError, match="already running"):
+        bpy.ops.clothfit.fit()
+    ops.end_modal(bpy.context, sess, cancelled=True)
+
+
+def test_background_invoke_runs_synchronously(small_capture):
+    """Under -b (no event loop) INVOKE_DEFAULT falls back to execute and finishes."""
+    assert bpy.app.background
+    small_settings(bpy.context.scene, small_capture)
+    assert bpy.ops.clothfit.fit("INVOKE_DEFAULT") == {"FINISHED"}
+    assert bpy.context.scene.clothfit.fit_has_result
+
+
+def test_run_fit_callback_cancel(small_capture):
+    small_settings(bpy.context.scene, small_capture).max_evaluations = 10_000
+    res, level, msg = api.run_fit(bpy.context.scene, callback=lambda s: s.job.generation >= 1)
+    assert res["cancelled"] and level == "WARNING"
