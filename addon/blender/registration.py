@@ -27,6 +27,8 @@ def register():
 
 
 def unregister():
+    if not _state["registered"]:  # idempotent: the atexit hook may have run before addon_utils' disable
+        return
     props.unregister_scene_property()
     _unregister_classes()
     _state["registered"] = False

@@ -1,0 +1,95 @@
+"""The extension zip: layout, Blender's own validator, install + enable in the bpy module.
+
+The install runs in a subprocess with its own ``BLENDER_USER_RESOURCES`` so the user's Blender
+config is untouched; there ``cv2`` is imported from the extension's wheel only (the venv's cv2 is
+hidden), which proves that Blender installed the bundled wheel.
+"""
+import os
+import subprocess
+import sys
+import textwrap
+import zipfile
+
+import pytest
+
+pytest.importorskip("bpy")
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "tools"))
+import build_extension  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def ext_zip(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dist")
+    try:
+        return build_extension.build(str(out), download=True, check=False)
+    except (SystemExit, subprocess.CalledProcessError) as e:
+        pytest.skip(f"cannot build the extension (wheel download failed?): {e}")
+
+
+def test_zip_layout(ext_zip):
+    names = set(zipfile.ZipFile(ext_zip).namelist())
+    manifest = build_extension.read_manifest()
+    assert os.path.basename(ext_zip) == f"silhouette_cloth_fit-{manifest['version']}.zip"
+    for need in ("blender_manifest.toml", "__init__.py", "addon/__init__.py", "addon/blender/ops.py",
+                 "addon/blender/registration.py", "addon/core/camera.py", "addon/core/simulate.py",
+                 "rigs/lab18.json"):
+        assert need in names, need
+    for w in manifest["wheels"]:
+        assert w[2:] in names
+    assert not any("numpy" in n for n in names)
+    bad = [n for n in names if n.split("/")[0] in ("tests", "out", ".venv", ".ci", "docs", "tools", "demo_blend",
+                                                    "dist", ".git") or "__pycache__" in n or n.endswith(".pyc")]
+    assert not bad, bad
+
+
+def test_blender_validator_accepts_zip(ext_zip):
+    assert build_extension.validate(ext_zip)
+
+
+INSTALL = textwrap.dedent('''
+    import importlib.machinery, os, sys
+    import bpy, addon_utils
+    zip_path, site = sys.argv[1], sys.argv[2]
+
+    class HideOtherCv2:  # hide any other cv2 package (the venv's): it must come from the bundled wheel
+        def find_spec(self, name, path=None, target=None):
+            if name == "cv2" and path is None:
+                paths = [p for p in sys.path if os.path.abspath(p) == os.path.abspath(site)
+                         or not os.path.isdir(os.path.join(p, "cv2"))]
+                return importlib.machinery.PathFinder.find_spec(name, paths)
+            return None
+    sys.meta_path.insert(0, HideOtherCv2())
+
+    assert "cv2" not in sys.modules
+    r = bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
+    assert r == {"FINISHED"}, r
+    mod = "bl_ext.user_default.silhouette_cloth_fit"
+    assert addon_utils.check(mod) == (True, True), addon_utils.check(mod)
+    op = bpy.ops.clothfit.build_rig.get_rna_type()
+    assert op.identifier == "CLOTHFIT_OT_build_rig"
+    import cv2
+    assert cv2.__file__.startswith(site), cv2.__file__
+    scene = bpy.context.scene
+    assert bpy.ops.clothfit.build_rig() == {"FINISHED"}
+    assert len(bpy.data.collections["ClothFit Rig"].objects) == 18
+    assert bpy.ops.clothfit.build_cloth() == {"FINISHED"}
+    ops_mod = sys.modules[mod + ".addon.blender.ops"]
+    assert ops_mod.__file__.startswith(os.environ["BLENDER_USER_RESOURCES"]), ops_mod.__file__
+    addon_utils.disable(mod)
+    assert not hasattr(bpy.types.Scene, "clothfit")
+    print("INSTALL-OK", cv2.__version__)
+''')
+
+
+def test_installs_and_enables_in_bpy(ext_zip, tmp_path):
+    res = tmp_path / "user_resources"
+    res.mkdir()
+    site = res / "extensions" / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+    script = tmp_path / "install.py"
+    script.write_text(INSTALL)
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(res))
+    r = subprocess.run([sys.executable, str(script), ext_zip, str(site)], cwd=str(tmp_path), env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and "INSTALL-OK 4.10.0" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
