@@ -1,0 +1,237 @@
+"""Build the demo scene: rig, cloth, simulate + bake, Blender-rendered silhouettes, fit, overlays.
+
+Runs the same under Blender and under Python with the ``bpy`` module::
+
+    blender -b --factory-startup --python-exit-code 1 -P demo_blend/build_demo.py -- --out out/demo
+    python demo_blend/build_demo.py --out out/demo
+
+Writes the capture to ``<out>/capture`` (silhouettes rendered by Blender's Workbench, 5 % boundary
+noise), the fit result and overlays there, and saves ``demo_blend/demo.blend`` (``--blend``).
+``--images DIR`` also writes the walkthrough pictures (docs/img): a Blender render of the rig and
+the cloth, a sheet of rendered silhouettes and the overlay contact sheet.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+
+
+def parse_args(argv=None):
+    if argv is None:
+        argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    ap = argparse.ArgumentParser(description="Build the Silhouette Cloth Fit demo scene")
+    ap.add_argument("--out", default=os.path.join("out", "demo"), help="output directory (capture, result, overlays)")
+    ap.add_argument("--blend", default=os.path.join(HERE, "demo.blend"), help="where to save the .blend ('' = do not)")
+    ap.add_argument("--rig", default="lab18", help="rig preset (rigs/) or cameras JSON")
+    ap.add_argument("--times", default=None, help="capture times start:stop:step (default: the paper's 0.05:1.5:0.05)")
+    ap.add_argument("--noise", type=float, default=0.05, help="boundary noise fraction of the rendered silhouettes")
+    ap.add_argument("--no-fit", action="store_true", help="skip the fit (and apply)")
+    ap.add_argument("--train-cameras", type=int, default=8)
+    ap.add_argument("--budget", type=int, default=600, help="fit: maximum model evaluations")
+    ap.add_argument("--resolution", default="120x160", choices=["FULL", "240x320", "120x160", "60x80"],
+                    help="fit resolution (H x W)")
+    ap.add_argument("--optimizer", default="spx-mgg", choices=["spx-mgg", "cma-es"])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--images", default=None, help="also write the walkthrough images into this directory")
+    return ap.parse_args(argv)
+
+
+def _register():
+    if ROOT not in sys.path:
+        sys.path.insert(0, ROOT)
+    import addon
+    from addon.blender import registration
+    if not registration.is_registered():
+        addon.register()
+
+
+def _run(op, **kw):
+    import bpy
+    t = time.time()
+    r = getattr(bpy.ops.clothfit, op)(**kw)
+    print(f"  clothfit.{op}: {r} in {time.time() - t:.1f} s", flush=True)
+    if r != {"FINISHED"}:
+        raise SystemExit(f"clothfit.{op} failed: {r}")
+
+
+def main(argv=None):
+    a = parse_args(argv)
+    import bpy
+    _register()
+    from addon.blender import api
+    out = os.path.abspath(a.out)
+    capture = os.path.join(out, "capture")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    p = scene.clothfit
+    p.rig_source, p.rig_preset = "PRESET", a.rig
+    if a.times:
+        p.frame_times = a.times
+    p.noise = a.noise
+    p.capture_dir = capture
+    p.train_cameras = a.train_cameras
+    p.max_evaluations = a.budget
+    p.fit_resolution = a.resolution
+    p.optimizer = a.optimizer
+    p.seed = a.seed
+    print(f"Silhouette Cloth Fit demo -> {out}", flush=True)
+    for op in ("build_rig", "build_cloth", "simulate", "render_silhouettes", "load_capture"):
+        _run(op)
+    true = dict(api.params_from_scene(scene).as_dict())
+    if not a.no_fit:
+        _run("fit")
+        _run("apply_fit")
+        res = api.load_result(scene)
+        print("  true   ", {k: f"{v:.4g}" for k, v in true.items()})
+        print("  fitted ", {k: f"{v:.4g}" for k, v in res["params"].items()})
+        if res.get("identifiable_error_pct"):
+            print("  identifiable error %", {k: f"{v:.2f}" for k, v in res["identifiable_error_pct"].items()})
+    _run("overlays")
+    print(f"  overlays: mean E_sil {p.overlay_error:.3f} % ({p.overlay_dir})")
+    if a.images:
+        write_walkthrough_images(scene, os.path.abspath(a.images))
+    p.view_frame = min(14, len(api.parse_times(p.frame_times)) - 1)
+    scene.frame_set(api.S.frame_of_time(scene, api.parse_times(p.frame_times)[p.view_frame]))
+    if a.blend:
+        blend = os.path.abspath(a.blend)
+        os.makedirs(os.path.dirname(blend), exist_ok=True)
+        # paths relative to the .blend, so the file works from any checkout
+        rel = lambda path: bpy.path.relpath(path, start=os.path.dirname(blend)) if path else path  # noqa: E731
+        p.capture_dir, p.result_path, p.overlay_dir = rel(p.capture_dir), rel(p.result_path), rel(p.overlay_dir)
+        _viewport_camera_view(scene)
+        bpy.ops.wm.save_as_mainfile(filepath=blend, compress=True, relative_remap=True)
+        print(f"saved {blend} ({os.path.getsize(blend) / 1e3:.0f} kB)")
+    return 0
+
+
+def _viewport_camera_view(scene):
+    """Frame the sidebar-visible 3D view on the cloth (no-op without a UI)."""
+    import bpy
+    for screen in bpy.data.screens:
+        for area in screen.areas:
+            if area.type == "VIEW_3D":
+                for space in area.spaces:
+                    if space.type == "VIEW_3D":
+                        space.show_region_ui = True
+
+
+# ======================================================= walkthrough images
+
+def _camera_proxies(scene, cam_objs, size=0.03):
+    """Small pyramids where the rig's cameras are (cameras themselves do not render)."""
+    import bpy
+    import numpy as np
+    coll = bpy.data.collections.new("ClothFit Docs")
+    scene.collection.children.link(coll)
+    verts = np.array([[0, 0, 0], [-1, -0.75, -1.6], [1, -0.75, -1.6], [1, 0.75, -1.6], [-1, 0.75, -1.6]]) * size
+    faces = [(0, 1, 2), (0, 2, 3), (0, 3, 4), (0, 4, 1), (1, 4, 3, 2)]
+    me = bpy.data.meshes.new("camera proxy")
+    me.from_pydata(verts.tolist(), [], faces)
+    objs = []
+    for c in cam_objs:
+        o = bpy.data.objects.new(f"proxy {c.name}", me)
+        o.matrix_world = c.matrix_world.copy()
+        o.color = (0.9, 0.5, 0.1, 1.0)
+        coll.objects.link(o)
+        objs.append(o)
+    return coll, objs
+
+
+def write_walkthrough_images(scene, img_dir):
+    """docs/img: rig + cloth rendered by Blender, rendered silhouettes, the overlay sheet."""
+
+    import bpy
+    import cv2
+    import numpy as np
+    from addon.blender import api
+    from addon.blender import render as R
+    from addon.core.capture import load_capture
+    from addon.core.overlay import contact_sheet, label
+    os.makedirs(img_dir, exist_ok=True)
+    p = scene.clothfit
+    times = api.parse_times(p.frame_times)
+    t_show = times[min(9, len(times) - 1)]
+    scene.frame_set(api.S.frame_of_time(scene, t_show))
+    # 1. the rig and the cloth, from an overview camera
+    cams = api.S.rig_objects(scene)
+    coll, proxies = _camera_proxies(scene, cams)
+    cloth = api.cloth_object(scene)
+    cloth.color = (0.3, 0.6, 1.0, 1.0)
+    data = bpy.data.cameras.new("overview")
+    data.lens = 30
+    over = bpy.data.objects.new("overview", data)
+    scene.collection.objects.link(over)
+    from addon.core.camera import Camera, look_at
+    Rm, t = look_at((0.95, -0.75, 0.6), (0.0, 0.0, 0.08))
+    K = np.array([[620.0, 0, 399.5], [0, 620.0, 299.5], [0, 0, 1]])
+    saved = (scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage)
+    api.S.camera_to_blender(Camera(K, Rm, t, 800, 600, "overview"), over, scene)
+    sh = scene.display.shading
+    old = (sh.light, sh.color_type)
+    sh.light, sh.color_type = "STUDIO", "OBJECT"
+    world = scene.world or bpy.data.worlds.new("ClothFit Docs World")
+    old_world = scene.world
+    scene.world = world
+    world.color = (0.32, 0.34, 0.38)
+    rig_png = os.path.join(img_dir, "blender_rig.png")
+    R.render_view(scene, over, rig_png)
+    for o in proxies:
+        o.hide_render = True
+    close_png = os.path.join(img_dir, ".cloth_close.png")
+    R.render_view(scene, cams[0], close_png)  # inset: the cloth through rig camera 0
+    sh.light, sh.color_type = old
+    scene.world = old_world
+    big = cv2.imread(rig_png)
+    ys, xs = np.nonzero(R.render_mask(scene, cloth, cams[0]))
+    half = int(0.65 * max(xs.max() - xs.min(), ys.max() - ys.min())) + 4
+    cy, cx = (ys.max() + ys.min()) // 2, (xs.max() + xs.min()) // 2
+    close = cv2.copyMakeBorder(cv2.imread(close_png), half, half, half, half, cv2.BORDER_REPLICATE)
+    inset = close[cy:cy + 2 * half, cx:cx + 2 * half]
+    inset = cv2.resize(inset, (240, 240), interpolation=cv2.INTER_AREA)
+    big[12:252, 548:788] = inset
+    cv2.rectangle(big, (547, 11), (788, 252), (255, 255, 255), 1)
+    cv2.putText(big, f"{cams[0].name}, t = {t_show:.2f} s", (552, 246), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                (255, 255, 255), 1, cv2.LINE_AA)
+    cv2.imwrite(rig_png, big, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    os.remove(close_png)
+    for o in proxies:
+        bpy.data.objects.remove(o)
+    bpy.data.collections.remove(coll)
+    bpy.data.objects.remove(over)
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = saved
+    # 2. silhouettes rendered by Blender (noisy observations as written), 6 cameras at one time
+    cap = load_capture(api.capture_dir(scene))
+    fi = cap.frame_index(t_show)
+    tiles = []
+    for ci in range(0, cap.n_cameras, 3):
+        m = cap.load_silhouette(ci, fi)
+        rgb = np.repeat(np.where(m, 255, 0).astype(np.uint8)[..., None], 3, axis=2)
+        tiles.append(label(rgb, f"{cap.cameras[ci].name} t={t_show:.2f}s"))
+    sil_png = os.path.join(img_dir, "blender_silhouettes.png")
+    cv2.imwrite(sil_png, contact_sheet(tiles, cols=3, tile_width=240)[..., ::-1])
+    # 3. the overlay contact sheet of the last overlays run
+    sheet = os.path.join(api.abspath(p.overlay_dir, "overlays"), "contact_sheet.png")
+    ov_png = os.path.join(img_dir, "blender_overlays.png")
+    img = cv2.imread(sheet)
+    scale = 960 / img.shape[1]
+    cv2.imwrite(ov_png, cv2.resize(img, (960, int(img.shape[0] * scale)), interpolation=cv2.INTER_AREA))
+    for f in (rig_png, sil_png, ov_png):
+        print(f"  image {f} ({os.path.getsize(f) / 1e3:.0f} kB)")
+    return [rig_png, sil_png, ov_png]
+
+
+if __name__ == "__main__":
+    try:
+        code = main()
+    except Exception as e:  # noqa: BLE001 - a script's exit code must say it failed
+        from addon.core.errors import ClothFitError  # noqa: E402
+        if isinstance(e, ClothFitError):
+            print(f"error: {e}", file=sys.stderr)
+            sys.exit(2)
+        raise
+    sys.exit(code)
