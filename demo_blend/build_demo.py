@@ -32,7 +32,7 @@ def parse_args(argv=None):
     ap.add_argument("--noise", type=float, default=0.05, help="boundary noise fraction of the rendered silhouettes")
     ap.add_argument("--no-fit", action="store_true", help="skip the fit (and apply)")
     ap.add_argument("--train-cameras", type=int, default=8)
-    ap.add_argument("--budget", type=int, default=600, help="fit: maximum model evaluations")
+    ap.add_argument("--budget", type=int, default=1500, help="fit: maximum model evaluations")
     ap.add_argument("--resolution", default="120x160", choices=["FULL", "240x320", "120x160", "60x80"],
                     help="fit resolution (H x W)")
     ap.add_argument("--optimizer", default="spx-mgg", choices=["spx-mgg", "cma-es"])
