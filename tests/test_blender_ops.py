@@ -233,3 +233,54 @@ def test_bad_frame_times_and_unstable_parameters(tmp_path):
     p.k = 1e6
     p.m = 1e-9
     assert "simulation needs more than" in run_error("simulate") or "unstable" in run_error("simulate")
+
+
+class FakeLayout:
+    """Records what a panel draws; checks every property and operator it names exists."""
+
+    def __init__(self, log):
+        self.log = log
+        self.use_property_split = False
+
+    def prop(self, data, name, **kw):
+        assert name in data.bl_rna.properties, name
+        self.log.append(("prop", name))
+
+    def operator(self, idname, **kw):
+        mod, op = idname.split(".")
+        getattr(getattr(bpy.ops, mod), op).get_rna_type()
+        self.log.append(("operator", idname))
+
+    def label(self, text="", **kw):
+        self.log.append(("label", text))
+
+    def row(self, **kw):
+        return self
+
+    column = box = row
+
+
+@pytest.mark.parametrize("state", ["empty", "running", "result"])
+def test_panel_sections_draw(state, tmp_path):
+    from addon.blender import panel
+    scene = bpy.context.scene
+    p = small_settings(scene, tmp_path)
+    if state == "running":
+        p.fit_running, p.fit_status = True, "fitting"
+    if state == "result":
+        p.fit_has_result, p.fit_best_m, p.fit_best_k, p.fit_best_l, p.fit_best_d = True, 1e-5, 9.0, 0.0066, 1e-4
+        p.result_path, p.overlay_dir = "/tmp/r.json", "/tmp/o"
+    drawn = []
+    for key, label, func in panel.SECTIONS:
+        for src in ("PRESET", "RING"):
+            p.rig_source = src
+            func(FakeLayout(drawn), scene, p)
+    ops_drawn = {x for k, x in drawn if k == "operator"}
+    expected = {f"clothfit.{op}" for op in OPERATORS}
+    if state == "running":
+        expected.discard("clothfit.fit")
+    if state != "result":
+        expected.discard("clothfit.apply_fit")
+    assert expected <= ops_drawn
+    if state == "result":
+        assert any("k/m" in x for k, x in drawn if k == "label")

@@ -34,8 +34,8 @@ def _view_frame_update(self, context):
     from . import api
     try:
         api.show_observations(context.scene, self.view_frame)
-    except Exception:  # a UI update callback must never raise
-        pass
+    except api.ClothFitError as e:  # an update callback cannot report: say it on the console
+        print(f"Cloth Fit: cannot show capture frame {self.view_frame}: {e}")
 
 
 class ClothFitProperties(bpy.types.PropertyGroup):
