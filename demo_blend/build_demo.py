@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import time
 
@@ -35,7 +36,8 @@ def parse_args(argv=None):
     ap.add_argument("--budget", type=int, default=1500, help="fit: maximum model evaluations")
     ap.add_argument("--resolution", default="120x160", choices=["FULL", "240x320", "120x160", "60x80"],
                     help="fit resolution (H x W)")
-    ap.add_argument("--optimizer", default="spx-mgg", choices=["spx-mgg", "cma-es"])
+    ap.add_argument("--optimizer", default=None, choices=["spx-mgg", "cma-es"],
+                    help="default: the project's default optimiser (core/defaults.py)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--images", default=None, help="also write the walkthrough images into this directory")
     return ap.parse_args(argv)
@@ -77,12 +79,15 @@ def main(argv=None):
     p.train_cameras = a.train_cameras
     p.max_evaluations = a.budget
     p.fit_resolution = a.resolution
-    p.optimizer = a.optimizer
+    if a.optimizer:
+        p.optimizer = a.optimizer
     p.seed = a.seed
     print(f"Silhouette Cloth Fit demo -> {out}", flush=True)
     for op in ("build_rig", "build_cloth", "simulate", "render_silhouettes", "load_capture"):
         _run(op)
     true = dict(api.params_from_scene(scene).as_dict())
+    if a.images:
+        first_guess_overlays(scene, os.path.abspath(a.images))
     if not a.no_fit:
         _run("fit")
         _run("apply_fit")
@@ -140,6 +145,39 @@ def _camera_proxies(scene, cam_objs, size=0.03):
         coll.objects.link(o)
         objs.append(o)
     return coll, objs
+
+
+FIRST_GUESS = {"k": 4.0, "l": 0.0075, "d": 4.0e-5}
+
+
+def first_guess_overlays(scene, img_dir, t_show=0.5):
+    """docs/img: overlays of a poor first guess (before fitting), to show the colours."""
+
+    from addon.blender import api
+    from addon.core.capture import load_capture
+    os.makedirs(img_dir, exist_ok=True)
+    p = scene.clothfit
+    saved = api.params_from_scene(scene).as_dict()
+    try:
+        api.params_to_scene(scene, dict(saved, **FIRST_GUESS))
+        cap = load_capture(api.capture_dir(scene))
+        fi = cap.frame_index(t_show) if abs(cap.frame_times - t_show).min() < 1e-6 else cap.n_frames // 2
+        s = api.make_overlays(scene, source="CORE", frame_indices=[fi])
+        dst = os.path.join(img_dir, "blender_overlays_first_guess.png")
+        shutil.copyfile(s["contact_sheet"], dst)
+        _shrink(dst, 960)
+        print(f"  image {dst}: first guess {FIRST_GUESS}, mean E_sil {s['mean_E_sil_pct']:.2f} %")
+    finally:
+        api.params_to_scene(scene, saved)
+        p.overlay_dir = ""
+
+
+def _shrink(path, width):
+    import cv2
+    img = cv2.imread(path)
+    if img.shape[1] > width:
+        img = cv2.resize(img, (width, int(img.shape[0] * width / img.shape[1])), interpolation=cv2.INTER_AREA)
+    cv2.imwrite(path, img, [cv2.IMWRITE_PNG_COMPRESSION, 9])
 
 
 def write_walkthrough_images(scene, img_dir):
@@ -217,9 +255,8 @@ def write_walkthrough_images(scene, img_dir):
     # 3. the overlay contact sheet of the last overlays run
     sheet = os.path.join(api.abspath(p.overlay_dir, "overlays"), "contact_sheet.png")
     ov_png = os.path.join(img_dir, "blender_overlays.png")
-    img = cv2.imread(sheet)
-    scale = 960 / img.shape[1]
-    cv2.imwrite(ov_png, cv2.resize(img, (960, int(img.shape[0] * scale)), interpolation=cv2.INTER_AREA))
+    shutil.copyfile(sheet, ov_png)
+    _shrink(ov_png, 960)
     for f in (rig_png, sil_png, ov_png):
         print(f"  image {f} ({os.path.getsize(f) / 1e3:.0f} kB)")
     return [rig_png, sil_png, ov_png]

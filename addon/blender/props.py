@@ -91,7 +91,7 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     train_times: EnumProperty(name="Training Times", items=[
         ("PAPER", "Paper", "t = 0.10, 0.20, ... (those present in the capture)"),
         ("ALL", "All", "Every frame of the capture")], default="PAPER")
-    optimizer: EnumProperty(name="Optimiser", items=OPTIMIZERS, default="spx-mgg")
+    optimizer: EnumProperty(name="Optimiser", items=OPTIMIZERS, default=D.DEFAULT_OPTIMIZER)
     seed: IntProperty(name="Seed", default=0, min=0)
     max_evaluations: IntProperty(name="Budget", default=D.FIT_EVALUATIONS, min=1,
                                  description="Maximum number of model evaluations")
