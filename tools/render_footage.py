@@ -394,12 +394,33 @@ def render_footage(out, rig=D.DEFAULT_RIG, times=None, resolution=DEFAULT_RES, e
 
 # ============================================================================= score
 
-def score(footage, capture_dir, **extract_kw):
+def single_plate_view(footage, tmp):
+    """A view of ``footage`` (symlinks) with only the first background plate per camera."""
+    os.makedirs(tmp, exist_ok=True)
+    for entry in os.listdir(footage):
+        src = os.path.join(footage, entry)
+        dst = os.path.join(tmp, entry)
+        if os.path.lexists(dst):
+            continue
+        if os.path.isdir(src) and entry.startswith("cam"):
+            os.makedirs(dst, exist_ok=True)
+            for f in os.listdir(src):
+                if not f.startswith("background_"):
+                    os.symlink(os.path.abspath(os.path.join(src, f)), os.path.join(dst, f))
+        else:
+            os.symlink(os.path.abspath(src), dst)
+    return tmp
+
+
+def score(footage, capture_dir, single_plate=False, **extract_kw):
     """Extract ``footage`` into ``capture_dir`` and compare with the true masks: IoU per camera."""
+    import tempfile
+
     from addon.core.capture import load_capture, read_silhouette
     from addon.core.extract import extract_capture
     t0 = time.time()
-    rep = extract_capture(footage, capture_dir, **extract_kw)
+    src = single_plate_view(footage, tempfile.mkdtemp(prefix="footage_1plate_")) if single_plate else footage
+    rep = extract_capture(src, capture_dir, **extract_kw)
     secs = time.time() - t0
     cap = load_capture(capture_dir)
     rows = []
@@ -505,6 +526,9 @@ def main(argv=None):
     s.add_argument("--luma-weight", type=float)
     s.add_argument("--shadow-min", type=float)
     s.add_argument("--blur", type=float)
+    s.add_argument("--refine", type=int, help="boundary refinement radius (0 = off)")
+    s.add_argument("--shadow-window", type=int)
+    s.add_argument("--single-plate", action="store_true", help="use only the first background plate")
     s.add_argument("--json", help="write the scores here")
     f = sub.add_parser("fit", help="fit on extracted silhouettes, score held-out cameras")
     f.add_argument("--capture", required=True)
@@ -524,8 +548,9 @@ def main(argv=None):
             print(f"rendered {a.out} in {time.time() - t0:.0f} s ({info['meta']['seconds_per_render']:.2f} s per render)")
         elif a.cmd == "score":
             kw = {k: v for k, v in (("threshold", a.threshold), ("luma_weight", a.luma_weight),
-                                    ("shadow_min", a.shadow_min), ("blur", a.blur)) if v is not None}
-            sc = score(a.footage, a.capture, **kw)
+                                    ("shadow_min", a.shadow_min), ("blur", a.blur), ("refine_radius", a.refine),
+                                    ("shadow_window", a.shadow_window)) if v is not None}
+            sc = score(a.footage, a.capture, a.single_plate, **kw)
             print(format_score(sc))
             for wmsg in sc["warnings"]:
                 print("warning:", wmsg)
