@@ -16,113 +16,23 @@ import argparse
 import os
 import shutil
 import sys
-import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 
 
-def parse_args(argv=None):
-    if argv is None:
-        argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
-    ap = argparse.ArgumentParser(description="Build the Silhouette Cloth Fit demo scene")
-    ap.add_argument("--out", default=os.path.join("out", "demo"), help="output directory (capture, result, overlays)")
-    ap.add_argument("--blend", default=os.path.join(HERE, "demo.blend"), help="where to save the .blend ('' = do not)")
-    ap.add_argument("--rig", default="lab18", help="rig preset (rigs/) or cameras JSON")
-    ap.add_argument("--times", default=None, help="capture times start:stop:step (default: the paper's 0.05:1.5:0.05)")
-    ap.add_argument("--noise", type=float, default=0.05, help="boundary noise fraction of the rendered silhouettes")
-    ap.add_argument("--no-fit", action="store_true", help="skip the fit (and apply)")
-    ap.add_argument("--train-cameras", type=int, default=8)
-    ap.add_argument("--budget", type=int, default=1500, help="fit: maximum model evaluations")
-    ap.add_argument("--resolution", default="120x160", choices=["FULL", "240x320", "120x160", "60x80"],
-                    help="fit resolution (H x W)")
-    ap.add_argument("--optimizer", default=None, choices=["spx-mgg", "cma-es"],
-                    help="default: the project's default optimiser (core/defaults.py)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--images", default=None, help="also write the walkthrough images into this directory")
-    return ap.parse_args(argv)
-
-
-def _register():
+def main(argv=None):
     if ROOT not in sys.path:
         sys.path.insert(0, ROOT)
-    import addon
-    from addon.blender import registration
-    if not registration.is_registered():
-        addon.register()
-
-
-def _run(op, **kw):
-    import bpy
-    t = time.time()
-    r = getattr(bpy.ops.clothfit, op)(**kw)
-    print(f"  clothfit.{op}: {r} in {time.time() - t:.1f} s", flush=True)
-    if r != {"FINISHED"}:
-        raise SystemExit(f"clothfit.{op} failed: {r}")
-
-
-def main(argv=None):
-    a = parse_args(argv)
-    import bpy
-    _register()
-    from addon.blender import api
-    out = os.path.abspath(a.out)
-    capture = os.path.join(out, "capture")
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    p = scene.clothfit
-    p.rig_source, p.rig_preset = "PRESET", a.rig
-    if a.times:
-        p.frame_times = a.times
-    p.noise = a.noise
-    p.capture_dir = capture
-    p.train_cameras = a.train_cameras
-    p.max_evaluations = a.budget
-    p.fit_resolution = a.resolution
-    if a.optimizer:
-        p.optimizer = a.optimizer
-    p.seed = a.seed
-    print(f"Silhouette Cloth Fit demo -> {out}", flush=True)
-    for op in ("build_rig", "build_cloth", "simulate", "render_silhouettes", "load_capture"):
-        _run(op)
-    true = dict(api.params_from_scene(scene).as_dict())
-    if a.images:
-        first_guess_overlays(scene, os.path.abspath(a.images))
-    if not a.no_fit:
-        _run("fit")
-        _run("apply_fit")
-        res = api.load_result(scene)
-        print("  true   ", {k: f"{v:.4g}" for k, v in true.items()})
-        print("  fitted ", {k: f"{v:.4g}" for k, v in res["params"].items()})
-        if res.get("identifiable_error_pct"):
-            print("  identifiable error %", {k: f"{v:.2f}" for k, v in res["identifiable_error_pct"].items()})
-    _run("overlays")
-    print(f"  overlays: mean E_sil {p.overlay_error:.3f} % ({p.overlay_dir})")
-    if a.images:
-        write_walkthrough_images(scene, os.path.abspath(a.images))
-    p.view_frame = min(14, len(api.parse_times(p.frame_times)) - 1)
-    scene.frame_set(api.S.frame_of_time(scene, api.parse_times(p.frame_times)[p.view_frame]))
-    if a.blend:
-        blend = os.path.abspath(a.blend)
-        os.makedirs(os.path.dirname(blend), exist_ok=True)
-        # paths relative to the .blend, so the file works from any checkout
-        rel = lambda path: bpy.path.relpath(path, start=os.path.dirname(blend)) if path else path  # noqa: E731
-        p.capture_dir, p.result_path, p.overlay_dir = rel(p.capture_dir), rel(p.result_path), rel(p.overlay_dir)
-        _viewport_camera_view(scene)
-        bpy.ops.wm.save_as_mainfile(filepath=blend, compress=True, relative_remap=True)
-        print(f"saved {blend} ({os.path.getsize(blend) / 1e3:.0f} kB)")
+    from addon.blender import pipeline
+    ap = pipeline.add_arguments(argparse.ArgumentParser(description="Build the Silhouette Cloth Fit demo scene"),
+                                blend_default=os.path.join(HERE, "demo.blend"))
+    ap.add_argument("--images", default=None, help="also write the walkthrough images into this directory")
+    a = ap.parse_args(pipeline.script_argv(argv))
+    images = os.path.abspath(a.images) if a.images else None
+    pipeline.run(a, after_capture=(lambda scene: first_guess_overlays(scene, images)) if images else None,
+                 after_overlays=(lambda scene: write_walkthrough_images(scene, images)) if images else None)
     return 0
-
-
-def _viewport_camera_view(scene):
-    """Frame the sidebar-visible 3D view on the cloth (no-op without a UI)."""
-    import bpy
-    for screen in bpy.data.screens:
-        for area in screen.areas:
-            if area.type == "VIEW_3D":
-                for space in area.spaces:
-                    if space.type == "VIEW_3D":
-                        space.show_region_ui = True
 
 
 # ======================================================= walkthrough images

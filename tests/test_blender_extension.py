@@ -93,3 +93,35 @@ def test_installs_and_enables_in_bpy(ext_zip, tmp_path):
     r = subprocess.run([sys.executable, str(script), ext_zip, str(site)], cwd=str(tmp_path), env=env,
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and "INSTALL-OK 4.10.0" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
+
+
+HIDE_CV2 = textwrap.dedent('''
+    import importlib.machinery, os, sys
+    sys.path.insert(0, sys.argv[1])
+
+    class NoCv2:  # like Blender's own Python: no OpenCV installed
+        def find_spec(self, name, path=None, target=None):
+            if name == "cv2" and path is None:
+                paths = [p for p in sys.path if not os.path.isdir(os.path.join(p, "cv2"))
+                         or ".blender_site" in p]
+                spec = importlib.machinery.PathFinder.find_spec(name, paths)
+                if spec is None:
+                    raise ModuleNotFoundError("No module named 'cv2'", name="cv2")
+                return spec
+            return None
+    sys.meta_path.insert(0, NoCv2())
+    from addon.blender import pipeline
+    site = pipeline.ensure_opencv()
+    import cv2
+    assert site and cv2.__file__.startswith(site), (site, cv2.__file__)
+    print("CV2-FROM-WHEEL", cv2.__version__)
+''')
+
+
+def test_checkout_without_opencv_uses_the_wheel(ext_zip, tmp_path):
+    """Under a Blender binary (no cv2), the pipeline unpacks the extension's wheel from wheels/."""
+    script = tmp_path / "nocv2.py"
+    script.write_text(HIDE_CV2)
+    r = subprocess.run([sys.executable, str(script), ROOT], cwd=str(tmp_path), capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0 and "CV2-FROM-WHEEL 4.10.0" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]

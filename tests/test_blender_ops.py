@@ -6,7 +6,7 @@ import shutil
 import numpy as np
 import pytest
 
-from blender_support import bpy, ensure_registered, factory, run_error, small_capture, small_settings  # noqa: F401
+from blender_support import bpy, factory, run_error, small_capture, small_settings  # noqa: F401
 
 import addon  # noqa: E402
 from addon.blender import registration  # noqa: E402
@@ -284,3 +284,19 @@ def test_panel_sections_draw(state, tmp_path):
     assert expected <= ops_drawn
     if state == "result":
         assert any("k/m" in x for k, x in drawn if k == "label")
+
+
+def test_headless_pipeline_main(tmp_path):
+    """The one-call pipeline of demo_blend/build_demo.py and the CLI, on a small setting."""
+    from addon.blender import pipeline
+    blend = tmp_path / "p.blend"
+    code = pipeline.main(["--out", str(tmp_path / "out"), "--blend", str(blend), "--rig", "ring8",
+                          "--times", "0.1:0.2:0.1", "--budget", "20", "--resolution", "60x80",
+                          "--train-cameras", "2", "--noise", "0"])
+    assert code == 0
+    assert (tmp_path / "out" / "capture" / "fit_result.json").is_file()
+    assert (tmp_path / "out" / "capture" / "overlays" / "contact_sheet.png").is_file()
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    p = bpy.context.scene.clothfit
+    assert p.capture_dir.startswith("//") and p.fit_has_result
+    assert pipeline.main(["--out", str(tmp_path / "o2"), "--rig", "no_such_rig"]) == 2

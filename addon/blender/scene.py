@@ -22,7 +22,6 @@ Blender has one render size per scene: every camera of a rig must share it.
 """
 from __future__ import annotations
 
-import math
 
 import bpy
 import numpy as np

@@ -1,0 +1,177 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The whole Blender pipeline in one call, for headless use (``blender -b``, the ``bpy`` module,
+``demo_blend/build_demo.py``, the ``python -m addon`` CLI).
+
+Steps, each one ``clothfit`` operator: build the rig, build the cloth, simulate + bake,
+render the silhouettes with Blender into ``<out>/capture``, load the capture, fit, apply the fit,
+overlays; then save the .blend (paths stored relative to it).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+STEPS_CAPTURE = ("build_rig", "build_cloth", "simulate", "render_silhouettes", "load_capture")
+
+
+def script_argv(argv=None):
+    """Arguments after ``--`` when present (Blender's convention), otherwise ``sys.argv[1:]``."""
+    if argv is not None:
+        return list(argv)
+    return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+
+
+def add_arguments(ap: argparse.ArgumentParser, blend_default=None):
+    ap.add_argument("--out", default=os.path.join("out", "demo"), help="output directory (capture, result, overlays)")
+    ap.add_argument("--blend", default=blend_default or "", help="where to save the .blend ('' = do not)")
+    ap.add_argument("--rig", default="lab18", help="rig preset (rigs/) or cameras JSON")
+    ap.add_argument("--times", default=None, help="capture times start:stop:step (default: the paper's 0.05:1.5:0.05)")
+    ap.add_argument("--noise", type=float, default=0.05, help="boundary noise fraction of the rendered silhouettes")
+    ap.add_argument("--no-fit", action="store_true", help="skip the fit (and apply)")
+    ap.add_argument("--train-cameras", type=int, default=8)
+    ap.add_argument("--budget", type=int, default=1500, help="fit: maximum model evaluations")
+    ap.add_argument("--resolution", default="120x160", choices=["FULL", "240x320", "120x160", "60x80"],
+                    help="fit resolution (H x W)")
+    ap.add_argument("--optimizer", default=None, choices=["spx-mgg", "cma-es"],
+                    help="default: the project's default optimiser (core/defaults.py)")
+    ap.add_argument("--seed", type=int, default=0)
+    return ap
+
+
+def ensure_opencv():
+    """Make ``cv2`` importable when running from a checkout under a Blender binary.
+
+    Blender's Python has no OpenCV; an installed extension gets it from its bundled wheel. From a
+    checkout (``blender -b -P demo_blend/build_demo.py``) the same wheel in ``wheels/`` (made by
+    ``tools/build_extension.py``) is unpacked once into ``out/.blender_site`` and put on sys.path.
+    """
+    try:
+        import cv2  # noqa: F401
+        return None
+    except ImportError:
+        pass
+    import glob
+    import platform
+    import zipfile
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    arch = platform.machine().lower()
+    wheels = [w for w in sorted(glob.glob(os.path.join(root, "wheels", "opencv_python_headless-*.whl")))
+              if (sys.platform.startswith("linux") and "manylinux" in w and arch in w)
+              or (sys.platform == "darwin" and "macosx" in w and arch in w)
+              or (sys.platform == "win32" and "win_amd64" in w)]
+    if not wheels:
+        raise SystemExit("OpenCV (cv2) is not importable and no matching wheel is in wheels/: run "
+                         "`python tools/build_extension.py` once (it downloads it), or install the extension")
+    site = os.path.join(root, "out", ".blender_site", os.path.basename(wheels[-1])[:-4])
+    if not os.path.isdir(os.path.join(site, "cv2")):
+        with zipfile.ZipFile(wheels[-1]) as z:
+            z.extractall(site)
+    sys.path.insert(0, site)
+    import cv2  # noqa: F401,F811
+    return site
+
+
+def ensure_registered():
+    from .. import register
+    from . import registration
+    if not registration.is_registered():
+        register()
+
+
+def run_op(op, **kw):
+    import bpy
+    from ..core.errors import ClothFitError
+    t = time.time()
+    try:
+        r = getattr(bpy.ops.clothfit, op)(**kw)
+    except RuntimeError as e:  # the operator reported an error (bad input): pass its message on
+        msg = str(e)
+        if msg.startswith("Error: ") and "Traceback" not in msg:
+            raise ClothFitError(f"clothfit.{op}: {msg[len('Error: '):].strip()}") from None
+        raise
+    print(f"  clothfit.{op}: {r} in {time.time() - t:.1f} s", flush=True)
+    if r != {"FINISHED"}:
+        raise SystemExit(f"clothfit.{op} failed: {r}")
+
+
+def run(args, after_capture=None, after_overlays=None):
+    """Run the pipeline for parsed ``args`` (see ``add_arguments``) on a fresh empty scene.
+
+    ``after_capture(scene)`` / ``after_overlays(scene)`` are optional hooks. Returns a summary dict.
+    """
+    import bpy
+    ensure_opencv()
+    ensure_registered()
+    from . import api
+    out = os.path.abspath(args.out)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    p = scene.clothfit
+    p.rig_source, p.rig_preset = "PRESET", args.rig
+    if args.times:
+        p.frame_times = args.times
+    p.noise = args.noise
+    p.capture_dir = os.path.join(out, "capture")
+    p.train_cameras = args.train_cameras
+    p.max_evaluations = args.budget
+    p.fit_resolution = args.resolution
+    if args.optimizer:
+        p.optimizer = args.optimizer
+    p.seed = args.seed
+    print(f"Silhouette Cloth Fit (Blender pipeline) -> {out}", flush=True)
+    for op in STEPS_CAPTURE:
+        run_op(op)
+    summary = {"capture": api.capture_dir(scene), "true_params": api.params_from_scene(scene).as_dict()}
+    if after_capture:
+        after_capture(scene)
+    if not args.no_fit:
+        run_op("fit")
+        run_op("apply_fit")
+        res = api.load_result(scene)
+        summary.update(fitted_params=res["params"], identifiable_error_pct=res.get("identifiable_error_pct"),
+                       result=p.result_path)
+        print("  true   ", {k: f"{v:.4g}" for k, v in summary["true_params"].items()})
+        print("  fitted ", {k: f"{v:.4g}" for k, v in res["params"].items()})
+        if res.get("identifiable_error_pct"):
+            print("  identifiable error %", {k: f"{v:.2f}" for k, v in res["identifiable_error_pct"].items()})
+    run_op("overlays")
+    summary["overlay_mean_E_sil_pct"] = p.overlay_error
+    print(f"  overlays: mean E_sil {p.overlay_error:.3f} % ({p.overlay_dir})")
+    if after_overlays:
+        after_overlays(scene)
+    times = api.parse_times(p.frame_times)
+    p["view_frame"] = min(14, len(times) - 1)
+    scene.frame_set(api.S.frame_of_time(scene, times[p.view_frame]))
+    if args.blend:
+        summary["blend"] = save_blend(scene, args.blend)
+    return summary
+
+
+def save_blend(scene, path):
+    """Save with the capture/result/overlay paths relative to the .blend (portable checkout)."""
+    import bpy
+    blend = os.path.abspath(path)
+    os.makedirs(os.path.dirname(blend), exist_ok=True)
+    p = scene.clothfit
+
+    def rel(x):
+        return bpy.path.relpath(x, start=os.path.dirname(blend)) if x and not x.startswith("//") else x
+    p.capture_dir, p.result_path, p.overlay_dir = rel(p.capture_dir), rel(p.result_path), rel(p.overlay_dir)
+    bpy.ops.wm.save_as_mainfile(filepath=blend, compress=True, relative_remap=True)
+    print(f"saved {blend} ({os.path.getsize(blend) / 1e3:.0f} kB)")
+    return blend
+
+
+def main(argv=None):
+    """``python -m addon``-style entry: parse ``argv`` and run the pipeline. Exit code 2 on bad input."""
+    from ..core.errors import ClothFitError
+    ap = add_arguments(argparse.ArgumentParser(description="Silhouette Cloth Fit: the Blender pipeline"))
+    args = ap.parse_args(script_argv(argv))
+    try:
+        run(args)
+    except ClothFitError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
