@@ -309,3 +309,29 @@ def test_undistort_silhouette_matches_undistorted_projection():
     m = np.zeros((480, 640), np.uint8)
     m[100:200, 100:300] = 1
     assert np.array_equal(CI.undistort_silhouette(m, plain), m > 0)   # no distortion: unchanged
+
+
+# ------------------------------------------------------------------------- CLI
+
+def test_cli_import_and_export_cameras(tmp_path, capsys):
+    from addon.cli import main as cli
+    cams = rig(3, DISTS)
+    CI.export_cameras(cams, str(tmp_path / "colmap"), "colmap")
+    assert cli(["import-cameras", str(tmp_path / "colmap"), "-o", str(tmp_path / "cams.json")]) == 0
+    same(cams, CI.import_cameras(str(tmp_path / "cams.json")))
+    out = capsys.readouterr().out
+    assert "imported 3 cameras" in out and "cam01" in out
+    assert cli(["export-cameras", str(tmp_path / "cams.json"), "-o", str(tmp_path / "o.yml")]) == 0
+    same(cams, CI.import_cameras(str(tmp_path / "o.yml")))
+    assert cli(["export-cameras", str(tmp_path / "cams.json"), "-o", str(tmp_path / "per"), "--format",
+                "opencv-dir"]) == 0
+    same(cams, CI.import_cameras(str(tmp_path / "per")))
+    # a capture as the source
+    from addon.core.capture import write_capture
+    from addon.core.model import paper_scenario
+    cap = write_capture(str(tmp_path / "cap"), cams, paper_scenario(frame_times=[0.1]), None)
+    assert cli(["export-cameras", cap.root, "-o", str(tmp_path / "fromcap")]) == 0
+    same(cams, CI.import_cameras(str(tmp_path / "fromcap")))
+    # errors: a message naming the file, exit code 2
+    assert cli(["import-cameras", str(tmp_path / "missing.yml"), "-o", str(tmp_path / "x.json")]) == 2
+    assert "missing.yml" in capsys.readouterr().err

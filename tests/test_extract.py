@@ -343,3 +343,15 @@ def test_boundary_refinement_moves_edge_to_half_contrast():
         r = X.refine_boundary(m, d, 2)
         assert iou(r, disk) > 0.98
     assert X.refine_boundary(fat, d, 0) is fat
+
+
+def test_cli_extract(tmp_path, capsys):
+    from addon.cli import main as cli
+    root, out = str(tmp_path / "f"), str(tmp_path / "c")
+    write_footage(root)
+    assert cli(["extract", root, "-o", out, "--threshold", "noise"]) == 0
+    assert "wrote capture" in capsys.readouterr().out
+    assert load_capture(out, validate=True).n_frames == 3
+    os.remove(os.path.join(root, "cam00", "background.png"))
+    assert cli(["extract", root, "-o", out]) == 2
+    assert "no background image" in capsys.readouterr().err

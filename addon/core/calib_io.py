@@ -645,3 +645,56 @@ def undistort_image(image: np.ndarray, camera: Camera, interpolation=None) -> np
         return image
     return cv2.remap(image, maps[0], maps[1], interpolation=cv2.INTER_LINEAR if interpolation is None else interpolation,
                      borderMode=cv2.BORDER_CONSTANT)
+
+
+# ========================================================================= CLI glue
+
+def _cameras_from_any(path: str, fmt: str = "auto", width=None, height=None) -> list:
+    """Cameras of a calibration file/folder, or of a capture (its folder or capture.json)."""
+    cj = path if os.path.basename(path) == "capture.json" else os.path.join(path, "capture.json")
+    if os.path.isfile(cj) and fmt == "auto":
+        from .capture import load_capture
+        return load_capture(cj).cameras
+    return import_cameras(path, fmt, width, height)
+
+
+def describe(cameras) -> str:
+    lines = []
+    for c in cameras:
+        d = "none" if c.dist.size == 0 or not np.any(c.dist != 0) else \
+            " ".join(f"{v:.4g}" for v in c.dist)
+        lines.append(f"{c.name:<12} {c.width}x{c.height}  fx {c.K[0, 0]:.2f} fy {c.K[1, 1]:.2f} "
+                     f"cx {c.K[0, 2]:.2f} cy {c.K[1, 2]:.2f}  centre {np.round(c.center, 4).tolist()}  dist {d}")
+    return "\n".join(lines)
+
+
+def main(argv) -> list:
+    """``python -m addon import-cameras|export-cameras ...`` (``argv[0]`` names the command).
+
+    import-cameras SRC -o cameras.json: any supported calibration -> our cameras JSON.
+    export-cameras SRC -o DST [--format opencv|opencv-dir|colmap|json]: our cameras JSON, a
+    capture (folder or capture.json) or any supported calibration -> DST.
+    """
+    import argparse
+    if not argv or argv[0] not in ("import-cameras", "export-cameras"):
+        raise ClothFitError("calib_io.main: first argument must be import-cameras or export-cameras")
+    cmd, rest = argv[0], argv[1:]
+    p = argparse.ArgumentParser(prog=f"python -m addon {cmd}",
+                                description="calibrated cameras: OpenCV FileStorage and COLMAP text models")
+    p.add_argument("src", help="calibration file or folder (OpenCV YAML/JSON/XML, folder of those, COLMAP model "
+                               "folder, our cameras JSON" + (", or a capture" if cmd == "export-cameras" else "") + ")")
+    p.add_argument("-o", "--out", required=True, help="output: cameras JSON (import) or file/folder (export)")
+    p.add_argument("--format", default="auto", choices=FORMATS,
+                   help="input format (import) / output format (export); auto: by extension")
+    p.add_argument("--width", type=int, help="image width when the OpenCV file has none")
+    p.add_argument("--height", type=int, help="image height when the OpenCV file has none")
+    a = p.parse_args(rest)
+    if cmd == "import-cameras":
+        cams = import_cameras(a.src, a.format, a.width, a.height)
+        export_cameras(cams, a.out, "json")
+    else:
+        cams = _cameras_from_any(a.src, "auto", a.width, a.height)
+        export_cameras(cams, a.out, a.format)
+    print(describe(cams))
+    print(f"{'imported' if cmd == 'import-cameras' else 'exported'} {len(cams)} cameras -> {a.out}")
+    return cams

@@ -822,3 +822,13 @@ def run_args(args) -> dict:
     print(format_report(rep))
     print(f"wrote capture {args.out} ({len(rep['cameras'])} cameras x {len(rep['frame_times'])} frames)")
     return rep
+
+
+def main(argv=None) -> dict:
+    """``python -m addon extract ...``: parse ``argv`` and run (ClothFitError propagates)."""
+    import argparse
+    p = argparse.ArgumentParser(prog="python -m addon extract",
+                                description="Silhouettes from camera images: background difference in YUV, "
+                                            "automatic per-camera threshold, shadow model, clean-up; writes a capture.")
+    add_arguments(p)
+    return run_args(p.parse_args(argv))
