@@ -295,7 +295,20 @@ def build_parser():
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
+    argv = sys.argv[1:] if argv is None else list(argv)
+    # sub-tools with parsers of their own: hand them everything after the command name
+    if argv and argv[0] in ("extract", "import-cameras", "export-cameras"):
+        try:
+            if argv[0] == "extract":
+                from .core import extract
+                extract.main(argv[1:])
+            else:
+                from .core import calib_io
+                calib_io.main(argv)
+        except ClothFitError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        return 0
     args = build_parser().parse_args(argv)
     try:
         args.fn(args)
