@@ -89,6 +89,21 @@ def test_overlays_core_source_and_ground_truth_agree(small_capture):
     assert scene.clothfit.overlay_error < 1.0   # core rasteriser vs Blender renders, same shapes
 
 
+def test_loaded_capture_drives_the_simulation(small_capture):
+    """After Load Capture the cloth and manipulation come from the capture: re-simulating with the
+    true parameters reproduces its (noise-free) silhouettes in Blender."""
+    scene = bpy.context.scene
+    p = small_settings(scene, small_capture)
+    assert bpy.ops.clothfit.load_capture() == {"FINISHED"}
+    assert p.scenario_source == "CAPTURE"
+    p.released_corner, p.settle_time, p.cloth_side = 2, 0.05, 0.2   # ignored: the capture's scenario wins
+    assert bpy.ops.clothfit.build_cloth() == {"FINISHED"}
+    assert bpy.ops.clothfit.simulate() == {"FINISHED"}
+    p.overlay_source = "BLENDER"
+    assert bpy.ops.clothfit.overlays() == {"FINISHED"}
+    assert p.overlay_error < 0.05
+
+
 def test_save_and_reload_keeps_all_properties(tmp_path):
     scene = bpy.context.scene
     p = small_settings(scene)

@@ -119,21 +119,36 @@ def grid_from_props(scene) -> ClothGrid:
     return ClothGrid(p.cloth_nx, side=p.cloth_side, height=p.cloth_height)
 
 
+def capture_scenario(scene):
+    """The loaded capture's scenario (handles, settling), for scenario source CAPTURE."""
+    from ..core.capture import load_capture as core_load
+    return core_load(capture_dir(scene)).scenario
+
+
 def scenario_for(scene, grid: ClothGrid, times=None):
+    """The manipulation to simulate: the paper's (panel settings) or the loaded capture's."""
     p = props(scene)
+    times = times if times is not None else parse_times(p.frame_times)
+    if p.scenario_source == "CAPTURE":
+        sc = capture_scenario(scene)
+        g = sc.grid
+        if (g.nx, g.ny) != (grid.nx, grid.ny):
+            raise ClothFitError(f"the capture's cloth is a {g.nx}x{g.ny} grid but the scene's cloth is "
+                                f"{grid.nx}x{grid.ny}: rebuild the cloth")
+        return sc.with_frames(times)
     if not 0 <= p.released_corner <= 3:
         raise ClothFitError(f"released corner {p.released_corner} must be 0..3")
-    sc = paper_scenario(grid, frame_times=times if times is not None else parse_times(p.frame_times),
-                        released_corner=p.released_corner)
+    sc = paper_scenario(grid, frame_times=times, released_corner=p.released_corner)
     sc.settle_time = float(p.settle_time)
     return sc
 
 
 def build_cloth(scene):
-    grid = grid_from_props(scene)
+    p = props(scene)
+    grid = capture_scenario(scene).grid if p.scenario_source == "CAPTURE" else grid_from_props(scene)
     sc = scenario_for(scene, grid)
     obj = S.build_cloth(scene, grid, sc.handles)
-    props(scene).cloth_object = obj
+    p.cloth_object = obj
     return obj
 
 
@@ -241,6 +256,7 @@ def load_capture(scene, path=None):
     if released and released[0].vertex in g.corners():
         p.released_corner = g.corners().index(released[0].vertex)
     p.capture_dir = root
+    p.scenario_source = "CAPTURE"
     p["view_frame"] = min(p.view_frame, cap.n_frames - 1)
     show_observations(scene, p.view_frame, cap)
     return cap

@@ -103,6 +103,10 @@ class CLOTHFIT_OT_load_capture(_ClothFitOperator, bpy.types.Operator):
 
     def run(self, context):
         cap = api.load_capture(context.scene, self.directory or None)
+        distorted = [c.name for c in cap.cameras if c.dist.size and (c.dist != 0).any()]
+        if distorted:
+            self.report({"WARNING"}, f"{len(distorted)} cameras have lens distortion: their Blender cameras show "
+                                     f"the undistorted pinhole (the fit uses the distortion)")
         return f"Loaded {cap.root}: {cap.n_cameras} cameras, {cap.n_frames} frames"
 
 

@@ -22,11 +22,15 @@ def draw_rig(layout, scene, p):
 
 
 def draw_cloth(layout, scene, p):
-    col = layout.column(align=True)
-    col.prop(p, "cloth_nx")
-    col.prop(p, "cloth_side")
-    col.prop(p, "cloth_height")
-    layout.prop(p, "released_corner")
+    layout.prop(p, "scenario_source", expand=True)
+    if p.scenario_source == "SETTINGS":
+        col = layout.column(align=True)
+        col.prop(p, "cloth_nx")
+        col.prop(p, "cloth_side")
+        col.prop(p, "cloth_height")
+        layout.prop(p, "released_corner")
+    else:
+        layout.label(text="Cloth and handles from the capture")
     layout.operator("clothfit.build_cloth", icon="MESH_GRID")
     if p.cloth_object is not None:
         layout.label(text=f"Cloth: {p.cloth_object.name}", icon="OBJECT_DATA")
@@ -38,7 +42,8 @@ def draw_simulation(layout, scene, p):
         col.prop(p, name)
     n = p.cloth_nx * p.cloth_nx
     layout.label(text=f"Cloth mass m x {n} = {1000 * p.m * n:.3g} g")
-    layout.prop(p, "settle_time")
+    if p.scenario_source == "SETTINGS":
+        layout.prop(p, "settle_time")
     layout.prop(p, "frame_times")
     layout.operator("clothfit.simulate", icon="PHYSICS")
 

@@ -58,6 +58,10 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     cloth_side: FloatProperty(name="Side", default=D.CLOTH_SIDE, min=1e-4, unit="LENGTH", precision=4)
     cloth_height: FloatProperty(name="Height", default=D.CLOTH_HEIGHT, unit="LENGTH", precision=4,
                                 description="Height of the held corners")
+    scenario_source: EnumProperty(name="Manipulation", items=[
+        ("SETTINGS", "Paper", "All four corners held, one released at t = 0 (the settings here)"),
+        ("CAPTURE", "Capture", "The loaded capture's handles, settling and cloth (set by Load Capture)")],
+        default="SETTINGS")
     released_corner: IntProperty(name="Released Corner", default=D.RELEASED_CORNER, min=0, max=3,
                                  description="Corner released at t = 0 (0..3; the other three stay held)")
     cloth_object: PointerProperty(name="Cloth", type=bpy.types.Object)
