@@ -191,6 +191,16 @@ def cmd_paper(a):
               max_evaluations=a.max_evaluations, only=a.only, truth_dt_safety=a.truth_dt_safety)
 
 
+def cmd_tables(a):
+    from .core.experiment import format_tables
+    try:
+        with open(a.json) as f:
+            d = json.load(f)
+    except (OSError, json.JSONDecodeError) as e:
+        raise ClothFitError(f"cannot read {a.json}: {e}") from None
+    print(format_tables(d))
+
+
 def cmd_bench(a):
     from .core.bench import run_bench
     run_bench(a.json, quick=a.quick)
@@ -274,6 +284,10 @@ def build_parser():
                    help="time-step factor of the ground truth (default: the model's own; 0.125 = 4x finer truth, "
                         "i.e. a model mismatch the fit cannot remove)")
     s.set_defaults(fn=cmd_paper)
+
+    s = sub.add_parser("tables", help="print the tables of a `paper` JSON again")
+    s.add_argument("json")
+    s.set_defaults(fn=cmd_tables)
 
     s = sub.add_parser("bench", help="speed figures")
     s.add_argument("--json", required=True)
