@@ -125,3 +125,16 @@ def test_checkout_without_opencv_uses_the_wheel(ext_zip, tmp_path):
     r = subprocess.run([sys.executable, str(script), ROOT], cwd=str(tmp_path), capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0 and "CV2-FROM-WHEEL 4.10.0" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
+
+
+def test_same_layout_as_blenders_own_builder(ext_zip, tmp_path):
+    """`blender --command extension build` (its script, run with this Python) packs the same files."""
+    script = build_extension.blender_ext_script()
+    if script is None:
+        pytest.skip("Blender's extension CLI not found in the bpy module")
+    r = subprocess.run([sys.executable, script, "build", "--source-dir", ROOT, "--output-dir", str(tmp_path)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    theirs = zipfile.ZipFile(tmp_path / os.path.basename(ext_zip)).namelist()
+    ours = zipfile.ZipFile(ext_zip).namelist()
+    assert sorted(n for n in theirs if not n.endswith("/")) == sorted(ours)
