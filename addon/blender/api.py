@@ -334,6 +334,20 @@ class FitSession:
         self.result_path = result_path
         self.timer = None
         self.started = time.time()
+        self.threaded = False       # the modal operator runs generations in a worker thread
+        self.worker = None          # threading.Thread running one job.step() (threaded mode)
+        self._outcome = None        # (more, exception) of the worker's step
+
+    def _work(self):
+        try:
+            self._outcome = (self.job.step(), None)
+        except BaseException as e:  # handed over to the main thread, which re-raises it
+            self._outcome = (False, e)
+
+    def wait(self):
+        """Block until the running worker step (if any) has finished."""
+        if self.worker is not None:
+            self.worker.join()
 
     @property
     def scene(self):
@@ -386,8 +400,40 @@ def fit_step(session) -> bool:
     return more
 
 
+def fit_tick(session):
+    """Threaded stepping for the modal operator: the generation runs in a worker thread (numpy /
+    numba only, no bpy), the main thread publishes. Returns None while a generation is running,
+    True after a generation when there are more (the next one is started at once), False when the
+    job is finished. Exceptions of the worker are re-raised here, on the main thread."""
+    import threading
+    if session.worker is not None:
+        if session.worker.is_alive():
+            return None
+        session.worker.join()
+        session.worker = None
+        more, err = session._outcome
+        session._outcome = None
+        if err is not None:
+            raise err
+        _publish(session.scene, session.job)
+        if not more:
+            return False
+    elif session.job.finished:
+        return False
+    else:
+        more = None
+    session.worker = threading.Thread(target=session._work, name="clothfit-fit-step", daemon=True)
+    session.worker.start()
+    return more
+
+
 def finish_fit(session, cancelled=False):
     """Stop (cancel keeps the best), write the result JSON, update the status. -> (level, message)."""
+    session.wait()  # a generation still running in the worker finishes first (its result is kept)
+    if session.worker is not None:
+        session.worker = None
+        if session._outcome and session._outcome[1] is None:
+            _publish(session.scene, session.job)
     job = session.job
     scene = session.scene
     if cancelled and not job.finished:

@@ -6,7 +6,8 @@ Each operator calls one function of ``api``; a ``ClothFitError`` (bad input) bec
 
 The fit is modal when invoked from the UI: a window-manager timer, one ``job.step()`` (one
 optimiser generation) per TIMER event, progress bar + status text + live panel, Esc cancels and
-keeps the best so far. ``execute`` (scripts, ``blender -b``: no event loop, timers never fire)
+keeps the best so far; the generation itself runs in a worker thread (numpy/numba only), every
+bpy call stays on the main thread. ``execute`` (scripts, ``blender -b``: no event loop, timers never fire)
 runs the same steps synchronously to completion. The event handling lives in the module
 functions ``begin_modal`` / ``modal_tick`` / ``end_modal`` so tests can drive it directly;
 ``end_modal`` is the one finish routine for finish, cancel and error.
@@ -134,9 +135,13 @@ class CLOTHFIT_OT_overlays(_ClothFitOperator, bpy.types.Operator):
 
 # ============================================================= the modal fit
 
-def begin_modal(context):
-    """Start a fit for the UI: job, progress bar, status text, timer. Returns the session."""
+def begin_modal(context, threaded=True):
+    """Start a fit for the UI: job, progress bar, status text, timer. Returns the session.
+
+    ``threaded``: each generation runs in a worker thread (the UI stays responsive; bpy is only
+    touched on the main thread); otherwise one generation runs inside each TIMER event."""
     sess = api.start_fit(context.scene)
+    sess.threaded = threaded
     wm = context.window_manager
     wm.progress_begin(0, 1000)
     if context.window is not None:
@@ -153,7 +158,9 @@ def modal_tick(context, session, event_type):
     if event_type != "TIMER":
         return "RUNNING", None, None
     try:
-        more = api.fit_step(session)
+        more = api.fit_tick(session) if session.threaded else api.fit_step(session)
+        if more is None:  # the worker is still computing this generation
+            return "RUNNING", None, None
     except (ClothFitError, OSError) as e:
         session.job.error = str(e)
         end_modal(context, session, cancelled=True)
