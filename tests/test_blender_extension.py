@@ -1,8 +1,9 @@
 """The extension zip: layout, Blender's own validator, install + enable in the bpy module.
 
 The install runs in a subprocess with its own ``BLENDER_USER_RESOURCES`` so the user's Blender
-config is untouched; there ``cv2`` is imported from the extension's wheel only (the venv's cv2 is
-hidden), which proves that Blender installed the bundled wheel.
+config is untouched; there ``cv2``, ``cma``, ``numba`` and ``llvmlite`` are imported from the
+extension's wheels only (the venv's copies are hidden), which proves that Blender installed the
+bundled wheels and that the numba kernels work from them.
 """
 import os
 import subprocess
@@ -52,25 +53,32 @@ INSTALL = textwrap.dedent('''
     import importlib.machinery, os, sys
     import bpy, addon_utils
     zip_path, site = sys.argv[1], sys.argv[2]
+    BUNDLED = ("cv2", "cma", "numba", "llvmlite")
 
-    class HideOtherCv2:  # hide any other cv2 package (the venv's): it must come from the bundled wheel
+    class HideOthers:  # hide the venv's copies: the bundled packages must come from their wheels
         def find_spec(self, name, path=None, target=None):
-            if name == "cv2" and path is None:
+            if name in BUNDLED and path is None:
                 paths = [p for p in sys.path if os.path.abspath(p) == os.path.abspath(site)
-                         or not os.path.isdir(os.path.join(p, "cv2"))]
-                return importlib.machinery.PathFinder.find_spec(name, paths)
+                         or not os.path.isdir(os.path.join(p, name))]
+                spec = importlib.machinery.PathFinder.find_spec(name, paths)
+                if spec is None:
+                    raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+                return spec
             return None
-    sys.meta_path.insert(0, HideOtherCv2())
+    sys.meta_path.insert(0, HideOthers())
 
-    assert "cv2" not in sys.modules
+    assert not any(m in sys.modules for m in BUNDLED)
     r = bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
     assert r == {"FINISHED"}, r
     mod = "bl_ext.user_default.silhouette_cloth_fit"
     assert addon_utils.check(mod) == (True, True), addon_utils.check(mod)
     op = bpy.ops.clothfit.build_rig.get_rna_type()
     assert op.identifier == "CLOTHFIT_OT_build_rig"
-    import cv2
-    assert cv2.__file__.startswith(site), cv2.__file__
+    import cv2, cma, numba
+    for m in (cv2, cma, numba):
+        assert m.__file__.startswith(site), m.__file__
+    accel = sys.modules.get(mod + ".addon.core.accel") or __import__(mod + ".addon.core.accel", fromlist=["x"])
+    assert accel.available(), "numba kernels not available from the bundled wheels"
     scene = bpy.context.scene
     assert bpy.ops.clothfit.build_rig() == {"FINISHED"}
     assert len(bpy.data.collections["ClothFit Rig"].objects) == 18
@@ -79,7 +87,7 @@ INSTALL = textwrap.dedent('''
     assert ops_mod.__file__.startswith(os.environ["BLENDER_USER_RESOURCES"]), ops_mod.__file__
     addon_utils.disable(mod)
     assert not hasattr(bpy.types.Scene, "clothfit")
-    print("INSTALL-OK", cv2.__version__)
+    print("INSTALL-OK", cv2.__version__, cma.__version__.split()[0], numba.__version__)
 ''')
 
 
@@ -92,39 +100,43 @@ def test_installs_and_enables_in_bpy(ext_zip, tmp_path):
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(res))
     r = subprocess.run([sys.executable, str(script), ext_zip, str(site)], cwd=str(tmp_path), env=env,
                        capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0 and "INSTALL-OK 4.10.0" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
+    assert r.returncode == 0 and "INSTALL-OK 4.10.0 4.5.0 0.68.1" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
 
 
-HIDE_CV2 = textwrap.dedent('''
+HIDE_PACKAGES = textwrap.dedent('''
     import importlib.machinery, os, sys
     sys.path.insert(0, sys.argv[1])
+    BUNDLED = ("cv2", "cma", "numba", "llvmlite")
 
-    class NoCv2:  # like Blender's own Python: no OpenCV installed
+    class Missing:  # like Blender's own Python: none of the bundled packages installed
         def find_spec(self, name, path=None, target=None):
-            if name == "cv2" and path is None:
-                paths = [p for p in sys.path if not os.path.isdir(os.path.join(p, "cv2"))
+            if name in BUNDLED and path is None:
+                paths = [p for p in sys.path if not os.path.isdir(os.path.join(p, name))
                          or ".blender_site" in p]
                 spec = importlib.machinery.PathFinder.find_spec(name, paths)
                 if spec is None:
-                    raise ModuleNotFoundError("No module named 'cv2'", name="cv2")
+                    raise ModuleNotFoundError(f"No module named {name!r}", name=name)
                 return spec
             return None
-    sys.meta_path.insert(0, NoCv2())
+    sys.meta_path.insert(0, Missing())
     from addon.blender import pipeline
-    site = pipeline.ensure_opencv()
-    import cv2
-    assert site and cv2.__file__.startswith(site), (site, cv2.__file__)
-    print("CV2-FROM-WHEEL", cv2.__version__)
+    added = pipeline.ensure_wheels()
+    import cv2, cma, numba
+    for m in (cv2, cma, numba):
+        assert ".blender_site" in m.__file__, m.__file__
+    from addon.core import accel
+    assert accel.available()
+    print("FROM-WHEELS", len(added), cv2.__version__, numba.__version__)
 ''')
 
 
-def test_checkout_without_opencv_uses_the_wheel(ext_zip, tmp_path):
-    """Under a Blender binary (no cv2), the pipeline unpacks the extension's wheel from wheels/."""
-    script = tmp_path / "nocv2.py"
-    script.write_text(HIDE_CV2)
+def test_checkout_under_blender_binary_uses_the_wheels(ext_zip, tmp_path):
+    """Under a Blender binary (no cv2, cma, numba), the pipeline unpacks the wheels of wheels/."""
+    script = tmp_path / "nopkgs.py"
+    script.write_text(HIDE_PACKAGES)
     r = subprocess.run([sys.executable, str(script), ROOT], cwd=str(tmp_path), capture_output=True, text=True,
                        timeout=300)
-    assert r.returncode == 0 and "CV2-FROM-WHEEL 4.10.0" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
+    assert r.returncode == 0 and "FROM-WHEELS 4 4.10.0 0.68.1" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
 
 
 def test_same_layout_as_blenders_own_builder(ext_zip, tmp_path):

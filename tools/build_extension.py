@@ -9,10 +9,10 @@ Everything else (tests/, out/, .venv/, .ci/, docs/, tools/, demo_blend/...) stay
 manifest's ``[build] paths_exclude_pattern`` is applied on top.
 
 Missing wheels are downloaded with pip (unmodified PyPI wheels, numpy is not bundled: Blender
-ships it)::
+ships it), with the platform tags of the file name the manifest lists, e.g.::
 
-    pip download --no-deps --only-binary=:all: --platform manylinux2014_x86_64 \
-        --python-version 3.11 opencv-python-headless==4.10.0.84 -d wheels/
+    pip download --no-deps --only-binary=:all: --platform manylinux_2_17_x86_64 \
+        --platform manylinux2014_x86_64 --python-version 3.11 opencv-python-headless==4.10.0.84 -d wheels/
 
 When the ``bpy`` module is installed, the zip is checked with Blender's own validator
 (``bl_pkg/cli/blender_ext.py validate``).
@@ -34,8 +34,6 @@ MANIFEST = "blender_manifest.toml"
 INCLUDE = ["blender_manifest.toml", "__init__.py", "addon", "rigs", "LICENSE", "README.md"]
 INCLUDE_EXT = {".py", ".json", ".toml", ".md", ""}
 WHEEL_RE = re.compile(r"^(?P<name>[A-Za-z0-9_]+)-(?P<version>[^-]+)-")
-PIP_PLATFORM = {"manylinux": "manylinux2014_x86_64", "macosx_11_0_arm64": "macosx_11_0_arm64",
-                "win_amd64": "win_amd64", "macosx_10": "macosx_10_16_x86_64"}
 
 
 def read_manifest(root=ROOT):
@@ -90,13 +88,15 @@ def download_wheel(rel: str, root=ROOT):
     if not m:
         raise SystemExit(f"cannot parse wheel file name {fn}")
     name = m.group("name").replace("_", "-")
-    tags = fn[:-4].split("-")[-1]
-    plat = next((v for k, v in PIP_PLATFORM.items() if k in tags), None)
-    if plat is None:
-        raise SystemExit(f"do not know the pip --platform for {fn}")
+    parts = fn[:-4].split("-")
+    plats = parts[-1].split(".")   # e.g. ["manylinux_2_17_x86_64", "manylinux2014_x86_64"] or ["any"]
     dest = os.path.join(root, os.path.dirname(rel))
-    cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "--platform", plat,
-           "--python-version", "3.11", f"{name}=={m.group('version')}", "-d", dest]
+    cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:"]
+    if plats != ["any"]:
+        for plat in plats:
+            cmd += ["--platform", plat]
+        cmd += ["--python-version", "3.11"]
+    cmd += [f"{name}=={m.group('version')}", "-d", dest]
     print("downloading:", " ".join(cmd))
     subprocess.run(cmd, check=True)
     if not os.path.isfile(os.path.join(root, rel)):

@@ -40,37 +40,51 @@ def add_arguments(ap: argparse.ArgumentParser, blend_default=None):
     return ap
 
 
-def ensure_opencv():
-    """Make ``cv2`` importable when running from a checkout under a Blender binary.
+def ensure_wheels():
+    """Make the bundled packages importable when running from a checkout under a Blender binary.
 
-    Blender's Python has no OpenCV; an installed extension gets it from its bundled wheel. From a
-    checkout (``blender -b -P demo_blend/build_demo.py``) the same wheel in ``wheels/`` (made by
-    ``tools/build_extension.py``) is unpacked once into ``out/.blender_site`` and put on sys.path.
+    Blender's Python has no OpenCV, cma or numba; an installed extension gets them from the
+    wheels its manifest lists. From a checkout (``blender -b -P demo_blend/build_demo.py``) the
+    same wheels in ``wheels/`` (downloaded by ``tools/build_extension.py``) are unpacked once into
+    ``out/.blender_site/<wheel>`` and put on sys.path, for each package that is not importable.
+    Returns the directories added. Raises SystemExit if OpenCV is missing and no wheel is there.
     """
-    try:
-        import cv2  # noqa: F401
-        return None
-    except ImportError:
-        pass
     import glob
+    import importlib.util
     import platform
     import zipfile
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     arch = platform.machine().lower()
-    wheels = [w for w in sorted(glob.glob(os.path.join(root, "wheels", "opencv_python_headless-*.whl")))
-              if (sys.platform.startswith("linux") and "manylinux" in w and arch in w)
-              or (sys.platform == "darwin" and "macosx" in w and arch in w)
-              or (sys.platform == "win32" and "win_amd64" in w)]
-    if not wheels:
+    added = []
+    for whl in sorted(glob.glob(os.path.join(root, "wheels", "*.whl"))):
+        tags = os.path.basename(whl)[:-4].split("-")[-1]
+        ok = (tags == "any" or (sys.platform.startswith("linux") and "linux" in tags and arch in tags)
+              or (sys.platform == "darwin" and "macosx" in tags and arch in tags)
+              or (sys.platform == "win32" and "win_amd64" in tags))
+        if not ok:
+            continue
+        with zipfile.ZipFile(whl) as z:
+            tops = sorted({n.split("/")[0] for n in z.namelist() if n.count("/") == 1 and n.endswith("/__init__.py")})
+            if not tops or all(_importable(t) for t in tops):
+                continue
+            site = os.path.join(root, "out", ".blender_site", os.path.basename(whl)[:-4])
+            if not all(os.path.isdir(os.path.join(site, t)) for t in tops):
+                z.extractall(site)
+        sys.path.insert(0, site)
+        added.append(site)
+    importlib.invalidate_caches()
+    if not _importable("cv2"):
         raise SystemExit("OpenCV (cv2) is not importable and no matching wheel is in wheels/: run "
-                         "`python tools/build_extension.py` once (it downloads it), or install the extension")
-    site = os.path.join(root, "out", ".blender_site", os.path.basename(wheels[-1])[:-4])
-    if not os.path.isdir(os.path.join(site, "cv2")):
-        with zipfile.ZipFile(wheels[-1]) as z:
-            z.extractall(site)
-    sys.path.insert(0, site)
-    import cv2  # noqa: F401,F811
-    return site
+                         "`python tools/build_extension.py` once (it downloads the wheels), or install the extension")
+    return added
+
+
+def _importable(name):
+    import importlib.util
+    try:
+        return importlib.util.find_spec(name) is not None
+    except ImportError:
+        return False
 
 
 def ensure_registered():
@@ -102,7 +116,7 @@ def run(args, after_capture=None, after_overlays=None):
     ``after_capture(scene)`` / ``after_overlays(scene)`` are optional hooks. Returns a summary dict.
     """
     import bpy
-    ensure_opencv()
+    ensure_wheels()
     ensure_registered()
     from . import api
     out = os.path.abspath(args.out)
