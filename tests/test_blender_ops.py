@@ -319,3 +319,15 @@ def test_headless_pipeline_main(tmp_path):
     p = bpy.context.scene.clothfit
     assert p.capture_dir.startswith("//") and p.fit_has_result
     assert pipeline.main(["--out", str(tmp_path / "o2"), "--rig", "no_such_rig"]) == 2
+
+
+def test_show_frame_swaps_camera_backgrounds(small_capture):
+    scene = bpy.context.scene
+    small_settings(scene, small_capture)
+    assert bpy.ops.clothfit.load_capture() == {"FINISHED"}
+    cam = S.rig_objects(scene)[1]
+    img = cam.data.background_images[0].image
+    assert img.filepath.endswith(os.path.join(cam.name, "000.png"))
+    scene.clothfit.view_frame = 2
+    assert cam.data.background_images[0].image.filepath.endswith(os.path.join(cam.name, "002.png"))
+    assert img.size[:] == (160, 120)
