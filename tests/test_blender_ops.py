@@ -331,3 +331,18 @@ def test_show_frame_swaps_camera_backgrounds(small_capture):
     scene.clothfit.view_frame = 2
     assert cam.data.background_images[0].image.filepath.endswith(os.path.join(cam.name, "002.png"))
     assert img.size[:] == (160, 120)
+
+
+def test_render_never_overwrites_a_foreign_capture(tmp_path):
+    from addon.core.synth import synth_capture
+    from addon.core.model import paper_scenario
+    from addon.core.camera import ring_rig
+    cams = ring_rig(n_per_ring=(2,), elevations_deg=(30.0,), distance=0.5, target=(0, 0, 0.06), width=80,
+                    height=60, fx=120.0)
+    synth_capture(tmp_path / "real", scenario=paper_scenario(frame_times=[0.1]), cameras=cams, noise=0.0)
+    scene = bpy.context.scene
+    small_settings(scene, tmp_path / "real")
+    for op in ("build_rig", "build_cloth", "simulate"):
+        getattr(bpy.ops.clothfit, op)()
+    assert "only overwrites its own renders" in run_error("render_silhouettes")
+    assert (tmp_path / "real" / "capture.json").is_file()

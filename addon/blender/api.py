@@ -208,10 +208,11 @@ def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None
     if missing:
         raise ClothFitError(f"the cloth is not baked at t = {missing[0]:.3f} s ({len(missing)} capture times "
                             f"missing): simulate first")
+    _refuse_foreign_capture(root)
     cams = S.rig_cameras(scene)
     shapes = S.baked_positions(cloth, times)
     par = params_from_scene(scene)
-    meta = {"generator": f"Blender {bpy.app.version_string} Workbench (addon/blender/render.py)",
+    meta = {"generator": f"{GENERATOR_PREFIX}{bpy.app.version_string} Workbench (addon/blender/render.py)",
             "true_params": par.as_dict(), "noise_fraction": noise, "seed": seed}
     cap = write_capture(root, cams, sc, None, shapes=shapes, cloth_mass=par.m * sc.grid.n_vertices, meta=meta)
     frame0 = scene.frame_current
@@ -237,6 +238,24 @@ def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None
         scene.frame_set(frame0)
     p.capture_dir = root
     return cap
+
+
+GENERATOR_PREFIX = "Blender "
+
+
+def _refuse_foreign_capture(root):
+    """Never overwrite a capture that this renderer did not write (real footage, synthetic...)."""
+    path = os.path.join(root, "capture.json")
+    if not os.path.isfile(path):
+        return
+    try:
+        with open(path) as f:
+            gen = str((json.load(f).get("meta") or {}).get("generator", ""))
+    except (OSError, ValueError, AttributeError):
+        gen = "?"
+    if not gen.startswith(GENERATOR_PREFIX):
+        raise ClothFitError(f"{root} already holds a capture written by {gen or 'another tool'!r}; Render Silhouettes "
+                            f"only overwrites its own renders: choose another capture directory")
 
 
 def load_capture(scene, path=None):
