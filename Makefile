@@ -21,7 +21,7 @@ $(STAMP): requirements.txt
 	touch $(STAMP)
 
 demo: venv
-	$(PY) demo_blend/build_demo.py --out out/demo
+	$(PY) demo_blend/build_demo.py --out out/demo --blend out/demo/demo.blend
 	$(PY) -m addon paper --quick --json out/paper_quick.json --out out/paper_quick --only table1
 	@echo "demo done: see out/demo/ (Blender-rendered capture, fit, overlays) and out/paper_quick.json"
 

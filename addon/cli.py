@@ -1,6 +1,7 @@
 """Command line: ``python -m addon <command> ...`` (no Blender needed except for ``blender-*``).
 
-Commands: synth, fit, evaluate, overlay, paper, bench, extract, import-cameras, export-cameras, rig.
+Commands: synth, fit, evaluate, overlay, paper, tables, bench, rig, extract, import-cameras, export-cameras,
+blender (the whole pipeline through Blender: needs the bpy module).
 Every error from bad input is one line naming the file or value (exit code 2), never a traceback.
 """
 from __future__ import annotations
@@ -301,6 +302,7 @@ def build_parser():
     s = sub.add_parser("extract", help="silhouettes from camera images (see --help)", add_help=False)
     s.add_argument("rest", nargs=argparse.REMAINDER)
     s.set_defaults(fn=cmd_extract)
+    sub.add_parser("blender", help="the whole pipeline through Blender (bpy module): see `blender --help`", add_help=False)
     for nm in ("import-cameras", "export-cameras"):
         s = sub.add_parser(nm, help="camera calibration files (OpenCV YAML/JSON, COLMAP)", add_help=False)
         s.add_argument("rest", nargs=argparse.REMAINDER)
@@ -311,8 +313,13 @@ def build_parser():
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
     # sub-tools with parsers of their own: hand them everything after the command name
-    if argv and argv[0] in ("extract", "import-cameras", "export-cameras"):
+    if argv and argv[0] in ("extract", "import-cameras", "export-cameras", "blender"):
         try:
+            if argv[0] == "blender":
+                # the whole Blender pipeline (bpy module needed): build rig and cloth, simulate, render
+                # silhouettes with Blender, fit, overlays, save a .blend
+                from .blender import pipeline
+                return int(pipeline.main(argv[1:]) or 0)
             if argv[0] == "extract":
                 from .core import extract
                 extract.main(argv[1:])
