@@ -169,6 +169,8 @@ def cmd_evaluate(a):
     from .core.evaluate import evaluate
     cap = load_capture(a.capture)
     r = evaluate(cap, _params(a), cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
+    if r["exploded"]:
+        raise ClothFitError(f"parameters {_params(a)} make the simulation explode: no silhouette to score")
     s = f"silhouette error {r['silhouette_error_pct']:.3f} % over {len(r['cameras'])} cameras x {len(r['times'])} frames"
     if "shape_error_mm" in r:
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
