@@ -346,3 +346,28 @@ def test_render_never_overwrites_a_foreign_capture(tmp_path):
         getattr(bpy.ops.clothfit, op)()
     assert "only overwrites its own renders" in run_error("render_silhouettes")
     assert (tmp_path / "real" / "capture.json").is_file()
+
+
+def test_render_failing_midway_leaves_no_capture_json(tmp_path, monkeypatch):
+    """Render Silhouettes writes capture.json only after the last PNG: a failed render is not a capture."""
+    from addon.blender import render as R
+    from addon.core.errors import ClothFitError
+    scene = bpy.context.scene
+    small_settings(scene, tmp_path / "cap")
+    for op in ("build_rig", "build_cloth", "simulate"):
+        assert getattr(bpy.ops.clothfit, op)() == {"FINISHED"}
+    real, calls = R.render_masks, []
+
+    def flaky(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            raise ClothFitError("simulated render failure")
+        return real(*a, **k)
+    monkeypatch.setattr(R, "render_masks", flaky)
+    assert "simulated render failure" in run_error("render_silhouettes")
+    assert (tmp_path / "cap" / "sil" / "cam00" / "000.png").is_file()
+    assert not (tmp_path / "cap" / "capture.json").exists()
+    assert "capture.json missing" in run_error("load_capture")
+    monkeypatch.setattr(R, "render_masks", real)
+    assert bpy.ops.clothfit.render_silhouettes() == {"FINISHED"}
+    assert bpy.ops.clothfit.load_capture() == {"FINISHED"}

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from addon.core import camera as camera_mod
-from addon.core.capture import (DEFAULT_PATTERN, FORMAT, Capture, load_capture, read_shapes, read_silhouette,
-                                save_silhouette, write_capture)
+from addon.core.capture import (DEFAULT_PATTERN, FORMAT, Capture, PendingCapture, finalize_capture, load_capture,
+                                read_shapes, read_silhouette, save_silhouette, write_capture)
 from addon.core.errors import ClothFitError
 from addon.core.model import ClothGrid, paper_scenario
 
@@ -120,6 +120,45 @@ def test_metadata_only_then_render(tmp_path):
     cap2 = load_capture(str(tmp_path / "c")).validate()
     assert cap2.shapes is None and cap2.cloth_mass is None and cap2.meta == {}
     assert np.array_equal(cap2.load_silhouette(2, 1), masks[2][1])
+
+
+def test_pending_capture_then_finalize(tmp_path):
+    """Two-step writing for renderers: no capture.json until finalize, which writes it last."""
+    root = tmp_path / "c"
+    cams, scen = _rig(), _scenario()
+    pending = write_capture(str(root), cams, scen, None, shapes=_shapes(scen), cloth_mass=0.002, meta=META,
+                            finalize=False)
+    assert isinstance(pending, PendingCapture) and not pending.finalized
+    assert (root / "cameras.json").is_file() and (root / "shapes.npz").is_file()
+    assert not (root / "capture.json").exists()
+    assert (root / "sil" / "cam02").is_dir()
+    # a renderer that stops midway: some PNGs written, never finalised -> not loadable
+    masks = _masks(3, 3)
+    save_silhouette(pending.silhouette_path(0, 0), masks[0][0])
+    msg = _err(load_capture, str(root))
+    assert "capture.json missing" in msg and "incomplete" in msg and str(root) in msg
+    # finalising before every PNG is there is refused, naming the missing files
+    msg = _err(finalize_capture, pending)
+    assert "8 of 9 silhouette files are missing" in msg and os.path.join("cam00", "001.png") in msg
+    assert not (root / "capture.json").exists()
+    for c in range(3):
+        for f in range(3):
+            save_silhouette(pending.silhouette_path(c, f), masks[c][f])
+    cap = finalize_capture(pending)
+    assert pending.finalized and isinstance(cap, Capture)
+    cap2 = load_capture(str(root)).validate()
+    assert cap2.cloth_mass == 0.002 and cap2.meta == META and cap2.shapes.shape == (3, 16, 3)
+    assert np.array_equal(cap2.load_silhouette(1, 2), masks[1][2])
+    assert not any(p.name.endswith(".tmp") for p in root.rglob("*"))
+    # rewriting a finished capture as pending removes its capture.json first
+    write_capture(str(root), cams, scen, None, finalize=False)
+    assert "capture.json missing" in _err(load_capture, str(root))
+    assert "PendingCapture" in _err(finalize_capture, cap)
+
+
+def test_missing_capture_json_messages(tmp_path):
+    assert "capture.json missing" in _err(load_capture, str(tmp_path))
+    assert "incomplete" not in _err(load_capture, str(tmp_path))
 
 
 def test_time_pattern_and_subset(tmp_path):

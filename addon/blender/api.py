@@ -193,7 +193,7 @@ def simulate(scene):
 def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None):
     """Blender renders the cloth's silhouette from every rig camera at every capture time and
     writes a capture directory (core format). Returns the ``Capture``."""
-    from ..core.capture import save_silhouette, write_capture
+    from ..core.capture import finalize_capture, save_silhouette, write_capture
     from ..core.metrics import add_boundary_noise
     from ..core.synth import noise_rng
     p = props(scene)
@@ -214,7 +214,10 @@ def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None
     par = params_from_scene(scene)
     meta = {"generator": f"{GENERATOR_PREFIX}{bpy.app.version_string} Workbench (addon/blender/render.py)",
             "true_params": par.as_dict(), "noise_fraction": noise, "seed": seed}
-    cap = write_capture(root, cams, sc, None, shapes=shapes, cloth_mass=par.m * sc.grid.n_vertices, meta=meta)
+    # two steps: everything but capture.json now, capture.json only once every PNG is written, so a
+    # render that fails midway never leaves a capture that looks complete
+    pending = write_capture(root, cams, sc, None, shapes=shapes, cloth_mass=par.m * sc.grid.n_vertices, meta=meta,
+                            finalize=False)
     frame0 = scene.frame_current
     tmp = os.path.join(root, ".render_tmp")
     os.makedirs(tmp, exist_ok=True)
@@ -228,9 +231,10 @@ def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None
                                         f"(empty silhouette)")
                 if noise > 0:
                     m = add_boundary_noise(m, noise, noise_rng(seed, ci, fi))
-                save_silhouette(cap.silhouette_path(ci, fi), m)
+                save_silhouette(pending.silhouette_path(ci, fi), m)
             if progress:
                 progress((fi + 1) / len(times))
+        cap = finalize_capture(pending)
     finally:
         for f in os.listdir(tmp):
             os.remove(os.path.join(tmp, f))

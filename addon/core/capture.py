@@ -589,7 +589,12 @@ def load_capture(path, validate: bool = False) -> Capture:
     if os.path.isdir(path):
         json_path = os.path.join(path, CAPTURE_JSON)
         if not os.path.isfile(json_path):
-            raise ClothFitError(f"capture directory {path} has no {CAPTURE_JSON} (missing file {json_path})")
+            if os.path.isfile(os.path.join(path, CAMERAS_JSON)):  # a writer started but did not finish
+                raise ClothFitError(f"capture directory {path}: {CAPTURE_JSON} missing: the capture is incomplete "
+                                    f"({CAMERAS_JSON} was written but the writer never finalised it, e.g. a "
+                                    f"render or extraction stopped midway); write the capture again")
+            raise ClothFitError(f"capture directory {path} has no {CAPTURE_JSON} ({CAPTURE_JSON} missing: "
+                                f"{json_path})")
     elif os.path.isfile(path):
         json_path = path
     else:
@@ -702,15 +707,23 @@ def _json_default(o):
 
 
 def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, cloth_mass=None, meta=None,
-                  pattern: str = DEFAULT_PATTERN, allow_empty: bool = False) -> Capture:
-    """Write a capture directory and return it as a ``Capture``.
+                  pattern: str = DEFAULT_PATTERN, allow_empty: bool = False, finalize: bool = True):
+    """Write a capture directory and return it as a ``Capture`` (or a ``PendingCapture``).
 
     ``silhouettes[c][f]`` (bool / 0-1 / 0-255 arrays of camera c's height x width) for every
-    camera and every frame of ``scenario.frame_times``; or None to write only the metadata
-    (a renderer then writes each PNG itself at ``capture.silhouette_path(c, f)`` with
-    ``save_silhouette``). Order: an old capture.json is removed first, then cameras.json,
-    shapes.npz and the PNGs, and capture.json is written last (temporary file + rename), so a
-    directory with a capture.json is always complete.
+    camera and every frame of ``scenario.frame_times``; or None when the caller writes each PNG
+    itself at ``capture.silhouette_path(c, f)`` with ``save_silhouette`` (a renderer).
+    Order: an old capture.json is removed first, then cameras.json, shapes.npz and the PNGs, and
+    capture.json is written last (temporary file + rename), so a directory with a capture.json
+    is always complete.
+
+    ``finalize=False`` (the two-step API for renderers): everything but capture.json is written
+    and a :class:`PendingCapture` is returned; the caller writes the silhouettes, then calls
+    :func:`finalize_capture` (which checks that every silhouette file exists) to write
+    capture.json. A writer that fails midway thus leaves no capture.json, and loading the
+    directory says "capture.json missing". ``finalize=True`` with ``silhouettes=None`` writes
+    capture.json at once (a metadata-only capture, e.g. a cameras container): only for callers
+    that do not need the PNGs to be there.
     """
     root = os.path.abspath(os.fspath(root))
     cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta)
@@ -750,11 +763,73 @@ def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, c
         for ci in range(cap.n_cameras):
             os.makedirs(os.path.dirname(cap.silhouette_path(ci, 0)), exist_ok=True)
 
-    try:
-        _write_bytes_atomic(cap.json_path, text.encode("utf-8"))
-    except OSError as e:
-        raise ClothFitError(f"{where}: cannot write ({e})") from None
-    return cap
+    pending = PendingCapture(cap, text)
+    if not finalize:
+        return pending
+    return pending.finalize(check_files=silhouettes is not None)
+
+
+class PendingCapture:
+    """A capture written except for its capture.json (``write_capture(..., finalize=False)``).
+
+    ``capture`` is the ``Capture`` it will become (``silhouette_path`` etc. work already);
+    :meth:`finalize` / :func:`finalize_capture` writes capture.json once every silhouette is there.
+    Until then ``load_capture`` refuses the directory ("capture.json missing").
+    """
+
+    def __init__(self, capture: Capture, text: str):
+        self.capture = capture
+        self._text = text
+        self.finalized = False
+
+    @property
+    def root(self):
+        return self.capture.root
+
+    @property
+    def json_path(self):
+        return self.capture.json_path
+
+    def silhouette_path(self, cam_index: int, frame_index: int) -> str:
+        return self.capture.silhouette_path(cam_index, frame_index)
+
+    def missing_silhouettes(self):
+        """Paths of the silhouette files not written yet."""
+        cap = self.capture
+        return [cap.silhouette_path(ci, fi) for ci in range(cap.n_cameras) for fi in range(cap.n_frames)
+                if not os.path.isfile(cap.silhouette_path(ci, fi))]
+
+    def finalize(self, check_files: bool = True) -> Capture:
+        """Write capture.json (temporary file + rename) and return the ``Capture``.
+
+        ``check_files``: refuse (ClothFitError naming the missing files) unless every
+        silhouette file exists. The files' contents are not read (``validate`` does that)."""
+        where = f"capture {self.json_path}"
+        if check_files:
+            missing = self.missing_silhouettes()
+            if missing:
+                n = self.capture.n_cameras * self.capture.n_frames
+                head = "\n  ".join(missing[:5])
+                more = f"\n  ... and {len(missing) - 5} more" if len(missing) > 5 else ""
+                raise ClothFitError(f"{where}: cannot finalise: {len(missing)} of {n} silhouette files are "
+                                    f"missing:\n  {head}{more}")
+        try:
+            _write_bytes_atomic(self.json_path, self._text.encode("utf-8"))
+        except OSError as e:
+            raise ClothFitError(f"{where}: cannot write ({e})") from None
+        self.finalized = True
+        return self.capture
+
+    def __repr__(self):
+        return f"PendingCapture({self.root!r}, finalized={self.finalized})"
+
+
+def finalize_capture(pending: PendingCapture, check_files: bool = True) -> Capture:
+    """Second step of ``write_capture(..., finalize=False)``: write capture.json last."""
+    if not isinstance(pending, PendingCapture):
+        raise ClothFitError(f"finalize_capture needs the PendingCapture returned by write_capture(..., "
+                            f"finalize=False), got {type(pending).__name__}")
+    return pending.finalize(check_files)
 
 
 def _check_silhouettes(cap: Capture, silhouettes, allow_empty: bool, where: str):
