@@ -145,7 +145,7 @@ def cmd_fit(a):
         cfg = FitConfig(train_cameras=_cams(cap, a.cameras), train_times=_times(a.times), optimizer=a.optimizer,
                         seed=a.seed, max_evaluations=a.max_evaluations or D.FIT_EVALUATIONS,
                         resolution=_res(a.resolution), cloth_mass=a.cloth_mass, backend=a.backend,
-                        population=a.population, target_error=a.target)
+                        population=a.population, children=a.children, target_error=a.target)
         job = FitJob(cap, cfg, checkpoint=ck)
     bar = Progress(not a.quiet)
     try:
@@ -191,7 +191,8 @@ def cmd_overlay(a):
 def cmd_paper(a):
     from .core.experiment import run_paper
     run_paper(a.json, quick=a.quick, out_dir=a.out, seed=a.seed, optimizer=a.optimizer,
-              max_evaluations=a.max_evaluations, only=a.only, truth_dt_safety=a.truth_dt_safety)
+              max_evaluations=a.max_evaluations, only=a.only, truth_dt_safety=a.truth_dt_safety,
+              population=a.population, children=a.children)
 
 
 def cmd_tables(a):
@@ -248,7 +249,8 @@ def build_parser():
     s.add_argument("--optimizer", default=D.DEFAULT_OPTIMIZER, help="cma-es (default) or spx-mgg (the paper's GA)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--max-evaluations", type=int, default=None)
-    s.add_argument("--population", type=int, default=None)
+    s.add_argument("--population", type=int, default=None, help="optimiser population (GA default 7n = 21, CMA-ES 4 + 3 ln n = 7)")
+    s.add_argument("--children", type=int, default=None, help="GA: SPX children per family (default 5n = 15)")
     s.add_argument("--target", type=float, default=None, help="stop when mean E_sil per image falls below this fraction")
     s.add_argument("--resolution", help="fit at HxW (silhouettes area-resampled)")
     s.add_argument("--cloth-mass", type=float, default=None, help="total cloth mass [kg] (fixes m)")
@@ -283,6 +285,8 @@ def build_parser():
     s.add_argument("--optimizer", default=None)
     s.add_argument("--max-evaluations", type=int, default=None)
     s.add_argument("--only", default=None, help="comma list of parts: table1, fig8, table2, optimizers")
+    s.add_argument("--population", type=int, default=None, help="optimiser population (GA: MGG population)")
+    s.add_argument("--children", type=int, default=None, help="GA: SPX children per family")
     s.add_argument("--truth-dt-safety", type=float, default=None,
                    help="time-step factor of the ground truth (default: the model's own; 0.125 = 4x finer truth, "
                         "i.e. a model mismatch the fit cannot remove)")

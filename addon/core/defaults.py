@@ -55,8 +55,14 @@ LOG_SCALED = {"k_over_m": True, "d_over_m": True, "l_rel": True}
 
 # --- optimisers (SPEC 7)
 N_FREE = 3
-GA_POPULATION = 20 * N_FREE       # MGG population ~ 20 n
-GA_CHILDREN = 10 * N_FREE         # SPX children per family ~ 10 n
+# SPX + MGG sizes. The optimiser's own defaults are the textbook values, population 20n and 10n children
+# (robust on hard test functions such as Rosenbrock). A cloth fit uses population 7n with 5n children:
+# on this problem they reached 0.5 % mean E_sil in a median 1371 evaluations where the textbook sizes
+# never got below 1 % in 2000 (README, "Optimisers").
+GA_POPULATION_TEXTBOOK = GA_POPULATION = 20 * N_FREE
+GA_CHILDREN_TEXTBOOK = GA_CHILDREN = 10 * N_FREE
+FIT_GA_POPULATION = 7 * N_FREE
+FIT_GA_CHILDREN = 5 * N_FREE
 CMA_POPSIZE = 4 + int(3 * math.log(N_FREE))
 FIT_EVALUATIONS = 2500            # default evaluation budget of one fit
 DEFAULT_OPTIMIZER = "cma-es"      # measured faster than SPX+MGG on this problem (README, `paper --only optimizers`)

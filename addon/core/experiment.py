@@ -39,7 +39,8 @@ QUICK = dict(evals=700, fig8_cameras=[4], opt_seeds=2, opt_evals=600, opt_camera
 DEFAULT_OPTIMIZER = D.DEFAULT_OPTIMIZER
 # optimiser variants compared: the paper's GA with the textbook sizes (population 20n, 10n children),
 # the same GA with a smaller population (7n, 5n children), and CMA-ES with its default population
-OPT_VARIANTS = [("spx-mgg", {"optimizer": "spx-mgg"}),
+OPT_VARIANTS = [("spx-mgg", {"optimizer": "spx-mgg", "population": D.GA_POPULATION_TEXTBOOK,
+                             "children": D.GA_CHILDREN_TEXTBOOK}),
                 ("spx-mgg-small", {"optimizer": "spx-mgg", "population": 7 * D.N_FREE, "children": 5 * D.N_FREE}),
                 ("cma-es", {"optimizer": "cma-es"})]
 
@@ -65,11 +66,11 @@ def _log(msg):
     print(msg, flush=True)
 
 
-def fit_and_score(train_cap, test_cap, n_cams, train_times, optimizer, evals, seed, resolution=None):
+def fit_and_score(train_cap, test_cap, n_cams, train_times, optimizer, evals, seed, resolution=None, sizes=None):
     train, held = select_training(train_cap.cameras, n_cams)
     t0 = time.time()
     job = FitJob(train_cap, FitConfig(train_cameras=train, train_times=train_times, optimizer=optimizer,
-                                      seed=seed, max_evaluations=evals))
+                                      seed=seed, max_evaluations=evals, **(sizes or {})))
     res = job.run()
     ev = evaluate(test_cap, res["params"], cameras=held, times=D.TEST_TIMES)
     gt = test_cap.meta["true_params"]
@@ -87,12 +88,13 @@ def fit_and_score(train_cap, test_cap, n_cams, train_times, optimizer, evals, se
 
 
 def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=None, max_evaluations=None,
-              only=None, truth_dt_safety=None):
+              only=None, truth_dt_safety=None, population=None, children=None):
     S = dict(QUICK if quick else FULL)
     if max_evaluations:
         S["evals"] = max_evaluations
     optimizer = optimizer or DEFAULT_OPTIMIZER
     parts = set((only or "table1,fig8,table2,optimizers").split(","))
+    sizes = {k: v for k, v in (("population", population), ("children", children)) if v}
     t_start = time.time()
     os.makedirs(out_dir, exist_ok=True)
     cap_path = os.path.join(out_dir, "capture_480x640")
@@ -102,14 +104,14 @@ def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=Non
     cap = load_capture(cap_path)
     gt = cap.meta["true_params"]
     out = {"protocol": "SPEC 5 (see addon/core/experiment.py)", "quick": quick, "seed": seed,
-           "optimizer": optimizer, "evaluations_per_fit": S["evals"], "true_params": gt,
+           "optimizer": optimizer, "optimizer_sizes": sizes, "evaluations_per_fit": S["evals"], "true_params": gt,
            "truth_dt_safety": tds, "model_dt_safety": D.DT_SAFETY,
            "true_identifiable": identifiable(gt), "rig": D.DEFAULT_RIG, "noise_fraction": D.NOISE_FRACTION}
 
     if "table1" in parts:
         rows = []
         for n in D.TABLE1_CAMERAS:
-            row, held = fit_and_score(cap, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed)
+            row, held = fit_and_score(cap, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, sizes=sizes)
             row["floor_noise_only_pct"] = noise_floor(cap, held, D.TEST_TIMES)
             fl = evaluate(cap, gt, cameras=held, times=D.TEST_TIMES)
             row["floor_true_params_pct"] = fl["silhouette_error_pct"]
@@ -129,7 +131,7 @@ def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=Non
         rows = []
         for n in S["fig8_cameras"]:
             for N in D.FIG8_SHAPES:
-                row, _ = fit_and_score(cap, cap, n, D.TRAIN_TIMES[:N], optimizer, S["evals"], seed)
+                row, _ = fit_and_score(cap, cap, n, D.TRAIN_TIMES[:N], optimizer, S["evals"], seed, sizes=sizes)
                 rows.append(row)
                 _log(f"fig8 cameras={n:2d} shapes={N:2d}: silhouette {row['silhouette_error_pct']:.3f} %, shape "
                      f"{row['shape_error_mm']:.3f} mm [{row['fit_seconds']:.0f} s]")
@@ -143,7 +145,7 @@ def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=Non
             synth_capture(lp, seed=seed, resolution=res, truth_dt_safety=tds)
             low = load_capture(lp)
             for n in D.TABLE2_CAMERAS:
-                row, _ = fit_and_score(low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res)
+                row, _ = fit_and_score(low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res, sizes=sizes)
                 row["floor_noise_only_pct"] = noise_floor(cap, held_of(cap, n), D.TEST_TIMES)
                 rows.append(row)
                 _log(f"table2 {res[0]}x{res[1]} cameras={n}: silhouette {row['silhouette_error_pct']:.3f} %, shape "

@@ -112,8 +112,10 @@ class FitJob:
         is_cma = cfg.optimizer.lower() in ("cma", "cma-es")
         if cfg.population:
             kw["popsize" if is_cma else "population"] = cfg.population
-        if cfg.children and not is_cma:
-            kw["children"] = cfg.children
+        elif not is_cma:
+            kw["population"] = D.FIT_GA_POPULATION
+        if not is_cma:
+            kw["children"] = cfg.children or D.FIT_GA_CHILDREN
         self.opt = make_optimizer(cfg.optimizer, self.space, cfg.seed, **kw)
         self.started = time.time()
         self.elapsed = 0.0
