@@ -192,7 +192,7 @@ def cmd_paper(a):
     from .core.experiment import run_paper
     run_paper(a.json, quick=a.quick, out_dir=a.out, seed=a.seed, optimizer=a.optimizer,
               max_evaluations=a.max_evaluations, only=a.only, truth_dt_safety=a.truth_dt_safety,
-              population=a.population, children=a.children)
+              population=a.population, children=a.children, rig=a.rig)
 
 
 def cmd_tables(a):
@@ -287,6 +287,7 @@ def build_parser():
     s.add_argument("--only", default=None, help="comma list of parts: table1, fig8, table2, optimizers")
     s.add_argument("--population", type=int, default=None, help="optimiser population (GA: MGG population)")
     s.add_argument("--children", type=int, default=None, help="GA: SPX children per family")
+    s.add_argument("--rig", default=None, help="camera rig preset (default lab18)")
     s.add_argument("--truth-dt-safety", type=float, default=None,
                    help="time-step factor of the ground truth (default: the model's own; 0.125 = 4x finer truth, "
                         "i.e. a model mismatch the fit cannot remove)")

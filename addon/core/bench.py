@@ -95,12 +95,21 @@ def run_bench(json_path, quick=False):
                                 max_evaluations=evals, seed=0))
     job.run()
     wall = time.perf_counter() - t0
+    try:
+        import resource
+        peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
+    except (ImportError, OSError):
+        peak_mb = None
+    out["peak_memory_mb"] = peak_mb
     out["fit"] = {"optimizer": DEFAULT_OPTIMIZER, "evaluations": job.evaluations, "wall_s": wall,
                   "evals_per_s": job.evaluations / wall, "ratio_to_target": wall / TARGET_FIT_S,
                   "best_E_sil_pct": 100 * job.best_error / job.objective.n_images}
     print(f"16-camera fit ({DEFAULT_OPTIMIZER}, {job.evaluations} evaluations): {wall:.1f} s wall "
           f"(target {TARGET_FIT_S:.0f} s, ratio {wall / TARGET_FIT_S:.2f}), best training E_sil "
           f"{out['fit']['best_E_sil_pct']:.3f} %", flush=True)
+    if peak_mb is not None:
+        print(f"peak memory of the whole bench process (capture, 240 observed silhouettes, numba): {peak_mb:.0f} MB",
+              flush=True)
     if load is not None and load > 0.5:
         print(f"note: the machine was busy (1-min load {load:.2f} on {os.cpu_count()} CPUs at the start): wall-clock "
               f"figures are pessimistic; CPU ms per evaluation is the load-independent figure", flush=True)

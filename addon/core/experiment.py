@@ -88,7 +88,7 @@ def fit_and_score(train_cap, test_cap, n_cams, train_times, optimizer, evals, se
 
 
 def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=None, max_evaluations=None,
-              only=None, truth_dt_safety=None, population=None, children=None):
+              only=None, truth_dt_safety=None, population=None, children=None, rig=None):
     S = dict(QUICK if quick else FULL)
     if max_evaluations:
         S["evals"] = max_evaluations
@@ -100,13 +100,14 @@ def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=Non
     cap_path = os.path.join(out_dir, "capture_480x640")
     _log(f"synthesising the ground-truth capture -> {cap_path}")
     tds = D.TRUTH_DT_SAFETY if truth_dt_safety is None else truth_dt_safety
-    synth_capture(cap_path, seed=seed, truth_dt_safety=tds)
+    rig = rig or D.DEFAULT_RIG
+    synth_capture(cap_path, seed=seed, truth_dt_safety=tds, rig=rig)
     cap = load_capture(cap_path)
     gt = cap.meta["true_params"]
     out = {"protocol": "SPEC 5 (see addon/core/experiment.py)", "quick": quick, "seed": seed,
            "optimizer": optimizer, "optimizer_sizes": sizes, "evaluations_per_fit": S["evals"], "true_params": gt,
            "truth_dt_safety": tds, "model_dt_safety": D.DT_SAFETY,
-           "true_identifiable": identifiable(gt), "rig": D.DEFAULT_RIG, "noise_fraction": D.NOISE_FRACTION}
+           "true_identifiable": identifiable(gt), "rig": rig, "noise_fraction": D.NOISE_FRACTION}
 
     if "table1" in parts:
         rows = []
@@ -142,7 +143,7 @@ def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=Non
         rows = []
         for res in D.TABLE2_RESOLUTIONS:
             lp = os.path.join(out_dir, f"capture_{res[0]}x{res[1]}")
-            synth_capture(lp, seed=seed, resolution=res, truth_dt_safety=tds)
+            synth_capture(lp, seed=seed, resolution=res, truth_dt_safety=tds, rig=rig)
             low = load_capture(lp)
             for n in D.TABLE2_CAMERAS:
                 row, _ = fit_and_score(low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res, sizes=sizes)
