@@ -172,19 +172,46 @@ def _remove_object(obj):
             bpy.data.meshes.remove(data)
 
 
-def build_rig(scene, cameras):
-    """Replace the rig collection's cameras by ``cameras`` (core Cameras). Returns the objects."""
+PAR_RANGE = (1.0 / 200.0, 200.0)   # Blender's pixel aspect range (fx / fy)
+
+
+def check_rig(cameras):
+    """Raise unless Blender can show every camera of ``cameras`` in one scene: one image size and
+    one fx/fy ratio (Blender has one render size and pixel aspect per scene), no skew, unique
+    names. The message names the first camera at fault."""
     cameras = list(cameras)
     if not cameras:
         raise ClothFitError("the rig has no camera")
-    sizes = {(c.width, c.height) for c in cameras}
-    if len(sizes) > 1:
-        raise ClothFitError(f"the rig's cameras have different image sizes {sorted(sizes)}: "
-                            f"Blender renders one size per scene")
-    pars = {round(c.K[0, 0] / c.K[1, 1], 9) for c in cameras}
-    if len(pars) > 1:
-        raise ClothFitError(f"the rig's cameras have different fx/fy ratios {sorted(pars)}: "
-                            f"Blender has one pixel aspect per scene")
+    c0 = cameras[0]
+    names = set()
+    for c in cameras:
+        if c.name in names:
+            raise ClothFitError(f"two cameras are named '{c.name}': camera names must be unique")
+        names.add(c.name)
+        if (c.width, c.height) != (c0.width, c0.height):
+            raise ClothFitError(f"camera '{c.name}' images {c.width}x{c.height} (WxH) but camera '{c0.name}' "
+                                f"{c0.width}x{c0.height}: Blender renders one image size per scene, so every "
+                                f"camera of the rig must have the same size")
+        if abs(c.K[0, 1]) > 1e-9 * c.K[0, 0]:
+            raise ClothFitError(f"camera '{c.name}': skew K[0,1] = {c.K[0, 1]:g} cannot be represented in Blender")
+        par = c.K[0, 0] / c.K[1, 1]
+        if not (PAR_RANGE[0] <= par <= PAR_RANGE[1]):
+            raise ClothFitError(f"camera '{c.name}': fx/fy = {par:g} is outside Blender's pixel aspect range")
+    par0 = c0.K[0, 0] / c0.K[1, 1]
+    for c in cameras[1:]:
+        par = c.K[0, 0] / c.K[1, 1]
+        if round(par, 9) != round(par0, 9):
+            raise ClothFitError(f"camera '{c.name}' has fx/fy = {par:.9g} but camera '{c0.name}' {par0:.9g}: "
+                                f"Blender has one pixel aspect per scene, so every camera of the rig must have "
+                                f"the same fx/fy")
+    return cameras
+
+
+def build_rig(scene, cameras):
+    """Replace the rig collection's cameras by ``cameras`` (core Cameras). Returns the objects.
+
+    Everything is checked (``check_rig``) before the old rig is touched."""
+    cameras = check_rig(cameras)
     coll = ensure_collection(scene, RIG_COLLECTION)
     for obj in list(coll.objects):
         _remove_object(obj)
@@ -320,6 +347,66 @@ def choose_fps(times, preferred=None):
 
 def frame_of_time(scene, t: float) -> int:
     return scene.frame_start + int(round(t * scene.render.fps / scene.render.fps_base))
+
+
+def time_of_frame(scene, frame) -> np.ndarray:
+    """Seconds of scene frame(s) ``frame`` (frame_start is t = 0, as the bake keys it)."""
+    return (np.asarray(frame, dtype=np.float64) - scene.frame_start) * scene.render.fps_base / scene.render.fps
+
+
+def ensure_fps(scene, times):
+    """Set the scene's frame rate to one at which every time is a whole frame (as the bake does),
+    keeping the current rate when it already is. Returns the old rate if it changed, else None."""
+    fps = choose_fps(times, scene.render.fps if scene.render.fps_base == 1.0 else None)
+    old = scene.render.fps / scene.render.fps_base
+    if scene.render.fps != fps or scene.render.fps_base != 1.0:
+        scene.render.fps, scene.render.fps_base = fps, 1.0
+        return old
+    return None
+
+
+def sample_world_positions(scene, objects, frames) -> np.ndarray:
+    """World positions (len(objects), len(frames), 3) of the objects' evaluated origins at the
+    given scene frames (animation, drivers, constraints and parents applied). The current frame
+    is restored."""
+    frames = [int(f) for f in frames]
+    out = np.zeros((len(objects), len(frames), 3))
+    frame0 = scene.frame_current
+    try:
+        for k, f in enumerate(frames):
+            scene.frame_set(f)
+            dg = bpy.context.evaluated_depsgraph_get()
+            for i, o in enumerate(objects):
+                out[i, k] = np.array(o.evaluated_get(dg).matrix_world.translation, dtype=np.float64)
+    finally:
+        scene.frame_set(frame0)
+    return out
+
+
+def simplify_track(times, positions, tol=1e-7):
+    """Keys of a piecewise-linear track without the ones linear interpolation reproduces within
+    ``tol`` (m): a resting empty keeps 1 key, a linear move 2. Every dropped key is within ``tol``
+    of the simplified track."""
+    t = np.asarray(times, dtype=np.float64)
+    P = np.asarray(positions, dtype=np.float64)
+    n = len(t)
+    if n <= 1:
+        return t, P
+    keep = [0]
+    i = 0
+    while i < n - 1:
+        j = i + 1
+        while j + 1 < n:
+            seg = slice(i + 1, j + 1)
+            w = ((t[seg] - t[i]) / (t[j + 1] - t[i]))[:, None]
+            if np.abs(P[i] + w * (P[j + 1] - P[i]) - P[seg]).max() > tol:
+                break
+            j += 1
+        keep.append(j)
+        i = j
+    if len(keep) == 2 and np.abs(P[keep[1]] - P[0]).max() <= tol:
+        keep = [0]
+    return t[keep], P[keep]
 
 
 # ======================================================================== bake
