@@ -15,7 +15,8 @@ from addon.blender import scene as S  # noqa: E402
 pytestmark = pytest.mark.usefixtures("factory")
 
 OPERATORS = ["build_rig", "build_cloth", "simulate", "render_silhouettes", "load_capture", "fit", "apply_fit",
-             "overlays"]
+             "overlays", "extract_silhouettes", "import_cameras", "export_cameras", "add_handle_empty",
+             "remove_handle"]
 
 
 def test_register_unregister_twice():
@@ -254,24 +255,42 @@ def test_bad_frame_times_and_unstable_parameters(tmp_path):
     assert "simulation needs more than" in run_error("simulate") or "unstable" in run_error("simulate")
 
 
+ICONS = {i.identifier for i in bpy.types.UILayout.bl_rna.functions["prop"].parameters["icon"].enum_items}
+
+
 class FakeLayout:
-    """Records what a panel draws; checks every property and operator it names exists."""
+    """Records what a panel draws; checks every property, operator, list and icon it names exists."""
 
     def __init__(self, log):
         self.log = log
         self.use_property_split = False
+        self.enabled = True
+
+    @staticmethod
+    def _icon(kw):
+        assert kw.get("icon", "NONE") in ICONS, kw["icon"]
 
     def prop(self, data, name, **kw):
         assert name in data.bl_rna.properties, name
+        self._icon(kw)
         self.log.append(("prop", name))
 
     def operator(self, idname, **kw):
         mod, op = idname.split(".")
         getattr(getattr(bpy.ops, mod), op).get_rna_type()
+        self._icon(kw)
         self.log.append(("operator", idname))
 
     def label(self, text="", **kw):
+        self._icon(kw)
         self.log.append(("label", text))
+
+    def template_list(self, listtype, list_id, data, propname, active_data, active_propname, **kw):
+        ul = getattr(bpy.types, listtype)
+        assert propname in data.bl_rna.properties and active_propname in active_data.bl_rna.properties
+        for i, item in enumerate(getattr(data, propname)):   # draw the rows as Blender would
+            ul.draw_item(None, bpy.context, self, data, item, 0, active_data, active_propname, i)
+        self.log.append(("list", listtype))
 
     def row(self, **kw):
         return self
@@ -279,11 +298,16 @@ class FakeLayout:
     column = box = row
 
 
-@pytest.mark.parametrize("state", ["empty", "running", "result"])
+@pytest.mark.parametrize("state", ["empty", "running", "result", "empties"])
 def test_panel_sections_draw(state, tmp_path):
     from addon.blender import panel
     scene = bpy.context.scene
     p = small_settings(scene, tmp_path)
+    if state == "empties":
+        assert bpy.ops.clothfit.add_handle_empty(row=0, column=15) == {"FINISHED"}
+        p.handles[0].use_release = True
+        p.extract_threshold_mode = "NUMBER"
+        p.extract_status = "2 cameras x 3 frames"
     if state == "running":
         p.fit_running, p.fit_status = True, "fitting"
     if state == "result":
@@ -300,9 +324,15 @@ def test_panel_sections_draw(state, tmp_path):
         expected.discard("clothfit.fit")
     if state != "result":
         expected.discard("clothfit.apply_fit")
+    if state != "empties":   # the handle list shows with the Empties manipulation (or when links exist)
+        expected -= {"clothfit.add_handle_empty", "clothfit.remove_handle"}
     assert expected <= ops_drawn
     if state == "result":
         assert any("k/m" in x for k, x in drawn if k == "label")
+    if state == "empties":
+        assert ("list", "CLOTHFIT_UL_handles") in drawn
+        assert ("label", "r0 c15 (#15)") in drawn and ("prop", "release_time") in drawn
+        assert ("prop", "extract_threshold") in drawn and ("label", "2 cameras x 3 frames") in drawn
 
 
 def test_headless_pipeline_main(tmp_path):

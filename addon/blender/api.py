@@ -22,7 +22,7 @@ import numpy as np
 from ..core import defaults as D
 from ..core.camera import load_rig, ring_rig, select_training
 from ..core.errors import ClothFitError
-from ..core.model import ClothGrid, Params, paper_scenario
+from ..core.model import ClothGrid, Handle, Params, Scenario, paper_scenario
 from . import render as R
 from . import scene as S
 
@@ -105,11 +105,171 @@ def rig_from_props(scene):
 
 def build_rig(scene, cameras=None):
     """Cameras (core ``Camera`` list, default: the rig the properties describe) into the scene."""
-    return S.build_rig(scene, cameras if cameras is not None else rig_from_props(scene))
+    return set_rig(scene, cameras if cameras is not None else rig_from_props(scene))[0]
 
 
 def rig_cameras(scene):
     return S.rig_cameras(scene)
+
+
+# ------------------------------------------------------- exact (imported) cameras
+
+PAR_APPROX_LIMIT = 0.01      # fx/fy ratios of one rig may differ this much (relative) and still be shown
+EXACT_MATCH_TOL = {"K": 1e-3, "R": 1e-5, "C": 1e-5}   # px, -, m: a Blender camera still shows its exact one
+
+
+def cameras_to_json(cameras) -> str:
+    """Exact JSON of cameras (float64 repr); all-zero distortion is left out."""
+    out = []
+    for c in cameras:
+        d = c.to_dict()
+        if not np.any(c.dist != 0):
+            d.pop("dist", None)
+        out.append(d)
+    return json.dumps(out)
+
+
+def cameras_from_json(text, where="scene.clothfit.rig_cameras_json"):
+    from ..core.camera import Camera
+    try:
+        data = json.loads(text)
+    except ValueError as e:
+        raise ClothFitError(f"{where}: not valid JSON ({e})") from None
+    if not isinstance(data, list):
+        raise ClothFitError(f"{where}: expected a list of cameras")
+    return [Camera.from_dict(d, where) for d in data]
+
+
+def blender_view_cameras(cameras):
+    """The cameras as one Blender scene can show them, and notes.
+
+    One image size per scene: cameras of different sizes are an error naming the camera. One
+    pixel aspect per scene: real calibrations have slightly different fx/fy per camera; up to
+    ``PAR_APPROX_LIMIT`` apart the Blender cameras use the median fx/fy (fx kept, fy adjusted;
+    a note says by how much), beyond it an error names the camera. Lens distortion cannot be
+    shown by a Blender camera (a note; the exact cameras are kept in ``rig_cameras_json``)."""
+    from ..core.camera import Camera
+    cameras = list(cameras)
+    if not cameras:
+        raise ClothFitError("the rig has no camera")
+    notes = []
+    pars = np.array([c.K[0, 0] / c.K[1, 1] for c in cameras])
+    if pars.max() / pars.min() - 1.0 > 1e-9:
+        par = float(np.median(pars))
+        worst = int(np.argmax(np.abs(pars / par - 1.0)))
+        off = abs(pars[worst] / par - 1.0)
+        if off > PAR_APPROX_LIMIT:
+            raise ClothFitError(
+                f"camera '{cameras[worst].name}' has fx/fy = {pars[worst]:.6g}, {100 * off:.2f} % "
+                f"away from the rig's median {par:.6g}: Blender has one pixel aspect per scene, so the cameras of a "
+                f"rig must share fx/fy (within {100 * PAR_APPROX_LIMIT:g} % they are shown approximately)")
+        shown, off = [], 0.0
+        for c in cameras:
+            K = c.K.copy()
+            K[1, 1] = K[0, 0] / par
+            off = max(off, abs(K[1, 1] - c.K[1, 1]))
+            shown.append(Camera(K, c.R, c.t, c.width, c.height, c.name))
+        notes.append(f"the cameras' fx/fy differ ({pars.min():.6g} to {pars.max():.6g}) but Blender has one pixel "
+                     f"aspect per scene: the Blender cameras use fx/fy = {par:.6g} (fy off by up to {off:.3g} px); "
+                     f"export keeps the exact cameras")
+    else:
+        shown = [Camera(c.K, c.R, c.t, c.width, c.height, c.name) for c in cameras]
+    distorted = [c.name for c in cameras if c.dist.size and np.any(c.dist != 0)]
+    if distorted:
+        notes.append(f"{len(distorted)} camera(s) have lens distortion ({', '.join(distorted[:4])}"
+                     f"{', ...' if len(distorted) > 4 else ''}): Blender shows the undistorted pinhole view; "
+                     f"the exact cameras (with distortion) are kept for export and fitting")
+    S.check_rig(shown)
+    return shown, notes
+
+
+def set_rig(scene, cameras):
+    """Build the rig from ``cameras`` and keep them exactly in ``rig_cameras_json``.
+    Returns (camera objects, notes)."""
+    cameras = list(cameras)
+    shown, notes = blender_view_cameras(cameras)
+    objs = S.build_rig(scene, shown)
+    props(scene).rig_cameras_json = cameras_to_json(cameras)
+    return objs, notes
+
+
+def _same_view(a, b):
+    tol = EXACT_MATCH_TOL
+    return ((a.width, a.height) == (b.width, b.height) and np.abs(a.K - b.K).max() <= tol["K"]
+            and np.abs(a.R - b.R).max() <= tol["R"] and np.abs(a.center - b.center).max() <= tol["C"])
+
+
+def exact_rig_cameras(scene):
+    """Per rig camera (rig order): ``(blender, exact, shown)``.
+
+    ``blender``: the camera as Blender renders it now (float32 settings); ``exact``: the imported
+    or loaded camera (float64, lens distortion) when the Blender camera still shows it (not moved,
+    not re-aimed: within ``EXACT_MATCH_TOL``), else None; ``shown``: float64 pinhole that Blender
+    shows for it (``exact`` without distortion, fy adjusted to the scene's pixel aspect), or None."""
+    p = props(scene)
+    objs = S.rig_objects(scene)
+    dg = bpy.context.evaluated_depsgraph_get()
+    now = [S.camera_from_blender(o, scene, depsgraph=dg) for o in objs]
+    stored = []
+    if p.rig_cameras_json.strip():
+        try:
+            stored = cameras_from_json(p.rig_cameras_json)
+            shown, _ = blender_view_cameras(stored)
+        except ClothFitError:
+            stored, shown = [], []
+    byname = {c.name: (c, v) for c, v in zip(stored, shown)}
+    out = []
+    for o, b in zip(objs, now):
+        ex, sh = byname.get(o.name, (None, None))
+        if ex is not None and _same_view(b, sh):
+            out.append((b, ex, sh))
+        else:
+            out.append((b, None, None))
+    return out
+
+
+def import_cameras(scene, path=None):
+    """Calibrated cameras (OpenCV FileStorage YAML/JSON/XML file or folder, COLMAP text model,
+    our cameras JSON) -> the rig. Returns (cameras, notes)."""
+    from ..core import calib_io
+    p = props(scene)
+    src = abspath(path if path else p.cameras_file, "camera file")
+    cams = calib_io.import_cameras(src)
+    _, notes = set_rig(scene, cams)
+    if path:
+        p.cameras_file = path
+    return cams, notes
+
+
+EXPORT_FORMATS = {"OPENCV": "opencv", "OPENCV_DIR": "opencv-dir", "COLMAP": "colmap", "JSON": "json"}
+
+
+def export_cameras(scene, path=None, fmt=None):
+    """The rig's cameras -> an OpenCV file/folder, a COLMAP model or our JSON. Cameras that
+    still show their imported/loaded camera are written exactly (float64, distortion); moved
+    ones as Blender shows them. Returns (path, cameras, names of cameras written from Blender)."""
+    from ..core import calib_io
+    p = props(scene)
+    fmt = fmt or p.cameras_export_format
+    if fmt not in EXPORT_FORMATS:
+        raise ClothFitError(f"camera export format {fmt!r} unknown ({', '.join(EXPORT_FORMATS)})")
+    dst = abspath(path if path else p.cameras_export_path, "camera export path")
+    if fmt in ("OPENCV", "JSON"):
+        ext = os.path.splitext(dst)[1].lower()
+        if os.path.isdir(dst) or not ext:
+            dst = os.path.join(dst, "cameras.json" if fmt == "JSON" else "calibration.yml")
+        elif fmt == "JSON" and ext != ".json":
+            raise ClothFitError(f"camera export path {dst}: a Cloth Fit cameras JSON must end with .json")
+    elif os.path.isfile(dst):
+        raise ClothFitError(f"camera export path {dst} is a file: the {fmt} format writes a folder")
+    rows = exact_rig_cameras(scene)
+    cams = [ex if ex is not None else b for b, ex, _ in rows]
+    from_blender = [b.name for b, ex, _ in rows if ex is None]
+    os.makedirs(os.path.dirname(dst) if fmt in ("OPENCV", "JSON") else dst, exist_ok=True)
+    calib_io.export_cameras(cams, dst, EXPORT_FORMATS[fmt])
+    if path:
+        p.cameras_export_path = path
+    return dst, cams, from_blender
 
 
 # ====================================================================== cloth
@@ -126,7 +286,8 @@ def capture_scenario(scene):
 
 
 def scenario_for(scene, grid: ClothGrid, times=None):
-    """The manipulation to simulate: the paper's (panel settings) or the loaded capture's."""
+    """The manipulation to simulate: the paper's (panel settings), the loaded capture's, or the
+    linked empties' (``scenario_source`` SETTINGS / CAPTURE / EMPTIES)."""
     p = props(scene)
     times = times if times is not None else parse_times(p.frame_times)
     if p.scenario_source == "CAPTURE":
@@ -136,6 +297,8 @@ def scenario_for(scene, grid: ClothGrid, times=None):
             raise ClothFitError(f"the capture's cloth is a {g.nx}x{g.ny} grid but the scene's cloth is "
                                 f"{grid.nx}x{grid.ny}: rebuild the cloth")
         return sc.with_frames(times)
+    if p.scenario_source == "EMPTIES":
+        return empties_scenario(scene, grid, times)
     if not 0 <= p.released_corner <= 3:
         raise ClothFitError(f"released corner {p.released_corner} must be 0..3")
     sc = paper_scenario(grid, frame_times=times, released_corner=p.released_corner)
@@ -146,8 +309,13 @@ def scenario_for(scene, grid: ClothGrid, times=None):
 def build_cloth(scene):
     p = props(scene)
     grid = capture_scenario(scene).grid if p.scenario_source == "CAPTURE" else grid_from_props(scene)
-    sc = scenario_for(scene, grid)
-    obj = S.build_cloth(scene, grid, sc.handles)
+    if p.scenario_source == "EMPTIES":  # vertex groups only: no need to sample (or validate) the empties yet
+        handles = [Handle(v, [0.0], grid.rest[v][None], link.release_time if link.use_release else None)
+                   for link, v in ((lk, lk.row * grid.nx + lk.column) for lk in p.handles)
+                   if link.row < grid.ny and link.column < grid.nx]
+    else:
+        handles = scenario_for(scene, grid).handles
+    obj = S.build_cloth(scene, grid, handles)
     p.cloth_object = obj
     return obj
 
@@ -169,6 +337,120 @@ def scene_scenario(scene, times=None):
     return scenario_for(scene, S.grid_from_object(obj), times), obj
 
 
+# ============================================================ handles from empties
+
+HANDLE_COLLECTION = "ClothFit Handles"
+
+
+def scene_grid(scene) -> ClothGrid:
+    """The grid of the built cloth, else the one the cloth settings describe."""
+    try:
+        return S.grid_from_object(cloth_object(scene))
+    except ClothFitError:
+        return grid_from_props(scene)
+
+
+def handle_links(scene, grid: ClothGrid):
+    """The Empties manipulation's links, checked: [(link, vertex index)]. Errors name the link."""
+    p = props(scene)
+    if not len(p.handles):
+        raise ClothFitError("the manipulation source is Empties but no handle is linked: add a handle empty "
+                            "(or link an empty to a grid vertex)")
+    out, seen = [], {}
+    for i, link in enumerate(p.handles):
+        obj = link.empty
+        name = f"handle #{i + 1}"
+        if obj is None:
+            raise ClothFitError(f"{name} (row {link.row}, column {link.column}) has no empty: pick one or remove the "
+                                f"handle")
+        name += f" ('{obj.name}')"
+        if obj.name not in scene.objects:
+            raise ClothFitError(f"{name}: the empty is not in the scene (deleted?): link another one or remove "
+                                f"the handle")
+        if obj.type != "EMPTY":
+            raise ClothFitError(f"{name}: '{obj.name}' is a {obj.type}, not an empty")
+        if not (0 <= link.row < grid.ny and 0 <= link.column < grid.nx):
+            raise ClothFitError(f"{name}: vertex row {link.row}, column {link.column} is outside the {grid.nx}x"
+                                f"{grid.ny} cloth grid (rows 0..{grid.ny - 1}, columns 0..{grid.nx - 1})")
+        v = link.row * grid.nx + link.column
+        if v in seen:
+            raise ClothFitError(f"{name}: vertex row {link.row}, column {link.column} is already linked by "
+                                f"{seen[v]}: one handle per vertex")
+        seen[v] = name
+        if link.use_release and not math.isfinite(link.release_time):
+            raise ClothFitError(f"{name}: release time {link.release_time} is not finite")
+        out.append((link, v))
+    return out
+
+
+def empties_scenario(scene, grid: ClothGrid, times, notes=None):
+    """The Empties manipulation: one ``Handle`` per link whose trajectory is its empty's evaluated
+    world position at every scene frame from the start of settling (t = -settle) to the last
+    capture time (frames -> seconds with the scene's frame rate, frame_start = t = 0, as the bake
+    keys it; keys that linear interpolation reproduces within 0.1 um are dropped). First the frame
+    rate is set as the bake will set it (every capture time a whole frame), so the empties'
+    keyframes are read at the rate the timeline then plays; ``notes`` gets a line if it changed."""
+    p = props(scene)
+    times = sorted(float(t) for t in times)
+    links = handle_links(scene, grid)
+    settle = float(p.settle_time)
+    old = S.ensure_fps(scene, sorted(set([0.0] + times)))
+    if old is not None and notes is not None:
+        notes.append(f"frame rate changed from {old:g} to {scene.render.fps} fps so that every capture time is a "
+                     f"whole frame: the empties' keyframes are read at {scene.render.fps} fps")
+    rate = scene.render.fps / scene.render.fps_base
+    f0 = scene.frame_start - int(math.ceil(settle * rate - 1e-6))   # settle is float32
+    f1 = S.frame_of_time(scene, times[-1])
+    frames = np.arange(f0, f1 + 1)
+    pos = S.sample_world_positions(scene, [link.empty for link, _ in links], frames)
+    ts = S.time_of_frame(scene, frames)
+    handles = []
+    for (link, v), P in zip(links, pos):
+        kt, kp = S.simplify_track(ts, P)
+        handles.append(Handle(v, kt, kp, float(link.release_time) if link.use_release else None))
+    return Scenario(grid, handles, times, settle_time=settle)
+
+
+def add_handle_empty(scene, row=None, column=None):
+    """A new empty at grid vertex (row, column)'s rest position, linked to it; the manipulation
+    source becomes Empties. Returns the link."""
+    p = props(scene)
+    row = p.new_handle_row if row is None or row < 0 else int(row)
+    column = p.new_handle_column if column is None or column < 0 else int(column)
+    grid = scene_grid(scene)
+    if not (0 <= row < grid.ny and 0 <= column < grid.nx):
+        raise ClothFitError(f"vertex row {row}, column {column} is outside the {grid.nx}x{grid.ny} cloth grid "
+                            f"(rows 0..{grid.ny - 1}, columns 0..{grid.nx - 1})")
+    v = row * grid.nx + column
+    for i, link in enumerate(p.handles):
+        if (link.row, link.column) == (row, column):
+            raise ClothFitError(f"vertex row {row}, column {column} is already linked by handle #{i + 1}")
+    coll = S.ensure_collection(scene, HANDLE_COLLECTION)
+    obj = bpy.data.objects.new(f"ClothFit Handle r{row} c{column}", None)
+    obj.empty_display_type = "SPHERE"
+    obj.empty_display_size = max(grid.spacing, 1e-3)
+    obj.location = [float(x) for x in grid.rest[v]]
+    coll.objects.link(obj)
+    link = p.handles.add()
+    link.empty, link.row, link.column = obj, row, column
+    p.handles_index = len(p.handles) - 1
+    p.scenario_source = "EMPTIES"
+    return link
+
+
+def remove_handle(scene, index=None, delete_empty=False):
+    """Remove handle link ``index`` (default: the active one); optionally delete its empty."""
+    p = props(scene)
+    i = p.handles_index if index is None or index < 0 else int(index)
+    if not 0 <= i < len(p.handles):
+        raise ClothFitError(f"no handle #{i + 1} to remove ({len(p.handles)} handles)")
+    obj = p.handles[i].empty
+    p.handles.remove(i)
+    p.handles_index = max(0, min(p.handles_index, len(p.handles) - 1))
+    if delete_empty and obj is not None:
+        bpy.data.objects.remove(obj, do_unlink=True)
+
+
 # ================================================================= simulation
 
 def simulate(scene):
@@ -176,7 +458,13 @@ def simulate(scene):
     from ..core.simulate import simulate as core_simulate
     times = parse_times(props(scene).frame_times)
     bake_times = sorted(set([0.0] + times))
-    sc, obj = scene_scenario(scene, bake_times)
+    notes = []
+    obj = cloth_object(scene)
+    grid = S.grid_from_object(obj)
+    if props(scene).scenario_source == "EMPTIES":
+        sc = empties_scenario(scene, grid, bake_times, notes)
+    else:
+        sc = scenario_for(scene, grid, bake_times)
     par = params_from_scene(scene)
     t0 = time.time()
     res = core_simulate(sc, [par])
@@ -185,7 +473,7 @@ def simulate(scene):
                             f"{res.reason[0]}")
     frames = S.bake_shape_keys(scene, obj, bake_times, res.positions[0])
     scene.frame_set(frames[0])
-    return {"frames": frames, "times": bake_times, "seconds": time.time() - t0}
+    return {"frames": frames, "times": bake_times, "seconds": time.time() - t0, "notes": notes, "scenario": sc}
 
 
 # ============================================================ observations
@@ -209,11 +497,18 @@ def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None
         raise ClothFitError(f"the cloth is not baked at t = {missing[0]:.3f} s ({len(missing)} capture times "
                             f"missing): simulate first")
     _refuse_foreign_capture(root)
-    cams = S.rig_cameras(scene)
     shapes = S.baked_positions(cloth, times)
+    check_bake_follows_handles(sc, shapes)
+    # the cameras as Blender renders them: the exact (float64) imported camera while the Blender
+    # camera still shows it, minus lens distortion (Blender renders a pinhole image)
+    rows = exact_rig_cameras(scene)
+    cams = [sh if sh is not None else b for b, _, sh in rows]
+    dropped = [b.name for b, ex, _ in rows if ex is not None and ex.dist.size and np.any(ex.dist != 0)]
     par = params_from_scene(scene)
     meta = {"generator": f"{GENERATOR_PREFIX}{bpy.app.version_string} Workbench (addon/blender/render.py)",
             "true_params": par.as_dict(), "noise_fraction": noise, "seed": seed}
+    if dropped:
+        meta["distortion_dropped"] = dropped
     # two steps: everything but capture.json now, capture.json only once every PNG is written, so a
     # render that fails midway never leaves a capture that looks complete
     pending = write_capture(root, cams, sc, None, shapes=shapes, cloth_mass=par.m * sc.grid.n_vertices, meta=meta,
@@ -245,10 +540,30 @@ def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None
 
 
 GENERATOR_PREFIX = "Blender "
+BAKE_TOL = 1e-5   # m: a held handle vertex of the bake vs the manipulation's position for it
 
 
-def _refuse_foreign_capture(root):
-    """Never overwrite a capture that this renderer did not write (real footage, synthetic...)."""
+def check_bake_follows_handles(scenario, shapes):
+    """Raise unless the baked shapes hold every handle where the scenario puts it (the bake is of
+    this manipulation: e.g. no empty moved, no corner changed since Simulate)."""
+    times = scenario.frame_times
+    for h in scenario.handles:
+        held = h.held(times)
+        if not held.any():
+            continue
+        want = h.position(times[held])
+        got = shapes[held][:, h.vertex]
+        err = np.linalg.norm(got - want, axis=-1)
+        k = int(np.argmax(err))
+        if err[k] > BAKE_TOL:
+            raise ClothFitError(f"the baked cloth does not follow the current manipulation: the handle on vertex "
+                                f"{h.vertex} is {1000 * err[k]:.3f} mm away from its position at t = "
+                                f"{times[held][k]:.3f} s (handles, empties or settings changed since Simulate): "
+                                f"simulate again")
+
+
+def _refuse_foreign_capture(root, own_prefix=GENERATOR_PREFIX, who="Render Silhouettes", what="renders"):
+    """Never overwrite a capture that this writer did not write (real footage, synthetic...)."""
     path = os.path.join(root, "capture.json")
     if not os.path.isfile(path):
         return
@@ -257,9 +572,114 @@ def _refuse_foreign_capture(root):
             gen = str((json.load(f).get("meta") or {}).get("generator", ""))
     except (OSError, ValueError, AttributeError):
         gen = "?"
-    if not gen.startswith(GENERATOR_PREFIX):
-        raise ClothFitError(f"{root} already holds a capture written by {gen or 'another tool'!r}; Render Silhouettes "
-                            f"only overwrites its own renders: choose another capture directory")
+    if not gen.startswith(own_prefix):
+        raise ClothFitError(f"{root} already holds a capture written by {gen or 'another tool'!r}; {who} "
+                            f"only overwrites its own {what}: choose another capture directory")
+
+
+# ================================================================= extraction
+
+EXTRACT_GENERATOR = "addon.core.extract"
+THRESHOLD_MODES = {"AUTO": "auto", "OTSU": "otsu", "NOISE": "noise"}
+
+
+def parse_camera_thresholds(spec: str, camera_names=None) -> dict:
+    """``"cam03=9.5, cam07=12"`` -> {"cam03": 9.5, "cam07": 12.0}; names checked against the cameras."""
+    out = {}
+    for item in (spec or "").replace(";", ",").split(","):
+        item = item.strip()
+        if not item:
+            continue
+        if "=" not in item:
+            raise ClothFitError(f"per-camera threshold {item!r}: expected CAMERA=VALUE (e.g. cam03=9.5)")
+        name, val = (x.strip() for x in item.split("=", 1))
+        try:
+            v = float(val)
+        except ValueError:
+            raise ClothFitError(f"per-camera threshold {item!r}: {val!r} is not a number") from None
+        if not (math.isfinite(v) and v > 0):
+            raise ClothFitError(f"per-camera threshold {item!r}: the threshold must be a positive number")
+        if name in out:
+            raise ClothFitError(f"per-camera threshold: camera '{name}' is given twice")
+        if camera_names is not None and name not in camera_names:
+            raise ClothFitError(f"per-camera threshold {item!r}: no camera '{name}' in the calibration (cameras: "
+                                f"{', '.join(list(camera_names)[:20])})")
+        out[name] = v
+    return out
+
+
+def _footage_cameras(scene, footage):
+    """The calibration for an extraction: the Calibration property, else the footage's own
+    (footage.json's, cameras.* / calibration.*, a COLMAP folder), else the rig's exact cameras
+    (imported or loaded). Returns (cameras, where they came from)."""
+    from ..core import calib_io
+    from ..core import extract as X
+    p = props(scene)
+    if p.extract_calibration.strip():
+        path = abspath(p.extract_calibration, "calibration")
+        return calib_io.import_cameras(path), path
+    meta, meta_path = X._read_footage_json(footage)
+    if isinstance(meta.get("cameras"), str):
+        path = os.path.join(footage, meta["cameras"])
+        return calib_io.import_cameras(path), path
+    path = X._find_calibration(footage)
+    if path is not None:
+        return calib_io.import_cameras(path), path
+    if p.rig_cameras_json.strip():
+        return cameras_from_json(p.rig_cameras_json), "the scene's imported cameras"
+    raise ClothFitError(f"footage {footage}: no calibration: set Calibration, put a cameras.yml (or footage.json, "
+                        f"or a COLMAP folder) in the footage folder, or import cameras into the rig first")
+
+
+def extract_silhouettes(scene, progress=None):
+    """Silhouettes from the footage folder (``core.extract.extract_capture``) into a capture,
+    then load it (cameras become the rig, observed silhouettes the camera backgrounds).
+
+    With the Empties manipulation the capture's scenario is the empties' (sampled at the
+    footage's frame times); otherwise footage.json's, else the paper's (with a warning).
+    ``progress(fraction)`` is called per camera. Returns (Capture, report); ``report["warnings"]``
+    lists every warning. Errors (every bad file in one message) write nothing."""
+    from ..core import extract as X
+    p = props(scene)
+    footage = abspath(p.footage_dir, "footage directory")
+    if not os.path.isdir(footage):
+        raise ClothFitError(f"footage folder not found: {footage}")
+    out = abspath(p.extract_capture_dir, "output capture directory") if p.extract_capture_dir.strip() \
+        else capture_dir(scene)
+    if os.path.normpath(out) == os.path.normpath(footage):
+        raise ClothFitError(f"the output capture directory is the footage folder {footage}: choose another one")
+    _refuse_foreign_capture(out, EXTRACT_GENERATOR, "Extract Silhouettes", "extractions")
+    cams, cam_source = _footage_cameras(scene, footage)
+    times = parse_times(p.extract_times) if p.extract_times.strip() else None
+    mode = p.extract_threshold_mode
+    opts = X.ExtractOptions(
+        threshold=THRESHOLD_MODES.get(mode, float(p.extract_threshold)),
+        thresholds=parse_camera_thresholds(p.extract_camera_thresholds, [c.name for c in cams]),
+        luma_weight=float(p.extract_luma_weight), shadow_min=float(p.extract_shadow_min),
+        debug_dir=os.path.join(out, "debug") if p.extract_debug else None).check()
+    scenario = None
+    if p.scenario_source == "EMPTIES":
+        ft = times
+        if ft is None:
+            ft = X._read_footage_json(footage)[0].get("frame_times")
+            if not isinstance(ft, list) or not ft:
+                raise ClothFitError(f"footage {footage}: no frame times (set Times, or frame_times in footage.json)")
+        scenario = empties_scenario(scene, scene_grid(scene), ft)
+
+    def cb(i, n, name):
+        if progress:
+            progress(i / max(n, 1))
+    report = X.extract_capture(footage, out, cameras=cams, frame_times=times, scenario=scenario, options=opts,
+                               progress=cb)
+    if progress:
+        progress(1.0)
+    cap = load_capture(scene, out)
+    thr = [r["threshold"] for r in report["cameras"].values()]
+    nw = len(report.get("warnings", []))
+    p.extract_status = (f"{cap.n_cameras} cameras x {cap.n_frames} frames, thresholds {min(thr):.2f}.."
+                        f"{max(thr):.2f}, {nw} warning{'s' if nw != 1 else ''}")
+    report["calibration"] = cam_source
+    return cap, report
 
 
 def load_capture(scene, path=None):
@@ -270,7 +690,7 @@ def load_capture(scene, path=None):
     root = abspath(path, "capture directory") if path else capture_dir(scene)
     cap = core_load(root)
     cap.validate(full=True)
-    S.build_rig(scene, cap.cameras)
+    set_rig(scene, cap.cameras)
     g = cap.scenario.grid
     p.cloth_nx, p.cloth_side, p.cloth_height = g.nx, g.side, g.height
     p.settle_time = cap.scenario.settle_time
@@ -547,6 +967,11 @@ def model_masks_core(scene, cap, frame_indices):
 
 
 def model_masks_blender(scene, cap, frame_indices):
+    distorted = [c.name for c in cap.cameras if c.dist.size and np.any(c.dist != 0)]
+    if distorted:
+        raise ClothFitError(f"the capture's cameras have lens distortion ({', '.join(distorted[:4])}"
+                            f"{', ...' if len(distorted) > 4 else ''}) but Blender renders pinhole images: "
+                            f"choose the Core model source for these overlays")
     cloth = cloth_object(scene)
     baked = {round(t, 3) for t in S.baked_times(cloth)}
     times = [float(cap.frame_times[i]) for i in frame_indices]

@@ -15,7 +15,7 @@ functions ``begin_modal`` / ``modal_tick`` / ``end_modal`` so tests can drive it
 from __future__ import annotations
 
 import bpy
-from bpy.props import StringProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from ..core.errors import ClothFitError
 from . import api
@@ -74,6 +74,8 @@ class CLOTHFIT_OT_simulate(_ClothFitOperator, bpy.types.Operator):
 
     def run(self, context):
         r = api.simulate(context.scene)
+        for note in r["notes"]:
+            self.report({"WARNING"}, note)
         return f"Simulated and baked {len(r['frames'])} shapes (frames {r['frames'][0]}..{r['frames'][-1]}) in {r['seconds']:.1f} s"
 
 
@@ -92,6 +94,11 @@ class CLOTHFIT_OT_render_silhouettes(_ClothFitOperator, bpy.types.Operator):
                                          progress=lambda f: wm.progress_update(int(100 * f)))
         finally:
             wm.progress_end()
+        dropped = cap.meta.get("distortion_dropped")
+        if dropped:
+            self.report({"WARNING"}, f"{len(dropped)} camera(s) have lens distortion ({', '.join(dropped[:4])}"
+                                     f"{', ...' if len(dropped) > 4 else ''}): Blender rendered pinhole images, so "
+                                     f"the capture's cameras are written without distortion")
         return f"Rendered {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root}"
 
 
@@ -104,11 +111,101 @@ class CLOTHFIT_OT_load_capture(_ClothFitOperator, bpy.types.Operator):
 
     def run(self, context):
         cap = api.load_capture(context.scene, self.directory or None)
-        distorted = [c.name for c in cap.cameras if c.dist.size and (c.dist != 0).any()]
-        if distorted:
-            self.report({"WARNING"}, f"{len(distorted)} cameras have lens distortion: their Blender cameras show "
-                                     f"the undistorted pinhole (the fit uses the distortion)")
+        for note in api.blender_view_cameras(cap.cameras)[1]:
+            self.report({"WARNING"}, note)
         return f"Loaded {cap.root}: {cap.n_cameras} cameras, {cap.n_frames} frames"
+
+
+MAX_LISTED_WARNINGS = 3
+
+
+class CLOTHFIT_OT_extract_silhouettes(_ClothFitOperator, bpy.types.Operator):
+    """Silhouettes from camera footage (background plates + frames per camera) into a capture, then load it"""
+    bl_idname = "clothfit.extract_silhouettes"
+    bl_label = "Extract Silhouettes"
+
+    def run(self, context):
+        wm = context.window_manager
+        window = getattr(context, "window", None) is not None
+        if window:
+            wm.progress_begin(0, 100)
+        try:
+            cap, rep = api.extract_silhouettes(
+                context.scene, progress=(lambda f: wm.progress_update(int(100 * f))) if window else None)
+        finally:
+            if window:
+                wm.progress_end()
+        warnings = rep.get("warnings", [])
+        for w in warnings[:MAX_LISTED_WARNINGS]:
+            self.report({"WARNING"}, f"Extraction: {w}")
+        if len(warnings) > MAX_LISTED_WARNINGS:
+            self.report({"WARNING"}, f"Extraction: {len(warnings) - MAX_LISTED_WARNINGS} more warnings "
+                                     f"({len(warnings)} in all) in {cap.root}/extract_report.json")
+        for note in api.blender_view_cameras(cap.cameras)[1]:
+            self.report({"WARNING"}, note)
+        return (f"Extracted {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root} "
+                f"({context.scene.clothfit.extract_status})")
+
+
+class CLOTHFIT_OT_import_cameras(_ClothFitOperator, bpy.types.Operator):
+    """Import calibrated cameras (OpenCV YAML/JSON/XML file or folder, COLMAP text model) as the rig"""
+    bl_idname = "clothfit.import_cameras"
+    bl_label = "Import Cameras"
+    filepath: StringProperty(name="File", default="", subtype="FILE_PATH", options={"SKIP_SAVE"},
+                             description="Calibration file or folder (default: the scene's Calibration)")
+
+    def run(self, context):
+        cams, notes = api.import_cameras(context.scene, self.filepath or None)
+        for note in notes:
+            self.report({"WARNING"}, note)
+        W, H = api.S.render_size(context.scene)
+        return f"Imported {len(cams)} cameras ({W}x{H}) from {context.scene.clothfit.cameras_file}"
+
+
+class CLOTHFIT_OT_export_cameras(_ClothFitOperator, bpy.types.Operator):
+    """Write the rig's cameras as an OpenCV calibration file/folder, a COLMAP text model or Cloth Fit JSON"""
+    bl_idname = "clothfit.export_cameras"
+    bl_label = "Export Cameras"
+    filepath: StringProperty(name="File", default="", subtype="FILE_PATH", options={"SKIP_SAVE"},
+                             description="Destination (default: the scene's Export To)")
+    file_format: EnumProperty(name="Format", items=[("SCENE", "Scene Setting", "The scene's export format")] + [
+        (k, k.replace("_", " ").title(), "") for k in api.EXPORT_FORMATS], default="SCENE", options={"SKIP_SAVE"})
+
+    def run(self, context):
+        fmt = None if self.file_format == "SCENE" else self.file_format
+        path, cams, from_blender = api.export_cameras(context.scene, self.filepath or None, fmt)
+        if from_blender:
+            self.report({"WARNING"}, f"{len(from_blender)} camera(s) were moved or changed in Blender "
+                                     f"({', '.join(from_blender[:4])}{', ...' if len(from_blender) > 4 else ''}): "
+                                     f"written as Blender shows them (no lens distortion)")
+        return f"Exported {len(cams)} cameras to {path}"
+
+
+class CLOTHFIT_OT_add_handle_empty(_ClothFitOperator, bpy.types.Operator):
+    """Add an empty at a grid vertex's rest position and link the vertex to it (manipulation: Empties)"""
+    bl_idname = "clothfit.add_handle_empty"
+    bl_label = "Add Handle Empty"
+    row: IntProperty(name="Row", default=-1, min=-1, options={"SKIP_SAVE"},
+                     description="Grid row (-1: the panel's)")
+    column: IntProperty(name="Column", default=-1, min=-1, options={"SKIP_SAVE"},
+                        description="Grid column (-1: the panel's)")
+
+    def run(self, context):
+        link = api.add_handle_empty(context.scene, self.row, self.column)
+        return f"Linked grid vertex row {link.row}, column {link.column} to '{link.empty.name}'"
+
+
+class CLOTHFIT_OT_remove_handle(_ClothFitOperator, bpy.types.Operator):
+    """Remove a handle link (the empty stays unless asked)"""
+    bl_idname = "clothfit.remove_handle"
+    bl_label = "Remove Handle"
+    index: IntProperty(name="Index", default=-1, min=-1, options={"SKIP_SAVE"},
+                       description="Handle to remove (0-based; -1: the active one)")
+    delete_empty: BoolProperty(name="Delete Empty", default=False, options={"SKIP_SAVE"})
+
+    def run(self, context):
+        api.remove_handle(context.scene, self.index, self.delete_empty)
+        return f"Removed the handle; {len(context.scene.clothfit.handles)} left"
 
 
 class CLOTHFIT_OT_apply_fit(_ClothFitOperator, bpy.types.Operator):
@@ -243,6 +340,11 @@ CLASSES = (
     CLOTHFIT_OT_simulate,
     CLOTHFIT_OT_render_silhouettes,
     CLOTHFIT_OT_load_capture,
+    CLOTHFIT_OT_extract_silhouettes,
+    CLOTHFIT_OT_import_cameras,
+    CLOTHFIT_OT_export_cameras,
+    CLOTHFIT_OT_add_handle_empty,
+    CLOTHFIT_OT_remove_handle,
     CLOTHFIT_OT_fit,
     CLOTHFIT_OT_apply_fit,
     CLOTHFIT_OT_overlays,

@@ -19,6 +19,16 @@ def draw_rig(layout, scene, p):
         row.prop(p, "ring_width")
         row.prop(p, "ring_height")
     layout.operator("clothfit.build_rig", icon="OUTLINER_OB_CAMERA")
+    box = layout.box()
+    box.label(text="Calibrated cameras", icon="CAMERA_DATA")
+    box.prop(p, "cameras_file")
+    box.operator("clothfit.import_cameras", icon="IMPORT")
+    row = box.row(align=True)
+    row.prop(p, "cameras_export_format", text="")
+    row.prop(p, "cameras_export_path", text="")
+    box.operator("clothfit.export_cameras", icon="EXPORT")
+    if p.rig_cameras_json and '"dist"' in p.rig_cameras_json:
+        box.label(text="Lens distortion: Blender shows the pinhole view", icon="INFO")
 
 
 def draw_cloth(layout, scene, p):
@@ -29,11 +39,57 @@ def draw_cloth(layout, scene, p):
         col.prop(p, "cloth_side")
         col.prop(p, "cloth_height")
         layout.prop(p, "released_corner")
+    elif p.scenario_source == "EMPTIES":
+        col = layout.column(align=True)
+        col.prop(p, "cloth_nx")
+        col.prop(p, "cloth_side")
+        col.prop(p, "cloth_height")
     else:
         layout.label(text="Cloth and handles from the capture")
     layout.operator("clothfit.build_cloth", icon="MESH_GRID")
     if p.cloth_object is not None:
         layout.label(text=f"Cloth: {p.cloth_object.name}", icon="OBJECT_DATA")
+    if p.scenario_source == "EMPTIES" or len(p.handles):
+        draw_handles(layout, scene, p)
+
+
+def draw_handles(layout, scene, p):
+    """The Empties manipulation: grid vertices linked to (animated) empties."""
+    box = layout.box()
+    box.label(text="Handles (grid vertex follows empty)", icon="EMPTY_AXIS")
+    row = box.row()
+    row.template_list("CLOTHFIT_UL_handles", "", p, "handles", p, "handles_index", rows=3)
+    col = row.column(align=True)
+    col.operator("clothfit.add_handle_empty", icon="ADD", text="")
+    col.operator("clothfit.remove_handle", icon="REMOVE", text="")
+    row = box.row(align=True)
+    row.label(text="New at")
+    row.prop(p, "new_handle_row")
+    row.prop(p, "new_handle_column")
+    if 0 <= p.handles_index < len(p.handles):
+        link = p.handles[p.handles_index]
+        col = box.column(align=True)
+        col.prop(link, "empty")
+        r = col.row(align=True)
+        r.prop(link, "row")
+        r.prop(link, "column")
+        r = col.row(align=True)
+        r.prop(link, "use_release")
+        sub = r.row(align=True)
+        sub.enabled = link.use_release
+        sub.prop(link, "release_time")
+
+
+class CLOTHFIT_UL_handles(bpy.types.UIList):
+    """One row per handle link: empty, grid vertex, release."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index=0):
+        row = layout.row(align=True)
+        row.prop(item, "empty", text="", emboss=False, icon="EMPTY_AXIS")
+        nx = data.cloth_nx
+        row.label(text=f"r{item.row} c{item.column} (#{item.row * nx + item.column})")
+        row.label(text=f"free at {item.release_time:g} s" if item.use_release else "held",
+                  icon="UNLOCKED" if item.use_release else "LOCKED")
 
 
 def draw_simulation(layout, scene, p):
@@ -42,7 +98,7 @@ def draw_simulation(layout, scene, p):
         col.prop(p, name)
     n = p.cloth_nx * p.cloth_nx
     layout.label(text=f"Cloth mass m x {n} = {1000 * p.m * n:.3g} g")
-    if p.scenario_source == "SETTINGS":
+    if p.scenario_source in ("SETTINGS", "EMPTIES"):
         layout.prop(p, "settle_time")
     layout.prop(p, "frame_times")
     layout.operator("clothfit.simulate", icon="PHYSICS")
@@ -56,6 +112,30 @@ def draw_observations(layout, scene, p):
     layout.operator("clothfit.render_silhouettes", icon="RENDER_STILL")
     layout.operator("clothfit.load_capture", icon="FILE_FOLDER")
     layout.prop(p, "view_frame")
+    draw_extract(layout, scene, p)
+
+
+def draw_extract(layout, scene, p):
+    """Silhouettes from real footage (background plates + frames per camera)."""
+    box = layout.box()
+    box.label(text="From footage", icon="IMAGE_BACKGROUND")
+    col = box.column(align=True)
+    col.prop(p, "footage_dir")
+    col.prop(p, "extract_calibration")
+    col.prop(p, "extract_times")
+    col.prop(p, "extract_capture_dir")
+    row = box.row(align=True)
+    row.prop(p, "extract_threshold_mode", text="")
+    if p.extract_threshold_mode == "NUMBER":
+        row.prop(p, "extract_threshold")
+    box.prop(p, "extract_camera_thresholds")
+    row = box.row(align=True)
+    row.prop(p, "extract_luma_weight")
+    row.prop(p, "extract_shadow_min")
+    box.prop(p, "extract_debug")
+    box.operator("clothfit.extract_silhouettes", icon="SELECT_SUBTRACT")
+    if p.extract_status:
+        box.label(text=p.extract_status)
 
 
 def draw_fitting(layout, scene, p):
@@ -143,4 +223,4 @@ def _section_panel(key, label, func):
         "draw": draw, "__doc__": f"Cloth Fit: {label}"})
 
 
-CLASSES = (CLOTHFIT_PT_main,) + tuple(_section_panel(*s) for s in SECTIONS)
+CLASSES = (CLOTHFIT_UL_handles, CLOTHFIT_PT_main) + tuple(_section_panel(*s) for s in SECTIONS)

@@ -7,10 +7,11 @@ float properties in single precision: the fit's exact numbers are in the result 
 from __future__ import annotations
 
 import bpy
-from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
-                       StringProperty)
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, IntProperty,
+                       PointerProperty, StringProperty)
 
 from ..core import defaults as D
+from ..core.extract import ExtractOptions
 
 OPTIMIZERS = [("spx-mgg", "SPX + MGG", "Real-coded GA: simplex crossover, minimal generation gap (the paper's)"),
               ("cma-es", "CMA-ES", "Covariance matrix adaptation evolution strategy")]
@@ -38,6 +39,33 @@ def _view_frame_update(self, context):
         print(f"Cloth Fit: cannot show capture frame {self.view_frame}: {e}")
 
 
+def _is_empty(self, obj):
+    return obj.type == "EMPTY"
+
+
+class ClothFitHandleLink(bpy.types.PropertyGroup):
+    """One handle of the Empties manipulation: grid vertex (row, column) follows an empty."""
+    empty: PointerProperty(name="Empty", type=bpy.types.Object, poll=_is_empty,
+                           description="Empty whose world position (animated or not) the grid vertex follows")
+    row: IntProperty(name="Row", default=0, min=0, max=1023,
+                     description="Grid row of the vertex (vertex index = row x grid columns + column)")
+    column: IntProperty(name="Column", default=0, min=0, max=1023, description="Grid column of the vertex")
+    use_release: BoolProperty(name="Release", default=False,
+                              description="Let the vertex go at the release time (free after it)")
+    release_time: FloatProperty(name="Release Time", default=0.0, unit="TIME_ABSOLUTE",
+                                description="Time [s] at which the vertex is released (t = 0 ends the settling)")
+
+
+THRESHOLD_MODES = [("AUTO", "Auto", "Noise-model threshold per camera, never below 2 levels (default)"),
+                   ("OTSU", "Otsu", "Otsu's threshold on each camera's difference histogram"),
+                   ("NOISE", "Noise", "Noise-model threshold without the floor"),
+                   ("NUMBER", "Number", "One fixed threshold (difference units, 0..255 scale)")]
+CAMERA_FORMATS = [("OPENCV", "OpenCV YAML", "One OpenCV FileStorage file (.yml/.yaml/.json/.xml) with every camera"),
+                  ("OPENCV_DIR", "OpenCV Folder", "A folder with one OpenCV .yml file per camera"),
+                  ("COLMAP", "COLMAP", "A COLMAP text model folder (cameras.txt, images.txt, points3D.txt)"),
+                  ("JSON", "Cloth Fit JSON", "Our cameras JSON (the capture format's cameras.json)")]
+
+
 class ClothFitProperties(bpy.types.PropertyGroup):
     # ------------------------------------------------------------------ rig
     rig_source: EnumProperty(name="Rig", items=[
@@ -45,6 +73,16 @@ class ClothFitProperties(bpy.types.PropertyGroup):
         ("RING", "Ring", "A parametric ring of cameras around the cloth")], default="PRESET")
     rig_preset: StringProperty(name="Preset", default=D.DEFAULT_RIG,
                                description="Rig preset name in rigs/ (lab18, ring8) or a path to a cameras JSON")
+    cameras_file: StringProperty(name="Calibration", subtype="FILE_PATH", options=PATH_OPTIONS, default="",
+                                 description="Calibrated cameras to import: OpenCV FileStorage YAML/JSON/XML file, "
+                                             "a folder of them, or a COLMAP text model folder")
+    cameras_export_path: StringProperty(name="Export To", subtype="FILE_PATH", options=PATH_OPTIONS, default="",
+                                        description="Where Export Cameras writes: a .yml/.json/.xml file or a folder")
+    cameras_export_format: EnumProperty(name="Format", items=CAMERA_FORMATS, default="OPENCV")
+    rig_cameras_json: StringProperty(name="Exact Cameras", default="",
+                                     description="The rig's cameras as imported or loaded (OpenCV K, R, t, lens "
+                                                 "distortion; JSON): what export and rendering use while the "
+                                                 "Blender cameras still show them")
     ring_cameras: IntProperty(name="Cameras", default=8, min=1, max=64)
     ring_elevation: FloatProperty(name="Elevation", default=25.0, min=-89.0, max=89.0, description="Degrees")
     ring_distance: FloatProperty(name="Distance", default=0.5, min=0.01, unit="LENGTH")
@@ -60,11 +98,19 @@ class ClothFitProperties(bpy.types.PropertyGroup):
                                 description="Height of the held corners")
     scenario_source: EnumProperty(name="Manipulation", items=[
         ("SETTINGS", "Paper", "All four corners held, one released at t = 0 (the settings here)"),
-        ("CAPTURE", "Capture", "The loaded capture's handles, settling and cloth (set by Load Capture)")],
+        ("CAPTURE", "Capture", "The loaded capture's handles, settling and cloth (set by Load Capture)"),
+        ("EMPTIES", "Empties", "Grid vertices follow the linked empties (keyframe them to move the cloth)")],
         default="SETTINGS")
     released_corner: IntProperty(name="Released Corner", default=D.RELEASED_CORNER, min=0, max=3,
                                  description="Corner released at t = 0 (0..3; the other three stay held)")
     cloth_object: PointerProperty(name="Cloth", type=bpy.types.Object)
+    handles: CollectionProperty(name="Handles", type=ClothFitHandleLink,
+                                description="Empties manipulation: grid vertices linked to empties")
+    handles_index: IntProperty(name="Active Handle", default=0, min=0)
+    new_handle_row: IntProperty(name="Row", default=0, min=0, max=1023,
+                                description="Grid row of the vertex Add Handle Empty links")
+    new_handle_column: IntProperty(name="Column", default=0, min=0, max=1023,
+                                   description="Grid column of the vertex Add Handle Empty links")
 
     # ----------------------------------------------------------- simulation
     m: FloatProperty(name="m", default=D.GT_PARAMS["m"], min=1e-12, precision=6, unit="MASS",
@@ -86,6 +132,32 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     noise: FloatProperty(name="Noise", default=D.NOISE_FRACTION, min=0.0, max=1.0, precision=3,
                          description="Fraction of boundary pixels flipped in rendered silhouettes")
     noise_seed: IntProperty(name="Noise Seed", default=0, min=0)
+    footage_dir: StringProperty(name="Footage", subtype="DIR_PATH", options=PATH_OPTIONS, default="",
+                                description="Footage folder: <camera>/background*.png and frames per camera, "
+                                            "optional footage.json and calibration")
+    extract_calibration: StringProperty(name="Calibration", subtype="FILE_PATH", options=PATH_OPTIONS, default="",
+                                        description="Calibrated cameras (empty: the footage's footage.json / "
+                                                    "cameras.* / COLMAP folder, else the imported rig cameras)")
+    extract_times: StringProperty(name="Times", default="",
+                                  description="Frame times of the footage frames (empty: footage.json's)")
+    extract_capture_dir: StringProperty(name="Output", subtype="DIR_PATH", options=PATH_OPTIONS, default="",
+                                        description="Capture directory to write (empty: the Capture directory above)")
+    extract_threshold_mode: EnumProperty(name="Threshold", items=THRESHOLD_MODES, default="AUTO")
+    extract_threshold: FloatProperty(name="Value", default=10.0, min=0.01, max=255.0, precision=2,
+                                     description="Fixed threshold (difference units, 0..255 scale)")
+    extract_camera_thresholds: StringProperty(name="Per Camera", default="",
+                                              description="Per-camera threshold overrides, e.g. cam03=9.5, cam07=12")
+    extract_luma_weight: FloatProperty(name="Luma Weight", default=ExtractOptions.luma_weight, min=0.0, max=10.0,
+                                       precision=2,
+                                       description="Weight of the luma difference against chroma (low = shadows "
+                                                   "count less)")
+    extract_shadow_min: FloatProperty(name="Shadow Min", default=ExtractOptions.shadow_min, min=0.01, max=1.0,
+                                      precision=2,
+                                      description="Background dimmed down to this brightness ratio counts as "
+                                                  "shadow (1 = no shadow model)")
+    extract_debug: BoolProperty(name="Debug Images", default=False,
+                                description="Write images of every extraction step into <output>/debug")
+    extract_status: StringProperty(name="Extraction", default="")
     view_frame: IntProperty(name="Show Frame", default=0, min=0, update=_view_frame_update,
                             description="Capture frame whose silhouettes the cameras show as background")
 
@@ -125,7 +197,7 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     overlay_error: FloatProperty(name="Overlay E_sil %", default=0.0, precision=4)
 
 
-CLASSES = (ClothFitProperties,)
+CLASSES = (ClothFitHandleLink, ClothFitProperties)
 
 
 def register_scene_property():
