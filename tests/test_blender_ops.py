@@ -288,8 +288,10 @@ class FakeLayout:
     def template_list(self, listtype, list_id, data, propname, active_data, active_propname, **kw):
         ul = getattr(bpy.types, listtype)
         assert propname in data.bl_rna.properties and active_propname in active_data.bl_rna.properties
-        for i, item in enumerate(getattr(data, propname)):   # draw the rows as Blender would
-            ul.draw_item(None, bpy.context, self, data, item, 0, active_data, active_propname, i)
+        params = [q.identifier for q in ul.bl_rna.functions["draw_item"].parameters]
+        assert params[-2:] == ["index", "flt_flag"]
+        for i, item in enumerate(getattr(data, propname)):   # draw the rows as Blender does: every argument
+            ul.draw_item(None, bpy.context, self, data, item, 0, active_data, active_propname, i, 0)
         self.log.append(("list", listtype))
 
     def row(self, **kw):

@@ -426,8 +426,10 @@ def test_extract_with_empties_writes_their_handles(tmp_path):
     scene, p, moving, rest = _empties_scene(tmp_path)
     _footage(tmp_path / "f")
     p.footage_dir, p.extract_capture_dir = str(tmp_path / "f"), str(tmp_path / "ext")
+    scene.render.fps = 24    # capture times 0.1, 0.2, 0.3 are not whole frames at 24 fps
     cap, rep = api.extract_silhouettes(scene)
     assert not any("paper's manipulation" in w for w in rep["warnings"])
+    assert any("frame rate changed from 24 to 20" in n for n in rep["notes"])
     hs = cap.scenario.handles
     assert [h.vertex for h in hs] == [0, 15]
     np.testing.assert_allclose(hs[0].position(np.array([0.1, 0.3])), [rest + DELTA / 3, rest + DELTA], atol=1e-6)

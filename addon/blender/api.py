@@ -638,7 +638,8 @@ def extract_silhouettes(scene, progress=None):
     With the Empties manipulation the capture's scenario is the empties' (sampled at the
     footage's frame times); otherwise footage.json's, else the paper's (with a warning).
     ``progress(fraction)`` is called per camera. Returns (Capture, report); ``report["warnings"]``
-    lists every warning. Errors (every bad file in one message) write nothing."""
+    lists every warning of the extraction, ``report["notes"]`` what the scene changed (frame rate).
+    Errors (every bad file in one message) write nothing."""
     from ..core import extract as X
     p = props(scene)
     footage = abspath(p.footage_dir, "footage directory")
@@ -657,14 +658,14 @@ def extract_silhouettes(scene, progress=None):
         thresholds=parse_camera_thresholds(p.extract_camera_thresholds, [c.name for c in cams]),
         luma_weight=float(p.extract_luma_weight), shadow_min=float(p.extract_shadow_min),
         debug_dir=os.path.join(out, "debug") if p.extract_debug else None).check()
-    scenario = None
+    scenario, notes = None, []
     if p.scenario_source == "EMPTIES":
         ft = times
         if ft is None:
             ft = X._read_footage_json(footage)[0].get("frame_times")
             if not isinstance(ft, list) or not ft:
                 raise ClothFitError(f"footage {footage}: no frame times (set Times, or frame_times in footage.json)")
-        scenario = empties_scenario(scene, scene_grid(scene), ft)
+        scenario = empties_scenario(scene, scene_grid(scene), ft, notes)
 
     def cb(i, n, name):
         if progress:
@@ -679,6 +680,7 @@ def extract_silhouettes(scene, progress=None):
     p.extract_status = (f"{cap.n_cameras} cameras x {cap.n_frames} frames, thresholds {min(thr):.2f}.."
                         f"{max(thr):.2f}, {nw} warning{'s' if nw != 1 else ''}")
     report["calibration"] = cam_source
+    report["notes"] = notes
     return cap, report
 
 

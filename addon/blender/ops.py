@@ -135,6 +135,8 @@ class CLOTHFIT_OT_extract_silhouettes(_ClothFitOperator, bpy.types.Operator):
         finally:
             if window:
                 wm.progress_end()
+        for note in rep.get("notes", []):
+            self.report({"WARNING"}, note)
         warnings = rep.get("warnings", [])
         for w in warnings[:MAX_LISTED_WARNINGS]:
             self.report({"WARNING"}, f"Extraction: {w}")

@@ -83,7 +83,7 @@ def draw_handles(layout, scene, p):
 class CLOTHFIT_UL_handles(bpy.types.UIList):
     """One row per handle link: empty, grid vertex, release."""
 
-    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index=0):
+    def draw_item(self, context, layout, data, item, icon, active_data, active_property, index=0, flt_flag=0):
         row = layout.row(align=True)
         row.prop(item, "empty", text="", emboss=False, icon="EMPTY_AXIS")
         nx = data.cloth_nx
