@@ -217,16 +217,6 @@ def cmd_rig(a):
     print(f"{len(cams)} cameras; training order (spread rule): {[cams[i].name for i in order]}")
 
 
-def cmd_extract(a):
-    from .core import extract
-    extract.main(a.rest)
-
-
-def cmd_calib(a, which):
-    from .core import calib_io
-    calib_io.main([which] + a.rest)
-
-
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m addon", description="Silhouette Cloth Fit: cloth parameters from multi-view silhouettes")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -306,39 +296,39 @@ def build_parser():
     s.add_argument("rig", nargs="?", default=D.DEFAULT_RIG)
     s.set_defaults(fn=cmd_rig)
 
-    s = sub.add_parser("extract", help="silhouettes from camera images (see --help)", add_help=False)
-    s.add_argument("rest", nargs=argparse.REMAINDER)
-    s.set_defaults(fn=cmd_extract)
-    sub.add_parser("blender", help="the whole pipeline through Blender (bpy module): see `blender --help`", add_help=False)
-    for nm in ("import-cameras", "export-cameras"):
-        s = sub.add_parser(nm, help="camera calibration files (OpenCV YAML/JSON, COLMAP)", add_help=False)
-        s.add_argument("rest", nargs=argparse.REMAINDER)
-        s.set_defaults(fn=lambda a, nm=nm: cmd_calib(a, nm))
+    # listed for --help only: main() hands these their whole argv before this parser runs
+    for nm, hlp in SUBTOOLS.items():
+        sub.add_parser(nm, help=hlp, add_help=False)
     return p
+
+
+SUBTOOLS = {"extract": "silhouettes from camera images (see `extract --help`)",
+            "import-cameras": "camera calibration files in (OpenCV YAML/JSON/XML, COLMAP)",
+            "export-cameras": "camera calibration files out (OpenCV YAML/JSON/XML, COLMAP)",
+            "blender": "the whole pipeline through Blender (bpy module): see `blender --help`"}
+
+
+def run_subtool(argv):
+    """Sub-tools with parsers of their own get everything after the command name."""
+    if argv[0] == "blender":
+        # build rig and cloth, simulate, render silhouettes with Blender, fit, overlays, save a .blend
+        from .blender import pipeline
+        return int(pipeline.main(argv[1:]) or 0)
+    if argv[0] == "extract":
+        from .core import extract
+        extract.main(argv[1:])
+    else:
+        from .core import calib_io
+        calib_io.main(argv)
+    return 0
 
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
-    # sub-tools with parsers of their own: hand them everything after the command name
-    if argv and argv[0] in ("extract", "import-cameras", "export-cameras", "blender"):
-        try:
-            if argv[0] == "blender":
-                # the whole Blender pipeline (bpy module needed): build rig and cloth, simulate, render
-                # silhouettes with Blender, fit, overlays, save a .blend
-                from .blender import pipeline
-                return int(pipeline.main(argv[1:]) or 0)
-            if argv[0] == "extract":
-                from .core import extract
-                extract.main(argv[1:])
-            else:
-                from .core import calib_io
-                calib_io.main(argv)
-        except ClothFitError as e:
-            print(f"error: {e}", file=sys.stderr)
-            return 2
-        return 0
-    args = build_parser().parse_args(argv)
     try:
+        if argv and argv[0] in SUBTOOLS:
+            return run_subtool(argv)
+        args = build_parser().parse_args(argv)
         args.fn(args)
     except ClothFitError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -482,7 +482,7 @@ def scenario_arrays(scenario, safety=D.DT_SAFETY):
                 events=ev, frame_of_event=frame_of_event, n_frames=int(scenario.frame_times.size),
                 gravity=np.asarray(scenario.gravity, dtype=np.float64), settle_rate=float(D.SETTLE_DAMPING_RATE),
                 safety=float(safety), centre=np.asarray(centre, dtype=np.float64), limit=float(limit),
-                max_strain=float(D.MAX_STRAIN), max_steps=int(2_000_000))
+                max_strain=float(D.MAX_STRAIN), max_steps=int(D.MAX_TOTAL_STEPS))
 
 
 _ORDER = ["nx", "ny", "rest", "springs", "rest_factor", "hv", "key_start", "key_times", "key_pos", "release", "events",

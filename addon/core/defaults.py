@@ -26,6 +26,7 @@ TRUTH_DT_SAFETY = DT_SAFETY  # step of the synthetic ground truth: the same mode
 SETTLE_TIME = 0.5            # seconds of settling under gravity with all handles held, before t = 0
 SETTLE_DAMPING_RATE = 40.0   # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
 EXPLODE_FACTOR = 10.0        # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded
+MAX_TOTAL_STEPS = 2_000_000     # a candidate needing more integration steps (far too stiff) = exploded
 MAX_STRAIN = 5.0             # a spring longer than (1 + MAX_STRAIN) * rest length = exploded
 
 # --- capture (SPEC 5): 30 shapes every 0.05 s, train on even tenths, test on the odd twentieths

@@ -58,10 +58,6 @@ def noise_floor(capture, cams, times):
     return 100.0 * float(np.mean(e))
 
 
-def held_of(cap, n):
-    return select_training(cap.cameras, n)[1]
-
-
 def _log(msg):
     print(msg, flush=True)
 
@@ -146,8 +142,9 @@ def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=Non
             synth_capture(lp, seed=seed, resolution=res, truth_dt_safety=tds, rig=rig)
             low = load_capture(lp)
             for n in D.TABLE2_CAMERAS:
-                row, _ = fit_and_score(low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res, sizes=sizes)
-                row["floor_noise_only_pct"] = noise_floor(cap, held_of(cap, n), D.TEST_TIMES)
+                row, held = fit_and_score(low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res,
+                                          sizes=sizes)
+                row["floor_noise_only_pct"] = noise_floor(cap, held, D.TEST_TIMES)
                 rows.append(row)
                 _log(f"table2 {res[0]}x{res[1]} cameras={n}: silhouette {row['silhouette_error_pct']:.3f} %, shape "
                      f"{row['shape_error_mm']:.3f} mm [{row['fit_seconds']:.0f} s]")

@@ -1,8 +1,8 @@
 """Overlays of observed vs. model silhouettes, and contact sheets.
 
-Colours (BGR images, as cv2 writes them): agreement (both) white, missing (observed only) red,
-extra (model only) blue... in RGB terms: agreement = white (255, 255, 255), missing = red
-(230, 40, 40), extra = cyan-blue (40, 140, 255), background = black.
+Colours (RGB; ``write_rgb`` converts to cv2's BGR when saving): agreement (both) white
+(255, 255, 255), missing (observed only) red (230, 40, 40), extra (model only) blue (40, 140, 255),
+background black.
 """
 from __future__ import annotations
 

@@ -83,13 +83,7 @@ def step_plan(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY):
     return dt, n_full, rem
 
 
-def substeps_for(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY) -> np.ndarray:
-    """Number of integration steps per candidate for an interval of length ``seg_len``."""
-    _, n_full, rem = step_plan(params, seg_len, safety)
-    return n_full + (rem > 0)
-
-
-MAX_TOTAL_STEPS = 2_000_000
+MAX_TOTAL_STEPS = D.MAX_TOTAL_STEPS
 
 
 def check_params(params: np.ndarray):
