@@ -15,7 +15,7 @@ CLOTH_HEIGHT = 0.10          # the held corners sit at z = 0.10 m, cloth centred
 # m: 2.5 g cloth / 256 points; k chosen so the hanging cloth stretches ~10 % near the held corners;
 # l: the flat grid spacing; d: viscous damping, d/m = 10 /s (a light cloth in air). Below d/m of about 8 /s
 # this bending-free sheet is chaotic after release (a 1e-7 relative change of k moves vertices by up to
-# 1.4 mm within 1.5 s at d/m = 7 /s; measured, see README), so the ground truth sits in the damped,
+# 1.4 mm within 1.5 s at k = 11 N/m, d/m = 7 /s; tools/sensitivity.py), so the ground truth sits in the damped,
 # reproducible regime; the search space still includes the chaotic one.
 GT_PARAMS = {"m": 1.0e-5, "k": 10.0, "l": CLOTH_SIDE / (GRID_N - 1), "d": 1.0e-4}
 
