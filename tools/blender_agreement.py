@@ -23,8 +23,6 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def parse_args(argv=None):
-    if argv is None:
-        argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     ap = argparse.ArgumentParser(description="Core rasteriser vs. Blender silhouettes")
     ap.add_argument("--rig", default="lab18")
     ap.add_argument("--times", default=None, help="start:stop:step or a comma list (default: the paper's 30 times)")
@@ -34,9 +32,10 @@ def parse_args(argv=None):
 
 
 def main(argv=None):
-    a = parse_args(argv)
     if ROOT not in sys.path:
         sys.path.insert(0, ROOT)
+    from addon.blender.pipeline import script_argv
+    a = parse_args(script_argv(argv))
     import bpy
     import numpy as np
 

@@ -57,6 +57,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
+from addon.blender.pipeline import script_argv  # noqa: E402  (no bpy import)
 from addon.core import defaults as D  # noqa: E402
 from addon.core.errors import ClothFitError  # noqa: E402
 from addon.core.model import ClothGrid, paper_scenario  # noqa: E402
@@ -362,14 +363,6 @@ def format_rows(rows):
 
 # ============================================================================== main
 
-def _argv(argv):
-    if argv is None:
-        argv = sys.argv[1:]
-        if "--" in sys.argv:
-            argv = sys.argv[sys.argv.index("--") + 1:]
-    return argv
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -389,7 +382,7 @@ def main(argv=None):
     f.add_argument("--overlays", help="folder for overlays of the held-out cameras")
     f.add_argument("--oracle", action="store_true",
                    help="also report the best shape error our model can reach (fitted on the 3D truth)")
-    a = ap.parse_args(_argv(argv))
+    a = ap.parse_args(script_argv(argv))
     try:
         if a.cmd == "check-units":
             g = check_units()

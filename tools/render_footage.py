@@ -56,6 +56,7 @@ if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
 from addon.core import calib_io  # noqa: E402
+from addon.blender.pipeline import script_argv  # noqa: E402  (no bpy import)
 from addon.core import defaults as D  # noqa: E402
 from addon.core.camera import Camera, load_rig  # noqa: E402
 from addon.core.errors import ClothFitError  # noqa: E402
@@ -496,14 +497,6 @@ def fit_footage(capture_dir, footage, n_train=(4,), evals=1500, seed=0, optimize
 
 # ============================================================================== main
 
-def _argv(argv):
-    if argv is None:
-        argv = sys.argv[1:]
-        if "--" in sys.argv:
-            argv = sys.argv[sys.argv.index("--") + 1:]
-    return argv
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -537,7 +530,7 @@ def main(argv=None):
     f.add_argument("--evals", type=int, default=1500)
     f.add_argument("--seed", type=int, default=0)
     f.add_argument("--json", help="write the rows here")
-    a = ap.parse_args(_argv(argv))
+    a = ap.parse_args(script_argv(argv))
     try:
         if a.cmd == "render":
             h, w = (int(v) for v in a.resolution.lower().split("x"))
