@@ -60,7 +60,7 @@ def _params(args):
 
 def _cams(capture, spec):
     """Camera selection: None = all; "n:4" = 4 spread cameras; "0,3,5" indices; names allowed."""
-    from .core.camera import select_training
+    from .core.observation.camera import select_training
     if not spec:
         return None
     if spec.startswith(("n:", "spread:", "heldout:")):
@@ -124,15 +124,15 @@ class Progress:
 
 
 def cmd_synth(a):
-    from .core.synth import synth_capture
+    from .core.observation.synth import synth_capture
     kw = {} if a.truth_dt_safety is None else {"truth_dt_safety": a.truth_dt_safety}
     cap = synth_capture(a.out, _params(a), rig=a.rig, noise=a.noise, resolution=_res(a.resolution), seed=a.seed, **kw)
     print(f"wrote capture {a.out}: {len(cap.cameras)} cameras x {len(cap.frame_times)} frames")
 
 
 def cmd_fit(a):
-    from .core.capture import load_capture
-    from .core.fitting import FitConfig, FitJob
+    from .core.fitting.job import FitConfig, FitJob
+    from .core.observation.capture import load_capture
     ck = a.checkpoint or (a.out + ".checkpoint.json")
     if a.resume and os.path.isfile(ck):
         job = FitJob.resume(ck)
@@ -165,8 +165,8 @@ def cmd_fit(a):
 
 
 def cmd_evaluate(a):
-    from .core.capture import load_capture
-    from .core.evaluate import evaluate
+    from .core.fitting.evaluate import evaluate
+    from .core.observation.capture import load_capture
     cap = load_capture(a.capture)
     r = evaluate(cap, _params(a), cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
     if r["exploded"]:
@@ -181,22 +181,22 @@ def cmd_evaluate(a):
 
 
 def cmd_overlay(a):
-    from .core.capture import load_capture
-    from .core.overlay import capture_overlays
+    from .core.observation.capture import load_capture
+    from .core.observation.overlay import capture_overlays
     cap = load_capture(a.capture)
     paths = capture_overlays(cap, _params(a), a.out, cameras=_cams(cap, a.cameras), times=_times(a.times))
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
 
 
 def cmd_paper(a):
-    from .core.experiment import run_paper
+    from .core.studies.experiment import run_paper
     run_paper(a.json, quick=a.quick, out_dir=a.out, seed=a.seed, optimizer=a.optimizer,
               max_evaluations=a.max_evaluations, only=a.only, truth_dt_safety=a.truth_dt_safety,
               population=a.population, children=a.children, rig=a.rig)
 
 
 def cmd_tables(a):
-    from .core.experiment import format_tables
+    from .core.studies.experiment import format_tables
     try:
         with open(a.json) as f:
             d = json.load(f)
@@ -206,12 +206,12 @@ def cmd_tables(a):
 
 
 def cmd_bench(a):
-    from .core.bench import run_bench
+    from .core.studies.bench import run_bench
     run_bench(a.json, quick=a.quick)
 
 
 def cmd_rig(a):
-    from .core.camera import load_rig, spread_order
+    from .core.observation.camera import load_rig, spread_order
     cams = load_rig(a.rig)
     order = spread_order(cams)
     print(f"{len(cams)} cameras; training order (spread rule): {[cams[i].name for i in order]}")
@@ -315,10 +315,10 @@ def run_subtool(argv):
         from .blender import pipeline
         return int(pipeline.main(argv[1:]) or 0)
     if argv[0] == "extract":
-        from .core import extract
+        from .core.footage import extract
         extract.main(argv[1:])
     else:
-        from .core import calib_io
+        from .core.footage import calib_io
         calib_io.main(argv)
     return 0
 

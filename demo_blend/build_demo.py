@@ -64,7 +64,7 @@ def first_guess_overlays(scene, img_dir, t_show=0.5):
     """docs/img: overlays of a poor first guess (before fitting), to show the colours."""
 
     from addon.blender import api
-    from addon.core.capture import load_capture
+    from addon.core.observation.capture import load_capture
     os.makedirs(img_dir, exist_ok=True)
     p = scene.clothfit
     saved = api.params_from_scene(scene).as_dict()
@@ -98,8 +98,8 @@ def write_walkthrough_images(scene, img_dir):
     import numpy as np
     from addon.blender import api
     from addon.blender import render as R
-    from addon.core.capture import load_capture
-    from addon.core.overlay import contact_sheet, label
+    from addon.core.observation.capture import load_capture
+    from addon.core.observation.overlay import contact_sheet, label
     os.makedirs(img_dir, exist_ok=True)
     p = scene.clothfit
     times = api.parse_times(p.frame_times)
@@ -114,7 +114,7 @@ def write_walkthrough_images(scene, img_dir):
     data.lens = 30
     over = bpy.data.objects.new("overview", data)
     scene.collection.objects.link(over)
-    from addon.core.camera import Camera, look_at
+    from addon.core.observation.camera import Camera, look_at
     Rm, t = look_at((0.95, -0.75, 0.6), (0.0, 0.0, 0.08))
     K = np.array([[620.0, 0, 399.5], [0, 620.0, 299.5], [0, 0, 1]])
     saved = (scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage)

@@ -10,7 +10,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from addon.core.camera import ring_rig, save_cameras  # noqa: E402
+from addon.core.observation.camera import ring_rig, save_cameras  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 

@@ -1,7 +1,7 @@
 """The core rasteriser's silhouettes vs. Blender's own renders of the same deformed cloth.
 
 lab18 rig at 480 x 640, the paper scenario simulated by the core, baked into the mesh, rendered by
-Workbench (AA off) and rasterised by ``core.raster.silhouette``: XOR < 1 % of the silhouette area
+Workbench (AA off) and rasterised by ``core.observation.raster.silhouette``: XOR < 1 % of the silhouette area
 for every (camera, shape). Measured figures: ``python tools/blender_agreement.py`` (docs/blender.md).
 """
 import numpy as np
@@ -12,7 +12,7 @@ from blender_support import bpy, factory  # noqa: F401
 from addon.blender import api  # noqa: E402
 from addon.blender import render as R  # noqa: E402
 from addon.blender import scene as S  # noqa: E402
-from addon.core.raster import silhouette  # noqa: E402
+from addon.core.observation.raster import silhouette  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 

@@ -8,8 +8,8 @@ cv2 = pytest.importorskip("cv2")
 
 from addon.blender import render as R  # noqa: E402
 from addon.blender import scene as S  # noqa: E402
-from addon.core.camera import Camera, look_at  # noqa: E402
-from addon.core.raster import rasterize, silhouette  # noqa: E402
+from addon.core.observation.camera import Camera, look_at  # noqa: E402
+from addon.core.observation.raster import rasterize, silhouette  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 

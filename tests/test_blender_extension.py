@@ -34,7 +34,7 @@ def test_zip_layout(ext_zip):
     manifest = build_extension.read_manifest()
     assert os.path.basename(ext_zip) == f"silhouette_cloth_fit-{manifest['version']}.zip"
     for need in ("blender_manifest.toml", "__init__.py", "addon/__init__.py", "addon/blender/ops.py",
-                 "addon/blender/registration.py", "addon/core/camera.py", "addon/core/simulate.py",
+                 "addon/blender/registration.py", "addon/core/observation/camera.py", "addon/core/physics/paper.py",
                  "rigs/lab18.json"):
         assert need in names, need
     for w in manifest["wheels"]:
@@ -77,8 +77,8 @@ INSTALL = textwrap.dedent('''
     import cv2, cma, numba
     for m in (cv2, cma, numba):
         assert m.__file__.startswith(site), m.__file__
-    accel = sys.modules.get(mod + ".addon.core.accel") or __import__(mod + ".addon.core.accel", fromlist=["x"])
-    assert accel.available(), "numba kernels not available from the bundled wheels"
+    jit = sys.modules.get(mod + ".addon.core.physics.jit") or __import__(mod + ".addon.core.physics.jit", fromlist=["x"])
+    assert jit.available(), "numba kernels not available from the bundled wheels"
     scene = bpy.context.scene
     assert bpy.ops.clothfit.build_rig() == {"FINISHED"}
     assert len(bpy.data.collections["ClothFit Rig"].objects) == 18
@@ -124,8 +124,8 @@ HIDE_PACKAGES = textwrap.dedent('''
     import cv2, cma, numba
     for m in (cv2, cma, numba):
         assert ".blender_site" in m.__file__, m.__file__
-    from addon.core import accel
-    assert accel.available()
+    from addon.core.physics import jit
+    assert jit.available()
     print("FROM-WHEELS", len(added), cv2.__version__, numba.__version__)
 ''')
 

@@ -366,9 +366,9 @@ def test_show_frame_swaps_camera_backgrounds(small_capture):
 
 
 def test_render_never_overwrites_a_foreign_capture(tmp_path):
-    from addon.core.synth import synth_capture
-    from addon.core.model import paper_scenario
-    from addon.core.camera import ring_rig
+    from addon.core.observation.synth import synth_capture
+    from addon.core.physics.scenario import paper_scenario
+    from addon.core.observation.camera import ring_rig
     cams = ring_rig(n_per_ring=(2,), elevations_deg=(30.0,), distance=0.5, target=(0, 0, 0.06), width=80,
                     height=60, fx=120.0)
     synth_capture(tmp_path / "real", scenario=paper_scenario(frame_times=[0.1]), cameras=cams, noise=0.0)

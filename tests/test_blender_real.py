@@ -12,10 +12,10 @@ cv2 = pytest.importorskip("cv2")
 
 from addon.blender import api  # noqa: E402
 from addon.blender import scene as S  # noqa: E402
-from addon.core import calib_io  # noqa: E402
-from addon.core.camera import Camera, load_rig  # noqa: E402
-from addon.core.capture import load_capture  # noqa: E402
-from addon.core.model import Handle  # noqa: E402
+from addon.core.footage import calib_io  # noqa: E402
+from addon.core.observation.camera import Camera, load_rig  # noqa: E402
+from addon.core.observation.capture import load_capture  # noqa: E402
+from addon.core.physics.scenario import Handle  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
@@ -67,7 +67,7 @@ def test_lab18_round_trip_through_blender(tmp_path, fmt):
 
 
 def _ring(n=4, w=160, h=120, dist=None, fy_scale=None):
-    from addon.core.camera import ring_rig
+    from addon.core.observation.camera import ring_rig
     cams = ring_rig(n_per_ring=(n,), elevations_deg=(30.0,), distance=0.5, target=(0, 0, 0.06), width=w,
                     height=h, fx=250.0)
     for i, c in enumerate(cams):
@@ -261,8 +261,8 @@ def test_extract_bad_input(tmp_path):
     # the output may not be the footage folder, nor a capture another tool wrote
     p.extract_capture_dir = str(tmp_path / "f")
     assert "is the footage folder" in run_error("extract_silhouettes")
-    from addon.core.synth import synth_capture
-    from addon.core.model import paper_scenario
+    from addon.core.observation.synth import synth_capture
+    from addon.core.physics.scenario import paper_scenario
     synth_capture(tmp_path / "synth", scenario=paper_scenario(frame_times=[0.1]), cameras=_ring(2), noise=0.0)
     p.extract_capture_dir = str(tmp_path / "synth")
     assert "only overwrites its own extractions" in run_error("extract_silhouettes")
@@ -354,7 +354,7 @@ def test_empty_moves_a_corner(tmp_path):
     want = rest + DELTA * np.clip(t / 0.3, 0, 1)[:, None]
     np.testing.assert_allclose(hs[0].position(t), want, atol=1e-6)
     # the fitter replays it: the capture's scenario reproduces the bake
-    from addon.core.simulate import simulate as core_simulate
+    from addon.core.physics.models import simulate as core_simulate
     cap = load_capture(tmp_path / "cap")
     res = core_simulate(cap.scenario, [api.params_from_scene(scene)])
     np.testing.assert_allclose(res.positions[0], cap.shapes, atol=1e-6)

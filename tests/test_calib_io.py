@@ -1,14 +1,14 @@
-"""Camera import/export (addon/core/calib_io.py): OpenCV FileStorage, COLMAP, distortion."""
+"""Camera import/export (addon/core/footage/calib_io.py): OpenCV FileStorage, COLMAP, distortion."""
 import os
 
 import cv2
 import numpy as np
 import pytest
 
-from addon.core import calib_io as CI
-from addon.core.camera import Camera, intrinsics, load_rig, look_at
+from addon.core.footage import calib_io as CI
+from addon.core.observation.camera import Camera, intrinsics, load_rig, look_at
 from addon.core.errors import ClothFitError
-from addon.core.raster import rasterize
+from addon.core.observation.raster import rasterize
 
 
 def rig(n=3, dist=None, skewless=True):
@@ -327,8 +327,8 @@ def test_cli_import_and_export_cameras(tmp_path, capsys):
                 "opencv-dir"]) == 0
     same(cams, CI.import_cameras(str(tmp_path / "per")))
     # a capture as the source
-    from addon.core.capture import write_capture
-    from addon.core.model import paper_scenario
+    from addon.core.observation.capture import write_capture
+    from addon.core.physics.scenario import paper_scenario
     cap = write_capture(str(tmp_path / "cap"), cams, paper_scenario(frame_times=[0.1]), None)
     assert cli(["export-cameras", cap.root, "-o", str(tmp_path / "fromcap")]) == 0
     same(cams, CI.import_cameras(str(tmp_path / "fromcap")))

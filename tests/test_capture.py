@@ -5,11 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from addon.core import camera as camera_mod
-from addon.core.capture import (DEFAULT_PATTERN, FORMAT, Capture, PendingCapture, finalize_capture, load_capture,
-                                read_shapes, read_silhouette, save_silhouette, write_capture)
+from addon.core.observation import camera as camera_mod
+from addon.core.observation.capture import (DEFAULT_PATTERN, FORMAT, Capture, PendingCapture, finalize_capture, load_capture, read_shapes, read_silhouette, save_silhouette, write_capture)
 from addon.core.errors import ClothFitError
-from addon.core.model import ClothGrid, paper_scenario
+from addon.core.physics.scenario import ClothGrid, paper_scenario
 
 H, W = 48, 64
 TIMES = [0.05, 0.10, 0.15]

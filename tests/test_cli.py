@@ -41,7 +41,7 @@ def cap(tmp_path_factory):
 
 
 def test_synth_writes_a_capture(cap):
-    from addon.core.capture import load_capture
+    from addon.core.observation.capture import load_capture
     c = load_capture(str(cap), validate=True)       # every silhouette file readable, sizes right
     assert c.n_cameras == 18 and c.n_frames == 30
     assert all((k.height, k.width) == (60, 80) for k in c.cameras)

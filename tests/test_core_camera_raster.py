@@ -10,12 +10,13 @@ import cv2
 import numpy as np
 import pytest
 
-from addon.core import camera as C
+from addon.core.observation import camera as C
 from addon.core import defaults as D
-from addon.core import metrics, raster
+from addon.core.observation import metrics
+from addon.core.observation import raster
 from addon.core.errors import ClothFitError
-from addon.core.model import paper_scenario
-from addon.core.simulate import simulate
+from addon.core.physics.scenario import paper_scenario
+from addon.core.physics.models import simulate
 
 
 def _random_rotation(rng):

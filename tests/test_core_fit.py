@@ -9,21 +9,23 @@ import cv2
 import numpy as np
 import pytest
 
-from addon.core import accel
-from addon.core import camera as C
+from addon.core.physics import jit
+from addon.core.observation import camera as C
 from addon.core import defaults as D
-from addon.core import overlay, raster, synth
+from addon.core.observation import overlay
+from addon.core.observation import raster
+from addon.core.observation import synth
 from addon.core.errors import ClothFitError
-from addon.core.evaluate import evaluate
-from addon.core.fitting import FitConfig, FitJob
-from addon.core.model import paper_scenario
-from addon.core.objective import SilhouetteObjective
-from addon.core.simulate import simulate
+from addon.core.fitting.evaluate import evaluate
+from addon.core.fitting.job import FitConfig, FitJob
+from addon.core.physics.scenario import paper_scenario
+from addon.core.fitting.objective import SilhouetteObjective
+from addon.core.physics.models import simulate
 
 GT = dict(D.GT_PARAMS)
 GT_ROW = [GT["m"], GT["k"], GT["l"], GT["d"]]
 K10_ROW = [GT["m"], GT["k"] * 1.1, GT["l"], GT["d"]]
-needs_numba = pytest.mark.skipif(not accel.available(), reason="numba not importable: no second backend")
+needs_numba = pytest.mark.skipif(not jit.available(), reason="numba not importable: no second backend")
 BACKENDS = ["numpy", pytest.param("numba", marks=needs_numba)]
 
 H, W = 120, 160
@@ -67,7 +69,7 @@ def test_objective_backends_agree(small_problem):
 
 def test_objective_per_image_is_e_sil_of_the_model_silhouette(small_problem):
     """The numpy objective's per-image value equals metrics.e_sil of a separately rasterised model."""
-    from addon.core.metrics import e_sil
+    from addon.core.observation.metrics import e_sil
     sc, cams, obs = small_problem
     X = simulate(sc, [K10_ROW], backend="numpy").positions[0]
     esil, _ = SilhouetteObjective(sc, cams, obs, backend="numpy").per_image(np.array([K10_ROW]))

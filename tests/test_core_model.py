@@ -8,17 +8,18 @@ import math
 import numpy as np
 import pytest
 
-from addon.core import accel
+from addon.core.physics import jit
 from addon.core import defaults as D
-from addon.core import simulate as S
+from addon.core.physics import paper as S
+from addon.core.physics.models import simulate
 from addon.core.errors import ClothFitError
-from addon.core.model import (ClothGrid, Handle, Params, Scenario, identifiable, identifiable_errors,
-                              paper_scenario)
+from addon.core.physics.scenario import ClothGrid, Handle, Scenario, paper_scenario
+from addon.core.physics.paper import Params, identifiable, identifiable_errors
 
 GT = dict(D.GT_PARAMS)
 GT_ROW = [GT["m"], GT["k"], GT["l"], GT["d"]]
-BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(not accel.available(), reason="numba missing"))]
-needs_numba = pytest.mark.skipif(not accel.available(), reason="numba not importable: no second backend")
+BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(not jit.available(), reason="numba missing"))]
+needs_numba = pytest.mark.skipif(not jit.available(), reason="numba not importable: no second backend")
 
 
 # ------------------------------------------------------------------ topology
@@ -123,7 +124,7 @@ def test_simulator_first_step_uses_the_model_forces(backend):
     dt = 0.5 * D.DT_SAFETY * math.sqrt(m / k)       # one substep in the interval
     grav = np.array([0.3, -0.2, -9.81])
     sc = Scenario(g, [], [dt], settle_time=0.0, gravity=grav)
-    r = S.simulate(sc, [[m, k, l, 0.0]], backend=backend)
+    r = simulate(sc, [[m, k, l, 0.0]], backend=backend)
     assert not r.exploded[0] and r.substeps[0] == 1
     expect = g.rest + dt * dt * (grav + S.spring_forces(g.rest, g, k, l) / m)
     disp = expect - g.rest
@@ -158,7 +159,7 @@ def test_undamped_energy_is_conserved_without_drift(backend):
     n = 4000
     g, dt, sc = _free_scenario(n, m, k)
     l = g.spacing
-    r = S.simulate(sc, [[m, k, l, 0.0]], backend=backend)
+    r = simulate(sc, [[m, k, l, 0.0]], backend=backend)
     assert not r.exploded[0]
     assert r.substeps[0] == n
     X = np.concatenate([g.rest[None], r.positions[0]])
@@ -179,7 +180,7 @@ def test_damped_energy_decreases(backend):
     n = 4000
     g, dt, sc = _free_scenario(n, m, k)
     l = g.spacing
-    r = S.simulate(sc, [[m, k, l, d]], backend=backend)
+    r = simulate(sc, [[m, k, l, d]], backend=backend)
     X = np.concatenate([g.rest[None], r.positions[0]])
     E0 = S.spring_energy(g.rest, g, k, l)
     E = _energies(g, X, dt, m, k, l)
@@ -198,8 +199,8 @@ def test_numpy_and_numba_agree_on_the_paper_scenario():
            [1e-5, 1e9, l, 0.0],            # k/m = 1e14: too many steps
            [-1e-5, 10.0, l, 0.0],          # m <= 0: invalid
            [1e-5, 10.0, l, 0.0]]           # undamped: chaotic but valid
-    a = S.simulate(sc, pop, backend="numpy")
-    b = S.simulate(sc, pop, backend="numba")
+    a = simulate(sc, pop, backend="numpy")
+    b = simulate(sc, pop, backend="numba")
     assert a.positions.shape == b.positions.shape == (5, 30, 256, 3)
     assert np.array_equal(a.exploded, b.exploded)
     assert a.exploded.tolist() == [False, False, True, True, False]
@@ -236,13 +237,13 @@ def short_paper():
 
 @pytest.fixture(scope="module")
 def short_paper_gt(short_paper):
-    return S.simulate(short_paper, [GT_ROW], backend="numpy")
+    return simulate(short_paper, [GT_ROW], backend="numpy")
 
 
 @pytest.mark.parametrize("backend,kind", _absurd_cases())
 def test_absurd_candidate_is_flagged_not_raised(backend, kind, short_paper, short_paper_gt):
     pop = [GT_ROW, ABSURD[kind], GT_ROW]
-    r = S.simulate(short_paper, pop, backend=backend)     # never an exception
+    r = simulate(short_paper, pop, backend=backend)     # never an exception
     assert r.exploded.tolist() == [False, True, False]
     assert isinstance(r.reason[1], str) and r.reason[1]
     if kind == "too_stiff":
@@ -258,21 +259,21 @@ def test_absurd_candidate_is_flagged_not_raised(backend, kind, short_paper, shor
 
 
 def test_numpy_population_of_only_bad_candidates_is_flagged_not_raised(short_paper):
-    r = S.simulate(short_paper, [[-1.0, 10.0, GT["l"], 0.0]], backend="numpy")
+    r = simulate(short_paper, [[-1.0, 10.0, GT["l"], 0.0]], backend="numpy")
     assert r.exploded.tolist() == [True]
     assert "invalid" in r.reason[0]
 
 
 @needs_numba
 def test_numba_population_of_only_bad_candidates_is_flagged(short_paper):
-    r = S.simulate(short_paper, [[-1.0, 10.0, GT["l"], 0.0], [1e-5, 1e9, GT["l"], 0.0]], backend="numba")
+    r = simulate(short_paper, [[-1.0, 10.0, GT["l"], 0.0], [1e-5, 1e9, GT["l"], 0.0]], backend="numba")
     assert r.exploded.tolist() == [True, True]
     assert all(r.reason)
 
 
 def test_unknown_backend_is_an_error(short_paper):
     with pytest.raises(ClothFitError, match="gpu"):
-        S.simulate(short_paper, [GT_ROW], backend="gpu")
+        simulate(short_paper, [GT_ROW], backend="gpu")
 
 
 # -------------------------------------------------------------------- handles
@@ -295,7 +296,7 @@ def _handle_scenario():
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_held_vertices_follow_their_trajectory_at_frame_times(backend):
     g, hs, sc, p = _handle_scenario()
-    r = S.simulate(sc, [p], backend=backend)
+    r = simulate(sc, [p], backend=backend)
     assert not r.exploded[0]
     X = r.positions[0]
     t = sc.frame_times
@@ -314,7 +315,7 @@ def test_held_vertices_follow_their_trajectory_at_frame_times(backend):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_released_corner_moves_after_release_and_not_before(backend):
     g, hs, sc, p = _handle_scenario()
-    r = S.simulate(sc, [p], backend=backend)
+    r = simulate(sc, [p], backend=backend)
     X = r.positions[0]
     v = hs[0].vertex
     dist = np.linalg.norm(X[:, v] - g.rest[v], axis=1)
@@ -329,7 +330,7 @@ def test_released_corner_moves_after_release_and_not_before(backend):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_released_corner_is_still_at_its_hold_position_at_the_release_time(backend):
     g, hs, sc, p = _handle_scenario()
-    r = S.simulate(sc, [p], backend=backend)
+    r = simulate(sc, [p], backend=backend)
     v = hs[0].vertex
     i = list(sc.frame_times).index(0.3)
     assert np.linalg.norm(r.positions[0, i, v] - g.rest[v]) < 1e-12
@@ -341,7 +342,7 @@ def test_paper_scenario_holds_three_corners_and_releases_one():
     rel = [h for h in sc.handles if h.release_time is not None]
     assert len(sc.handles) == 4 and len(rel) == 1 and rel[0].release_time == 0.0
     assert rel[0].vertex == sc.grid.corners()[D.RELEASED_CORNER]
-    r = S.simulate(sc.with_frames([0.05, 0.5, 1.0]), [GT_ROW], backend="numpy")
+    r = simulate(sc.with_frames([0.05, 0.5, 1.0]), [GT_ROW], backend="numpy")
     X = r.positions[0]
     for h in sc.handles:
         d = np.linalg.norm(X[:, h.vertex] - sc.grid.rest[h.vertex], axis=1)
@@ -410,7 +411,7 @@ def test_scaling_m_k_d_together_gives_identical_motion(backend, factor):
     sc = paper_scenario(frame_times=[0.05, 0.3, 0.7, 1.2])
     scaled = [GT["m"] * factor, GT["k"] * factor, GT["l"], GT["d"] * factor]
     other = [GT["m"], GT["k"] * 1.3, GT["l"], GT["d"] * 1.3]       # scaling k, d but not m does change it
-    r = S.simulate(sc, [GT_ROW, scaled, other], backend=backend)
+    r = simulate(sc, [GT_ROW, scaled, other], backend=backend)
     assert not r.exploded.any()
     diff = np.abs(r.positions[0] - r.positions[1]).max()
     assert diff < 1e-9, diff

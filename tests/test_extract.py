@@ -1,4 +1,4 @@
-"""Silhouette extraction (addon/core/extract.py) on tiny synthetic footage: no renders needed."""
+"""Silhouette extraction (addon/core/footage/extract.py) on tiny synthetic footage: no renders needed."""
 import argparse
 import json
 import os
@@ -7,9 +7,9 @@ import cv2
 import numpy as np
 import pytest
 
-from addon.core import extract as X
-from addon.core.camera import Camera, intrinsics, look_at
-from addon.core.capture import load_capture
+from addon.core.footage import extract as X
+from addon.core.observation.camera import Camera, intrinsics, look_at
+from addon.core.observation.capture import load_capture
 from addon.core.errors import ClothFitError
 
 H, W = 90, 120
@@ -195,7 +195,7 @@ def _cams(n=2):
 
 
 def write_footage(root, n_cams=2, times=(0.1, 0.2, 0.3), plates=1, footage_json=True):
-    from addon.core.calib_io import export_cameras
+    from addon.core.footage.calib_io import export_cameras
     os.makedirs(root, exist_ok=True)
     cams = _cams(n_cams)
     export_cameras(cams, os.path.join(root, "cameras.yml"))
@@ -248,7 +248,7 @@ def test_extract_capture_end_to_end(tmp_path):
 def test_extract_capture_undistort(tmp_path):
     root, out = str(tmp_path / "f"), str(tmp_path / "c")
     write_footage(root, n_cams=1, times=(0.1,))
-    from addon.core.calib_io import export_cameras, import_cameras
+    from addon.core.footage.calib_io import export_cameras, import_cameras
     cams = import_cameras(os.path.join(root, "cameras.yml"))
     cams[0].dist = np.array([-0.2, 0.05, 0.0, 0.0, 0.0])
     export_cameras(cams, os.path.join(root, "cameras.yml"))
@@ -317,7 +317,7 @@ def test_cli_glue(tmp_path, capsys):
     root, out = str(tmp_path / "f"), str(tmp_path / "c")
     write_footage(root, footage_json=False)
     scen = tmp_path / "scen.json"
-    from addon.core.model import paper_scenario
+    from addon.core.physics.scenario import paper_scenario
     scen.write_text(json.dumps({"scenario": paper_scenario(frame_times=[9.0]).to_dict()}))
     p = X.add_arguments(argparse.ArgumentParser())
     args = p.parse_args([root, "-o", out, "--cameras", os.path.join(root, "cameras.yml"), "--times", "0.1,0.2,0.3",

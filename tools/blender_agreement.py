@@ -5,7 +5,7 @@
 
 Simulates the paper scenario with the ground-truth parameters, bakes it into the Blender cloth,
 and for every rig camera and capture time compares Blender's silhouette (Workbench, AA off) with
-``core.raster.silhouette`` of the same vertices: XOR pixels / silhouette area. Prints a table per
+``core.observation.raster.silhouette`` of the same vertices: XOR pixels / silhouette area. Prints a table per
 camera and per time, the overall figures, and the time per silhouette of each (the Blender figure
 includes writing and reading the PNG, as a capture render does).
 """
@@ -43,7 +43,7 @@ def main(argv=None):
     from addon.blender import api, registration
     from addon.blender import render as R
     from addon.blender import scene as S
-    from addon.core.raster import silhouette
+    from addon.core.observation.raster import silhouette
     if not registration.is_registered():
         addon.register()
     bpy.ops.wm.read_factory_settings(use_empty=True)

@@ -60,7 +60,7 @@ if ROOT not in sys.path:
 from addon.blender.pipeline import script_argv  # noqa: E402  (no bpy import)
 from addon.core import defaults as D  # noqa: E402
 from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.model import ClothGrid, paper_scenario  # noqa: E402
+from addon.core.physics.scenario import ClothGrid, paper_scenario  # noqa: E402
 
 TAU = math.sqrt(0.001)   # s of physical time per Blender cloth time unit (gravity is scaled by 1/1000)
 FRAME_DT = 0.01          # s per frame
@@ -217,8 +217,8 @@ def observe(out_dir, rig=D.DEFAULT_RIG, times=None, cloth=None, resolution=None)
 
     from addon.blender.render import render_masks
     from addon.blender.scene import build_rig
-    from addon.core.camera import load_rig
-    from addon.core.capture import write_capture
+    from addon.core.observation.camera import load_rig
+    from addon.core.observation.capture import write_capture
 
     times = list(D.FRAME_TIMES if times is None else times)
     grid = ClothGrid()
@@ -286,8 +286,8 @@ def shape_oracle(cap, times=None, evals=600, seed=0):
     error a silhouette fit could reach at best, not a method (it needs the 3D truth)."""
     import cma
 
-    from addon.core.metrics import shape_error_mm
-    from addon.core.simulate import simulate
+    from addon.core.observation.metrics import shape_error_mm
+    from addon.core.physics.models import simulate
     times = list(D.TEST_TIMES if times is None else times)
     fidx = [cap.frame_index(t) for t in times]
     sc = cap.scenario.with_frames([float(cap.frame_times[i]) for i in fidx])
@@ -314,12 +314,12 @@ def shape_oracle(cap, times=None, evals=600, seed=0):
 
 def fit(capture_dir, n_cams=(4, 8, 16), evals=D.FIT_EVALUATIONS, seed=0, optimizer="spx-mgg",
         overlays=None, resolution=None):
-    from addon.core.camera import select_training
-    from addon.core.capture import load_capture
-    from addon.core.evaluate import evaluate
-    from addon.core.fitting import FitConfig, FitJob
-    from addon.core.model import identifiable
-    from addon.core.overlay import capture_overlays
+    from addon.core.observation.camera import select_training
+    from addon.core.observation.capture import load_capture
+    from addon.core.fitting.evaluate import evaluate
+    from addon.core.fitting.job import FitConfig, FitJob
+    from addon.core.physics.paper import identifiable
+    from addon.core.observation.overlay import capture_overlays
 
     cap = load_capture(capture_dir)
     rows = []
@@ -396,8 +396,8 @@ def main(argv=None):
                        a.overlays, res)
             print(format_rows(rows))
             if a.oracle:
-                from addon.core.capture import load_capture
-                from addon.core.evaluate import evaluate
+                from addon.core.observation.capture import load_capture
+                from addon.core.fitting.evaluate import evaluate
                 orc = shape_oracle(load_capture(a.capture))
                 ev = evaluate(load_capture(a.capture), orc["params"], times=D.TEST_TIMES)
                 orc["all_cameras_sil_err_pct"] = ev["silhouette_error_pct"]

@@ -55,13 +55,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from addon.core import calib_io  # noqa: E402
+from addon.core.footage import calib_io  # noqa: E402
 from addon.blender.pipeline import script_argv  # noqa: E402  (no bpy import)
 from addon.core import defaults as D  # noqa: E402
-from addon.core.camera import Camera, load_rig  # noqa: E402
+from addon.core.observation.camera import Camera, load_rig  # noqa: E402
 from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.model import Params, paper_scenario  # noqa: E402
-from addon.core.raster import silhouette  # noqa: E402
+from addon.core.physics.paper import Params  # noqa: E402
+from addon.core.physics.scenario import paper_scenario
+from addon.core.observation.raster import silhouette  # noqa: E402
 
 DEFAULT_TIMES = [0.1, 0.2, 0.3, 0.4, 0.6, 0.8]
 DEFAULT_RES = (240, 320)          # H, W (half of the rig's 480 x 640)
@@ -321,8 +322,8 @@ def render_footage(out, rig=D.DEFAULT_RIG, times=None, resolution=DEFAULT_RES, e
     import cv2
     import bpy
 
-    from addon.core.capture import save_silhouette
-    from addon.core.simulate import simulate
+    from addon.core.observation.capture import save_silhouette
+    from addon.core.physics.models import simulate
 
     times = list(DEFAULT_TIMES if times is None else times)
     rng = np.random.default_rng(seed)
@@ -417,8 +418,8 @@ def score(footage, capture_dir, single_plate=False, **extract_kw):
     """Extract ``footage`` into ``capture_dir`` and compare with the true masks: IoU per camera."""
     import tempfile
 
-    from addon.core.capture import load_capture, read_silhouette
-    from addon.core.extract import extract_capture
+    from addon.core.observation.capture import load_capture, read_silhouette
+    from addon.core.footage.extract import extract_capture
     t0 = time.time()
     src = single_plate_view(footage, tempfile.mkdtemp(prefix="footage_1plate_")) if single_plate else footage
     rep = extract_capture(src, capture_dir, **extract_kw)
@@ -457,11 +458,11 @@ def format_score(s):
 
 def fit_footage(capture_dir, footage, n_train=(4,), evals=1500, seed=0, optimizer="spx-mgg", train_times=None):
     """Fit on ``n`` training cameras' extracted silhouettes; score on the held-out cameras."""
-    from addon.core.camera import select_training
-    from addon.core.capture import load_capture, write_capture, read_silhouette, read_shapes
-    from addon.core.evaluate import evaluate
-    from addon.core.fitting import FitConfig, FitJob
-    from addon.core.model import identifiable, identifiable_errors
+    from addon.core.observation.camera import select_training
+    from addon.core.observation.capture import load_capture, write_capture, read_silhouette, read_shapes
+    from addon.core.fitting.evaluate import evaluate
+    from addon.core.fitting.job import FitConfig, FitJob
+    from addon.core.physics.paper import identifiable, identifiable_errors
 
     cap = load_capture(capture_dir)
     truth_dir = os.path.join(os.path.dirname(os.path.abspath(capture_dir)), os.path.basename(capture_dir) + "_truth")

@@ -14,8 +14,9 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from addon.core import defaults as D  # noqa: E402
-from addon.core.model import Params, paper_scenario  # noqa: E402
-from addon.core.simulate import simulate  # noqa: E402
+from addon.core.physics.paper import Params  # noqa: E402
+from addon.core.physics.scenario import paper_scenario
+from addon.core.physics.models import simulate  # noqa: E402
 
 
 def max_move(sc, base, rel):

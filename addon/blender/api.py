@@ -20,9 +20,10 @@ import bpy
 import numpy as np
 
 from ..core import defaults as D
-from ..core.camera import load_rig, ring_rig, select_training
 from ..core.errors import ClothFitError
-from ..core.model import ClothGrid, Handle, Params, Scenario, paper_scenario
+from ..core.observation.camera import load_rig, ring_rig, select_training
+from ..core.physics.paper import Params
+from ..core.physics.scenario import ClothGrid, Handle, Scenario, paper_scenario
 from . import render as R
 from . import scene as S
 
@@ -130,7 +131,7 @@ def cameras_to_json(cameras) -> str:
 
 
 def cameras_from_json(text, where="scene.clothfit.rig_cameras_json"):
-    from ..core.camera import Camera
+    from ..core.observation.camera import Camera
     try:
         data = json.loads(text)
     except ValueError as e:
@@ -148,7 +149,7 @@ def blender_view_cameras(cameras):
     ``PAR_APPROX_LIMIT`` apart the Blender cameras use the median fx/fy (fx kept, fy adjusted;
     a note says by how much), beyond it an error names the camera. Lens distortion cannot be
     shown by a Blender camera (a note; the exact cameras are kept in ``rig_cameras_json``)."""
-    from ..core.camera import Camera
+    from ..core.observation.camera import Camera
     cameras = list(cameras)
     if not cameras:
         raise ClothFitError("the rig has no camera")
@@ -231,7 +232,7 @@ def exact_rig_cameras(scene):
 def import_cameras(scene, path=None):
     """Calibrated cameras (OpenCV FileStorage YAML/JSON/XML file or folder, COLMAP text model,
     our cameras JSON) -> the rig. Returns (cameras, notes)."""
-    from ..core import calib_io
+    from ..core.footage import calib_io
     p = props(scene)
     src = abspath(path if path else p.cameras_file, "camera file")
     cams = calib_io.import_cameras(src)
@@ -248,7 +249,7 @@ def export_cameras(scene, path=None, fmt=None):
     """The rig's cameras -> an OpenCV file/folder, a COLMAP model or our JSON. Cameras that
     still show their imported/loaded camera are written exactly (float64, distortion); moved
     ones as Blender shows them. Returns (path, cameras, names of cameras written from Blender)."""
-    from ..core import calib_io
+    from ..core.footage import calib_io
     p = props(scene)
     fmt = fmt or p.cameras_export_format
     if fmt not in EXPORT_FORMATS:
@@ -281,7 +282,7 @@ def grid_from_props(scene) -> ClothGrid:
 
 def capture_scenario(scene):
     """The loaded capture's scenario (handles, settling), for scenario source CAPTURE."""
-    from ..core.capture import load_capture as core_load
+    from ..core.observation.capture import load_capture as core_load
     return core_load(capture_dir(scene)).scenario
 
 
@@ -455,7 +456,7 @@ def remove_handle(scene, index=None, delete_empty=False):
 
 def simulate(scene):
     """Simulate the scene's parameters and bake: one shape key per capture time plus t = 0."""
-    from ..core.simulate import simulate as core_simulate
+    from ..core.physics.models import simulate as core_simulate
     times = parse_times(props(scene).frame_times)
     bake_times = sorted(set([0.0] + times))
     notes = []
@@ -481,9 +482,9 @@ def simulate(scene):
 def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None):
     """Blender renders the cloth's silhouette from every rig camera at every capture time and
     writes a capture directory (core format). Returns the ``Capture``."""
-    from ..core.capture import finalize_capture, save_silhouette, write_capture
-    from ..core.metrics import add_boundary_noise
-    from ..core.synth import noise_rng
+    from ..core.observation.capture import finalize_capture, save_silhouette, write_capture
+    from ..core.observation.metrics import add_boundary_noise
+    from ..core.observation.synth import noise_rng
     p = props(scene)
     root = abspath(out_dir, "capture directory") if out_dir else capture_dir(scene)
     noise = p.noise if noise is None else float(noise)
@@ -612,8 +613,8 @@ def _footage_cameras(scene, footage):
     """The calibration for an extraction: the Calibration property, else the footage's own
     (footage.json's, cameras.* / calibration.*, a COLMAP folder), else the rig's exact cameras
     (imported or loaded). Returns (cameras, where they came from)."""
-    from ..core import calib_io
-    from ..core import extract as X
+    from ..core.footage import calib_io
+    from ..core.footage import extract as X
     p = props(scene)
     if p.extract_calibration.strip():
         path = abspath(p.extract_calibration, "calibration")
@@ -632,7 +633,7 @@ def _footage_cameras(scene, footage):
 
 
 def extract_silhouettes(scene, progress=None):
-    """Silhouettes from the footage folder (``core.extract.extract_capture``) into a capture,
+    """Silhouettes from the footage folder (``core.footage.extract.extract_capture``) into a capture,
     then load it (cameras become the rig, observed silhouettes the camera backgrounds).
 
     With the Empties manipulation the capture's scenario is the empties' (sampled at the
@@ -640,7 +641,7 @@ def extract_silhouettes(scene, progress=None):
     ``progress(fraction)`` is called per camera. Returns (Capture, report); ``report["warnings"]``
     lists every warning of the extraction, ``report["notes"]`` what the scene changed (frame rate).
     Errors (every bad file in one message) write nothing."""
-    from ..core import extract as X
+    from ..core.footage import extract as X
     p = props(scene)
     footage = abspath(p.footage_dir, "footage directory")
     if not os.path.isdir(footage):
@@ -687,7 +688,7 @@ def extract_silhouettes(scene, progress=None):
 def load_capture(scene, path=None):
     """Read and fully validate a capture; its cameras become the rig, its scenario the settings,
     and each camera shows its observed silhouette (frame ``view_frame``) as background image."""
-    from ..core.capture import load_capture as core_load
+    from ..core.observation.capture import load_capture as core_load
     p = props(scene)
     root = abspath(path, "capture directory") if path else capture_dir(scene)
     cap = core_load(root)
@@ -732,7 +733,7 @@ def show_background(cam_obj, image, alpha=0.6):
 
 def show_observations(scene, frame_index, cap=None, kind="observed"):
     """Camera backgrounds: observed silhouettes (or overlays) of capture frame ``frame_index``."""
-    from ..core.capture import load_capture as core_load
+    from ..core.observation.capture import load_capture as core_load
     cap = cap or core_load(capture_dir(scene))
     fi = max(0, min(int(frame_index), cap.n_frames - 1))
     objs = {o.name: o for o in S.rig_objects(scene)}
@@ -754,7 +755,7 @@ def show_observations(scene, frame_index, cap=None, kind="observed"):
 # ===================================================================== fitting
 
 def fit_config(scene, capture):
-    from ..core.fitting import FitConfig
+    from ..core.fitting.job import FitConfig
     p = props(scene)
     ncam = len(capture.cameras)
     if p.train_cameras > ncam:
@@ -810,8 +811,8 @@ class FitSession:
 
 def start_fit(scene, capture=None):
     """Load the capture, build the core ``FitJob``; returns a ``FitSession``."""
-    from ..core.capture import load_capture as core_load
-    from ..core.fitting import FitJob
+    from ..core.fitting.job import FitJob
+    from ..core.observation.capture import load_capture as core_load
     p = props(scene)
     if p.fit_running:
         raise ClothFitError("a fit is already running in this scene")
@@ -957,8 +958,8 @@ def overlay_path(cap, ci, fi):
 
 
 def model_masks_core(scene, cap, frame_indices):
-    from ..core.raster import silhouette
-    from ..core.simulate import simulate as core_simulate
+    from ..core.observation.raster import silhouette
+    from ..core.physics.models import simulate as core_simulate
     sc = cap.scenario.with_frames([float(cap.frame_times[i]) for i in frame_indices])
     res = core_simulate(sc, [params_from_scene(scene)])
     if res.exploded[0]:
@@ -1002,9 +1003,9 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
     """Observed vs. model silhouettes per camera and frame -> ``<capture>/overlays/<cam>/<f>.png``,
     a contact sheet of all cameras at one frame, E_sil per image in ``overlays/summary.json``;
     cameras show their overlay as background. Returns the summary dict."""
-    from ..core.capture import load_capture as core_load
-    from ..core.metrics import e_sil
-    from ..core.overlay import contact_sheet, label, overlay_image, write_rgb
+    from ..core.observation.capture import load_capture as core_load
+    from ..core.observation.metrics import e_sil
+    from ..core.observation.overlay import contact_sheet, label, overlay_image, write_rgb
     p = props(scene)
     cap = core_load(capture_dir(scene))
     fidx = list(range(cap.n_frames)) if frame_indices is None else [int(i) for i in frame_indices]

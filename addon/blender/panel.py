@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..core.model import identifiable
+from ..core.physics.paper import identifiable
 
 
 def draw_rig(layout, scene, p):

@@ -96,6 +96,7 @@ def ensure_registered():
 
 def run_op(op, **kw):
     import bpy
+
     from ..core.errors import ClothFitError
     t = time.time()
     try:

@@ -7,11 +7,18 @@ float properties in single precision: the fit's exact numbers are in the result 
 from __future__ import annotations
 
 import bpy
-from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, IntProperty,
-                       PointerProperty, StringProperty)
+from bpy.props import (
+    BoolProperty,
+    CollectionProperty,
+    EnumProperty,
+    FloatProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
 
 from ..core import defaults as D
-from ..core.extract import ExtractOptions
+from ..core.footage.extract import ExtractOptions
 
 OPTIMIZERS = [("spx-mgg", "SPX + MGG", "Real-coded GA: simplex crossover, minimal generation gap (the paper's)"),
               ("cma-es", "CMA-ES", "Covariance matrix adaptation evolution strategy")]

@@ -2,7 +2,7 @@
 """Scene builders: OpenCV cameras <-> Blender cameras, the rig collection, the cloth mesh, the bake.
 
 Camera conversion (Blender's ``BKE_camera_params_compute_viewplane``; pixel centres at integers as
-in ``core/camera.py``). With ``W, H`` the render size (resolution x percentage / 100, integer
+in ``core/observation/camera.py``). With ``W, H`` the render size (resolution x percentage / 100, integer
 division as Blender does), ``par = pixel_aspect_y / pixel_aspect_x``:
 
 * sensor fit AUTO is horizontal when ``pixel_aspect_x * W >= pixel_aspect_y * H``;
@@ -22,14 +22,13 @@ Blender has one render size per scene: every camera of a rig must share it.
 """
 from __future__ import annotations
 
-
 import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..core.camera import Camera
 from ..core.errors import ClothFitError
-from ..core.model import ClothGrid
+from ..core.observation.camera import Camera
+from ..core.physics.scenario import ClothGrid
 
 RIG_COLLECTION = "ClothFit Rig"
 CLOTH_COLLECTION = "ClothFit"

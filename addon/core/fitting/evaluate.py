@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import ClothFitError
-from .fitting import resample_silhouette
-from .metrics import shape_error_mm
-from .model import Params
+from ..errors import ClothFitError
+from ..observation.metrics import shape_error_mm
+from ..physics.models import simulate
+from ..physics.paper import Params
+from .job import resample_silhouette
 from .objective import SilhouetteObjective
-from .simulate import simulate
 
 
 def evaluate(capture, params, cameras=None, times=None, resolution=None, backend="auto") -> dict:

@@ -16,17 +16,18 @@ import time
 
 import numpy as np
 
-from . import accel
-from . import defaults as D
-from .camera import select_training
-from .capture import load_capture
+from .. import defaults as D
+from ..fitting.job import FitConfig, FitJob
+from ..fitting.objective import SilhouetteObjective
+from ..observation.camera import select_training
+from ..observation.capture import load_capture
+from ..observation.raster import silhouette
+from ..observation.synth import synth_capture
+from ..physics import jit
+from ..physics.models import simulate
+from ..physics.paper import Params
+from ..physics.scenario import paper_scenario
 from .experiment import DEFAULT_OPTIMIZER, FULL, QUICK
-from .fitting import FitConfig, FitJob
-from .model import Params, paper_scenario
-from .objective import SilhouetteObjective
-from .raster import silhouette
-from .simulate import simulate
-from .synth import synth_capture
 
 TARGET_EVALS_PER_S = 50.0
 TARGET_FIT_S = 120.0
@@ -64,11 +65,11 @@ def run_bench(json_path, quick=False):
         load = os.getloadavg()[0]
     except OSError:
         load = None
-    out = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "numba": accel.available(),
+    out = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "numba": jit.available(),
                        "load_average_1min_at_start": load},
            "workload": "16 cameras x 15 shapes at 480x640, settle 0.5 s + 1.5 s of motion, 705 springs",
            "targets": {"evals_per_s": TARGET_EVALS_PER_S, "fit_seconds": TARGET_FIT_S}}
-    backends = ["numba", "numpy"] if accel.available() else ["numpy"]
+    backends = ["numba", "numpy"] if jit.available() else ["numpy"]
     for be in backends:
         obj = SilhouetteObjective(sc, cams, obs, backend=be)
         Pb = P if be == "numba" else P[:4]

@@ -76,7 +76,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .errors import ClothFitError
+from ..errors import ClothFitError
 
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp", ".exr")
 BACKGROUND_PREFIXES = ("background", "bg")
@@ -571,7 +571,7 @@ def _find_calibration(footage_dir):
 
 
 def _resolve_scenario(scenario, frame_times, where):
-    from .model import Scenario, paper_scenario
+    from ..physics.scenario import Scenario, paper_scenario
     if scenario is None:
         return paper_scenario(frame_times=frame_times), ("no scenario given: the paper's manipulation is assumed "
                                                          "(10 cm 16x16 cloth, 4 corners held at z = 0.1 m, corner 0 "
@@ -612,8 +612,8 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
     per camera threshold and statistics, per frame area, all warnings.
     Raises one ClothFitError listing every bad file when anything is wrong; nothing is written then.
     """
+    from ..observation.capture import write_capture
     from . import calib_io
-    from .capture import write_capture
 
     opts = options or ExtractOptions()
     for k, v in option_overrides.items():

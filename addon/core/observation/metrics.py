@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import ClothFitError
+from ..errors import ClothFitError
 
 
 def e_sil(observed: np.ndarray, model: np.ndarray, name: str = "silhouette") -> float:

@@ -49,8 +49,8 @@ import re
 
 import numpy as np
 
-from .camera import Camera, load_cameras, save_cameras
-from .errors import ClothFitError
+from ..errors import ClothFitError
+from ..observation.camera import Camera, load_cameras, save_cameras
 
 _K_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsic", "intrinsic_matrix", "intrinsics", "M")
 _D_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "distortion", "dist", "D")
@@ -653,7 +653,7 @@ def _cameras_from_any(path: str, fmt: str = "auto", width=None, height=None) -> 
     """Cameras of a calibration file/folder, or of a capture (its folder or capture.json)."""
     cj = path if os.path.basename(path) == "capture.json" else os.path.join(path, "capture.json")
     if os.path.isfile(cj) and fmt == "auto":
-        from .capture import load_capture
+        from ..observation.capture import load_capture
         return load_capture(cj).cameras
     return import_cameras(path, fmt, width, height)
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ClothFitError
+from ..errors import ClothFitError
 
 
 @dataclass
@@ -252,7 +252,7 @@ def load_cameras(path: str):
     return cams
 
 
-RIGS_DIR = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "rigs"))
+RIGS_DIR = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "rigs"))
 
 
 def rig_path(name_or_path: str) -> str:

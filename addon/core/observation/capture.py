@@ -22,9 +22,9 @@ import string
 
 import numpy as np
 
+from ..errors import ClothFitError
+from ..physics.scenario import Scenario
 from .camera import Camera, load_cameras, save_cameras
-from .errors import ClothFitError
-from .model import Scenario
 
 FORMAT = "silhouette-cloth-fit/capture"
 VERSION = 1

@@ -3,16 +3,17 @@
 ``SilhouetteObjective`` holds the observed silhouettes of the chosen cameras and frames and returns,
 for a population of parameter sets, ``E_all`` (sum of ``E_sil`` over all images) or the per-image
 ``E_sil``. A candidate that explodes or goes non-finite scores ``inf`` (the worst), never an error.
-The numba kernels (``accel``) are used when available, else the numpy reference path.
+The numba kernels (``kernels``) are used when available, else the numpy reference path.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from . import accel
-from .errors import ClothFitError
-from .raster import rasterize_window
-from .simulate import simulate_numpy
+from ..errors import ClothFitError
+from ..observation.raster import rasterize_window
+from ..physics import jit, paper_kernels
+from ..physics.paper import simulate_numpy
+from . import kernels
 
 
 class SilhouetteObjective:
@@ -42,7 +43,7 @@ class SilhouetteObjective:
                 obs.append(o)
         self.observed = [[obs[c * F + f] for f in range(F)] for c in range(C)]
         if backend == "auto":
-            backend = "numba" if accel.available() else "numpy"
+            backend = "numba" if jit.available() else "numpy"
         if backend not in ("numba", "numpy"):
             raise ClothFitError(f"unknown backend {backend!r} (numba, numpy, auto)")
         self.backend = backend
@@ -66,7 +67,7 @@ class SilhouetteObjective:
                     pres.append(pre.ravel())
                     o += pre.size
             self._pre = np.concatenate(pres)
-            self._arrays = accel.scenario_arrays(scenario)
+            self._arrays = paper_kernels.scenario_arrays(scenario)
             self._Ks = np.array([c.K for c in self.cameras])
             self._Rs = np.array([c.R for c in self.cameras])
             self._ts = np.array([c.t for c in self.cameras])
@@ -97,10 +98,9 @@ class SilhouetteObjective:
             esil = np.full((P.shape[0], C, F), np.inf)
             codes = np.zeros(P.shape[0], dtype=np.int64)
             a = self._arrays
-            accel.objective_population(P, *[a[k] for k in accel._ORDER], self._Ks, self._Rs, self._ts, self._dists,
-                                       self._Hs, self._Ws, self._pre, self._pofs, self._bbs, self.areas, self._tris,
-                                       self._maxh, self._maxw, self._span_cap,
-                                       esil, codes)
+            kernels.objective_population(P, *[a[k] for k in paper_kernels.ORDER], self._Ks, self._Rs, self._ts,
+                                         self._dists, self._Hs, self._Ws, self._pre, self._pofs, self._bbs, self.areas,
+                                         self._tris, self._maxh, self._maxw, self._span_cap, esil, codes)
             exploded = codes != 0
             esil[exploded] = np.inf
             return esil, exploded

@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 
-from .errors import ClothFitError
+from ..errors import ClothFitError
 
 AGREE_RGB = (255, 255, 255)
 MISSING_RGB = (230, 40, 40)
@@ -68,9 +68,9 @@ def write_rgb(path: str, rgb: np.ndarray):
 def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_name="contact_sheet.png",
                      max_sheet=36):
     """Write one overlay PNG per camera and frame plus a contact sheet; returns the list of paths."""
-    from .model import Params
+    from ..physics.models import simulate
+    from ..physics.paper import Params
     from .raster import silhouette
-    from .simulate import simulate
     p = Params.from_dict(params, "overlay parameters")
     cams = list(range(len(capture.cameras))) if cameras is None else list(cameras)
     times = list(capture.frame_times) if times is None else list(times)

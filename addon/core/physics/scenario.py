@@ -1,14 +1,10 @@
-"""The mass-spring cloth (SPEC 2), its parameters, the manipulation, and identifiability.
+"""The cloth and its manipulation, shared by every cloth model: grid, handles, scenario.
 
 Grid: ``ny x nx`` point masses, vertex ``(i, j)`` (row i, column j) has index ``i * nx + j``.
 Every quad ``(i, j)..(i+1, j+1)`` is split along the diagonal ``(i, j)-(i+1, j+1)`` into two
 triangles; springs lie on every triangle edge: ``ny (nx-1)`` horizontal, ``(ny-1) nx`` vertical and
 ``(ny-1)(nx-1)`` diagonal. For 16 x 16: 450 triangles, 240 + 240 + 225 = 705 springs.
 
-Parameters (per point mass / per spring): point mass ``m`` [kg], spring coefficient ``k`` [N/m],
-natural length ``l`` [m] of the grid-aligned springs (diagonals rest at ``sqrt(2) l``), viscous
-damping ``d`` [N s/m] (force ``-d v_i``). The equations of motion divided by ``m`` only contain
-``k/m``, ``d/m`` and ``l``: those are what silhouettes can identify (see ``identifiable``).
 """
 from __future__ import annotations
 
@@ -17,56 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import defaults as D
-from .errors import ClothFitError
-
-PARAM_NAMES = ("m", "k", "l", "d")
-
-
-@dataclass
-class Params:
-    m: float
-    k: float
-    l: float
-    d: float
-
-    def as_dict(self):
-        return {n: float(getattr(self, n)) for n in PARAM_NAMES}
-
-    @classmethod
-    def from_dict(cls, d, source="parameters"):
-        try:
-            p = cls(*(float(d[n]) for n in PARAM_NAMES))
-        except KeyError as e:
-            raise ClothFitError(f"{source}: missing parameter {e.args[0]!r} (need m, k, l, d)") from None
-        except (TypeError, ValueError) as e:
-            raise ClothFitError(f"{source}: parameters must be numbers ({e})") from None
-        p.check(source)
-        return p
-
-    def check(self, source="parameters"):
-        for n in PARAM_NAMES:
-            v = getattr(self, n)
-            if not math.isfinite(v):
-                raise ClothFitError(f"{source}: {n} = {v} is not finite")
-        if self.m <= 0 or self.k <= 0 or self.l <= 0:
-            raise ClothFitError(f"{source}: m, k and l must be positive (m={self.m}, k={self.k}, l={self.l})")
-        if self.d < 0:
-            raise ClothFitError(f"{source}: damping d = {self.d} must be >= 0")
-
-    def identifiable(self):
-        return identifiable(self.as_dict())
-
-
-def identifiable(p: dict) -> dict:
-    """The combinations the motion depends on: k/m [1/s^2], d/m [1/s], l [m]."""
-    return {"k_over_m": p["k"] / p["m"], "d_over_m": p["d"] / p["m"], "l": p["l"]}
-
-
-def identifiable_errors(est: dict, true: dict) -> dict:
-    """Relative recovery error [%] of each identifiable quantity."""
-    a, b = identifiable(est), identifiable(true)
-    return {k: 100.0 * abs(a[k] - b[k]) / abs(b[k]) for k in a}
+from .. import defaults as D
+from ..errors import ClothFitError
 
 
 class ClothGrid:

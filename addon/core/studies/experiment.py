@@ -25,14 +25,14 @@ import time
 
 import numpy as np
 
-from . import defaults as D
-from .camera import select_training
-from .capture import load_capture
-from .evaluate import evaluate
-from .fitting import FitConfig, FitJob
-from .model import identifiable, identifiable_errors
-from .raster import silhouette
-from .synth import synth_capture
+from .. import defaults as D
+from ..fitting.evaluate import evaluate
+from ..fitting.job import FitConfig, FitJob
+from ..observation.camera import select_training
+from ..observation.capture import load_capture
+from ..observation.raster import silhouette
+from ..observation.synth import synth_capture
+from ..physics.paper import identifiable, identifiable_errors
 
 FULL = dict(evals=2500, fig8_cameras=[1, 16], opt_seeds=5, opt_evals=2000, opt_cameras=4)
 QUICK = dict(evals=700, fig8_cameras=[4], opt_seeds=2, opt_evals=600, opt_cameras=4)
@@ -100,7 +100,7 @@ def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=Non
     synth_capture(cap_path, seed=seed, truth_dt_safety=tds, rig=rig)
     cap = load_capture(cap_path)
     gt = cap.meta["true_params"]
-    out = {"protocol": "SPEC 5 (see addon/core/experiment.py)", "quick": quick, "seed": seed,
+    out = {"protocol": "SPEC 5 (see addon/core/studies/experiment.py)", "quick": quick, "seed": seed,
            "optimizer": optimizer, "optimizer_sizes": sizes, "evaluations_per_fit": S["evals"], "true_params": gt,
            "truth_dt_safety": tds, "model_dt_safety": D.DT_SAFETY,
            "true_identifiable": identifiable(gt), "rig": rig, "noise_fraction": D.NOISE_FRACTION}

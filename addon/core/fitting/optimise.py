@@ -72,8 +72,8 @@ import pickle
 
 import numpy as np
 
-from . import defaults as D
-from .errors import ClothFitError
+from .. import defaults as D
+from ..errors import ClothFitError
 
 STATE_VERSION = 1
 

@@ -1,4 +1,11 @@
-"""Population simulator of the mass-spring cloth (vectorised numpy over candidates).
+"""The paper's mass-spring sheet (SPEC 2): parameters, identifiability and the numpy reference
+simulator (vectorised over candidates; ``paper_kernels`` is its numba twin).
+
+Parameters (per point mass / per spring): point mass ``m`` [kg], spring coefficient ``k`` [N/m],
+natural length ``l`` [m] of the grid-aligned springs (diagonals rest at ``sqrt(2) l``), viscous
+damping ``d`` [N s/m] (force ``-d v_i``). The equations of motion divided by ``m`` only contain
+``k/m``, ``d/m`` and ``l``: those are what silhouettes can identify (see ``identifiable``).
+
 
 Integrator (part of the model, documented in the README):
 
@@ -30,9 +37,58 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import defaults as D
-from .errors import ClothFitError
-from .model import Scenario
+from .. import defaults as D
+from ..errors import ClothFitError
+from .scenario import Scenario
+
+PARAM_NAMES = ("m", "k", "l", "d")
+
+
+@dataclass
+class Params:
+    m: float
+    k: float
+    l: float
+    d: float
+
+    def as_dict(self):
+        return {n: float(getattr(self, n)) for n in PARAM_NAMES}
+
+    @classmethod
+    def from_dict(cls, d, source="parameters"):
+        try:
+            p = cls(*(float(d[n]) for n in PARAM_NAMES))
+        except KeyError as e:
+            raise ClothFitError(f"{source}: missing parameter {e.args[0]!r} (need m, k, l, d)") from None
+        except (TypeError, ValueError) as e:
+            raise ClothFitError(f"{source}: parameters must be numbers ({e})") from None
+        p.check(source)
+        return p
+
+    def check(self, source="parameters"):
+        for n in PARAM_NAMES:
+            v = getattr(self, n)
+            if not math.isfinite(v):
+                raise ClothFitError(f"{source}: {n} = {v} is not finite")
+        if self.m <= 0 or self.k <= 0 or self.l <= 0:
+            raise ClothFitError(f"{source}: m, k and l must be positive (m={self.m}, k={self.k}, l={self.l})")
+        if self.d < 0:
+            raise ClothFitError(f"{source}: damping d = {self.d} must be >= 0")
+
+    def identifiable(self):
+        return identifiable(self.as_dict())
+
+
+def identifiable(p: dict) -> dict:
+    """The combinations the motion depends on: k/m [1/s^2], d/m [1/s], l [m]."""
+    return {"k_over_m": p["k"] / p["m"], "d_over_m": p["d"] / p["m"], "l": p["l"]}
+
+
+def identifiable_errors(est: dict, true: dict) -> dict:
+    """Relative recovery error [%] of each identifiable quantity."""
+    a, b = identifiable(est), identifiable(true)
+    return {k: 100.0 * abs(a[k] - b[k]) / abs(b[k]) for k in a}
+
 
 
 @dataclass
@@ -89,22 +145,6 @@ MAX_TOTAL_STEPS = D.MAX_TOTAL_STEPS
 def check_params(params: np.ndarray):
     bad = ~np.all(np.isfinite(params), axis=1) | (params[:, 0] <= 0) | (params[:, 1] <= 0) | (params[:, 2] <= 0) | (params[:, 3] < 0)
     return bad
-
-
-def simulate(scenario: Scenario, params, backend: str = "auto", safety: float = D.DT_SAFETY) -> SimResult:
-    """Simulate a population; ``params`` is one or many (m, k, l, d). See the module doc.
-    ``safety`` scales the time step (``dt <= safety * sqrt(m/k)``); synthetic ground truth uses a
-    finer step than the fitter (``defaults.TRUTH_DT_SAFETY``)."""
-    P = _as_params(params)
-    if backend == "auto":
-        from . import accel
-        backend = "numba" if accel.available() else "numpy"
-    if backend == "numba":
-        from . import accel
-        return accel.simulate(scenario, P, safety)
-    if backend != "numpy":
-        raise ClothFitError(f"unknown simulation backend {backend!r} (numpy, numba, auto)")
-    return simulate_numpy(scenario, P, safety)
 
 
 def _handle_tables(scenario):

@@ -20,9 +20,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from . import defaults as D
-from .errors import ClothFitError
-from .model import identifiable, identifiable_errors
+from .. import defaults as D
+from ..errors import ClothFitError
+from ..physics.paper import identifiable, identifiable_errors
 from .objective import SilhouetteObjective
 from .optimise import SearchSpace, make_optimizer
 
@@ -232,8 +232,8 @@ class FitJob:
     @classmethod
     def resume(cls, path, capture=None):
         """Continue a job from its checkpoint (same capture, same config)."""
-        from .capture import load_capture
-        from .optimise import SPXMGG, CMAES  # noqa: F401
+        from ..observation.capture import load_capture
+        from .optimise import CMAES, SPXMGG  # noqa: F401
         try:
             with open(path) as f:
                 ck = json.load(f)

@@ -7,14 +7,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import defaults as D
+from .. import defaults as D
+from ..errors import ClothFitError
+from ..physics.models import simulate
+from ..physics.paper import Params
+from ..physics.scenario import paper_scenario
 from .camera import load_rig
 from .capture import write_capture
-from .errors import ClothFitError
 from .metrics import add_boundary_noise
-from .model import Params, paper_scenario
 from .raster import silhouette
-from .simulate import simulate
 
 
 def noise_rng(seed: int, cam: int, frame: int) -> np.random.Generator:

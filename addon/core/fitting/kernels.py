@@ -1,0 +1,35 @@
+"""The fused population kernel of the fit: simulate a candidate and score its silhouettes in the
+same thread, so a population never holds all its simulated frames at once.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..observation.silhouette_kernels import eval_frames
+from ..physics.jit import PARALLEL, njit, prange
+from ..physics.paper_kernels import simulate_one
+
+
+@njit(**PARALLEL)
+def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+                         events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
+                         max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris,
+                         max_h, max_w, span_cap, esil, codes):
+    """Simulate and score every candidate: esil[p, c, f]; codes[p] != 0 = exploded."""
+    V = rest.shape[0]
+    for p in prange(P.shape[0]):
+        X = np.zeros((n_frames, V, 3))
+        code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos,
+                                release, events, frame_of_event, n_frames, gravity, settle_rate, safety,
+                                centre, limit, max_strain, max_steps, X)
+        codes[p] = code
+        if code != 0:
+            continue
+        work = (np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
+                np.empty(span_cap, dtype=np.int32), np.zeros(max_h + 2, dtype=np.int64),
+                np.zeros(max_h + 2, dtype=np.int64), np.empty(span_cap, dtype=np.int32),
+                np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
+                np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
+                np.empty(span_cap, dtype=np.int32))
+        eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work, esil[p])
+

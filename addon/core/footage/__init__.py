@@ -1,0 +1,2 @@
+"""Real footage into captures: silhouette extraction and calibrated cameras in and out.
+"""

@@ -1,0 +1,236 @@
+"""numba kernels of the paper's sheet: the simulator of ``paper.simulate_numpy``, one candidate per
+thread. Same formulas, same order of operations (tests compare them with the numpy reference).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import defaults as D
+from .jit import JIT, PARALLEL, njit, prange
+from .paper import SimResult, event_times, explosion_limits
+
+REASONS = ["", "invalid parameters", "non-finite state", "flew away", "spring overstretched", "too many steps"]
+
+_jit = dict(cache=True, nogil=True, fastmath=False)
+
+@njit(**JIT)
+def _handle_at(h, t, key_start, key_times, key_pos, out_p, out_v):
+    k0 = key_start[h]
+    k1 = key_start[h + 1]
+    n = k1 - k0
+    for a in range(3):
+        out_v[a] = 0.0
+    if n == 1 or t <= key_times[k0]:
+        for a in range(3):
+            out_p[a] = key_pos[k0, a]
+        if n > 1 and t == key_times[k0]:
+            s = (key_pos[k0 + 1] - key_pos[k0]) / (key_times[k0 + 1] - key_times[k0])
+            for a in range(3):
+                out_v[a] = s[a]
+        return
+    if t >= key_times[k1 - 1]:
+        for a in range(3):
+            out_p[a] = key_pos[k1 - 1, a]
+        return
+    j = k0
+    while key_times[j + 1] <= t:
+        j += 1
+    w = (t - key_times[j]) / (key_times[j + 1] - key_times[j])
+    for a in range(3):
+        out_p[a] = key_pos[j, a] + w * (key_pos[j + 1, a] - key_pos[j, a])
+        out_v[a] = (key_pos[j + 1, a] - key_pos[j, a]) / (key_times[j + 1] - key_times[j])
+
+@njit(**JIT)
+def _family(X, Fb, n, off, rl, kap, mask):
+    """Forces of one spring family: pairs (q, q + off) for q < n, masked (0 = no spring)."""
+    for q in range(n):
+        d0 = X[0, q + off] - X[0, q]
+        d1 = X[1, q + off] - X[1, q]
+        d2 = X[2, q + off] - X[2, q]
+        ln = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        w = kap * (1.0 - rl / max(ln, 1e-12)) * mask[q]
+        Fb[0, q] = w * d0
+        Fb[1, q] = w * d1
+        Fb[2, q] = w * d2
+
+@njit(**JIT)
+def _scatter(F, Fb, n, off):
+    for a in range(3):
+        for q in range(n):
+            F[a, q] += Fb[a, q]
+        for q in range(n):
+            F[a, q + off] -= Fb[a, q]
+
+@njit(**JIT)
+def _soa_forces(X, F, Fb, mh, mv, md, nx, V, kap, L, g):
+    """Per-unit-mass forces on a structure-of-arrays state X (3, V), in the order of
+    simulate_numpy: gravity, then horizontal, vertical and diagonal springs. Each family is
+    one contiguous loop over vertex pairs (q, q + offset) with a 0/1 mask for pairs that
+    would wrap around a row end, so the loops vectorise."""
+    for a in range(3):
+        for q in range(V):
+            F[a, q] = g[a]
+    _family(X, Fb, V - 1, 1, L, kap, mh)
+    _scatter(F, Fb, V - 1, 1)
+    _family(X, Fb, V - nx, nx, L, kap, mv)
+    _scatter(F, Fb, V - nx, nx)
+    _family(X, Fb, V - nx - 1, nx + 1, math.sqrt(2.0) * L, kap, md)
+    _scatter(F, Fb, V - nx - 1, nx + 1)
+
+@njit(**JIT)
+def _max_strain(x, springs, rest_factor, L):
+    r = 0.0
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        d0 = x[j, 0] - x[i, 0]
+        d1 = x[j, 1] - x[i, 1]
+        d2 = x[j, 2] - x[i, 2]
+        q = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / (rest_factor[s] * L)
+        if q > r:
+            r = q
+    return r
+
+@njit(**JIT)
+def simulate_one(par, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+                 events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
+                 max_strain, max_steps, out):
+    """Simulate one candidate; writes frames into ``out`` (F, V, 3). Returns (code, steps)."""
+    m, k, L, dmp = par[0], par[1], par[2], par[3]
+    if not (math.isfinite(m) and math.isfinite(k) and math.isfinite(L) and math.isfinite(dmp)) \
+            or m <= 0 or k <= 0 or L <= 0 or dmp < 0:
+        return 1, 0
+    kap = k / m
+    beta = dmp / m
+    V = rest.shape[0]
+    X = np.ascontiguousarray(rest.T)
+    Vv = np.zeros((3, V))
+    F = np.zeros((3, V))
+    Fb = np.zeros((3, V))
+    mh = np.ones(V)
+    md = np.ones(V)
+    for q in range(V):
+        if q % nx == nx - 1:
+            mh[q] = 0.0
+            md[q] = 0.0
+    mv = np.ones(V)
+    p = np.zeros(3)
+    pv = np.zeros(3)
+    H = hv.shape[0]
+    for h in range(H):
+        _handle_at(h, events[0], key_start, key_times, key_pos, p, pv)
+        for a in range(3):
+            X[a, hv[h]] = p[a]
+    dt_max = safety * math.sqrt(m / k)
+    steps = 0
+    for e in range(events.shape[0] - 1):
+        a0 = events[e]
+        b0 = events[e + 1]
+        seg = b0 - a0
+        n_full = int(math.floor(seg / dt_max))
+        rem = seg - n_full * dt_max
+        if rem <= 1e-12 * seg:
+            rem = 0.0
+        nsub = n_full + (1 if rem > 0.0 else 0)
+        if steps + nsub > max_steps:
+            return 5, steps
+        settling = b0 <= 0.0
+        rate = max(beta, settle_rate) if settling else beta
+        for s in range(nsub):
+            if s < n_full:
+                dt = dt_max
+                tc = a0 + (s + 1) * dt_max
+            else:
+                dt = rem
+                tc = b0
+            damp = 1.0 / (1.0 + dt * rate)
+            _soa_forces(X, F, Fb, mh, mv, md, nx, V, kap, L, gravity)
+            for a in range(3):
+                for i in range(V):
+                    Vv[a, i] = (Vv[a, i] + dt * F[a, i]) * damp
+                    X[a, i] = X[a, i] + dt * Vv[a, i]
+            for h in range(H):
+                if settling or tc <= release[h]:
+                    _handle_at(h, tc, key_start, key_times, key_pos, p, pv)
+                    for a in range(3):
+                        X[a, hv[h]] = p[a]
+                        Vv[a, hv[h]] = pv[a]
+        steps += nsub
+        # explosion checks once per interval
+        far = 0.0
+        for a in range(3):
+            for i in range(V):
+                if not (math.isfinite(X[a, i]) and math.isfinite(Vv[a, i])):
+                    return 2, steps
+                dd = abs(X[a, i] - centre[a])
+                if dd > far:
+                    far = dd
+        if far > limit:
+            return 3, steps
+        xt = X.T
+        if _max_strain(xt, springs, rest_factor, L) > 1.0 + max_strain:
+            return 4, steps
+        f = frame_of_event[e + 1]
+        if f >= 0:
+            out[f] = xt
+    return 0, steps
+
+@njit(**PARALLEL)
+def simulate_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
+                        events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
+                        max_strain, max_steps, out, codes, steps):
+    for p in prange(P.shape[0]):
+        code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos,
+                                release, events, frame_of_event, n_frames, gravity, settle_rate, safety,
+                                centre, limit, max_strain, max_steps, out[p])
+        codes[p] = code
+        steps[p] = st
+
+
+def scenario_arrays(scenario, safety=D.DT_SAFETY):
+    """Flatten a Scenario into the plain arrays the kernels take."""
+    grid = scenario.grid
+    hs = scenario.handles
+    hv = np.array([h.vertex for h in hs], dtype=np.int64)
+    key_start = np.zeros(len(hs) + 1, dtype=np.int64)
+    for i, h in enumerate(hs):
+        key_start[i + 1] = key_start[i] + h.times.size
+    key_times = np.concatenate([h.times for h in hs]) if hs else np.zeros(1)
+    key_pos = np.concatenate([h.positions for h in hs]) if hs else np.zeros((1, 3))
+    release = np.array([np.inf if h.release_time is None else h.release_time for h in hs], dtype=np.float64)
+    ev = event_times(scenario)
+    frame_of_event = np.full(ev.size, -1, dtype=np.int64)
+    lookup = {round(float(t), 12): i for i, t in enumerate(scenario.frame_times)}
+    for e, t in enumerate(ev):
+        frame_of_event[e] = lookup.get(round(float(t), 12), -1)
+    centre, limit = explosion_limits(scenario)
+    return dict(nx=int(grid.nx), ny=int(grid.ny), rest=np.ascontiguousarray(grid.rest, dtype=np.float64),
+                springs=np.ascontiguousarray(grid.springs, dtype=np.int64),
+                rest_factor=np.ascontiguousarray(grid.rest_factor, dtype=np.float64),
+                hv=hv, key_start=key_start, key_times=np.ascontiguousarray(key_times, dtype=np.float64),
+                key_pos=np.ascontiguousarray(key_pos, dtype=np.float64), release=release,
+                events=ev, frame_of_event=frame_of_event, n_frames=int(scenario.frame_times.size),
+                gravity=np.asarray(scenario.gravity, dtype=np.float64), settle_rate=float(D.SETTLE_DAMPING_RATE),
+                safety=float(safety), centre=np.asarray(centre, dtype=np.float64), limit=float(limit),
+                max_strain=float(D.MAX_STRAIN), max_steps=int(D.MAX_TOTAL_STEPS))
+
+
+ORDER = ["nx", "ny", "rest", "springs", "rest_factor", "hv", "key_start", "key_times", "key_pos", "release", "events",
+          "frame_of_event", "n_frames", "gravity", "settle_rate", "safety", "centre", "limit", "max_strain",
+          "max_steps"]
+
+
+def simulate(scenario, P, safety=D.DT_SAFETY):
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 4)
+    a = scenario_arrays(scenario, safety)
+    V = a["rest"].shape[0]
+    out = np.zeros((P.shape[0], a["n_frames"], V, 3))
+    codes = np.zeros(P.shape[0], dtype=np.int64)
+    steps = np.zeros(P.shape[0], dtype=np.int64)
+    simulate_population(P, *[a[k] for k in ORDER], out, codes, steps)
+    exploded = codes != 0
+    out[exploded] = np.nan
+    reason = [REASONS[c] for c in codes]
+    return SimResult(out, exploded, steps, reason)

@@ -1,0 +1,2 @@
+"""Experiments and benchmarks built on the whole core: the paper protocol, speed figures.
+"""
