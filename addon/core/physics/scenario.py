@@ -49,6 +49,10 @@ class ClothGrid:
         self.springs = np.concatenate([h, v, g]).astype(np.int32)
         # rest length of each spring in units of l
         self.rest_factor = np.concatenate([np.ones(len(h)), np.ones(len(v)), np.full(len(g), math.sqrt(2.0))])
+        # the same sheet as a polygon mesh (what Blender's cloth is built from): one quad per cell,
+        # corners (i, j), (i, j+1), (i+1, j+1), (i+1, j), counter-clockwise seen from +z; the two
+        # triangles above are its corners (0, 1, 2) and (0, 2, 3), as Blender tessellates a quad
+        self.quads = np.stack([a, b, dd, c], 1).astype(np.int64)
 
     @property
     def n_vertices(self):
