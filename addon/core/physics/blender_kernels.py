@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from . import simd
 from .jit import JIT, PARALLEL, njit, prange
 
 F32 = np.float32
@@ -76,9 +77,9 @@ def _poly_avg(P, inds, n, l):
     r2 = ZERO
     for x in range(n):
         v = inds[x]
-        r0 += P[v, 0, l] * fact
-        r1 += P[v, 1, l] * fact
-        r2 += P[v, 2, l] * fact
+        r0 += P[3 * v, l] * fact
+        r1 += P[3 * v + 1, l] * fact
+        r2 += P[3 * v + 2, l] * fact
     return r0, r1, r2
 
 
@@ -86,10 +87,10 @@ def _poly_avg(P, inds, n, l):
 def _hinge_angle(P, i, j, pa, la, pb, lb, l):
     """spring_angle: polygon normals on both sides, edge direction, signed angle (lane l)."""
     m0, m1, m2 = _poly_avg(P, pa, la, l)
-    a0, a1, a2 = _normal_tri(P[j, 0, l], P[j, 1, l], P[j, 2, l], P[i, 0, l], P[i, 1, l], P[i, 2, l], m0, m1, m2)
+    a0, a1, a2 = _normal_tri(P[3 * j, l], P[3 * j + 1, l], P[3 * j + 2, l], P[3 * i, l], P[3 * i + 1, l], P[3 * i + 2, l], m0, m1, m2)
     m0, m1, m2 = _poly_avg(P, pb, lb, l)
-    b0, b1, b2 = _normal_tri(P[i, 0, l], P[i, 1, l], P[i, 2, l], P[j, 0, l], P[j, 1, l], P[j, 2, l], m0, m1, m2)
-    e0, e1, e2 = _normalize(P[i, 0, l] - P[j, 0, l], P[i, 1, l] - P[j, 1, l], P[i, 2, l] - P[j, 2, l])
+    b0, b1, b2 = _normal_tri(P[3 * i, l], P[3 * i + 1, l], P[3 * i + 2, l], P[3 * j, l], P[3 * j + 1, l], P[3 * j + 2, l], m0, m1, m2)
+    e0, e1, e2 = _normalize(P[3 * i, l] - P[3 * j, l], P[3 * i + 1, l] - P[3 * j + 1, l], P[3 * i + 2, l] - P[3 * j + 2, l])
     cos = a0 * b0 + a1 * b1 + a2 * b2
     t0 = a1 * b2 - a2 * b1
     t1 = a2 * b0 - a0 * b2
@@ -104,10 +105,10 @@ def setup(rest, sp_i, sp_j, struct_creation, h_spring, h_pa, h_la, h_pb, h_lb):
     in creation order), rest angles. ``rest`` is (V, 3) float32."""
     S = sp_i.shape[0]
     V = rest.shape[0]
-    P = np.empty((V, 3, 1), dtype=np.float32)
+    P = np.empty((3 * V, 1), dtype=np.float32)
     for v in range(V):
         for a in range(3):
-            P[v, a, 0] = rest[v, a]
+            P[3 * v + a, 0] = rest[v, a]
     restlen = np.empty(S, dtype=np.float32)
     for s in range(S):
         i = sp_i[s]
@@ -146,101 +147,227 @@ def _fbderiv(x):
 
 
 @njit(**JIT)
-def _matvec(Md, Mo, sp_i, sp_j, x, to, temp, L):
-    """mul_bfmatrix_lfvector for symmetric 3x3 blocks stored as (m00, m01, m02, m11, m12, m22):
-    section 1 adds the transposed off-diagonal blocks into ``to``, section 2 every block into
-    ``temp`` (diagonal blocks first), then ``to += temp``."""
-    V = x.shape[0]
-    S = sp_i.shape[0]
-    for v in range(V):
-        for a in range(3):
-            for l in range(L):
-                to[v, a, l] = ZERO
-                temp[v, a, l] = ZERO
-    for s in range(S):
-        r = sp_i[s]
-        c = sp_j[s]
-        for l in range(L):
-            m00 = Mo[s, 0, l]
-            m01 = Mo[s, 1, l]
-            m02 = Mo[s, 2, l]
-            m11 = Mo[s, 3, l]
-            m12 = Mo[s, 4, l]
-            m22 = Mo[s, 5, l]
-            x0 = x[r, 0, l]
-            x1 = x[r, 1, l]
-            x2 = x[r, 2, l]
-            to[c, 0, l] += m00 * x0 + m01 * x1 + m02 * x2
-            to[c, 1, l] += m01 * x0 + m11 * x1 + m12 * x2
-            to[c, 2, l] += m02 * x0 + m12 * x1 + m22 * x2
-    for v in range(V):
-        for l in range(L):
-            m00 = Md[v, 0, l]
-            m01 = Md[v, 1, l]
-            m02 = Md[v, 2, l]
-            m11 = Md[v, 3, l]
-            m12 = Md[v, 4, l]
-            m22 = Md[v, 5, l]
-            x0 = x[v, 0, l]
-            x1 = x[v, 1, l]
-            x2 = x[v, 2, l]
-            temp[v, 0, l] += m00 * x0 + m01 * x1 + m02 * x2
-            temp[v, 1, l] += m01 * x0 + m11 * x1 + m12 * x2
-            temp[v, 2, l] += m02 * x0 + m12 * x1 + m22 * x2
-    for s in range(S):
-        r = sp_i[s]
-        c = sp_j[s]
-        for l in range(L):
-            m00 = Mo[s, 0, l]
-            m01 = Mo[s, 1, l]
-            m02 = Mo[s, 2, l]
-            m11 = Mo[s, 3, l]
-            m12 = Mo[s, 4, l]
-            m22 = Mo[s, 5, l]
-            x0 = x[c, 0, l]
-            x1 = x[c, 1, l]
-            x2 = x[c, 2, l]
-            temp[r, 0, l] += m00 * x0 + m01 * x1 + m02 * x2
-            temp[r, 1, l] += m01 * x0 + m11 * x1 + m12 * x2
-            temp[r, 2, l] += m02 * x0 + m12 * x1 + m22 * x2
-    for v in range(V):
-        for a in range(3):
-            for l in range(L):
-                to[v, a, l] = to[v, a, l] + temp[v, a, l]
-
-
-@njit(**JIT)
 def _add_block(Mb, k, l, o00, o01, o02, o11, o12, o22):
-    Mb[k, 0, l] += o00
-    Mb[k, 1, l] += o01
-    Mb[k, 2, l] += o02
-    Mb[k, 3, l] += o11
-    Mb[k, 4, l] += o12
-    Mb[k, 5, l] += o22
+    Mb[6 * k, l] += o00
+    Mb[6 * k + 1, l] += o01
+    Mb[6 * k + 2, l] += o02
+    Mb[6 * k + 3, l] += o11
+    Mb[6 * k + 4, l] += o12
+    Mb[6 * k + 5, l] += o22
+
+
+if simd.available():  # pragma: no branch
+    from llvmlite import ir as _ir
+    from numba import types as _types
+    from numba.core import cgutils as _cg
+    from numba.extending import intrinsic as _intrinsic
+
+    def _fb_v(vb, x):
+        xx = vb.mul(x, x)
+        xxx = vb.mul(xx, x)
+        xxxx = vb.mul(xxx, x)
+        r = vb.add(vb.mul(vb.k(C4[0]), xxxx), vb.mul(vb.k(C4[1]), xxx))
+        r = vb.add(vb.add(r, vb.mul(vb.k(C4[2]), xx)), vb.mul(vb.k(C4[3]), x))
+        return vb.add(r, vb.k(C4[4]))
+
+    def _fbderiv_v(vb, x):
+        xx = vb.mul(x, x)
+        xxx = vb.mul(xx, x)
+        r = vb.add(vb.mul(vb.k(D3[0]), xxx), vb.mul(vb.k(D3[1]), xx))
+        return vb.add(vb.add(r, vb.mul(vb.k(D3[2]), x)), vb.k(D3[3]))
+
+    def _choi_ko(vb, ln, L0, kb, cb):
+        """fbstar and fbstar_jacobi: (force along the spring, its -d/dlength), lane by lane."""
+        x = vb.div(ln, L0)
+        tfb = vb.mul(kb, _fb_v(vb, x))
+        lin = vb.mul(cb, vb.sub(ln, L0))
+        use_lin = vb.lt(tfb, lin)
+        return vb.sel(use_lin, lin, tfb), vb.sel(use_lin, vb.neg(cb), vb.mul(vb.neg(kb), _fbderiv_v(vb, x)))
+
+    def _poly_avg_v(vb, P, pa_row, n):
+        """poly_avg over the n corners listed at pa_row (pointer to int64), lane vectors."""
+        b = vb.b
+        fact = vb.splat(b.fdiv(_ir.Constant(_ir.FloatType(), 1.0), b.sitofp(n, _ir.FloatType())))
+        acc = [vb.var(vb.zero) for _ in range(3)]
+        with _cg.for_range(b, n) as lp:
+            v3 = b.mul(b.load(b.gep(pa_row, [lp.index])), _ir.Constant(_ir.IntType(64), 3))
+            x = vb.ld3(P, v3)
+            for a in range(3):
+                vb.set(acc[a], vb.add(vb.get(acc[a]), vb.mul(x[a], fact)))
+        return [vb.get(a) for a in acc]
+
+    def _addrow(vb, data, row, v, mask=None):
+        old = vb.ld(data, row)
+        new = vb.add(old, v)
+        vb.st(data, row, new if mask is None else vb.sel(mask, new, old))
+
+    def _subrow(vb, data, row, v, mask=None):
+        old = vb.ld(data, row)
+        new = vb.sub(old, v)
+        vb.st(data, row, new if mask is None else vb.sel(mask, new, old))
+
+    @_intrinsic
+    def _springs_v(typingctx, X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la,
+                   h_pb, h_lb, restang, par, angular):
+        """The spring part of cloth_calc_force for W lanes at once, spring by spring in Blender's list
+        order: the hinge's angular bending force (explicit), then the spring's linear force, its
+        Jacobian blocks (diagonal into Xd/Vd, off-diagonal into Xo/Vo) and damping; per-lane
+        branches (tension or compression, active or not) become selections."""
+        sig = _types.void(X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb,
+                          h_lb, restang, par, angular)
+
+        def codegen(context, builder, signature, args):
+            from .simd import VB, _data
+            vb = VB(context, builder)
+            b = builder
+            I64 = _ir.IntType(64)
+
+            def c(i):
+                return _ir.Constant(I64, i)
+
+            (x_, v_, f_, xd_, vd_, xo_, vo_, si_, sj_, sk_, sh_, rl_, pa_, la_, pb_, lb_, ra_, par_) = (
+                _data(context, builder, t, a) for t, a in zip(signature.args[:18], args[:18]))
+            ang_on = b.icmp_signed("!=", args[18], c(0))
+            S = b.extract_value(context.make_array(signature.args[7])(context, builder, args[7]).shape, 0)
+            maxl = b.extract_value(context.make_array(signature.args[12])(context, builder, args[12]).shape, 1)
+            prow = lambda k: vb.ld(par_, c(k))  # noqa: E731  lane parameter rows
+            with _cg.for_range(b, S) as lp:
+                s = lp.index
+                i = vb.i(si_, s)
+                j = vb.i(sj_, s)
+                kind = vb.i(sk_, s)
+                hb = vb.i(sh_, s)
+                i3 = b.mul(i, c(3))
+                j3 = b.mul(j, c(3))
+                i6 = b.mul(i, c(6))
+                j6 = b.mul(j, c(6))
+                s6 = b.mul(s, c(6))
+                L0 = vb.f(rl_, s)
+                # ---- angular bending across the hinge this spring carries
+                with b.if_then(b.and_(ang_on, b.icmp_signed(">=", hb, c(0)))):
+                    pa_row = b.gep(pa_, [b.mul(hb, maxl)])
+                    pb_row = b.gep(pb_, [b.mul(hb, maxl)])
+                    la = vb.i(la_, hb)
+                    lb = vb.i(lb_, hb)
+                    Xi = vb.ld3(x_, i3)
+                    Xj = vb.ld3(x_, j3)
+                    ma = _poly_avg_v(vb, x_, pa_row, la)
+                    da = vb.normal_tri(Xj, Xi, ma)
+                    mb = _poly_avg_v(vb, x_, pb_row, lb)
+                    db = vb.normal_tri(Xi, Xj, mb)
+                    e = vb.normalize3([vb.sub(Xi[a], Xj[a]) for a in range(3)])
+                    cos = vb.dot3(da, db)
+                    sin = vb.dot3(vb.cross3(da, db), e)
+                    ang = vb.atan2(sin, cos)
+                    va = _poly_avg_v(vb, v_, pa_row, la)
+                    vbb = _poly_avg_v(vb, v_, pb_row, lb)
+                    Vi = vb.ld3(v_, i3)
+                    Vj = vb.ld3(v_, j3)
+                    ve = [vb.mul(vb.add(Vi[a], Vj[a]), vb.k(0.5)) for a in range(3)]
+                    va = [vb.sub(va[a], ve[a]) for a in range(3)]
+                    vbb = [vb.sub(vbb[a], ve[a]) for a in range(3)]
+                    k = vb.mul(vb.mul(prow(P_BEND), L0), vb.k(0.1))
+                    force = vb.mul(k, vb.sub(ang, vb.f(ra_, hb)))
+                    force = vb.add(force, vb.mul(vb.neg(prow(P_BDAMP)), vb.add(vb.dot3(va, da), vb.dot3(vbb, db))))
+                    fa = vb.div(force, vb.splat(b.sitofp(la, _ir.FloatType())))
+                    fbv = vb.div(force, vb.splat(b.sitofp(lb, _ir.FloatType())))
+                    with _cg.for_range(b, la) as lq:
+                        u3 = b.mul(b.load(b.gep(pa_row, [lq.index])), c(3))
+                        for a in range(3):
+                            _addrow(vb, f_, b.add(u3, c(a)), vb.mul(da[a], fa))
+                    with _cg.for_range(b, lb) as lq:
+                        u3 = b.mul(b.load(b.gep(pb_row, [lq.index])), c(3))
+                        for a in range(3):
+                            _addrow(vb, f_, b.add(u3, c(a)), vb.mul(db[a], fbv))
+                    fh = vb.mul(force, vb.k(0.5))
+                    fe = [vb.add(vb.mul(da[a], fh), vb.mul(db[a], fh)) for a in range(3)]
+                    for a in range(3):
+                        _subrow(vb, f_, b.add(i3, c(a)), fe[a])
+                    for a in range(3):
+                        _subrow(vb, f_, b.add(j3, c(a)), fe[a])
+                # ---- the linear spring
+                Xi = vb.ld3(x_, i3)
+                Xj = vb.ld3(x_, j3)
+                Vi = vb.ld3(v_, i3)
+                Vj = vb.ld3(v_, j3)
+                ext = [vb.sub(Xj[a], Xi[a]) for a in range(3)]
+                w = [vb.sub(Vj[a], Vi[a]) for a in range(3)]
+                ln = vb.sqrt(vb.dot3(ext, ext))
+                okd = vb.gt(ln, vb.k(FLT_EPS))
+                inv = vb.div(vb.k(1.0), ln)
+                d = [vb.sel(okd, vb.mul(ext[a], inv), vb.zero) for a in range(3)]
+                pp = [vb.mul(d[0], d[0]), vb.mul(d[1], d[0]), vb.mul(d[2], d[0]),
+                      vb.mul(d[1], d[1]), vb.mul(d[2], d[1]), vb.mul(d[2], d[2])]
+                diag = (True, False, False, True, False, True)
+                is_struct = b.icmp_signed("==", kind, c(KIND_STRUCT))
+                is_bend = b.icmp_signed("==", kind, c(KIND_BEND))
+                # tension (structural or shear)
+                kt = vb.sel(vb.splat_bool(is_struct), prow(P_KT), prow(P_KS))
+                dtn = vb.sel(vb.splat_bool(is_struct), prow(P_DT), prow(P_DS))
+                tension = vb.land(vb.ge(ln, L0), vb.gt(ln, vb.zero))
+                sf_t = vb.mul(kt, vb.sub(ln, L0))
+                r_ = vb.div(L0, ln)
+                one = vb.k(1.0)
+                jt = [vb.mul(vb.sub(vb.mul(vb.sub(one if diag[q] else vb.zero, pp[q]), r_), one if diag[q] else vb.zero), kt)
+                      for q in range(6)]
+                # compression: Choi & Ko (structural springs with angular bending; linear bending springs)
+                kb = vb.sel(vb.splat_bool(is_bend), prow(P_KB), prow(P_KC))
+                cb = vb.sel(vb.splat_bool(is_bend), prow(P_CB), prow(P_KC))
+                sf_c, jac = _choi_ko(vb, ln, L0, kb, cb)
+                jc = [vb.mul(pp[q], jac) for q in range(6)]
+                # which lanes have a force, and which branch
+                struct_compress = b.and_(is_struct, ang_on)
+                act_lin = vb.sel(vb.splat_bool(struct_compress), vb.true(), tension)
+                act_bend = vb.lt(ln, L0)
+                act = vb.sel(vb.splat_bool(is_bend), act_bend, act_lin)
+                use_t = vb.land(tension, vb.splat_bool(b.not_(is_bend)))
+                sf = vb.sel(use_t, sf_t, sf_c)
+                damping = vb.sel(use_t, dtn, prow(P_DC))
+                fv = [vb.mul(d[a], sf) for a in range(3)]
+                jx = [vb.sel(use_t, jt[q], jc[q]) for q in range(6)]
+                # damping along the spring (not for linear bending springs)
+                dv = vb.mul(damping, vb.dot3(w, d))
+                fd = [vb.add(fv[a], vb.mul(d[a], dv)) for a in range(3)]
+                fv = [vb.sel(vb.splat_bool(is_bend), fv[a], fd[a]) for a in range(3)]
+                nd = vb.neg(damping)
+                jv = [vb.sel(vb.splat_bool(is_bend), vb.zero, vb.mul(pp[q], nd)) for q in range(6)]
+                for a in range(3):
+                    _addrow(vb, f_, b.add(i3, c(a)), fv[a], act)
+                for a in range(3):
+                    _subrow(vb, f_, b.add(j3, c(a)), fv[a], act)
+                for q in range(6):
+                    _addrow(vb, xd_, b.add(i6, c(q)), jx[q], act)
+                    _addrow(vb, xd_, b.add(j6, c(q)), jx[q], act)
+                    vb.st(xo_, b.add(s6, c(q)), vb.sel(act, vb.sub(vb.zero, jx[q]), vb.zero))
+                    _addrow(vb, vd_, b.add(i6, c(q)), jv[q], act)
+                    _addrow(vb, vd_, b.add(j6, c(q)), jv[q], act)
+                    vb.st(vo_, b.add(s6, c(q)), vb.sel(act, vb.sub(vb.zero, jv[q]), vb.zero))
+            return context.get_dummy_value()
+        return sig, codegen
 
 
 @njit(**JIT)
 def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb,
-              restang, angular, par, g, goal, pinned, xold, xconst, hv, tg, avg_eps, L):
+              restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg, avg_eps, L):
     """cloth_calc_force for every lane: forces F and the blocks of dF/dx (Xd diagonal, Xo per spring)
     and dF/dv (Vd, Vo); ``act[s, l]`` = spring s has a block in lane l."""
-    V = X.shape[0]
+    V = X.shape[0] // 3
     S = sp_i.shape[0]
     for v in range(V):
         for a in range(3):
             for l in range(L):
-                F[v, a, l] = ZERO
+                F[3 * v + a, l] = ZERO
         for q in range(6):
             for l in range(L):
-                Xd[v, q, l] = ZERO
-                Vd[v, q, l] = ZERO
+                Xd[6 * v + q, l] = ZERO
+                Vd[6 * v + q, l] = ZERO
     # gravity (and goal springs, vertex by vertex)
     for v in range(V):
         for l in range(L):
             m = par[l, P_MASS]
-            F[v, 0, l] += g[0] * m
-            F[v, 1, l] += g[1] * m
-            F[v, 2, l] += g[2] * m
+            F[3 * v, l] += g[0] * m
+            F[3 * v + 1, l] += g[1] * m
+            F[3 * v + 2, l] += g[2] * m
     for h in range(hv.shape[0]):
         v = hv[h]
         gw = goal[h]
@@ -253,9 +380,9 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
             gx1 = sfac * xold[h, 1] + tg * xconst[h, 1]
             gx2 = sfac * xold[h, 2] + tg * xconst[h, 2]
             k = gw * par[l, P_KGOAL] / avg_eps
-            e0 = gx0 - X[v, 0, l]
-            e1 = gx1 - X[v, 1, l]
-            e2 = gx2 - X[v, 2, l]
+            e0 = gx0 - X[3 * v, l]
+            e1 = gx1 - X[3 * v + 1, l]
+            e2 = gx2 - X[3 * v + 2, l]
             dd = e0 * e0 + e1 * e1 + e2 * e2
             if dd > NORM_EPS:
                 ln = math.sqrt(dd)
@@ -270,9 +397,9 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
                 d2 = ZERO
             if ln > FLT_EPS:
                 s = k * ln
-                F[v, 0, l] += d0 * s
-                F[v, 1, l] += d1 * s
-                F[v, 2, l] += d2 * s
+                F[3 * v, l] += d0 * s
+                F[3 * v + 1, l] += d1 * s
+                F[3 * v + 2, l] += d2 * s
                 # dfdx_spring(dir, length, 0, k) = ((I - dd^T) * 0 - I) * k
                 o00 = (ONE - d0 * d0) * (ZERO / ln)
                 o11 = (ONE - d1 * d1) * (ZERO / ln)
@@ -286,265 +413,75 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
     for v in range(V):
         for l in range(L):
             nd = -par[l, P_DRAG]
-            F[v, 0, l] += Vel[v, 0, l] * nd
-            F[v, 1, l] += Vel[v, 1, l] * nd
-            F[v, 2, l] += Vel[v, 2, l] * nd
-            Vd[v, 0, l] += nd
-            Vd[v, 1, l] += ZERO * nd
-            Vd[v, 2, l] += ZERO * nd
-            Vd[v, 3, l] += nd
-            Vd[v, 4, l] += ZERO * nd
-            Vd[v, 5, l] += nd
-    # springs, in Blender's list order
-    for s in range(S):
-        i = sp_i[s]
-        j = sp_j[s]
-        kind = sp_kind[s]
-        L0 = restlen[s]
-        hb = sp_hinge[s]
-        for l in range(L):
-            act[s, l] = False
-            for q in range(6):
-                Xo[s, q, l] = ZERO
-                Vo[s, q, l] = ZERO
-        if hb >= 0 and angular:
-            pa = h_pa[hb]
-            pb = h_pb[hb]
-            la = h_la[hb]
-            lb = h_lb[hb]
-            for l in range(L):
-                ang, a0, a1, a2, b0, b1, b2 = _hinge_angle(X, i, j, pa, la, pb, lb, l)
-                va0, va1, va2 = _poly_avg(Vel, pa, la, l)
-                vb0, vb1, vb2 = _poly_avg(Vel, pb, lb, l)
-                ve0 = (Vel[i, 0, l] + Vel[j, 0, l]) * HALF
-                ve1 = (Vel[i, 1, l] + Vel[j, 1, l]) * HALF
-                ve2 = (Vel[i, 2, l] + Vel[j, 2, l]) * HALF
-                va0 -= ve0
-                va1 -= ve1
-                va2 -= ve2
-                vb0 -= ve0
-                vb1 -= ve1
-                vb2 -= ve2
-                k = par[l, P_BEND] * L0 * TENTH
-                force = k * (ang - restang[hb])
-                force += -par[l, P_BDAMP] * ((va0 * a0 + va1 * a1 + va2 * a2) + (vb0 * b0 + vb1 * b1 + vb2 * b2))
-                fa = force / F32(la)
-                fb = force / F32(lb)
-                for x in range(la):
-                    u = pa[x]
-                    F[u, 0, l] += a0 * fa
-                    F[u, 1, l] += a1 * fa
-                    F[u, 2, l] += a2 * fa
-                for x in range(lb):
-                    u = pb[x]
-                    F[u, 0, l] += b0 * fb
-                    F[u, 1, l] += b1 * fb
-                    F[u, 2, l] += b2 * fb
-                fh = force * HALF
-                fe0 = a0 * fh + b0 * fh
-                fe1 = a1 * fh + b1 * fh
-                fe2 = a2 * fh + b2 * fh
-                F[i, 0, l] -= fe0
-                F[i, 1, l] -= fe1
-                F[i, 2, l] -= fe2
-                F[j, 0, l] -= fe0
-                F[j, 1, l] -= fe1
-                F[j, 2, l] -= fe2
-        for l in range(L):
-            e0 = X[j, 0, l] - X[i, 0, l]
-            e1 = X[j, 1, l] - X[i, 1, l]
-            e2 = X[j, 2, l] - X[i, 2, l]
-            w0 = Vel[j, 0, l] - Vel[i, 0, l]
-            w1 = Vel[j, 1, l] - Vel[i, 1, l]
-            w2 = Vel[j, 2, l] - Vel[i, 2, l]
-            ln = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-            if ln > FLT_EPS:
-                inv = ONE / ln
-                d0 = e0 * inv
-                d1 = e1 * inv
-                d2 = e2 * inv
-            else:
-                d0 = ZERO
-                d1 = ZERO
-                d2 = ZERO
-            # outer product d d^T
-            p00 = d0 * d0
-            p01 = d1 * d0
-            p02 = d2 * d0
-            p11 = d1 * d1
-            p12 = d2 * d1
-            p22 = d2 * d2
-            damping = ZERO
-            if kind == KIND_BEND:
-                if not (ln < L0):
-                    continue
-                kb = par[l, P_KB]
-                cb = par[l, P_CB]
-                x = ln / L0
-                tfb = kb * _fb(x)
-                lin = cb * (ln - L0)
-                if tfb < lin:
-                    sf = lin
-                    jac = -cb
-                else:
-                    sf = tfb
-                    jac = -kb * _fbderiv(x)
-                f0 = d0 * sf
-                f1 = d1 * sf
-                f2 = d2 * sf
-                j00 = p00 * jac
-                j01 = p01 * jac
-                j02 = p02 * jac
-                j11 = p11 * jac
-                j12 = p12 * jac
-                j22 = p22 * jac
-                v00 = ZERO
-                v01 = ZERO
-                v02 = ZERO
-                v11 = ZERO
-                v12 = ZERO
-                v22 = ZERO
-            else:
-                if kind == KIND_STRUCT:
-                    kt = par[l, P_KT]
-                    dt_ = par[l, P_DT]
-                else:
-                    kt = par[l, P_KS]
-                    dt_ = par[l, P_DS]
-                if ln >= L0 and ln > ZERO:
-                    damping = dt_
-                    sf = kt * (ln - L0)
-                    f0 = d0 * sf
-                    f1 = d1 * sf
-                    f2 = d2 * sf
-                    r = L0 / ln
-                    j00 = (((ONE - p00) * r) - ONE) * kt
-                    j11 = (((ONE - p11) * r) - ONE) * kt
-                    j22 = (((ONE - p22) * r) - ONE) * kt
-                    j01 = (((ZERO - p01) * r) - ZERO) * kt
-                    j02 = (((ZERO - p02) * r) - ZERO) * kt
-                    j12 = (((ZERO - p12) * r) - ZERO) * kt
-                elif kind == KIND_STRUCT and angular:
-                    kb = par[l, P_KC]
-                    cb = kb
-                    damping = par[l, P_DC]
-                    x = ln / L0
-                    tfb = kb * _fb(x)
-                    lin = cb * (ln - L0)
-                    if tfb < lin:
-                        sf = lin
-                        jac = -cb
-                    else:
-                        sf = tfb
-                        jac = -kb * _fbderiv(x)
-                    f0 = d0 * sf
-                    f1 = d1 * sf
-                    f2 = d2 * sf
-                    j00 = p00 * jac
-                    j01 = p01 * jac
-                    j02 = p02 * jac
-                    j11 = p11 * jac
-                    j12 = p12 * jac
-                    j22 = p22 * jac
-                else:
-                    continue
-                dv = damping * (w0 * d0 + w1 * d1 + w2 * d2)
-                f0 += d0 * dv
-                f1 += d1 * dv
-                f2 += d2 * dv
-                nd = -damping
-                v00 = p00 * nd
-                v01 = p01 * nd
-                v02 = p02 * nd
-                v11 = p11 * nd
-                v12 = p12 * nd
-                v22 = p22 * nd
-            act[s, l] = True
-            F[i, 0, l] += f0
-            F[i, 1, l] += f1
-            F[i, 2, l] += f2
-            F[j, 0, l] -= f0
-            F[j, 1, l] -= f1
-            F[j, 2, l] -= f2
-            _add_block(Xd, i, l, j00, j01, j02, j11, j12, j22)
-            _add_block(Xd, j, l, j00, j01, j02, j11, j12, j22)
-            Xo[s, 0, l] = ZERO - j00
-            Xo[s, 1, l] = ZERO - j01
-            Xo[s, 2, l] = ZERO - j02
-            Xo[s, 3, l] = ZERO - j11
-            Xo[s, 4, l] = ZERO - j12
-            Xo[s, 5, l] = ZERO - j22
-            _add_block(Vd, i, l, v00, v01, v02, v11, v12, v22)
-            _add_block(Vd, j, l, v00, v01, v02, v11, v12, v22)
-            Vo[s, 0, l] = ZERO - v00
-            Vo[s, 1, l] = ZERO - v01
-            Vo[s, 2, l] = ZERO - v02
-            Vo[s, 3, l] = ZERO - v11
-            Vo[s, 4, l] = ZERO - v12
-            Vo[s, 5, l] = ZERO - v22
-
-
-@njit(**JIT)
-def _dot(a, b, free, out, L):
-    """Sequential float dot product over vertices (dot_lfvector), per lane."""
-    V = a.shape[0]
-    for l in range(L):
-        out[l] = ZERO
-    for v in range(V):
-        for l in range(L):
-            out[l] += a[v, 0, l] * b[v, 0, l] + a[v, 1, l] * b[v, 1, l] + a[v, 2, l] * b[v, 2, l]
+            F[3 * v, l] += Vel[3 * v, l] * nd
+            F[3 * v + 1, l] += Vel[3 * v + 1, l] * nd
+            F[3 * v + 2, l] += Vel[3 * v + 2, l] * nd
+            Vd[6 * v, l] += nd
+            Vd[6 * v + 1, l] += ZERO * nd
+            Vd[6 * v + 2, l] += ZERO * nd
+            Vd[6 * v + 3, l] += nd
+            Vd[6 * v + 4, l] += ZERO * nd
+            Vd[6 * v + 5, l] += nd
+    # springs, in Blender's list order (vectorised over the lanes)
+    _springs_v(X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang,
+               parT, angular)
 
 
 @njit(**JIT)
 def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular,
                    hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, avg_eps, par, keep, out,
                    centre, limit, max_ratio, codes, iterations):
-    """Simulate L = par.shape[0] candidates in lockstep through every frame of the plan.
+    """Simulate the W = simd.W lanes of ``par`` (W, N_LANE_PARAMS) in lockstep through every frame.
 
     ``targets`` (n_frames + 1, H, 3) float32 pin targets per frame, ``weights`` (n_frames + 1, H)
     pin weights; ``tg_steps``/``tp_steps`` the goal and pin interpolation factors of each step;
     ``keep`` (n_frames + 1,) index into ``out`` (L, K, V, 3) of the frames to keep, or -1.
     ``codes[l]`` != 0: the lane exploded (it is reset to rest and ignored from then on)."""
-    L = par.shape[0]
+    L = simd.W
     V = rest.shape[0]
     S = sp_i.shape[0]
     H = hv.shape[0]
     n_frames = targets.shape[0] - 1
-    X = np.empty((V, 3, L), dtype=np.float32)
-    Vel = np.zeros((V, 3, L), dtype=np.float32)
+    X = np.empty((3 * V, L), dtype=np.float32)
+    Vel = np.zeros((3 * V, L), dtype=np.float32)
     for v in range(V):
         for a in range(3):
             for l in range(L):
-                X[v, a, l] = rest[v, a]
+                X[3 * v + a, l] = rest[v, a]
     for h in range(H):
         for a in range(3):
             for l in range(L):
-                X[hv[h], a, l] = targets[0, h, a]
-    F = np.zeros((V, 3, L), dtype=np.float32)
-    Xd = np.zeros((V, 6, L), dtype=np.float32)
-    Vd = np.zeros((V, 6, L), dtype=np.float32)
-    Ad = np.zeros((V, 6, L), dtype=np.float32)
-    Xo = np.zeros((S, 6, L), dtype=np.float32)
-    Vo = np.zeros((S, 6, L), dtype=np.float32)
-    Ao = np.zeros((S, 6, L), dtype=np.float32)
+                X[3 * hv[h] + a, l] = targets[0, h, a]
+    F = np.zeros((3 * V, L), dtype=np.float32)
+    Xd = np.zeros((6 * V, L), dtype=np.float32)
+    Vd = np.zeros((6 * V, L), dtype=np.float32)
+    Ad = np.zeros((6 * V, L), dtype=np.float32)
+    Xo = np.zeros((6 * S, L), dtype=np.float32)
+    Vo = np.zeros((6 * S, L), dtype=np.float32)
+    Ao = np.zeros((6 * S, L), dtype=np.float32)
     act = np.zeros((S, L), dtype=np.bool_)
-    B = np.zeros((V, 3, L), dtype=np.float32)
-    dV = np.zeros((V, 3, L), dtype=np.float32)
-    r = np.zeros((V, 3, L), dtype=np.float32)
-    c = np.zeros((V, 3, L), dtype=np.float32)
-    q = np.zeros((V, 3, L), dtype=np.float32)
-    to = np.zeros((V, 3, L), dtype=np.float32)
-    temp = np.zeros((V, 3, L), dtype=np.float32)
+    B = np.zeros((3 * V, L), dtype=np.float32)
+    dV = np.zeros((3 * V, L), dtype=np.float32)
+    r = np.zeros((3 * V, L), dtype=np.float32)
+    c = np.zeros((3 * V, L), dtype=np.float32)
+    q = np.zeros((3 * V, L), dtype=np.float32)
+    to = np.zeros((3 * V, L), dtype=np.float32)
+    temp = np.zeros((3 * V, L), dtype=np.float32)
     free = np.ones(V, dtype=np.float32)
     xold = np.zeros((H, 3), dtype=np.float32)
     xconst = np.zeros((H, 3), dtype=np.float32)
     goal = np.zeros(H, dtype=np.float32)
     pinned = np.zeros(H, dtype=np.bool_)
-    delta = np.zeros(L, dtype=np.float32)
-    target = np.zeros(L, dtype=np.float32)
-    cq = np.zeros(L, dtype=np.float32)
+    delta = np.zeros((1, L), dtype=np.float32)
+    target = np.zeros((1, L), dtype=np.float32)
+    cq = np.zeros((1, L), dtype=np.float32)
+    ratio = np.zeros((1, L), dtype=np.float32)
+    run = np.zeros((1, L), dtype=np.float32)
     alive = np.ones(L, dtype=np.bool_)
-    running = np.zeros(L, dtype=np.bool_)
+    parT = np.empty((N_LANE_PARAMS, L), dtype=np.float32)
+    for k in range(N_LANE_PARAMS):
+        for l in range(L):
+            parT[k, l] = par[l, k]
     eps2 = CG_EPS * CG_EPS
     dt2 = dt * dt
     for l in range(L):
@@ -558,7 +495,7 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
         for l in range(L):
             for v in range(V):
                 for a in range(3):
-                    out[l, keep[0], v, a] = X[v, a, l]
+                    out[l, keep[0], v, a] = X[3 * v + a, l]
     for fr in range(1, n_frames + 1):
         # frame start: pin targets and weights of this frame; pinned velocities
         for v in range(V):
@@ -576,84 +513,70 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
                 for a in range(3):
                     vv = (xconst[h, a] - xold[h, a]) * inv_ts
                     for l in range(L):
-                        Vel[hv[h], a, l] = vv
+                        Vel[3 * hv[h] + a, l] = vv
         for st in range(n_steps):
             _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb,
-                      h_lb, restang, angular, par, g, goal, pinned, xold, xconst, hv, tg_steps[st], avg_eps, L)
+                      h_lb, restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg_steps[st], avg_eps,
+                      L)
             # A = M - (dF/dv dt + dF/dx dt^2); B = F dt + (dF/dx v) dt^2
             for v in range(V):
                 for qq in range(6):
                     for l in range(L):
                         mq = par[l, P_MASS] if (qq == 0 or qq == 3 or qq == 5) else ZERO
-                        Ad[v, qq, l] = mq - (Vd[v, qq, l] * dt + Xd[v, qq, l] * dt2)
+                        Ad[6 * v + qq, l] = mq - (Vd[6 * v + qq, l] * dt + Xd[6 * v + qq, l] * dt2)
             for s in range(S):
                 for qq in range(6):
                     for l in range(L):
-                        Ao[s, qq, l] = ZERO - (Vo[s, qq, l] * dt + Xo[s, qq, l] * dt2)
-            _matvec(Xd, Xo, sp_i, sp_j, Vel, to, temp, L)
-            for v in range(V):
-                for a in range(3):
-                    for l in range(L):
-                        B[v, a, l] = F[v, a, l] * dt + to[v, a, l] * dt2
+                        Ao[6 * s + qq, l] = ZERO - (Vo[6 * s + qq, l] * dt + Xo[6 * s + qq, l] * dt2)
+            simd.matvec(Xd, Xo, sp_i, sp_j, Vel, to, temp)
+            for k in range(3 * V):
+                for l in range(L):
+                    B[k, l] = F[k, l] * dt + to[k, l] * dt2
             # cg_filtered: dV = 0, r = c = filter(B)
             for v in range(V):
                 fv = free[v]
                 for a in range(3):
                     for l in range(L):
-                        dV[v, a, l] = ZERO
-                        r[v, a, l] = B[v, a, l] * fv
-                        c[v, a, l] = r[v, a, l] * fv
-            _dot(r, r, free, target, L)
+                        dV[3 * v + a, l] = ZERO
+                        r[3 * v + a, l] = B[3 * v + a, l] * fv
+                        c[3 * v + a, l] = r[3 * v + a, l] * fv
+            simd.dot(r, r, target)
             for l in range(L):
-                target[l] = eps2 * target[l]
-            _dot(r, c, free, delta, L)
+                target[0, l] = eps2 * target[0, l]
+            simd.dot(r, c, delta)
             anyrun = False
             for l in range(L):
-                running[l] = alive[l] and delta[l] > target[l]
-                anyrun = anyrun or running[l]
+                on = alive[l] and delta[0, l] > target[0, l]
+                run[0, l] = ONE if on else ZERO
+                anyrun = anyrun or on
             it = 0
             while anyrun and it < CG_MAX:
-                _matvec(Ad, Ao, sp_i, sp_j, c, q, temp, L)
-                for v in range(V):
-                    fv = free[v]
-                    for a in range(3):
-                        for l in range(L):
-                            q[v, a, l] = q[v, a, l] * fv
-                _dot(c, q, free, cq, L)
+                simd.matvec(Ad, Ao, sp_i, sp_j, c, q, temp)
+                simd.scale_rows(q, free)
+                simd.dot(c, q, cq)
                 for l in range(L):
-                    if running[l]:
-                        cq[l] = delta[l] / cq[l]       # alpha
-                for v in range(V):
-                    for a in range(3):
-                        for l in range(L):
-                            if running[l]:
-                                dV[v, a, l] = dV[v, a, l] + c[v, a, l] * cq[l]
-                                r[v, a, l] = r[v, a, l] + q[v, a, l] * (-cq[l])
+                    cq[0, l] = delta[0, l] / cq[0, l]          # alpha
+                simd.cg_step(dV, r, c, q, cq, run)
                 for l in range(L):
-                    cq[l] = delta[l]                   # delta_old
-                _dot(r, r, free, delta, L)
+                    ratio[0, l] = delta[0, l]                  # delta_old
+                simd.dot(r, r, delta)
                 for l in range(L):
-                    if running[l]:
-                        cq[l] = delta[l] / cq[l]       # delta_new / delta_old
-                for v in range(V):
-                    fv = free[v]
-                    for a in range(3):
-                        for l in range(L):
-                            if running[l]:
-                                c[v, a, l] = (r[v, a, l] + c[v, a, l] * cq[l]) * fv
+                    ratio[0, l] = delta[0, l] / ratio[0, l]    # delta_new / delta_old
+                simd.cg_direction(c, r, ratio, run, free)
                 it += 1
                 anyrun = False
                 for l in range(L):
-                    if running[l]:
+                    if run[0, l] != ZERO:
                         iterations[l] += 1
-                        running[l] = delta[l] > target[l]
-                        anyrun = anyrun or running[l]
+                        on = delta[0, l] > target[0, l]
+                        run[0, l] = ONE if on else ZERO
+                        anyrun = anyrun or on
             # advance: v += dv, x += v dt; pinned vertices to their interpolated targets
             for v in range(V):
                 for a in range(3):
                     for l in range(L):
-                        Vel[v, a, l] = Vel[v, a, l] + dV[v, a, l]
-                        X[v, a, l] = X[v, a, l] + Vel[v, a, l] * dt
+                        Vel[3 * v + a, l] = Vel[3 * v + a, l] + dV[3 * v + a, l]
+                        X[3 * v + a, l] = X[3 * v + a, l] + Vel[3 * v + a, l] * dt
             tp = tp_steps[st]
             sp = ONE - tp
             for h in range(H):
@@ -661,7 +584,7 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
                     for a in range(3):
                         x = sp * xold[h, a] + tp * xconst[h, a]
                         for l in range(L):
-                            X[hv[h], a, l] = x
+                            X[3 * hv[h] + a, l] = x
         # explosion checks, once per frame
         for l in range(L):
             if not alive[l]:
@@ -670,8 +593,8 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
             far = ZERO
             for v in range(V):
                 for a in range(3):
-                    xa = X[v, a, l]
-                    if not (math.isfinite(xa) and math.isfinite(Vel[v, a, l])):
+                    xa = X[3 * v + a, l]
+                    if not (math.isfinite(xa) and math.isfinite(Vel[3 * v + a, l])):
                         code = NONFINITE
                     else:
                         d = abs(xa - centre[a])
@@ -684,9 +607,9 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
                     if sp_kind[s] == KIND_STRUCT:
                         i = sp_i[s]
                         j = sp_j[s]
-                        e0 = X[j, 0, l] - X[i, 0, l]
-                        e1 = X[j, 1, l] - X[i, 1, l]
-                        e2 = X[j, 2, l] - X[i, 2, l]
+                        e0 = X[3 * j, l] - X[3 * i, l]
+                        e1 = X[3 * j + 1, l] - X[3 * i + 1, l]
+                        e2 = X[3 * j + 2, l] - X[3 * i + 2, l]
                         if math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) > max_ratio * restlen[s]:
                             code = STRETCHED
                             break
@@ -695,33 +618,31 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
                 alive[l] = False
                 for v in range(V):
                     for a in range(3):
-                        X[v, a, l] = rest[v, a]
-                        Vel[v, a, l] = ZERO
+                        X[3 * v + a, l] = rest[v, a]
+                        Vel[3 * v + a, l] = ZERO
         k = keep[fr]
         if k >= 0:
             for l in range(L):
                 for v in range(V):
                     for a in range(3):
-                        out[l, k, v, a] = X[v, a, l]
+                        out[l, k, v, a] = X[3 * v + a, l]
 
 
 @njit(**PARALLEL)
 def simulate_population(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular,
                         hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, avg_eps, par, lane_start,
                         keep, out, centre, limit, max_ratio, codes, iterations):
-    """Batches ``lane_start[b]:lane_start[b + 1]`` of the candidates ``par`` in parallel threads."""
-    nb = lane_start.shape[0] - 1
+    """Batches of simd.W lanes ``lane_start[b]:lane_start[b] + W`` of ``par`` in parallel threads."""
+    nb = lane_start.shape[0]
     for b in prange(nb):
         a = lane_start[b]
-        e = lane_start[b + 1]
+        e = a + simd.W
         simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular, hv,
                        targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, avg_eps, par[a:e], keep,
                        out[a:e], centre, limit, max_ratio, codes[a:e], iterations[a:e])
 
 
 # --------------------------------------------------------------------------- the Python side
-
-LANES = 16          # candidates per SIMD batch at most (one AVX-512 vector of float32)
 
 
 class Prepared:
@@ -747,7 +668,7 @@ class Prepared:
                                                      np.ascontiguousarray(net.struct_creation, dtype=np.int64),
                                                      self.h_spring, self.h_pa, self.h_la, self.h_pb, self.h_lb)
         self.avg_eps = F32(self.avg + FLT_EPS)
-        self.angular = net.bending_model == "ANGULAR"
+        self.angular = 1 if net.bending_model == "ANGULAR" else 0
         self.hv = np.ascontiguousarray(plan.handle_vertices, dtype=np.int64)
         self.targets = np.ascontiguousarray(plan.targets, dtype=np.float32)
         self.weights = np.ascontiguousarray(plan.weights, dtype=np.float32)
@@ -795,23 +716,24 @@ class Prepared:
         P[:, P_CB] = P[:, P_KB] * col["bending_damping"]
         return P
 
-    def run(self, rows, threads: int | None = None):
-        """Simulate the candidates ``rows``: (frames kept (P, K, V, 3) float32, codes, CG iterations)."""
-        import numba
+    def run(self, rows):
+        """Simulate the candidates ``rows``: (frames kept (P, K, V, 3) float32, codes, CG iterations).
+
+        The candidates are padded to whole batches of ``simd.W`` lanes (copies of the last one)."""
         par = self.lane_params(rows)
         n = par.shape[0]
-        threads = threads or numba.get_num_threads()
-        nb = max(min(threads, n), -(-n // LANES))
-        bounds = np.linspace(0, n, nb + 1).round().astype(np.int64)
-        out = np.zeros((n, self.kept.size, self.rest.shape[0], 3), dtype=np.float32)
-        codes = np.zeros(n, dtype=np.int64)
-        its = np.zeros(n, dtype=np.int64)
+        W = simd.W
+        nb = -(-n // W)
+        padded = np.concatenate([par, np.repeat(par[-1:], nb * W - n, axis=0)]) if nb * W > n else par
+        out = np.zeros((nb * W, self.kept.size, self.rest.shape[0], 3), dtype=np.float32)
+        codes = np.zeros(nb * W, dtype=np.int64)
+        its = np.zeros(nb * W, dtype=np.int64)
         simulate_population(self.rest, self.sp_i, self.sp_j, self.sp_kind, self.sp_hinge, self.restlen, self.h_pa,
                             self.h_la, self.h_pb, self.h_lb, self.restang, self.angular, self.hv, self.targets,
                             self.weights, self.tg.size, self.dt, self.tg, self.tp, self.inv_ts, self.g,
-                            self.avg_eps, par, bounds, self.keep, out, self.centre, self.limit, self.max_ratio,
-                            codes, its)
-        return out, codes, its
+                            self.avg_eps, np.ascontiguousarray(padded), np.arange(nb, dtype=np.int64) * W, self.keep,
+                            out, self.centre, self.limit, self.max_ratio, codes, its)
+        return out[:n], codes[:n], its[:n]
 
     def sample(self, out):
         """Positions at the capture times (P, F, V, 3) float64 from the kept frames."""
