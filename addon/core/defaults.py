@@ -29,6 +29,11 @@ EXPLODE_FACTOR = 10.0        # a vertex further than EXPLODE_FACTOR * cloth size
 MAX_TOTAL_STEPS = 2_000_000     # a candidate needing more integration steps (far too stiff) = exploded
 MAX_STRAIN = 5.0             # a spring longer than (1 + MAX_STRAIN) * rest length = exploded
 
+# --- Blender's cloth as a model (physics/blender.py): a fit targets a scene frame rate (Blender's cloth advances
+# per frame, not per second), 24 fps unless told
+BLENDER_FPS = 24
+WARM_START_SIGMA = 0.1      # CMA-ES step size (unit cube) when a fit starts from a given result (--init)
+
 # --- capture (SPEC 5): 30 shapes every 0.05 s, train on even tenths, test on the odd twentieths
 FRAME_TIMES = [round(0.05 * i, 2) for i in range(1, 31)]
 TRAIN_TIMES = [round(0.10 * i, 2) for i in range(1, 16)]

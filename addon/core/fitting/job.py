@@ -5,10 +5,13 @@ tick) and by the experiment protocol. The job never loses the best result found 
 kept in memory at every step, written to the checkpoint (if a path is given) after every
 generation, and ``result()`` returns it whether the job finished, was cancelled or failed.
 
-Identifiability (SPEC 2): the motion depends on k/m, d/m and l only. The job fixes ``m`` from the
-cloth mass (``FitConfig.cloth_mass``, else the capture's ``cloth_mass``, else the default point
-mass, flagged in the result) and searches k/m, d/m and l (relative to the grid spacing), in log
-scale. The result reports m, k, l, d for that m and the identifiable quantities.
+The model is the paper's sheet (default) or Blender's cloth (``FitConfig.model``); what is searched
+for each lives in ``parameters.py``. Identifiability (SPEC 2): the motion depends on ratios to the
+mass only, so the job fixes the mass from the cloth mass (``FitConfig.cloth_mass``, else the
+capture's ``cloth_mass``, else a default, flagged in the result) and searches the rest per unit
+mass, in log scale. The result reports the model's parameters for that mass (paper: m, k, l, d and
+the identifiable k/m, d/m, l; Blender: ``blender_cloth``, ClothSettings values a Cloth modifier
+takes, with the scene frame rate they belong to).
 """
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ import json
 import math
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -24,9 +27,8 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..physics.paper import identifiable, identifiable_errors
 from .objective import SilhouetteObjective
-from .optimise import SearchSpace, make_optimizer
-
-FREE_NAMES = ("k_over_m", "d_over_m", "l_rel")
+from .optimise import make_optimizer
+from .parameters import PaperParameters, make_parameters
 
 
 @dataclass
@@ -39,10 +41,17 @@ class FitConfig:
     target_error: float | None = None     # stop when E_all per image falls below this
     resolution: list | None = None        # (H, W) to fit at: silhouettes resampled, cameras rescaled
     cloth_mass: float | None = None       # kg, total; m = cloth_mass / n_vertices
-    bounds: dict = field(default_factory=lambda: {k: list(v) for k, v in D.SEARCH_BOUNDS.items()})
+    bounds: dict | None = None            # per free name (low, high); None = the model's defaults
     backend: str = "auto"
     population: int | None = None
     children: int | None = None
+    model: str = "paper"                  # "paper" or "blender"
+    fps: float | None = None              # blender: the scene frame rate the settings are for (24)
+    quality: int | None = None            # blender: solver steps per frame (5, or the warm start's)
+    bending_model: str | None = None      # blender: ANGULAR (default) or LINEAR
+    free: list | None = None              # blender: settings to search (default parameters.BLENDER_FREE)
+    fixed: dict | None = None             # blender: settings held at given values
+    init: str | None = None               # a result JSON to start from (warm start)
 
     @classmethod
     def from_dict(cls, d):
@@ -60,18 +69,6 @@ def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray
         return mask.astype(bool)
     img = cv2.resize(mask.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
     return img >= 0.5
-
-
-def point_mass(capture, cfg_mass=None):
-    """(m, source) for a capture: from the given total mass, the capture's, or the default."""
-    n = capture.scenario.grid.n_vertices
-    if cfg_mass is not None:
-        if not (cfg_mass > 0 and math.isfinite(cfg_mass)):
-            raise ClothFitError(f"cloth mass {cfg_mass} kg must be positive")
-        return cfg_mass / n, "given cloth mass"
-    if getattr(capture, "cloth_mass", None):
-        return capture.cloth_mass / n, "capture's cloth_mass"
-    return D.GT_PARAMS["m"], "default point mass (cloth mass unknown: k and d scale with it)"
 
 
 class FitJob:
@@ -103,13 +100,17 @@ class FitJob:
             observed = [[resample_silhouette(o, h, w) for o in oc] for oc in observed]
         self.scenario = capture.scenario.with_frames(self.train_times)
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
-        self.objective = SilhouetteObjective(self.scenario, cameras, observed, backend=cfg.backend, names=names)
-        self.m, self.m_source = point_mass(capture, cfg.cloth_mass)
-        self.spacing = capture.scenario.grid.spacing
-        bounds = {k: tuple(v) for k, v in cfg.bounds.items()}
-        self.space = SearchSpace(list(FREE_NAMES), bounds, {k: D.LOG_SCALED.get(k, True) for k in FREE_NAMES})
+        self.par = make_parameters(capture, cfg)
+        self.objective = SilhouetteObjective(self.scenario, cameras, observed, backend=cfg.backend, names=names,
+                                             model=self.par.model)
+        self.m, self.m_source = self.par.m, self.par.m_source
+        self.space = self.par.space
         kw = {}
         is_cma = cfg.optimizer.lower() in ("cma", "cma-es")
+        if self.par.initial is not None:          # warm start: from the given result, a closer search
+            kw["initial"] = self.par.initial
+            if is_cma:
+                kw["sigma0"] = D.WARM_START_SIGMA
         if cfg.population:
             kw["popsize" if is_cma else "population"] = cfg.population
         elif not is_cma:
@@ -126,10 +127,8 @@ class FitJob:
 
     # ------------------------------------------------------------- mapping
     def to_params(self, X):
-        """Free vectors (k/m, d/m, l_rel) -> (P, 4) rows of m, k, l, d."""
-        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-        m = self.m
-        return np.stack([np.full(len(X), m), X[:, 0] * m, X[:, 2] * self.spacing, X[:, 1] * m], 1)
+        """Free vectors -> the model's parameter rows (paper: (P, 4) rows of m, k, l, d)."""
+        return self.par.rows(X)
 
     # ---------------------------------------------------------------- state
     @property
@@ -151,10 +150,12 @@ class FitJob:
 
     @property
     def best_params(self):
+        """The best parameters so far: paper m, k, l, d; Blender the ClothSettings values."""
         if self.opt.best_x is None:
             return None
-        r = self.to_params(self.opt.best_x)[0]
-        return {"m": float(r[0]), "k": float(r[1]), "l": float(r[2]), "d": float(r[3])}
+        if isinstance(self.par, PaperParameters):
+            return self.par.params(self.opt.best_x)
+        return self.par.settings(self.opt.best_x)
 
     def step(self) -> bool:
         """Run one generation. Returns False once the job is finished (budget, target or cancel)."""
@@ -205,16 +206,19 @@ class FitJob:
             "exploded_candidates": self.exploded,
             "best_E_all": _finite(self.best_error), "best_E_sil_mean_pct": _finite(100.0 * self.best_error / n_img),
             "n_train_images": n_img,
-            "params": bp,
-            "identifiable": identifiable(bp) if bp else None,
+            "model": self.par.model.to_dict(),
+            "params": bp if isinstance(self.par, PaperParameters) else None,
+            "identifiable": identifiable(bp) if bp and isinstance(self.par, PaperParameters) else None,
             "mass_source": self.m_source,
-            "note": "m is not observable from silhouettes (only k/m, d/m and l are): m is fixed and k, d scale with it",
+            "note": self.par.note,
             "finished": self.finished, "cancelled": self.cancelled, "error": self.error,
             "elapsed_s": self.elapsed, "backend": self.objective.backend,
             "history": [[int(a), float(b) if math.isfinite(b) else None] for a, b in self.opt.history],
         }
+        if bp and not isinstance(self.par, PaperParameters):
+            res.update(self.par.describe(self.opt.best_x))
         gt = (self.capture.meta or {}).get("true_params")
-        if gt and bp:
+        if gt and bp and isinstance(self.par, PaperParameters):
             res["true_params"] = gt
             res["true_identifiable"] = identifiable(gt)
             res["identifiable_error_pct"] = identifiable_errors(bp, gt)

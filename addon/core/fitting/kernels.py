@@ -1,5 +1,7 @@
-"""The fused population kernel of the fit: simulate a candidate and score its silhouettes in the
-same thread, so a population never holds all its simulated frames at once.
+"""The population kernels of the fit: for the paper's sheet, simulate a candidate and score its
+silhouettes in the same thread, so a population never holds all its simulated frames at once;
+for models simulated elsewhere (Blender's cloth runs its candidates as SIMD lanes), score given
+positions, one candidate per thread.
 """
 from __future__ import annotations
 
@@ -33,3 +35,18 @@ def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, k
                 np.empty(span_cap, dtype=np.int32))
         eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work, esil[p])
 
+
+
+@njit(**PARALLEL)
+def score_population(X, ok, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, max_h, max_w, span_cap, esil):
+    """esil[p, c, f] for the positions X (P, F, V, 3) of every candidate with ok[p]."""
+    for p in prange(X.shape[0]):
+        if not ok[p]:
+            continue
+        work = (np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
+                np.empty(span_cap, dtype=np.int32), np.zeros(max_h + 2, dtype=np.int64),
+                np.zeros(max_h + 2, dtype=np.int64), np.empty(span_cap, dtype=np.int32),
+                np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
+                np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
+                np.empty(span_cap, dtype=np.int32))
+        eval_frames(X[p], Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work, esil[p])

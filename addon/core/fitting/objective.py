@@ -1,9 +1,10 @@
 """The fitness of a population: simulate every candidate, rasterise, compare (eq. 6, 7).
 
 ``SilhouetteObjective`` holds the observed silhouettes of the chosen cameras and frames and returns,
-for a population of parameter sets, ``E_all`` (sum of ``E_sil`` over all images) or the per-image
-``E_sil``. A candidate that explodes or goes non-finite scores ``inf`` (the worst), never an error.
-The numba kernels (``kernels``) are used when available, else the numpy reference path.
+for a population of parameter rows of its model (``physics.models``: the paper's sheet by default,
+or Blender's cloth), ``E_all`` (sum of ``E_sil`` over all images) or the per-image ``E_sil``. A
+candidate that explodes or goes non-finite scores ``inf`` (the worst), never an error. The numba
+kernels (``kernels``) are used when available, else the numpy reference path.
 """
 from __future__ import annotations
 
@@ -12,15 +13,19 @@ import numpy as np
 from ..errors import ClothFitError
 from ..observation.raster import rasterize_window
 from ..physics import jit, paper_kernels
+from ..physics.models import PaperModel, get_model
 from ..physics.paper import simulate_numpy
 from . import kernels
 
 
 class SilhouetteObjective:
-    def __init__(self, scenario, cameras, observed, backend: str = "auto", names=None):
+    def __init__(self, scenario, cameras, observed, backend: str = "auto", names=None, model=None):
         """``scenario.frame_times`` are the observed times; ``observed[c][f]`` a bool (H_c, W_c) image
-        of camera ``cameras[c]`` at ``scenario.frame_times[f]``."""
+        of camera ``cameras[c]`` at ``scenario.frame_times[f]``; ``model`` a model, name or dict
+        (``physics.models.get_model``; default: the paper's sheet)."""
         self.scenario = scenario
+        self.model = get_model(model)
+        self.paper = isinstance(self.model, PaperModel)
         self.cameras = list(cameras)
         C, F = len(self.cameras), scenario.frame_times.size
         if len(observed) != C:
@@ -67,7 +72,7 @@ class SilhouetteObjective:
                     pres.append(pre.ravel())
                     o += pre.size
             self._pre = np.concatenate(pres)
-            self._arrays = paper_kernels.scenario_arrays(scenario)
+            self._arrays = paper_kernels.scenario_arrays(scenario) if self.paper else None
             self._Ks = np.array([c.K for c in self.cameras])
             self._Rs = np.array([c.R for c in self.cameras])
             self._ts = np.array([c.t for c in self.cameras])
@@ -91,6 +96,8 @@ class SilhouetteObjective:
 
     def per_image(self, P):
         """``(esil (P, C, F), exploded (P,))``; exploded candidates have ``inf`` everywhere."""
+        if not self.paper:
+            return self._per_image_positions(P)
         P = np.ascontiguousarray(np.asarray(P, dtype=np.float64).reshape(-1, 4))
         C, F = self.areas.shape
         self.evaluations += P.shape[0]
@@ -114,6 +121,30 @@ class SilhouetteObjective:
                 uv = cam.project(sim.positions[p])  # (F, V, 2)
                 for f in range(F):
                     esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f])
+        return esil, sim.exploded
+
+    def _per_image_positions(self, rows):
+        """A model simulated on its own (Blender's cloth: SIMD batches), then scored."""
+        rows = np.asarray(rows, dtype=np.float64)
+        rows = rows.reshape(-1, len(self.model.row_names))
+        C, F = self.areas.shape
+        self.evaluations += rows.shape[0]
+        sim = self.model.simulate(self.scenario, rows, backend=self.backend)
+        esil = np.full((rows.shape[0], C, F), np.inf)
+        ok = ~sim.exploded
+        if self.backend == "numba":
+            X = np.ascontiguousarray(np.where(ok[:, None, None, None], sim.positions, 0.0))
+            kernels.score_population(X, ok, self._Ks, self._Rs, self._ts, self._dists, self._Hs, self._Ws,
+                                     self._pre, self._pofs, self._bbs, self.areas, self._tris, self._maxh,
+                                     self._maxw, self._span_cap, esil)
+        else:
+            tris = self.scenario.grid.triangles
+            for p in np.nonzero(ok)[0]:
+                for c, cam in enumerate(self.cameras):
+                    uv = cam.project(sim.positions[p])
+                    for f in range(F):
+                        esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f])
+        esil[sim.exploded] = np.inf
         return esil, sim.exploded
 
     @staticmethod

@@ -50,7 +50,7 @@ unchanged: silhouettes cannot tell them apart (``mass_scaled``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

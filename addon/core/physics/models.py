@@ -1,26 +1,180 @@
 """The cloth models of the core and the one entry point that simulates them.
 
-``simulate`` runs a population of candidates of a model on a scenario with the fastest backend
-available: the numba kernels (``*_kernels``) or the numpy reference code they are tested against.
+A *model* turns a scenario (``scenario.py``) and a population of parameter rows into the cloth's
+positions at the scenario's frame times (``SimResult``), with the fastest backend available: the
+numba kernels (``*_kernels``) or the numpy reference code they are tested against.
+
+* ``paper`` (``PaperModel``): the paper's mass-spring sheet; a row is ``(m, k, l, d)``.
+* ``blender`` (``BlenderModel``): Blender's own cloth solver (``blender.py``); a row is one value
+  per name of ``blender.FLOAT_SETTINGS``; the model fixes the frame rate it targets, the
+  solver quality and the bending model.
+
+``get_model`` builds one from a name or its ``to_dict()``; ``simulate`` keeps the paper model's
+historical call.
 """
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from .. import defaults as D
 from ..errors import ClothFitError
-from . import jit, paper_kernels
-from .paper import SimResult, _as_params, simulate_numpy
+from . import blender as B
+from . import blender_kernels, jit, paper_kernels
+from .paper import PARAM_NAMES, SimResult, _as_params, simulate_numpy
 from .scenario import Scenario
 
+MODEL_NAMES = ("paper", "blender")
 
-def simulate(scenario: Scenario, params, backend: str = "auto", safety: float = D.DT_SAFETY) -> SimResult:
-    """Simulate a population; ``params`` is one or many (m, k, l, d). See the module doc.
-    ``safety`` scales the time step (``dt <= safety * sqrt(m/k)``); synthetic ground truth uses a
-    finer step than the fitter (``defaults.TRUTH_DT_SAFETY``)."""
-    P = _as_params(params)
+
+def _backend(backend: str) -> str:
     if backend == "auto":
-        backend = "numba" if jit.available() else "numpy"
-    if backend == "numba":
-        return paper_kernels.simulate(scenario, P, safety)
-    if backend != "numpy":
+        return "numba" if jit.available() else "numpy"
+    if backend not in ("numba", "numpy"):
         raise ClothFitError(f"unknown simulation backend {backend!r} (numpy, numba, auto)")
-    return simulate_numpy(scenario, P, safety)
+    if backend == "numba" and not jit.available():
+        raise ClothFitError("the numba backend was asked for but numba is not importable")
+    return backend
+
+
+class PaperModel:
+    """The paper's sheet (SPEC 2): rows ``(m, k, l, d)``."""
+
+    name = "paper"
+    row_names = PARAM_NAMES
+
+    def __init__(self, safety: float = D.DT_SAFETY):
+        self.safety = float(safety)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name}
+
+    def simulate(self, scenario: Scenario, rows, backend: str = "auto") -> SimResult:
+        P = _as_params(rows)
+        if _backend(backend) == "numba":
+            return paper_kernels.simulate(scenario, P, self.safety)
+        return simulate_numpy(scenario, P, self.safety)
+
+
+class BlenderModel:
+    """Blender's Cloth modifier (``blender.py``) on the scenario's grid, for a scene at ``fps``
+    frames per second with ``quality`` steps per frame and the given bending model. Rows hold the
+    ``FLOAT_SETTINGS`` (``time_scale`` included: ``blender.physical_time_scale(fps)`` makes the
+    cloth move in real time)."""
+
+    name = "blender"
+    row_names = B.FLOAT_SETTINGS
+
+    def __init__(self, fps: float = D.BLENDER_FPS, quality: int = 5, bending_model: str = "ANGULAR"):
+        if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
+            raise ClothFitError(f"frame rate {fps!r} must be a positive number")
+        s = B.check_settings({"quality": quality, "bending_model": bending_model}, "blender model")
+        self.fps = float(fps)
+        self.quality = s["quality"]
+        self.bending_model = s["bending_model"]
+        self._cache = {}
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "fps": self.fps, "quality": self.quality, "bending_model": self.bending_model}
+
+    def settings(self, row) -> dict:
+        return B.row_settings(row, self.quality, self.bending_model)
+
+    def plan(self, scenario: Scenario):
+        """(network, frame plan) of a scenario, built once per scenario object."""
+        key = id(scenario)
+        hit = self._cache.get(key)
+        if hit is None or hit[0] is not scenario:
+            plan = B.FramePlan.from_scenario(scenario, self.fps)
+            first = scenario.grid.rest.copy()
+            first[plan.handle_vertices] = plan.targets[0]
+            net = B.Network.from_grid(scenario.grid, self.bending_model, first_frame=first)
+            hit = (scenario, net, plan, {})
+            self._cache = {key: hit}
+        return hit[1], hit[2]
+
+    def check_rows(self, rows) -> np.ndarray:
+        rows = np.asarray(rows, dtype=np.float64)
+        if rows.ndim == 1:
+            rows = rows[None]
+        if rows.ndim != 2 or rows.shape[1] != len(B.FLOAT_SETTINGS):
+            raise ClothFitError(f"blender model: rows must have {len(B.FLOAT_SETTINGS)} values "
+                                f"({', '.join(B.FLOAT_SETTINGS)}), got shape {rows.shape}")
+        for r in rows:
+            B.check_settings(self.settings(r), "blender model")
+        return rows
+
+    def simulate(self, scenario: Scenario, rows, backend: str = "auto") -> SimResult:
+        rows = self.check_rows(rows)
+        net, plan = self.plan(scenario)
+        n = rows.shape[0]
+        V = net.n_vertices
+        F = plan.lo.size
+        if _backend(backend) == "numpy":
+            out = np.full((n, F, V, 3), np.nan)
+            exploded = np.zeros(n, bool)
+            reason = [""] * n
+            steps = np.zeros(n, dtype=np.int64)
+            for p in range(n):
+                tr = B.simulate_reference(net, plan, self.settings(rows[p]), scenario.gravity)
+                out[p], exploded[p], reason[p] = tr.positions, tr.exploded, tr.reason
+                steps[p] = tr.steps_per_frame * plan.n_frames
+            return SimResult(out, exploded, steps, reason)
+        out = np.full((n, F, V, 3), np.nan)
+        codes = np.zeros(n, dtype=np.int64)
+        steps = np.zeros(n, dtype=np.int64)
+        ts_col = B.FLOAT_SETTINGS.index("time_scale")
+        for ts in np.unique(rows[:, ts_col]):            # the kernel runs one time step per call
+            sel = np.nonzero(rows[:, ts_col] == ts)[0]
+            prep = self.prepared(scenario, float(ts))
+            frames, c, _ = prep.run(rows[sel])
+            out[sel] = prep.sample(frames)
+            codes[sel] = c
+            steps[sel] = prep.tg.size * plan.n_frames
+        exploded = codes != 0
+        out[exploded] = np.nan
+        reason = ["" if c == 0 else f"exploded ({blender_kernels.REASONS[c]})" for c in codes]
+        return SimResult(out, exploded, steps, reason)
+
+    def prepared(self, scenario: Scenario, time_scale: float):
+        """The kernel's float32 arrays for a scenario and time step, built once."""
+        net, plan = self.plan(scenario)
+        store = self._cache[id(scenario)][3]
+        prep = store.get(time_scale)
+        if prep is None:
+            prep = store[time_scale] = blender_kernels.Prepared(net, plan, self.quality, time_scale, scenario.gravity)
+        return prep
+
+
+def get_model(spec=None):
+    """A model from a name ("paper", "blender") or a ``to_dict()``; None = the paper model."""
+    if spec is None:
+        return PaperModel()
+    if isinstance(spec, (PaperModel, BlenderModel)):
+        return spec
+    if isinstance(spec, str):
+        spec = {"name": spec}
+    if not isinstance(spec, dict) or "name" not in spec:
+        raise ClothFitError(f"model: expected a name ({', '.join(MODEL_NAMES)}) or an object with 'name', got {spec!r}")
+    name = str(spec["name"]).strip().lower()
+    if name == "paper":
+        return PaperModel()
+    if name == "blender":
+        extra = set(spec) - {"name", "fps", "quality", "bending_model"}
+        if extra:
+            raise ClothFitError(f"model: unknown key(s) {sorted(extra)} for the blender model")
+        return BlenderModel(spec.get("fps", D.BLENDER_FPS), spec.get("quality", B.DEFAULTS["quality"]),
+                            spec.get("bending_model", B.DEFAULTS["bending_model"]))
+    raise ClothFitError(f"unknown model {spec['name']!r}: choose one of {', '.join(MODEL_NAMES)}")
+
+
+def simulate(scenario: Scenario, params, backend: str = "auto", safety: float = D.DT_SAFETY,
+             model=None) -> SimResult:
+    """Simulate a population of ``model`` (default: the paper's sheet, rows (m, k, l, d)).
+    ``safety`` scales the paper model's time step (``dt <= safety * sqrt(m/k)``); synthetic ground
+    truth may use a finer step than the fitter (``defaults.TRUTH_DT_SAFETY``)."""
+    m = get_model(model)
+    if isinstance(m, PaperModel) and safety != m.safety:
+        m = PaperModel(safety)
+    return m.simulate(scenario, params, backend)

@@ -26,7 +26,6 @@ from ..observation.synth import synth_capture
 from ..physics import jit
 from ..physics.models import simulate
 from ..physics.paper import Params
-from ..physics.scenario import paper_scenario
 from .experiment import DEFAULT_OPTIMIZER, FULL, QUICK
 
 TARGET_EVALS_PER_S = 50.0

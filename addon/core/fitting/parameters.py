@@ -1,0 +1,248 @@
+"""What a fit searches, for each model: the free coordinates, their bounds, and the map from a
+free vector to the model's parameter rows and back to the numbers a user reads.
+
+Identifiability (SPEC 2, section 9): in both models the motion depends on ratios to the mass
+(scaling the mass, every stiffness and every damping together leaves it unchanged), so the mass
+is fixed from the cloth's weighed mass (``cloth_mass``, total; per vertex = cloth_mass / V) and
+the rest is searched per unit mass, in log scale.
+
+* ``PaperParameters``: k/m [1/s^2], d/m [1/s] and l relative to the grid spacing.
+* ``BlenderParameters``: a chosen set of ``bpy.types.ClothSettings`` values (by default
+  ``BLENDER_FREE``), each mass-scaled one as ``value / mass``; the other settings are fixed
+  (Blender's defaults, a warm-start result's values, or the user's), ``time_scale`` is the one
+  that makes the cloth move in real time at the target frame rate. Bounds are the defaults'
+  ranges, clipped to Blender's own limits at the fixed mass.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from .. import defaults as D
+from ..errors import ClothFitError
+from ..physics import blender as B
+from ..physics.models import BlenderModel, PaperModel, get_model
+from ..physics.paper import identifiable
+from .optimise import SearchSpace
+
+PAPER_FREE = ("k_over_m", "d_over_m", "l_rel")
+
+# Blender settings searched by default (see README, "Identifiability"); the rest stay fixed.
+BLENDER_FREE = {
+    "ANGULAR": ("tension_stiffness", "compression_stiffness", "shear_stiffness", "bending_stiffness",
+                "tension_damping", "shear_damping", "bending_damping", "air_damping"),
+    "LINEAR": ("tension_stiffness", "shear_stiffness", "bending_stiffness", "tension_damping", "shear_damping",
+               "bending_damping", "air_damping"),
+}
+# search ranges in Blender's units *for a vertex mass of 0.3 kg* (Blender's default); scaled with the
+# fixed mass for the mass-scaled settings, then clipped to Blender's limits
+BLENDER_BOUNDS_AT_DEFAULT_MASS = {
+    "tension_stiffness": (0.5, 2000.0), "compression_stiffness": (0.5, 2000.0), "shear_stiffness": (0.05, 2000.0),
+    "bending_stiffness": (1e-3, 500.0), "tension_damping": (1e-3, 50.0), "compression_damping": (1e-3, 50.0),
+    "shear_damping": (1e-3, 50.0), "bending_damping": (1e-4, 50.0), "air_damping": (1e-3, 10.0),
+    "pin_stiffness": (1e-2, 50.0),
+}
+FITTABLE = tuple(BLENDER_BOUNDS_AT_DEFAULT_MASS)
+
+
+def point_mass(capture, cfg_mass, default):
+    """(mass per vertex, source) from the given total mass, the capture's, or ``default``."""
+    n = capture.scenario.grid.n_vertices
+    if cfg_mass is not None:
+        if not (isinstance(cfg_mass, (int, float)) and math.isfinite(cfg_mass) and cfg_mass > 0):
+            raise ClothFitError(f"cloth mass {cfg_mass!r} kg must be a positive number")
+        return cfg_mass / n, "given cloth mass"
+    if getattr(capture, "cloth_mass", None):
+        return capture.cloth_mass / n, "capture's cloth_mass"
+    return default, None
+
+
+class PaperParameters:
+    """The paper's sheet: free (k/m, d/m, l / spacing), m fixed."""
+
+    def __init__(self, capture, cfg):
+        self.model = PaperModel()
+        m, src = point_mass(capture, cfg.cloth_mass, D.GT_PARAMS["m"])
+        self.m = m
+        self.m_source = src or "default point mass (cloth mass unknown: k and d scale with it)"
+        self.spacing = capture.scenario.grid.spacing
+        bounds = {k: tuple(v) for k, v in (cfg.bounds or D.SEARCH_BOUNDS).items()}
+        missing = set(PAPER_FREE) - set(bounds)
+        if missing:
+            raise ClothFitError(f"fit config: bounds missing for {sorted(missing)}")
+        self.space = SearchSpace(list(PAPER_FREE), bounds, {k: D.LOG_SCALED.get(k, True) for k in PAPER_FREE})
+        self.initial = None
+        self.note = "m is not observable from silhouettes (only k/m, d/m and l are): m is fixed and k, d scale with it"
+
+    def rows(self, X):
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        m = self.m
+        return np.stack([np.full(len(X), m), X[:, 0] * m, X[:, 2] * self.spacing, X[:, 1] * m], 1)
+
+    def params(self, x):
+        r = self.rows(x)[0]
+        return {"m": float(r[0]), "k": float(r[1]), "l": float(r[2]), "d": float(r[3])}
+
+    def describe(self, x) -> dict:
+        p = self.params(x)
+        return {"model": self.model.to_dict(), "params": p, "identifiable": identifiable(p)}
+
+
+class BlenderParameters:
+    """Blender's cloth: free ClothSettings (per unit mass, log scale), the rest fixed."""
+
+    def __init__(self, capture, cfg):
+        fps = D.BLENDER_FPS if cfg.fps is None else cfg.fps
+        init = load_init(cfg.init) if cfg.init else None
+        base = dict(B.DEFAULTS)
+        if init is not None and init.get("blender_cloth"):
+            base.update({k: v for k, v in init["blender_cloth"].items() if k in ("quality", "bending_model")})
+        quality = cfg.quality if cfg.quality is not None else base["quality"]
+        bending = cfg.bending_model if cfg.bending_model is not None else base["bending_model"]
+        self.model = BlenderModel(fps, quality, bending)
+        m, src = point_mass(capture, cfg.cloth_mass, None)
+        init_settings = None
+        if init is not None:
+            init_settings = settings_from_result(init, self.model, capture.scenario.grid)
+        if m is None:
+            m = init_settings["mass"] if init_settings else B.DEFAULTS["mass"]
+            src = ("warm-start result's mass" if init_settings else
+                   "Blender's default vertex mass (cloth mass unknown: every stiffness and damping scales with it)")
+        self.m, self.m_source = float(m), src
+        fixed = dict(base, quality=self.model.quality, bending_model=self.model.bending_model,
+                     time_scale=B.physical_time_scale(fps))
+        if init_settings:
+            fixed.update(_rescale(init_settings, self.m, self.model.bending_model))
+        fixed.update(cfg.fixed or {})
+        fixed["mass"] = self.m
+        self.fixed = B.check_settings(fixed, "fit: fixed Blender settings")
+        free = tuple(cfg.free) if cfg.free else BLENDER_FREE[self.model.bending_model]
+        bad = [n for n in free if n not in FITTABLE]
+        if bad:
+            raise ClothFitError(f"fit: cannot search {', '.join(bad)} (searchable: {', '.join(FITTABLE)})")
+        if len(set(free)) != len(free) or not free:
+            raise ClothFitError(f"fit: free settings {list(free)} must be distinct and not empty")
+        clash = set(free) & set(cfg.fixed or {})
+        if clash:
+            raise ClothFitError(f"fit: {sorted(clash)} cannot be both free and fixed")
+        self.free = free
+        self.scaled = set(B.mass_scaled(self.model.bending_model))
+        bounds = {}
+        for n in free:
+            # user bounds are in Blender's units at this mass; the defaults at Blender's default mass
+            user = (cfg.bounds or {}).get(n)
+            lo, hi = user if user is not None else BLENDER_BOUNDS_AT_DEFAULT_MASS[n]
+            ref = self.m if user is not None else B.DEFAULTS["mass"]
+            hard = B.RANGES[n][1]
+            if n in self.scaled:          # coordinates per unit mass
+                lo, hi, hard = lo / ref, hi / ref, hard / self.m
+            hi = min(hi, hard)
+            if not (0 < lo < hi):
+                raise ClothFitError(f"fit: the search range of {n} is empty at vertex mass {self.m:g} kg "
+                                    f"(bounds must be positive and within Blender's limit {B.RANGES[n][1]:g})")
+            bounds[n] = (lo, hi)
+        self.space = SearchSpace(list(free), bounds, {n: True for n in free})
+        self.initial = None
+        if init_settings:
+            x0 = np.array([self._coord(n, self.fixed[n]) for n in free])
+            self.initial = [self.space.clip(x0[None])[0]]
+        self.note = ("silhouettes cannot tell mass from stiffness and damping (the motion depends on their ratios): "
+                     "the vertex mass is fixed and every stiffness and damping scales with it")
+
+    def _coord(self, name, value):
+        return value / self.m if name in self.scaled else value
+
+    def rows(self, X):
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        base = B.settings_row(self.fixed)
+        R = np.repeat(base[None], len(X), 0)
+        for k, n in enumerate(self.free):
+            col = B.FLOAT_SETTINGS.index(n)
+            R[:, col] = X[:, k] * self.m if n in self.scaled else X[:, k]
+        return R
+
+    def settings(self, x) -> dict:
+        return self.model.settings(self.rows(x)[0])
+
+    def describe(self, x) -> dict:
+        s = self.settings(x)
+        per_mass = {n: s[n] / s["mass"] for n in sorted(self.scaled)}
+        return {"model": self.model.to_dict(), "blender_cloth": s, "blender_scene": {"fps": self.model.fps},
+                "free": list(self.free), "per_unit_mass": per_mass}
+
+
+def make_parameters(capture, cfg):
+    name = get_model(cfg.model).name
+    return PaperParameters(capture, cfg) if name == "paper" else BlenderParameters(capture, cfg)
+
+
+def load_init(path) -> dict:
+    """A result JSON to warm-start from."""
+    try:
+        with open(path) as f:
+            res = json.load(f)
+    except FileNotFoundError:
+        raise ClothFitError(f"warm-start result {path}: file not found") from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ClothFitError(f"warm-start result {path}: cannot read it ({e})") from None
+    if not isinstance(res, dict) or not (res.get("blender_cloth") or res.get("params")):
+        raise ClothFitError(f"warm-start result {path}: no 'blender_cloth' or 'params' in it (not a fit result)")
+    return res
+
+
+def _rescale(settings: dict, mass: float, bending_model: str) -> dict:
+    """Settings moved to another vertex mass without changing the motion."""
+    f = mass / settings["mass"]
+    out = dict(settings)
+    for n in B.mass_scaled(bending_model):
+        out[n] = settings[n] * f
+    return out
+
+
+def settings_from_result(res: dict, model: BlenderModel, grid) -> dict:
+    """Blender settings from a fit result: its ``blender_cloth``, or, for a paper-model result, an
+    approximation (the paper's springs as structural = compression = shear stiffness, its viscous
+    damping as air damping, in Blender's time unit at the model's frame rate)."""
+    if res.get("blender_cloth"):
+        return B.check_settings({k: v for k, v in res["blender_cloth"].items() if k in B.DEFAULTS},
+                                "warm-start blender_cloth")
+    p = res.get("params") or {}
+    try:
+        m, k, d = float(p["m"]), float(p["k"]), float(p["d"])
+    except (KeyError, TypeError, ValueError):
+        raise ClothFitError("warm-start result: its 'params' lack m, k, d") from None
+    unit = 1.0 / (model.fps * B.physical_time_scale(model.fps))      # seconds per solver time unit
+    avg = grid.spacing
+    stiff = k * unit * unit * avg                                    # Blender: k_spring = stiffness / avg
+    air = d * unit / B.AIR_SCALE
+    s = dict(B.DEFAULTS, mass=m, tension_stiffness=stiff, compression_stiffness=stiff, shear_stiffness=stiff,
+             air_damping=air, tension_damping=0.0, compression_damping=0.0, shear_damping=0.0,
+             quality=model.quality, bending_model=model.bending_model,
+             time_scale=B.physical_time_scale(model.fps))
+    # move to Blender's default mass so the numbers fall in Blender's ranges, then check
+    s = _rescale(s, B.DEFAULTS["mass"], model.bending_model)
+    for n in ("tension_stiffness", "compression_stiffness", "shear_stiffness"):
+        s[n] = min(s[n], B.RANGES[n][1])
+    s["air_damping"] = min(s["air_damping"], B.RANGES["air_damping"][1])
+    return B.check_settings(s, "warm start from a paper-model result")
+
+
+def model_rows_from_result(res: dict, grid=None):
+    """(model, one parameter row) to replay a fit result."""
+    if not isinstance(res, dict):
+        raise ClothFitError("result: expected a JSON object")
+    model = get_model(res.get("model") or ("blender" if res.get("blender_cloth") else "paper"))
+    if isinstance(model, BlenderModel):
+        bc = res.get("blender_cloth")
+        if not isinstance(bc, dict):
+            raise ClothFitError("result: a blender-model result needs 'blender_cloth'")
+        scene = res.get("blender_scene") or {}
+        fps = scene.get("fps", model.fps)
+        model = BlenderModel(fps, bc.get("quality", model.quality), bc.get("bending_model", model.bending_model))
+        s = B.check_settings({k: v for k, v in bc.items() if k in B.DEFAULTS}, "result blender_cloth")
+        return model, B.settings_row(s)
+    from ..physics.paper import Params
+    p = Params.from_dict(res.get("params") or res, "result params")
+    return model, np.array([p.m, p.k, p.l, p.d])
