@@ -35,7 +35,7 @@ def _res(s):
     return [h, w]
 
 
-def _params(args):
+def _params(args, default=None):
     if getattr(args, "params", None):
         p = args.params
         if os.path.isfile(p):
@@ -46,8 +46,7 @@ def _params(args):
                 raise ClothFitError(f"--params file {p} is not valid JSON: {e}") from None
             if not isinstance(d, dict):
                 raise ClothFitError(f"--params file {p} must hold an object")
-            d = d.get("params", d)
-            if not isinstance(d, dict):
+            if "params" in d and not d.get("params") and not d.get("blender_cloth"):
                 raise ClothFitError(f"--params file {p}: 'params' is empty (a fit that never evaluated?)")
         else:
             try:
@@ -55,7 +54,36 @@ def _params(args):
             except json.JSONDecodeError:
                 raise ClothFitError(f"--params {p!r} is neither a file nor JSON") from None
         return d
+    if default is not None:
+        return default
     return dict(D.GT_PARAMS)
+
+
+def _model_spec(a):
+    """--model/--fps/--quality/--bending-model -> a model dict (None: not asked for)."""
+    name = getattr(a, "model", None)
+    if name is None:
+        if any(getattr(a, k, None) is not None for k in ("fps", "quality", "bending_model")):
+            name = "blender"
+        else:
+            return None
+    spec = {"name": name}
+    if name == "blender":
+        for k in ("fps", "quality", "bending_model"):
+            if getattr(a, k, None) is not None:
+                spec[k] = getattr(a, k)
+    elif any(getattr(a, k, None) is not None for k in ("fps", "quality", "bending_model")):
+        raise ClothFitError("--fps, --quality and --bending-model belong to --model blender")
+    return spec
+
+
+def _capture_truth(cap):
+    """The parameters a synthetic capture was made with (for evaluate/overlay without --params)."""
+    meta = cap.meta or {}
+    if meta.get("true_blender_cloth"):
+        return {"model": meta.get("true_model") or "blender", "blender_cloth": meta["true_blender_cloth"],
+                "blender_scene": {"fps": (meta.get("true_model") or {}).get("fps", D.BLENDER_FPS)}}
+    return None
 
 
 def _cams(capture, spec):
@@ -126,7 +154,12 @@ class Progress:
 def cmd_synth(a):
     from .core.observation.synth import synth_capture
     kw = {} if a.truth_dt_safety is None else {"truth_dt_safety": a.truth_dt_safety}
-    cap = synth_capture(a.out, _params(a), rig=a.rig, noise=a.noise, resolution=_res(a.resolution), seed=a.seed, **kw)
+    spec = _model_spec(a)
+    params = _params(a, {} if spec and spec["name"] == "blender" else None)
+    if spec and spec["name"] == "blender":
+        params = params.get("blender_cloth", params)
+    cap = synth_capture(a.out, params, rig=a.rig, noise=a.noise, resolution=_res(a.resolution), seed=a.seed,
+                        model=spec, **kw)
     print(f"wrote capture {a.out}: {len(cap.cameras)} cameras x {len(cap.frame_times)} frames")
 
 
@@ -145,7 +178,9 @@ def cmd_fit(a):
         cfg = FitConfig(train_cameras=_cams(cap, a.cameras), train_times=_times(a.times), optimizer=a.optimizer,
                         seed=a.seed, max_evaluations=a.max_evaluations or D.FIT_EVALUATIONS,
                         resolution=_res(a.resolution), cloth_mass=a.cloth_mass, backend=a.backend,
-                        population=a.population, children=a.children, target_error=a.target)
+                        population=a.population, children=a.children, target_error=a.target,
+                        model=_model_spec(a), free=_names(a.free), fixed=_json_arg(a.fixed, "--fixed"),
+                        init=a.init, bounds=_json_arg(a.bounds, "--bounds"))
         job = FitJob(cap, cfg, checkpoint=ck)
     bar = Progress(not a.quiet)
     try:
@@ -157,20 +192,63 @@ def cmd_fit(a):
         bar.done()
         job.save_result(a.out)
     r = job.result()
-    print(json.dumps({k: r[k] for k in ("params", "identifiable", "best_E_sil_mean_pct", "evaluations",
-                                        "elapsed_s", "cancelled") if k in r}, indent=1))
+    keys = ("params", "identifiable") if r.get("params") else ("blender_cloth", "blender_scene")
+    print(json.dumps({k: r[k] for k in keys + ("best_E_sil_mean_pct", "evaluations", "elapsed_s", "cancelled")
+                      if k in r}, indent=1))
     if "identifiable_error_pct" in r:
         print("recovery error [%]:", json.dumps(r["identifiable_error_pct"]))
     print(f"wrote {a.out}")
+
+
+def _names(spec):
+    return [x.strip() for x in spec.split(",") if x.strip()] if spec else None
+
+
+def _json_arg(text, what):
+    """An option that takes JSON or a JSON file."""
+    if not text:
+        return None
+    from .core.jsonio import read_json
+    if os.path.isfile(text):
+        d = read_json(text, what)
+    else:
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError:
+            raise ClothFitError(f"{what} {text!r} is neither a file nor JSON") from None
+    if not isinstance(d, dict):
+        raise ClothFitError(f"{what} must be a JSON object")
+    return d
+
+
+def cmd_export_blender_cloth(a):
+    from .core.jsonio import read_json
+    from .core.physics import blender as B
+    from .core.physics.models import BlenderModel, model_and_row
+    res = read_json(a.result, "result")
+    model, row = model_and_row(res)
+    if not isinstance(model, BlenderModel):
+        raise ClothFitError(f"result {a.result}: a {model.name}-model fit has no Blender cloth settings "
+                            "(fit with --model blender, or warm-start one from it with --init)")
+    s = model.settings(row)
+    out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
+    if a.python:
+        print(f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match")
+        print("cloth = bpy.context.object.modifiers['Cloth'].settings")
+        for k in ("quality", "bending_model") + B.FLOAT_SETTINGS:
+            print(f"cloth.{k} = {s[k]!r}")
+    else:
+        print(json.dumps(out, indent=1))
 
 
 def cmd_evaluate(a):
     from .core.fitting.evaluate import evaluate
     from .core.observation.capture import load_capture
     cap = load_capture(a.capture)
-    r = evaluate(cap, _params(a), cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
+    params = _params(a, _capture_truth(cap))
+    r = evaluate(cap, params, cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
     if r["exploded"]:
-        raise ClothFitError(f"parameters {_params(a)} make the simulation explode: no silhouette to score")
+        raise ClothFitError(f"the {r['model']['name']} model with these parameters explodes: no silhouette to score")
     s = f"silhouette error {r['silhouette_error_pct']:.3f} % over {len(r['cameras'])} cameras x {len(r['times'])} frames"
     if "shape_error_mm" in r:
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
@@ -184,7 +262,7 @@ def cmd_overlay(a):
     from .core.observation.capture import load_capture
     from .core.observation.overlay import capture_overlays
     cap = load_capture(a.capture)
-    paths = capture_overlays(cap, _params(a), a.out, cameras=_cams(cap, a.cameras), times=_times(a.times))
+    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=_cams(cap, a.cameras), times=_times(a.times))
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
 
 
@@ -217,6 +295,14 @@ def cmd_rig(a):
     print(f"{len(cams)} cameras; training order (spread rule): {[cams[i].name for i in order]}")
 
 
+def _model_args(s):
+    s.add_argument("--model", choices=["paper", "blender"], default=None,
+                   help="cloth model: the paper's sheet or Blender's cloth solver (default: the capture's, else paper)")
+    s.add_argument("--fps", type=float, default=None, help="blender: scene frame rate the settings are for (24)")
+    s.add_argument("--quality", type=int, default=None, help="blender: solver steps per frame (5)")
+    s.add_argument("--bending-model", choices=["ANGULAR", "LINEAR"], default=None, help="blender: bending model")
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m addon", description="Silhouette Cloth Fit: cloth parameters from multi-view silhouettes")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -229,6 +315,7 @@ def build_parser():
     s.add_argument("--resolution", help="HxW, default: the rig's")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--truth-dt-safety", type=float, default=None, help="time-step factor of the truth (default: the model's)")
+    _model_args(s)
     s.set_defaults(fn=cmd_synth)
 
     s = sub.add_parser("fit", help="fit the model to a capture")
@@ -248,7 +335,19 @@ def build_parser():
     s.add_argument("--resume", action="store_true", help="continue from the checkpoint")
     s.add_argument("--backend", default="auto", choices=["auto", "numba", "numpy"])
     s.add_argument("--quiet", action="store_true")
+    _model_args(s)
+    s.add_argument("--free", help="blender: comma list of ClothSettings to search (default: see README, "
+                                  "Identifiability)")
+    s.add_argument("--fixed", help="blender: JSON (or file) of ClothSettings held fixed")
+    s.add_argument("--bounds", help="JSON (or file) {name: [low, high]} search ranges (blender: Blender units at "
+                                    "the fixed vertex mass)")
+    s.add_argument("--init", help="warm start from this result JSON (a blender or paper fit)")
     s.set_defaults(fn=cmd_fit)
+
+    s = sub.add_parser("export-blender-cloth", help="the Cloth modifier settings of a blender-model fit result")
+    s.add_argument("result")
+    s.add_argument("--python", action="store_true", help="print bpy assignments instead of JSON")
+    s.set_defaults(fn=cmd_export_blender_cloth)
 
     s = sub.add_parser("evaluate", help="silhouette and shape error of parameters on a capture")
     s.add_argument("capture")

@@ -5,16 +5,16 @@ import numpy as np
 
 from ..errors import ClothFitError
 from ..observation.metrics import shape_error_mm
-from ..physics.models import simulate
-from ..physics.paper import Params
+from ..physics.models import model_and_row
 from .job import resample_silhouette
 from .objective import SilhouetteObjective
 
 
 def evaluate(capture, params, cameras=None, times=None, resolution=None, backend="auto") -> dict:
     """Mean ``E_sil x 100`` over the images of ``cameras`` (indices) at ``times`` and, if the capture
-    has ground-truth shapes, the mean vertex distance [mm] per shape and overall."""
-    p = Params.from_dict(params, "parameters to evaluate")
+    has ground-truth shapes, the mean vertex distance [mm] per shape and overall. ``params``: a fit
+    result (its model is used), paper m, k, l, d, or ClothSettings values (the capture's model)."""
+    model, row = model_and_row(params, getattr(capture, "model", None))
     cams = list(range(len(capture.cameras))) if cameras is None else [int(c) for c in cameras]
     if not cams:
         raise ClothFitError("evaluate: no camera selected")
@@ -27,15 +27,15 @@ def evaluate(capture, params, cameras=None, times=None, resolution=None, backend
     if resolution is not None:
         camobjs = [c.resized(*resolution) for c in camobjs]
         observed = [[resample_silhouette(o, *resolution) for o in oc] for oc in observed]
-    obj = SilhouetteObjective(sc, camobjs, observed, backend=backend)
-    esil, exploded = obj.per_image(np.array([[p.m, p.k, p.l, p.d]]))
-    out = {"cameras": [capture.cameras[c].name for c in cams], "times": tt,
+    obj = SilhouetteObjective(sc, camobjs, observed, backend=backend, model=model)
+    esil, exploded = obj.per_image(row[None])
+    out = {"model": model.to_dict(), "cameras": [capture.cameras[c].name for c in cams], "times": tt,
            "exploded": bool(exploded[0]),
            "silhouette_error_pct": float(100 * esil[0].mean()),
            "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
            "silhouette_error_pct_per_time": (100 * esil[0].mean(0)).tolist()}
     if capture.shapes is not None:
-        sim = simulate(sc, [p], backend=backend)
+        sim = model.simulate(sc, row[None], backend=backend)
         true = capture.shapes[fidx]
         if sim.exploded[0]:
             se = np.full(len(fidx), np.inf)

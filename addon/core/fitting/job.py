@@ -45,7 +45,7 @@ class FitConfig:
     backend: str = "auto"
     population: int | None = None
     children: int | None = None
-    model: str = "paper"                  # "paper" or "blender"
+    model: object = None                  # "paper", "blender" or a model dict; None = the capture's, else paper
     fps: float | None = None              # blender: the scene frame rate the settings are for (24)
     quality: int | None = None            # blender: solver steps per frame (5, or the warm start's)
     bending_model: str | None = None      # blender: ANGULAR (default) or LINEAR

@@ -15,13 +15,13 @@ the rest is searched per unit mass, in log scale.
 """
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
+from ..jsonio import read_json
 from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
@@ -93,12 +93,15 @@ class PaperParameters:
 class BlenderParameters:
     """Blender's cloth: free ClothSettings (per unit mass, log scale), the rest fixed."""
 
-    def __init__(self, capture, cfg):
-        fps = D.BLENDER_FPS if cfg.fps is None else cfg.fps
+    def __init__(self, capture, cfg, spec=None):
+        spec = get_model(spec or "blender")          # the asked-for model (frame rate, quality, bending)
         init = load_init(cfg.init) if cfg.init else None
-        base = dict(B.DEFAULTS)
+        base = dict(B.DEFAULTS, quality=spec.quality, bending_model=spec.bending_model)
+        fps = spec.fps
         if init is not None and init.get("blender_cloth"):
             base.update({k: v for k, v in init["blender_cloth"].items() if k in ("quality", "bending_model")})
+            fps = float((init.get("blender_scene") or {}).get("fps", fps))
+        fps = fps if cfg.fps is None else cfg.fps
         quality = cfg.quality if cfg.quality is not None else base["quality"]
         bending = cfg.bending_model if cfg.bending_model is not None else base["bending_model"]
         self.model = BlenderModel(fps, quality, bending)
@@ -174,20 +177,16 @@ class BlenderParameters:
 
 
 def make_parameters(capture, cfg):
-    name = get_model(cfg.model).name
-    return PaperParameters(capture, cfg) if name == "paper" else BlenderParameters(capture, cfg)
+    """The search of ``cfg.model``, else the capture's own ``model``, else the paper's sheet."""
+    spec = cfg.model if cfg.model is not None else getattr(capture, "model", None)
+    model = get_model(spec)
+    return PaperParameters(capture, cfg) if model.name == "paper" else BlenderParameters(capture, cfg, model)
 
 
 def load_init(path) -> dict:
     """A result JSON to warm-start from."""
-    try:
-        with open(path) as f:
-            res = json.load(f)
-    except FileNotFoundError:
-        raise ClothFitError(f"warm-start result {path}: file not found") from None
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ClothFitError(f"warm-start result {path}: cannot read it ({e})") from None
-    if not isinstance(res, dict) or not (res.get("blender_cloth") or res.get("params")):
+    res = read_json(path, "warm-start result")
+    if not (res.get("blender_cloth") or res.get("params")):
         raise ClothFitError(f"warm-start result {path}: no 'blender_cloth' or 'params' in it (not a fit result)")
     return res
 
@@ -227,22 +226,3 @@ def settings_from_result(res: dict, model: BlenderModel, grid) -> dict:
         s[n] = min(s[n], B.RANGES[n][1])
     s["air_damping"] = min(s["air_damping"], B.RANGES["air_damping"][1])
     return B.check_settings(s, "warm start from a paper-model result")
-
-
-def model_rows_from_result(res: dict, grid=None):
-    """(model, one parameter row) to replay a fit result."""
-    if not isinstance(res, dict):
-        raise ClothFitError("result: expected a JSON object")
-    model = get_model(res.get("model") or ("blender" if res.get("blender_cloth") else "paper"))
-    if isinstance(model, BlenderModel):
-        bc = res.get("blender_cloth")
-        if not isinstance(bc, dict):
-            raise ClothFitError("result: a blender-model result needs 'blender_cloth'")
-        scene = res.get("blender_scene") or {}
-        fps = scene.get("fps", model.fps)
-        model = BlenderModel(fps, bc.get("quality", model.quality), bc.get("bending_model", model.bending_model))
-        s = B.check_settings({k: v for k, v in bc.items() if k in B.DEFAULTS}, "result blender_cloth")
-        return model, B.settings_row(s)
-    from ..physics.paper import Params
-    p = Params.from_dict(res.get("params") or res, "result params")
-    return model, np.array([p.m, p.k, p.l, p.d])

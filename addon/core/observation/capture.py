@@ -282,7 +282,7 @@ class Capture:
     """
 
     def __init__(self, root, cameras, scenario: Scenario, pattern: str = DEFAULT_PATTERN, shapes=None,
-                 cloth_mass=None, meta=None, json_path=None, _file_frames=None, _all_camera_names=None):
+                 cloth_mass=None, meta=None, json_path=None, _file_frames=None, _all_camera_names=None, model=None):
         self.root = os.path.abspath(str(root))
         self.json_path = json_path or os.path.join(self.root, CAPTURE_JSON)
         where = f"capture {self.json_path}"
@@ -312,6 +312,7 @@ class Capture:
         if not isinstance(meta, dict):
             raise ClothFitError(f"{where}: meta must be an object/dict, got {type(meta).__name__}")
         self.meta = meta
+        self.model = _check_model(model, where)
         self._check_unique_paths()
 
     # ------------------------------------------------------------------ basics
@@ -419,7 +420,7 @@ class Capture:
         scen = self.scenario.with_frames(self.frame_times[frames])
         shapes = None if self.shapes is None else self.shapes[frames]
         return Capture(self.root, [self.cameras[c] for c in cams], scen, self.pattern, shapes, self.cloth_mass,
-                       dict(self.meta), self.json_path, self._file_frames[frames], self._all_camera_names)
+                       dict(self.meta), self.json_path, self._file_frames[frames], self._all_camera_names, model=self.model)
 
     # ---------------------------------------------------------------- validate
     def validate(self, full: bool = True, allow_empty: bool = False, binarize_threshold=None) -> "Capture":
@@ -512,11 +513,24 @@ class Capture:
             d["shapes"] = SHAPES_NPZ
         if self.cloth_mass is not None:
             d["cloth_mass"] = self.cloth_mass
+        if self.model is not None:
+            d["model"] = self.model
         d["meta"] = self.meta
         return d
 
 
 # ================================================================= value checks
+
+def _check_model(model, where: str):
+    """The capture's optional ``model`` (the model a fit uses unless told otherwise), as a dict."""
+    if model is None:
+        return None
+    from ..physics.models import get_model
+    try:
+        return get_model(model).to_dict()
+    except ClothFitError as e:
+        raise ClothFitError(f"{where}: 'model': {e}") from None
+
 
 def check_shapes(shapes, n_frames: int, n_vertices: int, where: str) -> np.ndarray:
     try:
@@ -664,7 +678,8 @@ def load_capture(path, validate: bool = False) -> Capture:
     if not isinstance(meta, dict):
         raise ClothFitError(f"{where}: 'meta' must be an object, got {type(meta).__name__}")
 
-    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, json_path=json_path)
+    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, json_path=json_path,
+                  model=d.get("model"))
     if validate:
         cap.validate(full=True)
     return cap
@@ -707,7 +722,7 @@ def _json_default(o):
 
 
 def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, cloth_mass=None, meta=None,
-                  pattern: str = DEFAULT_PATTERN, allow_empty: bool = False, finalize: bool = True):
+                  pattern: str = DEFAULT_PATTERN, allow_empty: bool = False, finalize: bool = True, model=None):
     """Write a capture directory and return it as a ``Capture`` (or a ``PendingCapture``).
 
     ``silhouettes[c][f]`` (bool / 0-1 / 0-255 arrays of camera c's height x width) for every
@@ -726,7 +741,7 @@ def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, c
     that do not need the PNGs to be there.
     """
     root = os.path.abspath(os.fspath(root))
-    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta)
+    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, model=model)
     where = f"capture {cap.json_path}"
     if os.path.splitext(cap.pattern)[1].lower() != ".png":
         raise ClothFitError(f"{where}: silhouettes pattern {cap.pattern!r} must end with .png "

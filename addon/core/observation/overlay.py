@@ -68,17 +68,16 @@ def write_rgb(path: str, rgb: np.ndarray):
 def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_name="contact_sheet.png",
                      max_sheet=36):
     """Write one overlay PNG per camera and frame plus a contact sheet; returns the list of paths."""
-    from ..physics.models import simulate
-    from ..physics.paper import Params
+    from ..physics.models import model_and_row
     from .raster import silhouette
-    p = Params.from_dict(params, "overlay parameters")
+    model, row = model_and_row(params, getattr(capture, "model", None))
     cams = list(range(len(capture.cameras))) if cameras is None else list(cameras)
     times = list(capture.frame_times) if times is None else list(times)
     fidx = [capture.frame_index(t) for t in times]
     sc = capture.scenario.with_frames([float(capture.frame_times[i]) for i in fidx])
-    sim = simulate(sc, [p])
+    sim = model.simulate(sc, row[None])
     if sim.exploded[0]:
-        raise ClothFitError(f"overlay: parameters {p.as_dict()} make the simulation explode ({sim.reason[0]})")
+        raise ClothFitError(f"overlay: the {model.name} model with these parameters explodes ({sim.reason[0]})")
     X = sim.positions[0]
     paths, sheet = [], []
     for c in cams:

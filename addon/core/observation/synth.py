@@ -9,7 +9,8 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..physics.models import simulate
+from ..physics import blender as B
+from ..physics.models import BlenderModel, PaperModel, get_model, simulate
 from ..physics.paper import Params
 from ..physics.scenario import paper_scenario
 from .camera import load_rig
@@ -24,17 +25,36 @@ def noise_rng(seed: int, cam: int, frame: int) -> np.random.Generator:
 
 
 def synth_capture(root, params=None, rig=D.DEFAULT_RIG, noise=D.NOISE_FRACTION, resolution=None, seed=0,
-                  scenario=None, cameras=None, truth_dt_safety=D.TRUTH_DT_SAFETY):
-    """Simulate ``params`` (default: ground truth) on ``scenario`` (default: the paper's) and write a
-    capture with ``noise`` boundary noise to ``root``. Returns the Capture."""
-    p = Params.from_dict(params or D.GT_PARAMS, "ground-truth parameters")
+                  scenario=None, cameras=None, truth_dt_safety=D.TRUTH_DT_SAFETY, model=None):
+    """Simulate ``params`` on ``scenario`` (default: the paper's) with ``model`` (default: the paper's
+    sheet, ``params`` = m, k, l, d, default the ground truth; ``"blender"`` or a Blender model dict:
+    ``params`` = ClothSettings values, missing ones Blender's defaults, ``time_scale`` the real-time
+    one for the model's frame rate) and write a capture with ``noise`` boundary noise to ``root``.
+    Returns the Capture."""
     scenario = scenario or paper_scenario()
+    model = get_model(model)
+    if isinstance(model, BlenderModel):
+        given = dict(params or {})
+        given.setdefault("time_scale", B.physical_time_scale(model.fps))
+        given.setdefault("quality", model.quality)
+        given.setdefault("bending_model", model.bending_model)
+        settings = B.check_settings(given, "ground-truth Blender settings")
+        model = BlenderModel(model.fps, settings["quality"], settings["bending_model"])
+        sim = model.simulate(scenario, B.settings_row(settings))
+        truth = {"true_blender_cloth": settings, "true_model": model.to_dict()}
+        cloth_mass = settings["mass"] * scenario.grid.n_vertices
+        what = f"ground-truth Blender settings {settings}"
+    else:
+        p = Params.from_dict(params or D.GT_PARAMS, "ground-truth parameters")
+        sim = simulate(scenario, [p], safety=truth_dt_safety)
+        truth = {"true_params": p.as_dict(), "truth_dt_safety": truth_dt_safety}
+        cloth_mass = p.m * scenario.grid.n_vertices
+        what = f"ground-truth parameters {p.as_dict()}"
     cams = cameras if cameras is not None else load_rig(rig)
     if resolution is not None:
         cams = [c.resized(int(resolution[0]), int(resolution[1])) for c in cams]
-    sim = simulate(scenario, [p], safety=truth_dt_safety)
     if sim.exploded[0]:
-        raise ClothFitError(f"ground-truth parameters {p.as_dict()} make the simulation explode: {sim.reason[0]}")
+        raise ClothFitError(f"{what} make the simulation explode: {sim.reason[0]}")
     X = sim.positions[0]
     tris = scenario.grid.triangles
     sils = []
@@ -48,6 +68,7 @@ def synth_capture(root, params=None, rig=D.DEFAULT_RIG, noise=D.NOISE_FRACTION, 
                 s = add_boundary_noise(s, noise, noise_rng(seed, ci, fi))
             row.append(s)
         sils.append(row)
-    meta = {"generator": "synth (core rasteriser)", "true_params": p.as_dict(), "noise_fraction": noise,
-            "seed": seed, "truth_dt_safety": truth_dt_safety, "rig": rig if cameras is None else "custom"}
-    return write_capture(root, cams, scenario, sils, shapes=X, cloth_mass=p.m * scenario.grid.n_vertices, meta=meta)
+    meta = {"generator": f"synth (core {model.name} model, core rasteriser)", **truth, "noise_fraction": noise,
+            "seed": seed, "rig": rig if cameras is None else "custom"}
+    return write_capture(root, cams, scenario, sils, shapes=X, cloth_mass=cloth_mass, meta=meta,
+                         model=None if isinstance(model, PaperModel) else model.to_dict())

@@ -352,7 +352,6 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
     """cloth_calc_force for every lane: forces F and the blocks of dF/dx (Xd diagonal, Xo per spring)
     and dF/dv (Vd, Vo); ``act[s, l]`` = spring s has a block in lane l."""
     V = X.shape[0] // 3
-    S = sp_i.shape[0]
     for v in range(V):
         for a in range(3):
             for l in range(L):

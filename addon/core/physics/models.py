@@ -22,7 +22,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from . import blender as B
 from . import blender_kernels, jit, paper_kernels
-from .paper import PARAM_NAMES, SimResult, _as_params, simulate_numpy
+from .paper import PARAM_NAMES, Params, SimResult, _as_params, simulate_numpy
 from .scenario import Scenario
 
 MODEL_NAMES = ("paper", "blender")
@@ -167,6 +167,37 @@ def get_model(spec=None):
         return BlenderModel(spec.get("fps", D.BLENDER_FPS), spec.get("quality", B.DEFAULTS["quality"]),
                             spec.get("bending_model", B.DEFAULTS["bending_model"]))
     raise ClothFitError(f"unknown model {spec['name']!r}: choose one of {', '.join(MODEL_NAMES)}")
+
+
+def model_and_row(res: dict, default_model=None):
+    """(model, one parameter row) to replay ``res``: a fit result (its ``model``, ``blender_cloth``,
+    ``blender_scene`` or ``params``), a paper parameter object (m, k, l, d) or an object of
+    ClothSettings values (for ``default_model``'s frame rate, else Blender's default 24 fps)."""
+    if not isinstance(res, dict):
+        raise ClothFitError("parameters: expected a JSON object (a fit result, m/k/l/d or ClothSettings values)")
+    bc = res.get("blender_cloth")
+    if bc is None and set(res) & (set(B.FLOAT_SETTINGS) | {"quality", "bending_model"}) and "k" not in res:
+        bc = res                                     # bare ClothSettings values
+    spec = res.get("model") or ("blender" if bc is not None else None)
+    if spec is None:
+        spec = default_model if default_model is not None else "paper"
+        if get_model(spec).name == "blender":
+            raise ClothFitError("parameters: the blender model needs 'blender_cloth' (ClothSettings values), "
+                                "not m, k, l, d")
+    model = get_model(spec)
+    if isinstance(model, BlenderModel):
+        if not isinstance(bc, dict):
+            raise ClothFitError("parameters: a blender-model result needs 'blender_cloth'")
+        base = get_model(default_model) if default_model is not None else model
+        fps = float((res.get("blender_scene") or {}).get("fps", model.fps if res.get("model") else
+                                                             getattr(base, "fps", model.fps)))
+        given = dict(bc)
+        given.setdefault("time_scale", B.physical_time_scale(fps))
+        s = B.check_settings(given, "blender_cloth")
+        model = BlenderModel(fps, s["quality"], s["bending_model"])
+        return model, B.settings_row(s)
+    p = Params.from_dict(res.get("params") or res, "parameters")
+    return model, np.array([p.m, p.k, p.l, p.d])
 
 
 def simulate(scenario: Scenario, params, backend: str = "auto", safety: float = D.DT_SAFETY,
