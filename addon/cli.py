@@ -404,7 +404,8 @@ def build_parser():
 SUBTOOLS = {"extract": "silhouettes from camera images (see `extract --help`)",
             "import-cameras": "camera calibration files in (OpenCV YAML/JSON/XML, COLMAP)",
             "export-cameras": "camera calibration files out (OpenCV YAML/JSON/XML, COLMAP)",
-            "blender": "the whole pipeline through Blender (bpy module): see `blender --help`"}
+            "blender": "the whole pipeline through Blender (bpy module): see `blender --help`",
+            "blender-agreement": "the core's blender cloth model vs Blender's own solver, vertex by vertex (bpy module)"}
 
 
 def run_subtool(argv):
@@ -413,6 +414,9 @@ def run_subtool(argv):
         # build rig and cloth, simulate, render silhouettes with Blender, fit, overlays, save a .blend
         from .blender import pipeline
         return int(pipeline.main(argv[1:]) or 0)
+    if argv[0] == "blender-agreement":
+        from .blender import agreement
+        return int(agreement.main(argv[1:]) or 0)
     if argv[0] == "extract":
         from .core.footage import extract
         extract.main(argv[1:])

@@ -1,7 +1,7 @@
 """Core rasteriser vs. Blender's Workbench render of the same deformed cloth, and their speeds.
 
-    python tools/blender_agreement.py [--rig lab18] [--times 0.05:1.5:0.05] [--json out/agreement.json]
-    blender -b --factory-startup --python-exit-code 1 -P tools/blender_agreement.py -- [same options]
+    python tools/raster_agreement.py [--rig lab18] [--times 0.05:1.5:0.05] [--json out/agreement.json]
+    blender -b --factory-startup --python-exit-code 1 -P tools/raster_agreement.py -- [same options]
 
 Simulates the paper scenario with the ground-truth parameters, bakes it into the Blender cloth,
 and for every rig camera and capture time compares Blender's silhouette (Workbench, AA off) with
