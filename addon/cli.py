@@ -288,6 +288,15 @@ def cmd_bench(a):
     run_bench(a.json, quick=a.quick)
 
 
+def cmd_identifiability(a):
+    from .core.studies.identifiability import MATERIALS, run
+    mats = _names(a.materials)
+    bad = [m for m in mats or [] if m not in MATERIALS]
+    if bad:
+        raise ClothFitError(f"--materials: unknown {', '.join(bad)} (known: {', '.join(MATERIALS)})")
+    run(a.json, mats)
+
+
 def cmd_rig(a):
     from .core.observation.camera import load_rig, spread_order
     cams = load_rig(a.rig)
@@ -390,6 +399,12 @@ def build_parser():
     s.add_argument("--json", required=True)
     s.add_argument("--quick", action="store_true")
     s.set_defaults(fn=cmd_bench)
+
+    s = sub.add_parser("identifiability", help="which Blender cloth settings silhouettes can identify "
+                                               "(sensitivity and Cramer-Rao table)")
+    s.add_argument("--materials", help="comma list: default, silk, denim (default: all)")
+    s.add_argument("--json", help="write the tables to this file")
+    s.set_defaults(fn=cmd_identifiability)
 
     s = sub.add_parser("rig", help="show a rig preset and its training-camera order")
     s.add_argument("rig", nargs="?", default=D.DEFAULT_RIG)

@@ -216,13 +216,15 @@ def settings_from_result(res: dict, model: BlenderModel, grid) -> dict:
     avg = grid.spacing
     stiff = k * unit * unit * avg                                    # Blender: k_spring = stiffness / avg
     air = d * unit / B.AIR_SCALE
-    s = dict(B.DEFAULTS, mass=m, tension_stiffness=stiff, compression_stiffness=stiff, shear_stiffness=stiff,
-             air_damping=air, tension_damping=0.0, compression_damping=0.0, shear_damping=0.0,
-             quality=model.quality, bending_model=model.bending_model,
+    conv = {"mass": m, "tension_stiffness": stiff, "compression_stiffness": stiff, "shear_stiffness": stiff,
+            "air_damping": air, "tension_damping": 0.0, "compression_damping": 0.0, "shear_damping": 0.0}
+    # moved to Blender's default mass so the numbers fall in Blender's ranges; the paper's sheet has no
+    # bending: Blender's default bending at that mass
+    f = B.DEFAULTS["mass"] / m
+    scaled = set(B.mass_scaled(model.bending_model))
+    s = dict(B.DEFAULTS, quality=model.quality, bending_model=model.bending_model,
              time_scale=B.physical_time_scale(model.fps))
-    # move to Blender's default mass so the numbers fall in Blender's ranges, then check
-    s = _rescale(s, B.DEFAULTS["mass"], model.bending_model)
-    for n in ("tension_stiffness", "compression_stiffness", "shear_stiffness"):
+    s.update({n: (v * f if n in scaled else v) for n, v in conv.items()})
+    for n in scaled:
         s[n] = min(s[n], B.RANGES[n][1])
-    s["air_damping"] = min(s["air_damping"], B.RANGES["air_damping"][1])
     return B.check_settings(s, "warm start from a paper-model result")

@@ -46,6 +46,53 @@ def _rate(fn, n_items, min_time=2.0):
             return reps * n_items / dt, 1000.0 * (time.process_time() - c0) / (reps * n_items)
 
 
+def _bench_blender_model(tmp, quick, paper_rate):
+    """The ``blender`` cloth model on the same workload (16 cameras x 15 shapes at 480 x 640, the
+    paper's 16 x 16 sheet, 0.5 s settling + 1.5 s at 24 fps, quality 5), and a 4-camera fit of a
+    21 x 21 cloth with the default free set."""
+    from ..physics import blender as B
+    from ..physics.scenario import ClothGrid, paper_scenario
+    truth = {"tension_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness": 0.2, "air_damping": 2.0}
+    cap = load_capture(synth_capture(os.path.join(tmp, "blender_cap"), truth, model="blender", seed=0).root)
+    train, _ = select_training(cap.cameras, 16)
+    fidx = [cap.frame_index(t) for t in D.TRAIN_TIMES]
+    obs = [[cap.load_silhouette(c, f) for f in fidx] for c in train]
+    sc = cap.scenario.with_frames(D.TRAIN_TIMES)
+    cams = [cap.cameras[c] for c in train]
+    base = B.check_settings(dict(truth, time_scale=B.physical_time_scale(D.BLENDER_FPS)))
+    rng = np.random.default_rng(0)
+    pop = 16                                  # two batches of 8 SIMD lanes
+    P = np.repeat(B.settings_row(base)[None], pop, 0)
+    for n in ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping", "tension_damping"):
+        P[:, B.FLOAT_SETTINGS.index(n)] *= rng.uniform(0.8, 1.25, pop)
+    obj = SilhouetteObjective(sc, cams, obs, backend="numba", model=cap.model)
+    r, rc = _rate(lambda: obj(P), pop, min_time=3.0)
+    s, sc_ms = _rate(lambda: obj.model.simulate(sc, P), pop, min_time=2.0)
+    res = {"evals_per_s": r, "cpu_ms_per_eval": rc, "sim_only_per_s": s, "sim_cpu_ms_per_eval": sc_ms,
+           "ratio_to_target": r / TARGET_EVALS_PER_S,
+           "ratio_to_paper_model": (r / paper_rate) if paper_rate else None}
+    print(f"[blender model] candidate evaluations/s: {r:.1f} (target {TARGET_EVALS_PER_S:.0f}, ratio "
+          f"{r / TARGET_EVALS_PER_S:.2f}; paper model {paper_rate or float('nan'):.1f}/s); CPU per evaluation "
+          f"{rc:.1f} ms (simulation {sc_ms:.1f} ms); simulation alone {s:.1f}/s", flush=True)
+    # a 4-camera fit of a 21 x 21 cloth, the default free set, CMA-ES
+    sc21 = paper_scenario(ClothGrid(21, 21, D.CLOTH_SIDE))
+    cap21 = load_capture(synth_capture(os.path.join(tmp, "blender_cap21"), truth, model="blender", seed=0,
+                                       scenario=sc21).root)
+    evals = 600 if quick else 3000
+    t0 = time.perf_counter()
+    job = FitJob(cap21, FitConfig(train_cameras=select_training(cap21.cameras, 4)[0],
+                                  train_times=D.TRAIN_TIMES, max_evaluations=evals, seed=0))
+    job.run()
+    wall = time.perf_counter() - t0
+    res["fit_21x21_4cams"] = {"evaluations": job.evaluations, "wall_s": wall, "evals_per_s": job.evaluations / wall,
+                              "free": list(job.par.free),
+                              "best_E_sil_pct": 100 * job.best_error / job.objective.n_images}
+    print(f"[blender model] 4-camera fit of a 21 x 21 cloth ({len(job.par.free)} free settings, "
+          f"{job.evaluations} evaluations): {wall:.1f} s wall, best training E_sil "
+          f"{res['fit_21x21_4cams']['best_E_sil_pct']:.3f} %", flush=True)
+    return res
+
+
 def run_bench(json_path, quick=False):
     S = QUICK if quick else FULL
     tmp = tempfile.mkdtemp(prefix="clothfit_bench_")
@@ -113,6 +160,8 @@ def run_bench(json_path, quick=False):
     if load is not None and load > 0.5:
         print(f"note: the machine was busy (1-min load {load:.2f} on {os.cpu_count()} CPUs at the start): wall-clock "
               f"figures are pessimistic; CPU ms per evaluation is the load-independent figure", flush=True)
+    if jit.available():
+        out["blender_model"] = _bench_blender_model(tmp, quick, out.get("numba", {}).get("evals_per_s"))
     os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
     with open(json_path, "w") as f:
         json.dump(out, f, indent=1)
