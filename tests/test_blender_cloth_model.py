@@ -185,3 +185,75 @@ def test_synth_fit_export_evaluate_round_trip(tmp_path, capsys):
     mm = float(line.split("shape error ")[1].split(" mm")[0])
     assert err < 1.0 and mm < 0.5, line
     assert os.path.isfile(out)
+
+
+# ------------------------------------------------------------- the add-on: fit and apply Blender's cloth
+
+def _blender_fit_scene(tmp_path, budget=60):
+    from blender_support import run_error, small_settings  # noqa: F401
+    scene = bpy.context.scene
+    p = small_settings(scene, tmp_path / "cap")
+    p.settle_time = 0.25                      # 6 frames at 24 fps: Blender's cloth steps whole frames
+    for op in ("build_rig", "build_cloth", "simulate", "render_silhouettes"):
+        assert getattr(bpy.ops.clothfit, op)() == {"FINISHED"}
+    p.fit_model = "BLENDER"
+    p.max_evaluations = budget
+    return scene, p
+
+
+def test_addon_fits_blender_cloth_and_blender_replays_it(tmp_path):
+    """Panel path: fit with the Blender Cloth model, Apply Blender Cloth builds a cloth with the
+    fit's mesh, pins and release; Blender's own solver then moves it exactly as the core predicted."""
+    from addon.blender import api
+    from addon.blender import cloth as BC
+    from addon.core.observation.capture import load_capture
+    scene, p = _blender_fit_scene(tmp_path)
+    res, level, msg = api.run_fit(scene)
+    assert level == "INFO" and "tension=" in msg
+    assert res["model"]["name"] == "blender" and res["blender_scene"]["fps"] == BC.scene_fps(scene)
+    assert json.loads(p.fit_best_blender)["tension_stiffness"] == pytest.approx(
+        res["blender_cloth"]["tension_stiffness"])
+    bpy.ops.object.select_all(action="DESELECT")
+    bpy.context.view_layer.objects.active = None
+    assert bpy.ops.clothfit.apply_blender_cloth() == {"FINISHED"}
+    obj = bpy.data.objects[api.BLENDER_CLOTH_NAME]
+    cl = BC.cloth_modifier(obj)
+    got = BC.read_settings(cl)
+    for k, v in res["blender_cloth"].items():
+        assert got[k] == (v if isinstance(v, str) else pytest.approx(v, rel=1e-6)), k
+    # Blender replays it: its frames at the capture times equal the core model's
+    cap = load_capture(str(tmp_path / "cap"))
+    model, row = model_and_row(res)
+    core = model.simulate(cap.scenario, row[None]).positions[0]
+    net, plan = model.plan(cap.scenario)
+    frames, _, _ = BC.simulate_frames(scene, obj, plan.n_frames, scene.frame_start)
+    assert plan.between == 0
+    d = np.linalg.norm(frames[plan.lo] - core, axis=-1) * 1000
+    assert d.max() < 0.01, d.max()
+    # applying again replaces the fitted cloth rather than adding another
+    assert bpy.ops.clothfit.apply_blender_cloth() == {"FINISHED"}
+    assert sum(o.name.startswith(api.BLENDER_CLOTH_NAME) for o in bpy.data.objects) == 1
+
+
+def test_apply_blender_cloth_on_a_users_mesh_and_bad_cases(tmp_path):
+    from blender_support import run_error
+    from addon.blender import api
+    scene = bpy.context.scene
+    res = {"model": {"name": "blender", "fps": 30.0}, "blender_scene": {"fps": 30.0},
+           "blender_cloth": B.check_settings({"tension_stiffness": 21.0, "time_scale": B.physical_time_scale(30)})}
+    me = bpy.data.meshes.new("user")
+    me.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [], [(0, 1, 2, 3)])
+    obj = bpy.data.objects.new("user cloth", me)
+    scene.collection.objects.link(obj)
+    with pytest.raises(ClothFitError, match="for 30 fps but the scene runs at 24 fps"):
+        api.apply_blender_cloth(scene, obj, res, set_fps=False)
+    _, msg = api.apply_blender_cloth(scene, obj, res)
+    assert "frame rate set from 24 to 30 fps" in msg and "no pin group" in msg
+    assert scene.render.fps == 30
+    cs = [m for m in obj.modifiers if m.type == "CLOTH"][0].settings
+    assert cs.tension_stiffness == pytest.approx(21.0)
+    with pytest.raises(ClothFitError, match="paper-model fit"):
+        api.apply_blender_cloth(scene, obj, {"params": {"m": 1e-5, "k": 10, "l": 0.006, "d": 1e-4}})
+    scene.clothfit.capture_dir = str(tmp_path / "nothing")
+    msg = run_error("apply_blender_cloth")               # no fit result in the scene
+    assert "no fit result" in msg

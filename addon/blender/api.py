@@ -766,9 +766,14 @@ def fit_config(scene, capture):
         have = [t for t in D.TRAIN_TIMES if np.any(np.abs(capture.frame_times - t) < 1e-6)]
         times = have or None
     res = None if p.fit_resolution == "FULL" else [int(x) for x in p.fit_resolution.split("x")]
+    model = None
+    if p.fit_model == "BLENDER":      # Blender's cloth for this scene's frame rate
+        from .cloth import scene_fps
+        model = {"name": "blender", "fps": scene_fps(scene), "quality": int(p.fit_quality),
+                 "bending_model": p.fit_bending_model}
     return FitConfig(train_cameras=train, train_times=times, optimizer=p.optimizer, seed=p.seed,
                      max_evaluations=p.max_evaluations, resolution=res,
-                     cloth_mass=p.fit_cloth_mass if p.fit_cloth_mass > 0 else None)
+                     cloth_mass=p.fit_cloth_mass if p.fit_cloth_mass > 0 else None, model=model)
 
 
 class FitSession:
@@ -805,8 +810,16 @@ class FitSession:
         s = (f"Cloth Fit: generation {j.generation}, {j.evaluations}/{j.config.max_evaluations} evaluations, "
              f"best E_all {j.best_error:.4g}")
         if bp:
-            s += f" | m={bp['m']:.3g} k={bp['k']:.4g} l={bp['l']:.4g} d={bp['d']:.3g}"
+            s += " | " + _params_text(bp)
         return s + " | Esc cancels (keeps the best)"
+
+
+def _params_text(bp) -> str:
+    """One line of fitted parameters: paper m, k, l, d or the main Blender cloth settings."""
+    if "k" in bp:
+        return f"m={bp['m']:.3g} k={bp['k']:.4g} l={bp['l']:.4g} d={bp['d']:.3g}"
+    return (f"tension={bp['tension_stiffness']:.4g} shear={bp['shear_stiffness']:.4g} "
+            f"bending={bp['bending_stiffness']:.4g} air={bp['air_damping']:.4g}")
 
 
 def start_fit(scene, capture=None):
@@ -835,7 +848,11 @@ def _publish(scene, job):
     if bp:
         p.fit_best_error = job.best_error
         p.fit_best_pct = 100.0 * job.best_error / max(1, job.objective.n_images)
-        p.fit_best_m, p.fit_best_k, p.fit_best_l, p.fit_best_d = bp["m"], bp["k"], bp["l"], bp["d"]
+        if "k" in bp:
+            p.fit_best_m, p.fit_best_k, p.fit_best_l, p.fit_best_d = bp["m"], bp["k"], bp["l"], bp["d"]
+            p.fit_best_blender = ""
+        else:
+            p.fit_best_blender = json.dumps(bp)
         p.fit_has_result = True
 
 
@@ -900,7 +917,7 @@ def finish_fit(session, cancelled=False):
         p.fit_status = f"cancelled at generation {job.generation}; {kept} kept"
         return "WARNING", f"Fit cancelled at generation {job.generation}: {kept} kept ({session.result_path})"
     p.fit_status = f"finished: {kept}"
-    return "INFO", f"Fit finished: {kept}; k={bp['k']:.4g} l={bp['l']:.4g} d={bp['d']:.3g} ({session.result_path})"
+    return "INFO", f"Fit finished: {kept}; {_params_text(bp)} ({session.result_path})"
 
 
 def run_fit(scene, callback=None):
@@ -929,14 +946,18 @@ def load_result(scene, path=None):
             res = json.load(f)
     except (OSError, json.JSONDecodeError) as e:
         raise ClothFitError(f"fit result {path} is unreadable: {e}") from None
-    if not isinstance(res, dict) or not isinstance(res.get("params"), dict):
+    if not isinstance(res, dict) or not (isinstance(res.get("params"), dict) or
+                                         isinstance(res.get("blender_cloth"), dict)):
         raise ClothFitError(f"fit result {path} has no parameters (the fit found none)")
     return res
 
 
 def apply_fit(scene, result=None):
-    """Fitted parameters -> the scene's m, k, l, d; then re-simulate and bake."""
+    """Fitted parameters -> the scene's m, k, l, d; then re-simulate and bake. (A Blender-model
+    result goes to a Cloth modifier instead: ``apply_blender_cloth``.)"""
     p = props(scene)
+    if result is None and p.fit_best_blender:
+        raise ClothFitError("the fit is a Blender-cloth fit: use Apply Blender Cloth")
     if result is None and p.fit_has_result and p.fit_best_k > 0:
         par = Params(p.fit_best_m, p.fit_best_k, p.fit_best_l, p.fit_best_d)
         try:  # prefer the full-precision numbers of the result file
@@ -951,7 +972,60 @@ def apply_fit(scene, result=None):
     return simulate(scene)
 
 
+def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
+    """A Blender-model fit result -> a Cloth modifier. On the scene's own cloth (or with no mesh
+    active) a "Blender Cloth (fitted)" object is built beside it from the capture's scenario: the
+    same mesh, pins and release as the fit, so Blender replays the fitted motion. On any other
+    mesh its Cloth modifier is added or updated (its own pin group is kept). The scene's frame rate
+    is set to the one the settings are for (``set_fps``), else a differing rate is an error.
+    Returns (object, message)."""
+    from ..core.physics.models import BlenderModel, model_and_row
+    from . import cloth as BC
+    res = result if result is not None else load_result(scene)
+    model, row = model_and_row(res)
+    if not isinstance(model, BlenderModel):
+        raise ClothFitError("the fit result is a paper-model fit: it has no Blender cloth settings "
+                            "(fit with the Blender Cloth model)")
+    settings = model.settings(row)
+    fps = BC.scene_fps(scene)
+    note = ""
+    if abs(fps - model.fps) > 1e-6:
+        if not set_fps:
+            raise ClothFitError(f"the settings are for {model.fps:g} fps but the scene runs at {fps:g} fps: "
+                                f"Blender's cloth moves per frame, so they would move it differently")
+        BC.set_scene_fps(scene, model.fps)
+        note = f"; scene frame rate set from {fps:g} to {model.fps:g} fps"
+    own = None
+    try:
+        own = cloth_object(scene)
+    except ClothFitError:
+        pass
+    if obj is None or (own is not None and obj == own):
+        sc, _ = scene_scenario(scene)
+        net, plan = model.plan(sc)
+        old = bpy.data.objects.get(BLENDER_CLOTH_NAME)
+        if old is not None:
+            me = old.data
+            bpy.data.objects.remove(old, do_unlink=True)
+            if me is not None and me.users == 0:
+                bpy.data.meshes.remove(me)
+        new = BC.build_cloth_object(scene, net, plan, settings, name=BLENDER_CLOTH_NAME,
+                                    frame_start=scene.frame_start)
+        return new, (f"Built '{new.name}' with the fitted Cloth settings, pins and release of the scenario "
+                     f"(t = 0 at frame {scene.frame_start + plan.release_frame}){note}")
+    if obj.type != "MESH":
+        raise ClothFitError(f"the active object '{obj.name}' is a {obj.type.lower()}, not a mesh")
+    cl = BC.cloth_modifier(obj) or obj.modifiers.new("Cloth", "CLOTH")
+    BC.apply_settings(cl, settings)
+    pins = cl.settings.vertex_group_mass
+    return obj, (f"Cloth settings applied to '{obj.name}'"
+                 + (f" (pins: vertex group '{pins}')" if pins else " (no pin group set)") + note)
+
+
 # ==================================================================== overlays
+
+BLENDER_CLOTH_NAME = "Blender Cloth (fitted)"
+
 
 def overlay_path(cap, ci, fi):
     return os.path.join(cap.root, OVERLAY_DIR, cap.cameras[ci].name, f"{fi:03d}.png")

@@ -221,6 +221,22 @@ class CLOTHFIT_OT_apply_fit(_ClothFitOperator, bpy.types.Operator):
         return f"Applied m={p.m:.4g} k={p.k:.4g} l={p.l:.4g} d={p.d:.4g} and re-simulated"
 
 
+class CLOTHFIT_OT_apply_blender_cloth(_ClothFitOperator, bpy.types.Operator):
+    """Put the fitted Blender cloth settings on a Cloth modifier: on the active mesh, or (scene's own cloth
+    or no mesh active) on a new cloth with the fit's mesh, pins and release, so Blender replays the fit"""
+    bl_idname = "clothfit.apply_blender_cloth"
+    bl_label = "Apply Blender Cloth"
+
+    set_fps: bpy.props.BoolProperty(name="Set Frame Rate", default=True,
+                                    description="Set the scene's frame rate to the one the settings were fitted "
+                                                "for (Blender's cloth moves per frame)")
+
+    def run(self, context):
+        obj = context.active_object if context.active_object and context.active_object.type == "MESH" else None
+        new, msg = api.apply_blender_cloth(context.scene, obj, set_fps=self.set_fps)
+        return msg
+
+
 class CLOTHFIT_OT_overlays(_ClothFitOperator, bpy.types.Operator):
     """Observed vs. model silhouettes per camera and frame (white agree, red missing, blue extra)"""
     bl_idname = "clothfit.overlays"
@@ -349,5 +365,6 @@ CLASSES = (
     CLOTHFIT_OT_remove_handle,
     CLOTHFIT_OT_fit,
     CLOTHFIT_OT_apply_fit,
+    CLOTHFIT_OT_apply_blender_cloth,
     CLOTHFIT_OT_overlays,
 )

@@ -140,6 +140,13 @@ def draw_extract(layout, scene, p):
 
 def draw_fitting(layout, scene, p):
     col = layout.column(align=True)
+    col.prop(p, "fit_model")
+    if p.fit_model == "BLENDER":
+        col.prop(p, "fit_quality")
+        col.prop(p, "fit_bending_model")
+        fps = scene.render.fps / scene.render.fps_base
+        col.label(text=f"For this scene's {fps:g} fps", icon="TIME")
+    col = layout.column(align=True)
     col.prop(p, "train_cameras")
     col.prop(p, "train_times")
     col.prop(p, "optimizer")
@@ -160,6 +167,9 @@ def draw_fitting(layout, scene, p):
 def draw_results(layout, scene, p):
     if not p.fit_has_result:
         layout.label(text="No fit yet")
+    elif p.fit_best_blender:
+        layout.label(text=f"Best E_all {p.fit_best_error:.4g} (mean E_sil {p.fit_best_pct:.3f} %)")
+        draw_blender_cloth(layout, p)
     else:
         layout.label(text=f"Best E_all {p.fit_best_error:.4g} (mean E_sil {p.fit_best_pct:.3f} %)")
         col = layout.column(align=True)
@@ -181,6 +191,22 @@ def draw_results(layout, scene, p):
         layout.label(text=f"Overlay mean E_sil {p.overlay_error:.3f} %")
     if p.result_path:
         layout.label(text=f"Result: {bpy.path.basename(p.result_path)}", icon="FILE")
+
+
+def draw_blender_cloth(layout, p):
+    import json
+    try:
+        s = json.loads(p.fit_best_blender)
+    except ValueError:
+        layout.label(text="Fitted Blender cloth unreadable", icon="ERROR")
+        return
+    col = layout.column(align=True)
+    col.label(text=f"Blender cloth, quality {s.get('quality')}, {s.get('bending_model', '').lower()} bending")
+    for k in ("mass", "tension_stiffness", "compression_stiffness", "shear_stiffness", "bending_stiffness",
+              "tension_damping", "shear_damping", "bending_damping", "air_damping", "time_scale"):
+        if k in s:
+            col.label(text=f"{k.replace('_', ' ').capitalize()} = {s[k]:.4g}")
+    layout.operator("clothfit.apply_blender_cloth", icon="MOD_CLOTH")
 
 
 SECTIONS = (

@@ -179,6 +179,15 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     max_evaluations: IntProperty(name="Budget", default=D.FIT_EVALUATIONS, min=1,
                                  description="Maximum number of model evaluations")
     fit_resolution: EnumProperty(name="Resolution", items=RESOLUTIONS, default="FULL")
+    fit_model: EnumProperty(name="Model", items=[
+        ("PAPER", "Paper Sheet", "The paper's mass-spring sheet: m, k, l, d"),
+        ("BLENDER", "Blender Cloth", "Blender's own cloth solver: fits Cloth modifier settings for the scene's "
+                                     "frame rate, applied with Apply Blender Cloth")], default="PAPER")
+    fit_quality: IntProperty(name="Quality", default=5, min=1, max=80,
+                             description="Blender model: the Cloth modifier's quality (solver steps per frame)")
+    fit_bending_model: EnumProperty(name="Bending", items=[
+        ("ANGULAR", "Angular", "Blender's default bending model"),
+        ("LINEAR", "Linear", "Blender's linear bending model")], default="ANGULAR")
     fit_cloth_mass: FloatProperty(name="Cloth Mass", default=0.0, min=0.0, unit="MASS", precision=6,
                                   description="Weighed cloth mass (0 = the capture's); fixes m, since only "
                                               "k/m, d/m and l are observable")
@@ -195,6 +204,8 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     fit_best_k: FloatProperty(name="k", default=0.0, precision=4)
     fit_best_l: FloatProperty(name="l", default=0.0, precision=5, unit="LENGTH")
     fit_best_d: FloatProperty(name="d", default=0.0, precision=6)
+    fit_best_blender: StringProperty(name="Fitted Blender Cloth", default="",
+                                     description="ClothSettings of the best Blender-model fit (JSON)")
     fit_status: StringProperty(name="Status", default="")
     result_path: StringProperty(name="Result", subtype="FILE_PATH", options=PATH_OPTIONS, default="")
     overlay_source: EnumProperty(name="Model", items=[
