@@ -199,3 +199,24 @@ def free_cache(obj):
     cl = cloth_modifier(obj)
     if cl is not None:
         cl.point_cache.frame_end = cl.point_cache.frame_end  # touching the cache settings frees it
+
+
+def replay(scene, scenario, settings: dict, fps: float, frame_start: int = 1):
+    """Blender's own solver on a core scenario: build the cloth (the core blender model's mesh, pins
+    and release) with ``settings``, step it and return its vertices at the scenario's capture
+    times ``(F, V, 3)`` (read like the core model: linear between frames), then remove it."""
+    from ..core.physics.models import BlenderModel
+    given = dict(settings)
+    given.setdefault("time_scale", B.physical_time_scale(fps))
+    s = B.check_settings(given, "replay settings")
+    model = BlenderModel(fps, s["quality"], s["bending_model"])
+    net, plan = model.plan(scenario)
+    set_scene_fps(scene, fps)
+    obj = build_cloth_object(scene, net, plan, s, name="Replay Cloth", frame_start=frame_start)
+    try:
+        frames, _, _ = simulate_frames(scene, obj, plan.n_frames, frame_start)
+    finally:
+        me = obj.data
+        bpy.data.objects.remove(obj, do_unlink=True)
+        bpy.data.meshes.remove(me)
+    return plan.sample(frames)
