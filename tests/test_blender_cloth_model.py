@@ -22,7 +22,8 @@ pytestmark = pytest.mark.usefixtures("factory")
 CASES = [("default", {}),
          ("silk, linear bending", dict(agreement.PRESETS["silk"], bending_model="LINEAR")),
          ("quality 2", {"quality": 2}),
-         ("denim, quality 12", agreement.PRESETS["denim"])]
+         ("denim, quality 12", agreement.PRESETS["denim"]),
+         ("soft pins", {"pin_stiffness": 5.0, agreement.PIN_WEIGHT: 0.95})]
 
 
 @pytest.mark.parametrize("name,settings", CASES, ids=[c[0] for c in CASES])

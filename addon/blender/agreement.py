@@ -43,6 +43,8 @@ PRESETS = {
                "air_damping": 1, "bending_damping": 0.5},
 }
 
+PIN_WEIGHT = "pin weight"      # a case key: the handles' pin weight (< 1: Blender's soft goal springs)
+
 CASES = [
     ("default", {}),
     ("silk (soft, little bending)", PRESETS["silk"]),
@@ -55,6 +57,7 @@ CASES = [
     ("default, quality 2", {"quality": 2}),
     ("default, quality 15", {"quality": 15}),
     ("default, time scale 1 (Blender's own)", {"time_scale": 1.0}),
+    ("soft pins (weight 0.95, pin stiffness 5)", {"pin_stiffness": 5.0, PIN_WEIGHT: 0.95}),
 ]
 
 
@@ -71,10 +74,17 @@ def compare(scene, scenario: Scenario, settings: dict, fps: float = 24.0, frame_
     """Simulate ``settings`` on ``scenario`` in the core and in Blender; distances over every frame."""
     from . import cloth as BC
     given = dict(settings)
+    weight = given.pop(PIN_WEIGHT, None)
+    if weight is not None:
+        for h in scenario.handles:
+            h.weight = float(weight)
     given.setdefault("time_scale", B.physical_time_scale(fps))
     s = B.check_settings(given, "agreement settings")
     model = BlenderModel(fps, s["quality"], s["bending_model"])
     net, plan = model.plan(scenario)
+    if weight is not None:
+        for h in scenario.handles:
+            del h.weight
     t0 = time.perf_counter()
     prep = Prepared(net, plan, s["quality"], s["time_scale"], scenario.gravity, all_frames=True)
     core, codes, _ = prep.run(B.settings_row(s)[None])

@@ -28,6 +28,7 @@ from . import render as R
 from . import scene as S
 
 RESULT_JSON = "fit_result.json"
+RESULT_JSON_BLENDER = "fit_result_blender.json"   # a Blender-cloth fit keeps the paper fit's result
 OVERLAY_DIR = "overlays"
 
 
@@ -831,7 +832,8 @@ def start_fit(scene, capture=None):
         raise ClothFitError("a fit is already running in this scene")
     cap = capture or core_load(capture_dir(scene))
     job = FitJob(cap, fit_config(scene, cap))
-    sess = FitSession(scene, job, os.path.join(cap.root, RESULT_JSON))
+    name = RESULT_JSON if job.par.model.name == "paper" else RESULT_JSON_BLENDER
+    sess = FitSession(scene, job, os.path.join(cap.root, name))
     p.fit_running = True
     p.fit_progress = 0.0
     p.fit_generation = p.fit_evaluations = 0

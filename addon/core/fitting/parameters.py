@@ -114,7 +114,9 @@ class BlenderParameters:
             src = ("warm-start result's mass" if init_settings else
                    "Blender's default vertex mass (cloth mass unknown: every stiffness and damping scales with it)")
         self.m, self.m_source = float(m), src
-        fixed = dict(base, quality=self.model.quality, bending_model=self.model.bending_model,
+        # Blender's defaults are for its default vertex mass: moved to this mass, they move alike
+        fixed = _rescale(dict(base, mass=B.DEFAULTS["mass"]), self.m, self.model.bending_model)
+        fixed.update(quality=self.model.quality, bending_model=self.model.bending_model,
                      time_scale=B.physical_time_scale(fps))
         if init_settings:
             fixed.update(_rescale(init_settings, self.m, self.model.bending_model))
