@@ -6,14 +6,16 @@ import numpy as np
 from ..errors import ClothFitError
 from ..observation.metrics import shape_error_mm
 from ..physics.models import model_and_row
-from .job import resample_silhouette
+from .job import load_observed
 from .objective import SilhouetteObjective
 
 
 def evaluate(capture, params, cameras=None, times=None, resolution=None, backend="auto") -> dict:
     """Mean ``E_sil x 100`` over the images of ``cameras`` (indices) at ``times`` and, if the capture
     has ground-truth shapes, the mean vertex distance [mm] per shape and overall. ``params``: a fit
-    result (its model is used), paper m, k, l, d, or ClothSettings values (the capture's model)."""
+    result (its model is used), paper m, k, l, d, or ClothSettings values (the capture's model).
+    Pixels the capture marks as unknown (ignore masks / ignore labels) are left out of the error
+    (``objective``)."""
     model, row = model_and_row(params, getattr(capture, "model", None))
     cams = list(range(len(capture.cameras))) if cameras is None else [int(c) for c in cameras]
     if not cams:
@@ -22,12 +24,8 @@ def evaluate(capture, params, cameras=None, times=None, resolution=None, backend
     fidx = [capture.frame_index(t) for t in times]
     tt = [float(capture.frame_times[i]) for i in fidx]
     sc = capture.scenario.with_frames(tt)
-    camobjs = [capture.cameras[c] for c in cams]
-    observed = [[capture.load_silhouette(c, f) for f in fidx] for c in cams]
-    if resolution is not None:
-        camobjs = [c.resized(*resolution) for c in camobjs]
-        observed = [[resample_silhouette(o, *resolution) for o in oc] for oc in observed]
-    obj = SilhouetteObjective(sc, camobjs, observed, backend=backend, model=model)
+    camobjs, observed, ignore = load_observed(capture, cams, fidx, resolution)
+    obj = SilhouetteObjective(sc, camobjs, observed, backend=backend, model=model, ignore=ignore)
     esil, exploded = obj.per_image(row[None])
     out = {"model": model.to_dict(), "cameras": [capture.cameras[c].name for c in cams], "times": tt,
            "exploded": bool(exploded[0]),

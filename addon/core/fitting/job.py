@@ -71,6 +71,29 @@ def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray
     return img >= 0.5
 
 
+def resample_ignore(mask, height: int, width: int):
+    """An ignore mask at another resolution: a pixel is unknown when any part of it was (None stays None)."""
+    import cv2
+    if mask is None or mask.shape == (height, width):
+        return mask
+    img = cv2.resize(mask.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
+    return img > 0
+
+
+def load_observed(capture, cams, fidx, resolution=None):
+    """Cameras, observed silhouettes and ignore masks ``[cam][frame]`` of a capture, at ``resolution``."""
+    cameras = [capture.cameras[c] for c in cams]
+    observed, ignore = capture.load_observations(cams, fidx)
+    if resolution is not None:
+        h, w = int(resolution[0]), int(resolution[1])
+        if h <= 0 or w <= 0:
+            raise ClothFitError(f"fit resolution {resolution} must be positive")
+        cameras = [c.resized(h, w) for c in cameras]
+        observed = [[resample_silhouette(o, h, w) for o in oc] for oc in observed]
+        ignore = [[resample_ignore(g, h, w) for g in gc] for gc in ignore]
+    return cameras, observed, ignore
+
+
 class FitJob:
     def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None):
         self.capture = capture
@@ -90,19 +113,12 @@ class FitJob:
         self.train_cameras = cams
         self.train_frames = fidx
         self.train_times = [float(capture.frame_times[i]) for i in fidx]
-        cameras = [capture.cameras[c] for c in cams]
-        observed = [[capture.load_silhouette(c, f) for f in fidx] for c in cams]
-        if cfg.resolution is not None:
-            h, w = int(cfg.resolution[0]), int(cfg.resolution[1])
-            if h <= 0 or w <= 0:
-                raise ClothFitError(f"fit resolution {cfg.resolution} must be positive")
-            cameras = [c.resized(h, w) for c in cameras]
-            observed = [[resample_silhouette(o, h, w) for o in oc] for oc in observed]
+        cameras, observed, ignore = load_observed(capture, cams, fidx, cfg.resolution)
         self.scenario = capture.scenario.with_frames(self.train_times)
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
         self.par = make_parameters(capture, cfg)
         self.objective = SilhouetteObjective(self.scenario, cameras, observed, backend=cfg.backend, names=names,
-                                             model=self.par.model)
+                                             model=self.par.model, ignore=ignore)
         self.m, self.m_source = self.par.m, self.par.m_source
         self.space = self.par.space
         kw = {}

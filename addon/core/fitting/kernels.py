@@ -15,7 +15,7 @@ from ..physics.paper_kernels import simulate_one
 @njit(**PARALLEL)
 def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
                          events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
-                         max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris,
+                         max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris,
                          max_h, max_w, span_cap, esil, codes):
     """Simulate and score every candidate: esil[p, c, f]; codes[p] != 0 = exploded."""
     V = rest.shape[0]
@@ -33,12 +33,13 @@ def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, k
                 np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
                 np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
                 np.empty(span_cap, dtype=np.int32))
-        eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work, esil[p])
+        eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, work, esil[p])
 
 
 
 @njit(**PARALLEL)
-def score_population(X, ok, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, max_h, max_w, span_cap, esil):
+def score_population(X, ok, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, max_h, max_w,
+                     span_cap, esil):
     """esil[p, c, f] for the positions X (P, F, V, 3) of every candidate with ok[p]."""
     for p in prange(X.shape[0]):
         if not ok[p]:
@@ -49,4 +50,4 @@ def score_population(X, ok, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tr
                 np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
                 np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
                 np.empty(span_cap, dtype=np.int32))
-        eval_frames(X[p], Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work, esil[p])
+        eval_frames(X[p], Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, work, esil[p])

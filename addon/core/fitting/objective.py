@@ -5,6 +5,10 @@ for a population of parameter rows of its model (``physics.models``: the paper's
 or Blender's cloth), ``E_all`` (sum of ``E_sil`` over all images) or the per-image ``E_sil``. A
 candidate that explodes or goes non-finite scores ``inf`` (the worst), never an error. The numba
 kernels (``kernels``) are used when available, else the numpy reference path.
+
+Pixels of unknown truth (``ignore[c][f]``: occluders such as a hand or a post in front of the cloth)
+leave eq. 6 entirely: they are neither observed cloth nor observed background, so a model pixel
+there is neither missing nor extra, and the normaliser is the observed area outside them.
 """
 from __future__ import annotations
 
@@ -19,10 +23,11 @@ from . import kernels
 
 
 class SilhouetteObjective:
-    def __init__(self, scenario, cameras, observed, backend: str = "auto", names=None, model=None):
+    def __init__(self, scenario, cameras, observed, backend: str = "auto", names=None, model=None, ignore=None):
         """``scenario.frame_times`` are the observed times; ``observed[c][f]`` a bool (H_c, W_c) image
         of camera ``cameras[c]`` at ``scenario.frame_times[f]``; ``model`` a model, name or dict
-        (``physics.models.get_model``; default: the paper's sheet)."""
+        (``physics.models.get_model``; default: the paper's sheet); ``ignore[c][f]`` a bool image of
+        the pixels whose truth is unknown, or None (the whole list or any entry)."""
         self.scenario = scenario
         self.model = get_model(model)
         self.paper = isinstance(self.model, PaperModel)
@@ -31,7 +36,7 @@ class SilhouetteObjective:
         if len(observed) != C:
             raise ClothFitError(f"objective: {len(observed)} silhouette lists for {C} cameras")
         self.areas = np.zeros((C, F))
-        obs = []
+        obs, ign = [], []
         for c, cam in enumerate(self.cameras):
             if len(observed[c]) != F:
                 raise ClothFitError(f"objective: camera '{cam.name}' has {len(observed[c])} silhouettes for {F} frames")
@@ -41,12 +46,23 @@ class SilhouetteObjective:
                 if o.shape != (cam.height, cam.width):
                     raise ClothFitError(f"{nm}: silhouette is {o.shape[0]}x{o.shape[1]} but camera '{cam.name}' is "
                                         f"{cam.height}x{cam.width}")
+                g = None if ignore is None or ignore[c][f] is None else np.asarray(ignore[c][f], dtype=bool)
+                if g is not None:
+                    if g.shape != o.shape:
+                        raise ClothFitError(f"{nm}: ignore mask is {g.shape[0]}x{g.shape[1]} but camera '{cam.name}' "
+                                            f"is {cam.height}x{cam.width}")
+                    g = g if g.any() else None
+                    if g is not None:
+                        o = o & ~g
                 a = int(o.sum())
                 if a == 0:
-                    raise ClothFitError(f"{nm}: observed silhouette is empty")
+                    raise ClothFitError(f"{nm}: observed silhouette is empty" + (" outside the ignore mask" if g is not None
+                                                                                 else ""))
                 self.areas[c, f] = a
                 obs.append(o)
+                ign.append(g)
         self.observed = [[obs[c * F + f] for f in range(F)] for c in range(C)]
+        self.ignore = [[ign[c * F + f] for f in range(F)] for c in range(C)]
         if backend == "auto":
             backend = "numba" if jit.available() else "numpy"
         if backend not in ("numba", "numpy"):
@@ -54,24 +70,10 @@ class SilhouetteObjective:
         self.backend = backend
         self.evaluations = 0
         if backend == "numba":
-            # per image: bounding box of the observed silhouette and per-row prefix sums inside it
-            self._pofs = np.zeros((C, F), dtype=np.int64)
-            self._bbs = np.zeros((C, F, 4), dtype=np.int64)
-            pres, o = [], 0
-            for c in range(C):
-                for f in range(F):
-                    im = obs[c * F + f]
-                    rows = np.flatnonzero(im.any(1))
-                    cols = np.flatnonzero(im.any(0))
-                    r0, r1, c0, c1 = rows[0], rows[-1], cols[0], cols[-1]
-                    crop = im[r0:r1 + 1, c0:c1 + 1].astype(np.int32)
-                    pre = np.zeros((crop.shape[0], crop.shape[1] + 1), dtype=np.int32)
-                    np.cumsum(crop, axis=1, out=pre[:, 1:])
-                    self._pofs[c, f] = o
-                    self._bbs[c, f] = (r0, r1, c0, c1)
-                    pres.append(pre.ravel())
-                    o += pre.size
-            self._pre = np.concatenate(pres)
+            # per image: bounding box of the observed silhouette (and of the ignore mask) and per-row
+            # prefix sums inside it
+            self._pre, self._pofs, self._bbs = _prefix_sums(obs, C, F)
+            self._ipre, self._ipofs, self._ibbs = _prefix_sums(ign, C, F)
             self._arrays = paper_kernels.scenario_arrays(scenario) if self.paper else None
             self._Ks = np.array([c.K for c in self.cameras])
             self._Rs = np.array([c.R for c in self.cameras])
@@ -106,8 +108,8 @@ class SilhouetteObjective:
             codes = np.zeros(P.shape[0], dtype=np.int64)
             a = self._arrays
             kernels.objective_population(P, *[a[k] for k in paper_kernels.ORDER], self._Ks, self._Rs, self._ts,
-                                         self._dists, self._Hs, self._Ws, self._pre, self._pofs, self._bbs, self.areas,
-                                         self._tris, self._maxh, self._maxw, self._span_cap, esil, codes)
+                                         self._dists, self._Hs, self._Ws, self._pre, self._pofs, self._bbs, self._ipre,
+                                         self._ipofs, self._ibbs, self.areas, self._tris, self._maxh, self._maxw, self._span_cap, esil, codes)
             exploded = codes != 0
             esil[exploded] = np.inf
             return esil, exploded
@@ -120,7 +122,8 @@ class SilhouetteObjective:
             for c, cam in enumerate(self.cameras):
                 uv = cam.project(sim.positions[p])  # (F, V, 2)
                 for f in range(F):
-                    esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f])
+                    esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f],
+                                                     self.ignore[c][f])
         return esil, sim.exploded
 
     def _per_image_positions(self, rows):
@@ -135,7 +138,8 @@ class SilhouetteObjective:
         if self.backend == "numba":
             X = np.ascontiguousarray(np.where(ok[:, None, None, None], sim.positions, 0.0))
             kernels.score_population(X, ok, self._Ks, self._Rs, self._ts, self._dists, self._Hs, self._Ws,
-                                     self._pre, self._pofs, self._bbs, self.areas, self._tris, self._maxh,
+                                     self._pre, self._pofs, self._bbs, self._ipre, self._ipofs, self._ibbs,
+                                     self.areas, self._tris, self._maxh,
                                      self._maxw, self._span_cap, esil)
         else:
             tris = self.scenario.grid.triangles
@@ -143,13 +147,16 @@ class SilhouetteObjective:
                 for c, cam in enumerate(self.cameras):
                     uv = cam.project(sim.positions[p])
                     for f in range(F):
-                        esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f])
+                        esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f],
+                                                     self.ignore[c][f])
         esil[sim.exploded] = np.inf
         return esil, sim.exploded
 
     @staticmethod
-    def _esil_numpy(uv, tris, cam, obs, area):
+    def _esil_numpy(uv, tris, cam, obs, area, ignore=None):
         r0, c0, win = rasterize_window(uv, tris, cam.height, cam.width)
+        if ignore is not None and win.size:
+            win = win & ~ignore[r0:r0 + win.shape[0], c0:c0 + win.shape[1]]
         nmod = int(win.sum())
         inter = int(np.count_nonzero(obs[r0:r0 + win.shape[0], c0:c0 + win.shape[1]] & win)) if nmod else 0
         return (area + nmod - 2 * inter) / area
@@ -159,3 +166,29 @@ class SilhouetteObjective:
         e = esil.sum(axis=(1, 2))
         e[exploded | ~np.isfinite(e)] = np.inf
         return e
+
+
+def _prefix_sums(images, C, F):
+    """Per-row prefix sums of each image (C*F of them, None = nothing) over its bounding box:
+    ``(pre, pofs (C, F), bbs (C, F, 4))``; an empty image gets the empty box rows 0..-1."""
+    pofs = np.zeros((C, F), dtype=np.int64)
+    bbs = np.zeros((C, F, 4), dtype=np.int64)
+    bbs[:, :, 1] = -1
+    bbs[:, :, 3] = -1
+    pres, o = [np.zeros(1, dtype=np.int32)], 1
+    for c in range(C):
+        for f in range(F):
+            im = images[c * F + f]
+            if im is None or not im.any():
+                continue
+            rows = np.flatnonzero(im.any(1))
+            cols = np.flatnonzero(im.any(0))
+            r0, r1, c0, c1 = rows[0], rows[-1], cols[0], cols[-1]
+            crop = im[r0:r1 + 1, c0:c1 + 1].astype(np.int32)
+            pre = np.zeros((crop.shape[0], crop.shape[1] + 1), dtype=np.int32)
+            np.cumsum(crop, axis=1, out=pre[:, 1:])
+            pofs[c, f] = o
+            bbs[c, f] = (r0, r1, c0, c1)
+            pres.append(pre.ravel())
+            o += pre.size
+    return np.concatenate(pres), pofs, bbs

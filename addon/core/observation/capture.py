@@ -36,6 +36,8 @@ PATTERN_FIELDS = ("camera", "frame", "time")
 TIME_FORMAT = ".3f"          # how a bare {time} is formatted: 0.05 -> "0.050"
 REQUIRED_KEYS = ("format", "version", "cameras", "scenario", "frame_times", "silhouettes")
 FRAME_TIME_TOL = 1e-9        # top-level vs scenario vs shapes.npz frame times
+DEFAULT_IGNORE_PATTERN = "ignore/{camera}/{frame:03d}.png"
+MASK_KEYS = ("silhouette_ids", "ignore_ids", "matte_threshold", "ignore")   # how silhouettes are stored
 
 
 # =============================================================== silhouette files
@@ -201,6 +203,119 @@ def read_silhouette(path: str, expected_shape=None, binarize_threshold=None, all
     return mask
 
 
+def _where(path, source):
+    return f"silhouette {path}" + (f" ({source})" if source else "")
+
+
+def _check_size(img, expected_shape, where):
+    if expected_shape is not None:
+        h, w = img.shape[:2]
+        eh, ew = int(expected_shape[0]), int(expected_shape[1])
+        if (h, w) != (eh, ew):
+            raise ClothFitError(f"{where}: image is {h} x {w} (H x W) but {eh} x {ew} was expected")
+
+
+def read_label_silhouette(path: str, silhouette_ids, ignore_ids=(), expected_shape=None, allow_empty: bool = False,
+                          source: str | None = None):
+    """A label image (palette or greyscale PNG, e.g. a SAM 2 / XMem / DAVIS mask) -> ``(mask, ignore)``.
+
+    ``mask`` = pixels whose label is one of ``silhouette_ids`` (the cloth), ``ignore`` = pixels whose
+    label is one of ``ignore_ids`` (occluders: truth unknown there) or None without ignore ids.
+    The stored values are used as they are (palette indices, grey levels), never converted.
+    """
+    from .png import read_label_png
+    where = _where(path, source)
+    if not os.path.isfile(path):
+        raise ClothFitError(f"{where}: file not found")
+    labels = read_label_png(path, where)
+    _check_size(labels, expected_shape, where)
+    mask = np.isin(labels, np.asarray(silhouette_ids))
+    ignore = np.isin(labels, np.asarray(ignore_ids)) if len(ignore_ids) else None
+    if not allow_empty and not mask.any():
+        present = np.unique(labels)
+        raise ClothFitError(f"{where}: no cloth label: the image holds labels {_short_values(present, 12)} but "
+                            f"silhouette_ids are {list(silhouette_ids)}")
+    return mask, ignore
+
+
+def read_matte(path: str, threshold: float, expected_shape=None, allow_empty: bool = False,
+               source: str | None = None) -> np.ndarray:
+    """An alpha matte (PNG; grey, or the alpha channel of grey + alpha / RGBA) -> object = value >
+    ``threshold`` (0..1 of full scale, so 8- and 16-bit mattes take the same threshold)."""
+    import cv2
+    where = _where(path, source)
+    if not os.path.isfile(path):
+        raise ClothFitError(f"{where}: file not found")
+    data = np.fromfile(path, dtype=np.uint8)
+    if data.size == 0:
+        raise ClothFitError(f"{where}: the file is empty (0 bytes), not an image")
+    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if img is None or img.size == 0:
+        raise ClothFitError(f"{where}: corrupt or unreadable image ({data.size} bytes that OpenCV cannot decode)")
+    if img.dtype not in (np.uint8, np.uint16):
+        raise ClothFitError(f"{where}: unsupported pixel type {img.dtype} for an alpha matte (8- or 16-bit)")
+    _check_size(img, expected_shape, where)
+    if img.ndim == 3:
+        if img.shape[2] in (2, 4):
+            img = img[..., -1]             # the alpha channel
+        elif np.any(img[..., 0] != img[..., 1]) or np.any(img[..., 1] != img[..., 2]):
+            raise ClothFitError(f"{where}: a colour image is not an alpha matte (use grey, grey + alpha or RGBA)")
+        else:
+            img = img[..., 0]
+    scale = 255.0 if img.dtype == np.uint8 else 65535.0
+    mask = img.astype(np.float64) > float(threshold) * scale
+    if not allow_empty and not mask.any():
+        raise ClothFitError(f"{where}: empty silhouette (no matte value above {threshold:g})")
+    return mask
+
+
+def check_mask_spec(d, where: str) -> dict:
+    """The capture keys saying how silhouettes are stored (``MASK_KEYS``), checked; absent = binary PNGs.
+
+    ``silhouette_ids``: silhouettes are label images (palette or greyscale PNGs) and these labels
+    are the cloth; ``ignore_ids``: labels of occluders (needs ``silhouette_ids``); ``matte_threshold``
+    (0 <= T < 1): silhouettes are alpha mattes, object = alpha > T; ``ignore``: a file pattern (the
+    silhouette pattern's fields) of binary masks of pixels whose truth is unknown.
+    """
+    d = d or {}
+    out = {}
+
+    def ids(key):
+        v = d.get(key)
+        if v is None:
+            return None
+        if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+            v = [v]
+        if not isinstance(v, (list, tuple)) or not v or any(
+                isinstance(x, bool) or not isinstance(x, (int, np.integer)) or not 0 <= x <= 65535 for x in v):
+            raise ClothFitError(f"{where}: '{key}' must be a non-empty list of label values (integers 0..65535), "
+                                f"got {v!r:.80}")
+        return [int(x) for x in v]
+
+    sil, ign = ids("silhouette_ids"), ids("ignore_ids")
+    if sil is not None:
+        out["silhouette_ids"] = sil
+    if ign is not None:
+        if sil is None:
+            raise ClothFitError(f"{where}: 'ignore_ids' needs 'silhouette_ids' (label images)")
+        both = sorted(set(sil) & set(ign))
+        if both:
+            raise ClothFitError(f"{where}: labels {both} are both in 'silhouette_ids' and in 'ignore_ids'")
+        out["ignore_ids"] = ign
+    t = d.get("matte_threshold")
+    if t is not None:
+        if sil is not None:
+            raise ClothFitError(f"{where}: 'matte_threshold' (alpha mattes) and 'silhouette_ids' (label images) "
+                                f"exclude each other")
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not (0.0 <= float(t) < 1.0):
+            raise ClothFitError(f"{where}: 'matte_threshold' must be a number in [0, 1) (fraction of full alpha), "
+                                f"got {t!r}")
+        out["matte_threshold"] = float(t)
+    if d.get("ignore") is not None:
+        out["ignore"] = check_pattern(d["ignore"], f"{where}: 'ignore' pattern")
+    return out
+
+
 # =========================================================================== pattern
 
 class _Time(float):
@@ -282,7 +397,8 @@ class Capture:
     """
 
     def __init__(self, root, cameras, scenario: Scenario, pattern: str = DEFAULT_PATTERN, shapes=None,
-                 cloth_mass=None, meta=None, json_path=None, _file_frames=None, _all_camera_names=None, model=None):
+                 cloth_mass=None, meta=None, json_path=None, _file_frames=None, _all_camera_names=None, model=None,
+                 masks=None):
         self.root = os.path.abspath(str(root))
         self.json_path = json_path or os.path.join(self.root, CAPTURE_JSON)
         where = f"capture {self.json_path}"
@@ -313,6 +429,7 @@ class Capture:
             raise ClothFitError(f"{where}: meta must be an object/dict, got {type(meta).__name__}")
         self.meta = meta
         self.model = _check_model(model, where)
+        self.masks = check_mask_spec(masks, where)
         self._check_unique_paths()
 
     # ------------------------------------------------------------------ basics
@@ -379,14 +496,56 @@ class Capture:
         rel = self._relpath(self.cameras[ci].name, self._file_frames[fi], self.frame_times[fi])
         return os.path.join(self.root, *rel.replace("\\", "/").split("/"))
 
-    def load_silhouette(self, cam_index: int, frame_index: int, allow_empty: bool = False,
-                        binarize_threshold=None) -> np.ndarray:
-        """bool (H, W) silhouette of camera ``cam_index`` at frame ``frame_index`` (validated)."""
+    def ignore_path(self, cam_index: int, frame_index: int):
+        """The ignore mask file of a camera and frame (the capture's ``ignore`` pattern), or None."""
+        if "ignore" not in self.masks:
+            return None
+        ci, fi = self._check_cam(cam_index), self._check_frame(frame_index)
+        rel = self.masks["ignore"].format(camera=self.cameras[ci].name, frame=int(self._file_frames[fi]),
+                                          time=_Time(self.frame_times[fi]))
+        return os.path.join(self.root, *rel.replace("\\", "/").split("/"))
+
+    @property
+    def has_ignore(self) -> bool:
+        """True when the capture marks pixels of unknown truth (``ignore_ids`` or an ``ignore`` pattern)."""
+        return "ignore_ids" in self.masks or "ignore" in self.masks
+
+    def load_observation(self, cam_index: int, frame_index: int, allow_empty: bool = False,
+                         binarize_threshold=None):
+        """``(mask, ignore)`` of a camera and frame: the cloth silhouette (bool (H, W)) and the pixels
+        whose truth is unknown (bool (H, W), or None when the capture marks none). Cloth pixels under
+        an ignore mask are not cloth (they count as unknown); the silhouette must keep some pixel
+        outside the ignored ones (eq. 6 divides by that area) unless ``allow_empty``."""
         ci, fi = self._check_cam(cam_index), self._check_frame(frame_index)
         cam = self.cameras[ci]
-        return read_silhouette(self.silhouette_path(ci, fi), (cam.height, cam.width),
-                               binarize_threshold=binarize_threshold, allow_empty=allow_empty,
-                               source=f"camera '{cam.name}', frame {fi}, t={self.frame_times[fi]:g} s")
+        shape = (cam.height, cam.width)
+        src = f"camera '{cam.name}', frame {fi}, t={self.frame_times[fi]:g} s"
+        path = self.silhouette_path(ci, fi)
+        ignore = None
+        if "silhouette_ids" in self.masks:
+            mask, ignore = read_label_silhouette(path, self.masks["silhouette_ids"], self.masks.get("ignore_ids", ()),
+                                                 shape, allow_empty=allow_empty, source=src)
+        elif "matte_threshold" in self.masks:
+            mask = read_matte(path, self.masks["matte_threshold"], shape, allow_empty=allow_empty, source=src)
+        else:
+            mask = read_silhouette(path, shape, binarize_threshold=binarize_threshold, allow_empty=allow_empty,
+                                   source=src)
+        if "ignore" in self.masks:
+            extra = read_silhouette(self.ignore_path(ci, fi), shape, allow_empty=True,
+                                    source=f"ignore mask of {src}")
+            ignore = extra if ignore is None else (ignore | extra)
+        if ignore is not None:
+            mask = mask & ~ignore
+            if not allow_empty and not mask.any():
+                raise ClothFitError(f"{_where(path, src)}: every cloth pixel is ignored (hidden by the ignore mask "
+                                    f"or ignore labels): nothing left to compare")
+        return mask, ignore
+
+    def load_silhouette(self, cam_index: int, frame_index: int, allow_empty: bool = False,
+                        binarize_threshold=None) -> np.ndarray:
+        """bool (H, W) silhouette of camera ``cam_index`` at frame ``frame_index`` (validated); pixels
+        of unknown truth (``load_observation``) are not part of it."""
+        return self.load_observation(cam_index, frame_index, allow_empty, binarize_threshold)[0]
 
     def load_silhouettes(self, cam_indices=None, frame_indices=None, allow_empty: bool = False,
                          binarize_threshold=None):
@@ -395,16 +554,25 @@ class Capture:
         frames = range(self.n_frames) if frame_indices is None else list(frame_indices)
         return [[self.load_silhouette(ci, fi, allow_empty, binarize_threshold) for fi in frames] for ci in cams]
 
+    def load_observations(self, cam_indices=None, frame_indices=None, allow_empty: bool = False):
+        """``(masks, ignores)``, each ``[cam][frame]`` (an ignore entry is None where nothing is ignored)."""
+        cams = range(self.n_cameras) if cam_indices is None else cam_indices
+        frames = range(self.n_frames) if frame_indices is None else list(frame_indices)
+        pairs = [[self.load_observation(ci, fi, allow_empty) for fi in frames] for ci in cams]
+        return [[m for m, _ in row] for row in pairs], [[i for _, i in row] for row in pairs]
+
     def _check_unique_paths(self):
         seen = {}
-        for ci, c in enumerate(self.cameras):
-            for fi in range(self.n_frames):
-                p = self._relpath(c.name, self._file_frames[fi], self.frame_times[fi])
-                if p in seen:
-                    raise ClothFitError(
-                        f"capture {self.json_path}: silhouettes pattern {self.pattern!r} gives the same file {p} "
-                        f"to {seen[p]} and to camera '{c.name}' frame {fi}")
-                seen[p] = f"camera '{c.name}' frame {fi}"
+        patterns = [("silhouettes", self.pattern)] + ([("ignore", self.masks["ignore"])] if "ignore" in self.masks else [])
+        for kind, pat in patterns:
+            for ci, c in enumerate(self.cameras):
+                for fi in range(self.n_frames):
+                    p = pat.format(camera=c.name, frame=int(self._file_frames[fi]), time=_Time(self.frame_times[fi]))
+                    if p in seen:
+                        raise ClothFitError(
+                            f"capture {self.json_path}: {kind} pattern {pat!r} gives the same file {p} "
+                            f"to {seen[p]} and to camera '{c.name}' frame {fi}{f' ({kind})' if kind != 'silhouettes' else ''}")
+                    seen[p] = f"camera '{c.name}' frame {fi}" + (f" ({kind})" if kind != "silhouettes" else "")
 
     # ------------------------------------------------------------------ subset
     def subset(self, cam_indices=None, frame_indices=None) -> "Capture":
@@ -420,7 +588,8 @@ class Capture:
         scen = self.scenario.with_frames(self.frame_times[frames])
         shapes = None if self.shapes is None else self.shapes[frames]
         return Capture(self.root, [self.cameras[c] for c in cams], scen, self.pattern, shapes, self.cloth_mass,
-                       dict(self.meta), self.json_path, self._file_frames[frames], self._all_camera_names, model=self.model)
+                       dict(self.meta), self.json_path, self._file_frames[frames], self._all_camera_names, model=self.model,
+                       masks=self.masks)
 
     # ---------------------------------------------------------------- validate
     def validate(self, full: bool = True, allow_empty: bool = False, binarize_threshold=None) -> "Capture":
@@ -461,7 +630,7 @@ class Capture:
             for ci in range(self.n_cameras):
                 for fi in range(self.n_frames):
                     try:
-                        self.load_silhouette(ci, fi, allow_empty=allow_empty, binarize_threshold=binarize_threshold)
+                        self.load_observation(ci, fi, allow_empty=allow_empty, binarize_threshold=binarize_threshold)
                     except ClothFitError as e:
                         problems.append(str(e))
             if problems:
@@ -515,6 +684,7 @@ class Capture:
             d["cloth_mass"] = self.cloth_mass
         if self.model is not None:
             d["model"] = self.model
+        d.update(self.masks)
         d["meta"] = self.meta
         return d
 
@@ -678,8 +848,9 @@ def load_capture(path, validate: bool = False) -> Capture:
     if not isinstance(meta, dict):
         raise ClothFitError(f"{where}: 'meta' must be an object, got {type(meta).__name__}")
 
+    masks = check_mask_spec({k: d.get(k) for k in MASK_KEYS}, where)
     cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, json_path=json_path,
-                  model=d.get("model"))
+                  model=d.get("model"), masks=masks)
     if validate:
         cap.validate(full=True)
     return cap
@@ -722,7 +893,8 @@ def _json_default(o):
 
 
 def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, cloth_mass=None, meta=None,
-                  pattern: str = DEFAULT_PATTERN, allow_empty: bool = False, finalize: bool = True, model=None):
+                  pattern: str = DEFAULT_PATTERN, allow_empty: bool = False, finalize: bool = True, model=None,
+                  ignore=None, ignore_pattern: str = DEFAULT_IGNORE_PATTERN):
     """Write a capture directory and return it as a ``Capture`` (or a ``PendingCapture``).
 
     ``silhouettes[c][f]`` (bool / 0-1 / 0-255 arrays of camera c's height x width) for every
@@ -739,9 +911,15 @@ def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, c
     directory says "capture.json missing". ``finalize=True`` with ``silhouettes=None`` writes
     capture.json at once (a metadata-only capture, e.g. a cameras container): only for callers
     that do not need the PNGs to be there.
+
+    ``ignore[c][f]`` (bool arrays or None = nothing ignored): pixels whose truth is unknown
+    (occluders), written as binary PNGs under ``ignore_pattern`` and named by the capture's
+    ``ignore`` key. ``ignore=True`` with ``silhouettes=None``: the renderer writes them too, at
+    ``capture.ignore_path(c, f)``.
     """
     root = os.path.abspath(os.fspath(root))
-    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, model=model)
+    masks = {"ignore": ignore_pattern} if ignore is not None else None
+    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, model=model, masks=masks)
     where = f"capture {cap.json_path}"
     if os.path.splitext(cap.pattern)[1].lower() != ".png":
         raise ClothFitError(f"{where}: silhouettes pattern {cap.pattern!r} must end with .png "
@@ -752,8 +930,9 @@ def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, c
         raise ClothFitError(f"{where}: meta is not JSON serialisable ({e})") from None
     cap.meta = json.loads(text)["meta"]   # what a reader will get back
 
+    ign_arrays = ignore if ignore is not None and ignore is not True else None
     if silhouettes is not None:
-        _check_silhouettes(cap, silhouettes, allow_empty, where)
+        _check_silhouettes(cap, silhouettes, allow_empty, where, ign_arrays)
 
     try:
         os.makedirs(root, exist_ok=True)
@@ -777,6 +956,13 @@ def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, c
     else:
         for ci in range(cap.n_cameras):
             os.makedirs(os.path.dirname(cap.silhouette_path(ci, 0)), exist_ok=True)
+            if cap.has_ignore:
+                os.makedirs(os.path.dirname(cap.ignore_path(ci, 0)), exist_ok=True)
+    if ign_arrays is not None:
+        for ci, cam in enumerate(cap.cameras):
+            for fi in range(cap.n_frames):
+                m = ign_arrays[ci][fi]
+                save_silhouette(cap.ignore_path(ci, fi), np.zeros((cam.height, cam.width), bool) if m is None else m)
 
     pending = PendingCapture(cap, text)
     if not finalize:
@@ -808,11 +994,16 @@ class PendingCapture:
     def silhouette_path(self, cam_index: int, frame_index: int) -> str:
         return self.capture.silhouette_path(cam_index, frame_index)
 
+    def ignore_path(self, cam_index: int, frame_index: int):
+        return self.capture.ignore_path(cam_index, frame_index)
+
     def missing_silhouettes(self):
-        """Paths of the silhouette files not written yet."""
+        """Paths of the silhouette (and ignore mask) files not written yet."""
         cap = self.capture
-        return [cap.silhouette_path(ci, fi) for ci in range(cap.n_cameras) for fi in range(cap.n_frames)
-                if not os.path.isfile(cap.silhouette_path(ci, fi))]
+        paths = [cap.silhouette_path(ci, fi) for ci in range(cap.n_cameras) for fi in range(cap.n_frames)]
+        if cap.has_ignore:
+            paths += [cap.ignore_path(ci, fi) for ci in range(cap.n_cameras) for fi in range(cap.n_frames)]
+        return [p for p in paths if not os.path.isfile(p)]
 
     def finalize(self, check_files: bool = True) -> Capture:
         """Write capture.json (temporary file + rename) and return the ``Capture``.
@@ -847,7 +1038,7 @@ def finalize_capture(pending: PendingCapture, check_files: bool = True) -> Captu
     return pending.finalize(check_files)
 
 
-def _check_silhouettes(cap: Capture, silhouettes, allow_empty: bool, where: str):
+def _check_silhouettes(cap: Capture, silhouettes, allow_empty: bool, where: str, ignore=None):
     try:
         n = len(silhouettes)
     except TypeError:
@@ -865,5 +1056,10 @@ def _check_silhouettes(cap: Capture, silhouettes, allow_empty: bool, where: str)
             m = _mask_from_array(row[fi], w)
             if m.shape != (cam.height, cam.width):
                 raise ClothFitError(f"{w}: shape {m.shape} but the camera is {cam.height} x {cam.width} (H x W)")
+            if ignore is not None and ignore[ci][fi] is not None:
+                g = _mask_from_array(ignore[ci][fi], w + " ignore mask")
+                if g.shape != m.shape:
+                    raise ClothFitError(f"{w}: ignore mask shape {g.shape} but the camera is {cam.height} x {cam.width}")
+                m = m & ~g
             if not allow_empty and not m.any():
-                raise ClothFitError(f"{w}: empty silhouette (no object pixel)")
+                raise ClothFitError(f"{w}: empty silhouette (no object pixel{' outside the ignore mask' if ignore else ''})")

@@ -2,7 +2,8 @@
 
 Colours (RGB; ``write_rgb`` converts to cv2's BGR when saving): agreement (both) white
 (255, 255, 255), missing (observed only) red (230, 40, 40), extra (model only) blue (40, 140, 255),
-background black.
+background black; pixels of unknown truth (ignore masks: occluders) grey (110, 110, 110), darker
+(70, 70, 70) where the model is not.
 """
 from __future__ import annotations
 
@@ -15,10 +16,13 @@ from ..errors import ClothFitError
 AGREE_RGB = (255, 255, 255)
 MISSING_RGB = (230, 40, 40)
 EXTRA_RGB = (40, 140, 255)
+IGNORE_MODEL_RGB = (110, 110, 110)
+IGNORE_RGB = (70, 70, 70)
 
 
-def overlay_image(observed: np.ndarray, model: np.ndarray) -> np.ndarray:
-    """RGB uint8 image: white = both, red = observed only (missing), blue = model only (extra)."""
+def overlay_image(observed: np.ndarray, model: np.ndarray, ignore=None) -> np.ndarray:
+    """RGB uint8 image: white = both, red = observed only (missing), blue = model only (extra);
+    ``ignore`` pixels (truth unknown) grey: light where the model covers them, dark elsewhere."""
     o = np.asarray(observed, dtype=bool)
     m = np.asarray(model, dtype=bool)
     if o.shape != m.shape:
@@ -27,6 +31,12 @@ def overlay_image(observed: np.ndarray, model: np.ndarray) -> np.ndarray:
     img[o & m] = AGREE_RGB
     img[o & ~m] = MISSING_RGB
     img[~o & m] = EXTRA_RGB
+    if ignore is not None:
+        g = np.asarray(ignore, dtype=bool)
+        if g.shape != o.shape:
+            raise ClothFitError(f"overlay: ignore mask {g.shape} and silhouettes {o.shape} differ in size")
+        img[g & m] = IGNORE_MODEL_RGB
+        img[g & ~m] = IGNORE_RGB
     return img
 
 
@@ -83,10 +93,11 @@ def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_n
     for c in cams:
         cam = capture.cameras[c]
         for j, f in enumerate(fidx):
-            obs = capture.load_silhouette(c, f)
+            obs, ign = capture.load_observation(c, f)
             mod = silhouette(cam, X[j], sc.grid.triangles)
-            img = overlay_image(obs, mod)
-            e = np.count_nonzero(obs ^ mod) / max(1, obs.sum())
+            img = overlay_image(obs, mod, ign)
+            xor = obs ^ mod if ign is None else (obs ^ mod) & ~ign
+            e = np.count_nonzero(xor) / max(1, obs.sum())
             path = os.path.join(out_dir, cam.name, f"{f:03d}.png")
             write_rgb(path, img)
             paths.append(path)

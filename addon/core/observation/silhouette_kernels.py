@@ -1,6 +1,8 @@
 """numba kernels of the silhouette comparison (``raster.py`` is their numpy reference): project a
 mesh, cut its triangles into pixel-row spans, and count model pixels and their overlap with an
-observed silhouette from the observation's per-row prefix sums.
+observed silhouette from the observation's per-row prefix sums; model pixels inside the image's
+ignore mask (pixels of unknown truth, e.g. behind an occluder) are counted from the ignore mask's
+prefix sums in the same way and leave the XOR.
 """
 from __future__ import annotations
 
@@ -42,8 +44,10 @@ def _project(X, K, R, t, dist, uv, ok):
         uv[i, 1] = K[1, 1] * y + K[1, 2]
 
 @njit(**JIT)
-def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, srow, sc0, sc1, cnt, start, oc0, oc1, cntc, trow, tc0, tc1):
-    """Model pixel count and overlap with the observation, from row spans only.
+def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, ipre, ipofs, ibb, srow, sc0, sc1, cnt, start, oc0, oc1, cntc,
+                trow, tc0, tc1):
+    """Model pixel count, overlap with the observation and overlap with the ignore mask, from row
+    spans only (an image without ignore mask has an empty box ``ibb``: rows 0..-1).
 
     Every triangle is cut into one span per pixel row (pixel-centre sampling, as raster.py);
     spans are sorted by (row, column) with two counting sorts, merged into their union row by
@@ -92,7 +96,7 @@ def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, srow, sc0, sc1, cnt, start,
             if c1 < c0:
                 continue
             if n >= srow.shape[0]:
-                return -1, -1
+                return -1, -1, -1
             srow[n] = r
             sc0[n] = c0
             sc1[n] = c1
@@ -106,7 +110,7 @@ def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, srow, sc0, sc1, cnt, start,
             if c0 > cmax:
                 cmax = c0
     if n == 0:
-        return 0, 0
+        return 0, 0, 0
     # sort the spans by (row, start column): counting sort by column, then a stable one by row
     for x in range(cmin, cmax + 2):
         cntc[x] = 0
@@ -139,8 +143,11 @@ def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, srow, sc0, sc1, cnt, start,
     # observation's per-row prefix sums (over its bounding box)
     br0, br1, bc0, bc1 = bb[0], bb[1], bb[2], bb[3]
     bw1 = bc1 - bc0 + 2
+    ir0, ir1, ic0, ic1 = ibb[0], ibb[1], ibb[2], ibb[3]
+    iw1 = ic1 - ic0 + 2
     nmod = 0
     inter = 0
+    hid = 0
     for r in range(rmin, rmax + 1):
         s0 = start[r]
         s1 = start[r + 1]
@@ -148,6 +155,8 @@ def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, srow, sc0, sc1, cnt, start,
             continue
         inrow = r >= br0 and r <= br1
         base = pofs + (r - br0) * bw1
+        ignrow = r >= ir0 and r <= ir1
+        ibase = ipofs + (r - ir0) * iw1
         ca = oc0[s0]
         cb = oc1[s0]
         for i in range(s0 + 1, s1 + 1):
@@ -162,14 +171,20 @@ def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, srow, sc0, sc1, cnt, start,
                 x1 = min(cb, bc1)
                 if x1 >= x0:
                     inter += pre[base + x1 - bc0 + 1] - pre[base + x0 - bc0]
+            if ignrow:
+                x0 = max(ca, ic0)
+                x1 = min(cb, ic1)
+                if x1 >= x0:
+                    hid += ipre[ibase + x1 - ic0 + 1] - ipre[ibase + x0 - ic0]
             if not last:
                 ca = oc0[i]
                 cb = oc1[i]
-    return nmod, inter
+    return nmod, inter, hid
 
 @njit(**JIT)
-def eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work, out):
-    """E_sil for every camera c and frame f of one simulated candidate: out[c, f]."""
+def eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, work, out):
+    """E_sil for every camera c and frame f of one simulated candidate: out[c, f]. ``areas`` are the
+    observed silhouettes' areas outside their ignore masks (eq. 6's normaliser)."""
     C = Ks.shape[0]
     Fn = X.shape[0]
     V = X.shape[1]
@@ -179,10 +194,11 @@ def eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, areas, tris, work,
     for c in range(C):
         for f in range(Fn):
             _project(X[f], Ks[c], Rs[c], ts[c], dists[c], uv, ok)
-            nmod, inter = _span_count(uv, ok, tris, Hs[c], Ws[c], pre, pofs[c, f], bbs[c, f], srow, sc0, sc1,
-                                      cnt, start, oc0, oc1, cntc, trow, tc0, tc1)
+            nmod, inter, hid = _span_count(uv, ok, tris, Hs[c], Ws[c], pre, pofs[c, f], bbs[c, f], ipre,
+                                           ipofs[c, f], ibbs[c, f], srow, sc0, sc1, cnt, start, oc0, oc1, cntc,
+                                           trow, tc0, tc1)
             if nmod < 0:
                 out[c, f] = np.inf
             else:
-                out[c, f] = (areas[c, f] + nmod - 2 * inter) / areas[c, f]
+                out[c, f] = (areas[c, f] + nmod - hid - 2 * inter) / areas[c, f]
 
