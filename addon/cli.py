@@ -1,6 +1,6 @@
 """Command line: ``python -m addon <command> ...`` (no Blender needed except for ``blender-*``).
 
-Commands: synth, fit, evaluate, overlay, paper, tables, bench, rig, extract, import-cameras, export-cameras,
+Commands: synth, fit, evaluate, overlay, paper, tables, bench, occlusion, rig, extract, import-cameras, export-cameras,
 blender (the whole pipeline through Blender: needs the bpy module).
 Every error from bad input is one line naming the file or value (exit code 2), never a traceback.
 """
@@ -297,6 +297,12 @@ def cmd_identifiability(a):
     run(a.json, mats)
 
 
+def cmd_occlusion(a):
+    from .core.studies.occlusion import run_occlusion
+    run_occlusion(a.json, out_dir=a.out, quick=a.quick, n_train=a.train_cameras, evaluations=a.max_evaluations,
+                  seed=a.seed, resolution=_res(a.resolution), scales=_floats(a.scales, "--scales"))
+
+
 def cmd_rig(a):
     from .core.observation.camera import load_rig, spread_order
     cams = load_rig(a.rig)
@@ -405,6 +411,17 @@ def build_parser():
     s.add_argument("--materials", help="comma list: default, silk, denim (default: all)")
     s.add_argument("--json", help="write the tables to this file")
     s.set_defaults(fn=cmd_identifiability)
+
+    s = sub.add_parser("occlusion", help="study: a post and a hand hiding the cloth, as ignore masks vs as background")
+    s.add_argument("--json", required=True)
+    s.add_argument("--out", default="out/occlusion", help="where the three captures are written")
+    s.add_argument("--quick", action="store_true", help="240x320, 700 evaluations")
+    s.add_argument("--train-cameras", type=int, default=4)
+    s.add_argument("--scales", default="1,1.33,1.67", help="occluder sizes (x post 15 %% of the cloth width, hand 12 %%)")
+    s.add_argument("--max-evaluations", type=int, default=None)
+    s.add_argument("--resolution", help="HxW (default: the rig's 480x640; --quick 240x320)")
+    s.add_argument("--seed", type=int, default=0)
+    s.set_defaults(fn=cmd_occlusion)
 
     s = sub.add_parser("rig", help="show a rig preset and its training-camera order")
     s.add_argument("rig", nargs="?", default=D.DEFAULT_RIG)
