@@ -1,4 +1,4 @@
-"""Calibrated cameras in and out: OpenCV FileStorage (YAML/JSON/XML) and COLMAP text models.
+"""Calibrated cameras in and out: OpenCV FileStorage (YAML/JSON/XML), EasyMocap, COLMAP text and binary models.
 
 Our :class:`~.camera.Camera` is OpenCV's pinhole: ``x_cam = R X + t``, +Z forward, +Y down, pixel
 centres at integer coordinates, distortion in OpenCV's order ``(k1, k2, p1, p2[, k3, ...])``.
@@ -34,6 +34,21 @@ COLMAP text models (a folder with ``cameras.txt`` and ``images.txt``)
     on import, and ``+ 0.5`` on export. Focal lengths and distortion are unchanged.
     Export writes PINHOLE (no distortion), OPENCV (up to 4 coefficients or k3 = 0) or
     FULL_OPENCV, ``images.txt`` with ``<name>.png`` image names and an empty ``points3D.txt``.
+
+EasyMocap (a folder with ``intri.yml`` and ``extri.yml``, OpenCV FileStorage)
+    ``names`` lists the cameras; per camera ``K_<name>`` (3x3), ``dist_<name>`` (1x5 or 1x4, OpenCV
+    order), ``Rot_<name>`` (3x3; else ``R_<name>``, a Rodrigues vector) and ``T_<name>`` (3x1, metres):
+    ``x_cam = R X + T``, the same convention as ours, pixel centres at integers (OpenCV). EasyMocap
+    stores no image size: it is taken from ``H_<name>``/``W_<name>`` when present (EasyVolcap writes
+    them), else from the caller (``sizes`` per camera, e.g. the videos' frame size, or
+    ``width``/``height``).
+
+COLMAP binary models (``cameras.bin`` + ``images.bin``)
+    Read with our own struct reader (COLMAP's documented little-endian layout): cameras.bin =
+    uint64 count, then per camera int32 id, int32 model id, uint64 width, uint64 height, float64
+    params; images.bin = uint64 count, then per image int32 id, float64 qw qx qy qz tx ty tz, int32
+    camera id, a NUL-terminated name, uint64 number of 2D points and 24 bytes per point (x, y
+    float64, point3D id int64). Then exactly as the text model.
 
 Distortion: :meth:`Camera.project` applies the OpenCV distortion model, so a capture can keep
 distorted silhouettes with distorted cameras (the fitter projects vertices with distortion;
@@ -476,18 +491,7 @@ def read_colmap(folder: str) -> list:
             i += 1  # the POINTS2D line that follows an image line (often empty)
     if not images:
         raise ClothFitError(f"{ipath}: no images")
-    stems = [os.path.splitext(os.path.basename(n))[0] for n, *_ in images]
-    if len(set(stems)) != len(stems):
-        stems = [os.path.splitext(n)[0].replace("\\", "/").replace("/", "_") for n, *_ in images]
-    cams = []
-    for name, (_, R, t, cid, where) in zip(stems, images):
-        K, dist, w, h, _ = intr[cid]
-        cam = Camera.__new__(Camera)
-        cam.K, cam.R, cam.t, cam.dist, cam.width, cam.height, cam.name = K.copy(), R, t, dist.copy(), w, h, name
-        cam.validate(where)
-        cams.append(cam)
-    _check_unique(cams, ipath)
-    return cams
+    return _colmap_cameras(images, intr, ipath)
 
 
 def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
@@ -517,20 +521,199 @@ def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
     return folder
 
 
+# ===================================================================== EasyMocap
+
+EASYMOCAP_FILES = ("intri.yml", "extri.yml")
+
+
+def _is_easymocap(folder: str) -> bool:
+    return os.path.isdir(folder) and all(os.path.isfile(os.path.join(folder, f)) for f in EASYMOCAP_FILES)
+
+
+def read_easymocap(folder: str, width: int | None = None, height: int | None = None, sizes=None) -> list:
+    """Cameras of an EasyMocap calibration folder (``intri.yml`` + ``extri.yml``); see the module text.
+    ``sizes``: ``{name: (height, width)}`` for files without ``H_``/``W_``."""
+    import cv2
+    if os.path.isfile(folder):
+        folder = os.path.dirname(folder) or "."
+    data = {}
+    for fname in EASYMOCAP_FILES:
+        path = os.path.join(folder, fname)
+        if not os.path.isfile(path):
+            raise ClothFitError(f"EasyMocap calibration {folder}: {fname} not found (needs intri.yml and extri.yml)")
+        fs = _open_storage(path)
+        try:
+            d = _node_to_py(fs.root())
+        except (ValueError, TypeError) as e:
+            raise ClothFitError(f"EasyMocap file {path}: {e}") from None
+        finally:
+            fs.release()
+        if not isinstance(d, dict) or not isinstance(d.get("names"), list) or not d["names"]:
+            raise ClothFitError(f"EasyMocap file {path}: no 'names' list of cameras")
+        data[fname] = (d, path)
+    (intri, ipath), (extri, epath) = data["intri.yml"], data["extri.yml"]
+    names = [str(int(n)) if isinstance(n, (int, float)) else str(n) for n in intri["names"]]
+    enames = {str(int(n)) if isinstance(n, (int, float)) else str(n) for n in extri["names"]}
+    missing = [n for n in names if n not in enames]
+    if missing:
+        raise ClothFitError(f"EasyMocap file {epath}: no extrinsics for camera(s) {', '.join(missing)} of {ipath}")
+    cams = []
+    for n in names:
+        where = f"EasyMocap camera '{n}' ({folder})"
+        if f"K_{n}" not in intri:
+            raise ClothFitError(f"EasyMocap file {ipath}: K_{n} missing")
+        K = _array(intri[f"K_{n}"], f"K_{n}", where, shape=(3, 3))
+        dist = _array(intri.get(f"dist_{n}", []), f"dist_{n}", where, sizes=(0, 4, 5, 8))
+        if f"Rot_{n}" in extri:
+            R = _array(extri[f"Rot_{n}"], f"Rot_{n}", where, shape=(3, 3))
+        elif f"R_{n}" in extri:
+            R = cv2.Rodrigues(_array(extri[f"R_{n}"], f"R_{n}", where, shape=(3, 1)))[0]
+        else:
+            raise ClothFitError(f"EasyMocap file {epath}: neither Rot_{n} nor R_{n} for camera '{n}'")
+        if f"T_{n}" not in extri:
+            raise ClothFitError(f"EasyMocap file {epath}: T_{n} missing")
+        t = _array(extri[f"T_{n}"], f"T_{n}", where, shape=(3,))
+        if f"H_{n}" in intri and f"W_{n}" in intri:
+            h, w = int(intri[f"H_{n}"]), int(intri[f"W_{n}"])
+        elif sizes and n in sizes:
+            h, w = (int(v) for v in sizes[n])
+        elif width and height:
+            h, w = int(height), int(width)
+        else:
+            raise ClothFitError(f"EasyMocap calibration {folder}: camera '{n}' has no image size (EasyMocap files "
+                                f"store none): pass --width/--height, or extract from its video")
+        cam = Camera.__new__(Camera)
+        cam.K, cam.R, cam.t, cam.dist, cam.width, cam.height, cam.name = K, R, t, dist, w, h, n
+        cam.validate(where)
+        cams.append(cam)
+    _check_unique(cams, ipath)
+    return cams
+
+
+# ================================================================ COLMAP binary
+
+COLMAP_MODEL_IDS = {0: "SIMPLE_PINHOLE", 1: "PINHOLE", 2: "SIMPLE_RADIAL", 3: "RADIAL", 4: "OPENCV",
+                    5: "OPENCV_FISHEYE", 6: "FULL_OPENCV", 7: "FOV", 8: "SIMPLE_RADIAL_FISHEYE",
+                    9: "RADIAL_FISHEYE", 10: "THIN_PRISM_FISHEYE"}
+COLMAP_MODEL_NPARAMS = {0: 3, 1: 4, 2: 4, 3: 5, 4: 8, 5: 8, 6: 12, 7: 5, 8: 4, 9: 5, 10: 12}
+
+
+class _Bin:
+    def __init__(self, path):
+        if not os.path.isfile(path):
+            raise ClothFitError(f"COLMAP model file not found: {path}")
+        with open(path, "rb") as f:
+            self.data = f.read()
+        self.pos, self.path = 0, path
+
+    def read(self, fmt):
+        import struct
+        n = struct.calcsize("<" + fmt)
+        if self.pos + n > len(self.data):
+            raise ClothFitError(f"COLMAP binary file {self.path}: truncated at byte {self.pos} "
+                                f"(file has {len(self.data)} bytes)")
+        v = struct.unpack_from("<" + fmt, self.data, self.pos)
+        self.pos += n
+        return v
+
+    def name(self):
+        end = self.data.find(b"\0", self.pos)
+        if end < 0:
+            raise ClothFitError(f"COLMAP binary file {self.path}: truncated image name at byte {self.pos}")
+        s = self.data[self.pos:end].decode("utf-8", errors="replace")
+        self.pos = end + 1
+        return s
+
+
+def read_colmap_bin(folder: str) -> list:
+    """Cameras of a COLMAP binary model folder (``cameras.bin`` + ``images.bin``), one per image."""
+    cpath, ipath = os.path.join(folder, "cameras.bin"), os.path.join(folder, "images.bin")
+    b = _Bin(cpath)
+    intr = {}
+    (n,) = b.read("Q")
+    for k in range(n):
+        cid, mid, w, h = b.read("iiQQ")
+        where = f"{cpath} camera #{k} (id {cid})"
+        if mid not in COLMAP_MODEL_IDS:
+            raise ClothFitError(f"{where}: unknown camera model id {mid} (a corrupt file?)")
+        params = b.read("d" * COLMAP_MODEL_NPARAMS[mid])
+        K, dist = colmap_to_intrinsics(COLMAP_MODEL_IDS[mid], params, where)
+        if cid in intr:
+            raise ClothFitError(f"{where}: camera id {cid} defined twice")
+        intr[cid] = (K, dist, int(w), int(h))
+    if b.pos != len(b.data):
+        raise ClothFitError(f"COLMAP binary file {cpath}: {len(b.data) - b.pos} bytes left after {n} cameras "
+                            f"(not a cameras.bin?)")
+    if not intr:
+        raise ClothFitError(f"{cpath}: no cameras")
+    b = _Bin(ipath)
+    (n,) = b.read("Q")
+    images = []
+    for k in range(n):
+        iid, qw, qx, qy, qz, tx, ty, tz, cid = b.read("idddddddi")
+        name = b.name()
+        (npts,) = b.read("Q")
+        if b.pos + 24 * npts > len(b.data):
+            raise ClothFitError(f"COLMAP binary file {ipath}: truncated in the 2D points of image {name!r}")
+        b.pos += 24 * npts
+        where = f"{ipath} image #{k} ({name})"
+        q = np.array([qw, qx, qy, qz])
+        if not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-12:
+            raise ClothFitError(f"{where}: quaternion {q.tolist()} is not a rotation")
+        if cid not in intr:
+            raise ClothFitError(f"{where}: camera id {cid} is not in {cpath}")
+        images.append((name, _quat_to_R(q), np.array([tx, ty, tz]), cid, where))
+    if not images:
+        raise ClothFitError(f"{ipath}: no images")
+    return _colmap_cameras(images, intr, ipath)
+
+
+def _colmap_cameras(images, intr, where_all):
+    stems = [os.path.splitext(os.path.basename(n))[0] for n, *_ in images]
+    if len(set(stems)) != len(stems):
+        stems = [os.path.splitext(n)[0].replace("\\", "/").replace("/", "_") for n, *_ in images]
+    cams = []
+    for name, (_, R, t, cid, where) in zip(stems, images):
+        K, dist, w, h = intr[cid][:4]
+        cam = Camera.__new__(Camera)
+        cam.K, cam.R, cam.t, cam.dist, cam.width, cam.height, cam.name = K.copy(), R, t, dist.copy(), w, h, name
+        cam.validate(where)
+        cams.append(cam)
+    _check_unique(cams, where_all)
+    return cams
+
+
+def _colmap_folder(path: str):
+    """(folder, 'bin' | 'txt') of a COLMAP model given as a folder (or sparse/0 under it) or one of its files."""
+    folder = path if os.path.isdir(path) else os.path.dirname(path)
+    for f in (folder, os.path.join(folder, "sparse", "0"), os.path.join(folder, "sparse")):
+        if os.path.isfile(os.path.join(f, "cameras.txt")) and os.path.isfile(os.path.join(f, "images.txt")):
+            if os.path.isfile(path) and path.endswith(".bin"):
+                return f, "bin"
+            return f, "txt"
+        if os.path.isfile(os.path.join(f, "cameras.bin")) and os.path.isfile(os.path.join(f, "images.bin")):
+            return f, "bin"
+    return folder, "txt"
+
+
 # ============================================================ one entry point each way
 
-FORMATS = ("auto", "json", "opencv", "opencv-dir", "colmap")
+FORMATS = ("auto", "json", "opencv", "opencv-dir", "colmap", "easymocap")
 
 
 def detect_format(path: str) -> str:
     if os.path.isdir(path):
-        if os.path.isfile(os.path.join(path, "cameras.txt")) and os.path.isfile(os.path.join(path, "images.txt")):
-            return "colmap"
-        if os.path.isdir(os.path.join(path, "sparse", "0")) and os.path.isfile(os.path.join(path, "sparse", "0", "cameras.txt")):
-            return "colmap"
+        if _is_easymocap(path):
+            return "easymocap"
+        for sub in ("", os.path.join("sparse", "0"), "sparse"):
+            for ext in (".txt", ".bin"):
+                if all(os.path.isfile(os.path.join(path, sub, f + ext)) for f in ("cameras", "images")):
+                    return "colmap"
         return "opencv-dir"
     ext = os.path.splitext(path)[1].lower()
-    if ext == ".txt":
+    if os.path.basename(path) in EASYMOCAP_FILES and _is_easymocap(os.path.dirname(path) or "."):
+        return "easymocap"
+    if ext in (".txt", ".bin"):
         return "colmap"
     if ext == ".json":
         # our own cameras JSON has a "cameras" list of objects with K/R/t; OpenCV JSON otherwise
@@ -550,7 +733,8 @@ def detect_format(path: str) -> str:
                         "a COLMAP model folder or name the format)")
 
 
-def import_cameras(path: str, fmt: str = "auto", width: int | None = None, height: int | None = None) -> list:
+def import_cameras(path: str, fmt: str = "auto", width: int | None = None, height: int | None = None,
+                   sizes=None) -> list:
     """Cameras from any supported file or folder.
 
     ``fmt``: ``auto`` (by extension/content), ``json`` (our cameras JSON, see ``camera.py``),
@@ -572,10 +756,10 @@ def import_cameras(path: str, fmt: str = "auto", width: int | None = None, heigh
         if not os.path.isdir(path):
             raise ClothFitError(f"{path} is not a folder (format opencv-dir)")
         return read_opencv_dir(path, width, height)
-    folder = path if os.path.isdir(path) else os.path.dirname(path)
-    if not os.path.isfile(os.path.join(folder, "cameras.txt")) and os.path.isfile(os.path.join(folder, "sparse", "0", "cameras.txt")):
-        folder = os.path.join(folder, "sparse", "0")
-    return read_colmap(folder)
+    if fmt == "easymocap":
+        return read_easymocap(path, width, height, sizes)
+    folder, kind = _colmap_folder(path)
+    return read_colmap_bin(folder) if kind == "bin" else read_colmap(folder)
 
 
 def export_cameras(cameras, path: str, fmt: str = "auto") -> str:

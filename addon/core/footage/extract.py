@@ -712,35 +712,121 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
         if bad or len(frames) != len(frame_times):
             all_masks.append(None)
             continue
-        res = extract_camera(bgs, frames, opts, cam.name, names, (cam.height, cam.width))
-        res.report["background_files"] = bg_paths
-        report["cameras"][cam.name] = res.report
-        errors.extend(res.errors)
-        warnings.extend(res.warnings)
-        masks = res.masks
-        out_cam = cam
-        if opts.undistort and cam.dist.size and np.any(cam.dist != 0) and not res.errors:
-            maps = calib_io.undistort_maps(cam)
-            masks = [calib_io.undistort_silhouette(m, cam, maps) for m in masks]
-            out_cam = calib_io.undistorted_camera(cam)
+        masks, out_cam = _extract_one(cam, bgs, frames, names, opts, report, errors, warnings)
+        report["cameras"][cam.name]["background_files"] = bg_paths
         all_masks.append(masks)
         out_cameras.append(out_cam)
+    cap_meta = {"generator": "addon.core.extract", "footage": os.path.abspath(footage_dir)}
+    if isinstance(meta.get("meta"), dict):
+        cap_meta["footage_meta"] = meta["meta"]
+    return _write_result(out_dir, footage_dir, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report,
+                         errors, warnings)
+
+
+def _extract_one(cam, bgs, frames, names, opts, report, errors, warnings):
+    """Silhouettes of one camera from its loaded images (+ undistortion); problems go to ``errors``."""
+    from . import calib_io
+    res = extract_camera(bgs, frames, opts, cam.name, names, (cam.height, cam.width))
+    report["cameras"][cam.name] = res.report
+    errors.extend(res.errors)
+    warnings.extend(res.warnings)
+    masks = res.masks
+    out_cam = cam
+    if opts.undistort and cam.dist.size and np.any(cam.dist != 0) and not res.errors:
+        maps = calib_io.undistort_maps(cam)
+        masks = [calib_io.undistort_silhouette(m, cam, maps) for m in masks]
+        out_cam = calib_io.undistorted_camera(cam)
+    return masks, out_cam
+
+
+def _write_result(out_dir, source, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report, errors,
+                  warnings):
+    """All cameras done: one error listing every problem (nothing written), else the capture + report."""
+    from ..observation.capture import write_capture
     report["warnings"] = warnings
     if errors:
         listed = errors[:MAX_LISTED_ERRORS]
         more = f"\n  ... and {len(errors) - len(listed)} more" if len(errors) > len(listed) else ""
-        raise ClothFitError(f"extraction from {footage_dir} failed, nothing written ({len(errors)} problem"
+        raise ClothFitError(f"extraction from {source} failed, nothing written ({len(errors)} problem"
                             f"{'s' if len(errors) > 1 else ''}):\n  " + "\n  ".join(listed) + more)
-    cap_meta = {"generator": "addon.core.extract", "footage": os.path.abspath(footage_dir),
-                "extraction": {"options": {k: v for k, v in asdict(opts).items() if k != "debug_dir"},
-                               "thresholds": {n: r["threshold"] for n, r in report["cameras"].items()}}}
-    if isinstance(meta.get("meta"), dict):
-        cap_meta["footage_meta"] = meta["meta"]
+    cap_meta["extraction"] = {"options": {k: v for k, v in asdict(opts).items() if k != "debug_dir"},
+                              "thresholds": {n: r["threshold"] for n, r in report["cameras"].items()}}
     write_capture(out_dir, out_cameras, scen, all_masks, cloth_mass=cloth_mass, meta=cap_meta,
                   allow_empty=opts.allow_empty)
     with open(os.path.join(out_dir, REPORT_JSON), "w") as f:
         json.dump(report, f, indent=1)
     return report
+
+
+def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras, frame_times, scenario=None,
+                   cloth_mass=None, options: ExtractOptions | None = None, camera_names=None, progress=None,
+                   **option_overrides) -> dict:
+    """Silhouettes from one video per camera (``footage/video.py``: layout, timing rule) -> a capture.
+
+    ``sync``: a sync file path or ``{camera: video time at t = 0}``; ``cameras``: a calibration path or
+    Camera list; ``frame_times``: the capture times; ``progress(camera_index, n_cameras, text)``.
+    Video problems (no video, unreadable, sync or frame time outside it, wrong size) raise at once,
+    one line naming the file; extraction problems of all cameras are reported together as in
+    :func:`extract_capture`. Returns the report (also ``out_dir/extract_report.json``).
+    """
+    from . import calib_io, video
+    opts = options or ExtractOptions()
+    for k, v in option_overrides.items():
+        if not hasattr(opts, k):
+            raise ClothFitError(f"unknown extraction option {k!r}")
+        if v is not None:
+            setattr(opts, k, v)
+    opts.check()
+    if cameras is None:
+        raise ClothFitError("extract --videos needs the calibrated cameras (--cameras)")
+    if isinstance(cameras, str):
+        cameras = calib_io.import_cameras(cameras)
+    cameras = list(cameras)
+    if camera_names:
+        byname = {c.name: c for c in cameras}
+        missing = [n for n in camera_names if n not in byname]
+        if missing:
+            raise ClothFitError(f"cameras {', '.join(missing)} are not in the calibration ({', '.join(byname)})")
+        cameras = [byname[n] for n in camera_names]
+    if frame_times is None:
+        raise ClothFitError("extract --videos needs the capture times (--times)")
+    try:
+        frame_times = [float(t) for t in frame_times]
+    except (TypeError, ValueError):
+        raise ClothFitError(f"frame times must be numbers, got {frame_times!r}") from None
+    if not frame_times or any(t < 0 for t in frame_times) or np.any(np.diff(frame_times) <= 0):
+        raise ClothFitError(f"capture times {frame_times} must be >= 0 and strictly increasing")
+    sync_path = sync if isinstance(sync, str) else "sync"
+    sync = video.read_sync(sync, [c.name for c in cameras]) if isinstance(sync, str) else dict(sync)
+    scen, scen_note = _resolve_scenario(scenario, frame_times, "extract --videos")
+    errors, warnings = [], []
+    if scen_note:
+        warnings.append(scen_note)
+    report = {"videos": os.path.abspath(videos_dir), "plates": os.path.abspath(plates_dir),
+              "out": os.path.abspath(out_dir), "options": asdict(opts), "frame_times": frame_times, "sync": sync,
+              "cameras": {}, "video": {}}
+    all_masks, out_cameras = [], []
+    for ci, cam in enumerate(cameras):
+        if cam.name not in sync:
+            raise ClothFitError(f"{sync_path}: no time for camera '{cam.name}'")
+        if progress:
+            progress(ci, len(cameras), f"{cam.name}: plate")
+        plate, plate_src = video.read_plate(plates_dir, cam)
+        step = (lambda k, n, ci=ci, cam=cam: progress(ci + k / max(n, 1), len(cameras), f"{cam.name}: frame {k}/{n}")) \
+            if progress else None
+        frames, vrep = video.camera_frames(videos_dir, cam, sync[cam.name], frame_times, sync_path, step)
+        vrep["plate"] = plate_src
+        report["video"][cam.name] = vrep
+        names = [f"{os.path.basename(vrep['video'])} at {u:.4f} s" for u in vrep["frame_timestamps"]]
+        masks, out_cam = _extract_one(cam, [plate], frames, names, opts, report, errors, warnings)
+        all_masks.append(masks)
+        out_cameras.append(out_cam)
+    if progress:
+        progress(len(cameras), len(cameras), "done")
+    cap_meta = {"generator": "addon.core.extract (videos)", "videos": os.path.abspath(videos_dir),
+                "sync": sync, "frame_timestamps": {n: r["frame_timestamps"] for n, r in report["video"].items()}}
+    return _write_result(out_dir, videos_dir, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report,
+                         errors, warnings)
 
 
 def format_report(report: dict) -> str:
@@ -759,7 +845,15 @@ def format_report(report: dict) -> str:
 
 def add_arguments(parser):
     """Arguments of ``python -m addon extract`` (the lead's CLI calls this, then :func:`run_args`)."""
-    parser.add_argument("footage", help="footage folder: <camera>/background*.png + frames, optional footage.json")
+    parser.add_argument("footage", nargs="?", help="footage folder: <camera>/background*.png + frames, optional "
+                                                   "footage.json (or --videos)")
+    parser.add_argument("--videos", help="folder of videos, one per camera: <camera>.<mp4|mov|mkv|avi>")
+    parser.add_argument("--plates", help="with --videos: background plates <camera>.<png|jpg> or a video of the empty "
+                                         "scene (median frame)")
+    parser.add_argument("--sync", help="with --videos: JSON {camera: video time [s] at t = 0}")
+    parser.add_argument("--find-sync", choices=["flash"], help="with --videos: find the sync times from a flash seen by "
+                                                              "every camera (written to --sync if given)")
+    parser.add_argument("--flash-time", type=float, default=0.0, help="capture time [s] of the flash (default 0)")
     parser.add_argument("-o", "--out", required=True, help="capture folder to write")
     parser.add_argument("--cameras", help="calibration: our cameras JSON, OpenCV YAML/JSON/XML file or folder, COLMAP model folder")
     parser.add_argument("--times", help="frame times, comma separated (default: footage.json)")
@@ -816,12 +910,54 @@ def run_args(args) -> dict:
             times = [float(t) for t in args.times.split(",") if t.strip()]
         except ValueError:
             raise ClothFitError(f"--times {args.times!r}: not a comma-separated list of numbers") from None
-    rep = extract_capture(args.footage, args.out, cameras=args.cameras, frame_times=times,
-                          scenario=args.scenario, cloth_mass=args.cloth_mass, options=options_from_args(args),
-                          camera_names=args.camera_names)
+    if args.videos:
+        rep = _run_videos(args, times)
+    else:
+        if not args.footage:
+            raise ClothFitError("extract: give a footage folder, or --videos DIR --plates DIR --sync SYNC.json")
+        rep = extract_capture(args.footage, args.out, cameras=args.cameras, frame_times=times,
+                              scenario=args.scenario, cloth_mass=args.cloth_mass, options=options_from_args(args),
+                              camera_names=args.camera_names)
     print(format_report(rep))
     print(f"wrote capture {args.out} ({len(rep['cameras'])} cameras x {len(rep['frame_times'])} frames)")
     return rep
+
+
+def _run_videos(args, times):
+    import sys
+    import time
+    from . import calib_io, video
+    if args.footage:
+        raise ClothFitError(f"extract: a footage folder ({args.footage}) and --videos exclude each other")
+    if not args.plates:
+        raise ClothFitError("extract --videos needs --plates DIR (background plate per camera)")
+    if not args.cameras:
+        raise ClothFitError("extract --videos needs --cameras (the calibration)")
+    sizes = video.video_sizes(args.videos) if calib_io.detect_format(args.cameras) == "easymocap" else None
+    cams = calib_io.import_cameras(args.cameras, sizes=sizes)
+    if args.camera_names:
+        cams = [c for c in cams if c.name in args.camera_names]
+    if args.find_sync:
+        sync = video.flash_sync(args.videos, [c.name for c in cams], args.flash_time, args.sync)
+        print("sync from the flash: " + ", ".join(f"{k} {v:.4f} s" for k, v in sync.items()))
+    elif args.sync:
+        sync = args.sync
+    else:
+        raise ClothFitError("extract --videos needs --sync SYNC.json (or --find-sync flash)")
+    tty = sys.stderr.isatty() or os.environ.get("CLOTHFIT_PROGRESS") == "1"
+    t0 = time.time()
+
+    def progress(done, total, text):
+        if tty:
+            n = int(30 * done / max(total, 1))
+            sys.stderr.write(f"\r[{'#' * n}{'.' * (30 - n)}] {text:<24} {time.time() - t0:.0f}s ")
+            sys.stderr.flush()
+    try:
+        return extract_videos(args.videos, args.plates, sync, args.out, cams, times, scenario=args.scenario,
+                              cloth_mass=args.cloth_mass, options=options_from_args(args), progress=progress)
+    finally:
+        if tty:
+            sys.stderr.write("\n")
 
 
 def main(argv=None) -> dict:
