@@ -579,6 +579,9 @@ def read_easymocap(folder: str, width: int | None = None, height: int | None = N
             h, w = (int(v) for v in sizes[n])
         elif width and height:
             h, w = int(height), int(width)
+        elif sizes is not None:
+            raise ClothFitError(f"camera '{n}': no video {n}.<mp4|mov|mkv|avi> in {getattr(sizes, 'source', 'the videos')} "
+                                f"(its image size comes from the video: EasyMocap's {folder} stores none)")
         else:
             raise ClothFitError(f"EasyMocap calibration {folder}: camera '{n}' has no image size (EasyMocap files "
                                 f"store none): pass --width/--height, or extract from its video")

@@ -152,7 +152,10 @@ class Video:
 def video_sizes(videos_dir: str) -> dict:
     """``{camera: (height, width)}`` of every video in ``videos_dir`` (for calibrations without image size)."""
     av = _av()
-    out = {}
+
+    class Sizes(dict):
+        source = videos_dir
+    out = Sizes()
     if not os.path.isdir(videos_dir):
         raise ClothFitError(f"videos folder not found: {videos_dir}")
     for f in sorted(os.listdir(videos_dir)):
