@@ -300,7 +300,8 @@ def cmd_identifiability(a):
 def cmd_occlusion(a):
     from .core.studies.occlusion import run_occlusion
     run_occlusion(a.json, out_dir=a.out, quick=a.quick, n_train=a.train_cameras, evaluations=a.max_evaluations,
-                  seed=a.seed, resolution=_res(a.resolution), scales=_floats(a.scales, "--scales"))
+                  seed=a.seed, resolution=_res(a.resolution), scales=_floats(a.scales, "--scales"),
+                  truth_dt_safety=a.truth_dt_safety)
 
 
 def cmd_rig(a):
@@ -418,6 +419,8 @@ def build_parser():
     s.add_argument("--quick", action="store_true", help="240x320, 700 evaluations")
     s.add_argument("--train-cameras", type=int, default=4)
     s.add_argument("--scales", default="1,1.33,1.67", help="occluder sizes (x post 15 %% of the cloth width, hand 12 %%)")
+    s.add_argument("--truth-dt-safety", type=float, default=None,
+                   help="time-step factor of the truth (0.125 = 4x finer than the fitter: a model mismatch)")
     s.add_argument("--max-evaluations", type=int, default=None)
     s.add_argument("--resolution", help="HxW (default: the rig's 480x640; --quick 240x320)")
     s.add_argument("--seed", type=int, default=0)
