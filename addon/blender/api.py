@@ -480,9 +480,11 @@ def simulate(scene):
 
 # ============================================================ observations
 
-def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None):
+def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None, engine=None):
     """Blender renders the cloth's silhouette from every rig camera at every capture time and
-    writes a capture directory (core format). Returns the ``Capture``."""
+    writes a capture directory (core format). Returns the ``Capture``. ``engine``: WORKBENCH or
+    EEVEE (default: the scene's setting). Objects of the collection ``Occluders`` hide the cloth
+    (holdouts) and are written as the capture's ignore masks."""
     from ..core.observation.capture import finalize_capture, save_silhouette, write_capture
     from ..core.observation.metrics import add_boundary_noise
     from ..core.observation.synth import noise_rng
@@ -507,28 +509,40 @@ def render_silhouettes(scene, out_dir=None, noise=None, seed=None, progress=None
     cams = [sh if sh is not None else b for b, _, sh in rows]
     dropped = [b.name for b, ex, _ in rows if ex is not None and ex.dist.size and np.any(ex.dist != 0)]
     par = params_from_scene(scene)
-    meta = {"generator": f"{GENERATOR_PREFIX}{bpy.app.version_string} Workbench (addon/blender/render.py)",
+    engine = getattr(p, "render_engine", "WORKBENCH") if engine is None else engine
+    occluders = R.occluder_objects(scene)
+    meta = {"generator": f"{GENERATOR_PREFIX}{bpy.app.version_string} {engine.title()} (addon/blender/render.py)",
             "true_params": par.as_dict(), "noise_fraction": noise, "seed": seed}
+    if occluders:
+        meta["occluders"] = [o.name for o in occluders]
     if dropped:
         meta["distortion_dropped"] = dropped
     # two steps: everything but capture.json now, capture.json only once every PNG is written, so a
     # render that fails midway never leaves a capture that looks complete
     pending = write_capture(root, cams, sc, None, shapes=shapes, cloth_mass=par.m * sc.grid.n_vertices, meta=meta,
-                            finalize=False)
+                            finalize=False, ignore=True if occluders else None)
     frame0 = scene.frame_current
     tmp = os.path.join(root, ".render_tmp")
     os.makedirs(tmp, exist_ok=True)
     try:
         for fi, t in enumerate(times):
             scene.frame_set(S.frame_of_time(scene, t))
-            masks = R.render_masks(scene, cloth, objs, tmpdir=tmp)
+            masks = R.render_masks(scene, cloth, objs, tmpdir=tmp, engine=engine,
+                                   occluders=occluders if occluders else None)
             for ci, m in enumerate(masks):
+                ign = None
+                if occluders:
+                    m, ign = m
                 if not m.any():
                     raise ClothFitError(f"camera '{cams[ci].name}' does not see the cloth at t = {t:.3f} s "
-                                        f"(empty silhouette)")
+                                        f"(empty silhouette{', occluders included' if occluders else ''})")
                 if noise > 0:
                     m = add_boundary_noise(m, noise, noise_rng(seed, ci, fi))
+                    if ign is not None:
+                        m &= ~ign      # boundary noise at an occluder's edge is not cloth seen
                 save_silhouette(pending.silhouette_path(ci, fi), m)
+                if ign is not None:
+                    save_silhouette(pending.ignore_path(ci, fi), ign)
             if progress:
                 progress((fi + 1) / len(times))
         cap = finalize_capture(pending)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import bpy
 
+from . import render as R
+
 from ..core.physics.paper import identifiable
 
 
@@ -109,6 +111,10 @@ def draw_observations(layout, scene, p):
     row = layout.row(align=True)
     row.prop(p, "noise")
     row.prop(p, "noise_seed")
+    layout.prop(p, "render_engine")
+    n_occ = len(R.occluder_objects(scene))
+    if n_occ:
+        layout.label(text=f"{n_occ} occluder(s) in 'Occluders': written as ignore masks", icon="HOLDOUT_ON")
     layout.operator("clothfit.render_silhouettes", icon="RENDER_STILL")
     layout.operator("clothfit.load_capture", icon="FILE_FOLDER")
     layout.prop(p, "view_frame")

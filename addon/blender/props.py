@@ -139,6 +139,12 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     noise: FloatProperty(name="Noise", default=D.NOISE_FRACTION, min=0.0, max=1.0, precision=3,
                          description="Fraction of boundary pixels flipped in rendered silhouettes")
     noise_seed: IntProperty(name="Noise Seed", default=0, min=0)
+    render_engine: EnumProperty(name="Engine", items=[
+        ("WORKBENCH", "Workbench", "Flat Workbench render, anti-aliasing off (occluders drawn black = holdout)"),
+        ("EEVEE", "Eevee", "Eevee, one sample, zero pixel filter (occluders as real holdouts)")],
+        default="WORKBENCH",
+        description="Renderer of the silhouettes. Objects in the collection 'Occluders' hide the cloth and are "
+                    "written as ignore masks (pixels of unknown truth)")
     footage_dir: StringProperty(name="Footage", subtype="DIR_PATH", options=PATH_OPTIONS, default="",
                                 description="Footage folder: <camera>/background*.png and frames per camera, "
                                             "optional footage.json and calibration")
