@@ -6,7 +6,8 @@ Runs the same under Blender and under Python with the ``bpy`` module::
     python demo_blend/build_demo.py --out out/demo
 
 Writes the capture to ``<out>/capture`` (silhouettes rendered by Blender's Workbench, 5 % boundary
-noise), the fit result and overlays there, and saves ``demo_blend/demo.blend`` (``--blend``).
+noise; a post in the collection 'Occluders' stands in front of the cloth and is written as ignore
+masks, ``--no-post`` removes it), the fit result and overlays there, and saves ``demo_blend/demo.blend`` (``--blend``).
 ``--images DIR`` also writes the walkthrough pictures (docs/img): a Blender render of the rig and
 the cloth, a sheet of rendered silhouettes and the overlay contact sheet.
 """
@@ -28,6 +29,7 @@ def main(argv=None):
     ap = pipeline.add_arguments(argparse.ArgumentParser(description="Build the Silhouette Cloth Fit demo scene"),
                                 blend_default=os.path.join(HERE, "demo.blend"))
     ap.add_argument("--images", default=None, help="also write the walkthrough images into this directory")
+    ap.set_defaults(post=True)     # the demo has a post in front of the cloth (an occluder: ignore masks)
     a = ap.parse_args(pipeline.script_argv(argv))
     images = os.path.abspath(a.images) if a.images else None
     pipeline.run(a, after_capture=(lambda scene: first_guess_overlays(scene, images)) if images else None,

@@ -1109,13 +1109,14 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
     tiles = []
     for ci, c in enumerate(cap.cameras):
         for k, fi in enumerate(fidx):
-            obs = cap.load_silhouette(ci, fi)
+            obs, ign = cap.load_observation(ci, fi)
             mod = model[ci][k]
             if mod.shape != obs.shape:
                 raise ClothFitError(f"camera '{c.name}': model silhouette {mod.shape} and observed {obs.shape} differ "
                                     f"in size")
-            errs[ci, k] = e_sil(obs, mod, name=cap.silhouette_path(ci, fi))
-            img = overlay_image(obs, mod)
+            # pixels of unknown truth (occluders) leave eq. 6: the model is not judged there
+            errs[ci, k] = e_sil(obs, mod if ign is None else mod & ~ign, name=cap.silhouette_path(ci, fi))
+            img = overlay_image(obs, mod, ign)
             write_rgb(overlay_path(cap, ci, fi), img)
             if fi == sheet_fi:
                 tiles.append(label(img, f"{c.name} t={cap.frame_times[fi]:.2f} E={100 * errs[ci, k]:.2f}%"))

@@ -40,7 +40,35 @@ def add_arguments(ap: argparse.ArgumentParser, blend_default=None):
     ap.add_argument("--no-blender-model", action="store_true",
                     help="skip the second fit with Blender's cloth model (and its Cloth modifier)")
     ap.add_argument("--blender-budget", type=int, default=1500, help="Blender-model fit: maximum evaluations")
+    ap.add_argument("--engine", default="WORKBENCH", choices=["WORKBENCH", "EEVEE"], help="silhouette renderer")
+    ap.add_argument("--post", action=argparse.BooleanOptionalAction, default=False,
+                    help="stand a post in front of the cloth (collection 'Occluders': rendered as a holdout, "
+                         "written as ignore masks)")
     return ap
+
+
+POST_LOCATION = (0.02, -0.01, 0.05)   # m: through the cloth's area, where the released corner falls
+POST_RADIUS, POST_HEIGHT = 0.006, 0.3
+
+
+def add_post(scene):
+    """A thin vertical cylinder in the collection 'Occluders' (a post in front of / through the cloth)."""
+    import bpy
+    from .render import OCCLUDERS
+    coll = bpy.data.collections.get(OCCLUDERS) or bpy.data.collections.new(OCCLUDERS)
+    if coll.name not in {c.name for c in scene.collection.children_recursive}:
+        scene.collection.children.link(coll)
+    me = bpy.data.meshes.new("Post")
+    import bmesh
+    bm = bmesh.new()
+    bmesh.ops.create_cone(bm, cap_ends=True, segments=24, radius1=POST_RADIUS, radius2=POST_RADIUS,
+                          depth=POST_HEIGHT)
+    bm.to_mesh(me)
+    bm.free()
+    post = bpy.data.objects.new("Post", me)
+    post.location = POST_LOCATION
+    coll.objects.link(post)
+    return post
 
 
 def ensure_wheels():
@@ -138,6 +166,9 @@ def run(args, after_capture=None, after_overlays=None):
     if args.optimizer:
         p.optimizer = args.optimizer
     p.seed = args.seed
+    p.render_engine = getattr(args, "engine", "WORKBENCH")
+    if getattr(args, "post", False):
+        add_post(scene)
     print(f"Silhouette Cloth Fit (Blender pipeline) -> {out}", flush=True)
     for op in STEPS_CAPTURE:
         run_op(op)
