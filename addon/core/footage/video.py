@@ -19,7 +19,11 @@ on) seen by every camera: the frame with the largest rise of mean brightness mar
 ``sync[c] = flash_video_time[c] - flash_time`` where ``flash_time`` is the capture time of the
 flash (default 0). A clap needs audio and is not handled.
 
-Videos are read with PyAV (``av``, FFmpeg). Bad input is one line naming the file: a video that
+Videos are read with PyAV (``av``, FFmpeg) when it is installed, else with OpenCV's FFmpeg backend
+(``cv2.VideoCapture``; what runs inside Blender, where the extension bundles OpenCV but not PyAV):
+both give each frame's presentation timestamp from the container (tested: the same timestamps,
+the same frames to within rounding of the colour conversion). ``CLOTHFIT_VIDEO_BACKEND=opencv``
+forces OpenCV. Bad input is one line naming the file: a video that
 does not open or has no video stream, a camera without a video or plate, a sync time outside the
 video, a capture time past the video's end, a frame size different from the calibration.
 """
@@ -39,12 +43,58 @@ TIME_TOL = 1e-3          # s: a frame starting up to this much after the asked t
 PLATE_FRAMES = 31        # frames of a plate video whose median is the plate
 
 
+BACKENDS = ("av", "opencv")
+
+
 def _av():
     try:
         import av
     except ImportError:
-        raise ClothFitError("reading videos needs PyAV: pip install av (see requirements.txt)") from None
+        raise ClothFitError("this video backend needs PyAV: pip install av (see requirements.txt)") from None
     return av
+
+
+def default_backend() -> str:
+    """``av`` when PyAV is importable (and not overridden by CLOTHFIT_VIDEO_BACKEND), else ``opencv``."""
+    want = os.environ.get("CLOTHFIT_VIDEO_BACKEND", "").lower()
+    if want in BACKENDS:
+        return want
+    try:
+        import av  # noqa: F401
+        return "av"
+    except ImportError:
+        return "opencv"
+
+
+def _open_error(path, e):
+    detail = str(e).strip().splitlines()[0] if str(e).strip() else "no detail"
+    return ClothFitError(f"video {path}: cannot be opened as a video ({type(e).__name__}: {detail})")
+
+
+class _CvReader:
+    """OpenCV's FFmpeg backend: frames in decode order with their presentation timestamps."""
+
+    def __init__(self, path):
+        import cv2
+        self.cv2 = cv2
+        self.cap = cv2.VideoCapture(path, cv2.CAP_FFMPEG)
+        if not self.cap.isOpened():
+            raise ClothFitError(f"video {path}: cannot be opened as a video (OpenCV's FFmpeg backend refuses it)")
+        self.width = int(self.cap.get(cv2.CAP_PROP_FRAME_WIDTH))
+        self.height = int(self.cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+
+    def frames(self, decode):
+        """Yield ``(timestamp [s], BGR frame or None)``; frames are decoded only when ``decode(t)``."""
+        while self.cap.grab():
+            t = self.cap.get(self.cv2.CAP_PROP_POS_MSEC) / 1000.0
+            img = None
+            if decode(t):
+                ok, img = self.cap.retrieve()
+                img = img if ok else None
+            yield t, img
+
+    def close(self):
+        self.cap.release()
 
 
 def find_camera_file(folder: str, camera: str, exts, what: str):
@@ -62,13 +112,20 @@ def find_camera_file(folder: str, camera: str, exts, what: str):
 
 
 class Video:
-    """A video file's frame timestamps (s), size and end, from its container (packets; no decoding)."""
+    """A video file's frame timestamps (s), size and end, from its container (PyAV: packets, no
+    decoding; OpenCV: one pass over the frames)."""
 
-    def __init__(self, path: str):
-        av = _av()
+    def __init__(self, path: str, backend: str | None = None):
         self.path = path
+        self.backend = backend or default_backend()
+        if self.backend not in BACKENDS:
+            raise ClothFitError(f"video backend {self.backend!r} unknown (one of {', '.join(BACKENDS)})")
         if not os.path.isfile(path):
             raise ClothFitError(f"video {path}: file not found")
+        if self.backend == "opencv":
+            self._index_cv()
+            return
+        av = _av()
         try:
             with av.open(path) as c:
                 if not c.streams.video:
@@ -85,8 +142,7 @@ class Video:
         except ClothFitError:
             raise
         except Exception as e:  # av.error.InvalidDataError, FFmpegError, OSError ...
-            raise ClothFitError(f"video {path}: cannot be opened as a video ({type(e).__name__}: "
-                                f"{str(e).strip().splitlines()[0] if str(e).strip() else 'no detail'})") from None
+            raise _open_error(path, e) from None
         if not pts:
             raise ClothFitError(f"video {path}: holds no frames")
         order = np.argsort(pts, kind="stable")
@@ -98,35 +154,72 @@ class Video:
         self.start = float(self.times[0])
         self.end = float((self.pts[-1] + last) * tb)
 
+    def _index_cv(self):
+        r = _CvReader(self.path)
+        try:
+            self.width, self.height = r.width, r.height
+            times = [t for t, _ in r.frames(lambda t: False)]
+        finally:
+            r.close()
+        if not times:
+            raise ClothFitError(f"video {self.path}: holds no frames (or OpenCV cannot decode them)")
+        self.times = np.sort(np.asarray(times, dtype=np.float64))
+        self.pts = np.round(self.times * 1e6).astype(np.int64)      # microseconds: the key of a frame
+        last = float(np.median(np.diff(self.times))) if self.times.size > 1 else 0.0
+        self.start = float(self.times[0])
+        self.end = float(self.times[-1] + last)
+
+    def _decode(self, want_keys, want_frames=True):
+        """``{key: BGR frame}`` (or mean grey level when not ``want_frames``) of the frames with these keys
+        (``None`` = all)."""
+        got = {}
+        if self.backend == "opencv":
+            r = _CvReader(self.path)
+            try:
+                for t, img in r.frames(lambda t: want_keys is None or int(round(t * 1e6)) in want_keys):
+                    if img is None:
+                        continue
+                    k = int(round(t * 1e6))
+                    got[k] = img if want_frames else float(img.mean())
+                    if want_keys is not None and len(got) == len(want_keys):
+                        break
+            finally:
+                r.close()
+            return got
+        av = _av()
+        with av.open(self.path) as c:
+            for fr in c.decode(c.streams.video[0]):
+                if want_keys is None or (fr.pts in want_keys and fr.pts not in got):
+                    got[int(fr.pts)] = fr.to_ndarray(format="bgr24") if want_frames else \
+                        float(fr.to_ndarray(format="gray").mean())
+                    if want_keys is not None and len(got) == len(want_keys):
+                        break
+        return got
+
     def frame_index(self, video_time: float) -> int:
         """Index of the frame on display at ``video_time`` (see the module text)."""
         return int(np.searchsorted(self.times, video_time + TIME_TOL, side="right") - 1)
 
     def frames_at(self, video_times, progress=None):
         """BGR uint8 frames on display at each of ``video_times``, and their timestamps [s]."""
-        av = _av()
         idx = [self.frame_index(t) for t in video_times]
         for t, i in zip(video_times, idx):
             if i < 0 or t > self.end:
                 raise ClothFitError(f"video {self.path}: time {t:.4f} s is outside the video "
                                     f"({self.start:.4f} .. {self.end:.4f} s)")
         want = {int(self.pts[i]) for i in idx}
-        got = {}
         try:
-            with av.open(self.path) as c:
-                st = c.streams.video[0]
-                for fr in c.decode(st):
-                    if fr.pts in want and fr.pts not in got:
-                        got[fr.pts] = fr.to_ndarray(format="bgr24")
-                        if progress:
-                            progress(len(got), len(want))
-                        if len(got) == len(want):
-                            break
+            got = self._decode(want)
+        except ClothFitError:
+            raise
         except Exception as e:
             raise ClothFitError(f"video {self.path}: decoding failed ({type(e).__name__}: {e})") from None
+        if progress:
+            progress(len(got), len(want))
         missing = sorted(want - set(got))
         if missing:
-            raise ClothFitError(f"video {self.path}: the frames at {', '.join(f'{p * float(self.time_base):.4f}' for p in missing[:5])} s "
+            tt = [float(self.times[np.searchsorted(self.pts, p)]) for p in missing[:5]]
+            raise ClothFitError(f"video {self.path}: the frames at {', '.join(f'{t:.4f}' for t in tt)} s "
                                 f"are in the container but could not be decoded (a cut or corrupt file?)")
         return [got[int(self.pts[i])] for i in idx], [float(self.times[i]) for i in idx]
 
@@ -138,12 +231,10 @@ class Video:
 
     def mean_brightness(self):
         """Mean grey level of every frame, in timestamp order (for flash detection)."""
-        av = _av()
-        vals = {}
         try:
-            with av.open(self.path) as c:
-                for fr in c.decode(c.streams.video[0]):
-                    vals[int(fr.pts)] = float(fr.to_ndarray(format="gray").mean())
+            vals = self._decode(None, want_frames=False)
+        except ClothFitError:
+            raise
         except Exception as e:
             raise ClothFitError(f"video {self.path}: decoding failed ({type(e).__name__}: {e})") from None
         return np.array([vals.get(int(p), np.nan) for p in self.pts])
@@ -151,8 +242,6 @@ class Video:
 
 def video_sizes(videos_dir: str) -> dict:
     """``{camera: (height, width)}`` of every video in ``videos_dir`` (for calibrations without image size)."""
-    av = _av()
-
     class Sizes(dict):
         source = videos_dir
     out = Sizes()
@@ -163,13 +252,19 @@ def video_sizes(videos_dir: str) -> dict:
         if ext.lower() not in VIDEO_EXTS:
             continue
         p = os.path.join(videos_dir, f)
+        if default_backend() == "opencv":
+            r = _CvReader(p)
+            out[stem] = (r.height, r.width)
+            r.close()
+            continue
+        av = _av()
         try:
             with av.open(p) as c:
                 if c.streams.video:
                     cc = c.streams.video[0].codec_context
                     out[stem] = (cc.height, cc.width)
         except Exception as e:
-            raise ClothFitError(f"video {p}: cannot be opened as a video ({type(e).__name__})") from None
+            raise _open_error(p, e) from None
     return out
 
 
