@@ -624,7 +624,7 @@ def parse_camera_thresholds(spec: str, camera_names=None) -> dict:
     return out
 
 
-def _footage_cameras(scene, footage):
+def _footage_cameras(scene, footage, sizes=None):
     """The calibration for an extraction: the Calibration property, else the footage's own
     (footage.json's, cameras.* / calibration.*, a COLMAP folder), else the rig's exact cameras
     (imported or loaded). Returns (cameras, where they came from)."""
@@ -633,14 +633,14 @@ def _footage_cameras(scene, footage):
     p = props(scene)
     if p.extract_calibration.strip():
         path = abspath(p.extract_calibration, "calibration")
-        return calib_io.import_cameras(path), path
+        return calib_io.import_cameras(path, sizes=sizes), path
     meta, meta_path = X._read_footage_json(footage)
     if isinstance(meta.get("cameras"), str):
         path = os.path.join(footage, meta["cameras"])
         return calib_io.import_cameras(path), path
     path = X._find_calibration(footage)
     if path is not None:
-        return calib_io.import_cameras(path), path
+        return calib_io.import_cameras(path, sizes=sizes), path
     if p.rig_cameras_json.strip():
         return cameras_from_json(p.rig_cameras_json), "the scene's imported cameras"
     raise ClothFitError(f"footage {footage}: no calibration: set Calibration, put a cameras.yml (or footage.json, "
@@ -666,8 +666,15 @@ def extract_silhouettes(scene, progress=None):
     if os.path.normpath(out) == os.path.normpath(footage):
         raise ClothFitError(f"the output capture directory is the footage folder {footage}: choose another one")
     _refuse_foreign_capture(out, EXTRACT_GENERATOR, "Extract Silhouettes", "extractions")
-    cams, cam_source = _footage_cameras(scene, footage)
+    videos = getattr(p, "footage_kind", "IMAGES") == "VIDEOS"
+    sizes = None
+    if videos:
+        from ..core.footage import video as V
+        sizes = V.video_sizes(footage)
+    cams, cam_source = _footage_cameras(scene, footage, sizes)
     times = parse_times(p.extract_times) if p.extract_times.strip() else None
+    if videos and times is None:
+        raise ClothFitError("extraction from videos needs the capture times (Times)")
     mode = p.extract_threshold_mode
     opts = X.ExtractOptions(
         threshold=THRESHOLD_MODES.get(mode, float(p.extract_threshold)),
@@ -686,8 +693,23 @@ def extract_silhouettes(scene, progress=None):
     def cb(i, n, name):
         if progress:
             progress(i / max(n, 1))
-    report = X.extract_capture(footage, out, cameras=cams, frame_times=times, scenario=scenario, options=opts,
-                               progress=cb)
+    if videos:
+        names = [c.name for c in cams]
+        sync_path = abspath(p.footage_sync, "sync file") if p.footage_sync.strip() else None
+        if p.footage_find_sync:
+            sync = V.flash_sync(footage, names, p.footage_flash_time, sync_path)
+            notes.append("sync from the flash: " + ", ".join(f"{k} {v:.4f} s" for k, v in sync.items()))
+        elif sync_path:
+            sync = sync_path
+        else:
+            raise ClothFitError("extraction from videos needs a Sync file (or Sync from Flash)")
+        if not p.footage_plates.strip():
+            raise ClothFitError("extraction from videos needs the Plates folder")
+        report = X.extract_videos(footage, abspath(p.footage_plates, "plates folder"), sync, out, cams, times,
+                                  scenario=scenario, options=opts, progress=cb)
+    else:
+        report = X.extract_capture(footage, out, cameras=cams, frame_times=times, scenario=scenario, options=opts,
+                                   progress=cb)
     if progress:
         progress(1.0)
     cap = load_capture(scene, out)

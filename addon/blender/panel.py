@@ -125,8 +125,16 @@ def draw_extract(layout, scene, p):
     """Silhouettes from real footage (background plates + frames per camera)."""
     box = layout.box()
     box.label(text="From footage", icon="IMAGE_BACKGROUND")
+    box.prop(p, "footage_kind", expand=True)
     col = box.column(align=True)
     col.prop(p, "footage_dir")
+    if p.footage_kind == "VIDEOS":
+        col.prop(p, "footage_plates")
+        col.prop(p, "footage_sync")
+        row = col.row(align=True)
+        row.prop(p, "footage_find_sync")
+        if p.footage_find_sync:
+            row.prop(p, "footage_flash_time")
     col.prop(p, "extract_calibration")
     col.prop(p, "extract_times")
     col.prop(p, "extract_capture_dir")

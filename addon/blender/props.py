@@ -145,9 +145,23 @@ class ClothFitProperties(bpy.types.PropertyGroup):
         default="WORKBENCH",
         description="Renderer of the silhouettes. Objects in the collection 'Occluders' hide the cloth and are "
                     "written as ignore masks (pixels of unknown truth)")
+    footage_kind: EnumProperty(name="Footage", items=[
+        ("IMAGES", "Images", "Per camera a folder with background plates and the frames"),
+        ("VIDEOS", "Videos", "One video per camera (<camera>.mp4|mov|mkv|avi), plates, a sync file")],
+        default="IMAGES")
     footage_dir: StringProperty(name="Footage", subtype="DIR_PATH", options=PATH_OPTIONS, default="",
                                 description="Footage folder: <camera>/background*.png and frames per camera, "
-                                            "optional footage.json and calibration")
+                                            "optional footage.json and calibration; for videos: the videos folder")
+    footage_plates: StringProperty(name="Plates", subtype="DIR_PATH", options=PATH_OPTIONS, default="",
+                                   description="Videos: background plate per camera, <camera>.png|jpg or a video "
+                                               "of the empty scene (median frame)")
+    footage_sync: StringProperty(name="Sync", subtype="FILE_PATH", options=PATH_OPTIONS, default="",
+                                 description="Videos: JSON {camera: video time [s] at t = 0} (written here when "
+                                             "found from a flash)")
+    footage_find_sync: BoolProperty(name="Sync from Flash", default=False,
+                                    description="Videos: find the sync times from a flash seen by every camera")
+    footage_flash_time: FloatProperty(name="Flash Time", default=0.0, unit="TIME_ABSOLUTE",
+                                      description="Videos: capture time of the flash [s]")
     extract_calibration: StringProperty(name="Calibration", subtype="FILE_PATH", options=PATH_OPTIONS, default="",
                                         description="Calibrated cameras (empty: the footage's footage.json / "
                                                     "cameras.* / COLMAP folder, else the imported rig cameras)")
