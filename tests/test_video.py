@@ -190,3 +190,35 @@ def test_opencv_backend_reads_the_same(footage, tmp_path, monkeypatch):
     cap = load_capture(out)
     ious = [iou(cap.load_silhouette(c, f), truth["masks"][c][f]) for c in range(3) for f in range(3)]
     assert np.mean(ious) >= 0.95
+
+
+def _mat(name, a):
+    a = np.atleast_2d(np.asarray(a, dtype=float))
+    return (f"{name}: !!opencv-matrix\r\n  rows: {a.shape[0]}\r\n  cols: {a.shape[1]}\r\n  dt: d\r\n"
+            f"  data: [{', '.join(repr(float(v)) for v in a.ravel())}]\r\n")
+
+
+def test_easymocap_text_as_its_own_writer_makes_it(tmp_path):
+    """intri.yml / extri.yml typed the way EasyMocap's text FileStorage writer lays them out (CRLF,
+    quoted numeric names, Rodrigues R_ and 3x3 Rot_), plus EasyVolcap's H_/W_ image size."""
+    import cv2
+    cams = C.load_rig("ring8")[:2]
+    names = ["01", "02"]
+    intri = "%YAML:1.0\r\n---\r\nnames:\r\n" + "".join(f'  - "{n}"\r\n' for n in names)
+    extri = intri
+    for n, c in zip(names, cams):
+        intri += _mat(f"K_{n}", c.K) + _mat(f"dist_{n}", [[0.01, -0.02, 0.0, 0.0, 0.0]])
+        intri += f"H_{n}: {c.height}\r\nW_{n}: {c.width}\r\n" if n == "01" else ""
+        extri += _mat(f"R_{n}", cv2.Rodrigues(c.R)[0].T) + _mat(f"T_{n}", c.t.reshape(3, 1))
+        if n == "01":
+            extri += _mat(f"Rot_{n}", c.R)
+    (tmp_path / "intri.yml").write_bytes(intri.encode())
+    (tmp_path / "extri.yml").write_bytes(extri.encode())
+    got = calib_io.import_cameras(str(tmp_path), width=cams[1].width, height=cams[1].height)
+    assert [c.name for c in got] == names
+    for a, b in zip(got, cams):
+        assert np.allclose(a.K, b.K) and np.allclose(a.R, b.R, atol=1e-9) and np.allclose(a.t, b.t)
+        assert (a.width, a.height) == (b.width, b.height) and np.allclose(a.dist[:2], [0.01, -0.02])
+    (tmp_path / "extri.yml").write_bytes(extri.replace("T_02", "X_02").encode())
+    with pytest.raises(ClothFitError, match="extri.yml: T_02 missing"):
+        calib_io.import_cameras(str(tmp_path), width=640, height=480)
