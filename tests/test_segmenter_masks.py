@@ -2,7 +2,6 @@
 alpha mattes, ignore masks; pixels of unknown truth leave eq. 6 in both backends, in evaluate and
 in the overlays."""
 
-import io
 import json
 import os
 

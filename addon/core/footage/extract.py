@@ -612,7 +612,6 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
     per camera threshold and statistics, per frame area, all warnings.
     Raises one ClothFitError listing every bad file when anything is wrong; nothing is written then.
     """
-    from ..observation.capture import write_capture
     from . import calib_io
 
     opts = options or ExtractOptions()

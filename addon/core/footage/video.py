@@ -59,11 +59,8 @@ def default_backend() -> str:
     want = os.environ.get("CLOTHFIT_VIDEO_BACKEND", "").lower()
     if want in BACKENDS:
         return want
-    try:
-        import av  # noqa: F401
-        return "av"
-    except ImportError:
-        return "opencv"
+    import importlib.util
+    return "av" if importlib.util.find_spec("av") is not None else "opencv"
 
 
 def _open_error(path, e):
