@@ -249,3 +249,17 @@ def test_evaluate_and_overlay_grey(tmp_path, truth):
     post, hand = occluder(0, 0, (H, W))
     g = img[post | hand]
     assert np.all(g[:, 0] == g[:, 1]) and set(np.unique(g[:, 0])) <= {70, 110}
+
+
+def test_study_occluders_hide_part_of_the_cloth_in_every_view():
+    """The occlusion study's post and hand (studies/occlusion.py) hide some, never all, of the cloth."""
+    from addon.core.studies.occlusion import occluder_masks
+    rig = [c.resized(120, 160) for c in C.load_rig("lab18")]
+    sc = paper_scenario(frame_times=[0.1, 0.5, 1.0, 1.5])
+    X = simulate(sc, [GT], backend="numpy").positions[0]
+    for cam in rig:
+        post, hand = occluder_masks(cam, X, sc)
+        for f in range(4):
+            s = raster.silhouette(cam, X[f], sc.grid.triangles)
+            hidden = np.count_nonzero(s & (post | hand)) / np.count_nonzero(s)
+            assert 0.0 < hidden < 0.9, (cam.name, f, hidden)
