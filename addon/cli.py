@@ -163,12 +163,42 @@ def cmd_synth(a):
     print(f"wrote capture {a.out}: {len(cap.cameras)} cameras x {len(cap.frame_times)} frames")
 
 
+def _scene_evaluator(cfg):
+    """The workers of a ``--backend blender`` fit (Blender's own solver on ``cfg.blend``)."""
+    from .farm.scene import BlendSceneEvaluator
+    return BlendSceneEvaluator(cfg.blend, cfg.blend_object, cfg.frame_zero, cfg.workers, cfg.address, cfg.executor)
+
+
+def _backend_args(a):
+    """--backend core|blender (and the compute backends auto|numba|numpy) -> FitConfig fields."""
+    scene = {k: getattr(a, k, None) for k in ("blend", "object", "frame_zero", "workers", "address")}
+    if a.backend != "blender":
+        given = [f"--{k.replace('_', '-')}" for k, v in scene.items() if v is not None]
+        if given:
+            raise ClothFitError(f"{', '.join(given)} belong to --backend blender")
+        return {"backend": "auto" if a.backend == "core" else a.backend}
+    if not a.blend:
+        raise ClothFitError("--backend blender needs --blend SCENE.blend")
+    if any(getattr(a, k, None) is not None for k in ("fps", "quality", "bending_model")) or a.model == "paper":
+        raise ClothFitError("with --backend blender the scene's Cloth modifier and frame rate define the model: "
+                            "drop --model/--fps/--quality/--bending-model")
+    if a.workers is not None and a.workers < 1:
+        raise ClothFitError(f"--workers {a.workers}: must be at least 1")
+    return {"backend": "auto", "evaluator": "blender", "blend": a.blend, "blend_object": a.object,
+            "frame_zero": a.frame_zero, "workers": a.workers, "address": a.address, "executor": a.executor}
+
+
 def cmd_fit(a):
     from .core.fitting.job import FitConfig, FitJob
     from .core.observation.capture import load_capture
     ck = a.checkpoint or (a.out + ".checkpoint.json")
+    evaluator = None
     if a.resume and os.path.isfile(ck):
-        job = FitJob.resume(ck)
+        from .core.jsonio import read_json
+        ckcfg = FitConfig.from_dict(read_json(ck, "checkpoint").get("config") or {})
+        if ckcfg.evaluator == "blender":
+            evaluator = _scene_evaluator(ckcfg)
+        job = FitJob.resume(ck, evaluator=evaluator)
         if a.max_evaluations:
             job.config.max_evaluations = a.max_evaluations
             job.finished = job.evaluations >= a.max_evaluations
@@ -179,18 +209,33 @@ def cmd_fit(a):
                         seed=a.seed, max_evaluations=a.max_evaluations or D.FIT_EVALUATIONS,
                         resolution=_res(a.resolution), cloth_mass=a.cloth_mass, backend=a.backend,
                         population=a.population, children=a.children, target_error=a.target,
-                        model=_model_spec(a), free=_names(a.free), fixed=_json_arg(a.fixed, "--fixed"),
-                        init=a.init, bounds=_json_arg(a.bounds, "--bounds"))
-        job = FitJob(cap, cfg, checkpoint=ck)
+                        model=None if a.backend == "blender" else _model_spec(a), free=_names(a.free),
+                        fixed=_json_arg(a.fixed, "--fixed"), init=a.init, bounds=_json_arg(a.bounds, "--bounds"))
+        for k, v in _backend_args(a).items():
+            setattr(cfg, k, v)
+        if cfg.evaluator == "blender":
+            evaluator = _scene_evaluator(cfg)
+        try:
+            job = FitJob(cap, cfg, checkpoint=ck, evaluator=evaluator)
+        except BaseException:
+            if evaluator is not None:
+                evaluator.close()
+            raise
     bar = Progress(not a.quiet)
     try:
         job.run(callback=bar)
     except KeyboardInterrupt:
         job.cancel()
         print("\ncancelled: keeping the best result so far", file=sys.stderr)
+    except ClothFitError as e:            # e.g. a worker that died for good: the best so far is kept
+        job.error = str(e)
+        job.cancel()
+        raise
     finally:
         bar.done()
         job.save_result(a.out)
+        if evaluator is not None:
+            evaluator.close()
     r = job.result()
     keys = ("params", "identifiable") if r.get("params") else ("blender_cloth", "blender_scene")
     print(json.dumps({k: r[k] for k in keys + ("best_E_sil_mean_pct", "evaluations", "elapsed_s", "cancelled")
@@ -349,7 +394,19 @@ def build_parser():
     s.add_argument("--cloth-mass", type=float, default=None, help="total cloth mass [kg] (fixes m)")
     s.add_argument("--checkpoint", help="default: OUT.checkpoint.json; written every generation")
     s.add_argument("--resume", action="store_true", help="continue from the checkpoint")
-    s.add_argument("--backend", default="auto", choices=["auto", "numba", "numpy"])
+    s.add_argument("--backend", default="auto", choices=["auto", "numba", "numpy", "core", "blender"],
+                   help="where candidates are simulated: the core (auto, numba, numpy; core = auto) or blender "
+                        "(Blender's own solver on --blend, in worker processes)")
+    s.add_argument("--blend", help="blender backend: the .blend holding the cloth object (colliders and all)")
+    s.add_argument("--object", help="blender backend: the cloth object (default: the scene's only mesh with a "
+                                    "Cloth modifier)")
+    s.add_argument("--frame-zero", type=float, default=None,
+                   help="blender backend: scene frame of capture time 0 (default: the scene's frame_start)")
+    s.add_argument("--workers", type=int, default=None, help="blender backend: worker processes (default: the cores)")
+    s.add_argument("--address", default=None, help="blender backend: a running Ray cluster (auto, ray://host:port); "
+                                                   "default: a local Ray instance started for the fit")
+    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"],
+                   help="blender backend: Ray actors or spawned processes (auto: Ray when installed)")
     s.add_argument("--quiet", action="store_true")
     _model_args(s)
     s.add_argument("--free", help="blender: comma list of ClothSettings to search (default: see README, "

@@ -28,7 +28,7 @@ from ..errors import ClothFitError
 from ..physics.paper import identifiable, identifiable_errors
 from .objective import SilhouetteObjective
 from .optimise import make_optimizer
-from .parameters import PaperParameters, make_parameters
+from .parameters import PaperParameters, SceneParameters, make_parameters
 
 
 @dataclass
@@ -52,6 +52,14 @@ class FitConfig:
     free: list | None = None              # blender: settings to search (default parameters.BLENDER_FREE)
     fixed: dict | None = None             # blender: settings held at given values
     init: str | None = None               # a result JSON to start from (warm start)
+    evaluator: str = "core"               # where candidates are simulated: "core" or "blender" (a .blend's own
+                                          # solver in worker processes: addon.farm, handed to FitJob)
+    blend: str | None = None              # blender: the scene file, its cloth object, the frame of t = 0
+    blend_object: str | None = None
+    frame_zero: float | None = None
+    workers: int | None = None            # blender: worker processes (default: the cores)
+    address: str | None = None            # blender: a running Ray cluster ("auto", "ray://host:port")
+    executor: str = "auto"                # blender: "ray", "process" (no Ray) or "auto"
 
     @classmethod
     def from_dict(cls, d):
@@ -95,10 +103,19 @@ def load_observed(capture, cams, fidx, resolution=None):
 
 
 class FitJob:
-    def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None):
+    def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None, evaluator=None):
+        """``evaluator``: where candidates are simulated when not by the core's models: a model-like
+        object (``simulate(scenario, rows) -> SimResult``, ``scenario(times)``, ``describe()``), e.g.
+        ``addon.farm.scene.BlendSceneEvaluator`` (Blender's solver on a .blend in worker processes)."""
         self.capture = capture
         self.config = cfg = config or FitConfig()
         self.checkpoint = checkpoint
+        if cfg.evaluator not in ("core", "blender"):
+            raise ClothFitError(f"fit config: evaluator {cfg.evaluator!r} must be 'core' or 'blender'")
+        if cfg.evaluator != "core" and evaluator is None:
+            raise ClothFitError(f"a fit with the {cfg.evaluator} backend needs its workers "
+                                f"(python -m addon fit ... --backend blender --blend SCENE.blend)")
+        self.evaluator = evaluator
         ncam = len(capture.cameras)
         cams = list(range(ncam)) if cfg.train_cameras is None else [int(c) for c in cfg.train_cameras]
         for c in cams:
@@ -114,9 +131,13 @@ class FitJob:
         self.train_frames = fidx
         self.train_times = [float(capture.frame_times[i]) for i in fidx]
         cameras, observed, ignore = load_observed(capture, cams, fidx, cfg.resolution)
-        self.scenario = capture.scenario.with_frames(self.train_times)
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
-        self.par = make_parameters(capture, cfg)
+        if evaluator is not None:
+            self.scenario = evaluator.scenario(self.train_times)
+            self.par = SceneParameters(capture, cfg, evaluator)
+        else:
+            self.scenario = capture.scenario.with_frames(self.train_times)
+            self.par = make_parameters(capture, cfg)
         self.objective = SilhouetteObjective(self.scenario, cameras, observed, backend=cfg.backend, names=names,
                                              model=self.par.model, ignore=ignore)
         self.m, self.m_source = self.par.m, self.par.m_source
@@ -233,6 +254,10 @@ class FitJob:
         }
         if bp and not isinstance(self.par, PaperParameters):
             res.update(self.par.describe(self.opt.best_x))
+        if self.evaluator is not None:
+            res["raster_backend"] = res["backend"]
+            res.update(self.evaluator.describe())
+            res["seconds"] = self.elapsed
         gt = (self.capture.meta or {}).get("true_params")
         if gt and bp and isinstance(self.par, PaperParameters):
             res["true_params"] = gt
@@ -250,7 +275,7 @@ class FitJob:
                             "result": self.result()})
 
     @classmethod
-    def resume(cls, path, capture=None):
+    def resume(cls, path, capture=None, evaluator=None):
         """Continue a job from its checkpoint (same capture, same config)."""
         from ..observation.capture import load_capture
         from .optimise import CMAES, SPXMGG  # noqa: F401
@@ -262,7 +287,7 @@ class FitJob:
         except json.JSONDecodeError as e:
             raise ClothFitError(f"checkpoint {path} is corrupt: {e}") from None
         cap = capture or load_capture(ck["capture"])
-        job = cls(cap, FitConfig.from_dict(ck["config"]), checkpoint=path)
+        job = cls(cap, FitConfig.from_dict(ck["config"]), checkpoint=path, evaluator=evaluator)
         job.opt = type(job.opt).from_state(ck["optimizer_state"])
         job.elapsed = ck.get("elapsed", 0.0)
         job.exploded = ck.get("exploded", 0)

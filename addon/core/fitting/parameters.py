@@ -178,6 +178,92 @@ class BlenderParameters:
                 "free": list(self.free), "per_unit_mass": per_mass}
 
 
+SCENE_BOUND_FACTOR = 20.0   # a scene fit searches value / 20 .. value * 20 around the scene's (or warm start's) value
+
+
+class SceneParameters(BlenderParameters):
+    """Blender's cloth on a user's scene (``--backend blender``): the Cloth modifier's own values are
+    the fixed settings and the centre of the search (a warm start's values replace the free ones);
+    ``quality``, ``bending_model`` and ``time_scale`` stay the scene's. The vertex mass is
+    ``cloth_mass`` over the scene mesh's vertices, else the modifier's; every mass-scaled value is
+    moved to that mass without changing the motion. Default bounds: a factor ``SCENE_BOUND_FACTOR``
+    either side of the centre (per unit mass, log scale), clipped to Blender's limits."""
+
+    def __init__(self, capture, cfg, evaluator):
+        self.model = evaluator
+        scene = B.check_settings(dict(evaluator.initial), f"Cloth settings of '{getattr(evaluator, 'object', '?')}'")
+        bending = scene["bending_model"]
+        V = int(evaluator.mesh.n_vertices)
+        if cfg.cloth_mass is not None:
+            if not (isinstance(cfg.cloth_mass, (int, float)) and math.isfinite(cfg.cloth_mass) and cfg.cloth_mass > 0):
+                raise ClothFitError(f"cloth mass {cfg.cloth_mass!r} kg must be a positive number")
+            m, src = cfg.cloth_mass / V, "given cloth mass"
+        elif getattr(capture, "cloth_mass", None):
+            m, src = capture.cloth_mass / V, "capture's cloth_mass"
+        else:
+            m, src = scene["mass"], ("the scene's vertex mass (cloth mass unknown: every stiffness and damping "
+                                     "scales with it)")
+        self.m, self.m_source = float(m), src
+        fixed = _rescale(scene, self.m, bending)
+        self.init_note = None
+        if cfg.init:
+            from ..physics.models import BlenderModel as _BM
+            res = load_init(cfg.init)
+            core = _BM(evaluator.fps, scene["quality"], bending)
+            ini = settings_from_result(res, core, capture.scenario.grid)
+            ini = _rescale(ini, self.m, bending)
+            fixed.update({n: ini[n] for n in (tuple(cfg.free) if cfg.free else BLENDER_FREE[bending]) if n in ini})
+            if abs(ini["time_scale"] - scene["time_scale"]) > 1e-6 * scene["time_scale"] or \
+                    ini["quality"] != scene["quality"] or ini["bending_model"] != bending:
+                self.init_note = (f"warm start {cfg.init} was fitted at time_scale {ini['time_scale']:.6g}, quality "
+                                  f"{ini['quality']}, {ini['bending_model']}; the scene's are kept "
+                                  f"({scene['time_scale']:.6g}, {scene['quality']}, {bending})")
+        fixed.update(cfg.fixed or {})
+        fixed["mass"] = self.m
+        self.fixed = B.check_settings(fixed, "fit: fixed Blender settings")
+        free = tuple(cfg.free) if cfg.free else BLENDER_FREE[bending]
+        bad = [n for n in free if n not in FITTABLE]
+        if bad:
+            raise ClothFitError(f"fit: cannot search {', '.join(bad)} (searchable: {', '.join(FITTABLE)})")
+        if len(set(free)) != len(free) or not free:
+            raise ClothFitError(f"fit: free settings {list(free)} must be distinct and not empty")
+        clash = set(free) & set(cfg.fixed or {})
+        if clash:
+            raise ClothFitError(f"fit: {sorted(clash)} cannot be both free and fixed")
+        self.free = free
+        self.scaled = set(B.mass_scaled(bending))
+        bounds = {}
+        for n in free:
+            user = (cfg.bounds or {}).get(n)
+            hard = B.RANGES[n][1] / self.m if n in self.scaled else B.RANGES[n][1]
+            if user is not None:
+                lo, hi = (float(v) for v in user)
+                if n in self.scaled:
+                    lo, hi = lo / self.m, hi / self.m
+            else:
+                c = self._coord(n, self.fixed[n])
+                if c > 0:
+                    lo, hi = c / SCENE_BOUND_FACTOR, c * SCENE_BOUND_FACTOR
+                else:                       # a zero setting: Blender's presets' range at this mass
+                    lo, hi = BLENDER_BOUNDS_AT_DEFAULT_MASS[n]
+                    if n in self.scaled:
+                        lo, hi = lo / B.DEFAULTS["mass"], hi / B.DEFAULTS["mass"]
+            hi = min(hi, hard)
+            if not (0 < lo < hi):
+                raise ClothFitError(f"fit: the search range of {n} is empty at vertex mass {self.m:g} kg "
+                                    f"(bounds must be positive and within Blender's limit {B.RANGES[n][1]:g})")
+            bounds[n] = (lo, hi)
+        self.space = SearchSpace(list(free), bounds, {n: True for n in free})
+        self.initial = None
+        if cfg.init:
+            x0 = np.array([self._coord(n, self.fixed[n]) for n in free])
+            self.initial = [self.space.clip(x0[None])[0]]
+        self.note = ("Blender's own solver on the scene's cloth object; silhouettes cannot tell mass from stiffness "
+                     "and damping: the vertex mass is fixed and every stiffness and damping scales with it")
+        if self.init_note:
+            self.note += "; " + self.init_note
+
+
 def make_parameters(capture, cfg):
     """The search of ``cfg.model``, else the capture's own ``model``, else the paper's sheet."""
     spec = cfg.model if cfg.model is not None else getattr(capture, "model", None)

@@ -153,6 +153,8 @@ def get_model(spec=None):
         return PaperModel()
     if isinstance(spec, (PaperModel, BlenderModel)):
         return spec
+    if callable(getattr(spec, "simulate", None)) and hasattr(spec, "row_names"):
+        return spec                                  # a model-like evaluator (e.g. Blender workers on a scene)
     if isinstance(spec, str):
         spec = {"name": spec}
     if not isinstance(spec, dict) or "name" not in spec:
