@@ -134,9 +134,10 @@ class RayExecutor(Executor):
             old = os.environ.get("PYTHONPATH")
             os.environ["PYTHONPATH"] = REPO_ROOT + (os.pathsep + old if old else "")
             os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+            kw = {"_temp_dir": os.environ["CLOTHFIT_RAY_TMPDIR"]} if os.environ.get("CLOTHFIT_RAY_TMPDIR") else {}
             try:
                 ray.init(num_cpus=self.workers, include_dashboard=False, _node_ip_address="127.0.0.1",
-                         log_to_driver=False, configure_logging=True, logging_level="ERROR")
+                         log_to_driver=False, configure_logging=True, logging_level="ERROR", **kw)
             finally:
                 if old is None:
                     os.environ.pop("PYTHONPATH", None)
@@ -189,7 +190,7 @@ def _pool_call(method, args):
     return _HOST.call(method, *args)
 
 
-def _pool_pid():
+def _pool_pid(_=None):
     time.sleep(0.2)        # so that each process of the pool answers once
     return os.getpid()
 

@@ -1,0 +1,207 @@
+"""``fit --backend blender``: Blender's own solver on a user's .blend (a cloth falling onto a box
+collider, which no core model emulates) in worker processes, scored by the core objective.
+
+The scene and its capture are made here with the bpy module; the fits run in *subprocesses*
+without bpy (a process that imported bpy cannot start bpy workers: tested), on a local 2-worker
+Ray instance bound to 127.0.0.1, or the spawned process pool when Ray is absent.
+"""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+import pytest
+
+from blender_support import bpy, factory  # noqa: F401
+
+from addon.blender import collider_scene as CS  # noqa: E402
+from addon.blender.scene_worker import BlendScene  # noqa: E402
+from addon.core.errors import ClothFitError  # noqa: E402
+from addon.farm import executors  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SEED, POP, BUDGET = 3, 6, 12          # two generations of six candidates
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """(blend, capture dir, frame zero): a 7 x 7 cloth released onto a box, 6 capture times."""
+    d = tmp_path_factory.mktemp("scene")
+    sc = CS.collider_scenario(7, settle=0.25, after=0.5, every=2)
+    blend = str(d / "drop.blend")
+    f0 = CS.build_scene(blend, sc)
+    CS.observe(blend, sc, str(d / "cap"), frame_zero=f0, resolution=(60, 80))
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return blend, str(d / "cap"), f0
+
+
+def _env(**extra):
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST")}
+    env.update(extra)
+    return env
+
+
+def _cli(args, **env):
+    return subprocess.run([sys.executable, "-m", "addon"] + args, cwd=ROOT, env=_env(**env), capture_output=True,
+                          text=True, timeout=600)
+
+
+def _fit_args(scene, out, *extra):
+    blend, cap, f0 = scene
+    return ["fit", cap, "--backend", "blender", "--blend", blend, "--frame-zero", str(f0), "--workers", "2",
+            "--max-evaluations", str(BUDGET), "--population", str(POP), "--seed", str(SEED), "--quiet",
+            "--out", str(out)] + list(extra)
+
+
+def _procs_with(text):
+    found = []
+    for p in os.listdir("/proc"):
+        if not p.isdigit():
+            continue
+        try:
+            with open(f"/proc/{p}/cmdline", "rb") as f:
+                if text.encode() in f.read():
+                    found.append(int(p))
+        except OSError:
+            pass
+    return found
+
+
+# ---------------------------------------------------------------- the worker, in this process
+
+def test_worker_replays_the_observation_and_resets_between_candidates(scene):
+    """The worker's Blender at the true settings gives the capture's vertices exactly; another
+    candidate in between does not leak into the next (the cache is reset); fractional frames are
+    read linearly between whole frames."""
+    blend, cap, f0 = scene
+    bs = BlendScene(blend)
+    info = bs.info()
+    assert info["object"] == "Cloth" and info["colliders"] == ["Table"] and info["n_vertices"] == 49
+    truth = json.load(open(os.path.join(cap, "capture.json")))["meta"]["true_blender_cloth"]
+    obs = np.load(os.path.join(cap, "shapes.npz"))["positions"]
+    frames = f0 + np.arange(2, 13, 2)
+    a = bs.simulate(truth, frames)
+    other = bs.simulate(dict(truth, tension_stiffness=5.0, bending_stiffness=3.0), frames)
+    b = bs.simulate(truth, frames)
+    assert np.array_equal(a["positions"], obs) and np.array_equal(b["positions"], obs)
+    assert np.abs(other["positions"] - obs).max() > 1e-3
+    half = bs.simulate(truth, [f0 + 2.5])["positions"][0]
+    two = bs.simulate(truth, [f0 + 2, f0 + 3])["positions"]
+    assert np.allclose(half, 0.5 * (two[0] + two[1]), atol=1e-12)
+    # the box holds the cloth up: the core model (no colliders) lets it fall through
+    from addon.core.physics.models import BlenderModel
+    from addon.core.physics import blender as B
+    from addon.core.observation.capture import load_capture
+    c = load_capture(cap)
+    core = BlenderModel(24).simulate(c.scenario, B.settings_row(B.check_settings(truth)))
+    assert np.abs(core.positions[0] - obs).max() > 0.01
+
+
+@pytest.mark.parametrize("name,msg", [("Nope", "no object named 'Nope'"), ("Table", "has no Cloth modifier")])
+def test_bad_objects_are_one_line_errors(scene, name, msg):
+    with pytest.raises(ClothFitError, match=msg):
+        BlendScene(scene[0], name)
+
+
+def test_driver_with_bpy_refuses_to_start_workers(scene):
+    """This process has imported bpy: spawned workers would fail with "No module named '_bpy'"."""
+    from addon.farm.scene import BlendSceneEvaluator
+    for kind in ("process", "ray"):
+        with pytest.raises(ClothFitError, match="imported bpy"):
+            BlendSceneEvaluator(scene[0], workers=1, executor=kind)
+    assert "bpy" in sys.modules
+
+
+# ---------------------------------------------------------------- fits, in processes without bpy
+
+@pytest.fixture(scope="module")
+def ray_fit(scene, tmp_path_factory):
+    pytest.importorskip("ray")
+    out = tmp_path_factory.mktemp("rayfit") / "fit.json"
+    tmp = tempfile.mkdtemp(prefix="cfray", dir="/tmp")
+    r = _cli(_fit_args(scene, out), CLOTHFIT_RAY_TMPDIR=tmp)
+    return r, out, tmp
+
+
+def test_fit_on_local_ray_writes_the_result_and_leaves_no_process(ray_fit):
+    r, out, tmp = ray_fit
+    assert r.returncode == 0, r.stderr[-2000:]
+    res = json.load(open(out))
+    assert res["backend"] == "blender" and res["executor"] == "ray" and res["workers"] == 2
+    assert res["evaluations"] == BUDGET and res["blender_evaluations"] == BUDGET and res["seconds"] > 0
+    assert res["scene"]["colliders"] == ["Table"] and res["scene"]["object"] == "Cloth"
+    assert set(res["blender_cloth"]) >= {"tension_stiffness", "mass", "time_scale", "quality"}
+    assert res["best_E_all"] is not None
+    assert _procs_with(tmp) == []          # Ray's processes of that session are gone
+
+
+def test_no_ray_fallback_gives_the_same_fit(scene, ray_fit, tmp_path):
+    """Without Ray: the spawned process pool, the same candidates and the same result."""
+    out = tmp_path / "fit.json"
+    r = _cli(_fit_args(scene, out), CLOTHFIT_NO_RAY="1")
+    assert r.returncode == 0, r.stderr[-2000:]
+    res = json.load(open(out))
+    assert res["executor"] == "process"
+    ray_res = json.load(open(ray_fit[1]))
+    assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
+
+
+KILL = r"""
+import json, os, signal, sys
+from addon.core.fitting.job import FitConfig, FitJob
+from addon.core.observation.capture import load_capture
+from addon.farm.scene import BlendSceneEvaluator
+blend, cap, f0, seed, pop, budget = sys.argv[1], sys.argv[2], float(sys.argv[3]), *map(int, sys.argv[4:7])
+ev = BlendSceneEvaluator(blend, frame_zero=f0, workers=2, executor="ray")
+pids = ev.executor.pids()
+state = {"batch": 0}
+def hook(ex):
+    state["batch"] += 1
+    if state["batch"] == 2:                 # the second generation's candidates are queued: kill one worker
+        os.kill(pids[1], signal.SIGKILL)
+ev.executor.after_submit = hook
+job = FitJob(load_capture(cap), FitConfig(evaluator="blender", max_evaluations=budget, population=pop, seed=seed),
+             evaluator=ev)
+res = job.run()
+after = ev.executor.pids()
+ev.close()
+print(json.dumps({"res": res, "pids": pids, "after": after}, default=float))
+"""
+
+
+def test_worker_killed_mid_fit_is_restarted_and_its_candidates_evaluated_again(scene, ray_fit):
+    pytest.importorskip("ray")
+    blend, cap, f0 = scene
+    tmp = tempfile.mkdtemp(prefix="cfray", dir="/tmp")
+    r = subprocess.run([sys.executable, "-c", KILL, blend, cap, str(f0), str(SEED), str(POP), str(BUDGET)], cwd=ROOT,
+                       env=_env(CLOTHFIT_RAY_TMPDIR=tmp, PYTHONPATH=ROOT), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    d = json.loads(r.stdout.strip().splitlines()[-1])
+    assert d["after"][0] == d["pids"][0] and d["after"][1] != d["pids"][1]     # worker 1 was replaced
+    res = d["res"]
+    assert res["evaluations"] == BUDGET and res["blender_evaluations"] == BUDGET
+    ray_res = json.load(open(ray_fit[1]))
+    assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
+    assert _procs_with(tmp) == []
+
+
+@pytest.mark.parametrize("extra,msg", [
+    (["--blend", "/nonexistent/x.blend"], "file not found"),
+    (["--object", "Table", "--executor", "process", "--workers", "1"], "has no Cloth modifier"),
+    (["--frame-zero", "100", "--executor", "process", "--workers", "1"], "outside the cloth cache"),
+])
+def test_bad_scene_input_is_one_line(scene, tmp_path, extra, msg):
+    args = _fit_args(scene, tmp_path / "f.json")
+    for k in range(0, len(extra), 2):               # later options win in argparse
+        args += extra[k:k + 2]
+    r = _cli(args, CLOTHFIT_NO_RAY="1")
+    assert r.returncode == 2, r.stderr[-2000:]
+    err = r.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and msg in err[0], r.stderr
+
+
+def test_executor_refuses_address_without_ray():
+    with pytest.raises(ClothFitError, match="needs Ray"):
+        executors.make_executor("x:y", (), 1, address="auto", kind="process")
