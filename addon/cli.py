@@ -330,7 +330,7 @@ def cmd_tables(a):
 
 def cmd_bench(a):
     from .core.studies.bench import run_bench
-    run_bench(a.json, quick=a.quick)
+    run_bench(a.json, quick=a.quick, only_blender_workers=a.blender_workers)
 
 
 def cmd_identifiability(a):
@@ -462,6 +462,9 @@ def build_parser():
     s = sub.add_parser("bench", help="speed figures")
     s.add_argument("--json", required=True)
     s.add_argument("--quick", action="store_true")
+    s.add_argument("--blender-workers", action="store_true",
+                   help="only Blender's solver as the fit's evaluator: evaluations/s with 1 and 2 Ray workers, "
+                        "Ray's start-up cost (needs bpy and ray)")
     s.set_defaults(fn=cmd_bench)
 
     s = sub.add_parser("identifiability", help="which Blender cloth settings silhouettes can identify "
