@@ -245,6 +245,34 @@ def cmd_fit(a):
     print(f"wrote {a.out}")
 
 
+def cmd_fit_many(a):
+    from dataclasses import asdict
+    from .core.fitting.job import FitConfig
+    from .core.observation.capture import load_capture
+    if a.workers is not None and a.workers < 1:
+        raise ClothFitError(f"--workers {a.workers}: must be at least 1")
+    configs = []
+    for c in a.captures:
+        cap = load_capture(c)                     # bad captures fail here, before any worker starts
+        cfg = FitConfig(train_cameras=_cams(cap, a.cameras), train_times=_times(a.times), optimizer=a.optimizer,
+                        seed=a.seed, max_evaluations=a.max_evaluations or D.FIT_EVALUATIONS,
+                        resolution=_res(a.resolution), cloth_mass=a.cloth_mass, population=a.population,
+                        model=_model_spec(a))
+        configs.append(asdict(cfg))
+    os.makedirs(a.out_dir, exist_ok=True)
+    t0 = time.time()
+    from .farm.tasks import fit_many
+    results, kind, workers = fit_many(a.captures, configs, a.workers, a.address, a.executor)
+    wall = time.time() - t0
+    from .core.fitting.job import _atomic_json
+    for i, (c, r) in enumerate(zip(a.captures, results)):
+        name = f"{i:03d}_{os.path.basename(os.path.normpath(c))}.json"
+        _atomic_json(os.path.join(a.out_dir, name), r)
+        print(f"{c}: E_sil {r['best_E_sil_mean_pct']:.3f} % after {r['evaluations']} evaluations -> "
+              f"{os.path.join(a.out_dir, name)}")
+    print(f"{len(results)} fits on {workers} {kind} worker(s) in {wall:.1f} s")
+
+
 def _names(spec):
     return [x.strip() for x in spec.split(",") if x.strip()] if spec else None
 
@@ -416,6 +444,23 @@ def build_parser():
                                     "the fixed vertex mass)")
     s.add_argument("--init", help="warm start from this result JSON (a blender or paper fit)")
     s.set_defaults(fn=cmd_fit)
+
+    s = sub.add_parser("fit-many", help="fit many captures in parallel (Ray actors, or processes without Ray)")
+    s.add_argument("captures", nargs="+")
+    s.add_argument("--out-dir", default="out/fits")
+    s.add_argument("--cameras")
+    s.add_argument("--times")
+    s.add_argument("--optimizer", default=D.DEFAULT_OPTIMIZER)
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--max-evaluations", type=int, default=None)
+    s.add_argument("--population", type=int, default=None)
+    s.add_argument("--resolution")
+    s.add_argument("--cloth-mass", type=float, default=None)
+    s.add_argument("--workers", type=int, default=None, help="worker processes (default: the cores)")
+    s.add_argument("--address", default=None, help="a running Ray cluster (auto, ray://host:port)")
+    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"])
+    _model_args(s)
+    s.set_defaults(fn=cmd_fit_many)
 
     s = sub.add_parser("export-blender-cloth", help="the Cloth modifier settings of a blender-model fit result")
     s.add_argument("result")
