@@ -156,6 +156,7 @@ from addon.farm.scene import BlendSceneEvaluator
 blend, cap, f0, seed, pop, budget = sys.argv[1], sys.argv[2], float(sys.argv[3]), *map(int, sys.argv[4:7])
 ev = BlendSceneEvaluator(blend, frame_zero=f0, workers=2, executor="ray")
 pids = ev.executor.pids()
+ips = ev.executor.node_ips()
 state = {"batch": 0}
 def hook(ex):
     state["batch"] += 1
@@ -167,7 +168,7 @@ job = FitJob(load_capture(cap), FitConfig(evaluator="blender", max_evaluations=b
 res = job.run()
 after = ev.executor.pids()
 ev.close()
-print(json.dumps({"res": res, "pids": pids, "after": after}, default=float))
+print(json.dumps({"res": res, "pids": pids, "after": after, "ips": ips}, default=float))
 """
 
 
@@ -179,6 +180,7 @@ def test_worker_killed_mid_fit_is_restarted_and_its_candidates_evaluated_again(s
                        env=_env(CLOTHFIT_RAY_TMPDIR=tmp, PYTHONPATH=ROOT), capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     d = json.loads(r.stdout.strip().splitlines()[-1])
+    assert d["ips"] == ["127.0.0.1"] * 3                   # Ray's local instance stays on the loopback address
     assert d["after"][0] == d["pids"][0] and d["after"][1] != d["pids"][1]     # worker 1 was replaced
     res = d["res"]
     assert res["evaluations"] == BUDGET and res["blender_evaluations"] == BUDGET

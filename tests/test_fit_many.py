@@ -46,3 +46,15 @@ def test_fit_many_bad_capture_is_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "addon", "fit-many", str(tmp_path / "nope")], cwd=ROOT,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "not found" in r.stderr
+
+
+def test_unreachable_cluster_address_is_one_line(caps):
+    import socket
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()                                       # nothing listens there now
+    r = subprocess.run([sys.executable, "-m", "addon", "fit-many", caps[0], "--address", f"127.0.0.1:{port}"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "cannot connect to the Ray cluster" in err[0], r.stderr

@@ -26,11 +26,8 @@ MAX_RESTARTS = 3          # a Ray actor killed mid-job is restarted this many ti
 def ray_available() -> bool:
     if os.environ.get("CLOTHFIT_NO_RAY") == "1":
         return False
-    try:
-        import ray  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    import importlib.util
+    return importlib.util.find_spec("ray") is not None
 
 
 def check_driver(what="Blender workers"):
@@ -39,6 +36,22 @@ def check_driver(what="Blender workers"):
         raise ClothFitError(f"this process has imported bpy, so the {what} it would start could not import it "
                             f"(No module named '_bpy'): run the fit from a process without bpy "
                             f"(python -m addon fit ...), or connect to a running Ray cluster started outside Blender")
+
+
+def check_address(address, timeout=3.0):
+    """A cluster address (``auto``, ``host:port``, ``ray://host:port``) whose port answers; else a
+    one-line error (Ray itself waits minutes on an unreachable address)."""
+    import socket
+    if address == "auto":
+        return
+    hostport = address.split("://", 1)[-1]
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        raise ClothFitError(f"--address {address!r}: expected auto, host:port or ray://host:port")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as e:
+        raise ClothFitError(f"cannot connect to the Ray cluster at {address}: {e.strerror or e}") from None
 
 
 def default_workers() -> int:
@@ -67,6 +80,10 @@ class _Host:
 
     def pid(self):
         return os.getpid()
+
+    def node_ip(self):
+        import ray
+        return ray.util.get_node_ip_address()
 
 
 def _unwrap(r):
@@ -113,6 +130,11 @@ class RayExecutor(Executor):
 
     def __init__(self, factory, args, workers=None, address=None):
         check_driver("Ray workers")
+        loopback = not address or address.split("://", 1)[-1].rpartition(":")[0] in ("127.0.0.1", "localhost")
+        if loopback and "ray" not in sys.modules:
+            # Ray turns a node address of 127.0.0.1 into the machine's own network address unless it runs
+            # as a single-machine instance (its Windows/macOS mode): keep a local instance on loopback only
+            os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
         import ray
         self.ray = ray
         self.address = address
@@ -124,6 +146,7 @@ class RayExecutor(Executor):
         if ray.is_initialized():
             self.own = False
         elif address:
+            check_address(address)
             try:
                 ray.init(address=address, include_dashboard=False, log_to_driver=False,
                          runtime_env={"py_modules": [ADDON_DIR]})
@@ -161,6 +184,10 @@ class RayExecutor(Executor):
 
     def pids(self):
         return self.ray.get([a.pid.remote() for a in self.actors])
+
+    def node_ips(self):
+        """The address every worker and the driver (last) use as their node's: 127.0.0.1 locally."""
+        return self.ray.get([a.node_ip.remote() for a in self.actors]) + [self.ray.util.get_node_ip_address()]
 
     def close(self):
         if self.ray is None:
