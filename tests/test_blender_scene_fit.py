@@ -14,7 +14,7 @@ import tempfile
 import numpy as np
 import pytest
 
-from blender_support import bpy, factory  # noqa: F401
+from blender_support import bpy, ensure_registered, factory  # noqa: F401
 
 from addon.blender import collider_scene as CS  # noqa: E402
 from addon.blender.scene_worker import BlendScene  # noqa: E402
@@ -207,3 +207,54 @@ def test_bad_scene_input_is_one_line(scene, tmp_path, extra, msg):
 def test_executor_refuses_address_without_ray():
     with pytest.raises(ClothFitError, match="needs Ray"):
         executors.make_executor("x:y", (), 1, address="auto", kind="process")
+
+
+# ---------------------------------------------------------------- the add-on's operators
+
+def _open(scene):
+    blend, cap, f0 = scene
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    ensure_registered()
+    sc = bpy.context.scene
+    obj = sc.objects["Cloth"]
+    bpy.context.view_layer.objects.active = obj
+    sc.clothfit.capture_dir = cap
+    return sc, obj
+
+
+def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_settings(scene, monkeypatch):
+    monkeypatch.setenv("CLOTHFIT_NO_RAY", "1")
+    sc, obj = _open(scene)
+    sc.clothfit.max_evaluations = 6
+    assert bpy.ops.clothfit.fit_scene_cloth(workers=2, frame_zero=scene[2]) == {"FINISHED"}
+    res = json.load(open(obj["clothfit_scene_fit_result"]))
+    assert res["evaluations"] >= 6 and not res["cancelled"]
+    assert res["backend"] == "blender" and res["executor"] == "process" and res["scene"]["object"] == "Cloth"
+    before = obj.modifiers["Cloth (Cloth Fit)"].settings.tension_stiffness
+    assert bpy.ops.clothfit.apply_scene_fit() == {"FINISHED"}
+    cs = obj.modifiers["Cloth (Cloth Fit)"].settings
+    for k in ("tension_stiffness", "bending_stiffness", "air_damping", "time_scale"):
+        assert getattr(cs, k) == pytest.approx(res["blender_cloth"][k], rel=1e-6)
+    assert cs.tension_stiffness != before
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def test_esc_stops_the_fit_and_keeps_the_best(scene, monkeypatch):
+    from addon.blender.scene_fit import SceneFitSession
+    monkeypatch.setenv("CLOTHFIT_NO_RAY", "1")
+    sc, obj = _open(scene)
+    s = SceneFitSession(sc, obj, scene[1], 3000, workers=2, frame_zero=scene[2], extra=["--population", "6"])
+    res = s.wait(sc, poll=lambda sess: sess.progress()[0] >= 12)
+    assert s.cancelled and res["cancelled"] and 12 <= res["evaluations"] < 3000
+    assert res["blender_cloth"]["tension_stiffness"] > 0
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def test_operator_without_a_cloth_is_a_one_line_error(scene):
+    sc, obj = _open(scene)
+    bpy.context.view_layer.objects.active = sc.objects["Table"]
+    with pytest.raises(RuntimeError, match="has no Cloth modifier"):
+        bpy.ops.clothfit.fit_scene_cloth()
+    with pytest.raises(RuntimeError, match="has no Cloth modifier"):
+        bpy.ops.clothfit.apply_scene_fit()
+    bpy.ops.wm.read_factory_settings(use_empty=True)

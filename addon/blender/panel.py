@@ -176,6 +176,12 @@ def draw_fitting(layout, scene, p):
         layout.operator("clothfit.fit", icon="PLAY")
     if p.fit_status:
         layout.label(text=p.fit_status)
+    obj = getattr(bpy.context, "active_object", None)
+    if obj is not None and any(m.type == "CLOTH" for m in obj.modifiers):
+        # the active cloth's own settings by Blender's solver (colliders and all), workers outside the UI
+        row = layout.row(align=True)
+        row.operator("clothfit.fit_scene_cloth", icon="MOD_CLOTH")
+        row.operator("clothfit.apply_scene_fit", text="Apply", icon="CHECKMARK")
 
 
 def draw_results(layout, scene, p):

@@ -10,9 +10,9 @@ import atexit
 
 import bpy
 
-from . import ops, panel, props
+from . import ops, panel, props, scene_fit
 
-CLASSES = props.CLASSES + ops.CLASSES + panel.CLASSES
+CLASSES = props.CLASSES + ops.CLASSES + scene_fit.CLASSES + panel.CLASSES
 _register_classes, _unregister_classes = bpy.utils.register_classes_factory(CLASSES)
 _state = {"registered": False, "atexit": False}
 
