@@ -341,9 +341,30 @@ def cmd_overlay(a):
 
 def cmd_paper(a):
     from .core.studies.experiment import run_paper
+    if a.workers is not None or a.address is not None:
+        return _paper_parallel(a)
     run_paper(a.json, quick=a.quick, out_dir=a.out, seed=a.seed, optimizer=a.optimizer,
               max_evaluations=a.max_evaluations, only=a.only, truth_dt_safety=a.truth_dt_safety,
               population=a.population, children=a.children, rig=a.rig)
+
+
+def _paper_parallel(a):
+    """``paper --workers N / --address``: the protocol's parts as tasks on Ray (or spawned processes)."""
+    from .core.fitting.job import _atomic_json
+    from .core.studies.experiment import format_tables
+    from .farm.tasks import PAPER_PARTS, paper_parts
+    parts = [p for p in (a.only or ",".join(PAPER_PARTS)).split(",") if p]
+    bad = [p for p in parts if p not in PAPER_PARTS]
+    if bad:
+        raise ClothFitError(f"--only: unknown part(s) {', '.join(bad)} (parts: {', '.join(PAPER_PARTS)})")
+    if a.workers is not None and a.workers < 1:
+        raise ClothFitError(f"--workers {a.workers}: must be at least 1")
+    kw = {"quick": a.quick, "seed": a.seed, "optimizer": a.optimizer, "max_evaluations": a.max_evaluations,
+          "truth_dt_safety": a.truth_dt_safety, "population": a.population, "children": a.children, "rig": a.rig}
+    out = paper_parts(parts, a.out, kw, a.workers, a.address, a.executor)
+    _atomic_json(a.json, out)
+    print(format_tables(out))
+    print(f"{len(parts)} part(s) on {out['workers']} {out['executor']} worker(s) in {out['total_seconds']:.1f} s; wrote {a.json}")
 
 
 def cmd_tables(a):
@@ -495,6 +516,10 @@ def build_parser():
     s.add_argument("--population", type=int, default=None, help="optimiser population (GA: MGG population)")
     s.add_argument("--children", type=int, default=None, help="GA: SPX children per family")
     s.add_argument("--rig", default=None, help="camera rig preset (default lab18)")
+    s.add_argument("--workers", type=int, default=None,
+                   help="run the parts (table1, fig8, table2, optimizers) in parallel on this many workers")
+    s.add_argument("--address", default=None, help="run the parts on a running Ray cluster (auto, ray://host:port)")
+    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"])
     s.add_argument("--truth-dt-safety", type=float, default=None,
                    help="time-step factor of the ground truth (default: the model's own; 0.125 = 4x finer truth, "
                         "i.e. a model mismatch the fit cannot remove)")

@@ -58,3 +58,23 @@ def test_unreachable_cluster_address_is_one_line(caps):
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1 and "cannot connect to the Ray cluster" in err[0], r.stderr
+
+
+def test_paper_parts_on_workers_equal_the_local_protocol(tmp_path, capsys):
+    """``paper --workers 2``: the parts run as tasks (here Ray, or the process pool without it), the
+    numbers are the local run's."""
+    from addon.core.studies.experiment import run_paper
+    r = subprocess.run([sys.executable, "-m", "addon", "paper", "--quick", "--only", "table1,fig8",
+                        "--max-evaluations", "20", "--workers", "2", "--json", str(tmp_path / "par.json"),
+                        "--out", str(tmp_path / "par")], cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "2 part(s) on 2" in r.stdout
+    par = json.load(open(tmp_path / "par.json"))
+    loc = run_paper(str(tmp_path / "loc.json"), quick=True, out_dir=str(tmp_path / "loc"), only="table1,fig8",
+                    max_evaluations=20)
+    capsys.readouterr()
+
+    def strip(rows):
+        return [{k: v for k, v in row.items() if "seconds" not in k} for row in rows]
+    assert strip(par["table1"]) == strip(loc["table1"]) and strip(par["fig8"]) == strip(loc["fig8"])
+    assert par["identifiable"] == loc["identifiable"]

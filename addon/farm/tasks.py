@@ -32,3 +32,41 @@ def fit_many(captures, configs, workers=None, address=None, executor="auto"):
     with make_executor(RUNNER, (), workers, address, executor) as ex:
         res = ex.map("fit", [(os.path.abspath(c), dict(cfg)) for c, cfg in zip(captures, configs)])
         return res, ex.kind, ex.workers
+
+
+PAPER_RUNNER = "addon.farm.tasks:PaperRunner"
+PAPER_PARTS = ("table1", "fig8", "table2", "optimizers")
+PART_KEYS = {"table1": ("table1", "identifiable"), "fig8": ("fig8",), "table2": ("table2",),
+             "optimizers": ("optimizers",)}
+
+
+class PaperRunner:
+    """Worker side: one part of the paper protocol (its own capture, synthesised from the seed)."""
+
+    def part(self, part, out_dir, kwargs: dict) -> dict:
+        import contextlib
+        import io
+        from ..core.studies.experiment import run_paper
+        sub = os.path.join(out_dir, f"part_{part}")
+        with contextlib.redirect_stdout(io.StringIO()):
+            res = run_paper(os.path.join(sub, "paper.json"), out_dir=sub, only=part, **kwargs)
+        res["worker_pid"] = os.getpid()
+        return res
+
+
+def paper_parts(parts, out_dir, kwargs, workers=None, address=None, executor="auto"):
+    """The paper protocol's parts run in parallel on the workers, merged into one result (each part
+    is the local run's ``paper --only PART`` with the same seed: the same numbers)."""
+    t0 = time.perf_counter()
+    with make_executor(PAPER_RUNNER, (), workers, address, executor) as ex:
+        res = ex.map("part", [(p, os.path.abspath(out_dir), dict(kwargs)) for p in parts])
+        kind, n = ex.kind, ex.workers
+    out = {k: v for k, v in res[0].items() if k not in sum(PART_KEYS.values(), ()) + ("total_seconds", "worker_pid")}
+    for p, r in zip(parts, res):
+        for k in PART_KEYS[p]:
+            if k in r:
+                out[k] = r[k]
+    out["parts"] = {p: {"seconds": r.get("total_seconds"), "worker_pid": r.get("worker_pid")} for p, r in zip(parts, res)}
+    out["executor"], out["workers"] = kind, n
+    out["total_seconds"] = time.perf_counter() - t0
+    return out
