@@ -207,9 +207,8 @@ class SceneParameters(BlenderParameters):
         fixed = _rescale(scene, self.m, bending)
         self.init_note = None
         if cfg.init:
-            from ..physics.models import BlenderModel as _BM
             res = load_init(cfg.init)
-            core = _BM(evaluator.fps, scene["quality"], bending)
+            core = BlenderModel(evaluator.fps, scene["quality"], bending)
             ini = settings_from_result(res, core, capture.scenario.grid)
             ini = _rescale(ini, self.m, bending)
             fixed.update({n: ini[n] for n in (tuple(cfg.free) if cfg.free else BLENDER_FREE[bending]) if n in ini})
