@@ -233,8 +233,9 @@ def _open(scene):
     return sc, obj
 
 
-def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_settings(scene, monkeypatch):
+def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_settings(scene, monkeypatch, tmp_path):
     monkeypatch.setenv("CLOTHFIT_NO_RAY", "1")
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))     # the operator's working directory
     sc, obj = _open(scene)
     sc.clothfit.max_evaluations = 6
     assert bpy.ops.clothfit.fit_scene_cloth(workers=2, frame_zero=scene[2]) == {"FINISHED"}
@@ -250,11 +251,12 @@ def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_se
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
-def test_esc_stops_the_fit_and_keeps_the_best(scene, monkeypatch):
+def test_esc_stops_the_fit_and_keeps_the_best(scene, monkeypatch, tmp_path):
     from addon.blender.scene_fit import SceneFitSession
     monkeypatch.setenv("CLOTHFIT_NO_RAY", "1")
     sc, obj = _open(scene)
-    s = SceneFitSession(sc, obj, scene[1], 3000, workers=2, frame_zero=scene[2], extra=["--population", "6"])
+    s = SceneFitSession(sc, obj, scene[1], 3000, workers=2, frame_zero=scene[2], extra=["--population", "6"],
+                        out_dir=str(tmp_path / "fit"))
     res = s.wait(sc, poll=lambda sess: sess.progress()[0] >= 12)
     assert s.cancelled and res["cancelled"] and 12 <= res["evaluations"] < 3000
     assert res["blender_cloth"]["tension_stiffness"] > 0
