@@ -3,7 +3,18 @@
 Used by the CLI (a loop with a progress bar), by the Blender modal operator (one step per timer
 tick) and by the experiment protocol. The job never loses the best result found so far: it is
 kept in memory at every step, written to the checkpoint (if a path is given) after every
-generation, and ``result()`` returns it whether the job finished, was cancelled or failed.
+generation (or every ``checkpoint_interval`` seconds, and always at the end), and ``result()``
+returns it whether the job finished, was cancelled or failed.
+
+A job stops (``stop_reason``) when the optimiser has converged by its own criteria
+("converged"), the evaluation budget is spent ("budget"), the target error is reached
+("target"), it is cancelled ("cancelled") or it failed ("error": e.g. every candidate exploded).
+
+A checkpoint records what it is a fit of (``identity()``: a hash of the capture's cameras, frame
+times and the training silhouettes; cameras, times, resolution, model, optimiser, population,
+seed, bounds...). ``FitJob.resume`` refuses a checkpoint whose identity differs from the job asked
+for, naming the differing fields; only the budget (``max_evaluations``) and the target may change.
+Checkpoints hold plain numbers only (no pickle) and are checked field by field when read.
 
 The model is the paper's sheet (default) or Blender's cloth (``FitConfig.model``); what is searched
 for each lives in ``parameters.py``. Identifiability (SPEC 2): the motion depends on ratios to the
@@ -15,9 +26,12 @@ takes, with the scene frame rate they belong to).
 """
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import json
 import math
 import os
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 
@@ -27,7 +41,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..physics.paper import identifiable, identifiable_errors
 from .objective import SilhouetteObjective
-from .optimise import make_optimizer
+from .optimise import canonical_name, make_optimizer, optimizer_from_state
 from .parameters import PaperParameters, make_parameters
 
 
@@ -52,14 +66,93 @@ class FitConfig:
     free: list | None = None              # blender: settings to search (default parameters.BLENDER_FREE)
     fixed: dict | None = None             # blender: settings held at given values
     init: str | None = None               # a result JSON to start from (warm start)
+    restarts: int = D.FIT_RESTARTS        # cma-es: IPOP restarts after convergence (population doubled each)
 
     @classmethod
     def from_dict(cls, d):
+        if not isinstance(d, dict):
+            raise ClothFitError(f"fit config: expected an object, got {type(d).__name__}")
         known = {f for f in cls.__dataclass_fields__}
         bad = set(d) - known
         if bad:
             raise ClothFitError(f"fit config: unknown keys {sorted(bad)}")
-        return cls(**d)
+        return cls(**d).checked()
+
+    def checked(self) -> "FitConfig":
+        """The config with every value checked (one-line ClothFitError naming the first bad one)."""
+        def intval(name, lo, hi=10 ** 12, none_ok=True):
+            v = getattr(self, name)
+            if v is None and none_ok:
+                return
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+                raise ClothFitError(f"fit config: {name} must be an integer in {lo}..{hi}, got {v!r}")
+            setattr(self, name, int(v))
+
+        def numval(name, lo, hi=math.inf, none_ok=True):
+            v = getattr(self, name)
+            if v is None and none_ok:
+                return
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(v) \
+                    or not lo <= v <= hi:
+                raise ClothFitError(f"fit config: {name} must be a finite number in [{lo}, {hi}], got {v!r}")
+
+        def intlist(name):
+            v = getattr(self, name)
+            if v is not None and (not isinstance(v, (list, tuple)) or not all(
+                    isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in v)):
+                raise ClothFitError(f"fit config: {name} must be a list of integers, got {v!r}")
+
+        intval("seed", 0, 2 ** 63 - 1, none_ok=False)
+        intval("max_evaluations", 1, none_ok=False)
+        intval("population", 2, 10 ** 6)
+        intval("children", 1, 10 ** 6)
+        intval("restarts", 0, 20, none_ok=False)
+        intval("quality", 1, 80)
+        numval("target_error", 0.0)
+        numval("cloth_mass", 1e-12)
+        numval("fps", 1e-3, 1e4)
+        intlist("train_cameras")
+        tt = self.train_times
+        if tt is not None and (not isinstance(tt, (list, tuple)) or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in tt)):
+            raise ClothFitError(f"fit config: train_times must be a list of finite numbers, got {tt!r}")
+        if not isinstance(self.optimizer, str):
+            raise ClothFitError(f"fit config: optimizer must be a name, got {self.optimizer!r}")
+        canonical_name(self.optimizer)
+        if self.resolution is not None:
+            check_resolution(self.resolution, "fit config: resolution")
+        if self.backend not in ("auto", "numba", "numpy"):
+            raise ClothFitError(f"fit config: unknown backend {self.backend!r} (numba, numpy, auto)")
+        for name in ("bounds", "fixed"):
+            v = getattr(self, name)
+            if v is not None and not isinstance(v, dict):
+                raise ClothFitError(f"fit config: {name} must be an object, got {v!r}")
+        if self.free is not None and (not isinstance(self.free, (list, tuple))
+                                      or not all(isinstance(x, str) for x in self.free)):
+            raise ClothFitError(f"fit config: free must be a list of setting names, got {self.free!r}")
+        for name in ("bending_model", "init"):
+            v = getattr(self, name)
+            if v is not None and not isinstance(v, str):
+                raise ClothFitError(f"fit config: {name} must be a string, got {v!r}")
+        if self.model is not None and not isinstance(self.model, (str, dict)):
+            raise ClothFitError(f"fit config: model must be a name or a model object, got {self.model!r}")
+        return self
+
+
+def check_resolution(res, what="resolution"):
+    """(H, W) as two positive integers within the size limits."""
+    try:
+        h, w = res
+        ok = all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in (h, w))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ClothFitError(f"{what} {res!r} must be two integers (height, width)")
+    h, w = int(h), int(w)
+    if not (0 < h <= D.MAX_IMAGE_SIDE and 0 < w <= D.MAX_IMAGE_SIDE and h * w <= D.MAX_FIT_PIXELS):
+        raise ClothFitError(f"{what} {h}x{w} must be positive, at most {D.MAX_IMAGE_SIDE} per side and "
+                            f"{D.MAX_FIT_PIXELS} pixels in all")
+    return [h, w]
 
 
 def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -85,20 +178,46 @@ def load_observed(capture, cams, fidx, resolution=None):
     cameras = [capture.cameras[c] for c in cams]
     observed, ignore = capture.load_observations(cams, fidx)
     if resolution is not None:
-        h, w = int(resolution[0]), int(resolution[1])
-        if h <= 0 or w <= 0:
-            raise ClothFitError(f"fit resolution {resolution} must be positive")
+        h, w = check_resolution(resolution, "fit resolution")
         cameras = [c.resized(h, w) for c in cameras]
         observed = [[resample_silhouette(o, h, w) for o in oc] for oc in observed]
         ignore = [[resample_ignore(g, h, w) for g in gc] for gc in ignore]
     return cameras, observed, ignore
 
 
+STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
+CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
+CHECKPOINT_VERSION = 2
+CHECKPOINT_KEYS = ("format", "version", "identity", "config", "capture", "optimizer_state", "elapsed", "exploded",
+                   "finished", "cancelled", "stop_reason", "error", "result")
+MAX_CHECKPOINT_BYTES = 64 * 1024 * 1024
+
+
+def capture_hash(capture, cam_indices, frame_indices, observed) -> str:
+    """sha256 of what a fit sees of a capture: every camera (name, size, K, R, t, dist), the frame
+    times, the scenario, and the training silhouettes (as loaded, before any resampling)."""
+    h = hashlib.sha256()
+    h.update(json.dumps({"cameras": [c.to_dict() for c in capture.cameras],
+                         "frame_times": [float(t) for t in capture.frame_times],
+                         "scenario": capture.scenario.to_dict(),
+                         "train": [list(map(int, cam_indices)), list(map(int, frame_indices))]},
+                        sort_keys=True, default=_default).encode())
+    for oc in observed:
+        for o in oc:
+            o = np.asarray(o, dtype=bool)
+            h.update(np.asarray(o.shape, dtype=np.int64).tobytes())
+            h.update(np.packbits(o).tobytes())
+    return h.hexdigest()
+
+
 class FitJob:
-    def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None):
+    def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None,
+                 checkpoint_interval: float = 0.0):
         self.capture = capture
-        self.config = cfg = config or FitConfig()
+        self.config = cfg = (config or FitConfig()).checked()
         self.checkpoint = checkpoint
+        self.checkpoint_interval = float(checkpoint_interval)
+        self._last_save = -math.inf
         ncam = len(capture.cameras)
         cams = list(range(ncam)) if cfg.train_cameras is None else [int(c) for c in cfg.train_cameras]
         for c in cams:
@@ -106,14 +225,19 @@ class FitJob:
                 raise ClothFitError(f"training camera index {c} outside 0..{ncam - 1}")
         if not cams:
             raise ClothFitError("no training camera selected")
+        if len(set(cams)) != len(cams):
+            raise ClothFitError(f"training cameras {cams} name a camera twice")
         times = list(capture.frame_times) if cfg.train_times is None else list(cfg.train_times)
         if not times:
             raise ClothFitError("no training frame selected")
         fidx = [capture.frame_index(t) for t in times]
+        if len(set(fidx)) != len(fidx):
+            raise ClothFitError(f"training times {times} name a frame twice")
         self.train_cameras = cams
         self.train_frames = fidx
         self.train_times = [float(capture.frame_times[i]) for i in fidx]
         cameras, observed, ignore = load_observed(capture, cams, fidx, cfg.resolution)
+        self.capture_hash = capture_hash(capture, cams, fidx, observed)
         self.scenario = capture.scenario.with_frames(self.train_times)
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
         self.par = make_parameters(capture, cfg)
@@ -121,25 +245,53 @@ class FitJob:
                                              model=self.par.model, ignore=ignore)
         self.m, self.m_source = self.par.m, self.par.m_source
         self.space = self.par.space
-        kw = {}
-        is_cma = cfg.optimizer.lower() in ("cma", "cma-es")
+        self.optimizer_name = canonical_name(cfg.optimizer)
+        is_cma = self.optimizer_name == "cma-es"
+        tolfun = D.FIT_TOLFUN_PER_IMAGE * self.objective.n_images
+        kw = {"tolx": D.FIT_TOLX, "tolfun": tolfun}
         if self.par.initial is not None:          # warm start: from the given result, a closer search
             kw["initial"] = self.par.initial
             if is_cma:
                 kw["sigma0"] = D.WARM_START_SIGMA
-        if cfg.population:
-            kw["popsize" if is_cma else "population"] = cfg.population
-        elif not is_cma:
-            kw["population"] = D.FIT_GA_POPULATION
-        if not is_cma:
-            kw["children"] = cfg.children or D.FIT_GA_CHILDREN
-        self.opt = make_optimizer(cfg.optimizer, self.space, cfg.seed, **kw)
+        if is_cma:
+            kw["restarts"] = cfg.restarts
+            if cfg.population is not None:
+                kw["popsize"] = cfg.population
+        else:
+            kw["population"] = D.FIT_GA_POPULATION if cfg.population is None else cfg.population
+            kw["children"] = D.FIT_GA_CHILDREN if cfg.children is None else cfg.children
+            kw["stall_evaluations"] = D.FIT_GA_STALL
+        self.opt = make_optimizer(self.optimizer_name, self.space, cfg.seed, **kw)
         self.started = time.time()
         self.elapsed = 0.0
         self.finished = False
         self.cancelled = False
         self.error = None
+        self.stop_reason = None
         self.exploded = 0
+
+    # ------------------------------------------------------------- identity
+    def identity(self) -> dict:
+        """What this job is a fit of: a checkpoint is only resumed by a job with the same identity."""
+        opt = self.opt
+        ident = {
+            "capture_hash": self.capture_hash,
+            "cameras": [self.capture.cameras[c].name for c in self.train_cameras],
+            "camera_indices": list(self.train_cameras),
+            "times": list(self.train_times),
+            "resolution": None if self.config.resolution is None else [int(x) for x in self.config.resolution],
+            "model": self.par.model.to_dict(),
+            "fixed": getattr(self.par, "fixed", None),
+            "mass": float(self.m),
+            "optimizer": self.optimizer_name,
+            "population": int(getattr(opt, "popsize", getattr(opt, "population", 0))),
+            "children": getattr(opt, "children", None),
+            "restarts": getattr(opt, "restarts", None),
+            "seed": int(self.config.seed),
+            "bounds": self.space.state_dict(),
+            "initial": None if self.par.initial is None else np.asarray(self.par.initial).tolist(),
+        }
+        return json.loads(json.dumps(ident, default=_default))
 
     # ------------------------------------------------------------- mapping
     def to_params(self, X):
@@ -173,8 +325,26 @@ class FitJob:
             return self.par.params(self.opt.best_x)
         return self.par.settings(self.opt.best_x)
 
+    def _update_stop(self):
+        """Set ``finished`` and ``stop_reason`` from the state after a generation."""
+        if self.finished:
+            return
+        n_img = self.objective.n_images
+        if self.opt.best_x is None and self.evaluations >= D.FIT_EXPLODED_LIMIT:
+            self.error = (f"every one of the {self.evaluations} candidates tried made the simulation explode or "
+                          f"fail: check the capture's scenario (settle_time, gravity, cloth size) and the bounds")
+            self.stop_reason = "error"
+        elif self.config.target_error is not None and self.best_error / n_img <= self.config.target_error:
+            self.stop_reason = "target"
+        elif self.opt.stopped:
+            self.stop_reason = "converged"
+        elif self.evaluations >= self.config.max_evaluations:
+            self.stop_reason = "budget"
+        self.finished = self.stop_reason is not None
+
     def step(self) -> bool:
-        """Run one generation. Returns False once the job is finished (budget, target or cancel)."""
+        """Run one generation. Returns False once the job is finished (converged, budget, target,
+        cancelled or failed)."""
         if self.finished:
             return False
         t0 = time.time()
@@ -183,28 +353,42 @@ class FitJob:
         self.exploded += int(np.sum(~np.isfinite(f)))
         self.opt.tell(X, f)
         self.elapsed += time.time() - t0
-        n_img = self.objective.n_images
-        if self.evaluations >= self.config.max_evaluations:
-            self.finished = True
-        if self.config.target_error is not None and self.best_error / n_img <= self.config.target_error:
-            self.finished = True
-        if self.checkpoint:
+        self._update_stop()
+        if self.checkpoint and (self.finished or time.monotonic() - self._last_save >= self.checkpoint_interval):
             self.save_checkpoint(self.checkpoint)
         return not self.finished
 
     def run(self, callback=None):
-        while self.step():
-            if callback is not None and callback(self):
-                self.cancel()
-                break
+        try:
+            while self.step():
+                if callback is not None and callback(self):
+                    self.cancel()
+                    break
+        except ClothFitError as e:
+            self.fail(str(e))
+            raise
+        except Exception as e:
+            self.fail(f"{type(e).__name__}: {e}")
+            raise
         return self.result()
 
     def cancel(self):
         """Stop; the best result so far is kept (and written to the checkpoint)."""
         self.cancelled = True
+        if not self.finished:
+            self.stop_reason = "cancelled"
         self.finished = True
         if self.checkpoint:
             self.save_checkpoint(self.checkpoint)
+
+    def fail(self, message: str):
+        """Stop because of an error; the best so far is kept (and written to the checkpoint)."""
+        self.error = str(message)
+        self.stop_reason = "error"
+        self.finished = True
+        if self.checkpoint:
+            with contextlib.suppress(ClothFitError):
+                self.save_checkpoint(self.checkpoint)
 
     # --------------------------------------------------------------- output
     def result(self) -> dict:
@@ -213,12 +397,17 @@ class FitJob:
         res = {
             "format": "silhouette-cloth-fit/result", "version": 1,
             "capture": os.path.abspath(self.capture.root),
+            "capture_hash": self.capture_hash,
             "optimizer": self.config.optimizer, "seed": self.config.seed,
             "train_cameras": [self.capture.cameras[c].name for c in self.train_cameras],
             "train_camera_indices": self.train_cameras,
             "train_times": self.train_times,
             "resolution": self.config.resolution,
             "evaluations": self.evaluations, "generations": self.generation,
+            "max_evaluations": self.config.max_evaluations,
+            "stop_reason": self.stop_reason,
+            "converged_by": list(getattr(self.opt, "run_stops", None) or
+                                 ([self.opt.stop_reason] if getattr(self.opt, "stop_reason", None) else [])),
             "exploded_candidates": self.exploded,
             "best_E_all": _finite(self.best_error), "best_E_sil_mean_pct": _finite(100.0 * self.best_error / n_img),
             "n_train_images": n_img,
@@ -235,55 +424,207 @@ class FitJob:
             res.update(self.par.describe(self.opt.best_x))
         gt = (self.capture.meta or {}).get("true_params")
         if gt and bp and isinstance(self.par, PaperParameters):
-            res["true_params"] = gt
-            res["true_identifiable"] = identifiable(gt)
-            res["identifiable_error_pct"] = identifiable_errors(bp, gt)
+            # the capture's own record of its truth: free-form metadata, never a reason to lose the result
+            from ..physics.paper import Params
+            try:
+                truth = Params.from_dict(gt, "capture meta.true_params").as_dict()
+            except ClothFitError as e:
+                res["true_params_ignored"] = str(e)
+            else:
+                res["true_params"] = truth
+                res["true_identifiable"] = identifiable(truth)
+                est, tru = identifiable(bp), identifiable(truth)
+                res["identifiable_error_pct"] = {k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None)
+                                                 for k in est}
         return res
 
     def save_result(self, path):
-        _atomic_json(path, self.result())
+        atomic_json(path, self.result())
+
+    def checkpoint_dict(self) -> dict:
+        return {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "identity": self.identity(),
+                "config": asdict(self.config), "capture": os.path.abspath(self.capture.root),
+                "optimizer_state": self.opt.state_dict(), "elapsed": self.elapsed,
+                "exploded": self.exploded, "finished": self.finished, "cancelled": self.cancelled,
+                "stop_reason": self.stop_reason, "error": self.error, "result": self.result()}
 
     def save_checkpoint(self, path):
-        _atomic_json(path, {"config": asdict(self.config), "capture": os.path.abspath(self.capture.root),
-                            "optimizer_state": self.opt.state_dict(), "elapsed": self.elapsed,
-                            "exploded": self.exploded, "finished": self.finished, "cancelled": self.cancelled,
-                            "result": self.result()})
+        atomic_json(path, self.checkpoint_dict())
+        self._last_save = time.monotonic()
 
     @classmethod
-    def resume(cls, path, capture=None):
-        """Continue a job from its checkpoint (same capture, same config)."""
+    def resume(cls, path, capture=None, config: FitConfig | None = None, checkpoint_interval: float = 0.0):
+        """Continue a job from its checkpoint. ``config`` is the fit asked for now (default: the
+        checkpoint's own); a checkpoint of another fit (another capture, cameras, times, resolution,
+        model, optimiser, population, seed, bounds...) is refused naming the differing fields. The
+        budget (``max_evaluations``) and the target may differ."""
         from ..observation.capture import load_capture
-        from .optimise import CMAES, SPXMGG  # noqa: F401
-        try:
-            with open(path) as f:
-                ck = json.load(f)
-        except FileNotFoundError:
-            raise ClothFitError(f"checkpoint not found: {path}") from None
-        except json.JSONDecodeError as e:
-            raise ClothFitError(f"checkpoint {path} is corrupt: {e}") from None
+        ck = read_checkpoint(path)
+        saved_cfg = FitConfig.from_dict(ck["config"])
+        if config is None:
+            config = saved_cfg
         cap = capture or load_capture(ck["capture"])
-        job = cls(cap, FitConfig.from_dict(ck["config"]), checkpoint=path)
-        job.opt = type(job.opt).from_state(ck["optimizer_state"])
-        job.elapsed = ck.get("elapsed", 0.0)
-        job.exploded = ck.get("exploded", 0)
+        job = cls(cap, config, checkpoint=path, checkpoint_interval=checkpoint_interval)
+        diff = identity_diff(ck["identity"], job.identity())
+        if diff:
+            raise ClothFitError(f"checkpoint {path} is of another fit ({'; '.join(diff)}): resume with the same "
+                                f"capture and options, or start afresh with --force or another --out")
+        opt = optimizer_from_state(ck["optimizer_state"])
+        mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, getattr(job.opt, "popsize", None),
+                getattr(job.opt, "population", None), getattr(job.opt, "children", None),
+                getattr(job.opt, "restarts", None))
+        theirs = (type(opt), opt.space.state_dict(), opt.seed, getattr(opt, "popsize", None),
+                  getattr(opt, "population", None), getattr(opt, "children", None), getattr(opt, "restarts", None))
+        if mine != theirs:
+            raise ClothFitError(f"checkpoint {path}: its optimiser state does not match its recorded fit "
+                                f"(optimiser, bounds, seed or population differ)")
+        job.opt = opt
+        job.elapsed = ck["elapsed"]
+        job.exploded = ck["exploded"]
         job.finished = False
         job.cancelled = False
-        if job.evaluations >= job.config.max_evaluations:
-            job.finished = True
+        job._update_stop()
         return job
+
+
+def identity_diff(saved, now) -> list:
+    """Human-readable differences between two ``identity()`` dicts."""
+    if not isinstance(saved, dict):
+        return ["it records no identity"]
+    out = []
+    for k in sorted(set(saved) | set(now)):
+        a, b = saved.get(k, "<missing>"), now.get(k, "<missing>")
+        if a != b:
+            out.append(f"{k}: checkpoint {_short(a)}, now {_short(b)}")
+    return out
+
+
+def _short(v, limit=80):
+    s = json.dumps(v, default=str) if not isinstance(v, str) else v
+    return s if len(s) <= limit else s[:limit - 3] + "..."
+
+
+def read_checkpoint(path) -> dict:
+    """A checkpoint's JSON, checked at the top level (the optimiser state is checked by the optimiser)."""
+    path = os.fspath(path)
+    try:
+        if os.path.isdir(path):
+            raise ClothFitError(f"checkpoint {path} is a directory")
+        with open(path, "rb") as f:
+            raw = f.read(MAX_CHECKPOINT_BYTES + 1)
+    except FileNotFoundError:
+        raise ClothFitError(f"checkpoint not found: {path}") from None
+    except OSError as e:
+        raise ClothFitError(f"checkpoint {path}: cannot read it ({e.strerror or e})") from None
+    if len(raw) > MAX_CHECKPOINT_BYTES:
+        raise ClothFitError(f"checkpoint {path} is larger than {MAX_CHECKPOINT_BYTES} bytes: not a checkpoint")
+    try:
+        ck = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+        raise ClothFitError(f"checkpoint {path} is corrupt: {str(e).splitlines()[0]}") from None
+    if not isinstance(ck, dict):
+        raise ClothFitError(f"checkpoint {path} is corrupt: expected a JSON object")
+    if ck.get("format") != CHECKPOINT_FORMAT:
+        raise ClothFitError(f"checkpoint {path}: 'format' is {ck.get('format')!r}, expected {CHECKPOINT_FORMAT!r} "
+                            f"(a checkpoint of an older version cannot be resumed: start afresh with --force)")
+    if ck.get("version") != CHECKPOINT_VERSION:
+        raise ClothFitError(f"checkpoint {path}: version {ck.get('version')!r} is not supported "
+                            f"(this reader knows version {CHECKPOINT_VERSION})")
+    unknown = sorted(set(ck) - set(CHECKPOINT_KEYS))
+    missing = [k for k in CHECKPOINT_KEYS if k not in ck]
+    if unknown or missing:
+        raise ClothFitError(f"checkpoint {path}: " + ", ".join(
+            x for x in (f"unknown fields {unknown}" if unknown else "", f"missing fields {missing}" if missing else "")
+            if x))
+    for k in ("identity", "config", "optimizer_state"):
+        if not isinstance(ck[k], dict):
+            raise ClothFitError(f"checkpoint {path}: '{k}' must be an object")
+    if not isinstance(ck["capture"], str) or not ck["capture"]:
+        raise ClothFitError(f"checkpoint {path}: 'capture' must be a path")
+    e = ck["elapsed"]
+    if isinstance(e, bool) or not isinstance(e, (int, float)) or not math.isfinite(e) or e < 0:
+        raise ClothFitError(f"checkpoint {path}: 'elapsed' must be a number >= 0")
+    x = ck["exploded"]
+    if isinstance(x, bool) or not isinstance(x, int) or x < 0:
+        raise ClothFitError(f"checkpoint {path}: 'exploded' must be an integer >= 0")
+    for k in ("finished", "cancelled"):
+        if not isinstance(ck[k], bool):
+            raise ClothFitError(f"checkpoint {path}: '{k}' must be true or false")
+    if ck["stop_reason"] is not None and ck["stop_reason"] not in STOP_REASONS:
+        raise ClothFitError(f"checkpoint {path}: 'stop_reason' {ck['stop_reason']!r} is not one of {STOP_REASONS}")
+    ck["elapsed"] = float(e)
+    return ck
 
 
 def _finite(x):
     return float(x) if math.isfinite(x) else None
 
 
-def _atomic_json(path, obj):
+def atomic_json(path, obj):
+    """Write JSON safely: a new unique temporary file next to ``path`` (created exclusively, so a
+    planted file or symlink is never followed), flushed and fsynced, then renamed over ``path``
+    (rename replaces a symlink at ``path`` itself, never its target). Errors are one line."""
+    try:
+        text = json.dumps(obj, indent=1, default=_default, allow_nan=False)
+    except (TypeError, ValueError) as e:
+        raise ClothFitError(f"cannot write {path}: the data is not strict JSON ({e})") from None
+    atomic_write(path, (text + "\n").encode("utf-8"))
+
+
+def atomic_write(path, data: bytes):
+    path = os.fspath(path)
     d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        json.dump(obj, f, indent=1, default=_default)
-    os.replace(tmp, path)
+    base = os.path.basename(path)
+    if not base:
+        raise ClothFitError(f"cannot write {path!r}: not a file name")
+    if os.path.isdir(path) and not os.path.islink(path):
+        raise ClothFitError(f"cannot write {path}: it is a directory")
+    tmp = None
+    try:
+        os.makedirs(d, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=".tmp", dir=d)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as e:
+        raise ClothFitError(f"cannot write {path}: {e.strerror or e}") from None
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+
+
+_atomic_json = atomic_json
+
+
+@contextlib.contextmanager
+def exclusive_lock(path):
+    """Hold an exclusive advisory lock on ``path + '.lock'`` (POSIX ``flock``; released when the
+    process ends, even by kill -9). Another holder -> ClothFitError at once."""
+    lock_path = os.fspath(path) + ".lock"
+    try:
+        import fcntl
+    except ImportError:           # Windows: no advisory lock; the unique temp files still keep files whole
+        yield
+        return
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        os.makedirs(os.path.dirname(os.path.abspath(lock_path)), exist_ok=True)
+        fd = os.open(lock_path, flags, 0o644)
+    except OSError as e:
+        raise ClothFitError(f"cannot create the lock file {lock_path}: {e.strerror or e}") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise ClothFitError(f"another fit is writing {path} (it holds {lock_path}): wait for it, or "
+                                f"choose another --out") from None
+        yield
+    finally:
+        os.close(fd)
 
 
 def _default(o):
