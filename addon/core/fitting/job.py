@@ -31,7 +31,6 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 import time
 from dataclasses import asdict, dataclass
 
@@ -39,7 +38,9 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..physics.paper import identifiable, identifiable_errors
+from ..physics.paper import identifiable
+from ..safeio import atomic_json as safe_atomic_json
+from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from .objective import SilhouetteObjective
 from .optimise import canonical_name, make_optimizer, optimizer_from_state
 from .parameters import PaperParameters, make_parameters
@@ -561,70 +562,11 @@ def _finite(x):
 
 
 def atomic_json(path, obj):
-    """Write JSON safely: a new unique temporary file next to ``path`` (created exclusively, so a
-    planted file or symlink is never followed), flushed and fsynced, then renamed over ``path``
-    (rename replaces a symlink at ``path`` itself, never its target). Errors are one line."""
-    try:
-        text = json.dumps(obj, indent=1, default=_default, allow_nan=False)
-    except (TypeError, ValueError) as e:
-        raise ClothFitError(f"cannot write {path}: the data is not strict JSON ({e})") from None
-    atomic_write(path, (text + "\n").encode("utf-8"))
-
-
-def atomic_write(path, data: bytes):
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    base = os.path.basename(path)
-    if not base:
-        raise ClothFitError(f"cannot write {path!r}: not a file name")
-    if os.path.isdir(path) and not os.path.islink(path):
-        raise ClothFitError(f"cannot write {path}: it is a directory")
-    tmp = None
-    try:
-        os.makedirs(d, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=".tmp", dir=d)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-        tmp = None
-    except OSError as e:
-        raise ClothFitError(f"cannot write {path}: {e.strerror or e}") from None
-    finally:
-        if tmp is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+    """Checkpoints and results: strict JSON (no NaN), written by ``safeio.atomic_json``."""
+    safe_atomic_json(path, obj, strict=True, default=_default)
 
 
 _atomic_json = atomic_json
-
-
-@contextlib.contextmanager
-def exclusive_lock(path):
-    """Hold an exclusive advisory lock on ``path + '.lock'`` (POSIX ``flock``; released when the
-    process ends, even by kill -9). Another holder -> ClothFitError at once."""
-    lock_path = os.fspath(path) + ".lock"
-    try:
-        import fcntl
-    except ImportError:           # Windows: no advisory lock; the unique temp files still keep files whole
-        yield
-        return
-    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
-    try:
-        os.makedirs(os.path.dirname(os.path.abspath(lock_path)), exist_ok=True)
-        fd = os.open(lock_path, flags, 0o644)
-    except OSError as e:
-        raise ClothFitError(f"cannot create the lock file {lock_path}: {e.strerror or e}") from None
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            raise ClothFitError(f"another fit is writing {path} (it holds {lock_path}): wait for it, or "
-                                f"choose another --out") from None
-        yield
-    finally:
-        os.close(fd)
 
 
 def _default(o):

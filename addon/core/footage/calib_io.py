@@ -65,7 +65,7 @@ import re
 import numpy as np
 
 from ..errors import ClothFitError
-from ..observation.camera import Camera, load_cameras, save_cameras
+from ..observation.camera import Camera, check_camera_name, check_image_size, load_cameras, save_cameras
 
 _K_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsic", "intrinsic_matrix", "intrinsics", "M")
 _D_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "distortion", "dist", "D")
@@ -174,11 +174,9 @@ def _image_size(d, where, width, height):
         raise ClothFitError(f"{where}: no image size (image_width/image_height or image_size); give width and height")
     try:
         w, h = int(round(float(w))), int(round(float(h)))
-    except (TypeError, ValueError):
-        raise ClothFitError(f"{where}: image size {w!r} x {h!r} is not numeric") from None
-    if w <= 0 or h <= 0:
-        raise ClothFitError(f"{where}: image size {w} x {h} must be positive")
-    return w, h
+    except (TypeError, ValueError, OverflowError):
+        raise ClothFitError(f"{where}: image size {w!r} x {h!r} is not a finite number") from None
+    return check_image_size(w, h, where)
 
 
 def _camera_from_mapping(d: dict, name: str, where: str, width=None, height=None) -> Camera:
@@ -258,7 +256,10 @@ def read_opencv_dir(folder: str, width: int | None = None, height: int | None = 
 
 
 def _check_unique(cams, where):
+    """Names are checked (one plain path component each, unique) before any of them is used."""
     names = [c.name for c in cams]
+    for n in names:
+        check_camera_name(n, where)
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise ClothFitError(f"{where}: camera names are not unique: {', '.join(dup)}")

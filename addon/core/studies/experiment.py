@@ -208,10 +208,8 @@ def _fmt_id(e):
 
 
 def _dump(path, obj):
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    with open(path + ".tmp", "w") as f:
-        json.dump(obj, f, indent=1)
-    os.replace(path + ".tmp", path)
+    from ..safeio import atomic_json
+    atomic_json(path, obj)
 
 
 def format_tables(out) -> str:
