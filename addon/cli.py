@@ -511,7 +511,7 @@ def run_subtool(argv):
 DEBUG_ENV = "CLOTHFIT_DEBUG"
 
 
-def _one_line(text, limit=400):
+def _one_line(text, limit=1500):
     text = " ".join(str(text).split())
     return text if len(text) <= limit else text[:limit - 3] + "..."
 

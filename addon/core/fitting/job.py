@@ -194,20 +194,29 @@ CHECKPOINT_KEYS = ("format", "version", "identity", "config", "capture", "optimi
 MAX_CHECKPOINT_BYTES = 64 * 1024 * 1024
 
 
-def capture_hash(capture, cam_indices, frame_indices, observed) -> str:
-    """sha256 of what a fit sees of a capture: every camera (name, size, K, R, t, dist), the frame
-    times, the scenario, and the training silhouettes (as loaded, before any resampling)."""
+def capture_hash(capture) -> str:
+    """sha256 of a capture's cameras (name, size, K, R, t, dist), frame times and scenario."""
+    return hashlib.sha256(json.dumps({"cameras": [c.to_dict() for c in capture.cameras],
+                                      "frame_times": [float(t) for t in capture.frame_times],
+                                      "scenario": capture.scenario.to_dict()},
+                                     sort_keys=True, default=_default).encode()).hexdigest()
+
+
+def silhouettes_hash(observed, ignore=None) -> str:
+    """sha256 of the training silhouettes and their ignore masks (as fitted), in order."""
     h = hashlib.sha256()
-    h.update(json.dumps({"cameras": [c.to_dict() for c in capture.cameras],
-                         "frame_times": [float(t) for t in capture.frame_times],
-                         "scenario": capture.scenario.to_dict(),
-                         "train": [list(map(int, cam_indices)), list(map(int, frame_indices))]},
-                        sort_keys=True, default=_default).encode())
-    for oc in observed:
-        for o in oc:
-            o = np.asarray(o, dtype=bool)
-            h.update(np.asarray(o.shape, dtype=np.int64).tobytes())
-            h.update(np.packbits(o).tobytes())
+    for c, oc in enumerate(observed):
+        for f, o in enumerate(oc):
+            masks = [o]
+            g = None if ignore is None else ignore[c][f]
+            masks.append(g)
+            for m in masks:
+                if m is None:
+                    h.update(b"none")
+                    continue
+                m = np.asarray(m, dtype=bool)
+                h.update(np.asarray(m.shape, dtype=np.int64).tobytes())
+                h.update(np.packbits(m).tobytes())
     return h.hexdigest()
 
 
@@ -238,7 +247,8 @@ class FitJob:
         self.train_frames = fidx
         self.train_times = [float(capture.frame_times[i]) for i in fidx]
         cameras, observed, ignore = load_observed(capture, cams, fidx, cfg.resolution)
-        self.capture_hash = capture_hash(capture, cams, fidx, observed)
+        self.capture_hash = capture_hash(capture)
+        self.silhouettes_hash = silhouettes_hash(observed, ignore)
         self.scenario = capture.scenario.with_frames(self.train_times)
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
         self.par = make_parameters(capture, cfg)
@@ -277,6 +287,7 @@ class FitJob:
         opt = self.opt
         ident = {
             "capture_hash": self.capture_hash,
+            "silhouettes_hash": self.silhouettes_hash,
             "cameras": [self.capture.cameras[c].name for c in self.train_cameras],
             "camera_indices": list(self.train_cameras),
             "times": list(self.train_times),
@@ -398,7 +409,7 @@ class FitJob:
         res = {
             "format": "silhouette-cloth-fit/result", "version": 1,
             "capture": os.path.abspath(self.capture.root),
-            "capture_hash": self.capture_hash,
+            "capture_hash": self.capture_hash, "silhouettes_hash": self.silhouettes_hash,
             "optimizer": self.config.optimizer, "seed": self.config.seed,
             "train_cameras": [self.capture.cameras[c].name for c in self.train_cameras],
             "train_camera_indices": self.train_cameras,
@@ -468,8 +479,10 @@ class FitJob:
         job = cls(cap, config, checkpoint=path, checkpoint_interval=checkpoint_interval)
         diff = identity_diff(ck["identity"], job.identity())
         if diff:
-            raise ClothFitError(f"checkpoint {path} is of another fit ({'; '.join(diff)}): resume with the same "
-                                f"capture and options, or start afresh with --force or another --out")
+            names = [d.split(":")[0] for d in diff]
+            raise ClothFitError(f"checkpoint {path} is of another fit: {', '.join(names)} differ "
+                                f"({'; '.join(diff)}); resume with the same capture and options, or start afresh "
+                                f"with --force or another --out")
         opt = optimizer_from_state(ck["optimizer_state"])
         mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, getattr(job.opt, "popsize", None),
                 getattr(job.opt, "population", None), getattr(job.opt, "children", None),
@@ -493,10 +506,15 @@ def identity_diff(saved, now) -> list:
     if not isinstance(saved, dict):
         return ["it records no identity"]
     out = []
-    for k in sorted(set(saved) | set(now)):
-        a, b = saved.get(k, "<missing>"), now.get(k, "<missing>")
-        if a != b:
-            out.append(f"{k}: checkpoint {_short(a)}, now {_short(b)}")
+    keys = sorted(set(saved) | set(now))
+    differ = {k for k in keys if saved.get(k, "<missing>") != now.get(k, "<missing>")}
+    if differ & {"cameras", "camera_indices", "times", "capture_hash"}:
+        differ.discard("silhouettes_hash")     # other images, of course
+    if "cameras" in differ:
+        differ.discard("camera_indices")
+    for k in keys:
+        if k in differ:
+            out.append(f"{k}: checkpoint {_short(saved.get(k, '<missing>'), 40)}, now {_short(now.get(k, '<missing>'), 40)}")
     return out
 
 
