@@ -296,8 +296,8 @@ def cmd_evaluate(a):
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
     print(s)
     if a.json:
-        with open(a.json, "w") as f:
-            json.dump(r, f, indent=1)
+        from .core.safeio import atomic_json
+        atomic_json(a.json, r)
 
 
 def cmd_overlay(a):
