@@ -496,7 +496,7 @@ CMA_MUTATIONS = {
 @pytest.mark.parametrize("case", sorted(CMA_MUTATIONS))
 def test_corrupt_cma_state_is_one_line_error(case):
     d = _cma_state()
-    out = CMA_MUTATIONS[case](d)
+    CMA_MUTATIONS[case](d)
     if case == "not a dict":
         d = ["cma-es"]
     with pytest.raises(ClothFitError) as err:

@@ -389,7 +389,7 @@ def _footage(tmp_path, names=("cam00", "cam01"), dist=None):
     from test_extract import write_footage
     root = str(tmp_path / "footage")
     write_footage(root, n_cams=len(names))
-    from addon.core.footage.calib_io import export_cameras, import_cameras
+    from addon.core.footage.calib_io import import_cameras
     cams = import_cameras(os.path.join(root, "cameras.yml"))
     for c, n in zip(cams, names):
         if n != c.name and os.path.isdir(os.path.join(root, c.name)):
@@ -402,7 +402,7 @@ def _footage(tmp_path, names=("cam00", "cam01"), dist=None):
 
 def test_extract_into_its_footage_keeps_the_calibration(tmp_path):
     from addon.core.footage import extract as X
-    from addon.core.footage.calib_io import export_cameras, import_cameras
+    from addon.core.footage.calib_io import export_cameras
     root, cams = _footage(tmp_path, dist=[-0.2, 0.05, 0.0, 0.0, 0.0])
     export_cameras(cams, os.path.join(root, "cameras.json"))
     js = json.load(open(os.path.join(root, "footage.json")))
