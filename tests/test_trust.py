@@ -471,3 +471,71 @@ def test_kill_9_at_random_moments_leaves_a_resumable_checkpoint(cap, tmp_path):
     assert r["evaluations"] == ref["evaluations"] and r["params"] == ref["params"]
     assert r["stop_reason"] == ref["stop_reason"]
     assert killed >= 1 and resumed >= 1, (killed, resumed)
+
+
+# ------------------------------------------------------------------ fuzz: every input loads or is one ClothFitError
+
+JUNK = [None, True, 0, -1, 1e400, float("nan"), -1e308, 2 ** 70, "", "abc", "../x", [], [1], [[1, 2], [3]], {},
+        {"a": 1}, 0.5, 100000]
+
+
+def _paths(node, prefix=()):
+    yield prefix
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _paths(v, prefix + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node[:4]):
+            yield from _paths(v, prefix + (i,))
+
+
+def _mutated(doc, rnd):
+    d = json.loads(json.dumps(doc))
+    path = rnd.choice([p for p in _paths(d) if p])
+    node = d
+    for k in path[:-1]:
+        node = node[k]
+    if rnd.random() < 0.15 and isinstance(node, dict):
+        node.pop(path[-1])
+    else:
+        node[path[-1]] = rnd.choice(JUNK)
+    return d, path
+
+
+@pytest.mark.parametrize("which", ["capture.json", "cameras.json"])
+def test_fuzzed_capture_files_load_or_fail_in_one_line(cap, tmp_path, which):
+    from addon.core.observation.capture import load_capture
+    copy = tmp_path / "cap"
+    shutil.copytree(cap.root, copy)
+    doc = json.loads((copy / which).read_text())
+    rnd = random.Random(which)
+    for _ in range(150):
+        d, path = _mutated(doc, rnd)
+        (copy / which).write_text(json.dumps(d))
+        try:
+            c = load_capture(str(copy))
+            FitJob(c, FitConfig(train_cameras=[0], train_times=[0.1], max_evaluations=7))
+        except ClothFitError as e:
+            assert "\n" not in str(e), (path, str(e))
+        except Exception as e:  # noqa: BLE001
+            pytest.fail(f"{which} {path}: {type(e).__name__}: {e}")
+    (copy / which).write_text(json.dumps(doc))
+
+
+def test_fuzzed_checkpoints_resume_or_fail_in_one_line(cap, tmp_path):
+    out = tmp_path / "fit.json"
+    ck = str(out) + ".checkpoint.json"
+    assert fit("fit", cap.root, "--out", out, "--max-evaluations", 14, "--cameras", "0", "--times", "0.1",
+               "--quiet")[0] == 0
+    doc = json.load(open(ck))
+    rnd = random.Random(5)
+    for _ in range(300):
+        d, path = _mutated(doc, rnd)
+        open(ck, "w").write(json.dumps(d))
+        try:
+            job = FitJob.resume(ck, capture=cap)
+            job.step()
+        except ClothFitError as e:
+            assert "\n" not in str(e), (path, str(e))
+        except Exception as e:  # noqa: BLE001
+            pytest.fail(f"checkpoint {path}: {type(e).__name__}: {e}")
