@@ -85,8 +85,9 @@ class Camera:
             raise ClothFitError(f"{where}: focal lengths fx={self.K[0, 0]}, fy={self.K[1, 1]} must be positive")
         if abs(self.K[2, 2] - 1.0) > 1e-9 or abs(self.K[1, 0]) > 1e-9 or abs(self.K[2, 0]) > 1e-9 or abs(self.K[2, 1]) > 1e-9:
             raise ClothFitError(f"{where}: K must be upper triangular with K[2,2] = 1, got {self.K.tolist()}")
-        err = np.abs(self.R @ self.R.T - np.eye(3)).max()
-        if err > 1e-6 or np.linalg.det(self.R) < 0:
+        with np.errstate(over="ignore", invalid="ignore"):      # absurd entries: caught just below
+            err = np.abs(self.R @ self.R.T - np.eye(3)).max()
+        if not err <= 1e-6 or np.linalg.det(self.R) < 0:
             raise ClothFitError(f"{where}: R is not a rotation (|R R^T - I| = {err:.2e}, det = {np.linalg.det(self.R):.3f})")
         if self.dist.size not in (0, 4, 5, 8, 12, 14):
             raise ClothFitError(f"{where}: distortion must have 0, 4, 5, 8, 12 or 14 coefficients, got {self.dist.size}")
