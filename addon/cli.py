@@ -180,8 +180,8 @@ def _checkpoint_summary(ck):
     except ClothFitError as e:
         return f"an unreadable checkpoint ({e})"
     r = d.get("result") if isinstance(d.get("result"), dict) else {}
-    state = "finished" if d.get("finished") else "unfinished"
-    return f"the checkpoint of an {state} fit ({r.get('evaluations', '?')} evaluations)"
+    state = "a finished" if d.get("finished") else "an unfinished"
+    return f"the checkpoint of {state} fit ({r.get('evaluations', '?')} evaluations)"
 
 
 def cmd_fit(a):
