@@ -479,7 +479,7 @@ class FitJob:
         job = cls(cap, config, checkpoint=path, checkpoint_interval=checkpoint_interval)
         diff = identity_diff(ck["identity"], job.identity())
         if diff:
-            names = [d.split(":")[0] for d in diff]
+            names = list(dict.fromkeys(d.split(":")[0].split(".")[0] for d in diff))
             raise ClothFitError(f"checkpoint {path} is of another fit: {', '.join(names)} differ "
                                 f"({'; '.join(diff)}); resume with the same capture and options, or start afresh "
                                 f"with --force or another --out")
@@ -513,8 +513,16 @@ def identity_diff(saved, now) -> list:
     if "cameras" in differ:
         differ.discard("camera_indices")
     for k in keys:
-        if k in differ:
-            out.append(f"{k}: checkpoint {_short(saved.get(k, '<missing>'), 40)}, now {_short(now.get(k, '<missing>'), 40)}")
+        if k not in differ:
+            continue
+        a, b = saved.get(k, "<missing>"), now.get(k, "<missing>")
+        if isinstance(a, dict) and isinstance(b, dict):       # name the entries that differ
+            for sub in sorted(set(a) | set(b), key=str):
+                if a.get(sub, "<missing>") != b.get(sub, "<missing>"):
+                    out.append(f"{k}.{sub}: checkpoint {_short(a.get(sub, '<missing>'), 40)}, "
+                               f"now {_short(b.get(sub, '<missing>'), 40)}")
+        else:
+            out.append(f"{k}: checkpoint {_short(a, 40)}, now {_short(b, 40)}")
     return out
 
 
