@@ -28,11 +28,12 @@ def _floats(s, what="--times"):
 def _res(s):
     if not s:
         return None
+    from .core.fitting.job import check_resolution
     try:
         h, w = (int(x) for x in s.lower().split("x"))
     except ValueError:
         raise ClothFitError(f"resolution {s!r} must look like HxW, e.g. 120x160") from None
-    return [h, w]
+    return check_resolution([h, w], f"resolution {s!r}")
 
 
 def _params(args, default=None):
@@ -188,60 +189,99 @@ def _backend_args(a):
             "frame_zero": a.frame_zero, "workers": a.workers, "address": a.address, "executor": a.executor}
 
 
+def _refuse_overwriting_inputs(out, capture, what):
+    """An output must not replace the capture's own files."""
+    real = os.path.realpath(out)
+    root = os.path.realpath(capture.root)
+    inputs = {os.path.realpath(os.path.join(root, n)) for n in ("capture.json", "cameras.json", "shapes.npz")}
+    if real in inputs or real == root:
+        raise ClothFitError(f"{what} {out} would overwrite the capture's own {os.path.basename(real)}: choose another path")
+
+
+def _checkpoint_summary(ck):
+    from .core.fitting.job import read_checkpoint
+    try:
+        d = read_checkpoint(ck)
+    except ClothFitError as e:
+        return f"an unreadable checkpoint ({e})"
+    r = d.get("result") if isinstance(d.get("result"), dict) else {}
+    state = "a finished" if d.get("finished") else "an unfinished"
+    return f"the checkpoint of {state} fit ({r.get('evaluations', '?')} evaluations)"
+
+
 def cmd_fit(a):
-    from .core.fitting.job import FitConfig, FitJob
+    from .core.fitting.job import FitConfig, FitJob, exclusive_lock, read_checkpoint
     from .core.observation.capture import load_capture
     ck = a.checkpoint or (a.out + ".checkpoint.json")
+    if a.resume and a.force:
+        raise ClothFitError("--resume continues the checkpoint and --force replaces it: give one of them")
+    if os.path.realpath(ck) == os.path.realpath(a.out):
+        raise ClothFitError(f"--checkpoint and --out are the same file {a.out}")
+    for path, what in ((a.out, "--out"), (ck, "checkpoint")):
+        if os.path.isdir(path):
+            raise ClothFitError(f"{what} {path} is a directory: give a file name")
+    cap = load_capture(a.capture)
+    _refuse_overwriting_inputs(a.out, cap, "--out")
+    _refuse_overwriting_inputs(ck, cap, "--checkpoint")
+    cfg = FitConfig(train_cameras=_cams(cap, a.cameras), train_times=_times(a.times), optimizer=a.optimizer,
+                    seed=a.seed, max_evaluations=D.FIT_EVALUATIONS if a.max_evaluations is None else a.max_evaluations,
+                    resolution=_res(a.resolution), cloth_mass=a.cloth_mass, backend=a.backend,
+                    population=a.population, children=a.children, target_error=a.target,
+                    model=None if a.backend == "blender" else _model_spec(a), free=_names(a.free),
+                    fixed=_json_arg(a.fixed, "--fixed"), init=a.init, bounds=_json_arg(a.bounds, "--bounds"),
+                    restarts=D.FIT_RESTARTS if a.restarts is None else a.restarts)
+    for k, v in _backend_args(a).items():
+        setattr(cfg, k, v)
+    cfg = cfg.checked()
     evaluator = None
-    if a.resume and os.path.isfile(ck):
-        from .core.jsonio import read_json
-        ckcfg = FitConfig.from_dict(read_json(ck, "checkpoint").get("config") or {})
-        if ckcfg.evaluator == "blender":
-            evaluator = _scene_evaluator(ckcfg)
-        job = FitJob.resume(ck, evaluator=evaluator)
-        if a.max_evaluations:
-            job.config.max_evaluations = a.max_evaluations
-            job.finished = job.evaluations >= a.max_evaluations
-        print(f"resumed {ck} at {job.evaluations} evaluations", file=sys.stderr)
-    else:
-        cap = load_capture(a.capture)
-        cfg = FitConfig(train_cameras=_cams(cap, a.cameras), train_times=_times(a.times), optimizer=a.optimizer,
-                        seed=a.seed, max_evaluations=a.max_evaluations or D.FIT_EVALUATIONS,
-                        resolution=_res(a.resolution), cloth_mass=a.cloth_mass, backend=a.backend,
-                        population=a.population, children=a.children, target_error=a.target,
-                        model=None if a.backend == "blender" else _model_spec(a), free=_names(a.free),
-                        fixed=_json_arg(a.fixed, "--fixed"), init=a.init, bounds=_json_arg(a.bounds, "--bounds"))
-        for k, v in _backend_args(a).items():
-            setattr(cfg, k, v)
+    with exclusive_lock(ck):
+        if a.resume and not os.path.lexists(ck):
+            raise ClothFitError(f"--resume: there is no checkpoint {ck} to continue (run without --resume to start)")
+        if not a.resume and os.path.lexists(ck) and not a.force:
+            raise ClothFitError(f"{ck} holds {_checkpoint_summary(ck)}: continue it with --resume, replace it "
+                                f"with --force, or choose another --out")
         if cfg.evaluator == "blender":
             evaluator = _scene_evaluator(cfg)
         try:
-            job = FitJob(cap, cfg, checkpoint=ck, evaluator=evaluator)
+            if a.resume:
+                if a.max_evaluations is None:       # the budget the checkpointed fit was given
+                    saved = read_checkpoint(ck)["config"].get("max_evaluations")
+                    if isinstance(saved, int) and not isinstance(saved, bool) and saved >= 1:
+                        cfg.max_evaluations = saved
+                job = FitJob.resume(ck, capture=cap, config=cfg, checkpoint_interval=D.CHECKPOINT_INTERVAL_S,
+                                    evaluator=evaluator)
+                print(f"resumed {ck} at {job.evaluations} evaluations", file=sys.stderr)
+            else:
+                job = FitJob(cap, cfg, checkpoint=ck, checkpoint_interval=D.CHECKPOINT_INTERVAL_S,
+                             evaluator=evaluator)
         except BaseException:
             if evaluator is not None:
                 evaluator.close()
             raise
-    bar = Progress(not a.quiet)
-    try:
-        job.run(callback=bar)
-    except KeyboardInterrupt:
-        job.cancel()
-        print("\ncancelled: keeping the best result so far", file=sys.stderr)
-    except ClothFitError as e:            # e.g. a worker that died for good: the best so far is kept
-        job.error = str(e)
-        job.cancel()
-        raise
-    finally:
-        bar.done()
-        job.save_result(a.out)
-        if evaluator is not None:
-            evaluator.close()
+        bar = Progress(not a.quiet)
+        try:
+            job.run(callback=bar)
+        except KeyboardInterrupt:
+            job.cancel()
+            print("\ncancelled: keeping the best result so far", file=sys.stderr)
+        except ClothFitError as e:            # e.g. a worker that died for good: the best so far is kept
+            job.error = str(e)
+            job.cancel()
+        finally:
+            bar.done()
+            job.save_result(a.out)
+            if evaluator is not None:
+                evaluator.close()
     r = job.result()
+    if job.error:
+        raise ClothFitError(f"fit failed: {job.error} (the result so far is in {a.out})")
     keys = ("params", "identifiable") if r.get("params") else ("blender_cloth", "blender_scene")
-    print(json.dumps({k: r[k] for k in keys + ("best_E_sil_mean_pct", "evaluations", "elapsed_s", "cancelled")
-                      if k in r}, indent=1))
+    print(json.dumps({k: r[k] for k in keys + ("best_E_sil_mean_pct", "evaluations", "stop_reason", "elapsed_s",
+                                               "cancelled") if k in r}, indent=1))
     if "identifiable_error_pct" in r:
         print("recovery error [%]:", json.dumps(r["identifiable_error_pct"]))
+    if "true_params_ignored" in r:
+        print(f"note: {r['true_params_ignored']}", file=sys.stderr)
     print(f"wrote {a.out}")
 
 
@@ -327,8 +367,8 @@ def cmd_evaluate(a):
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
     print(s)
     if a.json:
-        with open(a.json, "w") as f:
-            json.dump(r, f, indent=1)
+        from .core.safeio import atomic_json
+        atomic_json(a.json, r)
 
 
 def cmd_overlay(a):
@@ -441,8 +481,13 @@ def build_parser():
     s.add_argument("--target", type=float, default=None, help="stop when mean E_sil per image falls below this fraction")
     s.add_argument("--resolution", help="fit at HxW (silhouettes area-resampled)")
     s.add_argument("--cloth-mass", type=float, default=None, help="total cloth mass [kg] (fixes m)")
-    s.add_argument("--checkpoint", help="default: OUT.checkpoint.json; written every generation")
-    s.add_argument("--resume", action="store_true", help="continue from the checkpoint")
+    s.add_argument("--restarts", type=int, default=None,
+                   help=f"cma-es: IPOP restarts after convergence, each with twice the population (default {D.FIT_RESTARTS})")
+    s.add_argument("--checkpoint", help="default: OUT.checkpoint.json; written every few seconds and at the end")
+    s.add_argument("--resume", action="store_true",
+                   help="continue the checkpoint; refused if it is of another fit (capture, cameras, times, "
+                        "resolution, optimiser, population, seed, bounds...); --max-evaluations may grow")
+    s.add_argument("--force", action="store_true", help="replace an existing checkpoint instead of refusing")
     s.add_argument("--backend", default="auto", choices=["auto", "numba", "numpy", "core", "blender"],
                    help="where candidates are simulated: the core (auto, numba, numpy; core = auto) or blender "
                         "(Blender's own solver on --blend, in worker processes)")
@@ -591,7 +636,18 @@ def run_subtool(argv):
     return 0
 
 
+DEBUG_ENV = "CLOTHFIT_DEBUG"
+
+
+def _one_line(text, limit=1500):
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def main(argv=None):
+    """Run a command. Bad input: one line ``error: ...`` and exit code 2; any other failure: one
+    line naming it and exit code 1 (the traceback only with the environment variable
+    CLOTHFIT_DEBUG=1); Ctrl-C: exit code 130."""
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         if argv and argv[0] in SUBTOOLS:
@@ -599,6 +655,16 @@ def main(argv=None):
         args = build_parser().parse_args(argv)
         args.fn(args)
     except ClothFitError as e:
-        print(f"error: {e}", file=sys.stderr)
+        print(f"error: {_one_line(e)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("\ninterrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # noqa: BLE001 - the last line of defence: never a traceback for the user
+        if os.environ.get(DEBUG_ENV):
+            raise
+        cmd = argv[0] if argv else "?"
+        print(f"error: {cmd} failed: {type(e).__name__}: {_one_line(e) or 'no message'} "
+              f"(set {DEBUG_ENV}=1 for the traceback)", file=sys.stderr)
+        return 1
     return 0

@@ -403,3 +403,47 @@ def test_render_failing_midway_leaves_no_capture_json(tmp_path, monkeypatch):
     monkeypatch.setattr(R, "render_masks", real)
     assert bpy.ops.clothfit.render_silhouettes() == {"FINISHED"}
     assert bpy.ops.clothfit.load_capture() == {"FINISHED"}
+
+
+# ---------------------------------------------------------------- issue 12: no lost or overwritten data
+
+def test_export_cameras_never_replaces_a_captures_cameras(tmp_path, small_capture):
+    cap = tmp_path / "cap"
+    shutil.copytree(small_capture, cap)
+    before = (cap / "cameras.json").read_bytes()
+    scene = bpy.context.scene
+    small_settings(scene, cap)
+    assert bpy.ops.clothfit.build_rig() == {"FINISHED"}
+    for kw in ({"filepath": str(cap / "cameras.json"), "file_format": "JSON"},
+               {"filepath": str(cap), "file_format": "JSON"}):
+        assert "camera file of the capture" in run_error("export_cameras", **kw)
+    assert (cap / "cameras.json").read_bytes() == before
+    # beside it, under another name, or elsewhere: fine
+    assert bpy.ops.clothfit.export_cameras(filepath=str(cap / "calibration.yml"), file_format="OPENCV") == {"FINISHED"}
+    assert bpy.ops.clothfit.export_cameras(filepath=str(tmp_path / "out" / "cameras.json"),
+                                           file_format="JSON") == {"FINISHED"}
+
+
+def test_operators_report_unexpected_failures(monkeypatch, tmp_path):
+    from addon.blender import api
+
+    def broken(*a, **k):
+        raise KeyError("no such thing")
+    monkeypatch.setattr(api, "import_cameras", broken)
+    msg = run_error("import_cameras")
+    assert "KeyError" in msg and "no such thing" in msg
+
+
+def test_blender_fit_keeps_its_result_with_bad_true_params(tmp_path, small_capture):
+    cap = tmp_path / "cap"
+    shutil.copytree(small_capture, cap)
+    cj = json.loads((cap / "capture.json").read_text())
+    cj["meta"]["true_params"] = {"m": 0.01, "k": 0, "l": 0.006, "d": 1e-4}
+    (cap / "capture.json").write_text(json.dumps(cj))
+    scene = bpy.context.scene
+    p = small_settings(scene, cap)
+    p.max_evaluations = 14
+    assert bpy.ops.clothfit.fit() == {"FINISHED"}
+    res = json.loads((cap / "fit_result.json").read_text())
+    assert res["params"] is not None and "true_params_ignored" in res
+    assert res["stop_reason"] in ("budget", "converged")

@@ -204,12 +204,28 @@ def test_spx_mgg_minimises_rosenbrock(seed, n):
 @pytest.mark.parametrize("fn, xopt", [(sphere, SHIFT), (rosenbrock, np.ones(4))])
 @pytest.mark.parametrize("n", [3, 4])
 def test_cma_minimises(seed, fn, xopt, n):
-    opt = make_optimizer("cma", box(n), seed=seed)
+    # Rosenbrock in 4-D has a local minimum (f = 3.70) that a single small-population run can end
+    # in (seed 0 does): IPOP restarts are the remedy
+    restarts = 2 if fn is rosenbrock else 0
+    opt = make_optimizer("cma", box(n), seed=seed, restarts=restarts)
     assert opt.ask().shape == (D.CMA_POPSIZE, n)
     x, f = opt.run(fn, 6000)
     assert f < 1e-8
     np.testing.assert_allclose(x, xopt[:n], atol=1e-3)
-    assert opt.evaluations <= 6000 + D.CMA_POPSIZE
+    assert opt.evaluations <= 6000 + opt.run_popsize
+    assert opt.stopped or opt.evaluations >= 6000
+
+
+def test_cma_stops_by_itself_and_ipop_restarts_double_the_population():
+    opt = make_optimizer("cma", box(4), seed=0)
+    x, f = opt.run(rosenbrock, 100_000)
+    assert opt.stopped and opt.evaluations < 5000           # converged (to the local minimum)
+    assert opt.run_stops == [opt.stop_reason] and opt.stop_reason in ("tolfun", "tolx")
+    assert f == pytest.approx(3.7014, abs=1e-3)
+    ipop = make_optimizer("cma", box(4), seed=0, restarts=3)
+    x, f = ipop.run(rosenbrock, 100_000)
+    assert ipop.stopped and len(ipop.run_stops) == 4 and ipop.run_popsize == 8 * D.CMA_POPSIZE
+    assert f < 1e-10 and ipop.evaluations < 40_000
 
 
 def test_cma_initial_guess_and_global_rng_untouched():
@@ -392,3 +408,136 @@ def test_make_optimizer_names():
     assert len(opt.ask()) == 12
     opt.tell(opt.ask(), sphere(opt.ask()))
     assert len(opt.ask()) == 7
+
+
+# --------------------------------------------------------------------------- untrusted checkpoints
+
+class _Boom:
+    """Unpickling this would create the file ``_Boom.path``."""
+    path = None
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def _cma_state(gens=5):
+    opt = make_optimizer("cma-es", box(3), seed=3)
+    _trace(opt, rosenbrock, gens)
+    opt.ask()
+    return json.loads(json.dumps(opt.state_dict(), allow_nan=False))
+
+
+def test_a_pickle_payload_is_never_run(tmp_path):
+    import base64
+    import pickle
+    marker = tmp_path / "pwned"
+    _Boom.path = str(marker)
+    d = _cma_state()
+    d["pickle_b64"] = base64.b64encode(pickle.dumps({"es": _Boom()})).decode()
+    with pytest.raises(ClothFitError) as err:
+        optimizer_from_state(d)
+    assert "unknown fields" in str(err.value) and "pickle_b64" in str(err.value)
+    assert "\n" not in str(err.value)
+    assert not marker.exists()
+    # the old (version 1, pickled) format is refused by its version, before any field is read
+    d["version"] = 1
+    with pytest.raises(ClothFitError, match="version"):
+        optimizer_from_state(d)
+    assert not marker.exists()
+
+
+def _set(path, value):
+    def f(d):
+        node = d
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = value
+    return f
+
+
+def _del(key):
+    return lambda d: d.pop(key)
+
+
+CMA_MUTATIONS = {
+    "C not positive definite": _set(["C"], [[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+    "C not symmetric": _set(["C"], [[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+    "C nan": _set(["C", 0, 0], float("nan")),
+    "C wrong shape": _set(["C"], [[1.0, 0.0], [0.0, 1.0]]),
+    "C strings": _set(["C"], "eye"),
+    "sigma negative": _set(["sigma"], -1.0),
+    "sigma inf": _set(["sigma"], float("inf")),
+    "sigma string": _set(["sigma"], "0.3"),
+    "mean short": _set(["mean"], [0.5, 0.5]),
+    "mean far": _set(["mean"], [1e300, 0.5, 0.5]),
+    "mean nested": _set(["mean"], [[0.5], [0.5], [0.5]]),
+    "pending wrong rows": _set(["pending"], [[0.5, 0.5, 0.5]]),
+    "lam not popsize": _set(["lam"], 1000),
+    "lam bool": _set(["lam"], True),
+    "rng garbage": _set(["rng"], {"bit_generator": "MT19937", "state": {}}),
+    "rng negative": _set(["rng", "state", "state"], -5),
+    "rng float": _set(["rng", "state", "inc"], 1.5),
+    "history bad": _set(["history"], [["a", 1.0]]),
+    "history object": _set(["history"], {"x": 1}),
+    "evaluations negative": _set(["evaluations"], -1),
+    "best_u without best_f": _set(["best_f"], None),
+    "restarts huge": _set(["restarts"], 10 ** 9),
+    "stop reason unknown": _set(["stop_reason"], "os.system"),
+    "space not object": _set(["space"], [1, 2]),
+    "space bounds": _set(["space", "bounds", "a"], [4.0, -3.0]),
+    "space extra": _set(["space", "code"], "x"),
+    "seed string": _set(["seed"], "0"),
+    "no mean": _del("mean"),
+    "no rng": _del("rng"),
+    "not a dict": lambda d: None,
+}
+
+
+@pytest.mark.parametrize("case", sorted(CMA_MUTATIONS))
+def test_corrupt_cma_state_is_one_line_error(case):
+    d = _cma_state()
+    CMA_MUTATIONS[case](d)
+    if case == "not a dict":
+        d = ["cma-es"]
+    with pytest.raises(ClothFitError) as err:
+        optimizer_from_state(d)
+    assert "\n" not in str(err.value)
+
+
+GA_MUTATIONS = {
+    "pop_f nan": _set(["pop_f", 0], float("nan")),
+    "pop_u shape": _set(["pop_u"], [[0.5, 0.5, 0.5]]),
+    "pop_u without pop_f": _set(["pop_f"], None),
+    "replace same": _set(["replace"], [1, 1]),
+    "replace outside": _set(["replace"], [0, 10 ** 6]),
+    "children zero": _set(["children"], 0),
+    "population below n+1": _set(["population"], 2),
+    "eps nan": _set(["eps"], float("nan")),
+    "unknown field": _set(["__reduce__"], "os.system"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(GA_MUTATIONS))
+def test_corrupt_ga_state_is_one_line_error(case):
+    opt = make_optimizer("spx-mgg", box(3), seed=3)
+    _trace(opt, rosenbrock, 5)
+    opt.ask()
+    d = json.loads(json.dumps(opt.state_dict(), allow_nan=False))
+    optimizer_from_state(json.loads(json.dumps(d)))       # the unmodified state loads
+    GA_MUTATIONS[case](d)
+    with pytest.raises(ClothFitError) as err:
+        optimizer_from_state(d)
+    assert "\n" not in str(err.value)
+
+
+def test_ga_stops_on_stagnation_and_collapse():
+    opt = make_optimizer("ga", box(3), seed=0, stall_evaluations=3000, tolfun=1e-9)
+    opt.run(sphere, 10 ** 6)
+    assert opt.stopped and opt.stop_reason == "stagnation" and opt.evaluations < 200_000
+    assert opt.best_f < 1e-6
+    off = make_optimizer("ga", box(3), seed=0)
+    off.run(sphere, 5000)
+    assert not off.stopped and off.evaluations >= 5000
+    collapse = make_optimizer("ga", box(3), seed=0, tolx=1e-3)
+    collapse.run(sphere, 10 ** 6)
+    assert collapse.stop_reason == "tolx" and np.all(np.ptp(collapse.pop_u, axis=0) < 1e-3)

@@ -13,7 +13,6 @@ bending model, and qualities from 2 to 15. Needs the bpy module.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
@@ -143,7 +142,6 @@ def main(argv=None):
         raise ClothFitError(f"--grid {a.grid}: must be 2..200")
     rows = run(a.grid, a.settle, a.after, a.fps)
     if a.json:
-        with open(a.json, "w") as f:
-            json.dump({"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps, "cases": rows},
-                      f, indent=1)
+        from ..core.safeio import atomic_json
+        atomic_json(a.json, {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps, "cases": rows})
     return 0

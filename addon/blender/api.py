@@ -11,6 +11,7 @@ Every function takes the scene (its ``scene.clothfit`` properties hold the setti
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -246,6 +247,30 @@ def import_cameras(scene, path=None):
 EXPORT_FORMATS = {"OPENCV": "opencv", "OPENCV_DIR": "opencv-dir", "COLMAP": "colmap", "JSON": "json"}
 
 
+def _refuse_capture_files(dst, fmt):
+    """A camera export must not replace a capture's own cameras.json / capture.json (the capture's
+    silhouettes belong to those cameras)."""
+    from ..core.observation.capture import CAMERAS_JSON, CAPTURE_JSON
+    if fmt in ("OPENCV", "JSON"):
+        folder, names = os.path.dirname(dst), [os.path.basename(dst)]
+    else:
+        folder, names = dst, []
+    if not os.path.isfile(os.path.join(folder, CAPTURE_JSON)):
+        return
+    cap_files = {CAMERAS_JSON, CAPTURE_JSON}
+    try:
+        with open(os.path.join(folder, CAPTURE_JSON)) as f:
+            ref = json.load(f).get("cameras")
+        if isinstance(ref, str):
+            cap_files.add(os.path.basename(ref))
+    except (OSError, ValueError, AttributeError):
+        pass
+    hit = [n for n in names if n in cap_files]
+    if hit:
+        raise ClothFitError(f"camera export path {dst} is the camera file of the capture in {folder}: exporting "
+                            f"there would replace the cameras its silhouettes were taken with; choose another path")
+
+
 def export_cameras(scene, path=None, fmt=None):
     """The rig's cameras -> an OpenCV file/folder, a COLMAP model or our JSON. Cameras that
     still show their imported/loaded camera are written exactly (float64, distortion); moved
@@ -264,6 +289,7 @@ def export_cameras(scene, path=None, fmt=None):
             raise ClothFitError(f"camera export path {dst}: a Cloth Fit cameras JSON must end with .json")
     elif os.path.isfile(dst):
         raise ClothFitError(f"camera export path {dst} is a file: the {fmt} format writes a folder")
+    _refuse_capture_files(dst, fmt)
     rows = exact_rig_cameras(scene)
     cams = [ex if ex is not None else b for b, ex, _ in rows]
     from_blender = [b.name for b, ex, _ in rows if ex is None]
@@ -947,6 +973,9 @@ def finish_fit(session, cancelled=False):
     job.save_result(session.result_path)
     p.result_path = session.result_path
     bp = job.best_params
+    if job.error:
+        p.fit_status = f"failed: {job.error}"
+        return "ERROR", f"Fit failed: {job.error} (result so far: {session.result_path})"
     if bp is None:
         p.fit_status = "cancelled before the first generation: no result"
         return "WARNING", "Fit cancelled before the first generation finished: no result"
@@ -967,8 +996,12 @@ def run_fit(scene, callback=None):
             if callback is not None and callback(sess):
                 cancelled = True
                 break
-    except BaseException:
+    except BaseException as e:
         props(scene).fit_running = False
+        if isinstance(e, Exception):       # keep the best so far on disk before reporting the error
+            sess.job.fail(str(e) if isinstance(e, ClothFitError) else f"{type(e).__name__}: {e}")
+            with contextlib.suppress(ClothFitError, OSError):
+                sess.job.save_result(sess.result_path)
         raise
     level, msg = finish_fit(sess, cancelled)
     return sess.job.result(), level, msg
@@ -1155,8 +1188,8 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
                "cameras": cap.camera_names, "E_sil_pct": (100 * errs).tolist(),
                "mean_E_sil_pct": float(100 * errs.mean()), "contact_sheet": sheet_path,
                "contact_sheet_frame": sheet_fi}
-    with open(os.path.join(out_dir, "summary.json"), "w") as f:
-        json.dump(summary, f, indent=1)
+    from ..core.safeio import atomic_json
+    atomic_json(os.path.join(out_dir, "summary.json"), summary)
     p.overlay_dir = out_dir
     p.overlay_error = summary["mean_E_sil_pct"]
     show_observations(scene, p.view_frame if p.view_frame in fidx else fidx[0], cap, kind="overlay")

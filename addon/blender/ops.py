@@ -2,7 +2,8 @@
 """Operators of the ``clothfit`` namespace (the scripting API: keep the names).
 
 Each operator calls one function of ``api``; a ``ClothFitError`` (bad input) becomes
-``self.report({'ERROR'}, message)`` and ``{'CANCELLED'}``, never a traceback.
+``self.report({'ERROR'}, message)`` and ``{'CANCELLED'}``, never a traceback; any other exception
+is reported the same way as one line naming it (its traceback goes to the system console).
 
 The fit is modal when invoked from the UI: a window-manager timer, one ``job.step()`` (one
 optimiser generation) per TIMER event, progress bar + status text + live panel, Esc cancels and
@@ -21,6 +22,16 @@ from ..core.errors import ClothFitError
 from . import api
 
 
+def failure_text(e: BaseException) -> str:
+    """One line for the user: bad input as it is; anything else named, its traceback printed to
+    the system console (never raised into Blender's UI)."""
+    if isinstance(e, (ClothFitError, OSError)):
+        return " ".join(str(e).split())
+    import traceback
+    traceback.print_exception(type(e), e, e.__traceback__)
+    return f"unexpected {type(e).__name__}: {' '.join(str(e).split()) or 'no message'} (details in the system console)"
+
+
 class _ClothFitOperator:
     """Runs ``self.run(context)`` and turns bad input into an error report."""
     bl_options = {"REGISTER", "UNDO"}
@@ -28,8 +39,8 @@ class _ClothFitOperator:
     def execute(self, context):
         try:
             msg = self.run(context)
-        except (ClothFitError, OSError) as e:
-            self.report({"ERROR"}, str(e))
+        except Exception as e:  # noqa: BLE001 - an operator reports, never raises
+            self.report({"ERROR"}, failure_text(e))
             return {"CANCELLED"}
         if msg:
             self.report({"INFO"}, msg)
@@ -276,10 +287,14 @@ def modal_tick(context, session, event_type):
         more = api.fit_tick(session) if session.threaded else api.fit_step(session)
         if more is None:  # the worker is still computing this generation
             return "RUNNING", None, None
-    except (ClothFitError, OSError) as e:
-        session.job.error = str(e)
-        end_modal(context, session, cancelled=True)
-        return "CANCELLED", "ERROR", f"Fit stopped: {e}"
+    except Exception as e:  # noqa: BLE001 - reported, the best so far kept
+        text = failure_text(e)
+        session.job.fail(text)
+        try:
+            end_modal(context, session, cancelled=True)
+        except Exception as e2:  # noqa: BLE001
+            text += f"; and then: {failure_text(e2)}"
+        return "CANCELLED", "ERROR", f"Fit stopped: {text}"
     context.window_manager.progress_update(int(1000 * session.job.progress))
     _status(context, session.status_text())
     _redraw(context)
@@ -322,8 +337,8 @@ class CLOTHFIT_OT_fit(bpy.types.Operator):
     def execute(self, context):
         try:
             _, level, msg = api.run_fit(context.scene)
-        except (ClothFitError, OSError) as e:
-            self.report({"ERROR"}, str(e))
+        except Exception as e:  # noqa: BLE001
+            self.report({"ERROR"}, failure_text(e))
             return {"CANCELLED"}
         self.report({level}, msg)
         _redraw(context)
@@ -334,8 +349,8 @@ class CLOTHFIT_OT_fit(bpy.types.Operator):
             return self.execute(context)
         try:
             self._session = begin_modal(context)
-        except (ClothFitError, OSError) as e:
-            self.report({"ERROR"}, str(e))
+        except Exception as e:  # noqa: BLE001
+            self.report({"ERROR"}, failure_text(e))
             return {"CANCELLED"}
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}

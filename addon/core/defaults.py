@@ -72,3 +72,17 @@ FIT_GA_CHILDREN = 5 * N_FREE
 CMA_POPSIZE = 4 + int(3 * math.log(N_FREE))
 FIT_EVALUATIONS = 2500            # default evaluation budget of one fit
 DEFAULT_OPTIMIZER = "cma-es"      # measured faster than SPX+MGG on this problem (README, `paper --only optimizers`)
+
+# --- when a fit has converged (README, "Fits: stopping"). Tolerances far below what silhouettes resolve: a step of
+# 1e-5 of the unit search cube is a 0.005 % change of k/m over its two decades; 1e-6 of E_sil per image is a
+# five-hundredth of one pixel of a 2000-pixel silhouette, far below the noise floor (about 0.2 % per image).
+# Measured on the paper protocol (Table 1): 623-714 evaluations per fit, every row on its noise floor; with
+# 1e-4 / 1e-5 the fits stopped after 469-595 evaluations but 0.002-0.008 points above the floor.
+FIT_TOLX = 1e-5                   # unit-cube step size at which CMA-ES has converged (GA: population spread)
+FIT_TOLFUN_PER_IMAGE = 1e-6       # spread of recent best E_all (per training image) below which it has converged
+FIT_GA_STALL = 3000               # GA: evaluations without an improvement of more than the tolfun = stagnated
+FIT_RESTARTS = 0                  # CMA-ES IPOP restarts (each with twice the population)
+FIT_EXPLODED_LIMIT = 100          # this many candidates, all exploded, and nothing finite: the fit is an error
+CHECKPOINT_INTERVAL_S = 2.0       # the CLI writes its checkpoint at most this often (and always at the end)
+MAX_FIT_PIXELS = 16_000_000       # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
+MAX_IMAGE_SIDE = 16384

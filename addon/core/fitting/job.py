@@ -3,7 +3,18 @@
 Used by the CLI (a loop with a progress bar), by the Blender modal operator (one step per timer
 tick) and by the experiment protocol. The job never loses the best result found so far: it is
 kept in memory at every step, written to the checkpoint (if a path is given) after every
-generation, and ``result()`` returns it whether the job finished, was cancelled or failed.
+generation (or every ``checkpoint_interval`` seconds, and always at the end), and ``result()``
+returns it whether the job finished, was cancelled or failed.
+
+A job stops (``stop_reason``) when the optimiser has converged by its own criteria
+("converged"), the evaluation budget is spent ("budget"), the target error is reached
+("target"), it is cancelled ("cancelled") or it failed ("error": e.g. every candidate exploded).
+
+A checkpoint records what it is a fit of (``identity()``: a hash of the capture's cameras, frame
+times and the training silhouettes; cameras, times, resolution, model, optimiser, population,
+seed, bounds...). ``FitJob.resume`` refuses a checkpoint whose identity differs from the job asked
+for, naming the differing fields; only the budget (``max_evaluations``) and the target may change.
+Checkpoints hold plain numbers only (no pickle) and are checked field by field when read.
 
 The model is the paper's sheet (default) or Blender's cloth (``FitConfig.model``); what is searched
 for each lives in ``parameters.py``. Identifiability (SPEC 2): the motion depends on ratios to the
@@ -15,6 +26,8 @@ takes, with the scene frame rate they belong to).
 """
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import json
 import math
 import os
@@ -25,9 +38,11 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..physics.paper import identifiable, identifiable_errors
+from ..physics.paper import identifiable
+from ..safeio import atomic_json as safe_atomic_json
+from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from .objective import SilhouetteObjective
-from .optimise import make_optimizer
+from .optimise import canonical_name, make_optimizer, optimizer_from_state
 from .parameters import PaperParameters, SceneParameters, make_parameters
 
 
@@ -60,14 +75,93 @@ class FitConfig:
     workers: int | None = None            # blender: worker processes (default: the cores)
     address: str | None = None            # blender: a running Ray cluster ("auto", "ray://host:port")
     executor: str = "auto"                # blender: "ray", "process" (no Ray) or "auto"
+    restarts: int = D.FIT_RESTARTS        # cma-es: IPOP restarts after convergence (population doubled each)
 
     @classmethod
     def from_dict(cls, d):
+        if not isinstance(d, dict):
+            raise ClothFitError(f"fit config: expected an object, got {type(d).__name__}")
         known = {f for f in cls.__dataclass_fields__}
         bad = set(d) - known
         if bad:
             raise ClothFitError(f"fit config: unknown keys {sorted(bad)}")
-        return cls(**d)
+        return cls(**d).checked()
+
+    def checked(self) -> "FitConfig":
+        """The config with every value checked (one-line ClothFitError naming the first bad one)."""
+        def intval(name, lo, hi=10 ** 12, none_ok=True):
+            v = getattr(self, name)
+            if v is None and none_ok:
+                return
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+                raise ClothFitError(f"fit config: {name} must be an integer in {lo}..{hi}, got {v!r}")
+            setattr(self, name, int(v))
+
+        def numval(name, lo, hi=math.inf, none_ok=True):
+            v = getattr(self, name)
+            if v is None and none_ok:
+                return
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(v) \
+                    or not lo <= v <= hi:
+                raise ClothFitError(f"fit config: {name} must be a finite number in [{lo}, {hi}], got {v!r}")
+
+        def intlist(name):
+            v = getattr(self, name)
+            if v is not None and (not isinstance(v, (list, tuple)) or not all(
+                    isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in v)):
+                raise ClothFitError(f"fit config: {name} must be a list of integers, got {v!r}")
+
+        intval("seed", 0, 2 ** 63 - 1, none_ok=False)
+        intval("max_evaluations", 1, none_ok=False)
+        intval("population", 2, 10 ** 6)
+        intval("children", 1, 10 ** 6)
+        intval("restarts", 0, 20, none_ok=False)
+        intval("quality", 1, 80)
+        numval("target_error", 0.0)
+        numval("cloth_mass", 1e-12)
+        numval("fps", 1e-3, 1e4)
+        intlist("train_cameras")
+        tt = self.train_times
+        if tt is not None and (not isinstance(tt, (list, tuple)) or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in tt)):
+            raise ClothFitError(f"fit config: train_times must be a list of finite numbers, got {tt!r}")
+        if not isinstance(self.optimizer, str):
+            raise ClothFitError(f"fit config: optimizer must be a name, got {self.optimizer!r}")
+        canonical_name(self.optimizer)
+        if self.resolution is not None:
+            check_resolution(self.resolution, "fit config: resolution")
+        if self.backend not in ("auto", "numba", "numpy"):
+            raise ClothFitError(f"fit config: unknown backend {self.backend!r} (numba, numpy, auto)")
+        for name in ("bounds", "fixed"):
+            v = getattr(self, name)
+            if v is not None and not isinstance(v, dict):
+                raise ClothFitError(f"fit config: {name} must be an object, got {v!r}")
+        if self.free is not None and (not isinstance(self.free, (list, tuple))
+                                      or not all(isinstance(x, str) for x in self.free)):
+            raise ClothFitError(f"fit config: free must be a list of setting names, got {self.free!r}")
+        for name in ("bending_model", "init"):
+            v = getattr(self, name)
+            if v is not None and not isinstance(v, str):
+                raise ClothFitError(f"fit config: {name} must be a string, got {v!r}")
+        if self.model is not None and not isinstance(self.model, (str, dict)):
+            raise ClothFitError(f"fit config: model must be a name or a model object, got {self.model!r}")
+        return self
+
+
+def check_resolution(res, what="resolution"):
+    """(H, W) as two positive integers within the size limits."""
+    try:
+        h, w = res
+        ok = all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in (h, w))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ClothFitError(f"{what} {res!r} must be two integers (height, width)")
+    h, w = int(h), int(w)
+    if not (0 < h <= D.MAX_IMAGE_SIDE and 0 < w <= D.MAX_IMAGE_SIDE and h * w <= D.MAX_FIT_PIXELS):
+        raise ClothFitError(f"{what} {h}x{w} must be positive, at most {D.MAX_IMAGE_SIDE} per side and "
+                            f"{D.MAX_FIT_PIXELS} pixels in all")
+    return [h, w]
 
 
 def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -93,22 +187,55 @@ def load_observed(capture, cams, fidx, resolution=None):
     cameras = [capture.cameras[c] for c in cams]
     observed, ignore = capture.load_observations(cams, fidx)
     if resolution is not None:
-        h, w = int(resolution[0]), int(resolution[1])
-        if h <= 0 or w <= 0:
-            raise ClothFitError(f"fit resolution {resolution} must be positive")
+        h, w = check_resolution(resolution, "fit resolution")
         cameras = [c.resized(h, w) for c in cameras]
         observed = [[resample_silhouette(o, h, w) for o in oc] for oc in observed]
         ignore = [[resample_ignore(g, h, w) for g in gc] for gc in ignore]
     return cameras, observed, ignore
 
 
+STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
+CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
+CHECKPOINT_VERSION = 2
+CHECKPOINT_KEYS = ("format", "version", "identity", "config", "capture", "optimizer_state", "elapsed", "exploded",
+                   "finished", "cancelled", "stop_reason", "error", "result")
+MAX_CHECKPOINT_BYTES = 64 * 1024 * 1024
+
+
+def capture_hash(capture) -> str:
+    """sha256 of a capture's cameras (name, size, K, R, t, dist), frame times and scenario."""
+    return hashlib.sha256(json.dumps({"cameras": [c.to_dict() for c in capture.cameras],
+                                      "frame_times": [float(t) for t in capture.frame_times],
+                                      "scenario": capture.scenario.to_dict()},
+                                     sort_keys=True, default=_default).encode()).hexdigest()
+
+
+def silhouettes_hash(observed, ignore=None) -> str:
+    """sha256 of the training silhouettes and their ignore masks (as fitted), in order."""
+    h = hashlib.sha256()
+    for c, oc in enumerate(observed):
+        for f, o in enumerate(oc):
+            masks = [o]
+            g = None if ignore is None else ignore[c][f]
+            masks.append(g)
+            for m in masks:
+                if m is None:
+                    h.update(b"none")
+                    continue
+                m = np.asarray(m, dtype=bool)
+                h.update(np.asarray(m.shape, dtype=np.int64).tobytes())
+                h.update(np.packbits(m).tobytes())
+    return h.hexdigest()
+
+
 class FitJob:
-    def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None, evaluator=None):
+    def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None,
+                 checkpoint_interval: float = 0.0, evaluator=None):
         """``evaluator``: where candidates are simulated when not by the core's models: a model-like
         object (``simulate(scenario, rows) -> SimResult``, ``scenario(times)``, ``describe()``), e.g.
         ``addon.farm.scene.BlendSceneEvaluator`` (Blender's solver on a .blend in worker processes)."""
         self.capture = capture
-        self.config = cfg = config or FitConfig()
+        self.config = cfg = (config or FitConfig()).checked()
         self.checkpoint = checkpoint
         if cfg.evaluator not in ("core", "blender"):
             raise ClothFitError(f"fit config: evaluator {cfg.evaluator!r} must be 'core' or 'blender'")
@@ -116,6 +243,8 @@ class FitJob:
             raise ClothFitError(f"a fit with the {cfg.evaluator} backend needs its workers "
                                 f"(python -m addon fit ... --backend blender --blend SCENE.blend)")
         self.evaluator = evaluator
+        self.checkpoint_interval = float(checkpoint_interval)
+        self._last_save = -math.inf
         ncam = len(capture.cameras)
         cams = list(range(ncam)) if cfg.train_cameras is None else [int(c) for c in cfg.train_cameras]
         for c in cams:
@@ -123,14 +252,20 @@ class FitJob:
                 raise ClothFitError(f"training camera index {c} outside 0..{ncam - 1}")
         if not cams:
             raise ClothFitError("no training camera selected")
+        if len(set(cams)) != len(cams):
+            raise ClothFitError(f"training cameras {cams} name a camera twice")
         times = list(capture.frame_times) if cfg.train_times is None else list(cfg.train_times)
         if not times:
             raise ClothFitError("no training frame selected")
         fidx = [capture.frame_index(t) for t in times]
+        if len(set(fidx)) != len(fidx):
+            raise ClothFitError(f"training times {times} name a frame twice")
         self.train_cameras = cams
         self.train_frames = fidx
         self.train_times = [float(capture.frame_times[i]) for i in fidx]
         cameras, observed, ignore = load_observed(capture, cams, fidx, cfg.resolution)
+        self.capture_hash = capture_hash(capture)
+        self.silhouettes_hash = silhouettes_hash(observed, ignore)
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
         if evaluator is not None:
             self.scenario = evaluator.scenario(self.train_times)
@@ -142,25 +277,57 @@ class FitJob:
                                              model=self.par.model, ignore=ignore)
         self.m, self.m_source = self.par.m, self.par.m_source
         self.space = self.par.space
-        kw = {}
-        is_cma = cfg.optimizer.lower() in ("cma", "cma-es")
+        self.optimizer_name = canonical_name(cfg.optimizer)
+        is_cma = self.optimizer_name == "cma-es"
+        tolfun = D.FIT_TOLFUN_PER_IMAGE * self.objective.n_images
+        kw = {"tolx": D.FIT_TOLX, "tolfun": tolfun}
         if self.par.initial is not None:          # warm start: from the given result, a closer search
             kw["initial"] = self.par.initial
             if is_cma:
                 kw["sigma0"] = D.WARM_START_SIGMA
-        if cfg.population:
-            kw["popsize" if is_cma else "population"] = cfg.population
-        elif not is_cma:
-            kw["population"] = D.FIT_GA_POPULATION
-        if not is_cma:
-            kw["children"] = cfg.children or D.FIT_GA_CHILDREN
-        self.opt = make_optimizer(cfg.optimizer, self.space, cfg.seed, **kw)
+        if is_cma:
+            kw["restarts"] = cfg.restarts
+            if cfg.population is not None:
+                kw["popsize"] = cfg.population
+        else:
+            kw["population"] = D.FIT_GA_POPULATION if cfg.population is None else cfg.population
+            kw["children"] = D.FIT_GA_CHILDREN if cfg.children is None else cfg.children
+            kw["stall_evaluations"] = D.FIT_GA_STALL
+        self.opt = make_optimizer(self.optimizer_name, self.space, cfg.seed, **kw)
         self.started = time.time()
         self.elapsed = 0.0
         self.finished = False
         self.cancelled = False
         self.error = None
+        self.stop_reason = None
         self.exploded = 0
+
+    # ------------------------------------------------------------- identity
+    def identity(self) -> dict:
+        """What this job is a fit of: a checkpoint is only resumed by a job with the same identity."""
+        opt = self.opt
+        ident = {
+            "capture_hash": self.capture_hash,
+            "silhouettes_hash": self.silhouettes_hash,
+            "cameras": [self.capture.cameras[c].name for c in self.train_cameras],
+            "camera_indices": list(self.train_cameras),
+            "times": list(self.train_times),
+            "resolution": None if self.config.resolution is None else [int(x) for x in self.config.resolution],
+            "model": self.par.model.to_dict(),
+            "fixed": getattr(self.par, "fixed", None),
+            "mass": float(self.m),
+            "optimizer": self.optimizer_name,
+            "population": int(getattr(opt, "popsize", getattr(opt, "population", 0))),
+            "children": getattr(opt, "children", None),
+            "restarts": getattr(opt, "restarts", None),
+            "seed": int(self.config.seed),
+            "bounds": self.space.state_dict(),
+            "initial": None if self.par.initial is None else np.asarray(self.par.initial).tolist(),
+            "scene": None if self.evaluator is None else {
+                "blend": os.path.abspath(self.config.blend) if self.config.blend else None,
+                "object": self.config.blend_object, "frame_zero": self.config.frame_zero},
+        }
+        return json.loads(json.dumps(ident, default=_default))
 
     # ------------------------------------------------------------- mapping
     def to_params(self, X):
@@ -194,8 +361,26 @@ class FitJob:
             return self.par.params(self.opt.best_x)
         return self.par.settings(self.opt.best_x)
 
+    def _update_stop(self):
+        """Set ``finished`` and ``stop_reason`` from the state after a generation."""
+        if self.finished:
+            return
+        n_img = self.objective.n_images
+        if self.opt.best_x is None and self.evaluations >= D.FIT_EXPLODED_LIMIT:
+            self.error = (f"every one of the {self.evaluations} candidates tried made the simulation explode or "
+                          f"fail: check the capture's scenario (settle_time, gravity, cloth size) and the bounds")
+            self.stop_reason = "error"
+        elif self.config.target_error is not None and self.best_error / n_img <= self.config.target_error:
+            self.stop_reason = "target"
+        elif self.opt.stopped:
+            self.stop_reason = "converged"
+        elif self.evaluations >= self.config.max_evaluations:
+            self.stop_reason = "budget"
+        self.finished = self.stop_reason is not None
+
     def step(self) -> bool:
-        """Run one generation. Returns False once the job is finished (budget, target or cancel)."""
+        """Run one generation. Returns False once the job is finished (converged, budget, target,
+        cancelled or failed)."""
         if self.finished:
             return False
         t0 = time.time()
@@ -204,28 +389,42 @@ class FitJob:
         self.exploded += int(np.sum(~np.isfinite(f)))
         self.opt.tell(X, f)
         self.elapsed += time.time() - t0
-        n_img = self.objective.n_images
-        if self.evaluations >= self.config.max_evaluations:
-            self.finished = True
-        if self.config.target_error is not None and self.best_error / n_img <= self.config.target_error:
-            self.finished = True
-        if self.checkpoint:
+        self._update_stop()
+        if self.checkpoint and (self.finished or time.monotonic() - self._last_save >= self.checkpoint_interval):
             self.save_checkpoint(self.checkpoint)
         return not self.finished
 
     def run(self, callback=None):
-        while self.step():
-            if callback is not None and callback(self):
-                self.cancel()
-                break
+        try:
+            while self.step():
+                if callback is not None and callback(self):
+                    self.cancel()
+                    break
+        except ClothFitError as e:
+            self.fail(str(e))
+            raise
+        except Exception as e:
+            self.fail(f"{type(e).__name__}: {e}")
+            raise
         return self.result()
 
     def cancel(self):
         """Stop; the best result so far is kept (and written to the checkpoint)."""
         self.cancelled = True
+        if not self.finished:
+            self.stop_reason = "cancelled"
         self.finished = True
         if self.checkpoint:
             self.save_checkpoint(self.checkpoint)
+
+    def fail(self, message: str):
+        """Stop because of an error; the best so far is kept (and written to the checkpoint)."""
+        self.error = str(message)
+        self.stop_reason = "error"
+        self.finished = True
+        if self.checkpoint:
+            with contextlib.suppress(ClothFitError):
+                self.save_checkpoint(self.checkpoint)
 
     # --------------------------------------------------------------- output
     def result(self) -> dict:
@@ -234,12 +433,17 @@ class FitJob:
         res = {
             "format": "silhouette-cloth-fit/result", "version": 1,
             "capture": os.path.abspath(self.capture.root),
+            "capture_hash": self.capture_hash, "silhouettes_hash": self.silhouettes_hash,
             "optimizer": self.config.optimizer, "seed": self.config.seed,
             "train_cameras": [self.capture.cameras[c].name for c in self.train_cameras],
             "train_camera_indices": self.train_cameras,
             "train_times": self.train_times,
             "resolution": self.config.resolution,
             "evaluations": self.evaluations, "generations": self.generation,
+            "max_evaluations": self.config.max_evaluations,
+            "stop_reason": self.stop_reason,
+            "converged_by": list(getattr(self.opt, "run_stops", None) or
+                                 ([self.opt.stop_reason] if getattr(self.opt, "stop_reason", None) else [])),
             "exploded_candidates": self.exploded,
             "best_E_all": _finite(self.best_error), "best_E_sil_mean_pct": _finite(100.0 * self.best_error / n_img),
             "n_train_images": n_img,
@@ -260,55 +464,166 @@ class FitJob:
             res["seconds"] = self.elapsed
         gt = (self.capture.meta or {}).get("true_params")
         if gt and bp and isinstance(self.par, PaperParameters):
-            res["true_params"] = gt
-            res["true_identifiable"] = identifiable(gt)
-            res["identifiable_error_pct"] = identifiable_errors(bp, gt)
+            # the capture's own record of its truth: free-form metadata, never a reason to lose the result
+            from ..physics.paper import Params
+            try:
+                truth = Params.from_dict(gt, "capture meta.true_params").as_dict()
+            except ClothFitError as e:
+                res["true_params_ignored"] = str(e)
+            else:
+                res["true_params"] = truth
+                res["true_identifiable"] = identifiable(truth)
+                est, tru = identifiable(bp), identifiable(truth)
+                res["identifiable_error_pct"] = {k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None)
+                                                 for k in est}
         return res
 
     def save_result(self, path):
-        _atomic_json(path, self.result())
+        atomic_json(path, self.result())
+
+    def checkpoint_dict(self) -> dict:
+        return {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "identity": self.identity(),
+                "config": asdict(self.config), "capture": os.path.abspath(self.capture.root),
+                "optimizer_state": self.opt.state_dict(), "elapsed": self.elapsed,
+                "exploded": self.exploded, "finished": self.finished, "cancelled": self.cancelled,
+                "stop_reason": self.stop_reason, "error": self.error, "result": self.result()}
 
     def save_checkpoint(self, path):
-        _atomic_json(path, {"config": asdict(self.config), "capture": os.path.abspath(self.capture.root),
-                            "optimizer_state": self.opt.state_dict(), "elapsed": self.elapsed,
-                            "exploded": self.exploded, "finished": self.finished, "cancelled": self.cancelled,
-                            "result": self.result()})
+        atomic_json(path, self.checkpoint_dict())
+        self._last_save = time.monotonic()
 
     @classmethod
-    def resume(cls, path, capture=None, evaluator=None):
-        """Continue a job from its checkpoint (same capture, same config)."""
+    def resume(cls, path, capture=None, config: FitConfig | None = None, checkpoint_interval: float = 0.0,
+               evaluator=None):
+        """Continue a job from its checkpoint. ``config`` is the fit asked for now (default: the
+        checkpoint's own); a checkpoint of another fit (another capture, cameras, times, resolution,
+        model, optimiser, population, seed, bounds...) is refused naming the differing fields. The
+        budget (``max_evaluations``) and the target may differ. ``evaluator``: the workers of a
+        Blender-scene fit."""
         from ..observation.capture import load_capture
-        from .optimise import CMAES, SPXMGG  # noqa: F401
-        try:
-            with open(path) as f:
-                ck = json.load(f)
-        except FileNotFoundError:
-            raise ClothFitError(f"checkpoint not found: {path}") from None
-        except json.JSONDecodeError as e:
-            raise ClothFitError(f"checkpoint {path} is corrupt: {e}") from None
+        ck = read_checkpoint(path)
+        saved_cfg = FitConfig.from_dict(ck["config"])
+        if config is None:
+            config = saved_cfg
         cap = capture or load_capture(ck["capture"])
-        job = cls(cap, FitConfig.from_dict(ck["config"]), checkpoint=path, evaluator=evaluator)
-        job.opt = type(job.opt).from_state(ck["optimizer_state"])
-        job.elapsed = ck.get("elapsed", 0.0)
-        job.exploded = ck.get("exploded", 0)
+        job = cls(cap, config, checkpoint=path, checkpoint_interval=checkpoint_interval,
+                  evaluator=evaluator)
+        diff = identity_diff(ck["identity"], job.identity())
+        if diff:
+            names = list(dict.fromkeys(d.split(":")[0].split(".")[0] for d in diff))
+            raise ClothFitError(f"checkpoint {path} is of another fit: {', '.join(names)} differ "
+                                f"({'; '.join(diff)}); resume with the same capture and options, or start afresh "
+                                f"with --force or another --out")
+        opt = optimizer_from_state(ck["optimizer_state"])
+        mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, getattr(job.opt, "popsize", None),
+                getattr(job.opt, "population", None), getattr(job.opt, "children", None),
+                getattr(job.opt, "restarts", None))
+        theirs = (type(opt), opt.space.state_dict(), opt.seed, getattr(opt, "popsize", None),
+                  getattr(opt, "population", None), getattr(opt, "children", None), getattr(opt, "restarts", None))
+        if mine != theirs:
+            raise ClothFitError(f"checkpoint {path}: its optimiser state does not match its recorded fit "
+                                f"(optimiser, bounds, seed or population differ)")
+        job.opt = opt
+        job.elapsed = ck["elapsed"]
+        job.exploded = ck["exploded"]
         job.finished = False
         job.cancelled = False
-        if job.evaluations >= job.config.max_evaluations:
-            job.finished = True
+        job._update_stop()
         return job
+
+
+def identity_diff(saved, now) -> list:
+    """Human-readable differences between two ``identity()`` dicts."""
+    if not isinstance(saved, dict):
+        return ["it records no identity"]
+    out = []
+    keys = sorted(set(saved) | set(now))
+    differ = {k for k in keys if saved.get(k, "<missing>") != now.get(k, "<missing>")}
+    if differ & {"cameras", "camera_indices", "times", "capture_hash"}:
+        differ.discard("silhouettes_hash")     # other images, of course
+    if "cameras" in differ:
+        differ.discard("camera_indices")
+    for k in keys:
+        if k not in differ:
+            continue
+        a, b = saved.get(k, "<missing>"), now.get(k, "<missing>")
+        if isinstance(a, dict) and isinstance(b, dict):       # name the entries that differ
+            for sub in sorted(set(a) | set(b), key=str):
+                if a.get(sub, "<missing>") != b.get(sub, "<missing>"):
+                    out.append(f"{k}.{sub}: checkpoint {_short(a.get(sub, '<missing>'), 40)}, "
+                               f"now {_short(b.get(sub, '<missing>'), 40)}")
+        else:
+            out.append(f"{k}: checkpoint {_short(a, 40)}, now {_short(b, 40)}")
+    return out
+
+
+def _short(v, limit=80):
+    s = json.dumps(v, default=str) if not isinstance(v, str) else v
+    return s if len(s) <= limit else s[:limit - 3] + "..."
+
+
+def read_checkpoint(path) -> dict:
+    """A checkpoint's JSON, checked at the top level (the optimiser state is checked by the optimiser)."""
+    path = os.fspath(path)
+    try:
+        if os.path.isdir(path):
+            raise ClothFitError(f"checkpoint {path} is a directory")
+        with open(path, "rb") as f:
+            raw = f.read(MAX_CHECKPOINT_BYTES + 1)
+    except FileNotFoundError:
+        raise ClothFitError(f"checkpoint not found: {path}") from None
+    except OSError as e:
+        raise ClothFitError(f"checkpoint {path}: cannot read it ({e.strerror or e})") from None
+    if len(raw) > MAX_CHECKPOINT_BYTES:
+        raise ClothFitError(f"checkpoint {path} is larger than {MAX_CHECKPOINT_BYTES} bytes: not a checkpoint")
+    try:
+        ck = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+        raise ClothFitError(f"checkpoint {path} is corrupt: {str(e).splitlines()[0]}") from None
+    if not isinstance(ck, dict):
+        raise ClothFitError(f"checkpoint {path} is corrupt: expected a JSON object")
+    if ck.get("format") != CHECKPOINT_FORMAT:
+        raise ClothFitError(f"checkpoint {path}: 'format' is {ck.get('format')!r}, expected {CHECKPOINT_FORMAT!r} "
+                            f"(a checkpoint of an older version cannot be resumed: start afresh with --force)")
+    if ck.get("version") != CHECKPOINT_VERSION:
+        raise ClothFitError(f"checkpoint {path}: version {ck.get('version')!r} is not supported "
+                            f"(this reader knows version {CHECKPOINT_VERSION})")
+    unknown = sorted(set(ck) - set(CHECKPOINT_KEYS))
+    missing = [k for k in CHECKPOINT_KEYS if k not in ck]
+    if unknown or missing:
+        raise ClothFitError(f"checkpoint {path}: " + ", ".join(
+            x for x in (f"unknown fields {unknown}" if unknown else "", f"missing fields {missing}" if missing else "")
+            if x))
+    for k in ("identity", "config", "optimizer_state"):
+        if not isinstance(ck[k], dict):
+            raise ClothFitError(f"checkpoint {path}: '{k}' must be an object")
+    if not isinstance(ck["capture"], str) or not ck["capture"]:
+        raise ClothFitError(f"checkpoint {path}: 'capture' must be a path")
+    e = ck["elapsed"]
+    if isinstance(e, bool) or not isinstance(e, (int, float)) or not math.isfinite(e) or e < 0:
+        raise ClothFitError(f"checkpoint {path}: 'elapsed' must be a number >= 0")
+    x = ck["exploded"]
+    if isinstance(x, bool) or not isinstance(x, int) or x < 0:
+        raise ClothFitError(f"checkpoint {path}: 'exploded' must be an integer >= 0")
+    for k in ("finished", "cancelled"):
+        if not isinstance(ck[k], bool):
+            raise ClothFitError(f"checkpoint {path}: '{k}' must be true or false")
+    if ck["stop_reason"] is not None and ck["stop_reason"] not in STOP_REASONS:
+        raise ClothFitError(f"checkpoint {path}: 'stop_reason' {ck['stop_reason']!r} is not one of {STOP_REASONS}")
+    ck["elapsed"] = float(e)
+    return ck
 
 
 def _finite(x):
     return float(x) if math.isfinite(x) else None
 
 
-def _atomic_json(path, obj):
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        json.dump(obj, f, indent=1, default=_default)
-    os.replace(tmp, path)
+def atomic_json(path, obj):
+    """Checkpoints and results: strict JSON (no NaN), written by ``safeio.atomic_json``."""
+    safe_atomic_json(path, obj, strict=True, default=_default)
+
+
+_atomic_json = atomic_json
 
 
 def _default(o):

@@ -38,44 +38,72 @@ SPX + MGG (real-coded GA, paper refs [13] [14], SPEC 7)
 
 CMA-ES
 ------
-:class:`CMAES` wraps ``cma.CMAEvolutionStrategy`` (imported lazily) in the unit cube: bounds
-``[0, 1]``, ``sigma0 = 0.3``, ``x0`` = the centre or the mean of ``initial`` (the initial guesses
-are also injected into the first generation), population ``D.CMA_POPSIZE``. Its normal samples
-come from this object's own ``numpy`` Generator (cma's ``randn`` option), never from the global
-``numpy.random`` state, so a seed reproduces a run. The run stops early when cma's own
-termination criteria fire (``stopped``); no restarts.
+:class:`CMAES` is this module's own steppable CMA-ES (Hansen's tutorial algorithm, "The CMA
+Evolution Strategy: A Tutorial", with rank-one and rank-mu updates and cumulative step-size
+adaptation) in the unit cube: the search runs on unbounded coordinates, and a candidate is
+*reflected* into ``[0, 1]`` (the triangle wave above) before it is decoded; ``sigma0 = 0.3``,
+the mean starts at the centre or the mean of ``initial`` (the guesses are also the first
+candidates of the first generation, their steps clipped in Mahalanobis norm as Hansen advises
+for injected solutions), population ``D.CMA_POPSIZE``. All random numbers come from this
+object's own PCG64 Generator, never from the global ``numpy.random`` state, so a seed
+reproduces a run.
+
+A run ends by its own criteria (``stop_reason``):
+
+* ``tolx``: ``sigma * sqrt(C_ii)`` and ``sigma * |pc_i|`` below ``tolx`` in every coordinate
+  (unit-cube units);
+* ``tolfun``: the best values of the last ``10 + ceil(30 n / lambda)`` generations and all
+  values of this one lie within ``tolfun``;
+* ``tolstagnation``: the median of the generation bests over the last
+  ``W = 120 + 30 n / lambda`` generations is no better than over the ``W`` before;
+* ``conditioncov`` (condition number of C above 1e14), ``noeffectcoord`` / ``noeffectaxis``
+  (a step no longer changes the mean), ``tolupsigma`` (sigma above 1e4: no signal at all).
+
+With ``restarts = R > 0`` (IPOP-CMA-ES, Auger & Hansen 2005) a run that stops is followed by a
+new one from a uniformly random mean with twice the population, up to ``R`` times; the best
+over all runs is kept. ``stopped`` is True once the last run has ended.
+
+SPX + MGG stops when its population has collapsed (spread below ``tolx`` in every unit-cube
+coordinate) or when the best value has not improved by more than ``tolfun`` during the last
+``stall_evaluations`` evaluations (both off unless set).
 
 Non-finite fitness
 ------------------
 An exploded or failed model is a bad candidate, never a crash (SPEC 4): every non-finite value
 (``nan``, ``+inf``, ``-inf``) is treated as ``+inf``, the worst. Such a candidate can never
-become ``best_x``; in MGG it ranks last in its family; cma, which is rank based, receives a
-finite stand-in worse than every finite value of that generation. ``best_x`` stays ``None`` and
-``best_f`` ``inf`` until a finite value has been told.
+become ``best_x``; in MGG it ranks last in its family; CMA-ES, which is rank based, ranks it
+after every finite value. ``best_x`` stays ``None`` and ``best_f`` ``inf`` until a finite value
+has been told.
+
+History
+-------
+``history`` is the best-so-far curve as ``(evaluations, best_f)`` steps: a point where the best
+changes, and one at the end of every run of equal bests (so its size grows with the number of
+improvements, not of generations). Its last point is always the current one.
 
 Checkpoints
 -----------
-``state_dict()`` returns a JSON-serialisable dict (strict JSON: no NaN / Infinity; an infinite
-fitness is stored as ``None``), and ``from_state(d)`` (or :func:`optimizer_from_state`) resumes
-exactly: a run checkpointed after any ``tell`` (or even between ``ask`` and ``tell``) and
-resumed produces the very same candidates as the uninterrupted run. For SPX + MGG the dict
-holds the population, fitnesses, pending children, counters and the PCG64 state as plain
-numbers. For CMA-ES the ``cma`` object (with its Generator) is pickled and stored as base64
-text inside the dict: only load CMA-ES checkpoints you wrote yourself (unpickling runs code),
-and resume with the same ``cma`` version.
+``state_dict()`` returns a JSON-serialisable dict of plain numbers (strict JSON: no NaN /
+Infinity; an infinite fitness is stored as ``None``), and ``from_state(d)`` (or
+:func:`optimizer_from_state`) resumes exactly: a run checkpointed after any ``tell`` (or even
+between ``ask`` and ``tell``) and resumed produces the very same candidates as the
+uninterrupted run. SPX + MGG: population, fitnesses, pending children, counters. CMA-ES: mean,
+step size, covariance matrix (its eigendecomposition is recomputed, deterministically), the
+evolution paths, counters, the restart state. Both: the PCG64 state as integers. Nothing is
+unpickled or executed: ``from_state`` checks every field (known keys only, types, shapes,
+finiteness, ranges, a symmetric positive-definite covariance) and raises a one-line
+:class:`ClothFitError` naming the field at fault.
 """
 from __future__ import annotations
 
-import base64
 import math
-import pickle
 
 import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
 
-STATE_VERSION = 1
+STATE_VERSION = 2
 
 
 # --------------------------------------------------------------------------- helpers
@@ -114,6 +142,80 @@ def reflect_unit(U: np.ndarray) -> np.ndarray:
     """Reflect values into [0, 1] at the faces of the unit cube (triangle wave, any distance)."""
     V = np.mod(np.asarray(U, dtype=np.float64), 2.0)
     return np.where(V > 1.0, 2.0 - V, V)
+
+
+# --------------------------------------------------------------------------- state validation
+
+def _field(d, key, where):
+    if key not in d:
+        raise ClothFitError(f"checkpoint: {where} state lacks '{key}'")
+    return d[key]
+
+
+def _check_keys(d, allowed, where):
+    unknown = sorted(set(d) - set(allowed))
+    if unknown:
+        raise ClothFitError(f"checkpoint: {where} state has unknown fields {unknown} (not written by this version)")
+
+
+def _num(d, key, where, kind=float, lo=None, hi=None, allow_none=False):
+    v = _field(d, key, where)
+    if v is None and allow_none:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (kind is int and not isinstance(v, int)):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be {'an integer' if kind is int else 'a number'}, "
+                            f"got {type(v).__name__}")
+    if kind is float and not math.isfinite(v):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be finite, got {v!r}")
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise ClothFitError(f"checkpoint: {where} '{key}' = {v!r} outside [{lo}, {hi}]")
+    return kind(v)
+
+
+def _array(d, key, where, shape, allow_none=False, inf_as_none=False):
+    """A nested list of numbers of the given shape (None in shape = any length), all finite
+    (or ``None`` = +inf where ``inf_as_none``)."""
+    v = _field(d, key, where)
+    if v is None and allow_none:
+        return None
+    if not isinstance(v, list):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be a list of numbers, got {type(v).__name__}")
+    try:
+        if inf_as_none:
+            flat = np.array([math.inf if x is None else x for x in v], dtype=object)
+            if any(isinstance(x, (bool, list, dict, str)) for x in flat):
+                raise TypeError
+            A = flat.astype(np.float64)
+        else:
+            A = np.array(v, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be a (nested) list of numbers") from None
+    if A.size == 0 and len(shape) == 2 and shape[0] is None and shape[1] is not None:
+        A = A.reshape(0, shape[1])
+    if A.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, A.shape)):
+        want = "x".join("*" if s is None else str(s) for s in shape)
+        raise ClothFitError(f"checkpoint: {where} '{key}' has shape {A.shape}, expected {want}")
+    if A.size > 10_000_000:
+        raise ClothFitError(f"checkpoint: {where} '{key}' is too large ({A.size} numbers)")
+    bad = np.isnan(A) | (np.isinf(A) if not inf_as_none else np.isneginf(A))
+    if bad.any():
+        raise ClothFitError(f"checkpoint: {where} '{key}' holds non-finite values")
+    return A
+
+
+def _rng_state_from_json(v, where):
+    """A PCG64 bit-generator state made of plain integers, validated."""
+    if (not isinstance(v, dict) or set(v) != {"bit_generator", "state", "has_uint32", "uinteger"}
+            or v["bit_generator"] != "PCG64" or not isinstance(v["state"], dict)
+            or set(v["state"]) != {"state", "inc"}):
+        raise ClothFitError(f"checkpoint: {where} 'rng' is not a PCG64 generator state")
+    ints = [v["state"]["state"], v["state"]["inc"], v["has_uint32"], v["uinteger"]]
+    if not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < 2 ** 128 for i in ints):
+        raise ClothFitError(f"checkpoint: {where} 'rng' must hold non-negative integers below 2**128")
+    try:
+        return _rng_from_state(v)
+    except (TypeError, ValueError) as exc:
+        raise ClothFitError(f"checkpoint: {where} 'rng' is invalid ({exc})") from None
 
 
 # --------------------------------------------------------------------------- search space
@@ -228,7 +330,17 @@ class SearchSpace:
 
     @classmethod
     def from_state(cls, d: dict) -> "SearchSpace":
-        return cls(d["names"], {k: tuple(v) for k, v in d["bounds"].items()}, d.get("log_scaled"))
+        if not isinstance(d, dict):
+            raise ClothFitError("checkpoint: search space must be an object")
+        _check_keys(d, ("names", "bounds", "log_scaled"), "search space")
+        names, bounds, logs = d.get("names"), d.get("bounds"), d.get("log_scaled") or {}
+        if (not isinstance(names, list) or not all(isinstance(n, str) for n in names) or len(names) > 1000
+                or not isinstance(bounds, dict) or not isinstance(logs, dict)
+                or not all(isinstance(v, list) and len(v) == 2 for v in bounds.values())
+                or not all(isinstance(v, bool) for v in logs.values())):
+            raise ClothFitError("checkpoint: search space needs 'names' (strings), 'bounds' (name: [lo, hi]) "
+                                "and 'log_scaled' (name: true/false)")
+        return cls(names, {k: tuple(v) for k, v in bounds.items()}, logs)
 
     def __repr__(self):
         parts = [f"{n}=[{a:g}, {b:g}]{' log' if g else ''}"
@@ -298,7 +410,11 @@ class Optimizer:
             if math.isfinite(f[i]) and f[i] < self.best_f:
                 self.best_f = float(f[i])
                 self._best_u = np.array(U[i], dtype=np.float64)
-        self.history.append((self.evaluations, self.best_f))
+        h = self.history
+        if len(h) >= 2 and h[-1][1] == self.best_f and h[-2][1] == self.best_f:
+            h[-1] = (self.evaluations, self.best_f)       # a run of equal bests: move its end
+        else:
+            h.append((self.evaluations, self.best_f))
 
     def _check_told(self, X, pending_u):
         if pending_u is None:
@@ -350,20 +466,44 @@ class Optimizer:
                 "best_u": None if self._best_u is None else self._best_u.tolist(),
                 "best_x": None if self._best_u is None else self.best_x.tolist()}
 
+    BASE_KEYS = ("algorithm", "version", "space", "seed", "evaluations", "generation", "history", "best_f",
+                 "best_u", "best_x")
+
     def _load_base(self, d: dict):
-        self.evaluations = int(d["evaluations"])
-        self.generation = int(d["generation"])
-        self.history = [(int(e), _float_from_json(b)) for e, b in d["history"]]
-        self.best_f = _float_from_json(d["best_f"])
-        self._best_u = None if d["best_u"] is None else np.array(d["best_u"], dtype=np.float64)
+        w = self.name
+        self.evaluations = _num(d, "evaluations", w, int, 0, 10 ** 12)
+        self.generation = _num(d, "generation", w, int, 0, 10 ** 12)
+        hist = _field(d, "history", w)
+        if not isinstance(hist, list) or len(hist) > 10 ** 6:
+            raise ClothFitError(f"checkpoint: {w} 'history' must be a list of [evaluations, best] pairs")
+        out = []
+        for item in hist:
+            if (not isinstance(item, list) or len(item) != 2 or isinstance(item[0], bool)
+                    or not isinstance(item[0], int) or not (item[1] is None or (
+                        isinstance(item[1], (int, float)) and not isinstance(item[1], bool) and math.isfinite(item[1])))):
+                raise ClothFitError(f"checkpoint: {w} 'history' must be a list of [evaluations, best] pairs")
+            out.append((int(item[0]), _float_from_json(item[1])))
+        self.history = out
+        bf = _num(d, "best_f", w, float, allow_none=True)
+        self.best_f = math.inf if bf is None else bf
+        bu = _array(d, "best_u", w, (self.space.n,), allow_none=True)
+        if (bu is None) != (bf is None):
+            raise ClothFitError(f"checkpoint: {w} 'best_f' and 'best_u' must be both set or both null")
+        self._best_u = bu
 
     @staticmethod
-    def _check_state(d, name):
+    def _check_state(d, name, keys=()):
         if not isinstance(d, dict) or d.get("algorithm") != name:
             got = d.get("algorithm") if isinstance(d, dict) else type(d).__name__
             raise ClothFitError(f"checkpoint: expected an '{name}' optimiser state, got {got!r}")
         if d.get("version") != STATE_VERSION:
-            raise ClothFitError(f"checkpoint: unsupported optimiser state version {d.get('version')!r}")
+            raise ClothFitError(f"checkpoint: unsupported {name} state version {d.get('version')!r} "
+                                f"(this version reads {STATE_VERSION})")
+        _check_keys(d, Optimizer.BASE_KEYS + tuple(keys), name)
+        seed = _field(d, "seed", name)
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+            raise ClothFitError(f"checkpoint: {name} 'seed' must be a non-negative integer or null")
+        return SearchSpace.from_state(_field(d, "space", name))
 
     def state_dict(self) -> dict:
         raise NotImplementedError
@@ -399,12 +539,20 @@ class SPXMGG(Optimizer):
     name = "spx-mgg"
 
     def __init__(self, space: SearchSpace, seed=None, initial=None, population: int | None = None,
-                 children: int | None = None, eps: float | None = None):
+                 children: int | None = None, eps: float | None = None, tolx: float = 0.0,
+                 tolfun: float = 0.0, stall_evaluations: int | None = None):
         super().__init__(space, seed, initial)
         n = space.n
-        self.population = int(D.GA_POPULATION if population is None else population)
-        self.children = int(D.GA_CHILDREN if children is None else children)
+        self.population = _pos_int(D.GA_POPULATION if population is None else population, "spx-mgg: population")
+        self.children = _pos_int(D.GA_CHILDREN if children is None else children, "spx-mgg: children", 0)
         self.eps = float(math.sqrt(n + 2) if eps is None else eps)
+        self.tolx = _nonneg(tolx, "spx-mgg: tolx")
+        self.tolfun = _nonneg(tolfun, "spx-mgg: tolfun")
+        self.stall_evaluations = (None if stall_evaluations is None else
+                                  _pos_int(stall_evaluations, "spx-mgg: stall_evaluations"))
+        self._ref_best = math.inf     # best at the last improvement by more than tolfun
+        self._last_improved = 0       # evaluations then
+        self.stop_reason = None
         if self.population < n + 1:
             raise ClothFitError(f"spx-mgg: population must be at least n + 1 = {n + 1}, got {self.population}")
         if self.children < 1:
@@ -458,11 +606,36 @@ class SPXMGG(Optimizer):
             self.pop_f[slots] = new_f
         self._pending, self._replace = None, None
         self._record(U, f)
+        if self.best_f < self._ref_best - self.tolfun:
+            self._ref_best, self._last_improved = self.best_f, self.evaluations
+        self.stop_reason = self._check_stop()
+
+    def _check_stop(self):
+        if self.pop_u is None:
+            return None
+        ok = np.isfinite(self.pop_f)
+        if self.tolx > 0 and ok.sum() >= 2:
+            spread = np.ptp(self.pop_u[ok], axis=0)
+            if np.all(spread < self.tolx):
+                return "tolx"
+        if self.stall_evaluations is not None and self.evaluations - self._last_improved >= self.stall_evaluations:
+            return "stagnation"
+        return None
+
+    @property
+    def stopped(self) -> bool:
+        return self.stop_reason is not None
+
+    STATE_KEYS = ("population", "children", "eps", "tolx", "tolfun", "stall_evaluations", "ref_best",
+                  "last_improved", "stop_reason", "rng", "initial_u", "pop_u", "pop_f", "pending_u", "replace")
 
     def state_dict(self) -> dict:
         d = self._base_state()
         d.update({
             "population": self.population, "children": self.children, "eps": self.eps,
+            "tolx": self.tolx, "tolfun": self.tolfun, "stall_evaluations": self.stall_evaluations,
+            "ref_best": _float_to_json(self._ref_best), "last_improved": int(self._last_improved),
+            "stop_reason": self.stop_reason,
             "rng": self.rng.bit_generator.state,
             "initial_u": self._initial_u.tolist(),
             "pop_u": None if self.pop_u is None else self.pop_u.tolist(),
@@ -474,132 +647,301 @@ class SPXMGG(Optimizer):
 
     @classmethod
     def from_state(cls, d: dict) -> "SPXMGG":
-        cls._check_state(d, cls.name)
-        space = SearchSpace.from_state(d["space"])
-        opt = cls(space, seed=d["seed"], population=d["population"], children=d["children"], eps=d["eps"])
+        w = cls.name
+        space = cls._check_state(d, w, cls.STATE_KEYS)
+        n = space.n
+        stall = _num(d, "stall_evaluations", w, int, 1, 10 ** 12, allow_none=True)
+        opt = cls(space, seed=d["seed"], population=_num(d, "population", w, int, n + 1, 10 ** 6),
+                  children=_num(d, "children", w, int, 1, 10 ** 6), eps=_num(d, "eps", w, float, 1e-12, 1e6),
+                  tolx=_num(d, "tolx", w, float, 0.0), tolfun=_num(d, "tolfun", w, float, 0.0),
+                  stall_evaluations=stall)
         opt._load_base(d)
-        opt.rng = _rng_from_state(d["rng"])
-        opt._initial_u = np.array(d["initial_u"], dtype=np.float64).reshape(-1, space.n)
-        if d["pop_u"] is not None:
-            opt.pop_u = np.array(d["pop_u"], dtype=np.float64).reshape(-1, space.n)
-            opt.pop_f = np.array([_float_from_json(v) for v in d["pop_f"]], dtype=np.float64)
-        if d["pending_u"] is not None:
-            opt._pending = np.array(d["pending_u"], dtype=np.float64).reshape(-1, space.n)
-        if d["replace"] is not None:
-            opt._replace = np.array(d["replace"], dtype=np.int64)
+        rb = _num(d, "ref_best", w, float, allow_none=True)
+        opt._ref_best = math.inf if rb is None else rb
+        opt._last_improved = _num(d, "last_improved", w, int, 0, opt.evaluations)
+        opt.stop_reason = _stop_reason(d, w, ("tolx", "stagnation"))
+        opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
+        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        if len(opt._initial_u) > opt.population:
+            raise ClothFitError(f"checkpoint: {w} has more initial guesses than its population")
+        opt.pop_u = _array(d, "pop_u", w, (opt.population, n), allow_none=True)
+        pop_f = _array(d, "pop_f", w, (opt.population,), allow_none=True, inf_as_none=True)
+        if (opt.pop_u is None) != (pop_f is None):
+            raise ClothFitError(f"checkpoint: {w} 'pop_u' and 'pop_f' must be both set or both null")
+        opt.pop_f = pop_f
+        rows = opt.population if opt.pop_u is None else opt.children
+        opt._pending = _array(d, "pending_u", w, (rows, n), allow_none=True)
+        rep = _field(d, "replace", w)
+        if opt._pending is not None and opt.pop_u is not None:
+            if (not isinstance(rep, list) or len(rep) != 2 or len(set(map(repr, rep))) != 2
+                    or not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < opt.population
+                               for i in rep)):
+                raise ClothFitError(f"checkpoint: {w} 'replace' must be two distinct population slots")
+            opt._replace = np.array(rep, dtype=np.int64)
+        elif rep is not None:
+            raise ClothFitError(f"checkpoint: {w} 'replace' must be null without a pending family")
         return opt
+
+
+def _pos_int(v, what, minimum=1):
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) < max(1, minimum):
+        raise ClothFitError(f"{what} must be an integer >= 1, got {v!r}")
+    return int(v)
+
+
+def _nonneg(v, what):
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{what} must be a number >= 0, got {v!r}") from None
+    if not (math.isfinite(x) and x >= 0):
+        raise ClothFitError(f"{what} must be a finite number >= 0, got {v!r}")
+    return x
+
+
+def _stop_reason(d, where, allowed):
+    v = _field(d, "stop_reason", where)
+    if v is not None and v not in allowed:
+        raise ClothFitError(f"checkpoint: {where} 'stop_reason' {v!r} is not one of {list(allowed)}")
+    return v
 
 
 # --------------------------------------------------------------------------- CMA-ES
 
-class _GaussianSource:
-    """cma's ``randn(lam, N)`` option drawing from our own Generator (picklable)."""
-
-    def __init__(self, rng):
-        self.rng = rng
-
-    def __call__(self, *shape):
-        return self.rng.standard_normal(shape)
-
-
-def _import_cma():
-    import warnings
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")          # e.g. "could not import matplotlib"
-        try:
-            import cma
-        except ImportError as exc:
-            raise ClothFitError("cma-es needs the 'cma' package (pip install cma)") from exc
-    return cma
+CMA_STOPS = ("tolx", "tolfun", "tolstagnation", "conditioncov", "noeffectcoord", "noeffectaxis", "tolupsigma")
 
 
 class CMAES(Optimizer):
-    """``cma.CMAEvolutionStrategy`` in the unit cube, behind the common ask/tell interface."""
+    """CMA-ES (Hansen's tutorial algorithm) in the unit cube, with optional IPOP restarts."""
 
     name = "cma-es"
 
     def __init__(self, space: SearchSpace, seed=None, initial=None, popsize: int | None = None,
-                 sigma0: float = 0.3, cma_options: dict | None = None):
+                 sigma0: float = 0.3, restarts: int = 0, tolx: float = 1e-11, tolfun: float = 1e-11):
         super().__init__(space, seed, initial)
-        cma = _import_cma()
-        self.popsize = int(D.CMA_POPSIZE if popsize is None else popsize)
-        self.sigma0 = float(sigma0)
+        self.popsize = _pos_int(D.CMA_POPSIZE if popsize is None else popsize, "cma-es: popsize")
         if self.popsize < 2:
             raise ClothFitError(f"cma-es: popsize must be >= 2, got {self.popsize}")
-        if not (math.isfinite(self.sigma0) and self.sigma0 > 0):
-            raise ClothFitError(f"cma-es: sigma0 must be a positive number, got {sigma0}")
+        try:
+            self.sigma0 = float(sigma0)
+        except (TypeError, ValueError):
+            raise ClothFitError(f"cma-es: sigma0 must be a positive number, got {sigma0!r}") from None
+        if not (math.isfinite(self.sigma0) and 0 < self.sigma0 <= 10):
+            raise ClothFitError(f"cma-es: sigma0 must be a positive number (unit cube), got {sigma0}")
+        if isinstance(restarts, bool) or not isinstance(restarts, (int, np.integer)) or not 0 <= restarts <= 20:
+            raise ClothFitError(f"cma-es: restarts must be an integer in 0..20, got {restarts!r}")
+        self.restarts = int(restarts)
+        self.tolx = _nonneg(tolx, "cma-es: tolx")
+        self.tolfun = _nonneg(tolfun, "cma-es: tolfun")
+        self.restarts_done = 0
+        self.stop_reason = None        # the criterion that ended the last run (None: running)
+        self.run_stops = []            # the criterion that ended each finished run
+        self._stopped = False
         n = space.n
         x0 = self._initial_u.mean(axis=0) if len(self._initial_u) else np.full(n, 0.5)
-        self._randn = _GaussianSource(self.rng)
-        opts = {"bounds": [0.0, 1.0], "popsize": self.popsize, "seed": np.nan,
-                "randn": self._randn, "verbose": -9, "verb_disp": 0, "verb_log": 0,
-                "maxfevals": np.inf, "maxiter": np.inf, "tolflatfitness": 10 ** 9}
-        opts.update(cma_options or {})
-        import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            self.es = cma.CMAEvolutionStrategy(list(x0), self.sigma0, opts)
-        if len(self._initial_u):
-            bh = getattr(self.es, "boundary_handler", None)
-            geno = [bh.inverse(u) if hasattr(bh, "inverse") else u for u in self._initial_u]
-            self.es.inject([np.asarray(g, dtype=np.float64) for g in geno], force=True)
-        self._pending = None
+        self._start_run(x0, self.popsize)
+        self._inject = self._initial_u.copy()
+        self._pending = None           # (lam, n) unbounded coordinates asked but not told
+        self._pending_injected = 0
+
+    # -- strategy parameters (derived from n and lambda, never stored)
+    def _setup(self, lam):
+        n = self.space.n
+        self.lam = int(lam)
+        self.mu = self.lam // 2
+        w = math.log(self.mu + 0.5) - np.log(np.arange(1, self.mu + 1))
+        self.weights = w / w.sum()
+        self.mueff = 1.0 / float(np.sum(self.weights ** 2))
+        self.cc = (4 + self.mueff / n) / (n + 4 + 2 * self.mueff / n)
+        self.cs = (self.mueff + 2) / (n + self.mueff + 5)
+        self.c1 = 2 / ((n + 1.3) ** 2 + self.mueff)
+        self.cmu = min(1 - self.c1, 2 * (self.mueff - 2 + 1 / self.mueff) / ((n + 2) ** 2 + self.mueff))
+        self.damps = 1 + 2 * max(0.0, math.sqrt((self.mueff - 1) / (n + 1)) - 1) + self.cs
+        self.chin = math.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n * n))
+        self.tolfun_window = 10 + int(math.ceil(30 * n / self.lam))
+        self.stag_window = int(120 + 30 * n / self.lam)
+
+    def _start_run(self, mean, lam):
+        n = self.space.n
+        self._setup(lam)
+        self.mean = np.array(mean, dtype=np.float64)
+        self.sigma = self.sigma0
+        self.C = np.eye(n)
+        self.pc = np.zeros(n)
+        self.ps = np.zeros(n)
+        self.run_generation = 0
+        self.run_bests = []            # generation bests of this run, the last 2 * stag_window
+        self.last_fvals = []           # this generation's finite values (for tolfun)
+
+    def _eig(self):
+        d2, B = np.linalg.eigh(self.C)
+        d2 = np.maximum(d2, 1e-300)
+        return B, np.sqrt(d2)
 
     @property
     def stopped(self) -> bool:
-        return bool(self.es.stop())
+        return self._stopped
+
+    @property
+    def run_popsize(self) -> int:
+        return self.lam
 
     def ask(self) -> np.ndarray:
-        """Candidates (popsize, n) in real space; asking again before tell() returns the same batch."""
+        """Candidates (lambda, n) in real space; asking again before tell() returns the same batch."""
         if self._pending is None:
-            import warnings
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                self._pending = self.es.ask()
-        return self.space.decode(np.array(self._pending))
+            B, Dv = self._eig()
+            Z = self.rng.standard_normal((self.lam, self.space.n))
+            G = self.mean + self.sigma * (Z @ (B * Dv).T)
+            k = min(len(self._inject), self.lam)
+            if k:
+                G[:k] = self._inject[:k]
+                self._inject = self._inject[k:]
+            self._pending, self._pending_injected = G, k
+        return self.space.decode(reflect_unit(self._pending))
 
     def tell(self, X, f) -> None:
-        U = None if self._pending is None else np.array(self._pending)
+        G = self._pending
+        U = None if G is None else reflect_unit(G)
         self._check_told(X, U)
         f = sanitize_fitness(f, len(U))
-        finite = np.isfinite(f)
-        if finite.all():
-            g = f
-        else:   # cma is rank based: a finite stand-in worse than every finite value
-            worst = float(f[finite].max()) if finite.any() else 0.0
-            g = np.where(finite, f, worst + 1.0 + abs(worst))
-        import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            self.es.tell(self._pending, [float(v) for v in g])
-        self._pending = None
+        n = self.space.n
+        order = np.argsort(f, kind="stable")           # +inf (bad) last
+        B, Dv = self._eig()
+        invsqrt = (B / Dv) @ B.T
+        Y = (G - self.mean) / self.sigma
+        k = self._pending_injected
+        if k:   # injected solutions: clip their steps in Mahalanobis norm
+            cap = math.sqrt(n) + 2 * n / (n + 2)
+            norms = np.linalg.norm(Y[:k] @ invsqrt.T, axis=1)
+            Y[:k] *= np.minimum(1.0, cap / np.maximum(norms, 1e-300))[:, None]
+        sel = Y[order[:self.mu]]
+        yw = self.weights @ sel
+        self.mean = self.mean + self.sigma * yw
+        self.ps = (1 - self.cs) * self.ps + math.sqrt(self.cs * (2 - self.cs) * self.mueff) * (invsqrt @ yw)
+        g = self.run_generation + 1
+        nps = float(np.linalg.norm(self.ps))
+        hsig = nps / math.sqrt(1 - (1 - self.cs) ** (2 * g)) / self.chin < 1.4 + 2 / (n + 1)
+        self.pc = (1 - self.cc) * self.pc + (math.sqrt(self.cc * (2 - self.cc) * self.mueff) * yw if hsig else 0.0)
+        c1a = self.c1 * (1 - (0.0 if hsig else 1.0) * self.cc * (2 - self.cc))
+        rank_mu = (sel.T * self.weights) @ sel
+        self.C = (1 - c1a - self.cmu) * self.C + self.c1 * np.outer(self.pc, self.pc) + self.cmu * rank_mu
+        self.C = (self.C + self.C.T) / 2
+        self.sigma *= math.exp(min(1.0, (self.cs / self.damps) * (nps / self.chin - 1)))
+        self.run_generation = g
+        self._pending, self._pending_injected = None, 0
         self._record(U, f)
+        fin = f[np.isfinite(f)]
+        self.last_fvals = fin.tolist()
+        self.run_bests.append(float(fin.min()) if fin.size else math.inf)
+        del self.run_bests[:-2 * self.stag_window]
+        reason = self._run_stop()
+        if reason is not None:
+            self.run_stops.append(reason)
+            self.stop_reason = reason
+            if self.restarts_done < self.restarts:          # IPOP: twice the population, a new random mean
+                self.restarts_done += 1
+                self._start_run(self.rng.random(n), 2 * self.lam)
+            else:
+                self._stopped = True
+
+    def _run_stop(self):
+        n = self.space.n
+        sd = self.sigma * np.sqrt(np.diag(self.C))
+        if np.all(sd < self.tolx) and np.all(self.sigma * np.abs(self.pc) < self.tolx):
+            return "tolx"
+        hist = self.run_bests[-self.tolfun_window:]
+        if len(hist) >= self.tolfun_window and all(math.isfinite(v) for v in hist) and self.last_fvals:
+            vals = hist + self.last_fvals
+            if max(vals) - min(vals) < self.tolfun:
+                return "tolfun"
+        W = self.stag_window
+        if len(self.run_bests) >= 2 * W:
+            old, new = np.median(self.run_bests[:W]), np.median(self.run_bests[W:])
+            if not new < old:
+                return "tolstagnation"
+        B, Dv = self._eig()
+        if (Dv.max() / Dv.min()) ** 2 > 1e14:
+            return "conditioncov"
+        if np.any(self.mean == self.mean + 0.2 * sd):
+            return "noeffectcoord"
+        i = self.run_generation % n
+        if np.all(self.mean == self.mean + 0.1 * self.sigma * Dv[i] * B[:, i]):
+            return "noeffectaxis"
+        if self.sigma * Dv.max() > 1e4:
+            return "tolupsigma"
+        return None
+
+    STATE_KEYS = ("popsize", "sigma0", "restarts", "tolx", "tolfun", "restarts_done", "stop_reason", "run_stops",
+                  "stopped", "lam", "mean", "sigma", "C", "pc", "ps", "run_generation", "run_bests", "last_fvals",
+                  "rng", "initial_u", "inject", "pending", "pending_injected")
 
     def state_dict(self) -> dict:
-        """JSON dict; the cma object (with the Generator) is pickled to base64 text."""
         d = self._base_state()
-        blob = pickle.dumps({"es": self.es, "randn": self._randn, "pending": self._pending},
-                            protocol=pickle.HIGHEST_PROTOCOL)
-        d.update({"popsize": self.popsize, "sigma0": self.sigma0,
-                  "rng": self.rng.bit_generator.state,      # informational: the pickle is authoritative
-                  "pickle_b64": base64.b64encode(blob).decode("ascii")})
+        d.update({"popsize": self.popsize, "sigma0": self.sigma0, "restarts": self.restarts,
+                  "tolx": self.tolx, "tolfun": self.tolfun, "restarts_done": self.restarts_done,
+                  "stop_reason": self.stop_reason, "run_stops": list(self.run_stops), "stopped": self._stopped,
+                  "lam": self.lam, "mean": self.mean.tolist(), "sigma": self.sigma, "C": self.C.tolist(),
+                  "pc": self.pc.tolist(), "ps": self.ps.tolist(), "run_generation": self.run_generation,
+                  "run_bests": [_float_to_json(v) for v in self.run_bests], "last_fvals": list(self.last_fvals),
+                  "rng": self.rng.bit_generator.state, "initial_u": self._initial_u.tolist(),
+                  "inject": self._inject.tolist(),
+                  "pending": None if self._pending is None else self._pending.tolist(),
+                  "pending_injected": self._pending_injected})
         return d
 
     @classmethod
     def from_state(cls, d: dict) -> "CMAES":
-        cls._check_state(d, cls.name)
-        _import_cma()
-        space = SearchSpace.from_state(d["space"])
-        opt = cls.__new__(cls)
-        Optimizer.__init__(opt, space, seed=d["seed"])
-        opt.popsize, opt.sigma0 = int(d["popsize"]), float(d["sigma0"])
+        w = cls.name
+        space = cls._check_state(d, w, cls.STATE_KEYS)
+        n = space.n
+        opt = cls(space, seed=d["seed"], popsize=_num(d, "popsize", w, int, 2, 10 ** 6),
+                  sigma0=_num(d, "sigma0", w, float, 1e-300, 10.0), restarts=_num(d, "restarts", w, int, 0, 20),
+                  tolx=_num(d, "tolx", w, float, 0.0), tolfun=_num(d, "tolfun", w, float, 0.0))
         opt._load_base(d)
-        try:
-            payload = pickle.loads(base64.b64decode(d["pickle_b64"]))
-        except Exception as exc:  # corrupt text, other cma version...
-            raise ClothFitError(f"checkpoint: cannot restore the cma-es state ({exc})") from exc
-        opt.es, opt._randn, opt._pending = payload["es"], payload["randn"], payload["pending"]
-        opt.rng = opt._randn.rng
+        opt.restarts_done = _num(d, "restarts_done", w, int, 0, opt.restarts)
+        lam = _num(d, "lam", w, int, 2, 10 ** 7)
+        if lam != opt.popsize * 2 ** opt.restarts_done:
+            raise ClothFitError(f"checkpoint: {w} 'lam' {lam} is not popsize x 2^restarts_done")
+        opt._setup(lam)
+        opt.stop_reason = _stop_reason(d, w, CMA_STOPS)
+        rs = _field(d, "run_stops", w)
+        if not isinstance(rs, list) or len(rs) > opt.restarts + 1 or any(r not in CMA_STOPS for r in rs):
+            raise ClothFitError(f"checkpoint: {w} 'run_stops' must be a list of stop criteria")
+        opt.run_stops = list(rs)
+        st = _field(d, "stopped", w)
+        if not isinstance(st, bool):
+            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
+        opt._stopped = st
+        opt.mean = _array(d, "mean", w, (n,))
+        if np.abs(opt.mean).max() > 1e6:
+            raise ClothFitError(f"checkpoint: {w} 'mean' is absurdly far from the unit cube")
+        opt.sigma = _num(d, "sigma", w, float, 1e-300, 1e6)
+        if opt.sigma <= 0:
+            raise ClothFitError(f"checkpoint: {w} 'sigma' must be positive")
+        C = _array(d, "C", w, (n, n))
+        if not np.array_equal(C, C.T):
+            raise ClothFitError(f"checkpoint: {w} 'C' is not symmetric")
+        ev = np.linalg.eigvalsh(C)
+        if not ev.min() > 0 or ev.max() > 1e12:
+            raise ClothFitError(f"checkpoint: {w} 'C' is not a positive-definite covariance matrix")
+        opt.C = C
+        opt.pc = _array(d, "pc", w, (n,))
+        opt.ps = _array(d, "ps", w, (n,))
+        opt.run_generation = _num(d, "run_generation", w, int, 0, opt.generation)
+        rb = _array(d, "run_bests", w, (None,), inf_as_none=True)
+        if len(rb) > 2 * opt.stag_window:
+            raise ClothFitError(f"checkpoint: {w} 'run_bests' is longer than its window")
+        opt.run_bests = rb.tolist()
+        opt.last_fvals = _array(d, "last_fvals", w, (None,)).tolist()
+        if len(opt.last_fvals) > lam:
+            raise ClothFitError(f"checkpoint: {w} 'last_fvals' has more values than a generation")
+        opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
+        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        opt._inject = _array(d, "inject", w, (None, n))
+        opt._pending = _array(d, "pending", w, (lam, n), allow_none=True)
+        if opt._pending is not None and np.abs(opt._pending).max() > 1e7:
+            raise ClothFitError(f"checkpoint: {w} 'pending' is absurdly far from the unit cube")
+        opt._pending_injected = _num(d, "pending_injected", w, int, 0, lam if opt._pending is not None else 0)
         return opt
 
 

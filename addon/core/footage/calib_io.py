@@ -65,7 +65,7 @@ import re
 import numpy as np
 
 from ..errors import ClothFitError
-from ..observation.camera import Camera, load_cameras, save_cameras
+from ..observation.camera import Camera, check_camera_name, check_image_size, load_cameras, save_cameras
 
 _K_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsic", "intrinsic_matrix", "intrinsics", "M")
 _D_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "distortion", "dist", "D")
@@ -174,11 +174,9 @@ def _image_size(d, where, width, height):
         raise ClothFitError(f"{where}: no image size (image_width/image_height or image_size); give width and height")
     try:
         w, h = int(round(float(w))), int(round(float(h)))
-    except (TypeError, ValueError):
-        raise ClothFitError(f"{where}: image size {w!r} x {h!r} is not numeric") from None
-    if w <= 0 or h <= 0:
-        raise ClothFitError(f"{where}: image size {w} x {h} must be positive")
-    return w, h
+    except (TypeError, ValueError, OverflowError):
+        raise ClothFitError(f"{where}: image size {w!r} x {h!r} is not a finite number") from None
+    return check_image_size(w, h, where)
 
 
 def _camera_from_mapping(d: dict, name: str, where: str, width=None, height=None) -> Camera:
@@ -258,7 +256,10 @@ def read_opencv_dir(folder: str, width: int | None = None, height: int | None = 
 
 
 def _check_unique(cams, where):
+    """Names are checked (one plain path component each, unique) before any of them is used."""
     names = [c.name for c in cams]
+    for n in names:
+        check_camera_name(n, where)
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise ClothFitError(f"{where}: camera names are not unique: {', '.join(dup)}")
@@ -496,8 +497,12 @@ def read_colmap(folder: str) -> list:
 
 def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
     """A COLMAP text model: one COLMAP camera and one image (``<name><image_ext>``) per Camera."""
+    from ..safeio import atomic_write
     os.makedirs(folder, exist_ok=True)
-    with open(os.path.join(folder, "cameras.txt"), "w") as f:
+    for c in cameras:
+        check_camera_name(c.name, f"COLMAP export to {folder}")
+    files = {}
+    with _Text(files, "cameras.txt") as f:
         f.write("# Camera list with one line of data per camera:\n")
         f.write("#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n")
         f.write(f"# Number of cameras: {len(cameras)}\n")
@@ -505,7 +510,7 @@ def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
         for i, c in enumerate(cameras):
             model, params = intrinsics_to_colmap(c)
             f.write(f"{i + 1} {model} {c.width} {c.height} " + " ".join(repr(float(p)) for p in params) + "\n")
-    with open(os.path.join(folder, "images.txt"), "w") as f:
+    with _Text(files, "images.txt") as f:
         f.write("# Image list with two lines of data per image:\n")
         f.write("#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n")
         f.write("#   POINTS2D[] as (X, Y, POINT3D_ID)\n")
@@ -514,10 +519,12 @@ def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
             q = _R_to_quat(c.R)
             vals = " ".join(repr(float(v)) for v in (*q, *c.t))
             f.write(f"{i + 1} {vals} {i + 1} {c.name}{image_ext}\n\n")
-    with open(os.path.join(folder, "points3D.txt"), "w") as f:
+    with _Text(files, "points3D.txt") as f:
         f.write("# 3D point list with one line of data per point:\n")
         f.write("#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n")
         f.write("# Number of points: 0, mean track length: 0\n")
+    for name, text in files.items():         # each file whole, never through a planted symlink
+        atomic_write(os.path.join(folder, name), text.encode("utf-8"))
     return folder
 
 
@@ -574,7 +581,7 @@ def read_easymocap(folder: str, width: int | None = None, height: int | None = N
             raise ClothFitError(f"EasyMocap file {epath}: T_{n} missing")
         t = _array(extri[f"T_{n}"], f"T_{n}", where, shape=(3,))
         if f"H_{n}" in intri and f"W_{n}" in intri:
-            h, w = int(intri[f"H_{n}"]), int(intri[f"W_{n}"])
+            w, h = check_image_size(intri[f"W_{n}"], intri[f"H_{n}"], where)
         elif sizes and n in sizes:
             h, w = (int(v) for v in sizes[n])
         elif width and height:
@@ -697,6 +704,21 @@ def _colmap_folder(path: str):
         if os.path.isfile(os.path.join(f, "cameras.bin")) and os.path.isfile(os.path.join(f, "images.bin")):
             return f, "bin"
     return folder, "txt"
+
+
+class _Text:
+    """``with _Text(files, name) as f: f.write(...)`` collects a text file into ``files[name]``."""
+
+    def __init__(self, files, name):
+        import io
+        self.files, self.name, self.buf = files, name, io.StringIO()
+
+    def __enter__(self):
+        return self.buf
+
+    def __exit__(self, *exc):
+        self.files[self.name] = self.buf.getvalue()
+        return False
 
 
 # ============================================================ one entry point each way

@@ -77,6 +77,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import ClothFitError
+from ..observation.camera import check_camera_name
+from ..safeio import atomic_json
 
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp", ".exr")
 BACKGROUND_PREFIXES = ("background", "bg")
@@ -635,9 +637,16 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
         if cameras is None:
             raise ClothFitError(f"footage {footage_dir}: no cameras given and no {FOOTAGE_JSON}, cameras.* / "
                                 "calibration.* file or COLMAP folder found")
+    inputs = [os.path.join(footage_dir, FOOTAGE_JSON)]
     if isinstance(cameras, str):
+        inputs.append(cameras)
         cameras = calib_io.import_cameras(cameras)
     cameras = list(cameras)
+    for c in cameras:        # names become folders (debug images, silhouettes): checked before any is used
+        check_camera_name(c.name, "calibration")
+    if isinstance(scenario, str):
+        inputs.append(scenario)
+    _refuse_overwriting(out_dir, inputs)
     if camera_names:
         byname = {c.name: c for c in cameras}
         missing = [n for n in camera_names if n not in byname]
@@ -752,8 +761,7 @@ def _write_result(out_dir, source, out_cameras, scen, all_masks, cloth_mass, cap
                               "thresholds": {n: r["threshold"] for n, r in report["cameras"].items()}}
     write_capture(out_dir, out_cameras, scen, all_masks, cloth_mass=cloth_mass, meta=cap_meta,
                   allow_empty=opts.allow_empty)
-    with open(os.path.join(out_dir, REPORT_JSON), "w") as f:
-        json.dump(report, f, indent=1)
+    atomic_json(os.path.join(out_dir, REPORT_JSON), report)
     return report
 
 
@@ -778,9 +786,16 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
     opts.check()
     if cameras is None:
         raise ClothFitError("extract --videos needs the calibrated cameras (--cameras)")
+    inputs = [sync] if isinstance(sync, str) else []
     if isinstance(cameras, str):
+        inputs.append(cameras)
         cameras = calib_io.import_cameras(cameras)
     cameras = list(cameras)
+    for c in cameras:        # names become folders (debug images, silhouettes): checked before any is used
+        check_camera_name(c.name, "calibration")
+    if isinstance(scenario, str):
+        inputs.append(scenario)
+    _refuse_overwriting(out_dir, inputs)
     if camera_names:
         byname = {c.name: c for c in cameras}
         missing = [n for n in camera_names if n not in byname]
@@ -826,6 +841,20 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
                 "sync": sync, "frame_timestamps": {n: r["frame_timestamps"] for n, r in report["video"].items()}}
     return _write_result(out_dir, videos_dir, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report,
                          errors, warnings)
+
+
+def _refuse_overwriting(out_dir, inputs):
+    """The capture written to ``out_dir`` must not replace the extraction's own input files."""
+    from ..observation.capture import CAMERAS_JSON, CAPTURE_JSON, SHAPES_NPZ
+    outs = {os.path.realpath(os.path.join(out_dir, n)): n for n in (CAPTURE_JSON, CAMERAS_JSON, SHAPES_NPZ, REPORT_JSON)}
+    for p in inputs:
+        if not os.path.exists(p):
+            continue
+        real = os.path.realpath(p)
+        hit = [outs[real]] if real in outs else []
+        if hit:
+            raise ClothFitError(f"extract: writing the capture to {out_dir} would overwrite its input {p} "
+                                f"({', '.join(hit)}): choose another -o folder")
 
 
 def format_report(report: dict) -> str:

@@ -303,9 +303,8 @@ def flash_sync(videos_dir: str, camera_names, flash_time: float = 0.0, out_path:
             raise ClothFitError(f"camera '{name}': no video {name}.<{'|'.join(e[1:] for e in VIDEO_EXTS)}> in {videos_dir}")
         sync[name] = flash_time_of(Video(p)) - float(flash_time)
     if out_path:
-        import json
-        with open(out_path, "w") as f:
-            json.dump(sync, f, indent=1)
+        from ..safeio import atomic_json
+        atomic_json(out_path, sync)
     return sync
 
 

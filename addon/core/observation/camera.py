@@ -25,6 +25,35 @@ import numpy as np
 from ..errors import ClothFitError
 
 
+MAX_IMAGE_SIDE = 16384          # pixels per side of a camera image
+
+
+def check_camera_name(name, where: str = "camera"):
+    """A camera name becomes a folder name (silhouettes, debug images): refuse anything that is not
+    one plain path component."""
+    if (not isinstance(name, str) or not name or name in (".", "..") or name != name.strip()
+            or any(ch in name for ch in '/\\:*?"<>|') or any(ord(ch) < 32 for ch in name) or len(name) > 200):
+        raise ClothFitError(f"{where}: camera name {name!r} cannot be used in a file name "
+                            f"(no empty names, '.', '..', '/', '\\', ':', '*', '?', '\"', '<', '>', '|', control "
+                            f"characters or edge spaces)")
+    return name
+
+
+def check_image_size(width, height, where: str = "camera"):
+    """(width, height) as positive integers up to MAX_IMAGE_SIDE (numbers such as 640.0 accepted)."""
+    out = []
+    for nm, v in (("width", width), ("height", height)):
+        try:
+            ok = not isinstance(v, bool) and float(v) == int(float(v))
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+        if not ok or not 0 < int(float(v)) <= MAX_IMAGE_SIDE:
+            raise ClothFitError(f"{where}: image {nm} {v!r} must be positive: a whole number of pixels in "
+                                f"1..{MAX_IMAGE_SIDE}")
+        out.append(int(float(v)))
+    return out[0], out[1]
+
+
 @dataclass
 class Camera:
     K: np.ndarray
@@ -56,8 +85,9 @@ class Camera:
             raise ClothFitError(f"{where}: focal lengths fx={self.K[0, 0]}, fy={self.K[1, 1]} must be positive")
         if abs(self.K[2, 2] - 1.0) > 1e-9 or abs(self.K[1, 0]) > 1e-9 or abs(self.K[2, 0]) > 1e-9 or abs(self.K[2, 1]) > 1e-9:
             raise ClothFitError(f"{where}: K must be upper triangular with K[2,2] = 1, got {self.K.tolist()}")
-        err = np.abs(self.R @ self.R.T - np.eye(3)).max()
-        if err > 1e-6 or np.linalg.det(self.R) < 0:
+        with np.errstate(over="ignore", invalid="ignore"):      # absurd entries: caught just below
+            err = np.abs(self.R @ self.R.T - np.eye(3)).max()
+        if not err <= 1e-6 or np.linalg.det(self.R) < 0:
             raise ClothFitError(f"{where}: R is not a rotation (|R R^T - I| = {err:.2e}, det = {np.linalg.det(self.R):.3f})")
         if self.dist.size not in (0, 4, 5, 8, 12, 14):
             raise ClothFitError(f"{where}: distortion must have 0, 4, 5, 8, 12 or 14 coefficients, got {self.dist.size}")
@@ -147,9 +177,12 @@ class Camera:
             raise ClothFitError(
                 f"{source}: camera '{d.get('name', '?')}' needs K 3x3, R 3x3, t 3; got "
                 f"{K.shape}, {R.shape}, {t.shape}")
+        name = d.get("name", "cam")
+        check_camera_name(name, source)
+        w, h = check_image_size(d["width"], d["height"], f"{source}: camera '{name}'")
         cam = cls.__new__(cls)
         cam.K, cam.R, cam.t, cam.dist = K, R, t.reshape(3), dist.reshape(-1)
-        cam.width, cam.height, cam.name = int(d["width"]), int(d["height"]), str(d.get("name", "cam"))
+        cam.width, cam.height, cam.name = w, h, name
         cam.validate(source)
         return cam
 
@@ -228,8 +261,8 @@ def save_cameras(path: str, cameras, extra: dict | None = None):
          "cameras": [c.to_dict() for c in cameras]}
     if extra:
         d.update(extra)
-    with open(path, "w") as f:
-        json.dump(d, f, indent=1)
+    from ..safeio import atomic_json
+    atomic_json(path, d)
 
 
 def load_cameras(path: str):

@@ -14,6 +14,7 @@ Every problem is a ``ClothFitError`` whose message names the file or the value a
 """
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -23,8 +24,9 @@ import string
 import numpy as np
 
 from ..errors import ClothFitError
+from ..safeio import atomic_write
 from ..physics.scenario import Scenario
-from .camera import Camera, load_cameras, save_cameras
+from .camera import Camera, check_camera_name, load_cameras, save_cameras
 
 FORMAT = "silhouette-cloth-fit/capture"
 VERSION = 1
@@ -35,6 +37,7 @@ DEFAULT_PATTERN = "sil/{camera}/{frame:03d}.png"
 PATTERN_FIELDS = ("camera", "frame", "time")
 TIME_FORMAT = ".3f"          # how a bare {time} is formatted: 0.05 -> "0.050"
 REQUIRED_KEYS = ("format", "version", "cameras", "scenario", "frame_times", "silhouettes")
+MAX_FIELD_WIDTH = 32        # largest width / precision of a pattern field ({frame:03d})
 FRAME_TIME_TOL = 1e-9        # top-level vs scenario vs shapes.npz frame times
 DEFAULT_IGNORE_PATTERN = "ignore/{camera}/{frame:03d}.png"
 MASK_KEYS = ("silhouette_ids", "ignore_ids", "matte_threshold", "ignore")   # how silhouettes are stored
@@ -95,10 +98,7 @@ def _imencode(ext, img):
 
 
 def _write_bytes_atomic(path: str, data: bytes):
-    tmp = path + ".tmp"
-    with open(tmp, "wb") as f:
-        f.write(data)
-    os.replace(tmp, path)
+    atomic_write(path, data)
 
 
 def read_silhouette(path: str, expected_shape=None, binarize_threshold=None, allow_empty: bool = False,
@@ -344,6 +344,9 @@ def check_pattern(pattern, where: str = "silhouettes pattern") -> str:
             raise ClothFitError(f"{where} {pattern!r}: conversions (!{conv}) are not allowed")
         if spec and "{" in spec:
             raise ClothFitError(f"{where} {pattern!r}: nested fields are not allowed")
+        if spec and any(int(n) > MAX_FIELD_WIDTH for n in re.findall(r"\d+", spec)):
+            raise ClothFitError(f"{where} {pattern!r}: field width or precision in {{{name}:{spec}}} above "
+                                f"{MAX_FIELD_WIDTH}")
         fields.add(name)
     if "camera" not in fields:
         raise ClothFitError(f"{where} {pattern!r}: must contain {{camera}}")
@@ -362,9 +365,7 @@ def check_pattern(pattern, where: str = "silhouettes pattern") -> str:
 
 
 def _check_camera_name(name: str, where: str):
-    if not name or name in (".", "..") or any(ch in name for ch in '/\\:*?"<>|') or name != name.strip():
-        raise ClothFitError(f"{where}: camera name {name!r} cannot be used in a file name "
-                            f"(no empty names, '/', '\\', ':', '*', '?', '\"', '<', '>', '|' or edge spaces)")
+    check_camera_name(name, where)
 
 
 def _field_regex(component: str, camera: str | None = None) -> re.Pattern:
@@ -938,14 +939,11 @@ def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, c
         os.makedirs(root, exist_ok=True)
         if os.path.exists(cap.json_path):
             os.remove(cap.json_path)
-        tmp = os.path.join(root, CAMERAS_JSON + ".tmp")
-        save_cameras(tmp, cap.cameras)
-        os.replace(tmp, os.path.join(root, CAMERAS_JSON))
+        save_cameras(os.path.join(root, CAMERAS_JSON), cap.cameras)
         if cap.shapes is not None:
-            tmp = os.path.join(root, SHAPES_NPZ + ".tmp")
-            with open(tmp, "wb") as f:
-                np.savez_compressed(f, positions=cap.shapes, frame_times=cap.frame_times)
-            os.replace(tmp, os.path.join(root, SHAPES_NPZ))
+            buf = io.BytesIO()
+            np.savez_compressed(buf, positions=cap.shapes, frame_times=cap.frame_times)
+            atomic_write(os.path.join(root, SHAPES_NPZ), buf.getvalue())
     except OSError as e:
         raise ClothFitError(f"{where}: cannot write ({e})") from None
 

@@ -31,6 +31,12 @@ def synth_capture(root, params=None, rig=D.DEFAULT_RIG, noise=D.NOISE_FRACTION, 
     ``params`` = ClothSettings values, missing ones Blender's defaults, ``time_scale`` the real-time
     one for the model's frame rate) and write a capture with ``noise`` boundary noise to ``root``.
     Returns the Capture."""
+    if isinstance(truth_dt_safety, bool) or not isinstance(truth_dt_safety, (int, float)) \
+            or not (0 < truth_dt_safety <= 1):          # also rejects NaN
+        raise ClothFitError(f"synth: truth_dt_safety must be a number in (0, 1] (a fraction of the model's "
+                            f"stable time step), got {truth_dt_safety!r}")
+    if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not (0 <= noise <= 1):
+        raise ClothFitError(f"synth: noise must be a fraction in [0, 1], got {noise!r}")
     scenario = scenario or paper_scenario()
     model = get_model(model)
     if isinstance(model, BlenderModel):

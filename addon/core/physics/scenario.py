@@ -16,6 +16,16 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 
+# plausibility limits of a scenario read from a file: beyond them a value is a typo or an attack
+# (memory exhaustion, a simulation that never ends), not a cloth
+MAX_GRID_SIDE = 1000
+MAX_GRID_VERTICES = 250_000
+MAX_SIZE_M = 1000.0          # lengths and positions [m]
+MAX_TIME_S = 3600.0          # frame and key times [s]
+MAX_SETTLE_S = 60.0          # settling before t = 0 [s]
+MAX_GRAVITY = 1000.0         # [m/s^2]
+MAX_FRAMES = 100_000
+
 
 class ClothGrid:
     """Topology and rest geometry of the sheet."""
@@ -23,10 +33,19 @@ class ClothGrid:
     def __init__(self, nx: int = D.GRID_N, ny: int | None = None, side: float = D.CLOTH_SIDE,
                  height: float = D.CLOTH_HEIGHT, side_y: float | None = None):
         ny = nx if ny is None else ny
+        for v in (nx, ny):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer, float)) or v != int(v):
+                raise ClothFitError(f"cloth grid size must be whole numbers, got {nx} x {ny}")
         if nx < 2 or ny < 2:
             raise ClothFitError(f"cloth grid must be at least 2 x 2, got {nx} x {ny}")
-        if not (side > 0):
-            raise ClothFitError(f"cloth side must be positive, got {side}")
+        if nx > MAX_GRID_SIDE or ny > MAX_GRID_SIDE or nx * ny > MAX_GRID_VERTICES:
+            raise ClothFitError(f"cloth grid {nx} x {ny} is too large (at most {MAX_GRID_SIDE} per side and "
+                                f"{MAX_GRID_VERTICES} vertices)")
+        for nm, v in (("side", side), ("side_y", side if side_y is None else side_y)):
+            if not (isinstance(v, (int, float, np.floating)) and math.isfinite(v) and 0 < v <= MAX_SIZE_M):
+                raise ClothFitError(f"cloth {nm} must be a positive finite length up to {MAX_SIZE_M:g} m, got {v}")
+        if not (isinstance(height, (int, float, np.floating)) and math.isfinite(height) and abs(height) <= MAX_SIZE_M):
+            raise ClothFitError(f"cloth height must be a finite number within +-{MAX_SIZE_M:g} m, got {height}")
         self.nx, self.ny = int(nx), int(ny)
         self.side = float(side)
         self.side_y = float(side if side_y is None else side_y)
@@ -99,6 +118,12 @@ class Handle:
             raise ClothFitError(f"handle on vertex {self.vertex}: key times must increase, got {self.times.tolist()}")
         if not np.all(np.isfinite(self.positions)) or not np.all(np.isfinite(self.times)):
             raise ClothFitError(f"handle on vertex {self.vertex}: non-finite key")
+        if np.abs(self.positions).max() > MAX_SIZE_M or np.abs(self.times).max() > MAX_TIME_S:
+            raise ClothFitError(f"handle on vertex {self.vertex}: keys beyond {MAX_SIZE_M:g} m or {MAX_TIME_S:g} s")
+        if self.release_time is not None and not (math.isfinite(self.release_time)
+                                                  and abs(self.release_time) <= MAX_TIME_S):
+            raise ClothFitError(f"handle on vertex {self.vertex}: release_time {self.release_time} must be finite "
+                                f"and within {MAX_TIME_S:g} s")
 
     def position(self, t):
         """Positions at times ``t`` (array) -> ``t.shape + (3,)``."""
@@ -158,6 +183,20 @@ class Scenario:
         self.gravity = np.asarray(self.gravity, dtype=np.float64).reshape(3)
         if self.frame_times.size == 0:
             raise ClothFitError("scenario: no frame times")
+        if not np.all(np.isfinite(self.frame_times)) or self.frame_times.max() > MAX_TIME_S:
+            raise ClothFitError(f"scenario: frame times must be finite and at most {MAX_TIME_S:g} s")
+        if self.frame_times.size > MAX_FRAMES:
+            raise ClothFitError(f"scenario: {self.frame_times.size} frame times (at most {MAX_FRAMES})")
+        try:
+            self.settle_time = float(self.settle_time)
+        except (TypeError, ValueError):
+            raise ClothFitError(f"scenario: settle_time must be a number, got {self.settle_time!r}") from None
+        if not (math.isfinite(self.settle_time) and 0 <= self.settle_time <= MAX_SETTLE_S):
+            raise ClothFitError(f"scenario: settle_time {self.settle_time} must be a finite number of seconds in "
+                                f"[0, {MAX_SETTLE_S:g}]")
+        if not np.all(np.isfinite(self.gravity)) or np.linalg.norm(self.gravity) > MAX_GRAVITY:
+            raise ClothFitError(f"scenario: gravity {self.gravity.tolist()} must be finite and at most "
+                                f"{MAX_GRAVITY:g} m/s^2")
         if np.any(np.diff(self.frame_times) <= 0):
             raise ClothFitError(f"scenario: frame times must increase, got {self.frame_times.tolist()}")
         if self.frame_times[0] < 0:

@@ -8,7 +8,6 @@
 """
 from __future__ import annotations
 
-import json
 import os
 import platform
 import tempfile
@@ -170,9 +169,8 @@ def bench_blender_workers(tmp, grid=21, workers=(1, 2), candidates=24, echo=prin
 def run_bench(json_path, quick=False, only_blender_workers=False):
     if only_blender_workers:
         out = {"blender_workers": bench_blender_workers(tempfile.mkdtemp(prefix="clothfit_bench_"))}
-        os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
-        with open(json_path, "w") as f:
-            json.dump(out, f, indent=1)
+        from ..safeio import atomic_json
+        atomic_json(json_path, out)
         return out
     S = QUICK if quick else FULL
     tmp = tempfile.mkdtemp(prefix="clothfit_bench_")
@@ -234,6 +232,16 @@ def run_bench(json_path, quick=False, only_blender_workers=False):
     print(f"16-camera fit ({DEFAULT_OPTIMIZER}, {job.evaluations} evaluations): {wall:.1f} s wall "
           f"(target {TARGET_FIT_S:.0f} s, ratio {wall / TARGET_FIT_S:.2f}), best training E_sil "
           f"{out['fit']['best_E_sil_pct']:.3f} %", flush=True)
+    with tempfile.TemporaryDirectory() as td:      # what one checkpoint costs (written at most every 2 s)
+        ck = os.path.join(td, "fit.checkpoint.json")
+        t0 = time.perf_counter()
+        for _ in range(20):
+            job.save_checkpoint(ck)
+        out["checkpoint_ms"] = 1000 * (time.perf_counter() - t0) / 20
+        out["checkpoint_bytes"] = os.path.getsize(ck)
+    out["fit"]["stop_reason"] = job.stop_reason
+    print(f"checkpoint: {out['checkpoint_ms']:.1f} ms per write ({out['checkpoint_bytes']} bytes, after "
+          f"{job.generation} generations; written at most every {D.CHECKPOINT_INTERVAL_S:g} s by the CLI)", flush=True)
     if peak_mb is not None:
         print(f"peak memory of the whole bench process (capture, 240 observed silhouettes, numba): {peak_mb:.0f} MB",
               flush=True)
@@ -243,7 +251,6 @@ def run_bench(json_path, quick=False, only_blender_workers=False):
     if jit.available():
         out["blender_model"] = _bench_blender_model(tmp, quick, out.get("numba", {}).get("evals_per_s"))
     out["blender_workers"] = bench_blender_workers(tmp)
-    os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
-    with open(json_path, "w") as f:
-        json.dump(out, f, indent=1)
+    from ..safeio import atomic_json
+    atomic_json(json_path, out)
     return out

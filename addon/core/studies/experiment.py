@@ -20,12 +20,14 @@ fitter uses) and the ``lab18`` rig:
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 
 import numpy as np
 
 from .. import defaults as D
+from ..errors import ClothFitError
 from ..fitting.evaluate import evaluate
 from ..fitting.job import FitConfig, FitJob
 from ..observation.camera import select_training
@@ -86,11 +88,18 @@ def fit_and_score(train_cap, test_cap, n_cams, train_times, optimizer, evals, se
 def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=None, max_evaluations=None,
               only=None, truth_dt_safety=None, population=None, children=None, rig=None):
     S = dict(QUICK if quick else FULL)
-    if max_evaluations:
+    for name, v, lo in (("max_evaluations", max_evaluations, 1), ("population", population, 2),
+                        ("children", children, 1)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < lo):
+            raise ClothFitError(f"paper: {name} must be an integer >= {lo}, got {v!r}")
+    if truth_dt_safety is not None and not (isinstance(truth_dt_safety, (int, float))
+                                            and math.isfinite(truth_dt_safety) and 0 < truth_dt_safety <= 1):
+        raise ClothFitError(f"paper: --truth-dt-safety must be a number in (0, 1], got {truth_dt_safety!r}")
+    if max_evaluations is not None:
         S["evals"] = max_evaluations
     optimizer = optimizer or DEFAULT_OPTIMIZER
     parts = set((only or "table1,fig8,table2,optimizers").split(","))
-    sizes = {k: v for k, v in (("population", population), ("children", children)) if v}
+    sizes = {k: v for k, v in (("population", population), ("children", children)) if v is not None}
     t_start = time.time()
     os.makedirs(out_dir, exist_ok=True)
     cap_path = os.path.join(out_dir, "capture_480x640")
@@ -199,10 +208,8 @@ def _fmt_id(e):
 
 
 def _dump(path, obj):
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    with open(path + ".tmp", "w") as f:
-        json.dump(obj, f, indent=1)
-    os.replace(path + ".tmp", path)
+    from ..safeio import atomic_json
+    atomic_json(path, obj)
 
 
 def format_tables(out) -> str:

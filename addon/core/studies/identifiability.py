@@ -21,7 +21,6 @@ scaling it with every stiffness and damping leaves the motion unchanged (tested)
 """
 from __future__ import annotations
 
-import json
 
 import numpy as np
 
@@ -114,6 +113,6 @@ def run(json_path=None, materials=None, echo=print):
         echo(format_table(t))
         out.append(t)
     if json_path:
-        with open(json_path, "w") as f:
-            json.dump(out, f, indent=1)
+        from ..safeio import atomic_json
+        atomic_json(json_path, out)
     return out

@@ -22,7 +22,6 @@ Goal: held-out error of *ignore* within 1.25x of *clean*; *background* clearly w
 """
 from __future__ import annotations
 
-import json
 import os
 import time
 
@@ -135,7 +134,6 @@ def run_occlusion(json_path, out_dir="out/occlusion", quick=False, n_train=4, ev
             f"{fi['heldout_pct']:>11.3f} / {fb['heldout_pct']:<10.3f} {fi['shape_error_mm']:>10.3f} / "
             f"{fb['shape_error_mm']:<9.3f} {row['ratio_ignore']:>9.3f} / {row['ratio_background']:<9.3f}")
     if json_path:
-        os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
-        with open(json_path, "w") as fh:
-            json.dump(res, fh, indent=1)
+        from ..safeio import atomic_json
+        atomic_json(json_path, res)
     return res

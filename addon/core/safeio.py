@@ -1,0 +1,94 @@
+"""Safe writers shared by the core: unique temporary files, fsync, rename; an exclusive lock.
+
+No writer here follows a symlink planted at the destination or at a temporary name, and none
+leaves a half-written file under the destination's name. Every failure is one ClothFitError line.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+
+import numpy as np
+
+from .errors import ClothFitError
+
+
+def atomic_json(path, obj, strict: bool = False, default=None):
+    """Write JSON safely (see :func:`atomic_write`); ``strict``: no NaN / Infinity."""
+    try:
+        text = json.dumps(obj, indent=1, default=default or _default, allow_nan=not strict)
+    except (TypeError, ValueError) as e:
+        raise ClothFitError(f"cannot write {path}: the data is not strict JSON ({e})") from None
+    atomic_write(path, (text + "\n").encode("utf-8"))
+
+
+def atomic_write(path, data: bytes):
+    """Write a file safely: a new unique temporary file next to ``path`` (created exclusively by
+    ``mkstemp``, so a planted file or symlink is never followed), flushed and fsynced, then renamed
+    over ``path`` (a rename replaces a symlink at ``path`` itself, never its target). Two writers
+    never share a temporary file; a reader sees the old or the new file, whole. One-line errors."""
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    base = os.path.basename(path)
+    if not base:
+        raise ClothFitError(f"cannot write {path!r}: not a file name")
+    if os.path.isdir(path) and not os.path.islink(path):
+        raise ClothFitError(f"cannot write {path}: it is a directory")
+    tmp = None
+    try:
+        os.makedirs(d, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=".tmp", dir=d)
+        try:
+            mode = os.lstat(path).st_mode & 0o777 if os.path.isfile(path) and not os.path.islink(path) else 0o644
+            os.fchmod(fd, mode)
+        except (OSError, AttributeError):
+            pass
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as e:
+        raise ClothFitError(f"cannot write {path}: {e.strerror or e}") from None
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+
+
+@contextlib.contextmanager
+def exclusive_lock(path):
+    """Hold an exclusive advisory lock on ``path + '.lock'`` (POSIX ``flock``; released when the
+    process ends, even by kill -9). Another holder -> ClothFitError at once."""
+    lock_path = os.fspath(path) + ".lock"
+    try:
+        import fcntl
+    except ImportError:           # Windows: no advisory lock; the unique temp files still keep files whole
+        yield
+        return
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        os.makedirs(os.path.dirname(os.path.abspath(lock_path)), exist_ok=True)
+        fd = os.open(lock_path, flags, 0o644)
+    except OSError as e:
+        raise ClothFitError(f"cannot create the lock file {lock_path}: {e.strerror or e}") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise ClothFitError(f"another fit is writing {path} (it holds {lock_path}): wait for it, or "
+                                f"choose another --out") from None
+        yield
+    finally:
+        os.close(fd)
+
+
+def _default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o)}")
