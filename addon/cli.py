@@ -229,7 +229,7 @@ def cmd_fit(a):
                     population=a.population, children=a.children, target_error=a.target,
                     model=None if a.backend == "blender" else _model_spec(a), free=_names(a.free),
                     fixed=_json_arg(a.fixed, "--fixed"), init=a.init, bounds=_json_arg(a.bounds, "--bounds"),
-                    restarts=D.FIT_RESTARTS if a.restarts is None else a.restarts)
+                    restarts=a.restarts)
     for k, v in _backend_args(a).items():
         setattr(cfg, k, v)
     cfg = cfg.checked()
@@ -482,7 +482,8 @@ def build_parser():
     s.add_argument("--resolution", help="fit at HxW (silhouettes area-resampled)")
     s.add_argument("--cloth-mass", type=float, default=None, help="total cloth mass [kg] (fixes m)")
     s.add_argument("--restarts", type=int, default=None,
-                   help=f"cma-es: IPOP restarts after convergence, each with twice the population (default {D.FIT_RESTARTS})")
+                   help=f"cma-es: IPOP restarts after convergence, each with twice the population (default: paper "
+                        f"{D.FIT_RESTARTS}, blender {D.BLENDER_FIT_RESTARTS})")
     s.add_argument("--checkpoint", help="default: OUT.checkpoint.json; written every few seconds and at the end")
     s.add_argument("--resume", action="store_true",
                    help="continue the checkpoint; refused if it is of another fit (capture, cameras, times, "

@@ -81,7 +81,8 @@ DEFAULT_OPTIMIZER = "cma-es"      # measured faster than SPX+MGG on this problem
 FIT_TOLX = 1e-5                   # unit-cube step size at which CMA-ES has converged (GA: population spread)
 FIT_TOLFUN_PER_IMAGE = 1e-6       # spread of recent best E_all (per training image) below which it has converged
 FIT_GA_STALL = 3000               # GA: evaluations without an improvement of more than the tolfun = stagnated
-FIT_RESTARTS = 0                  # CMA-ES IPOP restarts (each with twice the population)
+FIT_RESTARTS = 0                  # CMA-ES IPOP restarts (each with twice the population), paper model
+BLENDER_FIT_RESTARTS = 4          # the blender model's 8 free settings have local minima: restart until the budget
 FIT_EXPLODED_LIMIT = 100          # this many candidates, all exploded, and nothing finite: the fit is an error
 CHECKPOINT_INTERVAL_S = 2.0       # the CLI writes its checkpoint at most this often (and always at the end)
 MAX_FIT_PIXELS = 16_000_000       # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)

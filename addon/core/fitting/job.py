@@ -75,7 +75,8 @@ class FitConfig:
     workers: int | None = None            # blender: worker processes (default: the cores)
     address: str | None = None            # blender: a running Ray cluster ("auto", "ray://host:port")
     executor: str = "auto"                # blender: "ray", "process" (no Ray) or "auto"
-    restarts: int = D.FIT_RESTARTS        # cma-es: IPOP restarts after convergence (population doubled each)
+    restarts: int | None = None           # cma-es: IPOP restarts after convergence (population doubled each);
+                                          # None = the model's default (paper 0, blender BLENDER_FIT_RESTARTS)
 
     @classmethod
     def from_dict(cls, d):
@@ -115,7 +116,7 @@ class FitConfig:
         intval("max_evaluations", 1, none_ok=False)
         intval("population", 2, 10 ** 6)
         intval("children", 1, 10 ** 6)
-        intval("restarts", 0, 20, none_ok=False)
+        intval("restarts", 0, 20)
         intval("quality", 1, 80)
         numval("target_error", 0.0)
         numval("cloth_mass", 1e-12)
@@ -285,13 +286,18 @@ class FitJob:
             kw["initial"] = self.par.initial
             if is_cma:
                 kw["sigma0"] = D.WARM_START_SIGMA
+        paper = isinstance(self.par, PaperParameters)
+        n = self.space.n
         if is_cma:
-            kw["restarts"] = cfg.restarts
-            if cfg.population is not None:
-                kw["popsize"] = cfg.population
-        else:
-            kw["population"] = D.FIT_GA_POPULATION if cfg.population is None else cfg.population
-            kw["children"] = D.FIT_GA_CHILDREN if cfg.children is None else cfg.children
+            kw["restarts"] = (cfg.restarts if cfg.restarts is not None else
+                              D.FIT_RESTARTS if paper else D.BLENDER_FIT_RESTARTS)
+            # Hansen's default population 4 + 3 ln n (7 for the paper's 3 free quantities)
+            kw["popsize"] = cfg.population if cfg.population is not None else 4 + int(3 * math.log(n))
+        else:   # the paper's GA: population 7n, 5n children per family
+            kw["population"] = (cfg.population if cfg.population is not None else
+                                D.FIT_GA_POPULATION if paper else 7 * n)
+            kw["children"] = (cfg.children if cfg.children is not None else
+                              D.FIT_GA_CHILDREN if paper else 5 * n)
             kw["stall_evaluations"] = D.FIT_GA_STALL
         self.opt = make_optimizer(self.optimizer_name, self.space, cfg.seed, **kw)
         self.started = time.time()
