@@ -541,3 +541,38 @@ def test_ga_stops_on_stagnation_and_collapse():
     collapse = make_optimizer("ga", box(3), seed=0, tolx=1e-3)
     collapse.run(sphere, 10 ** 6)
     assert collapse.stop_reason == "tolx" and np.all(np.ptp(collapse.pop_u, axis=0) < 1e-3)
+
+
+def test_active_cma_minimises_an_ill_conditioned_ellipsoid_and_resumes_exactly():
+    """Active CMA-ES (negative weights for the worse half; off by default) converges on an
+    8-D ellipsoid, keeps C positive definite, and its state round-trips through JSON."""
+    n = 8
+    space = SearchSpace([f"x{i}" for i in range(n)], {f"x{i}": (-1.0, 1.0) for i in range(n)},
+                        {f"x{i}": False for i in range(n)})
+    scale = 10.0 ** (np.arange(n) / (n - 1) * 3)
+
+    def f(X):
+        return np.sum((scale * (np.atleast_2d(X) - 0.3)) ** 2, axis=1)
+
+    a = CMAES(space, seed=3, active=True, tolx=1e-12)
+    p = CMAES(space, seed=3, tolx=1e-12)
+    for _ in range(400):
+        for o in (a, p):
+            X = o.ask()
+            o.tell(X, f(X))
+        assert np.linalg.eigvalsh(a.C).min() > 0
+    assert a.best_f < 1e-4 and a.best_f < 1e-3 * p.best_f      # measured: 3.2e-6 against 1.28
+    b = CMAES(space, seed=3, active=True)
+    for _ in range(5):
+        b.tell(b.ask(), f(b.ask()))
+    c = optimizer_from_state(json.loads(json.dumps(b.state_dict())))
+    assert c.active
+    for _ in range(5):
+        xb, xc = b.ask(), c.ask()
+        np.testing.assert_array_equal(xb, xc)
+        b.tell(xb, f(xb))
+        c.tell(xc, f(xc))
+    bad = b.state_dict()
+    bad["active"] = "yes"
+    with pytest.raises(ClothFitError, match="'active' must be true or false"):
+        optimizer_from_state(bad)

@@ -717,8 +717,12 @@ class CMAES(Optimizer):
     name = "cma-es"
 
     def __init__(self, space: SearchSpace, seed=None, initial=None, popsize: int | None = None,
-                 sigma0: float = 0.3, restarts: int = 0, tolx: float = 1e-11, tolfun: float = 1e-11):
+                 sigma0: float = 0.3, restarts: int = 0, tolx: float = 1e-11, tolfun: float = 1e-11,
+                 active: bool = False):
         super().__init__(space, seed, initial)
+        if not isinstance(active, (bool, np.bool_)):
+            raise ClothFitError(f"cma-es: active must be true or false, got {active!r}")
+        self.active = bool(active)     # active CMA: the worse half lowers the variance along its steps
         self.popsize = _pos_int(D.CMA_POPSIZE if popsize is None else popsize, "cma-es: popsize")
         if self.popsize < 2:
             raise ClothFitError(f"cma-es: popsize must be >= 2, got {self.popsize}")
@@ -756,6 +760,19 @@ class CMAES(Optimizer):
         self.cs = (self.mueff + 2) / (n + self.mueff + 5)
         self.c1 = 2 / ((n + 1.3) ** 2 + self.mueff)
         self.cmu = min(1 - self.c1, 2 * (self.mueff - 2 + 1 / self.mueff) / ((n + 2) ** 2 + self.mueff))
+        if self.active:
+            # Hansen's tutorial (2016), eq. 53: weights for all lambda, negative for the worse half,
+            # scaled so the covariance stays positive definite
+            wa = math.log((self.lam + 1) / 2) - np.log(np.arange(1, self.lam + 1))
+            pos, neg = wa[wa >= 0], wa[wa < 0]
+            mueff_neg = float(neg.sum() ** 2 / np.sum(neg ** 2)) if neg.size else 0.0
+            amu = 1 + self.c1 / self.cmu
+            amueff = 1 + 2 * mueff_neg / (self.mueff + 2)
+            aposdef = (1 - self.c1 - self.cmu) / (n * self.cmu)
+            self.weights_all = np.where(wa >= 0, wa / pos.sum(),
+                                        min(amu, amueff, aposdef) * wa / max(np.abs(neg).sum(), 1e-300))
+        else:
+            self.weights_all = np.concatenate([self.weights, np.zeros(self.lam - self.mu)])
         self.damps = 1 + 2 * max(0.0, math.sqrt((self.mueff - 1) / (n + 1)) - 1) + self.cs
         self.chin = math.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n * n))
         self.tolfun_window = 10 + int(math.ceil(30 * n / self.lam))
@@ -823,8 +840,19 @@ class CMAES(Optimizer):
         hsig = nps / math.sqrt(1 - (1 - self.cs) ** (2 * g)) / self.chin < 1.4 + 2 / (n + 1)
         self.pc = (1 - self.cc) * self.pc + (math.sqrt(self.cc * (2 - self.cc) * self.mueff) * yw if hsig else 0.0)
         c1a = self.c1 * (1 - (0.0 if hsig else 1.0) * self.cc * (2 - self.cc))
-        rank_mu = (sel.T * self.weights) @ sel
-        self.C = (1 - c1a - self.cmu) * self.C + self.c1 * np.outer(self.pc, self.pc) + self.cmu * rank_mu
+        if self.active:
+            Yo = Y[order]
+            wo = self.weights_all.copy()
+            neg = wo < 0
+            if neg.any():       # negative weights act on steps normalised in the Mahalanobis norm
+                m2 = np.sum((Yo[neg] @ invsqrt.T) ** 2, axis=1)
+                wo[neg] *= n / np.maximum(m2, 1e-300)
+            rank_mu = (Yo.T * wo) @ Yo
+            self.C = ((1 - c1a - self.cmu * float(self.weights_all.sum())) * self.C
+                      + self.c1 * np.outer(self.pc, self.pc) + self.cmu * rank_mu)
+        else:
+            rank_mu = (sel.T * self.weights) @ sel
+            self.C = (1 - c1a - self.cmu) * self.C + self.c1 * np.outer(self.pc, self.pc) + self.cmu * rank_mu
         self.C = (self.C + self.C.T) / 2
         self.sigma *= math.exp(min(1.0, (self.cs / self.damps) * (nps / self.chin - 1)))
         self.run_generation = g
@@ -871,14 +899,15 @@ class CMAES(Optimizer):
             return "tolupsigma"
         return None
 
-    STATE_KEYS = ("popsize", "sigma0", "restarts", "tolx", "tolfun", "restarts_done", "stop_reason", "run_stops",
+    STATE_KEYS = ("popsize", "sigma0", "restarts", "tolx", "tolfun", "active", "restarts_done", "stop_reason", "run_stops",
                   "stopped", "lam", "mean", "sigma", "C", "pc", "ps", "run_generation", "run_bests", "last_fvals",
                   "rng", "initial_u", "inject", "pending", "pending_injected")
 
     def state_dict(self) -> dict:
         d = self._base_state()
         d.update({"popsize": self.popsize, "sigma0": self.sigma0, "restarts": self.restarts,
-                  "tolx": self.tolx, "tolfun": self.tolfun, "restarts_done": self.restarts_done,
+                  "tolx": self.tolx, "tolfun": self.tolfun, "active": self.active,
+                  "restarts_done": self.restarts_done,
                   "stop_reason": self.stop_reason, "run_stops": list(self.run_stops), "stopped": self._stopped,
                   "lam": self.lam, "mean": self.mean.tolist(), "sigma": self.sigma, "C": self.C.tolist(),
                   "pc": self.pc.tolist(), "ps": self.ps.tolist(), "run_generation": self.run_generation,
@@ -896,7 +925,8 @@ class CMAES(Optimizer):
         n = space.n
         opt = cls(space, seed=d["seed"], popsize=_num(d, "popsize", w, int, 2, 10 ** 6),
                   sigma0=_num(d, "sigma0", w, float, 1e-300, 10.0), restarts=_num(d, "restarts", w, int, 0, 20),
-                  tolx=_num(d, "tolx", w, float, 0.0), tolfun=_num(d, "tolfun", w, float, 0.0))
+                  tolx=_num(d, "tolx", w, float, 0.0), tolfun=_num(d, "tolfun", w, float, 0.0),
+                  active=_active(d, w))
         opt._load_base(d)
         opt.restarts_done = _num(d, "restarts_done", w, int, 0, opt.restarts)
         lam = _num(d, "lam", w, int, 2, 10 ** 7)
@@ -958,6 +988,13 @@ def canonical_name(name: str) -> str:
         raise ClothFitError(f"unknown optimiser '{name}': choose one of "
                             f"{', '.join(sorted(ALIASES))} (i.e. {' or '.join(OPTIMIZERS)})")
     return ALIASES[key]
+
+
+def _active(d, where):
+    v = d.get("active", False)          # older checkpoints: plain CMA-ES
+    if not isinstance(v, bool):
+        raise ClothFitError(f"checkpoint: {where} 'active' must be true or false")
+    return v
 
 
 def make_optimizer(name: str, space: SearchSpace, seed=None, **kw) -> Optimizer:
