@@ -54,7 +54,10 @@ class SceneFitSession:
         env = dict(os.environ)
         env["PYTHONPATH"] = PACKAGE_PARENT + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen(cmd, cwd=PACKAGE_PARENT, env=env, stdout=self.log, stderr=subprocess.STDOUT)
+        # Esc sends SIGINT: the child must not inherit an ignored SIGINT from Blender's process (an
+        # ignored signal stays ignored across exec, and Python then installs no KeyboardInterrupt)
+        self.proc = subprocess.Popen(cmd, cwd=PACKAGE_PARENT, env=env, stdout=self.log, stderr=subprocess.STDOUT,
+                                     preexec_fn=_default_sigint if os.name == "posix" else None)
         self.cancelled = False
 
     def progress(self):
@@ -106,6 +109,10 @@ class SceneFitSession:
             except subprocess.TimeoutExpired:
                 pass
         return self.finish(scene)
+
+
+def _default_sigint():
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def apply_result(obj, result_path=None) -> dict:
