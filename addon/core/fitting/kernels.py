@@ -8,8 +8,19 @@ from __future__ import annotations
 import numpy as np
 
 from ..observation.silhouette_kernels import eval_frames
-from ..physics.jit import PARALLEL, njit, prange
+from ..physics.jit import JIT, PARALLEL, njit, prange
 from ..physics.paper_kernels import simulate_one
+
+
+@njit(**JIT)
+def work_buffers(span_cap, max_h, max_w):
+    """One thread's scratch arrays for ``eval_frames`` (row spans and prefix sums)."""
+    return (np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
+            np.empty(span_cap, dtype=np.int32), np.zeros(max_h + 2, dtype=np.int64),
+            np.zeros(max_h + 2, dtype=np.int64), np.empty(span_cap, dtype=np.int32),
+            np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
+            np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
+            np.empty(span_cap, dtype=np.int32))
 
 
 @njit(**PARALLEL)
@@ -27,12 +38,7 @@ def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, k
         codes[p] = code
         if code != 0:
             continue
-        work = (np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
-                np.empty(span_cap, dtype=np.int32), np.zeros(max_h + 2, dtype=np.int64),
-                np.zeros(max_h + 2, dtype=np.int64), np.empty(span_cap, dtype=np.int32),
-                np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
-                np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
-                np.empty(span_cap, dtype=np.int32))
+        work = work_buffers(span_cap, max_h, max_w)
         eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, work, esil[p])
 
 
@@ -44,10 +50,5 @@ def score_population(X, ok, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipo
     for p in prange(X.shape[0]):
         if not ok[p]:
             continue
-        work = (np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
-                np.empty(span_cap, dtype=np.int32), np.zeros(max_h + 2, dtype=np.int64),
-                np.zeros(max_h + 2, dtype=np.int64), np.empty(span_cap, dtype=np.int32),
-                np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
-                np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
-                np.empty(span_cap, dtype=np.int32))
+        work = work_buffers(span_cap, max_h, max_w)
         eval_frames(X[p], Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, work, esil[p])

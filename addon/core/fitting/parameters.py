@@ -47,9 +47,10 @@ BLENDER_BOUNDS_AT_DEFAULT_MASS = {
 FITTABLE = tuple(BLENDER_BOUNDS_AT_DEFAULT_MASS)
 
 
-def point_mass(capture, cfg_mass, default):
-    """(mass per vertex, source) from the given total mass, the capture's, or ``default``."""
-    n = capture.scenario.grid.n_vertices
+def point_mass(capture, cfg_mass, default, n_vertices=None):
+    """(mass per vertex, source) from the given total mass, the capture's, or ``default``; the
+    total is spread over ``n_vertices`` (default: the capture's grid)."""
+    n = capture.scenario.grid.n_vertices if n_vertices is None else int(n_vertices)
     if cfg_mass is not None:
         if not (isinstance(cfg_mass, (int, float)) and math.isfinite(cfg_mass) and cfg_mass > 0):
             raise ClothFitError(f"cloth mass {cfg_mass!r} kg must be a positive number")
@@ -57,6 +58,20 @@ def point_mass(capture, cfg_mass, default):
     if getattr(capture, "cloth_mass", None):
         return capture.cloth_mass / n, "capture's cloth_mass"
     return default, None
+
+
+def free_set(cfg, bending_model: str) -> tuple:
+    """The Blender settings a fit searches (``cfg.free`` or the default set), checked."""
+    free = tuple(cfg.free) if cfg.free else BLENDER_FREE[bending_model]
+    bad = [n for n in free if n not in FITTABLE]
+    if bad:
+        raise ClothFitError(f"fit: cannot search {', '.join(bad)} (searchable: {', '.join(FITTABLE)})")
+    if len(set(free)) != len(free) or not free:
+        raise ClothFitError(f"fit: free settings {list(free)} must be distinct and not empty")
+    clash = set(free) & set(cfg.fixed or {})
+    if clash:
+        raise ClothFitError(f"fit: {sorted(clash)} cannot be both free and fixed")
+    return free
 
 
 class PaperParameters:
@@ -123,16 +138,7 @@ class BlenderParameters:
         fixed.update(cfg.fixed or {})
         fixed["mass"] = self.m
         self.fixed = B.check_settings(fixed, "fit: fixed Blender settings")
-        free = tuple(cfg.free) if cfg.free else BLENDER_FREE[self.model.bending_model]
-        bad = [n for n in free if n not in FITTABLE]
-        if bad:
-            raise ClothFitError(f"fit: cannot search {', '.join(bad)} (searchable: {', '.join(FITTABLE)})")
-        if len(set(free)) != len(free) or not free:
-            raise ClothFitError(f"fit: free settings {list(free)} must be distinct and not empty")
-        clash = set(free) & set(cfg.fixed or {})
-        if clash:
-            raise ClothFitError(f"fit: {sorted(clash)} cannot be both free and fixed")
-        self.free = free
+        self.free = free = free_set(cfg, self.model.bending_model)
         self.scaled = set(B.mass_scaled(self.model.bending_model))
         bounds = {}
         for n in free:
@@ -193,16 +199,8 @@ class SceneParameters(BlenderParameters):
         self.model = evaluator
         scene = B.check_settings(dict(evaluator.initial), f"Cloth settings of '{getattr(evaluator, 'object', '?')}'")
         bending = scene["bending_model"]
-        V = int(evaluator.mesh.n_vertices)
-        if cfg.cloth_mass is not None:
-            if not (isinstance(cfg.cloth_mass, (int, float)) and math.isfinite(cfg.cloth_mass) and cfg.cloth_mass > 0):
-                raise ClothFitError(f"cloth mass {cfg.cloth_mass!r} kg must be a positive number")
-            m, src = cfg.cloth_mass / V, "given cloth mass"
-        elif getattr(capture, "cloth_mass", None):
-            m, src = capture.cloth_mass / V, "capture's cloth_mass"
-        else:
-            m, src = scene["mass"], ("the scene's vertex mass (cloth mass unknown: every stiffness and damping "
-                                     "scales with it)")
+        m, src = point_mass(capture, cfg.cloth_mass, scene["mass"], evaluator.mesh.n_vertices)
+        src = src or "the scene's vertex mass (cloth mass unknown: every stiffness and damping scales with it)"
         self.m, self.m_source = float(m), src
         fixed = _rescale(scene, self.m, bending)
         self.init_note = None
@@ -211,7 +209,7 @@ class SceneParameters(BlenderParameters):
             core = BlenderModel(evaluator.fps, scene["quality"], bending)
             ini = settings_from_result(res, core, capture.scenario.grid)
             ini = _rescale(ini, self.m, bending)
-            fixed.update({n: ini[n] for n in (tuple(cfg.free) if cfg.free else BLENDER_FREE[bending]) if n in ini})
+            fixed.update({n: ini[n] for n in free_set(cfg, bending) if n in ini})
             if abs(ini["time_scale"] - scene["time_scale"]) > 1e-6 * scene["time_scale"] or \
                     ini["quality"] != scene["quality"] or ini["bending_model"] != bending:
                 self.init_note = (f"warm start {cfg.init} was fitted at time_scale {ini['time_scale']:.6g}, quality "
@@ -220,16 +218,7 @@ class SceneParameters(BlenderParameters):
         fixed.update(cfg.fixed or {})
         fixed["mass"] = self.m
         self.fixed = B.check_settings(fixed, "fit: fixed Blender settings")
-        free = tuple(cfg.free) if cfg.free else BLENDER_FREE[bending]
-        bad = [n for n in free if n not in FITTABLE]
-        if bad:
-            raise ClothFitError(f"fit: cannot search {', '.join(bad)} (searchable: {', '.join(FITTABLE)})")
-        if len(set(free)) != len(free) or not free:
-            raise ClothFitError(f"fit: free settings {list(free)} must be distinct and not empty")
-        clash = set(free) & set(cfg.fixed or {})
-        if clash:
-            raise ClothFitError(f"fit: {sorted(clash)} cannot be both free and fixed")
-        self.free = free
+        self.free = free = free_set(cfg, bending)
         self.scaled = set(B.mass_scaled(bending))
         bounds = {}
         for n in free:
