@@ -43,16 +43,9 @@ AFTER = 1.5
 GRID = 21
 MATERIALS = {                    # Blender ClothSettings; time_scale: real time at 24 fps
     "cotton (Blender's defaults)": {},
-    "silk (soft, little bending)": {"mass": 0.15, "tension_stiffness": 5, "compression_stiffness": 5,
-                                    "shear_stiffness": 5, "bending_stiffness": 0.05, "tension_damping": 0,
-                                    "compression_damping": 0, "shear_damping": 0, "air_damping": 1,
-                                    "bending_damping": 0.5},
-    "denim (stiff, quality 12)": {"quality": 12, "mass": 1, "tension_stiffness": 40, "compression_stiffness": 40,
-                                  "shear_stiffness": 40, "bending_stiffness": 10, "tension_damping": 25,
-                                  "compression_damping": 25, "shear_damping": 25, "air_damping": 1,
-                                  "bending_damping": 0.5},
+    "silk (soft, little bending)": B.PRESETS["silk"],
+    "denim (stiff, quality 12)": B.PRESETS["denim"],
 }
-
 
 def slug(name):
     return name.split(" ")[0]
@@ -199,7 +192,7 @@ def replay(out):
 def table(out):
     with open(os.path.join(out, "cross_simulator.json")) as f:
         rows = json.load(f)
-    print(f"| material | model | train cams | held-out E_sil % (floor) | shape error mm | Blender replay mm | evals | s |")
+    print("| material | model | train cams | held-out E_sil % (floor) | shape error mm | Blender replay mm | evals | s |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         rep = r.get("blender_replay_shape_error_mm")

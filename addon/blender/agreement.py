@@ -23,24 +23,7 @@ from ..core.physics.blender_kernels import Prepared
 from ..core.physics.models import BlenderModel
 from ..core.physics.scenario import ClothGrid, Scenario, paper_scenario
 
-# Blender 4.5's cloth presets (scripts/presets/cloth/*.py), as ClothSettings values
-PRESETS = {
-    "cotton": {"quality": 5, "mass": 0.3, "tension_stiffness": 15, "compression_stiffness": 15,
-               "shear_stiffness": 15, "bending_stiffness": 0.5, "tension_damping": 5, "compression_damping": 5,
-               "shear_damping": 5, "air_damping": 1, "bending_damping": 0.5},
-    "silk": {"quality": 5, "mass": 0.15, "tension_stiffness": 5, "compression_stiffness": 5, "shear_stiffness": 5,
-             "bending_stiffness": 0.05, "tension_damping": 0, "compression_damping": 0, "shear_damping": 0,
-             "air_damping": 1, "bending_damping": 0.5},
-    "denim": {"quality": 12, "mass": 1, "tension_stiffness": 40, "compression_stiffness": 40, "shear_stiffness": 40,
-              "bending_stiffness": 10, "tension_damping": 25, "compression_damping": 25, "shear_damping": 25,
-              "air_damping": 1, "bending_damping": 0.5},
-    "leather": {"quality": 15, "mass": 0.4, "tension_stiffness": 80, "compression_stiffness": 80,
-                "shear_stiffness": 80, "bending_stiffness": 150, "tension_damping": 25, "compression_damping": 25,
-                "shear_damping": 25, "air_damping": 1, "bending_damping": 0.5},
-    "rubber": {"quality": 7, "mass": 3, "tension_stiffness": 15, "compression_stiffness": 15, "shear_stiffness": 15,
-               "bending_stiffness": 25, "tension_damping": 25, "compression_damping": 25, "shear_damping": 25,
-               "air_damping": 1, "bending_damping": 0.5},
-}
+PRESETS = B.PRESETS
 
 PIN_WEIGHT = "pin weight"      # a case key: the handles' pin weight (< 1: Blender's soft goal springs)
 

@@ -19,28 +19,10 @@ import numpy as np
 
 from ..core.errors import ClothFitError
 from ..core.physics import blender as B
-from .scene import _action_fcurves, evaluated_positions
+from .scene import evaluated_positions, set_key_interpolation
 
 PIN_GROUP = "clothfit_pin"
 CLOTH_MODIFIER = "Cloth (Cloth Fit)"
-
-
-def _constant_keys(id_data):
-    ad = getattr(id_data, "animation_data", None)
-    if ad is None or ad.action is None:
-        return
-    for fc in _action_fcurves(ad):
-        for kp in fc.keyframe_points:
-            kp.interpolation = "CONSTANT"
-
-
-def _linear_keys(id_data):
-    ad = getattr(id_data, "animation_data", None)
-    if ad is None or ad.action is None:
-        return
-    for fc in _action_fcurves(ad):
-        for kp in fc.keyframe_points:
-            kp.interpolation = "LINEAR"
 
 
 def set_scene_fps(scene, fps: float):
@@ -99,7 +81,7 @@ def add_pins(scene, obj, plan: B.FramePlan, frame_start: int, name_prefix="cloth
         for f in range(T.shape[0]):
             emp.location = T[f, k]
             emp.keyframe_insert("location", frame=frame_start + f)
-        _linear_keys(emp)
+        set_key_interpolation(emp, "LINEAR")
         hook = obj.modifiers.new(f"{name_prefix} hook {v}", "HOOK")
         hook.object = emp
         hook.vertex_indices_set([v])
@@ -129,7 +111,7 @@ def add_pins(scene, obj, plan: B.FramePlan, frame_start: int, name_prefix="cloth
                 mix.keyframe_insert("mask_constant", frame=frame_start + f)
                 prev = w
         added.append(mix.name)
-    _constant_keys(obj)
+    set_key_interpolation(obj, "CONSTANT")
     return added
 
 

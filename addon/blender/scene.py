@@ -444,20 +444,21 @@ def bake_shape_keys(scene, obj, times, positions):
         for f, v in sorted(keys):
             kb.value = v
             kb.keyframe_insert("value", frame=f)
-    _linear_keys(key)
+    set_key_interpolation(key, "LINEAR")
     scene.frame_start = min(scene.frame_start, frames[0])
     scene.frame_end = frames[-1]
     obj.data.update()
     return frames
 
 
-def _linear_keys(key):
-    ad = key.animation_data
+def set_key_interpolation(id_data, mode="LINEAR"):
+    """Every keyframe of ``id_data``'s action gets interpolation ``mode`` (LINEAR, CONSTANT)."""
+    ad = getattr(id_data, "animation_data", None)
     if ad is None or ad.action is None:
         return
     for fc in _action_fcurves(ad):
         for kp in fc.keyframe_points:
-            kp.interpolation = "LINEAR"
+            kp.interpolation = mode
 
 
 def _action_fcurves(ad):

@@ -83,6 +83,24 @@ DEFAULTS = {"quality": 5, "bending_model": "ANGULAR", "mass": 0.3, "air_damping"
 # the settings that scale with the mass (the symmetry of the equations of motion)
 MASS_SCALED = ("mass", "air_damping", "tension_stiffness", "compression_stiffness", "shear_stiffness",
                "bending_stiffness", "tension_damping", "compression_damping", "shear_damping", "pin_stiffness")
+# Blender 4.5's cloth presets (scripts/presets/cloth/*.py), as ClothSettings values
+PRESETS = {
+    "cotton": {"quality": 5, "mass": 0.3, "tension_stiffness": 15, "compression_stiffness": 15,
+               "shear_stiffness": 15, "bending_stiffness": 0.5, "tension_damping": 5, "compression_damping": 5,
+               "shear_damping": 5, "air_damping": 1, "bending_damping": 0.5},
+    "silk": {"quality": 5, "mass": 0.15, "tension_stiffness": 5, "compression_stiffness": 5, "shear_stiffness": 5,
+             "bending_stiffness": 0.05, "tension_damping": 0, "compression_damping": 0, "shear_damping": 0,
+             "air_damping": 1, "bending_damping": 0.5},
+    "denim": {"quality": 12, "mass": 1, "tension_stiffness": 40, "compression_stiffness": 40, "shear_stiffness": 40,
+              "bending_stiffness": 10, "tension_damping": 25, "compression_damping": 25, "shear_damping": 25,
+              "air_damping": 1, "bending_damping": 0.5},
+    "leather": {"quality": 15, "mass": 0.4, "tension_stiffness": 80, "compression_stiffness": 80,
+                "shear_stiffness": 80, "bending_stiffness": 150, "tension_damping": 25, "compression_damping": 25,
+                "shear_damping": 25, "air_damping": 1, "bending_damping": 0.5},
+    "rubber": {"quality": 7, "mass": 3, "tension_stiffness": 15, "compression_stiffness": 15, "shear_stiffness": 15,
+               "bending_stiffness": 25, "tension_damping": 25, "compression_damping": 25, "shear_damping": 25,
+               "air_damping": 1, "bending_damping": 0.5},
+}
 GRAVITY_SCALE = 0.001       # Blender scales the scene gravity by 1/1000 for cloth
 AIR_SCALE = 0.01            # drag = AIR_SCALE * air_damping
 SOFTGOALSNAP = 0.999        # goal weight (w^4) from which a vertex is pinned

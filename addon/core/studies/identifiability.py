@@ -33,12 +33,9 @@ CANDIDATES = ("tension_stiffness", "compression_stiffness", "shear_stiffness", "
               "tension_damping", "compression_damping", "shear_damping", "bending_damping", "air_damping")
 MATERIALS = {
     "default": {},
-    "silk": {"mass": 0.15, "tension_stiffness": 5, "compression_stiffness": 5, "shear_stiffness": 5,
-             "bending_stiffness": 0.05, "tension_damping": 0.5, "compression_damping": 0.5, "shear_damping": 0.5,
-             "air_damping": 1, "bending_damping": 0.5},
-    "denim": {"quality": 12, "mass": 1, "tension_stiffness": 40, "compression_stiffness": 40,
-              "shear_stiffness": 40, "bending_stiffness": 10, "tension_damping": 25, "compression_damping": 25,
-              "shear_damping": 25, "air_damping": 1, "bending_damping": 0.5},
+    # Blender's silk preset with spring dampings of 0.5 instead of 0 (a log-derivative needs a value)
+    "silk": dict(B.PRESETS["silk"], tension_damping=0.5, compression_damping=0.5, shear_damping=0.5),
+    "denim": B.PRESETS["denim"],
 }
 SIGMA_M = 0.5e-3          # positions resolved to 0.5 mm (about one pixel of the lab18 rig at the cloth)
 STEP = 0.05               # +-5 % in log
