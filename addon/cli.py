@@ -38,22 +38,9 @@ def _res(s):
 
 def _params(args, default=None):
     if getattr(args, "params", None):
-        p = args.params
-        if os.path.isfile(p):
-            try:
-                with open(p) as f:
-                    d = json.load(f)
-            except (OSError, json.JSONDecodeError) as e:
-                raise ClothFitError(f"--params file {p} is not valid JSON: {e}") from None
-            if not isinstance(d, dict):
-                raise ClothFitError(f"--params file {p} must hold an object")
-            if "params" in d and not d.get("params") and not d.get("blender_cloth"):
-                raise ClothFitError(f"--params file {p}: 'params' is empty (a fit that never evaluated?)")
-        else:
-            try:
-                d = json.loads(p)
-            except json.JSONDecodeError:
-                raise ClothFitError(f"--params {p!r} is neither a file nor JSON") from None
+        d = _json_arg(args.params, "--params")
+        if "params" in d and not d.get("params") and not d.get("blender_cloth"):
+            raise ClothFitError(f"--params {args.params}: 'params' is empty (a fit that never evaluated?)")
         return d
     if default is not None:
         return default
