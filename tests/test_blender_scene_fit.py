@@ -150,6 +150,59 @@ def test_no_ray_fallback_gives_the_same_fit(scene, ray_fit, tmp_path):
     assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
 
 
+def _free_port():
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _kill_procs_with(text):
+    import signal
+    import time
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for p in _procs_with(text):
+            try:
+                os.kill(p, sig)
+            except OSError:
+                pass
+        for _ in range(50):
+            if not _procs_with(text):
+                return
+            time.sleep(0.2)
+
+
+def test_fit_on_a_running_cluster_by_address(scene, ray_fit, tmp_path):
+    """``--address HOST:PORT``: a Ray cluster started apart (``ray start --head`` on loopback, as the
+    README tells), the fit run from a directory outside the repository (its workers get ``addon``
+    through Ray's ``py_modules``, not through the repository's path); the same result as the fit
+    on a local instance, and the cluster is left running for the next fit."""
+    pytest.importorskip("ray")
+    tmp = tempfile.mkdtemp(prefix="cfrc", dir="/tmp")
+    port = _free_port()
+    ray_cli = os.path.join(os.path.dirname(sys.executable), "ray")
+    env = {k: v for k, v in _env(RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0", RAY_AUTH_MODE="disabled").items()
+           if k != "PYTHONPATH"}
+    try:
+        r = subprocess.run([ray_cli, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}",
+                            "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats",
+                            f"--temp-dir={tmp}"], cwd=tmp, env=env, capture_output=True, text=True, timeout=180)
+        assert r.returncode == 0, (r.stdout + r.stderr)[-2000:]
+        out = tmp_path / "fit.json"
+        args = _fit_args(scene, out, "--address", f"127.0.0.1:{port}")
+        fit = subprocess.run([sys.executable, "-m", "addon"] + args, cwd=tmp, env=dict(env, PYTHONPATH=ROOT),
+                             capture_output=True, text=True, timeout=600)
+        assert fit.returncode == 0, fit.stderr[-2000:]
+        res = json.load(open(out))
+        assert res["executor"] == "ray" and res["evaluations"] == BUDGET
+        ray_res = json.load(open(ray_fit[1]))
+        assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
+        assert _procs_with(tmp), "the fit must leave the user's cluster running"
+    finally:
+        _kill_procs_with(tmp)
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 KILL = r"""
 import json, os, signal, sys
 from addon.core.fitting.job import FitConfig, FitJob

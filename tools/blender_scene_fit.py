@@ -15,6 +15,17 @@ the result within 1 mm of the observed motion.
 
     python tools/blender_scene_fit.py all --out out/scene_fit [--budget 600] [--workers 2]
         [--resolution 240x320] [--population 8] [--seed 0] [--init RESULT.json]
+
+The warm start (``--release corner``: only one corner let go, so the cloth first swings free about
+the other three, as in the paper, and strikes the box later; ``--drop 0.05`` puts the box's top
+5 cm below the cloth, where the swinging corner reaches it):
+
+4. ``warm`` (no bpy): the core's blender model (which has no colliders) fitted on the capture times
+   before the cloth reaches the box, the contact time predicted by that model at the scene's
+   starting settings (5 mm margin; the truth is not used); its result is ``--init`` for ``fit``.
+   ``all --warm`` runs build, warm, fit from the warm start, replay.
+
+    python tools/blender_scene_fit.py all --out out/scene_warm --release corner --drop 0.05 --after 0.75 --warm
 """
 from __future__ import annotations
 
@@ -29,21 +40,67 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 
+BOX = 0.06          # the box collider's side [m]; centred under the cloth
+MARGIN = 0.005      # warm start: capture times while the predicted cloth stays this far above the box
+
+
 def _paths(out):
     return {"blend": os.path.join(out, "drop.blend"), "capture": os.path.join(out, "capture"),
             "fit": os.path.join(out, "fit.json"), "replay": os.path.join(out, "replay.json"),
-            "meta": os.path.join(out, "scene.json")}
+            "meta": os.path.join(out, "scene.json"), "warm": os.path.join(out, "warm.json")}
+
+
+def free_times(cap, drop, box, fps=24.0):
+    """Capture times before the cloth comes within ``MARGIN`` of the box (top ``drop`` below the
+    cloth, ``box`` wide, centred), as the core blender model predicts at Blender's default settings
+    with the real-time time scale (the scene's starting settings; no collider in the core model)."""
+    import numpy as np
+    from addon.core.physics import blender as B
+    from addon.core.physics.models import BlenderModel
+    model = BlenderModel(fps)
+    s = dict(B.DEFAULTS, time_scale=B.physical_time_scale(fps))
+    sc = cap.scenario
+    X = model.simulate(sc, B.settings_row(s)[None]).positions[0]          # (F, V, 3)
+    top = sc.grid.height - drop
+    inside = (np.abs(X[..., 0]) < box / 2 + MARGIN) & (np.abs(X[..., 1]) < box / 2 + MARGIN)
+    near = (inside & (X[..., 2] < top + MARGIN)).any(axis=1)
+    k = int(np.argmax(near)) if near.any() else len(near)
+    return [float(t) for t in sc.frame_times[:k]]
+
+
+def warm(a):
+    from addon.core.observation.capture import load_capture
+    P = _paths(a.out)
+    with open(P["meta"]) as f:
+        meta = json.load(f)
+    cap = load_capture(P["capture"])
+    times = free_times(cap, meta.get("drop", 0.03), meta.get("box", BOX))
+    if len(times) < 2:
+        raise SystemExit(f"warm start: only {len(times)} capture time(s) before the cloth reaches the box; "
+                         f"use --release corner and a deeper --drop")
+    cmd = [sys.executable, "-m", "addon", "fit", P["capture"], "--model", "blender", "--fps", "24",
+           "--times", ",".join(f"{t:.9g}" for t in times), "--max-evaluations", str(a.warm_budget),
+           "--seed", str(a.seed), "--out", P["warm"], "--force", "--quiet"]
+    t0 = time.time()
+    subprocess.run(cmd, check=True, cwd=ROOT)
+    with open(P["warm"]) as f:
+        res = json.load(f)
+    print(f"warm start: the core blender model on the {len(times)} capture times before contact "
+          f"(t <= {times[-1]:.3f} s), {res.get('evaluations')} evaluations in {time.time() - t0:.1f} s, "
+          f"training E_sil {res.get('best_E_sil_mean_pct'):.3f} % -> {P['warm']}")
+    return P["warm"]
 
 
 def build(a):
     from addon.blender import collider_scene as CS
     P = _paths(a.out)
     h, w = (int(x) for x in a.resolution.split("x"))
-    sc = CS.collider_scenario(a.grid, settle=0.25, after=0.5, every=2)
-    f0 = CS.build_scene(P["blend"], sc)
+    sc = CS.collider_scenario(a.grid, settle=0.25, after=a.after, every=a.every, release=a.release)
+    f0 = CS.build_scene(P["blend"], sc, drop=a.drop, box=BOX)
     CS.observe(P["blend"], sc, P["capture"], frame_zero=f0, resolution=(h, w))
     with open(P["meta"], "w") as f:
-        json.dump({"frame_zero": f0, "grid": a.grid, "resolution": [h, w]}, f)
+        json.dump({"frame_zero": f0, "grid": a.grid, "resolution": [h, w], "release": a.release, "drop": a.drop,
+                   "box": BOX}, f)
     print(f"wrote {P['blend']} (t = 0 at frame {f0}) and {P['capture']}")
 
 
@@ -66,6 +123,13 @@ def replay(a):
     out = {"mean_mm": float(d.mean()), "max_mm": float(d.max()), "per_frame_max_mm": d.max(1).tolist(),
            "start_mean_mm": float(d0.mean()), "start_max_mm": float(d0.max()),
            "evaluations": res.get("evaluations"), "best_E_sil_mean_pct": res.get("best_E_sil_mean_pct")}
+    if os.path.isfile(P["warm"]) and a.result is None:      # the warm start on its own, replayed by Blender
+        wres = read_json(P["warm"], "warm-start result")
+        y = bs.simulate(dict(info["settings"], **{k: v for k, v in wres["blender_cloth"].items()
+                                                  if k in info["settings"]}), frames)["positions"]
+        dw = np.linalg.norm(y - obs, axis=-1) * 1000
+        out["warm_start_mean_mm"], out["warm_start_max_mm"] = float(dw.mean()), float(dw.max())
+        print(f"the core model's warm start replayed by Blender: mean {dw.mean():.2f} mm, max {dw.max():.2f} mm")
     # the floor: the true settings with one of them 1 % off, replayed by Blender (contact is chaotic)
     truth = cap["meta"]["true_blender_cloth"]
     floor = {}
@@ -90,7 +154,7 @@ def _child(cmd, a, extra=()):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="tools/blender_scene_fit.py")
-    ap.add_argument("cmd", choices=["build", "fit", "replay", "all"])
+    ap.add_argument("cmd", choices=["build", "warm", "fit", "replay", "all"])
     ap.add_argument("--out", default="out/scene_fit")
     ap.add_argument("--grid", type=int, default=9)
     ap.add_argument("--resolution", default="240x320")
@@ -100,15 +164,26 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--init", default=None)
     ap.add_argument("--result", default=None, help="replay: this result instead of OUT/fit.json")
+    ap.add_argument("--release", default="all", choices=["all", "corner"], help="build: corners let go at t = 0")
+    ap.add_argument("--drop", type=float, default=0.03, help="build: the box's top below the cloth [m]")
+    ap.add_argument("--after", type=float, default=0.5, help="build: seconds observed after the release")
+    ap.add_argument("--every", type=int, default=2, help="build: a capture time every N frames (24 fps)")
+    ap.add_argument("--warm", action="store_true", help="all: fit from the core model's warm start")
+    ap.add_argument("--warm-budget", type=int, default=1500, help="warm: core-model evaluations")
     a = ap.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     if a.cmd == "build":
         return build(a)
     if a.cmd == "replay":
         return replay(a)
+    if a.cmd == "warm":
+        return warm(a)
     P = _paths(a.out)
     if a.cmd == "all":
-        _child("build", a, ["--grid", str(a.grid), "--resolution", a.resolution])
+        _child("build", a, ["--grid", str(a.grid), "--resolution", a.resolution, "--release", a.release,
+                            "--drop", str(a.drop), "--after", str(a.after), "--every", str(a.every)])
+        if a.warm:
+            a.init = warm(a)
     with open(P["meta"]) as f:
         meta = json.load(f)
     cmd = [sys.executable, "-m", "addon", "fit", P["capture"], "--backend", "blender", "--blend", P["blend"],

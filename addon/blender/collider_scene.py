@@ -30,11 +30,17 @@ TRUTH = {"tension_stiffness": 40.0, "compression_stiffness": 40.0, "shear_stiffn
          "tension_damping": 5.0, "shear_damping": 5.0, "bending_damping": 0.5, "air_damping": 2.0}
 
 
-def collider_scenario(n=9, side=0.10, settle=0.25, after=0.5, fps=24.0, every=1) -> Scenario:
-    """All four corners held for ``settle`` s, all released at t = 0; capture times every ``every``
-    frames for ``after`` s."""
+def collider_scenario(n=9, side=0.10, settle=0.25, after=0.5, fps=24.0, every=1, release="all") -> Scenario:
+    """All four corners held for ``settle`` s; at t = 0 all of them released (``release="all"``: the
+    cloth falls flat onto the box) or only the first (``"corner"``, the paper's release: the cloth
+    swings free about the other corners before its corner strikes the box); capture times every
+    ``every`` frames for ``after`` s."""
+    if release not in ("all", "corner"):
+        raise ClothFitError(f"collider scene: release must be 'all' or 'corner', got {release!r}")
     grid = ClothGrid(n, n, side)
-    handles = [Handle(v, [0.0], grid.rest[v][None], 0.0) for v in grid.corners()]
+    corners = grid.corners()
+    handles = [Handle(v, [0.0], grid.rest[v][None], 0.0 if release == "all" or v == corners[0] else None)
+               for v in corners]
     times = np.arange(every, int(round(after * fps)) + 1, every) / fps
     return Scenario(grid, handles, times, settle, D.GRAVITY)
 
