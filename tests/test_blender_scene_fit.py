@@ -87,6 +87,7 @@ def test_worker_replays_the_observation_and_resets_between_candidates(scene):
     other = bs.simulate(dict(truth, tension_stiffness=5.0, bending_stiffness=3.0), frames)
     b = bs.simulate(truth, frames)
     assert np.array_equal(a["positions"], obs) and np.array_equal(b["positions"], obs)
+    assert 0 < a["cpu_seconds"] and 0 < a["seconds"]
     assert np.abs(other["positions"] - obs).max() > 1e-3
     half = bs.simulate(truth, [f0 + 2.5])["positions"][0]
     two = bs.simulate(truth, [f0 + 2, f0 + 3])["positions"]

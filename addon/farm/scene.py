@@ -72,6 +72,7 @@ class BlendSceneEvaluator:
         self.evaluations = 0
         self.seconds = 0.0          # wall time inside simulate() (workers + transfer)
         self.worker_seconds = 0.0   # summed simulation time reported by the workers
+        self.worker_cpu_seconds = 0.0   # and their CPU time
 
     @property
     def workers(self):
@@ -115,6 +116,7 @@ class BlendSceneEvaluator:
         steps = np.zeros(n, dtype=np.int64)
         for p, r in enumerate(out):
             self.worker_seconds += r["seconds"]
+            self.worker_cpu_seconds += r.get("cpu_seconds", 0.0)
             steps[p] = r["frames"] * self.quality
             if r["exploded"]:
                 exploded[p], reason[p] = True, r["reason"]

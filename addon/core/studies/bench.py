@@ -145,24 +145,26 @@ def bench_blender_workers(tmp, grid=21, workers=(1, 2), candidates=48, echo=prin
             obj(P[:2])                           # jit warm-up
             t1 = time.perf_counter()
             c1 = time.process_time()
-            busy0 = ev.worker_seconds
+            busy0, cpu0 = ev.worker_seconds, ev.worker_cpu_seconds
             obj(P)
             wall = time.perf_counter() - t1
-            busy = ev.worker_seconds - busy0
+            busy, wcpu = ev.worker_seconds - busy0, ev.worker_cpu_seconds - cpu0
             # worker_s_per_eval: the simulation time a worker reports per candidate; if it grows with
             # the worker count, the workers share CPUs (other load), not a limit of the dispatch.
             # busy_fraction: summed worker simulation time / (workers x wall): 1.0 = no idle worker.
             out["runs"][str(w)] = {"evals_per_s": candidates / wall, "wall_s": wall,
                                    "driver_cpu_ms_per_eval": 1000 * (time.process_time() - c1) / candidates,
                                    "worker_s_per_eval": busy / candidates, "busy_fraction": busy / (w * wall),
+                                   # > 1: Blender's solver uses more than one thread per worker
+                                   "worker_cpu_per_wall": wcpu / busy if busy > 0 else None,
                                    "ray_init_s": ev.executor.startup_s, "ready_s": ready}
         finally:
             ev.close()
         r = out["runs"][str(w)]
         echo(f"[blender workers] {w} worker(s): {candidates / wall:.2f} Blender evaluations/s "
              f"({grid} x {grid} cloth onto a box, {out['frames_per_candidate']} frames each, scored on 4 cameras); "
-             f"a worker simulates one in {r['worker_s_per_eval']:.3f} s, workers busy {100 * r['busy_fraction']:.0f} % "
-             f"of the wall time; "
+             f"a worker simulates one in {r['worker_s_per_eval']:.3f} s using {r['worker_cpu_per_wall'] or 0:.2f} CPUs, "
+             f"workers busy {100 * r['busy_fraction']:.0f} % of the wall time; "
              f"Ray start-up {ev.executor.startup_s:.1f} s, workers ready (.blend loaded) after {ready:.1f} s", flush=True)
     try:
         out["load_average_1min_at_end"] = os.getloadavg()[0]
