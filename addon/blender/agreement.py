@@ -1,6 +1,6 @@
 """The core's ``blender`` cloth model against Blender's own Cloth modifier, vertex by vertex.
 
-    python -m addon blender-agreement [--grid 21] [--settle 1.0] [--after 1.5] [--fps 24] [--json FILE]
+    clothfit blender-agreement [--grid 21] [--settle 1.0] [--after 1.5] [--fps 24] [--json FILE]
 
 The same cloth (a 10 cm sheet, ``--grid`` x ``--grid`` vertices, hung from its four corners),
 pins, release (one corner let go after ``--settle`` seconds) and settings are simulated by the
@@ -12,7 +12,6 @@ bending model, and qualities from 2 to 15. Needs the bpy module.
 """
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -111,20 +110,27 @@ def run(n=21, settle=1.0, after=1.5, fps=24.0, cases=None, echo=print) -> list:
     return rows
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m addon blender-agreement",
-                                 description="the core's blender cloth model against Blender's own solver "
-                                             "(needs the bpy module)")
-    ap.add_argument("--grid", type=int, default=21, help="vertices per side of the 10 cm sheet (21)")
-    ap.add_argument("--settle", type=float, default=1.0, help="seconds hung by four corners before the release (1)")
-    ap.add_argument("--after", type=float, default=1.5, help="seconds simulated after the release (1.5)")
-    ap.add_argument("--fps", type=float, default=24.0, help="scene frame rate (24)")
-    ap.add_argument("--json", help="write every figure to this file")
-    a = ap.parse_args(argv)
+def add_arguments(ap):
+    """Arguments of ``clothfit blender-agreement``; run with :func:`run_args`."""
+    ap.add_argument("--grid", type=int, default=21,
+                    help="vertices per side of the 10 cm sheet, 2..200 (default: %(default)s)")
+    ap.add_argument("--settle", type=float, default=1.0,
+                    help="seconds hung by four corners before the release (default: %(default)s)")
+    ap.add_argument("--after", type=float, default=1.5,
+                    help="seconds simulated after the release (default: %(default)s)")
+    ap.add_argument("--fps", type=float, default=24.0, help="scene frame rate [frames/s] (default: %(default)s)")
+    ap.add_argument("--json", help="also write every figure to this file")
+    return ap
+
+
+def run_args(a) -> dict:
+    """Run the comparison from parsed :func:`add_arguments` arguments; prints a table (for people)
+    and returns every figure."""
     if a.grid < 2 or a.grid > 200:
         raise ClothFitError(f"--grid {a.grid}: must be 2..200")
     rows = run(a.grid, a.settle, a.after, a.fps)
+    out = {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps, "cases": rows}
     if a.json:
         from ..core.safeio import atomic_json
-        atomic_json(a.json, {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps, "cases": rows})
-    return 0
+        atomic_json(a.json, out)
+    return out
