@@ -474,8 +474,15 @@ def cmd_blender(a):
 
 
 def cmd_blender_agreement(a):
+    if a.grid < 2 or a.grid > 200:
+        raise ClothFitError(f"--grid {a.grid}: must be 2..200")
     from .blender import agreement
-    return agreement.run_args(a)
+    out = {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps,
+           "cases": agreement.run(a.grid, a.settle, a.after, a.fps)}
+    if a.json:
+        from .core.safeio import atomic_json
+        atomic_json(a.json, out)
+    return out
 
 
 PROG = "clothfit"
@@ -582,7 +589,7 @@ def _command(sub, name, fn, help, output):
 
 def build_parser():
     from . import version
-    from .blender import agreement, pipeline
+    from .blender import pipeline
     from .core.footage import calib_io, extract
     p = ArgumentParser(prog=PROG, description="Silhouette Cloth Fit: cloth parameters from multi-view silhouettes.",
                        epilog=EPILOG)
@@ -760,9 +767,16 @@ def build_parser():
     pipeline.add_arguments(_command(sub, "blender", cmd_blender,
                                     "the whole pipeline through Blender (bpy module): rig, cloth, simulate, render "
                                     "silhouettes, fit, overlays, .blend", "a summary of the run as JSON"))
-    agreement.add_arguments(_command(sub, "blender-agreement", cmd_blender_agreement,
-                                     "the core's blender cloth model vs Blender's own solver, vertex by vertex "
-                                     "(bpy module)", "every case's distances as JSON"))
+    s = _command(sub, "blender-agreement", cmd_blender_agreement,
+                 "the core's blender cloth model vs Blender's own solver, vertex by vertex (bpy module)",
+                 "every case's distances as JSON")
+    s.add_argument("--grid", type=int, default=21,
+                   help="vertices per side of the 10 cm sheet, 2..200 (default: %(default)s)")
+    s.add_argument("--settle", type=float, default=1.0,
+                   help="seconds hung by four corners before the release (default: %(default)s)")
+    s.add_argument("--after", type=float, default=1.5, help="seconds simulated after the release (default: %(default)s)")
+    s.add_argument("--fps", type=float, default=24.0, help="scene frame rate [frames/s] (default: %(default)s)")
+    s.add_argument("--json", help="also write every figure to this file")
     return p
 
 

@@ -108,29 +108,3 @@ def run(n=21, settle=1.0, after=1.5, fps=24.0, cases=None, echo=print) -> list:
     echo(f"worst case: mean {max(r['mean_mm'] for r in rows):.6f} mm, max {worst:.6f} mm "
          f"(goal: mean < 0.1 mm, max < 1 mm)")
     return rows
-
-
-def add_arguments(ap):
-    """Arguments of ``clothfit blender-agreement``; run with :func:`run_args`."""
-    ap.add_argument("--grid", type=int, default=21,
-                    help="vertices per side of the 10 cm sheet, 2..200 (default: %(default)s)")
-    ap.add_argument("--settle", type=float, default=1.0,
-                    help="seconds hung by four corners before the release (default: %(default)s)")
-    ap.add_argument("--after", type=float, default=1.5,
-                    help="seconds simulated after the release (default: %(default)s)")
-    ap.add_argument("--fps", type=float, default=24.0, help="scene frame rate [frames/s] (default: %(default)s)")
-    ap.add_argument("--json", help="also write every figure to this file")
-    return ap
-
-
-def run_args(a) -> dict:
-    """Run the comparison from parsed :func:`add_arguments` arguments; prints a table (for people)
-    and returns every figure."""
-    if a.grid < 2 or a.grid > 200:
-        raise ClothFitError(f"--grid {a.grid}: must be 2..200")
-    rows = run(a.grid, a.settle, a.after, a.fps)
-    out = {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps, "cases": rows}
-    if a.json:
-        from ..core.safeio import atomic_json
-        atomic_json(a.json, out)
-    return out
