@@ -566,7 +566,8 @@ def _search_args(s):
                                         "(default: the capture's)")
     s.add_argument("--cloth-mass", type=float, default=None,
                    help="total cloth mass [kg]: fixes m, which silhouettes cannot identify (default: the "
-                        "capture's cloth_mass, else the paper's 2.56 g, flagged in the result)")
+                        "capture's cloth_mass, else a vertex mass flagged in the result: paper 1e-5 kg, blender "
+                        "Blender's 0.3 kg, --backend blender the scene's)")
 
 
 def _farm_args(s, what):
@@ -721,7 +722,7 @@ def build_parser():
 
     s = _command(sub, "bench", cmd_bench, "speed figures", "every figure as JSON (the same as --json)")
     s.add_argument("--json", required=True, help="write every figure to this JSON file")
-    s.add_argument("--quick", action="store_true", help="a shorter whole-fit measurement (700 evaluations, not 2500)")
+    s.add_argument("--quick", action="store_true", help="shorter fits: 700 evaluations instead of 2500 (the blender model's fit 600 instead of 3000)")
     s.add_argument("--blender-workers", action="store_true",
                    help="only Blender's solver as the fit's evaluator: evaluations/s with 1 and 2 Ray workers, "
                         "Ray's start-up cost (needs bpy and ray)")
