@@ -887,5 +887,8 @@ def main(argv=None):
         print(f"error: {args.cmd} failed: {type(e).__name__}: {_one_line(e) or 'no message'} "
               f"(set {DEBUG_ENV}=1 for the traceback)", file=sys.stderr)
         return EXIT_FAILURE
-    emit(result)
+    try:
+        emit(result)
+    except BrokenPipeError:                    # the reader went away (| head): nothing more to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return code
