@@ -1,4 +1,4 @@
-"""``python -m addon ...``: the headless CLI."""
+"""``python -m addon ...``: the headless CLI, the same program as the ``clothfit`` console script."""
 import sys
 
 from .cli import main

@@ -1,15 +1,22 @@
-"""Command line: ``python -m addon <command> ...`` (no Blender needed except for ``blender-*``).
+"""Command line: ``clothfit <command> ...`` (the console script; ``python -m addon`` is the same).
 
-Commands: synth, fit, evaluate, overlay, paper, tables, bench, occlusion, rig, extract, import-cameras, export-cameras,
-blender (the whole pipeline through Blender: needs the bpy module).
-Every error from bad input is one line naming the file or value (exit code 2), never a traceback.
+No Blender needed except for ``blender`` and ``blender-agreement`` (the bpy module). The habits of
+every command (``EPILOG``, also at the end of ``--help``): stdout carries one JSON document, the
+command's result, and nothing else; messages for people (progress, tables, "wrote ...") go to
+stderr. Exit codes: 0 done, 1 an unexpected failure, 2 bad data (a ClothFitError: one line naming
+the file or value, never a traceback), 64 a command line the parser rejects, 130 Ctrl-C (a fit
+keeps and reports its best result first).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
 import os
+import signal
 import sys
+import threading
 import time
 
 from .core import defaults as D
@@ -149,6 +156,8 @@ def cmd_synth(a):
     cap = synth_capture(a.out, params, rig=a.rig, noise=a.noise, resolution=_res(a.resolution), seed=a.seed,
                         model=spec, **kw)
     print(f"wrote capture {a.out}: {len(cap.cameras)} cameras x {len(cap.frame_times)} frames")
+    return {"capture": a.out, "cameras": [c.name for c in cap.cameras], "frame_times": list(cap.frame_times),
+            "resolution": [cap.cameras[0].height, cap.cameras[0].width]}
 
 
 def _scene_evaluator(cfg):
@@ -221,6 +230,7 @@ def cmd_fit(a):
         setattr(cfg, k, v)
     cfg = cfg.checked()
     evaluator = None
+    interrupted = False
     with exclusive_lock(ck):
         if a.resume and not os.path.lexists(ck):
             raise ClothFitError(f"--resume: there is no checkpoint {ck} to continue (run without --resume to start)")
@@ -249,27 +259,34 @@ def cmd_fit(a):
         try:
             job.run(callback=bar)
         except KeyboardInterrupt:
-            job.cancel()
-            print("\ncancelled: keeping the best result so far", file=sys.stderr)
+            interrupted = True
+            with _sigint_deferred():          # a second Ctrl-C must not lose the result being written
+                job.cancel()
         except ClothFitError as e:            # e.g. a worker that died for good: the best so far is kept
             job.error = str(e)
             job.cancel()
         finally:
             bar.done()
-            job.save_result(a.out)
+            with _sigint_deferred():
+                job.save_result(a.out)
             if evaluator is not None:
                 evaluator.close()
     r = job.result()
     if job.error:
         raise ClothFitError(f"fit failed: {job.error} (the result so far is in {a.out})")
     keys = ("params", "identifiable") if r.get("params") else ("blender_cloth", "blender_scene")
-    print(json.dumps({k: r[k] for k in keys + ("best_E_sil_mean_pct", "evaluations", "stop_reason", "elapsed_s",
-                                               "cancelled") if k in r}, indent=1))
+    summary = {k: r[k] for k in keys + ("identifiable_error_pct", "best_E_sil_mean_pct", "evaluations",
+                                        "stop_reason", "elapsed_s", "cancelled") if k in r}
+    summary.update(out=a.out, checkpoint=ck)
     if "identifiable_error_pct" in r:
-        print("recovery error [%]:", json.dumps(r["identifiable_error_pct"]))
+        print("recovery error [%]: " + ", ".join(f"{k} {v:.3g}" for k, v in r["identifiable_error_pct"].items()
+                                                  if v is not None))
     if "true_params_ignored" in r:
-        print(f"note: {r['true_params_ignored']}", file=sys.stderr)
+        print(f"note: {r['true_params_ignored']}")
+    if interrupted:
+        raise Interrupted(f"the best result so far ({r['evaluations']} evaluations) is in {a.out}", summary)
     print(f"wrote {a.out}")
+    return summary
 
 
 def cmd_fit_many(a):
@@ -292,12 +309,15 @@ def cmd_fit_many(a):
     results, kind, workers = fit_many(a.captures, configs, a.workers, a.address, a.executor)
     wall = time.time() - t0
     from .core.fitting.job import _atomic_json
+    fits = []
     for i, (c, r) in enumerate(zip(a.captures, results)):
-        name = f"{i:03d}_{os.path.basename(os.path.normpath(c))}.json"
-        _atomic_json(os.path.join(a.out_dir, name), r)
-        print(f"{c}: E_sil {r['best_E_sil_mean_pct']:.3f} % after {r['evaluations']} evaluations -> "
-              f"{os.path.join(a.out_dir, name)}")
+        path = os.path.join(a.out_dir, f"{i:03d}_{os.path.basename(os.path.normpath(c))}.json")
+        _atomic_json(path, r)
+        print(f"{c}: E_sil {r['best_E_sil_mean_pct']:.3f} % after {r['evaluations']} evaluations -> {path}")
+        fits.append({"capture": c, "out": path, "best_E_sil_mean_pct": r["best_E_sil_mean_pct"],
+                     "evaluations": r["evaluations"], "stop_reason": r.get("stop_reason")})
     print(f"{len(results)} fits on {workers} {kind} worker(s) in {wall:.1f} s")
+    return {"fits": fits, "workers": workers, "executor": kind, "wall_s": wall}
 
 
 def _names(spec):
@@ -332,13 +352,12 @@ def cmd_export_blender_cloth(a):
                             "(fit with --model blender, or warm-start one from it with --init)")
     s = model.settings(row)
     out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
-    if a.python:
-        print(f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match")
-        print("cloth = bpy.context.object.modifiers['Cloth'].settings")
-        for k in ("quality", "bending_model") + B.FLOAT_SETTINGS:
-            print(f"cloth.{k} = {s[k]!r}")
-    else:
-        print(json.dumps(out, indent=1))
+    if a.python:                              # the one command whose stdout is not JSON: Python, by request
+        lines = [f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
+                 "cloth = bpy.context.object.modifiers['Cloth'].settings"]
+        lines += [f"cloth.{k} = {s[k]!r}" for k in ("quality", "bending_model") + B.FLOAT_SETTINGS]
+        return Text("\n".join(lines))
+    return out
 
 
 def cmd_evaluate(a):
@@ -356,6 +375,7 @@ def cmd_evaluate(a):
     if a.json:
         from .core.safeio import atomic_json
         atomic_json(a.json, r)
+    return r
 
 
 def cmd_overlay(a):
@@ -364,15 +384,16 @@ def cmd_overlay(a):
     cap = load_capture(a.capture)
     paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=_cams(cap, a.cameras), times=_times(a.times))
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
+    return {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}
 
 
 def cmd_paper(a):
     from .core.studies.experiment import run_paper
     if a.workers is not None or a.address is not None:
         return _paper_parallel(a)
-    run_paper(a.json, quick=a.quick, out_dir=a.out, seed=a.seed, optimizer=a.optimizer,
-              max_evaluations=a.max_evaluations, only=a.only, truth_dt_safety=a.truth_dt_safety,
-              population=a.population, children=a.children, rig=a.rig)
+    return run_paper(a.json, quick=a.quick, out_dir=a.out, seed=a.seed, optimizer=a.optimizer,
+                     max_evaluations=a.max_evaluations, only=a.only, truth_dt_safety=a.truth_dt_safety,
+                     population=a.population, children=a.children, rig=a.rig)
 
 
 def _paper_parallel(a):
@@ -392,6 +413,7 @@ def _paper_parallel(a):
     _atomic_json(a.json, out)
     print(format_tables(out))
     print(f"{len(parts)} part(s) on {out['workers']} {out['executor']} worker(s) in {out['total_seconds']:.1f} s; wrote {a.json}")
+    return out
 
 
 def cmd_tables(a):
@@ -401,12 +423,12 @@ def cmd_tables(a):
             d = json.load(f)
     except (OSError, json.JSONDecodeError) as e:
         raise ClothFitError(f"cannot read {a.json}: {e}") from None
-    print(format_tables(d))
+    return Text(format_tables(d))           # text tables by design (the JSON is the file itself)
 
 
 def cmd_bench(a):
     from .core.studies.bench import run_bench
-    run_bench(a.json, quick=a.quick, only_blender_workers=a.blender_workers)
+    return run_bench(a.json, quick=a.quick, only_blender_workers=a.blender_workers)
 
 
 def cmd_identifiability(a):
@@ -415,12 +437,12 @@ def cmd_identifiability(a):
     bad = [m for m in mats or [] if m not in MATERIALS]
     if bad:
         raise ClothFitError(f"--materials: unknown {', '.join(bad)} (known: {', '.join(MATERIALS)})")
-    run(a.json, mats)
+    return run(a.json, mats)
 
 
 def cmd_occlusion(a):
     from .core.studies.occlusion import run_occlusion
-    run_occlusion(a.json, out_dir=a.out, quick=a.quick, n_train=a.train_cameras, evaluations=a.max_evaluations,
+    return run_occlusion(a.json, out_dir=a.out, quick=a.quick, n_train=a.train_cameras, evaluations=a.max_evaluations,
                   seed=a.seed, resolution=_res(a.resolution), scales=_floats(a.scales, "--scales"),
                   truth_dt_safety=a.truth_dt_safety)
 
@@ -430,198 +452,333 @@ def cmd_rig(a):
     cams = load_rig(a.rig)
     order = spread_order(cams)
     print(f"{len(cams)} cameras; training order (spread rule): {[cams[i].name for i in order]}")
+    return {"rig": a.rig, "cameras": [c.name for c in cams], "training_order": [cams[i].name for i in order],
+            "resolution": [cams[0].height, cams[0].width] if cams else None}
 
 
-def _model_args(s):
+def cmd_extract(a):
+    from .core.footage import extract
+    return extract.run_args(a)
+
+
+def cmd_cameras(a):
+    from .core.footage import calib_io
+    return calib_io.run_args(a)
+
+
+def cmd_blender(a):
+    """The whole pipeline through Blender (build rig and cloth, simulate, render silhouettes, fit,
+    overlays, save a .blend): needs the bpy module."""
+    from .blender import pipeline
+    return pipeline.run(a)
+
+
+def cmd_blender_agreement(a):
+    if a.grid < 2 or a.grid > 200:
+        raise ClothFitError(f"--grid {a.grid}: must be 2..200")
+    from .blender import agreement
+    out = {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps,
+           "cases": agreement.run(a.grid, a.settle, a.after, a.fps)}
+    if a.json:
+        from .core.safeio import atomic_json
+        atomic_json(a.json, out)
+    return out
+
+
+PROG = "clothfit"
+EXIT_FAILURE = 1          # an unexpected failure (a bug or the machine): one line, CLOTHFIT_DEBUG=1 for the traceback
+EXIT_BAD_DATA = 2         # a ClothFitError: a file or value the command cannot use
+EXIT_USAGE = 64           # the parser rejected the command line (sysexits.h EX_USAGE)
+EXIT_INTERRUPTED = 130    # Ctrl-C (128 + SIGINT, the shells' convention)
+
+EPILOG = f"""\
+output:
+  stdout carries one JSON document, the command's result, and nothing else (clothfit fit ... | jq .params);
+  progress, tables and every other message for people go to stderr. Not JSON: `tables` (text tables),
+  `export-blender-cloth --python` (Python), --help and --version.
+exit codes:
+  0 done; {EXIT_FAILURE} an unexpected failure (set CLOTHFIT_DEBUG=1 for the traceback); {EXIT_BAD_DATA} bad data: a file or
+  value the command cannot use, one line naming it; {EXIT_USAGE} a command line the parser rejects (unknown command or
+  option, missing or mistyped value); {EXIT_INTERRUPTED} interrupted by Ctrl-C: `fit` first writes its best result
+  so far to --out and reports it on stdout."""
+
+
+class Text(str):
+    """A command result printed as text, not JSON (``tables``, ``export-blender-cloth --python``)."""
+
+
+class Interrupted(Exception):
+    """Ctrl-C after a command kept its work: ``result`` is still reported, then exit code 130."""
+
+    def __init__(self, message, result=None):
+        super().__init__(message)
+        self.result = result
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions and epilogs keep their line breaks; option help is wrapped as usual."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with the CLI's habits: a usage error exits with EXIT_USAGE (64), not argparse's 2,
+    which is the code of bad data here."""
+
+    def __init__(self, *args, **kw):
+        kw.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kw)
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def _model_args(s, default_text="the capture's, else paper"):
+    from .core.physics import blender as B
     s.add_argument("--model", choices=["paper", "blender"], default=None,
-                   help="cloth model: the paper's sheet or Blender's cloth solver (default: the capture's, else paper)")
-    s.add_argument("--fps", type=float, default=None, help="blender: scene frame rate the settings are for (24)")
-    s.add_argument("--quality", type=int, default=None, help="blender: solver steps per frame (5)")
-    s.add_argument("--bending-model", choices=["ANGULAR", "LINEAR"], default=None, help="blender: bending model")
+                   help=f"cloth model: the paper's mass-spring sheet or Blender's cloth solver (default: {default_text})")
+    s.add_argument("--fps", type=float, default=None,
+                   help=f"blender model: scene frame rate [frames/s] the settings are for (default: {D.BLENDER_FPS})")
+    s.add_argument("--quality", type=int, default=None,
+                   help=f"blender model: solver steps per frame (default: {B.DEFAULTS['quality']}, Blender's)")
+    s.add_argument("--bending-model", choices=list(B.BENDING_MODELS), default=None,
+                   help=f"blender model: Blender's bending model (default: {B.DEFAULTS['bending_model']})")
+
+
+def _selection_args(s, what="fit"):
+    """--cameras / --times: which cameras and frames a command uses."""
+    s.add_argument("--cameras", help=f"cameras to {what}: 'n:16' (16 spread round the cloth by the spread rule), "
+                                     "'heldout:16' (the others), indices or names, comma separated (default: all)")
+    s.add_argument("--times", help=f"frame times to {what}: 'train' (0.1, 0.2 ... 1.5 s), 'test' (0.05, 0.15 ... "
+                                   "1.45 s) or a comma list of times [s] (default: every frame of the capture)")
+
+
+def _search_args(s):
+    """Options of fit and fit-many: the optimiser and the fit's budget and scale."""
+    s.add_argument("--optimizer", default=D.DEFAULT_OPTIMIZER,
+                   help="cma-es or spx-mgg, the paper's real-coded GA (default: %(default)s)")
+    s.add_argument("--seed", type=int, default=0, help="random seed of the optimiser (default: %(default)s)")
+    s.add_argument("--max-evaluations", type=int, default=None,
+                   help=f"budget: at most this many simulated candidates (default: {D.FIT_EVALUATIONS}; with "
+                        f"--resume the checkpoint's)")
+    s.add_argument("--population", type=int, default=None,
+                   help="optimiser population (default: GA 7n = 21, CMA-ES 4 + 3 ln n = 7)")
+    s.add_argument("--resolution", help="fit at HxW [px], e.g. 120x160; silhouettes area-resampled "
+                                        "(default: the capture's)")
+    s.add_argument("--cloth-mass", type=float, default=None,
+                   help="total cloth mass [kg]: fixes m, which silhouettes cannot identify (default: the "
+                        "capture's cloth_mass, else a vertex mass flagged in the result: paper 1e-5 kg, blender "
+                        "Blender's 0.3 kg, --backend blender the scene's)")
+
+
+def _farm_args(s, what):
+    s.add_argument("--workers", type=int, default=None, help=f"{what}: worker processes (default: the cores)")
+    s.add_argument("--address", default=None, help=f"{what}: a running Ray cluster (auto, ray://host:port); "
+                                                   "default: a local Ray instance started for the run")
+    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"],
+                   help=f"{what}: Ray actors or spawned processes; auto = Ray when installed (default: %(default)s)")
+
+
+def _command(sub, name, fn, help, output):
+    """One subcommand: ``help`` in the command list and as its description, ``output`` in its epilog."""
+    s = sub.add_parser(name, help=help, description=help[0].upper() + help[1:] + ".",
+                       epilog=f"output: {output}; messages for people on stderr.\nexit codes: 0 done, "
+                              f"{EXIT_BAD_DATA} bad data, {EXIT_USAGE} usage, {EXIT_INTERRUPTED} Ctrl-C "
+                              f"(see {PROG} --help).")
+    s.set_defaults(fn=fn)
+    return s
 
 
 def build_parser():
-    p = argparse.ArgumentParser(prog="python -m addon", description="Silhouette Cloth Fit: cloth parameters from multi-view silhouettes")
-    sub = p.add_subparsers(dest="cmd", required=True)
+    from . import version
+    from .blender import pipeline
+    from .core.footage import calib_io, extract
+    p = ArgumentParser(prog=PROG, description="Silhouette Cloth Fit: cloth parameters from multi-view silhouettes.",
+                       epilog=EPILOG)
+    p.add_argument("--version", action="version", version=f"%(prog)s {version()}")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("synth", help="make a synthetic capture from ground-truth parameters")
-    s.add_argument("--out", required=True)
-    s.add_argument("--rig", default=D.DEFAULT_RIG)
-    s.add_argument("--params", help="JSON or a JSON file with m, k, l, d (default: the built-in ground truth)")
-    s.add_argument("--noise", type=float, default=D.NOISE_FRACTION, help="fraction of boundary pixels flipped")
-    s.add_argument("--resolution", help="HxW, default: the rig's")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--truth-dt-safety", type=float, default=None, help="time-step factor of the truth (default: the model's)")
-    _model_args(s)
-    s.set_defaults(fn=cmd_synth)
+    s = _command(sub, "synth", cmd_synth, "make a synthetic capture from ground-truth parameters",
+                 "the capture's cameras, frame times and image size as JSON")
+    s.add_argument("--out", required=True, help="capture folder to write")
+    s.add_argument("--rig", default=D.DEFAULT_RIG,
+                   help="camera rig: a preset of rigs/ (lab18, lab18_far, ring8) or a cameras JSON (default: %(default)s)")
+    s.add_argument("--params", help="JSON or a JSON file: the paper model's m [kg per point mass], k [N/m], l [m], "
+                                    "d [N s/m], or Blender cloth settings with --model blender (default: the built-in "
+                                    "ground truth)")
+    s.add_argument("--noise", type=float, default=D.NOISE_FRACTION,
+                   help="fraction of the silhouettes' boundary pixels flipped (default: %(default)s)")
+    s.add_argument("--resolution", help="image size HxW [px], e.g. 120x160 (default: the rig's)")
+    s.add_argument("--seed", type=int, default=0, help="random seed of the boundary noise (default: %(default)s)")
+    s.add_argument("--truth-dt-safety", type=float, default=None,
+                   help="time step of the truth as a factor of sqrt(m/k); 0.125 = 4x finer than the fitter's "
+                        "(default: the model's own)")
+    _model_args(s, "paper")
 
-    s = sub.add_parser("fit", help="fit the model to a capture")
-    s.add_argument("capture")
-    s.add_argument("--out", default="out/fit.json")
-    s.add_argument("--cameras", help="'n:16' (spread rule), indices or names, default all")
-    s.add_argument("--times", help="'train', 'test' or comma list of times; default all")
-    s.add_argument("--optimizer", default=D.DEFAULT_OPTIMIZER, help="cma-es (default) or spx-mgg (the paper's GA)")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--max-evaluations", type=int, default=None)
-    s.add_argument("--population", type=int, default=None, help="optimiser population (GA default 7n = 21, CMA-ES 4 + 3 ln n = 7)")
-    s.add_argument("--children", type=int, default=None, help="GA: SPX children per family (default 5n = 15)")
-    s.add_argument("--target", type=float, default=None, help="stop when mean E_sil per image falls below this fraction")
-    s.add_argument("--resolution", help="fit at HxW (silhouettes area-resampled)")
-    s.add_argument("--cloth-mass", type=float, default=None, help="total cloth mass [kg] (fixes m)")
+    s = _command(sub, "fit", cmd_fit, "fit the model to a capture",
+                 "a summary of the fit as JSON (params, errors, evaluations, stop_reason, out); the whole "
+                 "result is in --out")
+    s.add_argument("capture", help="capture folder (capture.json, cameras.json, silhouettes)")
+    s.add_argument("--out", default="out/fit.json", help="result JSON to write (default: %(default)s)")
+    _selection_args(s, "fit")
+    _search_args(s)
+    s.add_argument("--children", type=int, default=None, help="GA: SPX children per family (default: 5n = 15)")
+    s.add_argument("--target", type=float, default=None,
+                   help="stop when the mean E_sil per training image falls below this fraction, e.g. 0.005 = "
+                        "0.5 %% (default: no target)")
     s.add_argument("--restarts", type=int, default=None,
                    help=f"cma-es: IPOP restarts after convergence, each with twice the population (default: paper "
                         f"{D.FIT_RESTARTS}, blender {D.BLENDER_FIT_RESTARTS})")
-    s.add_argument("--checkpoint", help="default: OUT.checkpoint.json; written every few seconds and at the end")
-    s.add_argument("--resume", action="store_true",
-                   help="continue the checkpoint; refused if it is of another fit (capture, cameras, times, "
-                        "resolution, optimiser, population, seed, bounds...); --max-evaluations may grow")
-    s.add_argument("--force", action="store_true", help="replace an existing checkpoint instead of refusing")
+    s.add_argument("--checkpoint", help=f"checkpoint file, written every {D.CHECKPOINT_INTERVAL_S:g} s and at the end "
+                                        f"(default: OUT.checkpoint.json)")
+    again = s.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true",
+                       help="continue the checkpoint; refused if it is of another fit (capture, cameras, times, "
+                            "resolution, optimiser, population, seed, bounds...); --max-evaluations may grow")
+    again.add_argument("--force", action="store_true", help="replace an existing checkpoint instead of refusing")
     s.add_argument("--backend", default="auto", choices=["auto", "numba", "numpy", "core", "blender"],
                    help="where candidates are simulated: the core (auto, numba, numpy; core = auto) or blender "
-                        "(Blender's own solver on --blend, in worker processes)")
+                        "(Blender's own solver on --blend, in worker processes) (default: %(default)s)")
     s.add_argument("--blend", help="blender backend: the .blend holding the cloth object (colliders and all)")
     s.add_argument("--object", help="blender backend: the cloth object (default: the scene's only mesh with a "
                                     "Cloth modifier)")
     s.add_argument("--frame-zero", type=float, default=None,
                    help="blender backend: scene frame of capture time 0 (default: the scene's frame_start)")
-    s.add_argument("--workers", type=int, default=None, help="blender backend: worker processes (default: the cores)")
-    s.add_argument("--address", default=None, help="blender backend: a running Ray cluster (auto, ray://host:port); "
-                                                   "default: a local Ray instance started for the fit")
-    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"],
-                   help="blender backend: Ray actors or spawned processes (auto: Ray when installed)")
-    s.add_argument("--quiet", action="store_true")
+    _farm_args(s, "blender backend")
+    s.add_argument("--quiet", action="store_true",
+                   help="no progress bar on stderr (shown on a terminal, or with CLOTHFIT_PROGRESS=1)")
     _model_args(s)
-    s.add_argument("--free", help="blender: comma list of ClothSettings to search (default: see README, "
+    s.add_argument("--free", help="blender model: comma list of ClothSettings to search (default: see README, "
                                   "Identifiability)")
-    s.add_argument("--fixed", help="blender: JSON (or file) of ClothSettings held fixed")
-    s.add_argument("--bounds", help="JSON (or file) {name: [low, high]} search ranges (blender: Blender units at "
-                                    "the fixed vertex mass)")
-    s.add_argument("--init", help="warm start from this result JSON (a blender or paper fit)")
-    s.set_defaults(fn=cmd_fit)
+    s.add_argument("--fixed", help="blender model: JSON (or file) of ClothSettings held fixed (default: Blender's "
+                                   "defaults for the settings not searched)")
+    s.add_argument("--bounds", help="JSON (or file) {name: [low, high]} search ranges; blender: Blender units at "
+                                    "the fixed vertex mass (default: the model's ranges)")
+    s.add_argument("--init", help="warm start from this result JSON, a blender or paper fit (default: a cold start)")
 
-    s = sub.add_parser("fit-many", help="fit many captures in parallel (Ray actors, or processes without Ray)")
-    s.add_argument("captures", nargs="+")
-    s.add_argument("--out-dir", default="out/fits")
-    s.add_argument("--cameras")
-    s.add_argument("--times")
-    s.add_argument("--optimizer", default=D.DEFAULT_OPTIMIZER)
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--max-evaluations", type=int, default=None)
-    s.add_argument("--population", type=int, default=None)
-    s.add_argument("--resolution")
-    s.add_argument("--cloth-mass", type=float, default=None)
-    s.add_argument("--workers", type=int, default=None, help="worker processes (default: the cores)")
-    s.add_argument("--address", default=None, help="a running Ray cluster (auto, ray://host:port)")
-    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"])
+    s = _command(sub, "fit-many", cmd_fit_many, "fit many captures in parallel (Ray actors, or processes without Ray)",
+                 "one summary per fit (capture, out, E_sil, evaluations) and the workers used, as JSON")
+    s.add_argument("captures", nargs="+", help="capture folders")
+    s.add_argument("--out-dir", default="out/fits",
+                   help="folder for one result JSON per capture, NNN_<capture>.json (default: %(default)s)")
+    _selection_args(s, "fit")
+    _search_args(s)
+    _farm_args(s, "the fits")
     _model_args(s)
-    s.set_defaults(fn=cmd_fit_many)
 
-    s = sub.add_parser("export-blender-cloth", help="the Cloth modifier settings of a blender-model fit result")
-    s.add_argument("result")
-    s.add_argument("--python", action="store_true", help="print bpy assignments instead of JSON")
-    s.set_defaults(fn=cmd_export_blender_cloth)
+    s = _command(sub, "export-blender-cloth", cmd_export_blender_cloth,
+                 "the Cloth modifier settings of a blender-model fit result",
+                 "the settings as JSON (blender_cloth, blender_scene), or Python with --python")
+    s.add_argument("result", help="result JSON of a fit with --model blender")
+    s.add_argument("--python", action="store_true", help="print bpy assignments (Python) instead of JSON")
 
-    s = sub.add_parser("evaluate", help="silhouette and shape error of parameters on a capture")
-    s.add_argument("capture")
-    s.add_argument("--params", help="result JSON file, or JSON with m, k, l, d (default ground truth)")
-    s.add_argument("--cameras")
-    s.add_argument("--times")
-    s.add_argument("--resolution")
-    s.add_argument("--json")
-    s.set_defaults(fn=cmd_evaluate)
+    s = _command(sub, "evaluate", cmd_evaluate, "silhouette and shape error of parameters on a capture",
+                 "the errors as JSON: mean, per camera and per time (silhouette [%], shape [mm] when the "
+                 "capture has its true shapes)")
+    s.add_argument("capture", help="capture folder")
+    s.add_argument("--params", help="a result JSON file, or JSON with m, k, l, d (default: a synthetic capture's "
+                                    "truth, else the built-in ground truth)")
+    _selection_args(s, "score")
+    s.add_argument("--resolution", help="score at HxW [px] (default: the capture's)")
+    s.add_argument("--json", help="also write the result to this file")
 
-    s = sub.add_parser("overlay", help="observed vs model silhouette images and a contact sheet")
-    s.add_argument("capture")
-    s.add_argument("--params")
-    s.add_argument("--out", default="out/overlays")
-    s.add_argument("--cameras")
-    s.add_argument("--times")
-    s.set_defaults(fn=cmd_overlay)
+    s = _command(sub, "overlay", cmd_overlay, "observed vs model silhouette images and a contact sheet",
+                 "the image paths as JSON")
+    s.add_argument("capture", help="capture folder")
+    s.add_argument("--params", help="a result JSON file, or JSON with m, k, l, d (default: a synthetic capture's "
+                                    "truth, else the built-in ground truth)")
+    s.add_argument("--out", default="out/overlays",
+                   help="folder for the images, <camera>/<frame>.png and contact_sheet.png (default: %(default)s)")
+    _selection_args(s, "draw")
 
-    s = sub.add_parser("paper", help="the paper's Table 1, Fig. 8 and Table 2 protocol")
-    s.add_argument("--json", required=True)
-    s.add_argument("--out", default="out/paper")
-    s.add_argument("--quick", action="store_true")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--optimizer", default=None)
-    s.add_argument("--max-evaluations", type=int, default=None)
-    s.add_argument("--only", default=None, help="comma list of parts: table1, fig8, table2, optimizers")
-    s.add_argument("--population", type=int, default=None, help="optimiser population (GA: MGG population)")
-    s.add_argument("--children", type=int, default=None, help="GA: SPX children per family")
-    s.add_argument("--rig", default=None, help="camera rig preset (default lab18)")
+    s = _command(sub, "paper", cmd_paper, "the paper's Table 1, Fig. 8 and Table 2 protocol",
+                 "every table and figure as JSON (the same as --json)")
+    s.add_argument("--json", required=True, help="write the tables and every figure to this JSON file")
+    s.add_argument("--out", default="out/paper", help="folder for the captures, fits and overlays (default: %(default)s)")
+    s.add_argument("--quick", action="store_true",
+                   help="a smaller protocol: 700 evaluations per fit, fewer cameras and seeds")
+    s.add_argument("--seed", type=int, default=0, help="random seed of the captures and fits (default: %(default)s)")
+    s.add_argument("--optimizer", default=None, help=f"cma-es or spx-mgg (default: {D.DEFAULT_OPTIMIZER})")
+    s.add_argument("--max-evaluations", type=int, default=None,
+                   help="budget of each fit (default: 2500, --quick 700)")
+    s.add_argument("--only", default=None, help="comma list of parts: table1, fig8, table2, optimizers (default: all)")
+    s.add_argument("--population", type=int, default=None,
+                   help="optimiser population; GA: the MGG population (default: the optimiser's, see fit --help)")
+    s.add_argument("--children", type=int, default=None, help="GA: SPX children per family (default: 5n = 15)")
+    s.add_argument("--rig", default=None, help=f"camera rig preset (default: {D.DEFAULT_RIG})")
     s.add_argument("--workers", type=int, default=None,
-                   help="run the parts (table1, fig8, table2, optimizers) in parallel on this many workers")
+                   help="run the parts (table1, fig8, table2, optimizers) in parallel on this many workers "
+                        "(default: one after the other in this process)")
     s.add_argument("--address", default=None, help="run the parts on a running Ray cluster (auto, ray://host:port)")
-    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"])
+    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"],
+                   help="with --workers / --address: Ray actors or spawned processes; auto = Ray when installed "
+                        "(default: %(default)s)")
     s.add_argument("--truth-dt-safety", type=float, default=None,
                    help="time-step factor of the ground truth (default: the model's own; 0.125 = 4x finer truth, "
                         "i.e. a model mismatch the fit cannot remove)")
-    s.set_defaults(fn=cmd_paper)
 
-    s = sub.add_parser("tables", help="print the tables of a `paper` JSON again")
-    s.add_argument("json")
-    s.set_defaults(fn=cmd_tables)
+    s = _command(sub, "tables", cmd_tables, "print the tables of a `paper` JSON again",
+                 "text tables (the one text command: the JSON is the file itself)")
+    s.add_argument("json", help="a JSON written by `paper --json`")
 
-    s = sub.add_parser("bench", help="speed figures")
-    s.add_argument("--json", required=True)
-    s.add_argument("--quick", action="store_true")
+    s = _command(sub, "bench", cmd_bench, "speed figures", "every figure as JSON (the same as --json)")
+    s.add_argument("--json", required=True, help="write every figure to this JSON file")
+    s.add_argument("--quick", action="store_true", help="shorter fits: 700 evaluations instead of 2500 (the blender model's fit 600 instead of 3000)")
     s.add_argument("--blender-workers", action="store_true",
                    help="only Blender's solver as the fit's evaluator: evaluations/s with 1 and 2 Ray workers, "
                         "Ray's start-up cost (needs bpy and ray)")
-    s.set_defaults(fn=cmd_bench)
 
-    s = sub.add_parser("identifiability", help="which Blender cloth settings silhouettes can identify "
-                                               "(sensitivity and Cramer-Rao table)")
+    s = _command(sub, "identifiability", cmd_identifiability,
+                 "which Blender cloth settings silhouettes can identify (sensitivity and Cramer-Rao table)",
+                 "the tables as JSON")
     s.add_argument("--materials", help="comma list: default, silk, denim (default: all)")
-    s.add_argument("--json", help="write the tables to this file")
-    s.set_defaults(fn=cmd_identifiability)
+    s.add_argument("--json", help="also write the tables to this file")
 
-    s = sub.add_parser("occlusion", help="study: a post and a hand hiding the cloth, as ignore masks vs as background")
-    s.add_argument("--json", required=True)
-    s.add_argument("--out", default="out/occlusion", help="where the three captures are written")
+    s = _command(sub, "occlusion", cmd_occlusion,
+                 "study: a post and a hand hiding the cloth, as ignore masks vs as background",
+                 "the study's table as JSON (the same as --json)")
+    s.add_argument("--json", required=True, help="write the study to this JSON file")
+    s.add_argument("--out", default="out/occlusion", help="where the three captures are written (default: %(default)s)")
     s.add_argument("--quick", action="store_true", help="240x320, 700 evaluations")
-    s.add_argument("--train-cameras", type=int, default=4)
-    s.add_argument("--scales", default="1,1.33,1.67", help="occluder sizes (x post 15 %% of the cloth width, hand 12 %%)")
+    s.add_argument("--train-cameras", type=int, default=4,
+                   help="cameras each fit trains on, by the spread rule (default: %(default)s)")
+    s.add_argument("--scales", default="1,1.33,1.67",
+                   help="occluder sizes, x (post 15 %% of the cloth width, hand 12 %%) (default: %(default)s)")
     s.add_argument("--truth-dt-safety", type=float, default=None,
-                   help="time-step factor of the truth (0.125 = 4x finer than the fitter: a model mismatch)")
-    s.add_argument("--max-evaluations", type=int, default=None)
-    s.add_argument("--resolution", help="HxW (default: the rig's 480x640; --quick 240x320)")
-    s.add_argument("--seed", type=int, default=0)
-    s.set_defaults(fn=cmd_occlusion)
+                   help="time-step factor of the truth; 0.125 = 4x finer than the fitter: a model mismatch "
+                        "(default: the fitter's own)")
+    s.add_argument("--max-evaluations", type=int, default=None, help="budget of each fit (default: 2000, --quick 700)")
+    s.add_argument("--resolution", help="HxW [px] (default: the rig's 480x640; --quick 240x320)")
+    s.add_argument("--seed", type=int, default=0, help="random seed of the captures and fits (default: %(default)s)")
 
-    s = sub.add_parser("rig", help="show a rig preset and its training-camera order")
-    s.add_argument("rig", nargs="?", default=D.DEFAULT_RIG)
-    s.set_defaults(fn=cmd_rig)
+    s = _command(sub, "rig", cmd_rig, "show a rig preset and its training-camera order",
+                 "the camera names and their training order as JSON")
+    s.add_argument("rig", nargs="?", default=D.DEFAULT_RIG,
+                   help="a preset of rigs/ (lab18, lab18_far, ring8) or a cameras JSON (default: %(default)s)")
 
-    # listed for --help only: main() hands these their whole argv before this parser runs
-    for nm, hlp in SUBTOOLS.items():
-        sub.add_parser(nm, help=hlp, add_help=False)
+    extract.add_arguments(_command(sub, "extract", cmd_extract,
+                                   "silhouettes from camera images or videos: background difference, automatic "
+                                   "threshold, clean-up; writes a capture", "the extraction report as JSON"))
+    calib_io.add_arguments(_command(sub, "import-cameras", cmd_cameras,
+                                    "read a calibration (OpenCV YAML/JSON/XML, COLMAP, EasyMocap) into our cameras JSON",
+                                    "the command, --out and the camera names as JSON"), "import-cameras")
+    calib_io.add_arguments(_command(sub, "export-cameras", cmd_cameras,
+                                    "write cameras (ours, a capture's or any calibration) as OpenCV YAML/JSON/XML, "
+                                    "OpenCV files per camera or a COLMAP text model",
+                                    "the command, --out and the camera names as JSON"), "export-cameras")
+    pipeline.add_arguments(_command(sub, "blender", cmd_blender,
+                                    "the whole pipeline through Blender (bpy module): rig, cloth, simulate, render "
+                                    "silhouettes, fit, overlays, .blend", "a summary of the run as JSON"))
+    s = _command(sub, "blender-agreement", cmd_blender_agreement,
+                 "the core's blender cloth model vs Blender's own solver, vertex by vertex (bpy module)",
+                 "every case's distances as JSON")
+    s.add_argument("--grid", type=int, default=21,
+                   help="vertices per side of the 10 cm sheet, 2..200 (default: %(default)s)")
+    s.add_argument("--settle", type=float, default=1.0,
+                   help="seconds hung by four corners before the release (default: %(default)s)")
+    s.add_argument("--after", type=float, default=1.5, help="seconds simulated after the release (default: %(default)s)")
+    s.add_argument("--fps", type=float, default=24.0, help="scene frame rate [frames/s] (default: %(default)s)")
+    s.add_argument("--json", help="also write every figure to this file")
     return p
-
-
-SUBTOOLS = {"extract": "silhouettes from camera images (see `extract --help`)",
-            "import-cameras": "camera calibration files in (OpenCV YAML/JSON/XML, COLMAP)",
-            "export-cameras": "camera calibration files out (OpenCV YAML/JSON/XML, COLMAP)",
-            "blender": "the whole pipeline through Blender (bpy module): see `blender --help`",
-            "blender-agreement": "the core's blender cloth model vs Blender's own solver, vertex by vertex (bpy module)"}
-
-
-def run_subtool(argv):
-    """Sub-tools with parsers of their own get everything after the command name."""
-    if argv[0] == "blender":
-        # build rig and cloth, simulate, render silhouettes with Blender, fit, overlays, save a .blend
-        from .blender import pipeline
-        return int(pipeline.main(argv[1:]) or 0)
-    if argv[0] == "blender-agreement":
-        from .blender import agreement
-        return int(agreement.main(argv[1:]) or 0)
-    if argv[0] == "extract":
-        from .core.footage import extract
-        extract.main(argv[1:])
-    else:
-        from .core.footage import calib_io
-        calib_io.main(argv)
-    return 0
 
 
 DEBUG_ENV = "CLOTHFIT_DEBUG"
@@ -632,27 +789,106 @@ def _one_line(text, limit=1500):
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
-def main(argv=None):
-    """Run a command. Bad input: one line ``error: ...`` and exit code 2; any other failure: one
-    line naming it and exit code 1 (the traceback only with the environment variable
-    CLOTHFIT_DEBUG=1); Ctrl-C: exit code 130."""
-    argv = sys.argv[1:] if argv is None else list(argv)
+@contextlib.contextmanager
+def _sigint_deferred():
+    """Ctrl-C inside waits until the block is done (a result being written is not cut short)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got = []
+    old = signal.signal(signal.SIGINT, lambda *_: got.append(True))
     try:
-        if argv and argv[0] in SUBTOOLS:
-            return run_subtool(argv)
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+    if got and callable(old):
+        old(signal.SIGINT, None)
+
+
+@contextlib.contextmanager
+def messages_to_stderr():
+    """Inside: whatever the command writes to stdout goes to stderr, at the file-descriptor level too
+    (Blender, Ray and other libraries print from C or from threads); the result goes to the real
+    stdout afterwards. Without file descriptors (stdout replaced in-process) ``sys.stdout`` alone
+    is redirected."""
+    try:
+        out_fd, err_fd = sys.stdout.fileno(), sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(out_fd)
+    line_buffering = getattr(sys.stdout, "line_buffering", None)
+    os.dup2(err_fd, out_fd)
+    if line_buffering is False and hasattr(sys.stdout, "reconfigure"):
+        sys.stdout.reconfigure(line_buffering=True)      # in order with stderr's lines
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            sys.stdout.flush()
+        os.dup2(saved, out_fd)
+        os.close(saved)
+        if line_buffering is False and hasattr(sys.stdout, "reconfigure"):
+            sys.stdout.reconfigure(line_buffering=False)
+
+
+def _finite(o):
+    """NaN and infinities as null: stdout is strict JSON (jq and other parsers refuse NaN)."""
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    return o
+
+
+def emit(result):
+    """Write a command's result to stdout: text as it is, anything else as one JSON document."""
+    if result is None:
+        return
+    from .core.safeio import json_text
+    text = result if isinstance(result, Text) else json_text(_finite(json.loads(json_text(result))), strict=True)
+    sys.stdout.write(text.rstrip("\n") + "\n")
+    sys.stdout.flush()
+
+
+def main(argv=None):
+    """Run a command (see ``EPILOG`` for stdout and the exit codes). Bad input: one line
+    ``error: ...`` and exit code 2; a command line the parser rejects: its usage and exit code 64;
+    any other failure: one line naming it and exit code 1 (the traceback only with the environment
+    variable CLOTHFIT_DEBUG=1); Ctrl-C: one line and exit code 130."""
+    argv = sys.argv[1:] if argv is None else [str(x) for x in argv]
+    try:
         args = build_parser().parse_args(argv)
-        args.fn(args)
+    except SystemExit as e:                    # --help / --version (0) or a usage error (64)
+        return e.code if isinstance(e.code, int) else EXIT_USAGE
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    result, code = None, 0
+    try:
+        with messages_to_stderr():
+            result = args.fn(args)
+    except Interrupted as e:
+        print(f"interrupted: {_one_line(e)}", file=sys.stderr)
+        result, code = e.result, EXIT_INTERRUPTED
+    except KeyboardInterrupt:
+        print(f"interrupted: {args.cmd} stopped", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except ClothFitError as e:
         print(f"error: {_one_line(e)}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("\ninterrupted", file=sys.stderr)
-        return 130
+        return EXIT_BAD_DATA
     except Exception as e:  # noqa: BLE001 - the last line of defence: never a traceback for the user
         if os.environ.get(DEBUG_ENV):
             raise
-        cmd = argv[0] if argv else "?"
-        print(f"error: {cmd} failed: {type(e).__name__}: {_one_line(e) or 'no message'} "
+        print(f"error: {args.cmd} failed: {type(e).__name__}: {_one_line(e) or 'no message'} "
               f"(set {DEBUG_ENV}=1 for the traceback)", file=sys.stderr)
-        return 1
-    return 0
+        return EXIT_FAILURE
+    try:
+        emit(result)
+    except BrokenPipeError:                    # the reader went away (| head): nothing more to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return code

@@ -181,10 +181,9 @@ def test_synth_fit_export_evaluate_round_trip(tmp_path, capsys):
     assert bc["mass"] == pytest.approx(0.3) and "capture" in r["mass_source"]
     capsys.readouterr()
     assert cli.main(["evaluate", cap, "--params", out, "--times", "0.2,0.4"]) == 0
-    line = capsys.readouterr().out
-    err = float(line.split("silhouette error ")[1].split(" %")[0])
-    mm = float(line.split("shape error ")[1].split(" mm")[0])
-    assert err < 1.0 and mm < 0.5, line
+    ev = json.loads(capsys.readouterr().out)            # stdout: the result as JSON
+    err, mm = ev["silhouette_error_pct"], ev["shape_error_mm"]
+    assert err < 1.0 and mm < 0.5, ev
     assert os.path.isfile(out)
 
 

@@ -138,6 +138,8 @@ def test_fit_on_local_ray_writes_the_result_and_leaves_no_process(ray_fit):
     assert set(res["blender_cloth"]) >= {"tension_stiffness", "mass", "time_scale", "quality"}
     assert res["best_E_all"] is not None
     assert _procs_with(tmp) == []          # Ray's processes of that session are gone
+    summary = json.loads(r.stdout)         # stdout is the summary alone: Ray's and Blender's output went to stderr
+    assert summary["blender_cloth"] == res["blender_cloth"] and summary["out"] == str(out)
 
 
 def test_no_ray_fallback_gives_the_same_fit(scene, ray_fit, tmp_path):

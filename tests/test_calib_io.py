@@ -1,4 +1,5 @@
 """Camera import/export (addon/core/footage/calib_io.py): OpenCV FileStorage, COLMAP, distortion."""
+import json
 import os
 
 import cv2
@@ -319,8 +320,10 @@ def test_cli_import_and_export_cameras(tmp_path, capsys):
     CI.export_cameras(cams, str(tmp_path / "colmap"), "colmap")
     assert cli(["import-cameras", str(tmp_path / "colmap"), "-o", str(tmp_path / "cams.json")]) == 0
     same(cams, CI.import_cameras(str(tmp_path / "cams.json")))
-    out = capsys.readouterr().out
-    assert "imported 3 cameras" in out and "cam01" in out
+    io = capsys.readouterr()
+    assert "imported 3 cameras" in io.err and "cam01" in io.err          # for people: stderr
+    assert json.loads(io.out) == {"command": "import-cameras", "out": str(tmp_path / "cams.json"),
+                                  "cameras": ["cam00", "cam01", "cam02"]}
     assert cli(["export-cameras", str(tmp_path / "cams.json"), "-o", str(tmp_path / "o.yml")]) == 0
     same(cams, CI.import_cameras(str(tmp_path / "o.yml")))
     assert cli(["export-cameras", str(tmp_path / "cams.json"), "-o", str(tmp_path / "per"), "--format",

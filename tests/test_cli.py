@@ -1,7 +1,9 @@
 import sys, os; sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-"""The headless CLI ``python -m addon`` in a subprocess: synth, fit, evaluate, overlay, and one-line
-errors (exit code 2, no traceback) for bad input."""
+"""The headless CLI ``python -m addon`` (the ``clothfit`` console script) in a subprocess: synth, fit,
+evaluate, overlay with their JSON on stdout, and one-line errors (exit code 2, no traceback) for bad input.
+The CLI's habits (help on every option, --version, exit codes 64 and 130, the console script) are in
+test_cli_habits.py."""
 
 import json
 import shutil
@@ -36,7 +38,9 @@ def cap(tmp_path_factory):
     root = tmp_path_factory.mktemp("cli") / "cap"
     rc, out, err = run("synth", "--out", root, "--resolution", "60x80")
     assert rc == 0, err
-    assert "18 cameras x 30 frames" in out
+    assert "18 cameras x 30 frames" in err
+    r = json.loads(out)
+    assert len(r["cameras"]) == 18 and len(r["frame_times"]) == 30 and r["resolution"] == [60, 80]
     return root
 
 
@@ -56,7 +60,12 @@ def fit_json(cap):
                       "--times", "0.1,0.2,0.3", "--optimizer", "cma-es", "--quiet")
     assert rc == 0, err
     assert "Traceback" not in err
-    assert f"wrote {out}" in so
+    assert f"wrote {out}" in err
+    summary = json.loads(so)                       # stdout: only the summary, as JSON
+    assert summary["out"] == str(out) and summary["cancelled"] is False
+    assert summary["evaluations"] >= 60 and set(summary["params"]) == {"m", "k", "l", "d"}
+    with open(out) as f:
+        assert json.load(f)["params"] == summary["params"]
     return out
 
 
@@ -80,9 +89,10 @@ def test_evaluate_prints_a_silhouette_error(fit_json, cap, tmp_path):
     rc, out, err = run("evaluate", cap, "--params", fit_json, "--cameras", "heldout:2", "--times", "0.15,0.25",
                        "--json", js)
     assert rc == 0, err
-    assert "silhouette error" in out and "16 cameras x 2 frames" in out and "shape error" in out
+    assert "silhouette error" in err and "16 cameras x 2 frames" in err and "shape error" in err
     with open(js) as f:
         r = json.load(f)
+    assert json.loads(out) == r                    # stdout: the same result as --json
     assert len(r["cameras"]) == 16 and r["times"] == [0.15, 0.25]
     assert r["silhouette_error_pct"] > 0
     # the ground truth (default --params) scores better than a wrong k
@@ -99,7 +109,9 @@ def test_overlay_writes_images(fit_json, cap, tmp_path):
     rc, so, err = run("overlay", cap, "--params", fit_json, "--out", out, "--cameras", "cam00,3",
                       "--times", "0.1,0.2")
     assert rc == 0, err
-    assert "wrote 5 images" in so
+    assert "wrote 5 images" in err
+    r = json.loads(so)
+    assert len(r["images"]) == 4 and r["contact_sheet"] == str(out / "contact_sheet.png")
     for cam in ("cam00", "cam03"):
         for f in ("001", "003"):
             img = cv2.imread(str(out / cam / f"{f}.png"))

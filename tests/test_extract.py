@@ -350,7 +350,8 @@ def test_cli_extract(tmp_path, capsys):
     root, out = str(tmp_path / "f"), str(tmp_path / "c")
     write_footage(root)
     assert cli(["extract", root, "-o", out, "--threshold", "noise"]) == 0
-    assert "wrote capture" in capsys.readouterr().out
+    io = capsys.readouterr()
+    assert "wrote capture" in io.err and json.loads(io.out)["frame_times"] == [0.1, 0.2, 0.3]
     assert load_capture(out, validate=True).n_frames == 3
     os.remove(os.path.join(root, "cam00", "background.png"))
     assert cli(["extract", root, "-o", out]) == 2

@@ -34,7 +34,11 @@ def test_fit_many_equals_local_fits(caps, tmp_path, env):
                         "--times", ",".join(map(str, TIMES)), "--workers", "2", "--out-dir", str(out)],
                        cwd=ROOT, env=e, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
-    assert f"2 fits on 2 {'process' if env else 'ray'} worker(s)" in r.stdout
+    assert f"2 fits on 2 {'process' if env else 'ray'} worker(s)" in r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["workers"] == 2 and summary["executor"] == ("process" if env else "ray")
+    assert [f["out"] for f in summary["fits"]] == [str(out / f"{i:03d}_{os.path.basename(c)}.json")
+                                                   for i, c in enumerate(caps)]
     for i, c in enumerate(caps):
         got = json.load(open(out / f"{i:03d}_{os.path.basename(c)}.json"))
         local = FitJob(load_capture(c), FitConfig(train_times=TIMES, max_evaluations=30, seed=4)).run()
@@ -68,8 +72,9 @@ def test_paper_parts_on_workers_equal_the_local_protocol(tmp_path, capsys):
                         "--max-evaluations", "20", "--workers", "2", "--json", str(tmp_path / "par.json"),
                         "--out", str(tmp_path / "par")], cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "2 part(s) on 2" in r.stdout
+    assert "2 part(s) on 2" in r.stderr
     par = json.load(open(tmp_path / "par.json"))
+    assert json.loads(r.stdout) == par                   # stdout: the same document as --json
     loc = run_paper(str(tmp_path / "loc.json"), quick=True, out_dir=str(tmp_path / "loc"), only="table1,fig8",
                     max_evaluations=20)
     capsys.readouterr()

@@ -355,8 +355,7 @@ def test_bad_capture_values_are_one_line_errors(cap, tmp_path, case):
     (("--resolution", "0x40"), "positive"),
     (("--target", "nan"), "target_error"),
     (("--cloth-mass", "inf"), "cloth_mass"),
-    (("--resume", "--force"), "--force"),
-])
+])                            # --resume with --force: a usage error, exit code 64 (test_cli_habits.py)
 def test_bad_fit_options_are_one_line_errors(cap, tmp_path, args, needle):
     out = tmp_path / "fit.json"
     one_line_error(*fit("fit", cap.root, "--out", out, *FAST, *args), needle)

@@ -13,8 +13,8 @@ Blender 4.2+ binary instead (the same code).
 
 Before building, the manifest is checked (``check_manifest``): every wheel named is for a listed
 platform and for Blender's Python (3.11: cp311 / abi3 / py3 tags), every listed platform gets
-opencv-python-headless, cma, numba and llvmlite (except ``NO_FAST_PATH``), the numba / llvmlite /
-OpenCV / cma versions are the ones ``requirements.txt`` pins, and ``blender_version_max`` keeps
+opencv-python-headless, numba and llvmlite (except ``NO_FAST_PATH``), the numba / llvmlite /
+OpenCV versions are the ones ``requirements.txt`` (the runtime pins) has, and ``blender_version_max`` keeps
 Blender versions with another Python out. ``--remote`` also asks the package index (pip's
 resolver, ``--dry-run``: metadata only, nothing downloaded) that every named wheel file exists.
 
@@ -39,7 +39,7 @@ import tomllib
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MANIFEST = "blender_manifest.toml"
 WHEEL_RE = re.compile(r"^(?P<name>[A-Za-z0-9_]+)-(?P<version>[^-]+)-")
-REQUIRED = ("opencv_python_headless", "cma", "numba", "llvmlite")
+REQUIRED = ("opencv_python_headless", "numba", "llvmlite")
 # numba 0.68 / llvmlite 0.50 publish no macOS x86-64 wheels: that platform runs the numpy path
 NO_FAST_PATH = {"macos-x64": ("numba", "llvmlite")}
 PYTHON = (3, 11)                    # Blender 4.2 .. 4.5

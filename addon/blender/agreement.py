@@ -1,6 +1,6 @@
 """The core's ``blender`` cloth model against Blender's own Cloth modifier, vertex by vertex.
 
-    python -m addon blender-agreement [--grid 21] [--settle 1.0] [--after 1.5] [--fps 24] [--json FILE]
+    clothfit blender-agreement [--grid 21] [--settle 1.0] [--after 1.5] [--fps 24] [--json FILE]
 
 The same cloth (a 10 cm sheet, ``--grid`` x ``--grid`` vertices, hung from its four corners),
 pins, release (one corner let go after ``--settle`` seconds) and settings are simulated by the
@@ -12,7 +12,6 @@ bending model, and qualities from 2 to 15. Needs the bpy module.
 """
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -109,22 +108,3 @@ def run(n=21, settle=1.0, after=1.5, fps=24.0, cases=None, echo=print) -> list:
     echo(f"worst case: mean {max(r['mean_mm'] for r in rows):.6f} mm, max {worst:.6f} mm "
          f"(goal: mean < 0.1 mm, max < 1 mm)")
     return rows
-
-
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m addon blender-agreement",
-                                 description="the core's blender cloth model against Blender's own solver "
-                                             "(needs the bpy module)")
-    ap.add_argument("--grid", type=int, default=21, help="vertices per side of the 10 cm sheet (21)")
-    ap.add_argument("--settle", type=float, default=1.0, help="seconds hung by four corners before the release (1)")
-    ap.add_argument("--after", type=float, default=1.5, help="seconds simulated after the release (1.5)")
-    ap.add_argument("--fps", type=float, default=24.0, help="scene frame rate (24)")
-    ap.add_argument("--json", help="write every figure to this file")
-    a = ap.parse_args(argv)
-    if a.grid < 2 or a.grid > 200:
-        raise ClothFitError(f"--grid {a.grid}: must be 2..200")
-    rows = run(a.grid, a.settle, a.after, a.fps)
-    if a.json:
-        from ..core.safeio import atomic_json
-        atomic_json(a.json, {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps, "cases": rows})
-    return 0

@@ -24,23 +24,30 @@ def script_argv(argv=None):
 
 
 def add_arguments(ap: argparse.ArgumentParser, blend_default=None):
-    ap.add_argument("--out", default=os.path.join("out", "demo"), help="output directory (capture, result, overlays)")
-    ap.add_argument("--blend", default=blend_default or "", help="where to save the .blend ('' = do not)")
-    ap.add_argument("--rig", default="lab18", help="rig preset (rigs/) or cameras JSON")
-    ap.add_argument("--times", default=None, help="capture times start:stop:step (default: the paper's 0.05:1.5:0.05)")
-    ap.add_argument("--noise", type=float, default=0.05, help="boundary noise fraction of the rendered silhouettes")
+    ap.add_argument("--out", default=os.path.join("out", "demo"),
+                    help="output directory: capture, result, overlays (default: %(default)s)")
+    ap.add_argument("--blend", default=blend_default or "",
+                    help="where to save the .blend; '' = do not save (default: %(default)r)")
+    ap.add_argument("--rig", default="lab18", help="rig preset (rigs/) or cameras JSON (default: %(default)s)")
+    ap.add_argument("--times", default=None,
+                    help="capture times [s] as start:stop:step (default: the paper's 0.05:1.5:0.05)")
+    ap.add_argument("--noise", type=float, default=0.05,
+                    help="fraction of boundary pixels flipped in the rendered silhouettes (default: %(default)s)")
     ap.add_argument("--no-fit", action="store_true", help="skip the fit (and apply)")
-    ap.add_argument("--train-cameras", type=int, default=8)
-    ap.add_argument("--budget", type=int, default=1500, help="fit: maximum model evaluations")
+    ap.add_argument("--train-cameras", type=int, default=8,
+                    help="cameras the fit trains on, chosen by the spread rule (default: %(default)s)")
+    ap.add_argument("--budget", type=int, default=1500, help="fit: maximum model evaluations (default: %(default)s)")
     ap.add_argument("--resolution", default="120x160", choices=["FULL", "240x320", "120x160", "60x80"],
-                    help="fit resolution (H x W)")
+                    help="fit resolution H x W [px]; FULL = the rig's (default: %(default)s)")
     ap.add_argument("--optimizer", default=None, choices=["spx-mgg", "cma-es"],
                     help="default: the project's default optimiser (core/defaults.py)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="random seed of the fit (default: %(default)s)")
     ap.add_argument("--no-blender-model", action="store_true",
                     help="skip the second fit with Blender's cloth model (and its Cloth modifier)")
-    ap.add_argument("--blender-budget", type=int, default=1500, help="Blender-model fit: maximum evaluations")
-    ap.add_argument("--engine", default="WORKBENCH", choices=["WORKBENCH", "EEVEE"], help="silhouette renderer")
+    ap.add_argument("--blender-budget", type=int, default=1500,
+                    help="Blender-model fit: maximum evaluations (default: %(default)s)")
+    ap.add_argument("--engine", default="WORKBENCH", choices=["WORKBENCH", "EEVEE"],
+                    help="silhouette renderer (default: %(default)s)")
     ap.add_argument("--post", action=argparse.BooleanOptionalAction, default=False,
                     help="stand a post in front of the cloth (collection 'Occluders': rendered as a holdout, "
                          "written as ignore masks)")
@@ -74,7 +81,7 @@ def add_post(scene):
 def ensure_wheels():
     """Make the bundled packages importable when running from a checkout under a Blender binary.
 
-    Blender's Python has no OpenCV, cma or numba; an installed extension gets them from the
+    Blender's Python has no OpenCV or numba; an installed extension gets them from the
     wheels its manifest lists. From a checkout (``blender -b -P demo_blend/build_demo.py``) the
     same wheels in ``wheels/`` (downloaded by ``tools/build_extension.py``) are unpacked once into
     ``out/.blender_site/<wheel>`` and put on sys.path, for each package that is not importable.

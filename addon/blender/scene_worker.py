@@ -17,6 +17,7 @@ import numpy as np
 
 from ..core.errors import ClothFitError
 from .cloth import apply_settings, cloth_modifier, read_settings, scene_fps
+from .render import quiet_stdout
 from .scene import evaluated_positions
 
 FLY_AWAY_M = 100.0        # a vertex this far from where it started = a failed (exploded) candidate
@@ -61,7 +62,8 @@ class BlendScene:
         if not os.path.isfile(path):
             raise ClothFitError(f"Blender scene {path}: file not found")
         try:
-            bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
+            with quiet_stdout():          # Blender's 'Read blend: ...' line: noise in the driver's output
+                bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
         except RuntimeError as e:
             raise ClothFitError(f"Blender scene {path}: cannot open it ({str(e).strip().splitlines()[-1]})") from None
         self.path = str(path)

@@ -15,10 +15,16 @@ import numpy as np
 from .errors import ClothFitError
 
 
+def json_text(obj, strict: bool = False, default=None) -> str:
+    """The JSON text the project writes (indent 1; numpy scalars and arrays as numbers and lists);
+    ``strict``: no NaN / Infinity (ValueError)."""
+    return json.dumps(obj, indent=1, default=default or _default, allow_nan=not strict)
+
+
 def atomic_json(path, obj, strict: bool = False, default=None):
     """Write JSON safely (see :func:`atomic_write`); ``strict``: no NaN / Infinity."""
     try:
-        text = json.dumps(obj, indent=1, default=default or _default, allow_nan=not strict)
+        text = json_text(obj, strict, default)
     except (TypeError, ValueError) as e:
         raise ClothFitError(f"cannot write {path}: the data is not strict JSON ({e})") from None
     atomic_write(path, (text + "\n").encode("utf-8"))

@@ -877,33 +877,36 @@ def describe(cameras) -> str:
     return "\n".join(lines)
 
 
-def main(argv) -> list:
-    """``python -m addon import-cameras|export-cameras ...`` (``argv[0]`` names the command).
-
-    import-cameras SRC -o cameras.json: any supported calibration -> our cameras JSON.
-    export-cameras SRC -o DST [--format opencv|opencv-dir|colmap|json]: our cameras JSON, a
-    capture (folder or capture.json) or any supported calibration -> DST.
-    """
-    import argparse
-    if not argv or argv[0] not in ("import-cameras", "export-cameras"):
-        raise ClothFitError("calib_io.main: first argument must be import-cameras or export-cameras")
-    cmd, rest = argv[0], argv[1:]
-    p = argparse.ArgumentParser(prog=f"python -m addon {cmd}",
-                                description="calibrated cameras: OpenCV FileStorage and COLMAP text models")
-    p.add_argument("src", help="calibration file or folder (OpenCV YAML/JSON/XML, folder of those, COLMAP model "
-                               "folder, our cameras JSON" + (", or a capture" if cmd == "export-cameras" else "") + ")")
-    p.add_argument("-o", "--out", required=True, help="output: cameras JSON (import) or file/folder (export)")
-    p.add_argument("--format", default="auto", choices=FORMATS,
-                   help="input format (import) / output format (export); auto: by extension")
-    p.add_argument("--width", type=int, help="image width when the OpenCV file has none")
-    p.add_argument("--height", type=int, help="image height when the OpenCV file has none")
-    a = p.parse_args(rest)
+def add_arguments(p, cmd):
+    """Arguments of ``clothfit import-cameras`` / ``clothfit export-cameras`` (``cmd``); run with :func:`run_args`."""
     if cmd == "import-cameras":
+        p.add_argument("src", help="calibration file or folder: OpenCV YAML/JSON/XML, a folder of those, a COLMAP "
+                                   "model folder, EasyMocap intri/extri, or our cameras JSON")
+        p.add_argument("-o", "--out", required=True, help="cameras JSON to write (our format)")
+        p.add_argument("--format", default="auto", choices=FORMATS,
+                       help="format of SRC; auto: by file extension and folder contents (default: %(default)s)")
+    else:
+        p.add_argument("src", help="cameras to export: our cameras JSON, a capture (folder or capture.json) or any "
+                                   "calibration import-cameras reads")
+        p.add_argument("-o", "--out", required=True, help="file or folder to write (opencv-dir and colmap: a folder)")
+        p.add_argument("--format", default="auto", choices=[f for f in FORMATS if f != "easymocap"],
+                       help="format to write; auto: by the extension of --out, .json = json, .yml/.yaml/.xml = "
+                            "opencv, anything else (a folder) = colmap (default: %(default)s)")
+    p.add_argument("--width", type=int, help="image width [px] when the OpenCV file has none")
+    p.add_argument("--height", type=int, help="image height [px] when the OpenCV file has none")
+    p.set_defaults(cameras_cmd=cmd)
+    return p
+
+
+def run_args(a) -> dict:
+    """Run ``import-cameras`` / ``export-cameras`` from parsed :func:`add_arguments` arguments: prints a
+    table of the cameras (for people) and returns ``{"command", "out", "cameras": [names]}``."""
+    if a.cameras_cmd == "import-cameras":
         cams = import_cameras(a.src, a.format, a.width, a.height)
         export_cameras(cams, a.out, "json")
     else:
         cams = _cameras_from_any(a.src, "auto", a.width, a.height)
         export_cameras(cams, a.out, a.format)
     print(describe(cams))
-    print(f"{'imported' if cmd == 'import-cameras' else 'exported'} {len(cams)} cameras -> {a.out}")
-    return cams
+    print(f"{'imported' if a.cameras_cmd == 'import-cameras' else 'exported'} {len(cams)} cameras -> {a.out}")
+    return {"command": a.cameras_cmd, "out": a.out, "cameras": [c.name for c in cams]}

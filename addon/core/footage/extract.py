@@ -872,7 +872,7 @@ def format_report(report: dict) -> str:
 # ========================================================================= CLI glue
 
 def add_arguments(parser):
-    """Arguments of ``python -m addon extract`` (the lead's CLI calls this, then :func:`run_args`)."""
+    """Arguments of ``clothfit extract`` (the CLI calls this, then :func:`run_args`)."""
     parser.add_argument("footage", nargs="?", help="footage folder: <camera>/background*.png + frames, optional "
                                                    "footage.json (or --videos)")
     parser.add_argument("--videos", help="folder of videos, one per camera: <camera>.<mp4|mov|mkv|avi>")
@@ -881,31 +881,46 @@ def add_arguments(parser):
     parser.add_argument("--sync", help="with --videos: JSON {camera: video time [s] at t = 0}")
     parser.add_argument("--find-sync", choices=["flash"], help="with --videos: find the sync times from a flash seen by "
                                                               "every camera (written to --sync if given)")
-    parser.add_argument("--flash-time", type=float, default=0.0, help="capture time [s] of the flash (default 0)")
+    parser.add_argument("--flash-time", type=float, default=0.0,
+                        help="capture time [s] of the flash (default: %(default)s)")
     parser.add_argument("-o", "--out", required=True, help="capture folder to write")
-    parser.add_argument("--cameras", help="calibration: our cameras JSON, OpenCV YAML/JSON/XML file or folder, COLMAP model folder")
-    parser.add_argument("--times", help="frame times, comma separated (default: footage.json)")
-    parser.add_argument("--scenario", help="JSON with the scenario (cloth + handles), e.g. a capture.json")
-    parser.add_argument("--cloth-mass", type=float, help="weighed cloth mass [kg]")
-    parser.add_argument("--threshold", default="auto", help="auto | otsu | noise | a number (default auto)")
+    parser.add_argument("--cameras", help="calibration: our cameras JSON, OpenCV YAML/JSON/XML file or folder, COLMAP "
+                                          "model folder (default: footage.json's, else a cameras.* or "
+                                          "calibration.* file in the footage folder)")
+    parser.add_argument("--times", help="frame times [s], comma separated (default: footage.json's)")
+    parser.add_argument("--scenario", help="JSON with the scenario (cloth + handles), e.g. a capture.json "
+                                           "(default: footage.json's, else the paper's scenario)")
+    parser.add_argument("--cloth-mass", type=float, help="weighed cloth mass [kg] (default: footage.json's, if any)")
+    parser.add_argument("--threshold", default="auto",
+                        help="difference threshold: auto, otsu, noise or a number (default: %(default)s)")
     parser.add_argument("--camera-threshold", action="append", default=[], metavar="NAME=VALUE",
-                        help="threshold of one camera (repeatable)")
+                        help="threshold of one camera, overriding --threshold (repeatable)")
     parser.add_argument("--luma-weight", type=float, default=ExtractOptions.luma_weight,
-                        help="weight of the luma difference against chroma (shadows)")
+                        help="weight of the luma difference against chroma, against shadows (default: %(default)s)")
     parser.add_argument("--shadow-min", type=float, default=ExtractOptions.shadow_min,
-                        help="background dimmed down to this brightness ratio counts as shadow (1 = off)")
-    parser.add_argument("--noise-k", type=float, default=ExtractOptions.noise_k, help="noise threshold factor")
-    parser.add_argument("--blur", type=float, default=ExtractOptions.blur, help="Gaussian sigma [px] on the difference")
-    parser.add_argument("--open", type=int, default=ExtractOptions.open_radius, dest="open_radius")
-    parser.add_argument("--close", type=int, default=ExtractOptions.close_radius, dest="close_radius")
-    parser.add_argument("--no-largest", action="store_true", help="keep every component")
-    parser.add_argument("--no-fill-holes", action="store_true")
+                        help="background dimmed down to this brightness ratio counts as shadow, 1 = off "
+                             "(default: %(default)s)")
+    parser.add_argument("--noise-k", type=float, default=ExtractOptions.noise_k,
+                        help="noise threshold = median + this factor x robust sigma (default: %(default)s)")
+    parser.add_argument("--blur", type=float, default=ExtractOptions.blur,
+                        help="Gaussian sigma [px] on both images before differencing, 0 = off (default: %(default)s)")
+    parser.add_argument("--open", type=int, default=ExtractOptions.open_radius, dest="open_radius",
+                        help="morphological opening radius [px], 0 = off (default: %(default)s)")
+    parser.add_argument("--close", type=int, default=ExtractOptions.close_radius, dest="close_radius",
+                        help="morphological closing radius [px], 0 = off (default: %(default)s)")
+    parser.add_argument("--no-largest", action="store_true",
+                        help="keep every component (default: only the largest)")
+    parser.add_argument("--no-fill-holes", action="store_true", help="keep holes inside the silhouette "
+                                                                     "(default: filled)")
     parser.add_argument("--refine", type=int, default=ExtractOptions.refine_radius, dest="refine_radius",
-                        help="boundary refinement radius [px] (0 = off)")
-    parser.add_argument("--min-area", type=int, default=ExtractOptions.min_area)
-    parser.add_argument("--allow-empty", action="store_true", help="nothing found = warning + empty silhouette")
+                        help="boundary refinement radius [px], 0 = off (default: %(default)s)")
+    parser.add_argument("--min-area", type=int, default=ExtractOptions.min_area,
+                        help="a silhouette smaller than this [px] counts as nothing found (default: %(default)s)")
+    parser.add_argument("--allow-empty", action="store_true",
+                        help="nothing found = a warning and an empty silhouette (default: an error)")
     parser.add_argument("--undistort", action="store_true", help="undistort silhouettes, write cameras without distortion")
-    parser.add_argument("--camera", action="append", dest="camera_names", help="extract only this camera (repeatable)")
+    parser.add_argument("--camera", action="append", dest="camera_names",
+                        help="extract only this camera (repeatable; default: every camera)")
     parser.add_argument("--debug", dest="debug_dir", help="write debug images of every step here")
     return parser
 
@@ -931,7 +946,8 @@ def options_from_args(args) -> ExtractOptions:
 
 
 def run_args(args) -> dict:
-    """Run an extraction from parsed :func:`add_arguments` arguments; prints and returns the report."""
+    """Run an extraction from parsed :func:`add_arguments` arguments; prints a summary (for people)
+    and returns the report."""
     times = None
     if args.times:
         try:
@@ -986,13 +1002,3 @@ def _run_videos(args, times):
     finally:
         if tty:
             sys.stderr.write("\n")
-
-
-def main(argv=None) -> dict:
-    """``python -m addon extract ...``: parse ``argv`` and run (ClothFitError propagates)."""
-    import argparse
-    p = argparse.ArgumentParser(prog="python -m addon extract",
-                                description="Silhouettes from camera images: background difference in YUV, "
-                                            "automatic per-camera threshold, shadow model, clean-up; writes a capture.")
-    add_arguments(p)
-    return run_args(p.parse_args(argv))

@@ -285,7 +285,10 @@ def load_cameras(path: str):
     return cams
 
 
-RIGS_DIR = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "rigs"))
+# the rig presets: rigs/ beside addon/ (a checkout, the extension), or addon/rigs/ in a wheel (pyproject.toml)
+_PACKAGED_RIGS = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "rigs"))
+RIGS_DIR = _PACKAGED_RIGS if os.path.isdir(_PACKAGED_RIGS) else \
+    os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "rigs"))
 
 
 def rig_path(name_or_path: str) -> str:
