@@ -13,7 +13,7 @@ This file only hands names on. The work lives by concern: ``reading`` (the scene
 core objects: ``read_scene``), ``cameras`` (rig, import/export), ``building`` (cloth, handles,
 simulate), ``rendering`` (Render Silhouettes), ``footage`` (extract, load a capture, camera
 backgrounds), ``fitting`` (fit session, run, apply), ``overlays``; ``steps`` cuts long calls into
-steps for the modal operators (``render_steps``, ``simulate_steps``).
+steps for the modal operators (``render_steps``, ``simulate_steps``, ``extract_steps``).
 """
 from ...core.errors import ClothFitError  # noqa: F401
 from .. import render as R  # noqa: F401
@@ -47,6 +47,7 @@ from .footage import (  # noqa: F401
     OVERLAY_DIR,
     THRESHOLD_MODES,
     extract_silhouettes,
+    extract_steps,
     load_capture,
     overlay_path,
     parse_camera_thresholds,

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 import os
+import queue
+import threading
 
 import bpy
 
@@ -22,6 +24,7 @@ from .reading import (
     refuse_foreign_capture,
     scene_grid,
 )
+from .steps import Steps
 
 EXTRACT_GENERATOR = "addon.core.extract"
 THRESHOLD_MODES = {"AUTO": "auto", "OTSU": "otsu", "NOISE": "noise"}
@@ -85,6 +88,19 @@ def extract_silhouettes(scene, progress=None):
     ``progress(fraction)`` is called per camera. Returns (Capture, report); ``report["warnings"]``
     lists every warning of the extraction, ``report["notes"]`` what the scene changed (frame rate).
     Errors (every bad file in one message) write nothing."""
+    return extract_steps(scene).run(progress)
+
+
+def extract_steps(scene) -> Steps:
+    """``extract_silhouettes`` in steps for the modal operator. The first step reads the settings
+    and checks them; the extraction (pure core: numpy, OpenCV) then runs in a worker thread and
+    each step reports its progress; the capture is loaded into the scene at the end. Cancelled,
+    the cameras extracted so far are written as a capture (not loaded); stopped before the first
+    camera is done, nothing is written."""
+    return Steps(_extract_work, scene)
+
+
+def _extract_work(steps, scene):
     from ...core.footage import extract as X
     p = props(scene)
     footage = abspath(p.footage_dir, "footage directory")
@@ -118,29 +134,56 @@ def extract_silhouettes(scene, progress=None):
             if not isinstance(ft, list) or not ft:
                 raise ClothFitError(f"footage {footage}: no frame times (set Times, or frame_times in footage.json)")
         scenario = empties_scenario(scene, scene_grid(scene), ft, notes)
-
-    def cb(i, n, name):
-        if progress:
-            progress(i / max(n, 1))
     if videos:
         names = [c.name for c in cams]
         sync_path = abspath(p.footage_sync, "sync file") if p.footage_sync.strip() else None
-        if p.footage_find_sync:
-            sync = V.flash_sync(footage, names, p.footage_flash_time, sync_path)
-            notes.append("sync from the flash: " + ", ".join(f"{k} {v:.4f} s" for k, v in sync.items()))
-        elif sync_path:
-            sync = sync_path
-        else:
+        if not (p.footage_find_sync or sync_path):
             raise ClothFitError("extraction from videos needs a Sync file (or Sync from Flash)")
         if not p.footage_plates.strip():
             raise ClothFitError("extraction from videos needs the Plates folder")
-        report = X.extract_videos(footage, abspath(p.footage_plates, "plates folder"), sync, out, cams, times,
-                                  scenario=scenario, options=opts, progress=cb)
-    else:
-        report = X.extract_capture(footage, out, cameras=cams, frame_times=times, scenario=scenario, options=opts,
-                                   progress=cb)
-    if progress:
-        progress(1.0)
+        plates, find_sync, flash_time = abspath(p.footage_plates, "plates folder"), p.footage_find_sync, \
+            p.footage_flash_time
+
+    # from here on no bpy: the worker thread runs the core extraction
+    events, stop, box = queue.Queue(), threading.Event(), {}
+
+    def cb(i, n, name):
+        events.put((i / max(n, 1), f"{name}"))
+
+    def work():
+        try:
+            if videos:
+                sync = sync_path
+                if find_sync:
+                    sync = V.flash_sync(footage, names, flash_time, sync_path)
+                    notes.append("sync from the flash: " + ", ".join(f"{k} {v:.4f} s" for k, v in sync.items()))
+                box["report"] = X.extract_videos(footage, plates, sync, out, cams, times, scenario=scenario,
+                                                 options=opts, progress=cb, should_stop=stop.is_set)
+            else:
+                box["report"] = X.extract_capture(footage, out, cameras=cams, frame_times=times, scenario=scenario,
+                                                  options=opts, progress=cb, should_stop=stop.is_set)
+        except BaseException as e:  # noqa: BLE001 - handed to the main thread, raised there
+            box["err"] = e
+    worker = threading.Thread(target=work, name="clothfit-extract", daemon=True)
+    worker.start()
+    steps.kept = "nothing was written"
+    fraction, text = 0.0, f"extracting {len(cams)} cameras"
+    try:
+        while worker.is_alive() or not events.empty():
+            try:
+                fraction, text = events.get(timeout=0.02)
+            except queue.Empty:
+                pass
+            yield fraction, text
+    except GeneratorExit:           # cancelled: the cameras done so far become the capture
+        stop.set()
+        worker.join()
+        steps.kept = _kept_after_stop(box, out, len(cams))
+        raise
+    worker.join()
+    if "err" in box:
+        raise box["err"]
+    report = box["report"]
     cap = load_capture(scene, out)
     thr = [r["threshold"] for r in report["cameras"].values()]
     nw = len(report.get("warnings", []))
@@ -149,6 +192,18 @@ def extract_silhouettes(scene, progress=None):
     report["calibration"] = cam_source
     report["notes"] = notes
     return cap, report
+
+
+def _kept_after_stop(box, out, n):
+    if "err" in box:
+        e = box["err"]
+        first = (str(e).splitlines() or [""])[0]
+        return "nothing was written" + ("" if "stopped before the first camera" in first else f" ({first})")
+    done = box["report"].get("stopped", {}).get("cameras_done", n)
+    if done < n:
+        return (f"kept a capture of the {done} of {n} cameras extracted so far in {out} (not loaded: Load "
+                f"Capture loads it; extract again for every camera)")
+    return f"kept the whole capture in {out} (it finished before the stop; not loaded: Load Capture loads it)"
 
 
 def load_capture(scene, path=None):
@@ -167,7 +222,7 @@ def load_capture(scene, path=None):
     released = [h for h in cap.scenario.handles if h.release_time is not None]
     if released and released[0].vertex in g.corners():
         p.released_corner = g.corners().index(released[0].vertex)
-    p.capture_dir = root
+    p.capture_dir = cap.root          # the folder, also when ``path`` is its capture.json
     p.scenario_source = "CAPTURE"
     p["view_frame"] = min(p.view_frame, cap.n_frames - 1)
     show_observations(scene, p.view_frame, cap)

@@ -66,7 +66,7 @@ def _render_work(steps, scene, out_dir, noise, seed, engine):
     # render that fails or stops midway never leaves a capture that looks complete
     pending = write_capture(root, cams, sc, None, shapes=inp.shapes, cloth_mass=par.m * sc.grid.n_vertices,
                             meta=meta, finalize=False, ignore=True if occluders else None)
-    steps.kept = f"no silhouette rendered; {root} holds the capture's cameras.json (no capture.json)"
+    steps.kept = f"no silhouette was rendered yet; {root} holds the capture's cameras.json (no capture.json)"
     frame0 = scene.frame_current
     tmp = os.path.join(root, ".render_tmp")
     os.makedirs(tmp, exist_ok=True)
@@ -89,7 +89,7 @@ def _render_work(steps, scene, out_dir, noise, seed, engine):
                 save_silhouette(pending.silhouette_path(ci, fi), m)
                 if ign is not None:
                     save_silhouette(pending.ignore_path(ci, fi), ign)
-            steps.kept = (f"the silhouettes of {fi + 1} of {len(times)} capture times ({(fi + 1) * len(cams)} "
+            steps.kept = (f"kept the silhouettes of {fi + 1} of {len(times)} capture times ({(fi + 1) * len(cams)} "
                           f"files) in {root}; capture.json not written (the capture is incomplete: render again)")
             if fi + 1 < len(times):
                 yield (fi + 1) / len(times), f"capture time {fi + 1}/{len(times)} (t = {t:.3f} s)"

@@ -41,10 +41,13 @@ class Steps:
         return True
 
     def run(self, progress=None):
-        """All steps to the end; ``progress(fraction)`` after each (1.0 at the end). Returns the result."""
+        """All steps to the end; ``progress(fraction)`` whenever the fraction done changes (1.0 at the
+        end). Returns the result."""
+        last = None
         while self.step():
-            if progress is not None:
+            if progress is not None and self.fraction != last:
                 progress(self.fraction)
+                last = self.fraction
         if progress is not None:
             progress(1.0)
         return self.result
