@@ -382,11 +382,7 @@ def begin_steps(context, steps, label, done=None):
     text, timer. Returns the ``StepsRun``. ``done(context, result) -> (warnings, message)``."""
     run = StepsRun(steps, label, done)
     steps.step()
-    wm = context.window_manager
-    wm.progress_begin(0, 1000)
-    if context.window is not None:
-        run.timer = wm.event_timer_add(0.02, window=context.window)
-    _status(context, run.status_text())
+    _ui_begin(context, run, run.status_text())
     return run
 
 
@@ -420,13 +416,26 @@ def steps_tick(context, run, event_type):
 
 def end_steps(context, run):
     """The one finish routine of a long operator: timer, progress bar, status text, redraw."""
+    _ui_end(context, run)
+    _redraw(context)
+
+
+def _ui_begin(context, run, text):
+    """Progress bar, timer (``run.timer``) and status text of a modal run (fit or long operator)."""
+    wm = context.window_manager
+    wm.progress_begin(0, 1000)
+    if context.window is not None:
+        run.timer = wm.event_timer_add(0.02, window=context.window)
+    _status(context, text)
+
+
+def _ui_end(context, run):
     wm = context.window_manager
     if run.timer is not None:
         wm.event_timer_remove(run.timer)
         run.timer = None
     wm.progress_end()
     _status(context, None)
-    _redraw(context)
 
 
 # ============================================================= the modal fit
@@ -438,11 +447,7 @@ def begin_modal(context, threaded=True):
     touched on the main thread); otherwise one generation runs inside each TIMER event."""
     sess = api.start_fit(context.scene)
     sess.threaded = threaded
-    wm = context.window_manager
-    wm.progress_begin(0, 1000)
-    if context.window is not None:
-        sess.timer = wm.event_timer_add(0.02, window=context.window)
-    _status(context, sess.status_text())
+    _ui_begin(context, sess, sess.status_text())
     return sess
 
 
@@ -476,12 +481,7 @@ def modal_tick(context, session, event_type):
 
 def end_modal(context, session, cancelled):
     """The one finish routine: timer, progress bar, status text, result file, panel."""
-    wm = context.window_manager
-    if session.timer is not None:
-        wm.event_timer_remove(session.timer)
-        session.timer = None
-    wm.progress_end()
-    _status(context, None)
+    _ui_end(context, session)
     out = api.finish_fit(session, cancelled)
     _redraw(context)
     return out

@@ -114,6 +114,7 @@ def _simulate_work(steps, scene, threaded):
         worker = threading.Thread(target=work, name="clothfit-simulate", daemon=True)
         worker.start()
         while worker.is_alive():
+            worker.join(0.01)       # a short wait per step: no busy loop, the UI stays responsive
             yield 0.5, f"simulating ({time.time() - t0:.1f} s)"
         if "err" in box:
             raise box["err"]
