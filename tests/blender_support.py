@@ -62,6 +62,17 @@ def small_capture(tmp_path_factory):
     return root
 
 
+def addon_preferences():
+    """The add-on's preferences in this session. From a checkout the add-on is not enabled through
+    Blender's add-on list, so its entry is added (as enabling does) under the module name the
+    preferences class is registered for; a factory reset removes it again."""
+    from addon.blender import prefs
+    addons = bpy.context.preferences.addons
+    if addons.get(prefs.ADDON_NAME) is None:
+        addons.new().module = prefs.ADDON_NAME
+    return addons[prefs.ADDON_NAME].preferences
+
+
 def run_error(op, **kw):
     """Run ``bpy.ops.clothfit.<op>`` expecting an ERROR report; return its message."""
     with pytest.raises(RuntimeError) as ei:

@@ -101,8 +101,14 @@ INSTALL = textwrap.dedent('''
     assert bpy.ops.clothfit.build_cloth() == {"FINISHED"}
     ops_mod = sys.modules[mod + ".addon.blender.ops"]
     assert ops_mod.__file__.startswith(os.environ["BLENDER_USER_RESOURCES"]), ops_mod.__file__
+    prefs = bpy.context.preferences.addons[mod].preferences     # bl_idname = the extension's module
+    assert type(prefs).__name__ == "ClothFitPreferences" and prefs.workers == 0, prefs
+    menus = sys.modules[mod + ".addon.blender.menus"]
+    assert menus.menu_import in bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize()
+    assert menus.menu_export in bpy.types.TOPBAR_MT_file_export._dyn_ui_initialize()
     addon_utils.disable(mod)
     assert not hasattr(bpy.types.Scene, "clothfit")
+    assert menus.menu_import not in bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize()
     print("INSTALL-OK", cv2.__version__, numba.__version__)
 ''')
 

@@ -15,7 +15,7 @@ import tempfile
 import numpy as np
 import pytest
 
-from blender_support import bpy, ensure_registered, factory  # noqa: F401
+from blender_support import addon_preferences, bpy, ensure_registered, factory  # noqa: F401
 
 from addon.blender import collider_scene as CS  # noqa: E402
 from addon.blender.scene_worker import BlendScene  # noqa: E402
@@ -291,12 +291,14 @@ def _open(scene):
 
 def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_settings(scene, monkeypatch, tmp_path):
     monkeypatch.setenv("CLOTHFIT_NO_RAY", "1")
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))     # the operator's working directory
     sc, obj = _open(scene)
+    prefs = addon_preferences()          # the operator's defaults: workers and working folder
+    prefs.workers, prefs.cache_dir = 2, str(tmp_path / "cache")
     sc.clothfit.max_evaluations = 6
-    assert bpy.ops.clothfit.fit_scene_cloth(workers=2, frame_zero=scene[2]) == {"FINISHED"}
+    assert bpy.ops.clothfit.fit_scene_cloth(frame_zero=scene[2]) == {"FINISHED"}
+    assert obj["clothfit_scene_fit_result"].startswith(str(tmp_path / "cache" / "clothfit_scene_fit_"))
     res = json.load(open(obj["clothfit_scene_fit_result"]))
-    assert res["evaluations"] >= 6 and not res["cancelled"]
+    assert res["evaluations"] >= 6 and not res["cancelled"] and res["workers"] == 2
     assert res["backend"] == "blender" and res["executor"] == "process" and res["scene"]["object"] == "Cloth"
     before = obj.modifiers["Cloth (Cloth Fit)"].settings.tension_stiffness
     assert bpy.ops.clothfit.apply_scene_fit() == {"FINISHED"}
@@ -317,6 +319,23 @@ def test_esc_stops_the_fit_and_keeps_the_best(scene, monkeypatch, tmp_path):
     res = s.wait(sc, poll=lambda sess: sess.progress()[0] >= 12)
     assert s.cancelled and res["cancelled"] and 12 <= res["evaluations"] < 3000
     assert res["blender_cloth"]["tension_stiffness"] > 0
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def test_unreachable_ray_address_of_the_preferences_is_a_one_line_error(scene, tmp_path):
+    """The preferences' Ray address is only connected to (never started), checked before anything is
+    written: a closed port on the loopback address is one line, and the cache folder stays empty."""
+    import socket
+    with socket.socket() as s:          # a loopback port that nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    sc, obj = _open(scene)
+    prefs = addon_preferences()
+    prefs.ray_address, prefs.cache_dir = f"ray://127.0.0.1:{port}", str(tmp_path / "cache")
+    with pytest.raises(RuntimeError, match=f"cannot connect to the Ray cluster at ray://127.0.0.1:{port}") as ei:
+        bpy.ops.clothfit.fit_scene_cloth(frame_zero=scene[2])
+    assert "\n" not in str(ei.value).strip()
+    assert os.listdir(tmp_path / "cache") == []
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 

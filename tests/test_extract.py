@@ -245,6 +245,24 @@ def test_extract_capture_end_to_end(tmp_path):
     assert "threshold" in X.format_report(rep)
 
 
+def test_extract_capture_stopped_keeps_the_cameras_done(tmp_path):
+    """``should_stop`` (Esc in Blender): the capture holds the cameras extracted before the stop."""
+    write_footage(str(tmp_path / "f"), n_cams=3)
+    asked = []
+
+    def stop_after_one():
+        asked.append(1)
+        return len(asked) > 1           # False before camera 0, True before camera 1
+    rep = X.extract_capture(str(tmp_path / "f"), str(tmp_path / "cap"), should_stop=stop_after_one)
+    assert rep["stopped"] == {"cameras_done": 1, "cameras": 3} and len(asked) == 2
+    assert any("stopped after 1 of 3 cameras" in w for w in rep["warnings"])
+    cap = load_capture(str(tmp_path / "cap"), validate=True)
+    assert cap.camera_names == ["cam00"] and cap.meta["extraction"]["stopped"]["cameras_done"] == 1
+    with pytest.raises(ClothFitError, match="stopped before the first camera finished: nothing written"):
+        X.extract_capture(str(tmp_path / "f"), str(tmp_path / "cap_none"), should_stop=lambda: True)
+    assert not (tmp_path / "cap_none").exists()
+
+
 def test_extract_capture_undistort(tmp_path):
     root, out = str(tmp_path / "f"), str(tmp_path / "c")
     write_footage(root, n_cams=1, times=(0.1,))

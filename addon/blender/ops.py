@@ -15,11 +15,14 @@ functions ``begin_modal`` / ``modal_tick`` / ``end_modal`` so tests can drive it
 """
 from __future__ import annotations
 
+import os
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from ..core.errors import ClothFitError
 from . import api
+from .props import CAMERA_FORMATS
 
 
 def failure_text(e: BaseException) -> str:
@@ -78,39 +81,138 @@ class CLOTHFIT_OT_build_cloth(_ClothFitOperator, bpy.types.Operator):
         return f"Built cloth '{obj.name}': {len(obj.data.vertices)} vertices, {len(obj.data.polygons)} triangles"
 
 
-class CLOTHFIT_OT_simulate(_ClothFitOperator, bpy.types.Operator):
-    """Simulate the mass-spring cloth with the scene's parameters and bake it into shape keys"""
-    bl_idname = "clothfit.simulate"
-    bl_label = "Simulate"
-
-    def run(self, context):
-        r = api.simulate(context.scene)
-        for note in r["notes"]:
-            self.report({"WARNING"}, note)
-        return f"Simulated and baked {len(r['frames'])} shapes (frames {r['frames'][0]}..{r['frames'][-1]}) in {r['seconds']:.1f} s"
+def _simulate_done(context, r):
+    """(warnings, message) after Simulate."""
+    return list(r["notes"]), (f"Simulated and baked {len(r['frames'])} shapes (frames {r['frames'][0]}.."
+                              f"{r['frames'][-1]}) in {r['seconds']:.1f} s")
 
 
-class CLOTHFIT_OT_render_silhouettes(_ClothFitOperator, bpy.types.Operator):
-    """Render the cloth's silhouette from every rig camera at every capture time into a capture directory"""
-    bl_idname = "clothfit.render_silhouettes"
-    bl_label = "Render Silhouettes"
-    directory: StringProperty(name="Directory", default="", subtype="DIR_PATH", options={"SKIP_SAVE"},
-                              description="Capture directory (default: the scene's)")
+def _render_done(context, cap):
+    """(warnings, message) after Render Silhouettes."""
+    notes = []
+    dropped = cap.meta.get("distortion_dropped")
+    if dropped:
+        notes.append(f"{len(dropped)} camera(s) have lens distortion ({', '.join(dropped[:4])}"
+                     f"{', ...' if len(dropped) > 4 else ''}): Blender rendered pinhole images, so "
+                     f"the capture's cameras are written without distortion")
+    return notes, f"Rendered {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root}"
+
+
+MAX_LISTED_WARNINGS = 3
+
+
+def _extract_done(context, result):
+    """(warnings, message) after Extract Silhouettes."""
+    cap, rep = result
+    notes = list(rep.get("notes", []))
+    warnings = rep.get("warnings", [])
+    notes += [f"Extraction: {w}" for w in warnings[:MAX_LISTED_WARNINGS]]
+    if len(warnings) > MAX_LISTED_WARNINGS:
+        notes.append(f"Extraction: {len(warnings) - MAX_LISTED_WARNINGS} more warnings ({len(warnings)} in all) in "
+                     f"{cap.root}/extract_report.json")
+    notes += api.blender_view_cameras(cap.cameras)[1]
+    return notes, (f"Extracted {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root} "
+                   f"({context.scene.clothfit.extract_status})")
+
+
+class _StepsOperator(_ClothFitOperator):
+    """A long operator: modal when invoked from the UI (one step of the API's ``Steps`` per TIMER
+    event, progress bar, status text, Esc stops and keeps what is done: ``begin_steps`` /
+    ``steps_tick`` / ``end_steps``); ``execute`` (scripts, ``blender -b``) runs every step at once.
+    Subclasses give ``steps(context)`` (the one API call) and ``done`` (warnings, message)."""
+    done = None
+    _run = None
 
     def run(self, context):
         wm = context.window_manager
-        wm.progress_begin(0, 100)
+        window = getattr(context, "window", None) is not None
+        if window:
+            wm.progress_begin(0, 100)
         try:
-            cap = api.render_silhouettes(context.scene, self.directory or None,
-                                         progress=lambda f: wm.progress_update(int(100 * f)))
+            result = self.steps(context).run((lambda f: wm.progress_update(int(100 * f))) if window else None)
         finally:
-            wm.progress_end()
-        dropped = cap.meta.get("distortion_dropped")
-        if dropped:
-            self.report({"WARNING"}, f"{len(dropped)} camera(s) have lens distortion ({', '.join(dropped[:4])}"
-                                     f"{', ...' if len(dropped) > 4 else ''}): Blender rendered pinhole images, so "
-                                     f"the capture's cameras are written without distortion")
-        return f"Rendered {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root}"
+            if window:
+                wm.progress_end()
+        notes, msg = type(self).done(context, result)
+        for note in notes:
+            self.report({"WARNING"}, note)
+        return msg
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            self._run = begin_steps(context, self.steps(context), self.bl_label, type(self).done)
+        except Exception as e:  # noqa: BLE001 - bad input: reported before anything runs
+            self.report({"ERROR"}, failure_text(e))
+            return {"CANCELLED"}
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "Z" and (event.ctrl or event.oskey):
+            return {"RUNNING_MODAL"}   # no undo while the run holds the scene's data (undo reloads it)
+        state, level, msg = steps_tick(context, self._run, event.type)
+        if state == "RUNNING":
+            return {"RUNNING_MODAL"} if event.type in {"TIMER", "ESC"} else {"PASS_THROUGH"}
+        for note in self._run.notes:
+            self.report({"WARNING"}, note)
+        self.report({level}, msg)
+        return {"FINISHED"} if state == "FINISHED" else {"CANCELLED"}
+
+    def cancel(self, context):  # Blender ends the operator (file load, window closed)
+        if self._run is not None and not self._run.steps.finished:
+            steps_tick(context, self._run, "ESC")
+
+
+class CLOTHFIT_OT_simulate(_StepsOperator, bpy.types.Operator):
+    """Simulate the mass-spring cloth with the scene's parameters and bake it into shape keys (Esc stops
+    before the bake and leaves the scene as it was)"""
+    bl_idname = "clothfit.simulate"
+    bl_label = "Simulate"
+    done = _simulate_done
+
+    def steps(self, context):
+        return api.simulate_steps(context.scene, threaded=not bpy.app.background)
+
+
+class CLOTHFIT_OT_render_silhouettes(_StepsOperator, bpy.types.Operator):
+    """Render the cloth's silhouette from every rig camera at every capture time into a capture directory
+    (Esc stops and keeps the silhouettes rendered so far)"""
+    bl_idname = "clothfit.render_silhouettes"
+    bl_label = "Render Silhouettes"
+    # UNDO restores the scene's settings; the files written to the capture directory stay on disk
+    directory: StringProperty(name="Directory", default="", subtype="DIR_PATH", options={"SKIP_SAVE"},
+                              description="Capture directory (default: the scene's)")
+    done = _render_done
+
+    def steps(self, context):
+        return api.render_steps(context.scene, self.directory or None)
+
+
+class CLOTHFIT_OT_extract_silhouettes(_StepsOperator, bpy.types.Operator):
+    """Silhouettes from camera footage (background plates + frames per camera) into a capture, then load it
+    (Esc stops and writes the cameras extracted so far as a capture)"""
+    bl_idname = "clothfit.extract_silhouettes"
+    bl_label = "Extract Silhouettes"
+    done = _extract_done
+
+    def steps(self, context):
+        return api.extract_steps(context.scene)
+
+
+def _browse(op, context, path):
+    """Open Blender's file browser on ``path`` for ``op`` (menus: File > Import / Export); without a
+    window (background, scripts) run at once."""
+    if bpy.app.background or getattr(context, "window", None) is None:
+        return op.execute(context)
+    op.filepath = path
+    context.window_manager.fileselect_add(op)
+    return {"RUNNING_MODAL"}
+
+
+BROWSE = BoolProperty(name="File Browser", default=False, options={"HIDDEN", "SKIP_SAVE"},
+                      description="Pick the file in Blender's file browser first (the File menu's entries)")
 
 
 class CLOTHFIT_OT_load_capture(_ClothFitOperator, bpy.types.Operator):
@@ -119,45 +221,24 @@ class CLOTHFIT_OT_load_capture(_ClothFitOperator, bpy.types.Operator):
     bl_label = "Load Capture"
     directory: StringProperty(name="Directory", default="", subtype="DIR_PATH", options={"SKIP_SAVE"},
                               description="Capture directory (default: the scene's)")
+    filepath: StringProperty(name="Capture File", default="", subtype="FILE_PATH", options={"SKIP_SAVE"},
+                             description="The capture's capture.json (or its folder); default: the scene's Capture")
+    filter_glob: StringProperty(default="*.json", options={"HIDDEN"},
+                                description="Files the file browser lists")
+    browse: BROWSE
+
+    def invoke(self, context, event):
+        if not self.browse:
+            return self.execute(context)
+        p = context.scene.clothfit
+        start = os.path.join(bpy.path.abspath(p.capture_dir), "capture.json") if p.capture_dir else "capture.json"
+        return _browse(self, context, start)
 
     def run(self, context):
-        cap = api.load_capture(context.scene, self.directory or None)
+        cap = api.load_capture(context.scene, self.filepath or self.directory or None)
         for note in api.blender_view_cameras(cap.cameras)[1]:
             self.report({"WARNING"}, note)
         return f"Loaded {cap.root}: {cap.n_cameras} cameras, {cap.n_frames} frames"
-
-
-MAX_LISTED_WARNINGS = 3
-
-
-class CLOTHFIT_OT_extract_silhouettes(_ClothFitOperator, bpy.types.Operator):
-    """Silhouettes from camera footage (background plates + frames per camera) into a capture, then load it"""
-    bl_idname = "clothfit.extract_silhouettes"
-    bl_label = "Extract Silhouettes"
-
-    def run(self, context):
-        wm = context.window_manager
-        window = getattr(context, "window", None) is not None
-        if window:
-            wm.progress_begin(0, 100)
-        try:
-            cap, rep = api.extract_silhouettes(
-                context.scene, progress=(lambda f: wm.progress_update(int(100 * f))) if window else None)
-        finally:
-            if window:
-                wm.progress_end()
-        for note in rep.get("notes", []):
-            self.report({"WARNING"}, note)
-        warnings = rep.get("warnings", [])
-        for w in warnings[:MAX_LISTED_WARNINGS]:
-            self.report({"WARNING"}, f"Extraction: {w}")
-        if len(warnings) > MAX_LISTED_WARNINGS:
-            self.report({"WARNING"}, f"Extraction: {len(warnings) - MAX_LISTED_WARNINGS} more warnings "
-                                     f"({len(warnings)} in all) in {cap.root}/extract_report.json")
-        for note in api.blender_view_cameras(cap.cameras)[1]:
-            self.report({"WARNING"}, note)
-        return (f"Extracted {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root} "
-                f"({context.scene.clothfit.extract_status})")
 
 
 class CLOTHFIT_OT_import_cameras(_ClothFitOperator, bpy.types.Operator):
@@ -165,7 +246,16 @@ class CLOTHFIT_OT_import_cameras(_ClothFitOperator, bpy.types.Operator):
     bl_idname = "clothfit.import_cameras"
     bl_label = "Import Cameras"
     filepath: StringProperty(name="File", default="", subtype="FILE_PATH", options={"SKIP_SAVE"},
-                             description="Calibration file or folder (default: the scene's Calibration)")
+                             description="Calibration file or folder (default: the scene's Calibration); in the "
+                                         "file browser, a folder (OpenCV per camera, COLMAP) is picked by entering it")
+    filter_glob: StringProperty(default="*.yml;*.yaml;*.json;*.xml;*.txt", options={"HIDDEN"},
+                                description="Files the file browser lists")
+    browse: BROWSE
+
+    def invoke(self, context, event):
+        if not self.browse:
+            return self.execute(context)
+        return _browse(self, context, bpy.path.abspath(context.scene.clothfit.cameras_file))
 
     def run(self, context):
         cams, notes = api.import_cameras(context.scene, self.filepath or None)
@@ -181,8 +271,19 @@ class CLOTHFIT_OT_export_cameras(_ClothFitOperator, bpy.types.Operator):
     bl_label = "Export Cameras"
     filepath: StringProperty(name="File", default="", subtype="FILE_PATH", options={"SKIP_SAVE"},
                              description="Destination (default: the scene's Export To)")
-    file_format: EnumProperty(name="Format", items=[("SCENE", "Scene Setting", "The scene's export format")] + [
-        (k, k.replace("_", " ").title(), "") for k in api.EXPORT_FORMATS], default="SCENE", options={"SKIP_SAVE"})
+    file_format: EnumProperty(name="Format", items=[("SCENE", "Scene Setting", "The scene's export format")]
+                              + CAMERA_FORMATS, default="SCENE", options={"SKIP_SAVE"},
+                              description="File format of the exported cameras")
+    check_existing: BoolProperty(default=True, options={"HIDDEN", "SKIP_SAVE"},
+                                 description="The file browser warns before replacing a file")
+    browse: BROWSE
+
+    def invoke(self, context, event):
+        if not self.browse:
+            return self.execute(context)
+        p = context.scene.clothfit
+        return _browse(self, context, bpy.path.abspath(p.cameras_export_path) if p.cameras_export_path
+                       else "calibration.yml")
 
     def run(self, context):
         fmt = None if self.file_format == "SCENE" else self.file_format
@@ -214,7 +315,8 @@ class CLOTHFIT_OT_remove_handle(_ClothFitOperator, bpy.types.Operator):
     bl_label = "Remove Handle"
     index: IntProperty(name="Index", default=-1, min=-1, options={"SKIP_SAVE"},
                        description="Handle to remove (0-based; -1: the active one)")
-    delete_empty: BoolProperty(name="Delete Empty", default=False, options={"SKIP_SAVE"})
+    delete_empty: BoolProperty(name="Delete Empty", default=False, options={"SKIP_SAVE"},
+                              description="Also delete the handle's empty")
 
     def run(self, context):
         api.remove_handle(context.scene, self.index, self.delete_empty)
@@ -259,6 +361,83 @@ class CLOTHFIT_OT_overlays(_ClothFitOperator, bpy.types.Operator):
                 f"{s['mean_E_sil_pct']:.3f} %, contact sheet {s['contact_sheet']}")
 
 
+# ======================================================= modal long operators
+
+class StepsRun:
+    """One long operator's run in the UI: the API's ``Steps``, its timer and what it reports."""
+
+    def __init__(self, steps, label, done=None):
+        self.steps, self.label, self.done = steps, label, done
+        self.timer = None
+        self.notes = []          # warnings to report with the final message
+
+    def status_text(self):
+        pct = 100.0 * self.steps.fraction
+        return f"{self.label}: {self.steps.text} ({pct:.0f} %) | Esc stops (keeps what is done)"
+
+
+def begin_steps(context, steps, label, done=None):
+    """Start a long operator for the UI. Its first step runs at once (it reads the scene and checks
+    the input, so bad input fails here, before anything is written); then progress bar, status
+    text, timer. Returns the ``StepsRun``. ``done(context, result) -> (warnings, message)``."""
+    run = StepsRun(steps, label, done)
+    steps.step()
+    _ui_begin(context, run, run.status_text())
+    return run
+
+
+def steps_tick(context, run, event_type):
+    """Handle one event of a long operator: TIMER does one step, ESC stops and keeps what is done.
+    Returns (state, level, message), state RUNNING / FINISHED / CANCELLED; warnings of a finished
+    run are in ``run.notes``."""
+    if event_type == "ESC":
+        kept = run.steps.cancel()
+        end_steps(context, run)
+        return "CANCELLED", "WARNING", f"{run.label} stopped: {kept}"
+    if event_type != "TIMER":
+        return "RUNNING", None, None
+    try:
+        more = run.steps.step()
+        if not more and run.done is not None:
+            run.notes, msg = run.done(context, run.steps.result)
+        else:
+            msg = f"{run.label} finished"
+    except Exception as e:  # noqa: BLE001 - reported; what the steps wrote so far stays
+        end_steps(context, run)
+        kept = run.steps.kept
+        return "CANCELLED", "ERROR", f"{run.label} failed: {failure_text(e)}" + (f" ({kept})" if kept else "")
+    if more:
+        context.window_manager.progress_update(int(1000 * run.steps.fraction))
+        _status(context, run.status_text())
+        return "RUNNING", None, None
+    end_steps(context, run)
+    return "FINISHED", "INFO", msg
+
+
+def end_steps(context, run):
+    """The one finish routine of a long operator: timer, progress bar, status text, redraw."""
+    _ui_end(context, run)
+    _redraw(context)
+
+
+def _ui_begin(context, run, text):
+    """Progress bar, timer (``run.timer``) and status text of a modal run (fit or long operator)."""
+    wm = context.window_manager
+    wm.progress_begin(0, 1000)
+    if context.window is not None:
+        run.timer = wm.event_timer_add(0.02, window=context.window)
+    _status(context, text)
+
+
+def _ui_end(context, run):
+    wm = context.window_manager
+    if run.timer is not None:
+        wm.event_timer_remove(run.timer)
+        run.timer = None
+    wm.progress_end()
+    _status(context, None)
+
+
 # ============================================================= the modal fit
 
 def begin_modal(context, threaded=True):
@@ -268,11 +447,7 @@ def begin_modal(context, threaded=True):
     touched on the main thread); otherwise one generation runs inside each TIMER event."""
     sess = api.start_fit(context.scene)
     sess.threaded = threaded
-    wm = context.window_manager
-    wm.progress_begin(0, 1000)
-    if context.window is not None:
-        sess.timer = wm.event_timer_add(0.02, window=context.window)
-    _status(context, sess.status_text())
+    _ui_begin(context, sess, sess.status_text())
     return sess
 
 
@@ -306,12 +481,7 @@ def modal_tick(context, session, event_type):
 
 def end_modal(context, session, cancelled):
     """The one finish routine: timer, progress bar, status text, result file, panel."""
-    wm = context.window_manager
-    if session.timer is not None:
-        wm.event_timer_remove(session.timer)
-        session.timer = None
-    wm.progress_end()
-    _status(context, None)
+    _ui_end(context, session)
     out = api.finish_fit(session, cancelled)
     _redraw(context)
     return out
@@ -330,7 +500,9 @@ class CLOTHFIT_OT_fit(bpy.types.Operator):
     """Fit k, l, d to the capture's silhouettes (one generation per tick; Esc cancels and keeps the best)"""
     bl_idname = "clothfit.fit"
     bl_label = "Fit"
-    bl_options = {"REGISTER"}
+    # UNDO takes the scene back to before the fit (its live status and best parameters); the result
+    # file written into the capture directory stays on disk
+    bl_options = {"REGISTER", "UNDO"}
 
     _session = None
 

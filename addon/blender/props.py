@@ -74,46 +74,52 @@ CAMERA_FORMATS = [("OPENCV", "OpenCV YAML", "One OpenCV FileStorage file (.yml/.
 
 
 class ClothFitProperties(bpy.types.PropertyGroup):
+    """Cloth Fit's settings and results for this scene"""
     # ------------------------------------------------------------------ rig
     rig_source: EnumProperty(name="Rig", items=[
         ("PRESET", "Preset", "A camera rig file from rigs/ (or a path to a cameras JSON)"),
-        ("RING", "Ring", "A parametric ring of cameras around the cloth")], default="PRESET")
-    rig_preset: StringProperty(name="Preset", default=D.DEFAULT_RIG,
+        ("RING", "Ring", "A parametric ring of cameras around the cloth")], default="PRESET",
+        description="Where Build Rig takes its cameras from")
+    rig_preset: StringProperty(name="Preset", default=D.DEFAULT_RIG, subtype="FILE_PATH", options=PATH_OPTIONS,
                                description="Rig preset name in rigs/ (lab18, ring8) or a path to a cameras JSON")
     cameras_file: StringProperty(name="Calibration", subtype="FILE_PATH", options=PATH_OPTIONS, default="",
                                  description="Calibrated cameras to import: OpenCV FileStorage YAML/JSON/XML file, "
                                              "a folder of them, or a COLMAP text model folder")
     cameras_export_path: StringProperty(name="Export To", subtype="FILE_PATH", options=PATH_OPTIONS, default="",
                                         description="Where Export Cameras writes: a .yml/.json/.xml file or a folder")
-    cameras_export_format: EnumProperty(name="Format", items=CAMERA_FORMATS, default="OPENCV")
+    cameras_export_format: EnumProperty(name="Format", items=CAMERA_FORMATS, default="OPENCV",
+                                        description="File format Export Cameras writes")
     rig_cameras_json: StringProperty(name="Exact Cameras", default="",
                                      description="The rig's cameras as imported or loaded (OpenCV K, R, t, lens "
                                                  "distortion; JSON): what export and rendering use while the "
                                                  "Blender cameras still show them")
-    ring_cameras: IntProperty(name="Cameras", default=8, min=1, max=64)
-    ring_elevation: FloatProperty(name="Elevation", default=25.0, min=-89.0, max=89.0, description="Degrees")
-    ring_distance: FloatProperty(name="Distance", default=0.5, min=0.01, unit="LENGTH")
-    ring_target_z: FloatProperty(name="Target Height", default=0.06, unit="LENGTH")
-    ring_fx: FloatProperty(name="Focal (px)", default=1000.0, min=1.0)
-    ring_width: IntProperty(name="Width", default=D.IMAGE_W, min=4, max=16384)
-    ring_height: IntProperty(name="Height", default=D.IMAGE_H, min=4, max=16384)
+    ring_cameras: IntProperty(name="Cameras", default=8, min=1, max=64, description="Cameras on the ring")
+    ring_elevation: FloatProperty(name="Elevation", default=25.0, min=-89.0, max=89.0, description="Elevation of the ring above the target [degrees]")
+    ring_distance: FloatProperty(name="Distance", default=0.5, min=0.01, unit="LENGTH",
+                                 description="Distance of every camera from the target")
+    ring_target_z: FloatProperty(name="Target Height", default=0.06, unit="LENGTH",
+                                 description="Height of the point the cameras look at")
+    ring_fx: FloatProperty(name="Focal (px)", default=1000.0, min=1.0, description="Focal length in pixels (fx = fy)")
+    ring_width: IntProperty(name="Width", default=D.IMAGE_W, min=4, max=16384, description="Image width [px]")
+    ring_height: IntProperty(name="Height", default=D.IMAGE_H, min=4, max=16384, description="Image height [px]")
 
     # ---------------------------------------------------------------- cloth
     cloth_nx: IntProperty(name="Grid", default=D.GRID_N, min=2, max=128, description="Point masses per side")
-    cloth_side: FloatProperty(name="Side", default=D.CLOTH_SIDE, min=1e-4, unit="LENGTH", precision=4)
+    cloth_side: FloatProperty(name="Side", default=D.CLOTH_SIDE, min=1e-4, unit="LENGTH", precision=4,
+                              description="Side length of the square cloth")
     cloth_height: FloatProperty(name="Height", default=D.CLOTH_HEIGHT, unit="LENGTH", precision=4,
                                 description="Height of the held corners")
     scenario_source: EnumProperty(name="Manipulation", items=[
         ("SETTINGS", "Paper", "All four corners held, one released at t = 0 (the settings here)"),
         ("CAPTURE", "Capture", "The loaded capture's handles, settling and cloth (set by Load Capture)"),
         ("EMPTIES", "Empties", "Grid vertices follow the linked empties (keyframe them to move the cloth)")],
-        default="SETTINGS")
+        default="SETTINGS", description="How the cloth is held and moved")
     released_corner: IntProperty(name="Released Corner", default=D.RELEASED_CORNER, min=0, max=3,
                                  description="Corner released at t = 0 (0..3; the other three stay held)")
-    cloth_object: PointerProperty(name="Cloth", type=bpy.types.Object)
+    cloth_object: PointerProperty(name="Cloth", type=bpy.types.Object, description="The cloth mesh Build Cloth made")
     handles: CollectionProperty(name="Handles", type=ClothFitHandleLink,
                                 description="Empties manipulation: grid vertices linked to empties")
-    handles_index: IntProperty(name="Active Handle", default=0, min=0)
+    handles_index: IntProperty(name="Active Handle", default=0, min=0, description="The handle selected in the list")
     new_handle_row: IntProperty(name="Row", default=0, min=0, max=1023,
                                 description="Grid row of the vertex Add Handle Empty links")
     new_handle_column: IntProperty(name="Column", default=0, min=0, max=1023,
@@ -138,7 +144,8 @@ class ClothFitProperties(bpy.types.PropertyGroup):
                                 description="Capture directory (capture.json, cameras.json, sil/...)")
     noise: FloatProperty(name="Noise", default=D.NOISE_FRACTION, min=0.0, max=1.0, precision=3,
                          description="Fraction of boundary pixels flipped in rendered silhouettes")
-    noise_seed: IntProperty(name="Noise Seed", default=0, min=0)
+    noise_seed: IntProperty(name="Noise Seed", default=0, min=0,
+                            description="Seed of the boundary noise (same seed, same silhouettes)")
     render_engine: EnumProperty(name="Engine", items=[
         ("WORKBENCH", "Workbench", "Flat Workbench render, anti-aliasing off (occluders drawn black = holdout)"),
         ("EEVEE", "Eevee", "Eevee, one sample, zero pixel filter (occluders as real holdouts)")],
@@ -148,7 +155,7 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     footage_kind: EnumProperty(name="Footage", items=[
         ("IMAGES", "Images", "Per camera a folder with background plates and the frames"),
         ("VIDEOS", "Videos", "One video per camera (<camera>.mp4|mov|mkv|avi), plates, a sync file")],
-        default="IMAGES")
+        default="IMAGES", description="What the footage folder holds")
     footage_dir: StringProperty(name="Footage", subtype="DIR_PATH", options=PATH_OPTIONS, default="",
                                 description="Footage folder: <camera>/background*.png and frames per camera, "
                                             "optional footage.json and calibration; for videos: the videos folder")
@@ -169,7 +176,8 @@ class ClothFitProperties(bpy.types.PropertyGroup):
                                   description="Frame times of the footage frames (empty: footage.json's)")
     extract_capture_dir: StringProperty(name="Output", subtype="DIR_PATH", options=PATH_OPTIONS, default="",
                                         description="Capture directory to write (empty: the Capture directory above)")
-    extract_threshold_mode: EnumProperty(name="Threshold", items=THRESHOLD_MODES, default="AUTO")
+    extract_threshold_mode: EnumProperty(name="Threshold", items=THRESHOLD_MODES, default="AUTO",
+                                         description="How each camera's foreground threshold is chosen")
     extract_threshold: FloatProperty(name="Value", default=10.0, min=0.01, max=255.0, precision=2,
                                      description="Fixed threshold (difference units, 0..255 scale)")
     extract_camera_thresholds: StringProperty(name="Per Camera", default="",
@@ -184,7 +192,7 @@ class ClothFitProperties(bpy.types.PropertyGroup):
                                                   "shadow (1 = no shadow model)")
     extract_debug: BoolProperty(name="Debug Images", default=False,
                                 description="Write images of every extraction step into <output>/debug")
-    extract_status: StringProperty(name="Extraction", default="")
+    extract_status: StringProperty(name="Extraction", default="", description="Summary of the last extraction")
     view_frame: IntProperty(name="Show Frame", default=0, min=0, update=_view_frame_update,
                             description="Capture frame whose silhouettes the cameras show as background")
 
@@ -193,46 +201,59 @@ class ClothFitProperties(bpy.types.PropertyGroup):
                                description="Cameras used for fitting (spread around the rig); the rest are held out")
     train_times: EnumProperty(name="Training Times", items=[
         ("PAPER", "Paper", "t = 0.10, 0.20, ... (those present in the capture)"),
-        ("ALL", "All", "Every frame of the capture")], default="PAPER")
-    optimizer: EnumProperty(name="Optimiser", items=OPTIMIZERS, default=D.DEFAULT_OPTIMIZER)
-    seed: IntProperty(name="Seed", default=0, min=0)
+        ("ALL", "All", "Every frame of the capture")], default="PAPER",
+        description="Capture times the fit compares")
+    optimizer: EnumProperty(name="Optimiser", items=OPTIMIZERS, default=D.DEFAULT_OPTIMIZER,
+                           description="Search method of the fit")
+    seed: IntProperty(name="Seed", default=0, min=0, description="Seed of the optimiser (same seed, same fit)")
     max_evaluations: IntProperty(name="Budget", default=D.FIT_EVALUATIONS, min=1,
                                  description="Maximum number of model evaluations")
-    fit_resolution: EnumProperty(name="Resolution", items=RESOLUTIONS, default="FULL")
+    fit_resolution: EnumProperty(name="Resolution", items=RESOLUTIONS, default="FULL",
+                                description="Image size the fit compares silhouettes at (smaller: faster)")
     fit_model: EnumProperty(name="Model", items=[
         ("PAPER", "Paper Sheet", "The paper's mass-spring sheet: m, k, l, d"),
         ("BLENDER", "Blender Cloth", "Blender's own cloth solver: fits Cloth modifier settings for the scene's "
-                                     "frame rate, applied with Apply Blender Cloth")], default="PAPER")
+                                     "frame rate, applied with Apply Blender Cloth")], default="PAPER",
+        description="The cloth model whose parameters the fit finds")
     fit_quality: IntProperty(name="Quality", default=5, min=1, max=80,
                              description="Blender model: the Cloth modifier's quality (solver steps per frame)")
     fit_bending_model: EnumProperty(name="Bending", items=[
         ("ANGULAR", "Angular", "Blender's default bending model"),
-        ("LINEAR", "Linear", "Blender's linear bending model")], default="ANGULAR")
+        ("LINEAR", "Linear", "Blender's linear bending model")], default="ANGULAR",
+        description="Blender model: the Cloth modifier's bending model")
     fit_cloth_mass: FloatProperty(name="Cloth Mass", default=0.0, min=0.0, unit="MASS", precision=6,
                                   description="Weighed cloth mass (0 = the capture's); fixes m, since only "
                                               "k/m, d/m and l are observable")
 
     # --------------------------------------------------- live status/results
-    fit_running: BoolProperty(name="Running", default=False)
-    fit_progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR")
-    fit_generation: IntProperty(name="Generation", default=0)
-    fit_evaluations: IntProperty(name="Evaluations", default=0)
-    fit_best_error: FloatProperty(name="Best E_all", default=0.0, precision=5)
-    fit_best_pct: FloatProperty(name="Mean E_sil %", default=0.0, precision=4)
-    fit_has_result: BoolProperty(name="Has Result", default=False)
-    fit_best_m: FloatProperty(name="m", default=0.0, precision=6, unit="MASS")
-    fit_best_k: FloatProperty(name="k", default=0.0, precision=4)
-    fit_best_l: FloatProperty(name="l", default=0.0, precision=5, unit="LENGTH")
-    fit_best_d: FloatProperty(name="d", default=0.0, precision=6)
+    fit_running: BoolProperty(name="Running", default=False, description="A fit is running in this scene")
+    fit_progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
+                                 description="Share of the fit's evaluation budget used")
+    fit_generation: IntProperty(name="Generation", default=0, description="Optimiser generations done")
+    fit_evaluations: IntProperty(name="Evaluations", default=0, description="Model evaluations done")
+    fit_best_error: FloatProperty(name="Best E_all", default=0.0, precision=5,
+                                   description="Best total silhouette error so far (sum over the training images)")
+    fit_best_pct: FloatProperty(name="Mean E_sil %", default=0.0, precision=4,
+                                 description="Best mean silhouette error per image so far [%]")
+    fit_has_result: BoolProperty(name="Has Result", default=False, description="The fit found parameters")
+    fit_best_m: FloatProperty(name="m", default=0.0, precision=6, unit="MASS", description="Fitted point mass [kg]")
+    fit_best_k: FloatProperty(name="k", default=0.0, precision=4, description="Fitted spring coefficient [N/m]")
+    fit_best_l: FloatProperty(name="l", default=0.0, precision=5, unit="LENGTH",
+                               description="Fitted natural spring length")
+    fit_best_d: FloatProperty(name="d", default=0.0, precision=6, description="Fitted damping [N s/m]")
     fit_best_blender: StringProperty(name="Fitted Blender Cloth", default="",
                                      description="ClothSettings of the best Blender-model fit (JSON)")
-    fit_status: StringProperty(name="Status", default="")
-    result_path: StringProperty(name="Result", subtype="FILE_PATH", options=PATH_OPTIONS, default="")
+    fit_status: StringProperty(name="Status", default="", description="What the fit is doing or how it ended")
+    result_path: StringProperty(name="Result", subtype="FILE_PATH", options=PATH_OPTIONS, default="",
+                                description="The fit's result JSON (Apply Fit reads it)")
     overlay_source: EnumProperty(name="Model", items=[
         ("BLENDER", "Blender", "Model silhouettes rendered by Blender from the baked cloth"),
-        ("CORE", "Core", "Model silhouettes from the core rasteriser (fast)")], default="BLENDER")
-    overlay_dir: StringProperty(name="Overlays", subtype="DIR_PATH", options=PATH_OPTIONS, default="")
-    overlay_error: FloatProperty(name="Overlay E_sil %", default=0.0, precision=4)
+        ("CORE", "Core", "Model silhouettes from the core rasteriser (fast)")], default="BLENDER",
+        description="Where Overlays takes the model's silhouettes from")
+    overlay_dir: StringProperty(name="Overlays", subtype="DIR_PATH", options=PATH_OPTIONS, default="",
+                                description="Folder of the last overlays")
+    overlay_error: FloatProperty(name="Overlay E_sil %", default=0.0, precision=4,
+                                  description="Mean silhouette error of the last overlays [%]")
 
 
 CLASSES = (ClothFitHandleLink, ClothFitProperties)

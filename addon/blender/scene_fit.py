@@ -31,14 +31,22 @@ PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath
 class SceneFitSession:
     """A fit of ``obj``'s Cloth settings running in its own process."""
 
-    def __init__(self, scene, obj, capture_dir, budget, workers=2, frame_zero=None, out_dir=None, extra=()):
+    def __init__(self, scene, obj, capture_dir, budget, workers=2, frame_zero=None, out_dir=None, extra=(),
+                 address=None, cache_dir=None):
+        """``workers``: None = the fit's default (the cores); ``address``: a running Ray cluster
+        (checked here first: an unreachable one is a one-line error before anything is written);
+        ``out_dir``: the working folder, default a new one in ``cache_dir`` (default: the system's
+        temporary folder)."""
         if obj is None or cloth_modifier(obj) is None:
             raise ClothFitError(f"object '{getattr(obj, 'name', None)}' has no Cloth modifier: select the cloth")
         capture_dir = bpy.path.abspath(capture_dir or "")
         if not os.path.isfile(os.path.join(capture_dir, "capture.json")):
             raise ClothFitError(f"capture {capture_dir}: no capture.json there (set the capture directory)")
+        if address:        # only connect (a socket): never start a cluster from Blender's process
+            from ..farm.executors import check_address
+            check_address(address)
         self.obj_name = obj.name
-        self.out_dir = out_dir or tempfile.mkdtemp(prefix="clothfit_scene_fit_")
+        self.out_dir = out_dir or tempfile.mkdtemp(prefix="clothfit_scene_fit_", dir=cache_dir)
         os.makedirs(self.out_dir, exist_ok=True)
         self.blend = os.path.join(self.out_dir, "scene.blend")
         bpy.ops.wm.save_as_mainfile(filepath=self.blend, copy=True)
@@ -49,8 +57,12 @@ class SceneFitSession:
         f0 = scene.frame_start if frame_zero is None else frame_zero
         cmd = [os.environ.get("CLOTHFIT_PYTHON") or sys.executable, "-m", "addon", "fit", capture_dir,
                "--backend", "blender", "--blend", self.blend, "--object", obj.name, "--frame-zero", str(f0),
-               "--workers", str(int(workers)), "--max-evaluations", str(self.budget), "--out", self.result_path,
-               "--quiet"] + list(extra)
+               "--max-evaluations", str(self.budget), "--out", self.result_path, "--quiet"] + list(extra)
+        if workers:
+            cmd += ["--workers", str(int(workers))]
+        if address:
+            cmd += ["--address", address]
+        self.cmd = cmd
         env = dict(os.environ)
         env["PYTHONPATH"] = PACKAGE_PARENT + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self.log = open(self.log_path, "w")
@@ -134,19 +146,26 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
     started outside Blender's UI (Esc stops and keeps the best)"""
     bl_idname = "clothfit.fit_scene_cloth"
     bl_label = "Fit This Cloth's Settings"
-    bl_options = {"REGISTER"}
+    # UNDO: what the fit changes in the .blend (the object's result path) is undone; the working files
+    # it writes (the .blend copy, the result, the log in the cache folder) stay on disk
+    bl_options = {"REGISTER", "UNDO"}
 
-    workers: IntProperty(name="Workers", default=2, min=1, max=256)
+    workers: IntProperty(name="Workers", default=0, min=0, max=256,
+                         description="Worker processes (0: the add-on preferences' Workers)")
     frame_zero: FloatProperty(name="Frame of t = 0", default=-1.0,
-                              description="scene frame of capture time 0 (-1: the scene's start frame)")
+                              description="Scene frame of capture time 0 (-1: the scene's start frame)")
 
     _session = None
     _timer = None
 
     def _start(self, context):
+        from .prefs import cache_folder, preferences
         p = context.scene.clothfit
+        prefs = preferences(context)
         fz = None if self.frame_zero < 0 else self.frame_zero
-        return SceneFitSession(context.scene, context.active_object, p.capture_dir, p.max_evaluations, self.workers, fz)
+        return SceneFitSession(context.scene, context.active_object, p.capture_dir, p.max_evaluations,
+                               self.workers or prefs.workers or None, fz, address=prefs.ray_address.strip() or None,
+                               cache_dir=cache_folder(context))
 
     def _report_result(self, res):
         self.report({"INFO"}, f"Fitted {res.get('evaluations')} candidates: E_sil {res.get('best_E_sil_mean_pct') or 0:.3f} %"

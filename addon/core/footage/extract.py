@@ -600,7 +600,7 @@ def _resolve_scenario(scenario, frame_times, where):
 
 def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=None, scenario=None,
                     cloth_mass=None, options: ExtractOptions | None = None, camera_names=None,
-                    progress=None, **option_overrides) -> dict:
+                    progress=None, should_stop=None, **option_overrides) -> dict:
     """Extract every camera's silhouettes from a footage folder and write a capture.
 
     ``cameras``: a calibration path (anything ``calib_io.import_cameras`` reads) or a list of
@@ -610,7 +610,10 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
     capture.json works); default ``footage.json``'s, else the paper's scenario (with a warning).
     ``cloth_mass`` [kg]: default ``footage.json``'s. ``camera_names``: extract only these.
     ``options`` or keyword overrides of :class:`ExtractOptions` fields. ``progress(i, n, name)``
-    is called per camera. Returns the report (also written to ``out_dir/extract_report.json``):
+    is called per camera. ``should_stop()`` is asked before each camera: True stops there, and the
+    capture holds the cameras done so far (``report["stopped"]``, a warning; before the first
+    camera it is a ClothFitError, nothing written).
+    Returns the report (also written to ``out_dir/extract_report.json``):
     per camera threshold and statistics, per frame area, all warnings.
     Raises one ClothFitError listing every bad file when anything is wrong; nothing is written then.
     """
@@ -682,6 +685,8 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
     all_masks = []
     out_cameras = []
     for ci, cam in enumerate(cameras):
+        if _stop(should_stop, ci, len(cameras), report, warnings):
+            break
         if progress:
             progress(ci, len(cameras), cam.name)
         folder = os.path.join(footage_dir, cam.name)
@@ -731,6 +736,18 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
                          errors, warnings)
 
 
+def _stop(should_stop, ci, n, report, warnings) -> bool:
+    """Asked before camera ``ci``: stop here? Then the capture holds cameras 0..ci-1 (none: an error,
+    nothing written)."""
+    if should_stop is None or not should_stop():
+        return False
+    if ci == 0:
+        raise ClothFitError("extraction stopped before the first camera finished: nothing written")
+    report["stopped"] = {"cameras_done": ci, "cameras": n}
+    warnings.append(f"stopped after {ci} of {n} cameras: the capture holds only those")
+    return True
+
+
 def _extract_one(cam, bgs, frames, names, opts, report, errors, warnings):
     """Silhouettes of one camera from its loaded images (+ undistortion); problems go to ``errors``."""
     from . import calib_io
@@ -759,6 +776,8 @@ def _write_result(out_dir, source, out_cameras, scen, all_masks, cloth_mass, cap
                             f"{'s' if len(errors) > 1 else ''}):\n  " + "\n  ".join(listed) + more)
     cap_meta["extraction"] = {"options": {k: v for k, v in asdict(opts).items() if k != "debug_dir"},
                               "thresholds": {n: r["threshold"] for n, r in report["cameras"].items()}}
+    if "stopped" in report:
+        cap_meta["extraction"]["stopped"] = report["stopped"]
     write_capture(out_dir, out_cameras, scen, all_masks, cloth_mass=cloth_mass, meta=cap_meta,
                   allow_empty=opts.allow_empty)
     atomic_json(os.path.join(out_dir, REPORT_JSON), report)
@@ -767,11 +786,12 @@ def _write_result(out_dir, source, out_cameras, scen, all_masks, cloth_mass, cap
 
 def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras, frame_times, scenario=None,
                    cloth_mass=None, options: ExtractOptions | None = None, camera_names=None, progress=None,
-                   **option_overrides) -> dict:
+                   should_stop=None, **option_overrides) -> dict:
     """Silhouettes from one video per camera (``footage/video.py``: layout, timing rule) -> a capture.
 
     ``sync``: a sync file path or ``{camera: video time at t = 0}``; ``cameras``: a calibration path or
-    Camera list; ``frame_times``: the capture times; ``progress(camera_index, n_cameras, text)``.
+    Camera list; ``frame_times``: the capture times; ``progress(camera_index, n_cameras, text)``;
+    ``should_stop`` as in :func:`extract_capture`.
     Video problems (no video, unreadable, sync or frame time outside it, wrong size) raise at once,
     one line naming the file; extraction problems of all cameras are reported together as in
     :func:`extract_capture`. Returns the report (also ``out_dir/extract_report.json``).
@@ -821,6 +841,8 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
               "cameras": {}, "video": {}}
     all_masks, out_cameras = [], []
     for ci, cam in enumerate(cameras):
+        if _stop(should_stop, ci, len(cameras), report, warnings):
+            break
         if cam.name not in sync:
             raise ClothFitError(f"{sync_path}: no time for camera '{cam.name}'")
         if progress:
