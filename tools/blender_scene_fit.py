@@ -118,9 +118,15 @@ def main(argv=None):
         cmd += ["--init", a.init]
     t0 = time.time()
     subprocess.run(cmd, check=True, cwd=ROOT)
-    print(f"fit: {time.time() - t0:.1f} s wall (Ray start-up included)")
+    wall = time.time() - t0
+    print(f"fit: {wall:.1f} s wall (Ray start-up included)")
     if a.cmd == "all":
         _child("replay", a)
+        with open(P["replay"]) as f:
+            summary = {"fit_wall_s": wall, "workers": a.workers, "budget": a.budget, "population": a.population,
+                       "resolution": a.resolution, "grid": a.grid, "replay": json.load(f)}
+        with open(os.path.join(a.out, "summary.json"), "w") as f:
+            json.dump(summary, f, indent=1)
 
 
 if __name__ == "__main__":
