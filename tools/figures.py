@@ -104,11 +104,13 @@ def source_output(name):
 
 
 def git_state():
-    """(short commit, dirty) of the repository: dirty when addon/ or tools/ have uncommitted changes."""
+    """(short commit, dirty) of the repository: dirty when the code (addon/, tools/, demo_blend/, rigs/;
+    not these two docs tools) has uncommitted changes."""
     try:
         commit = subprocess.run(["git", "rev-parse", "--short=7", "HEAD"], cwd=ROOT, capture_output=True,
                                 text=True, check=True).stdout.strip()
-        st = subprocess.run(["git", "status", "--porcelain", "--", "addon", "tools", "demo_blend", "rigs"],
+        st = subprocess.run(["git", "status", "--porcelain", "--", "addon", "tools", "demo_blend", "rigs",
+                             ":!tools/figures.py", ":!tools/docs_check.py"],
                             cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown", True
@@ -157,11 +159,11 @@ def run_source(name, out_path=None, log=None):
     out_path = out_path or source_output(name)
     os.makedirs(os.path.dirname(out_path), exist_ok=True)
     argv = source_argv(name, out_path)
-    started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     l0 = _load1()
     t0 = time.perf_counter()
     print(f"[figures] {name}: {_fmt_argv(argv)}", flush=True)
-    r = subprocess.run(argv, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT if log else None)
+    r = subprocess.run(argv, check=False, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT if log else None)
     seconds = time.perf_counter() - t0
     if r.returncode != 0:
         raise SystemExit(f"error: {name}: `{_fmt_argv(argv)}` exited with {r.returncode}")
@@ -178,7 +180,7 @@ def record(name, from_file=None):
         out_path = os.path.abspath(from_file)
         argv = source_argv(name, os.path.relpath(out_path, ROOT))
         seconds = l0 = l1 = None
-        started = datetime.datetime.fromtimestamp(os.path.getmtime(out_path), datetime.timezone.utc).strftime(
+        started = datetime.datetime.fromtimestamp(os.path.getmtime(out_path), datetime.UTC).strftime(
             "%Y-%m-%dT%H:%M:%SZ")
         meta = out_path + ".run.json"       # written by `tools/figures.py run`: the run's own commit
         if os.path.isfile(meta):

@@ -15,10 +15,10 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from addon.core import defaults as D  # noqa: E402
-from addon.core.physics.paper import Params  # noqa: E402
+from addon.core import defaults as D
+from addon.core.physics.models import simulate
+from addon.core.physics.paper import Params
 from addon.core.physics.scenario import paper_scenario
-from addon.core.physics.models import simulate  # noqa: E402
 
 
 def max_move(sc, base, rel):
