@@ -126,5 +126,7 @@ def main(argv=None):
     rows = run(a.grid, a.settle, a.after, a.fps)
     if a.json:
         from ..core.safeio import atomic_json
-        atomic_json(a.json, {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps, "cases": rows})
+        import bpy
+        atomic_json(a.json, {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps,
+                             "blender": bpy.app.version_string, "cases": rows})
     return 0
