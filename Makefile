@@ -4,12 +4,16 @@
 #   make test   - the whole test suite (pure core + Blender layer through the bpy module)
 #   make bench  - speed figures (out/bench.json)
 #   make paper  - the full paper protocol (Table 1, Fig. 8, Table 2, optimisers; out/paper.json)
+#   make docs-check   - every figure in README.md and docs/*.md against its recording in docs/figures/ (in make test)
+#   make docs-images  - run the demo again, record its figures (docs/figures/demo.json), copy its pictures to docs/img
+#   make docs-refresh - re-record every cheap source (demo, identifiability, ...) and regenerate the generated blocks
+#   make docs-rerun   - run the cheap sources again and compare with their recordings (nothing written)
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test bench paper extension clean
+.PHONY: venv demo test bench paper extension clean docs-check docs-images docs-refresh docs-rerun
 
 venv: $(STAMP)
 
@@ -36,6 +40,22 @@ paper: venv
 
 extension: venv
 	$(PY) tools/build_extension.py
+
+docs-check: venv
+	$(PY) tools/docs_check.py
+
+docs-images: venv
+	$(PY) tools/figures.py record demo paper_quick
+	$(PY) tools/figures.py pictures
+	$(PY) tools/docs_check.py --write
+
+docs-refresh: venv
+	$(PY) tools/figures.py record cheap
+	$(PY) tools/figures.py pictures
+	$(PY) tools/docs_check.py --write
+
+docs-rerun: venv
+	$(PY) tools/figures.py rerun
 
 clean:
 	rm -rf out dist

@@ -4,6 +4,7 @@
     python tools/figures.py record NAME [NAME...]     # run the command, write docs/figures/NAME.json
     python tools/figures.py record NAME --from FILE   # record an output a run of that exact command already wrote
     python tools/figures.py rerun [NAME...]           # run the cheap commands again, compare with the recording
+    python tools/figures.py pictures                  # copy the recorded demo run's pictures to docs/img
 
 A *source* is one command of this repository that writes a JSON file. ``record`` runs it and writes
 ``docs/figures/NAME.json``: the command line, the commit it ran at (``dirty`` when addon/ or tools/
@@ -270,6 +271,30 @@ def rerun(names):
     return 1 if bad else 0
 
 
+DEMO_PICTURES = os.path.join(ROOT, "out", "demo", "pictures")
+DOCS_IMG = os.path.join(ROOT, "docs", "img")
+
+
+def _sha256(path):
+    import hashlib
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()
+
+
+def copy_pictures():
+    """Copy the pictures of the recorded demo run (docs/figures/demo.json) from out/demo/pictures to
+    docs/img, refusing any picture that is not the one that run made."""
+    import shutil
+    pics = load_recording("demo")["data"]["story"]["pictures"]
+    for name, sha in pics.items():
+        src = os.path.join(DEMO_PICTURES, name)
+        if not os.path.isfile(src) or _sha256(src) != sha:
+            raise SystemExit(f"error: {os.path.relpath(src, ROOT)} is not the picture of the recorded demo run "
+                             f"(docs/figures/demo.json): run `make docs-images` (demo + record + copy)")
+        shutil.copyfile(src, os.path.join(DOCS_IMG, name))
+        print(f"[figures] docs/img/{name}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python tools/figures.py", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -279,6 +304,7 @@ def main(argv=None):
     r.add_argument("--from", dest="from_file", help="record this file (written by the source's command) instead of running it")
     r = sub.add_parser("run", help="run a source's command, keep its output for `record --from` (long runs)")
     r.add_argument("names", nargs="+")
+    sub.add_parser("pictures", help="copy the recorded demo run's pictures to docs/img")
     r = sub.add_parser("rerun", help="run the cheap sources again and compare with their recordings")
     r.add_argument("names", nargs="*", help="default: every cheap source")
     a = ap.parse_args(argv)
@@ -291,6 +317,9 @@ def main(argv=None):
             else:
                 state = "not recorded"
             print(f"{name:24s} {s['cost']:9s} {state}\n    {_fmt_argv(source_argv(name, 'out/figures/' + name + '.json'))}")
+        return 0
+    if a.cmd == "pictures":
+        copy_pictures()
         return 0
     names = a.names if a.cmd != "rerun" or a.names else [n for n, s in SOURCES.items() if s["cost"] == "cheap"]
     if names == ["cheap"]:

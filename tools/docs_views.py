@@ -1,0 +1,2 @@
+"""Generated blocks of the docs: view name -> function(recording) -> Markdown text (tools/docs_check.py)."""
+VIEWS = {}
