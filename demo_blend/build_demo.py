@@ -128,7 +128,9 @@ def story_pictures(summary, pics, state):
                      "E_sil_pct": {"first_guess": errs[rows[0][0]], "fitted": errs[rows[1][0]]}},
            "evaluations": res["evaluations"], "stop_reason": res["stop_reason"],
            "fit_seconds": res["elapsed_s"], "train_cameras": res["train_cameras"],
-           "train_times": res["train_times"], "fit_resolution": res["resolution"]}
+           "train_times": res["train_times"], "fit_resolution": res["resolution"],
+           "heldout_cameras": [names[c] for c in held], "test_times": test_times,
+           "image_size": [cap.cameras[0].height, cap.cameras[0].width]}
     for key, p in sets.items():
         k = key
         tr = evaluate(cap, p, cameras=res["train_camera_indices"], times=res["train_times"],

@@ -1,2 +1,103 @@
-"""Generated blocks of the docs: view name -> function(recording) -> Markdown text (tools/docs_check.py)."""
-VIEWS = {}
+"""Generated blocks of the docs (``<!--gen VIEW-->`` ... ``<!--/gen-->``): view name -> function.
+
+Each function gets ``recording(name)`` (the parsed docs/figures/NAME.json) and returns the block's
+Markdown. Where a command prints the same table, the view calls the command's own formatter.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+for _d in (ROOT, os.path.join(ROOT, "tools")):
+    if _d not in sys.path:
+        sys.path.insert(0, _d)
+
+
+def _data(recording, name):
+    rec = recording(name)
+    if rec is None:
+        raise KeyError(f"no recording docs/figures/{name}.json")
+    return rec["data"]
+
+
+def _provenance(recording, name):
+    rec = recording(name)
+    return f"`{rec['command']}`, commit {rec['commit']}{' + uncommitted changes' if rec.get('dirty') else ''}"
+
+
+def identifiability_default(recording):
+    from addon.core.studies.identifiability import format_table
+    t = next(x for x in _data(recording, "identifiability") if x["material"] == "default")
+    return "```\n" + format_table(t) + "\n```"
+
+
+def blender_agreement(recording):
+    d = _data(recording, "blender_agreement")
+    out = [f"{d['grid']} x {d['grid']} sheet, 10 cm, hung by its corners, {d['settle_s']:g} s settle, one corner "
+           f"released, {d['after_s']:g} s after, {d['fps']:g} fps: the core's blender model against Blender "
+           f"{d.get('blender', '(version not recorded)')}:", "",
+           "| case | quality | mean mm | max mm | equal frames | core s | Blender s |", "|---|---|---|---|---|---|---|"]
+    for r in d["cases"]:
+        out.append(f"| {r['case']} | {r['settings']['quality']} | {r['mean_mm']:.6f} | {r['max_mm']:.6f} | "
+                   f"{r['exactly_equal_frames']}/{r['frames']} | {r['core_s']:.2f} | {r['blender_s']:.2f} |")
+    worst_mean = max(r["mean_mm"] for r in d["cases"])
+    worst_max = max(r["max_mm"] for r in d["cases"])
+    out += ["", f"Worst case: mean {worst_mean:.6f} mm, max {worst_max:.6f} mm (goal: mean < 0.1 mm, max < 1 mm)."]
+    return "\n".join(out)
+
+
+def cross_simulator(recording):
+    from cross_simulator import format_table
+    return format_table(_data(recording, "cross_simulator"))
+
+
+def demo_parameters(recording):
+    d = _data(recording, "demo")["story"]
+    idt, idg, idf = (d["identifiable"][k] for k in ("truth", "first_guess", "fitted"))
+    ef, eg = d["identifiable_error_pct"]["fitted"], d["identifiable_error_pct"]["first_guess"]
+    tr, ho, sh = d["train_E_sil_pct"], d["heldout_E_sil_pct"], d["shape_error_mm"]
+    train = (f"{len(d['train_cameras'])} cameras x {len(d['train_times'])} times, "
+             f"{d['fit_resolution'][0]} x {d['fit_resolution'][1]}")
+    held = (f"{len(d['heldout_cameras'])} cameras x {len(d['test_times'])} test times, "
+            f"{d['image_size'][0]} x {d['image_size'][1]}")
+    rows = [
+        ("k/m [1/s²]", f"{idt['k_over_m']:,.0f}", f"{idg['k_over_m']:,.0f} ({eg['k_over_m']:.0f} % off)",
+         f"{idf['k_over_m']:,.0f} ({ef['k_over_m']:.2f} % off)"),
+        ("d/m [1/s]", f"{idt['d_over_m']:.4g}", f"{idg['d_over_m']:.4g} ({eg['d_over_m']:.0f} % off)",
+         f"{idf['d_over_m']:.5g} ({ef['d_over_m']:.2f} % off)"),
+        ("l [mm]", f"{1000 * idt['l']:.4f}", f"{1000 * idg['l']:.4f} ({eg['l']:.0f} % off)",
+         f"{1000 * idf['l']:.4f} ({ef['l']:.2f} % off)"),
+        (f"training E_sil ({train})", f"{tr['truth']:.2f} %", f"{tr['first_guess']:.1f} %",
+         f"{tr['fitted']:.2f} %"),
+        (f"held-out E_sil ({held})", f"{ho['truth']:.2f} %",
+         f"{ho['first_guess']:.1f} %", f"{ho['fitted']:.2f} %"),
+        ("shape error (held-out times)", "0", f"{sh['first_guess']:.2f} mm", f"{sh['fitted']:.3f} mm"),
+    ]
+    out = ["| | truth | first guess (the optimiser's start) | fitted |", "|---|---|---|---|"]
+    out += [f"| {' | '.join(r)} |" for r in rows]
+    return "\n".join(out)
+
+
+def recordings(recording):
+    """The table of every recording: what, command, commit, when."""
+    import glob
+    out = ["| recording | what | command | commit | recorded |", "|---|---|---|---|---|"]
+    for p in sorted(glob.glob(os.path.join(ROOT, "docs", "figures", "*.json"))):
+        name = os.path.basename(p)[:-5]
+        rec = recording(name)
+        if name.startswith("cited_"):
+            out.append(f"| [{name}](docs/figures/{name}.json) | citation | - | - | - |")
+            continue
+        out.append(f"| [{name}](docs/figures/{name}.json) | {rec.get('what', '')} | `{rec['command']}` | "
+                   f"{rec['commit']}{' (dirty)' if rec.get('dirty') else ''} | {rec['recorded_at'][:10]} |")
+    return "\n".join(out)
+
+
+VIEWS = {
+    "identifiability.default": identifiability_default,
+    "blender_agreement": blender_agreement,
+    "cross_simulator": cross_simulator,
+    "demo.parameters": demo_parameters,
+    "recordings": recordings,
+}
