@@ -13,8 +13,8 @@ comments, invisible on GitHub:
     the last numbers before the tag (one per KEY, in order) are figures of recording NAME. A KEY is
     a path into the recorded output (``rows.3.mean_mm``; ``rows[material^=silk,train_cameras=4]``
     picks the first list item whose fields match, ``^=`` a prefix) or an expression of paths in
-    braces (``{a.x}*1000``, ``{a}/{b}``), optionally followed by ``~5%`` or ``~0.2``: the
-    tolerance. Without one the quoted number must be the value rounded to the digits shown. ``_``
+    braces (``{a.x}*1000``, ``{a}/{b}``), or ``@seconds`` (a field of the recording itself: how
+    long the command ran), optionally followed by ``~5%`` or ``~0.2``: the tolerance. Without one the quoted number must be the value rounded to the digits shown. ``_``
     skips a number (an input between figures).
 ``<!--cite NAME KEY ...-->``
     the same for a citation (``cited_*.json``): a publication's numbers, not our measurements.
@@ -180,11 +180,12 @@ def parse_key(k):
     return k, tol
 
 
-def check_value(quoted, key, data):
-    """None if the quoted number matches the recorded value, else a message."""
+def check_value(quoted, key, rec):
+    """None if the quoted number matches the recorded value, else a message. ``@field`` reads the
+    recording's own fields (``@seconds``: how long the command ran), other keys its output."""
     k, tol = parse_key(key)
     try:
-        v = evaluate(data, k)
+        v = evaluate(rec, k[1:]) if k.startswith("@") else evaluate(rec["data"], k)
     except (KeyError, IndexError, ValueError, TypeError, ZeroDivisionError) as e:
         return f"key {k!r}: {e}"
     if isinstance(v, bool) or not isinstance(v, (int, float)):
@@ -299,7 +300,7 @@ def check_block(path, start, text, problems, stats):
             if key == "_":
                 stats["inputs"] += 1
                 continue
-            msg = check_value(n, key, rec["data"])
+            msg = check_value(n, key, rec)
             stats["cited" if kind == "cite" else "figures"] += 1
             if msg:
                 problems.append(Problem(path, line_of(start, t, p), f"[{name}] {msg}"))
