@@ -9,8 +9,8 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
 
-import docs_check as DC  # noqa: E402
-import figures as F  # noqa: E402
+import docs_check as DC
+import figures as F
 
 
 def test_docs_agree_with_their_recordings():
@@ -45,7 +45,8 @@ def test_cited_paper_numbers_are_the_ones_the_code_prints():
 def test_readme_pictures_are_the_recorded_demo_runs():
     """docs/img copies of the demo's pictures are byte for byte the pictures of the recorded run."""
     pics = DC.recording("demo")["data"]["story"]["pictures"]
-    readme = open(os.path.join(ROOT, "README.md"), encoding="utf-8").read()
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
+        readme = f.read()
     shown = [n for n in pics if f"docs/img/{n}" in readme]
     assert len(shown) >= 3, "the README shows the demo's pictures"
     for n in pics:

@@ -83,6 +83,89 @@ SOURCES = {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json", "cost": "expensive",
         "what": "Blender's cloth as the truth, fitted by both core models (about 45 min)"},
+    "paper_mismatch": {
+        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--truth-dt-safety", "0.125", "--json", "{out}",
+                 "--out", "out/paper_mismatch"], "cost": "expensive",
+        "what": "Table 1 with a model mismatch: the truth simulated with a 4x finer time step"},
+    "paper_far": {
+        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--rig", "lab18_far", "--json", "{out}",
+                 "--out", "out/paper_far"], "cost": "expensive",
+        "what": "Table 1 on a room-sized rig (the cameras at 1.25 m)"},
+    "paper_ga": {
+        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--optimizer", "spx-mgg", "--population", "60",
+                 "--children", "30", "--json", "{out}", "--out", "out/paper_ga"], "cost": "expensive",
+        "what": "Table 1 with the paper's GA at its textbook sizes"},
+    "occlusion_mismatch": {
+        "argv": ["{py}", "-m", "addon", "occlusion", "--truth-dt-safety", "0.125", "--json", "{out}",
+                 "--out", "out/occlusion_mismatch"], "cost": "expensive",
+        "what": "the occluder study with a model mismatch"},
+    "occlusion_quick_1cam": {
+        "argv": ["{py}", "-m", "addon", "occlusion", "--quick", "--train-cameras", "1", "--json", "{out}",
+                 "--out", "out/occlusion_q1"], "cost": "expensive",
+        "what": "the occluder study, 1 training camera, 240 x 320, 700 evaluations"},
+    "occlusion_quick_2cam": {
+        "argv": ["{py}", "-m", "addon", "occlusion", "--quick", "--train-cameras", "2", "--json", "{out}",
+                 "--out", "out/occlusion_q2"], "cost": "expensive",
+        "what": "the occluder study, 2 training cameras, 240 x 320, 700 evaluations"},
+    "video_footage": {
+        "argv": ["{py}", "tools/video_footage.py", "--out", "out/video_footage", "--json", "{out}"],
+        "cost": "expensive", "what": "videos as phones record them, synced by a flash, extracted: IoU"},
+    "footage": {
+        "steps": [["{py}", "tools/render_footage.py", "render", "--out", "out/real/footage"],
+                  ["{py}", "-m", "addon", "extract", "out/real/footage", "-o", "out/real/capture"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture", "--json", "out/real/score_auto.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_single", "--single-plate", "--json", "out/real/score_single.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_sw1", "--shadow-window", "1", "--json", "out/real/score_sw1.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_norefine", "--refine", "0", "--json", "out/real/score_norefine.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_otsu", "--threshold", "otsu", "--json", "out/real/score_otsu.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_noshadow", "--shadow-min", "1", "--json", "out/real/score_noshadow.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_noblur", "--blur", "0", "--json", "out/real/score_noblur.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_paper", "--threshold", "otsu", "--luma-weight", "1", "--shadow-min", "1",
+                   "--blur", "0", "--refine", "0", "--json", "out/real/score_paper.json"]],
+        "outputs": {"footage": "out/real/footage/footage.json", "auto": "out/real/score_auto.json",
+                    "single_plate": "out/real/score_single.json", "shadow_window_1": "out/real/score_sw1.json",
+                    "no_refine": "out/real/score_norefine.json", "otsu": "out/real/score_otsu.json",
+                    "no_shadow": "out/real/score_noshadow.json", "no_blur": "out/real/score_noblur.json",
+                    "paper_recipe": "out/real/score_paper.json"},
+        "cost": "expensive", "what": "photoreal footage rendered by Cycles, extracted: IoU per variant (about 20 min)"},
+    "footage_fit": {
+        "steps": [["{py}", "tools/render_footage.py", "fit", "--capture", "out/real/capture", "--footage",
+                   "out/real/footage", "--cameras", "2,4,8,16", "--evals", "3000", "--seed", str(s),
+                   "--json", f"out/real/fit_auto_s{s}.json"] for s in (0, 1, 2)]
+        + [["{py}", "tools/render_footage.py", "fit", "--capture", "out/real/capture_paper", "--footage",
+            "out/real/footage", "--cameras", "4,16", "--evals", "3000", "--seed", "0", "--json",
+            "out/real/fit_paper_s0.json"]],
+        "outputs": {"s0": "out/real/fit_auto_s0.json", "s1": "out/real/fit_auto_s1.json",
+                    "s2": "out/real/fit_auto_s2.json", "paper_recipe": "out/real/fit_paper_s0.json"},
+        "cost": "expensive", "what": "fits on the extracted footage silhouettes (needs the footage recording's files)"},
+    "blender_cloth": {
+        "steps": [["{py}", "tools/blender_cloth_experiment.py", "check-units", "--json", "out/blendercloth/units.json"],
+                  ["{py}", "tools/blender_cloth_experiment.py", "observe", "--out", "out/blendercloth/capture"],
+                  ["{py}", "tools/blender_cloth_experiment.py", "fit", "--capture", "out/blendercloth/capture",
+                   "--cameras", "4,8,16", "--oracle", "--json", "out/blendercloth/fit.json", "--overlays",
+                   "out/blendercloth/overlays"]],
+        "outputs": {"units": "out/blendercloth/units.json", "fit": "out/blendercloth/fit.json"},
+        "cost": "expensive", "what": "Blender's cloth simulator as the truth, fitted by the paper's sheet"},
+    "blender_scene_fit_pop12": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_pop12", "--population", "12"],
+        "output": "out/scene_fit_pop12/summary.json", "cost": "expensive",
+        "what": "the same, population 12"},
+    "blender_scene_fit_2400": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_2400", "--budget", "2400"],
+        "output": "out/scene_fit_2400/summary.json", "cost": "expensive",
+        "what": "the same, 2400 evaluations"},
+    "blender_scene_fit_480x640": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_480", "--resolution", "480x640"],
+        "output": "out/scene_fit_480/summary.json", "cost": "expensive",
+        "what": "the same, silhouettes at 480 x 640"},
     "blender_scene_fit": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
         "output": "out/scene_fit/summary.json", "cost": "expensive",
@@ -97,6 +180,11 @@ def _fmt_argv(argv):
 def source_argv(name, out_path):
     s = SOURCES[name]
     return [a.replace("{py}", sys.executable).replace("{out}", out_path) for a in s["argv"]]
+
+
+def source_steps(name):
+    """A multi-step source: [argv, ...] run in order; its output is {key: JSON of each file}."""
+    return [[a.replace("{py}", sys.executable) for a in step] for step in SOURCES[name]["steps"]]
 
 
 def source_output(name):
@@ -173,10 +261,34 @@ def run_source(name, out_path=None, log=None):
     return argv, seconds, l0, _load1(), started, out_path
 
 
+def run_steps(name):
+    """Run a multi-step source; returns (command text, seconds, load before, after, started, data)."""
+    steps = source_steps(name)
+    started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    l0 = _load1()
+    t0 = time.perf_counter()
+    for argv in steps:
+        print(f"[figures] {name}: {_fmt_argv(argv)}", flush=True)
+        r = subprocess.run(argv, check=False, cwd=ROOT)
+        if r.returncode != 0:
+            raise SystemExit(f"error: {name}: `{_fmt_argv(argv)}` exited with {r.returncode}")
+    seconds = time.perf_counter() - t0
+    data = {}
+    for key, rel in SOURCES[name]["outputs"].items():
+        with open(os.path.join(ROOT, rel)) as f:
+            data[key] = json.load(f)
+    return " && ".join(_fmt_argv(a) for a in steps), seconds, l0, _load1(), started, data
+
+
 def record(name, from_file=None):
     if name not in SOURCES:
         raise SystemExit(f"error: unknown source {name!r}; known: {', '.join(SOURCES)}")
     commit, dirty = git_state()
+    if "steps" in SOURCES[name]:
+        cmd, seconds, l0, l1, started, data = run_steps(name)
+        path = write_recording(name, data, cmd, commit, dirty, seconds, l0, l1, started)
+        print(f"[figures] recorded {os.path.relpath(path, ROOT)} (commit {commit}{', dirty' if dirty else ''})")
+        return path
     if from_file:
         out_path = os.path.abspath(from_file)
         argv = source_argv(name, os.path.relpath(out_path, ROOT))
@@ -255,11 +367,14 @@ def rerun(names):
     for name in names:
         s = SOURCES[name]
         rec = load_recording(name)
-        with tempfile.TemporaryDirectory() as tmp:
-            out_path = os.path.join(tmp, f"{name}.json") if "output" not in s else source_output(name)
-            run_source(name, out_path)
-            with open(out_path) as f:
-                new = json.load(f)
+        if "steps" in s:
+            new = run_steps(name)[-1]
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                out_path = os.path.join(tmp, f"{name}.json") if "output" not in s else source_output(name)
+                run_source(name, out_path)
+                with open(out_path) as f:
+                    new = json.load(f)
         diffs = compare(rec["data"], new, s.get("rtol", 0.0), s.get("atol", 0.0))
         if diffs:
             bad += 1
@@ -316,7 +431,9 @@ def main(argv=None):
                 state = f"recorded {rec['recorded_at']} at {rec['commit']}{' (dirty)' if rec['dirty'] else ''}"
             else:
                 state = "not recorded"
-            print(f"{name:24s} {s['cost']:9s} {state}\n    {_fmt_argv(source_argv(name, 'out/figures/' + name + '.json'))}")
+            cmd = (" && ".join(_fmt_argv(a) for a in source_steps(name)) if "steps" in s
+                   else _fmt_argv(source_argv(name, "out/figures/" + name + ".json")))
+            print(f"{name:24s} {s['cost']:9s} {state}\n    {cmd}")
         return 0
     if a.cmd == "pictures":
         copy_pictures()
