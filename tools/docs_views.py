@@ -79,6 +79,66 @@ def demo_parameters(recording):
     return "\n".join(out)
 
 
+def _rec_err(e):
+    return ", ".join(f"{e[k]:.4f}" for k in ("k_over_m", "d_over_m", "l"))
+
+
+def paper_table1(recording, name="paper", with_paper=True):
+    rows = _data(recording, name)["table1"]
+    cited = _data(recording, "cited_paper")["table1"]
+    cams = [r["cameras"] for r in rows]
+    out = ["| training cameras | " + " | ".join(str(c) for c in cams) + " |", "|---" * (len(cams) + 1) + "|",
+           "| silhouette error [%], ours | " + " | ".join(f"{r['silhouette_error_pct']:.3f}" for r in rows) + " |",
+           "| noise floor of the same images [%] | " + " | ".join(f"{r['floor_noise_only_pct']:.3f}" for r in rows) + " |",
+           "| shape error [mm], ours | " + " | ".join(f"{r['shape_error_mm']:.4f}" for r in rows) + " |"]
+    if with_paper:
+        ix = [cited["cameras"].index(c) for c in cams]
+        out += ["| paper: silhouette error [%] | " + " | ".join(f"{cited['silhouette_pct'][i]:.3f}" for i in ix) + " |",
+                "| paper: shape error [mm] | " + " | ".join(f"{cited['shape_mm'][i]:.3f}" for i in ix) + " |"]
+    out.append("| k/m, d/m, l recovery error [%] | " + " | ".join(_rec_err(r["identifiable_error_pct"]) for r in rows)
+               + " |")
+    out.append("| evaluations (converged) | " + " | ".join(str(r.get("evaluations", "-")) for r in rows) + " |")
+    return "\n".join(out)
+
+
+def paper_table2(recording):
+    rows = _data(recording, "paper")["table2"]
+    cited = _data(recording, "cited_paper")["table2"]
+    cams = cited["cameras"]
+    out = ["| train resolution | " + " | ".join(f"{c} cameras" for c in cams) + " | paper " +
+           " / ".join(str(c) for c in cams) + " |", "|---" * (len(cams) + 2) + "|"]
+    for res in sorted({tuple(r["train_resolution"]) for r in rows}):
+        cells = []
+        for c in cams:
+            r = next(x for x in rows if tuple(x["train_resolution"]) == res and x["cameras"] == c)
+            cells.append(f"{r['silhouette_error_pct']:.3f}")
+        paper = " / ".join(f"{v:.3f}" for v in cited[f"{res[0]}x{res[1]}"])
+        out.append(f"| {res[0]} x {res[1]} | " + " | ".join(cells) + f" | {paper} |")
+    return "\n".join(out)
+
+
+OPT_LABELS = {"spx-mgg": "SPX + MGG, population 60, 30 children (textbook sizes)",
+              "spx-mgg-small": "SPX + MGG, population 21, 15 children",
+              "cma-es": "CMA-ES (population 7)"}
+
+
+def paper_optimizers(recording):
+    o = _data(recording, "paper")["optimizers"]
+    lv = o["levels_pct"]
+    out = ["| optimiser | " + " | ".join(f"to {v:g} %" for v in lv) + " | median final | evaluations used |",
+           "|---" * (len(lv) + 3) + "|"]
+    for opt, sm in o["summary"].items():
+        cells = []
+        for v in lv:
+            med, reached = sm[f"median_evals_to_{v}"], sm[f"reached_{v}"]
+            cells.append(f"never ({reached})" if med is None else f"{med:.0f} ({reached})")
+        used = [r["evaluations"] for r in o["runs"] if r["optimizer"] == opt]
+        u = f"{min(used)}" if min(used) == max(used) else f"{min(used)}-{max(used)}"
+        out.append(f"| {OPT_LABELS.get(opt, opt)} | " + " | ".join(cells) +
+                   f" | {sm['final_E_sil_pct_median']:.3f} % | {u} |")
+    return "\n".join(out)
+
+
 def recordings(recording):
     """The table of every recording: what, command, commit, when."""
     import glob
@@ -100,4 +160,7 @@ VIEWS = {
     "cross_simulator": cross_simulator,
     "demo.parameters": demo_parameters,
     "recordings": recordings,
+    "paper.table1": paper_table1,
+    "paper.table2": paper_table2,
+    "paper.optimizers": paper_optimizers,
 }
