@@ -49,7 +49,7 @@ def main(argv=None):
     out = os.path.abspath(a.out)
     pics = None if a.no_pictures else os.path.abspath(a.pictures or os.path.join(out, "pictures"))
     print("note: Blender's first render may print 'EGL Error (0x3009)' lines: its headless OpenGL start-up asking "
-          "for a newer OpenGL than the driver offers (harmless; README, 'Demo').", flush=True)
+          "for a newer OpenGL than the driver offers (harmless; README, 'The demo').", flush=True)
     t0 = time.perf_counter()
     state = {}
     summary = pipeline.run(a, after_capture=(lambda scene: capture_pictures(scene, pics, state)) if pics else None,
@@ -75,24 +75,41 @@ def write_summary(path, summary, a):
 
 # ======================================================= the story: first guess, fit, error curve, parameters
 
+def shown(scene):
+    """(time, camera names) the pictures show: SHOW_TIME and SHOW_CAMERAS on the demo's rig and
+    times; otherwise the middle capture time, the first training camera and two held-out ones."""
+    from addon.blender import api
+    from addon.core.observation.camera import select_training
+    from addon.core.observation.capture import load_capture
+    cap = load_capture(api.capture_dir(scene))
+    times = [float(t) for t in cap.frame_times]
+    t = SHOW_TIME if any(abs(x - SHOW_TIME) < 1e-9 for x in times) else times[len(times) // 2]
+    names = [c.name for c in cap.cameras]
+    if all(n in names for n in SHOW_CAMERAS):
+        return t, list(SHOW_CAMERAS)
+    train, held = select_training(cap.cameras, min(scene.clothfit.train_cameras, len(names)))
+    return t, [names[i] for i in ([train[0]] + held[:2])]
+
+
 def capture_pictures(scene, pics, state):
     """Right after the capture (the true cloth is baked): camera images of the shown cameras, the rig
     picture and the silhouettes sheet, and the first guess's overlay sheet."""
     from addon.blender import api
     from addon.blender import render as R
     os.makedirs(pics, exist_ok=True)
-    scene.frame_set(api.S.frame_of_time(scene, SHOW_TIME))
+    t, names = state["time"], state["cameras"] = shown(scene)
+    scene.frame_set(api.S.frame_of_time(scene, t))
     cams = {o.name: o for o in api.S.rig_objects(scene)}
     state["images"] = {}
     with studio_look(scene, api.cloth_object(scene)):
-        for name in SHOW_CAMERAS:
+        for name in names:
             path = os.path.join(pics, "camera", f"{name}.png")
             os.makedirs(os.path.dirname(path), exist_ok=True)
             R.render_view(scene, cams[name], path)
             state["images"][name] = path
-    write_rig_image(scene, pics)
-    write_silhouettes_sheet(scene, pics)
-    state["first_guess_sheet"] = first_guess_overlays(scene, pics)
+    write_rig_image(scene, pics, t)
+    write_silhouettes_sheet(scene, pics, t)
+    state["first_guess_sheet"] = first_guess_overlays(scene, pics, t)
 
 
 def story_pictures(summary, pics, state):
@@ -111,20 +128,22 @@ def story_pictures(summary, pics, state):
     truth = dict(summary["true_params"])
     first = P.first_guess_params(cap)
     names = [c.name for c in cap.cameras]
-    cams = [names.index(n) for n in SHOW_CAMERAS]
+    t_show = state["time"]
+    cams = [names.index(n) for n in state["cameras"]]
     train, held = select_training(cap.cameras, len(res["train_cameras"]))
     roles = ["training" if c in train else "held out" for c in cams]
-    images = [cv2.imread(state["images"][n])[..., ::-1] for n in SHOW_CAMERAS]
+    images = [cv2.imread(state["images"][n])[..., ::-1] for n in state["cameras"]]
     sets = {"first_guess": first, "fitted": res["params"], "truth": truth}
     rows = [("first guess (where the optimiser starts)", first), ("fitted", res)]
-    img, errs = P.fit_on_images(cap, images, rows, cams, SHOW_TIME, roles)
+    img, errs = P.fit_on_images(cap, images, rows, cams, t_show, roles)
     paths = {"fit_on_images": P.write(os.path.join(pics, "fit_on_images.png"), img)}
     # the figures: training error at the fit's resolution, held-out cameras at the test times (full size)
     test_times = [float(t) for t in cap.frame_times if not any(abs(t - u) < 1e-9 for u in res["train_times"])]
+    test_times = test_times or [float(t) for t in cap.frame_times]   # every time trained on: score them all
     fig = {"first_guess": first, "fitted": res["params"], "true": truth,
            "identifiable": {k: identifiable(v) for k, v in sets.items()},
            "identifiable_error_pct": {}, "train_E_sil_pct": {}, "heldout_E_sil_pct": {}, "shape_error_mm": {},
-           "shown": {"time": SHOW_TIME, "cameras": list(SHOW_CAMERAS), "roles": roles,
+           "shown": {"time": t_show, "cameras": list(state["cameras"]), "roles": roles,
                      "E_sil_pct": {"first_guess": errs[rows[0][0]], "fitted": errs[rows[1][0]]}},
            "evaluations": res["evaluations"], "stop_reason": res["stop_reason"],
            "fit_seconds": res["elapsed_s"], "train_cameras": res["train_cameras"],
@@ -230,8 +249,8 @@ def _camera_proxies(scene, cam_objs, size=0.03):
     return coll, objs
 
 
-def first_guess_overlays(scene, pics):
-    """Overlays of the first guess (where the optimiser starts) for every camera at SHOW_TIME, core
+def first_guess_overlays(scene, pics, t_show):
+    """Overlays of the first guess (where the optimiser starts) for every camera at ``t_show``, core
     rasteriser: what the fit has to correct. Returns their mean E_sil [%]."""
     import pictures as P
 
@@ -242,7 +261,7 @@ def first_guess_overlays(scene, pics):
     try:
         cap = load_capture(api.capture_dir(scene))
         api.params_to_scene(scene, P.first_guess_params(cap))
-        s = api.make_overlays(scene, source="CORE", frame_indices=[cap.frame_index(SHOW_TIME)])
+        s = api.make_overlays(scene, source="CORE", frame_indices=[cap.frame_index(t_show)])
         dst = os.path.join(pics, "blender_overlays_first_guess.png")
         shutil.copyfile(s["contact_sheet"], dst)
         _shrink(dst, 960)
@@ -261,7 +280,7 @@ def _shrink(path, width):
     cv2.imwrite(path, img, [cv2.IMWRITE_PNG_COMPRESSION, 9])
 
 
-def write_rig_image(scene, pics):
+def write_rig_image(scene, pics, t_show):
     """The rig and the cloth rendered by Blender from an overview camera (orange pyramids: the rig's
     cameras), inset: the cloth through cam00."""
     import bpy
@@ -300,7 +319,7 @@ def write_rig_image(scene, pics):
     inset = cv2.resize(inset, (240, 240), interpolation=cv2.INTER_AREA)
     big[12:252, 548:788] = inset
     cv2.rectangle(big, (547, 11), (788, 252), (255, 255, 255), 1)
-    cv2.putText(big, f"{cams[0].name}, t = {SHOW_TIME:.2f} s", (552, 246), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+    cv2.putText(big, f"{cams[0].name}, t = {t_show:.2f} s", (552, 246), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
                 (255, 255, 255), 1, cv2.LINE_AA)
     cv2.imwrite(rig_png, big, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     os.remove(close_png)
@@ -312,8 +331,8 @@ def write_rig_image(scene, pics):
     return rig_png
 
 
-def write_silhouettes_sheet(scene, pics):
-    """Silhouettes as Render Silhouettes wrote them (noisy observations), 6 cameras at SHOW_TIME."""
+def write_silhouettes_sheet(scene, pics, t_show):
+    """Silhouettes as Render Silhouettes wrote them (noisy observations), 6 cameras at ``t_show``."""
     import cv2
     import numpy as np
 
@@ -321,12 +340,12 @@ def write_silhouettes_sheet(scene, pics):
     from addon.core.observation.capture import load_capture
     from addon.core.observation.overlay import contact_sheet, label
     cap = load_capture(api.capture_dir(scene))
-    fi = cap.frame_index(SHOW_TIME)
+    fi = cap.frame_index(t_show)
     tiles = []
     for ci in range(0, cap.n_cameras, 3):
         m = cap.load_silhouette(ci, fi)
         rgb = np.repeat(np.where(m, 255, 0).astype(np.uint8)[..., None], 3, axis=2)
-        tiles.append(label(rgb, f"{cap.cameras[ci].name} t={SHOW_TIME:.2f}s"))
+        tiles.append(label(rgb, f"{cap.cameras[ci].name} t={t_show:.2f}s"))
     sil_png = os.path.join(pics, "blender_silhouettes.png")
     cv2.imwrite(sil_png, contact_sheet(tiles, cols=3, tile_width=240)[..., ::-1])
     print(f"  picture {sil_png}")
