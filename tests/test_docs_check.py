@@ -124,7 +124,7 @@ def test_a_measurement_in_a_code_comment_fails(fake):
 
 
 def test_list_selection_and_skips(fake):
-    assert not fake("silk 1.23 mm, denim 2.5 mm at 3 cameras<!--fig t rows[material^=silk].mm rows[material=denim].mm _-->\n")[0]
+    assert not fake("silk 1.23 mm, denim 2.5 mm at 3 mm<!--fig t rows[material^=silk].mm rows[material=denim].mm _-->\n")[0]
     msgs, _ = fake("silk 1.3 mm<!--fig t rows[material^=silk].mm-->\n")
     assert msgs and "differs" in msgs[0]
 

@@ -29,7 +29,8 @@ A tag covers the numbers after the previous tag of the same paragraph, list item
 Not counted as numbers: inline code and code blocks (commands, options, file names), link
 targets, version numbers (``Python 3.11``, ``4.5.15``), references (``issue 12``, ``Table 1``,
 ``section 6.2``, ``eq. 6``), sizes written ``480 x 640``, compounds such as ``2-core`` or
-``18-camera``, list numbering, ``t = 0.5`` times and names with digits (``cam00``, ``lab18``).
+``18-camera``, camera counts (``8 cameras``: the set-up), exponents (``s^2``), list numbering,
+``t = 0.5`` times and names with digits (``cam00``, ``lab18``).
 Every other number without a tag is an error, as is a tagged number that differs from its
 recording beyond the tolerance, a key or recording that does not exist, a generated block that
 differs from its rendering, and a measured figure in a code block's comment.
@@ -72,6 +73,8 @@ NOT_FIGURES = [
     r"\b[A-Za-z_]+\d+[A-Za-z_\d]*\b",
     r"\b\d+[A-Za-z_]*[A-Za-z_]\d+\w*\b",
     r"\b[23]D\b",
+    r"\^-?\d+",
+    r"\b\d+\s+(?:training\s+|held-out\s+|other\s+|rig\s+)?cameras?\b",
 ]
 NOT_RE = re.compile("|".join(f"(?:{p})" for p in NOT_FIGURES), re.MULTILINE)
 
@@ -129,9 +132,21 @@ def _match(item, cond):
 
 
 def lookup(data, path):
-    """Value at a dotted path (``a.b.3.c``; ``a[k=v,j^=p].c`` selects list items by their fields)."""
+    """Value at a dotted path (``a.b.3.c``; ``a[k=v,j^=p].c`` selects list items by their fields; a key
+    that itself holds dots, ``median_evals_to_1.0``, is found too)."""
     cur = data
-    for part in re.findall(r"(?:[^.\[\]]+|\[[^\]]*\])+", path):
+    parts = re.findall(r"(?:[^.\[\]]+|\[[^\]]*\])+", path)
+    i = 0
+    while i < len(parts):
+        part = parts[i]
+        # a key with dots in it ("median_evals_to_1.0"): join the following parts until one exists
+        j = i
+        while isinstance(cur, dict) and part not in cur and j + 1 < len(parts) and "[" not in part:
+            j += 1
+            part = part + "." + parts[j]
+        if isinstance(cur, dict) and part not in cur:
+            part, j = parts[i], i
+        i = j + 1
         m = _SEL_RE.match(part)
         if not m:
             raise KeyError(path)
@@ -155,10 +170,14 @@ def lookup(data, path):
     return cur
 
 
-def evaluate(data, key):
+def evaluate(rec, key):
+    """A key's value: a path into the recorded output, ``@field`` a field of the recording itself,
+    or an arithmetic expression of such paths in braces."""
+    def value(path):
+        return lookup(rec, path[1:]) if path.startswith("@") else lookup(rec["data"], path)
     if "{" not in key:
-        return lookup(data, key)
-    expr = re.sub(r"\{([^}]+)\}", lambda m: repr(float(lookup(data, m.group(1)))), key)
+        return value(key)
+    expr = re.sub(r"\{([^}]+)\}", lambda m: repr(float(value(m.group(1)))), key)
     if not re.fullmatch(r"[-+*/().\deE ]+|.*inf.*", expr):
         raise KeyError(f"{key}: not an arithmetic expression")
     return eval(expr, {"__builtins__": {}}, {})
@@ -186,7 +205,7 @@ def check_value(quoted, key, rec):
     recording's own fields (``@seconds``: how long the command ran), other keys its output."""
     k, tol = parse_key(key)
     try:
-        v = evaluate(rec, k[1:]) if k.startswith("@") else evaluate(rec["data"], k)
+        v = evaluate(rec, k)
     except (KeyError, IndexError, ValueError, TypeError, ZeroDivisionError) as e:
         return f"key {k!r}: {e}"
     if isinstance(v, bool) or not isinstance(v, (int, float)):

@@ -102,18 +102,36 @@ def paper_table1(recording, name="paper", with_paper=True):
 
 
 def paper_table2(recording):
+    """Silhouette error [%] with its excess over the held-out images' noise floor, the paper's
+    numbers, and the shape error [um]."""
     rows = _data(recording, "paper")["table2"]
     cited = _data(recording, "cited_paper")["table2"]
     cams = cited["cameras"]
-    out = ["| train resolution | " + " | ".join(f"{c} cameras" for c in cams) + " | paper " +
-           " / ".join(str(c) for c in cams) + " |", "|---" * (len(cams) + 2) + "|"]
+    out = ["| train resolution | " + " | ".join(f"{c} cameras (over the floor)" for c in cams) + " | paper " +
+           " / ".join(str(c) for c in cams) + " | shape error " + " / ".join(str(c) for c in cams) + " [um] |",
+           "|---" * (len(cams) + 3) + "|"]
     for res in sorted({tuple(r["train_resolution"]) for r in rows}):
-        cells = []
+        cells, shape = [], []
         for c in cams:
             r = next(x for x in rows if tuple(x["train_resolution"]) == res and x["cameras"] == c)
-            cells.append(f"{r['silhouette_error_pct']:.3f}")
+            cells.append(f"{r['silhouette_error_pct']:.3f} (+{r['silhouette_error_pct'] - r['floor_noise_only_pct']:.3f})")
+            shape.append(f"{1000 * r['shape_error_mm']:.1f}")
         paper = " / ".join(f"{v:.3f}" for v in cited[f"{res[0]}x{res[1]}"])
-        out.append(f"| {res[0]} x {res[1]} | " + " | ".join(cells) + f" | {paper} |")
+        out.append(f"| {res[0]} x {res[1]} | " + " | ".join(cells) + f" | {paper} | {' / '.join(shape)} |")
+    return "\n".join(out)
+
+
+def paper_fig8(recording):
+    rows = _data(recording, "paper")["fig8"]
+    cams = sorted({r["cameras"] for r in rows})
+    ns = sorted({r["train_shapes"] for r in rows})
+    out = ["| training shapes N | " + " | ".join(str(n) for n in ns) + " |", "|---" * (len(ns) + 1) + "|"]
+    for c in cams:
+        by = {r["train_shapes"]: r for r in rows if r["cameras"] == c}
+        out.append(f"| silhouette error [%], {c} camera{'s' if c > 1 else ''} | " +
+                   " | ".join(f"{by[n]['silhouette_error_pct']:.3f}" if n in by else "-" for n in ns) + " |")
+        out.append(f"| shape error [um], {c} camera{'s' if c > 1 else ''} | " +
+                   " | ".join(f"{1000 * by[n]['shape_error_mm']:.2f}" if n in by else "-" for n in ns) + " |")
     return "\n".join(out)
 
 
@@ -162,5 +180,6 @@ VIEWS = {
     "recordings": recordings,
     "paper.table1": paper_table1,
     "paper.table2": paper_table2,
+    "paper.fig8": paper_fig8,
     "paper.optimizers": paper_optimizers,
 }
