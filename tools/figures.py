@@ -166,6 +166,9 @@ SOURCES = {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_480", "--resolution", "480x640"],
         "output": "out/scene_fit_480/summary.json", "cost": "expensive",
         "what": "the same, silhouettes at 480 x 640"},
+    "stopping": {
+        "argv": ["{py}", "tools/stopping.py", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
+        "what": "fits that stop by themselves: CMA-ES and SPX + MGG on a small capture, budget 100,000"},
     "blender_scene_fit": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
         "output": "out/scene_fit/summary.json", "cost": "expensive",
