@@ -118,6 +118,13 @@ def test_references_versions_sizes_and_code_are_not_figures(fake):
     assert msgs == []
 
 
+def test_an_inputs_region_accepts_untagged_numbers_and_still_checks_tags(fake):
+    assert not fake("<!--inputs: options-->\n`--budget` at least 1, at most 16384 per side.\n<!--/inputs-->\n")[0]
+    msgs, _ = fake("<!--inputs: options-->\nit took 30 s<!--fig t s-->\n<!--/inputs-->\nand 5 more\n")
+    assert len(msgs) == 2 and "differs" in msgs[0] and "has no tag" in msgs[1]
+    assert "has no <!--/inputs-->" in fake("<!--inputs-->\n5\n")[0][0]
+
+
 def test_a_measurement_in_a_code_comment_fails(fake):
     msgs, _ = fake("```\npython tools/x.py   # 14 min\n```\n")
     assert len(msgs) == 1 and "code comment" in msgs[0]

@@ -21,6 +21,9 @@ comments, invisible on GitHub:
 ``<!--in-->``
     the numbers since the previous tag are inputs or definitions (sizes, settings, counts of the
     set-up), not measurements.
+``<!--inputs: why-->`` ... ``<!--/inputs-->``
+    a region (lines of its own) whose untagged numbers are all inputs: option tables, limits and
+    formats. Tags inside it are still checked.
 ``<!--gen VIEW-->`` ... ``<!--/gen-->``
     the lines between are generated: they must equal ``VIEW``'s rendering of the recordings
     (``--write`` rewrites them).
@@ -251,6 +254,9 @@ def split_blocks(lines):
         if in_code:
             blocks.append((i, line, "code"))
             continue
+        if re.fullmatch(r"<!--\s*/?(?:inputs|gen)\b.*-->", s):   # region markers stand alone
+            flush()
+            continue
         if not s or s.startswith("#") and not s.startswith("#!"):
             flush()
             if s:
@@ -272,7 +278,7 @@ def line_of(block_start, text, pos):
     return block_start + text.count("\n", 0, pos)
 
 
-def check_block(path, start, text, problems, stats):
+def check_block(path, start, text, problems, stats, inputs_region=False):
     # blank inline code and link targets; keep comments (tags) in place
     t = CODE_RE.sub(lambda m: " " * len(m.group(0)), text)
     t = LINK_RE.sub(lambda m: "](" + " " * len(m.group(1)) + ")", t)
@@ -315,7 +321,10 @@ def check_block(path, start, text, problems, stats):
             continue
         claimed = pending[len(pending) - len(keys):]
         for p0, n0 in pending[:len(pending) - len(keys)]:
-            problems.append(Problem(path, line_of(start, t, p0), f"number {n0} has no tag ({_context(text, p0)})"))
+            if inputs_region:
+                stats["inputs"] += 1
+            else:
+                problems.append(Problem(path, line_of(start, t, p0), f"number {n0} has no tag ({_context(text, p0)})"))
         for (p, n), key in zip(claimed, keys):
             if key == "_":
                 stats["inputs"] += 1
@@ -326,7 +335,10 @@ def check_block(path, start, text, problems, stats):
                 problems.append(Problem(path, line_of(start, t, p), f"[{name}] {msg}"))
         pending = []
     for p, n in pending:
-        problems.append(Problem(path, line_of(start, t, p), f"number {n} has no tag ({_context(text, p)})"))
+        if inputs_region:
+            stats["inputs"] += 1
+        else:
+            problems.append(Problem(path, line_of(start, t, p), f"number {n} has no tag ({_context(text, p)})"))
 
 
 def _context(text, p, w=38):
@@ -358,6 +370,8 @@ def render(view):
     return VIEWS[view](recording).rstrip("\n")
 
 
+INPUTS_BEGIN = re.compile(r"^\s*<!--\s*inputs\b.*-->\s*$")
+INPUTS_END = re.compile(r"^\s*<!--\s*/inputs\s*-->\s*$")
 GEN_BEGIN = re.compile(r"^\s*<!--\s*gen\s+(\S+)\s*-->\s*$")
 GEN_END = re.compile(r"^\s*<!--\s*/gen\s*-->\s*$")
 
@@ -411,11 +425,23 @@ def check_file(path, write=False, stats=None):
     for _, a, b in regions:
         for k in range(a, min(b, len(masked))):
             masked[k] = ""
+    in_inputs, opened = set(), None
+    for i, line in enumerate(lines, 1):
+        if INPUTS_BEGIN.match(line):
+            opened = i
+        elif INPUTS_END.match(line):
+            if opened is None:
+                problems.append(Problem(path, i, "<!--/inputs--> without <!--inputs-->"))
+            else:
+                in_inputs.update(range(opened, i))
+            opened = None
+    if opened is not None:
+        problems.append(Problem(path, opened, "<!--inputs--> has no <!--/inputs-->"))
     for start, text, kind in split_blocks(masked):
         if kind == "code":
             check_code_line(path, start, text, problems)
         else:
-            check_block(path, start, text, problems, stats)
+            check_block(path, start, text, problems, stats, inputs_region=start in in_inputs)
     return problems, stats
 
 

@@ -101,6 +101,33 @@ def paper_table1(recording, name="paper", with_paper=True):
     return "\n".join(out)
 
 
+def paper_variants(recording):
+    """Table 1's harder variants, one block of rows each."""
+    cams = [r["cameras"] for r in _data(recording, "paper_mismatch")["table1"]]
+    out = ["| variant | figure | " + " | ".join(f"{c} cam" for c in cams) + " |", "|---" * (len(cams) + 2) + "|"]
+
+    def rows(name):
+        return {r["cameras"]: r for r in _data(recording, name)["table1"]}
+
+    def line(label, what, rs, f):
+        out.append(f"| {label} | {what} | " + " | ".join(f(rs[c]) if c in rs else "-" for c in cams) + " |")
+    m = rows("paper_mismatch")
+    line("model mismatch", "held-out E_sil [%]", m, lambda r: f"{r['silhouette_error_pct']:.3f}")
+    line("", "true parameters through the model [%]", m, lambda r: f"{r['floor_true_params_pct']:.3f}")
+    line("", "shape error [mm]", m, lambda r: f"{r['shape_error_mm']:.3f}")
+    line("", "k/m, d/m, l error [%]", m, lambda r: _rec_err(r["identifiable_error_pct"]).replace("0000", "00"))
+    f = rows("paper_far")
+    line("room-sized rig", "held-out E_sil [%]", f, lambda r: f"{r['silhouette_error_pct']:.3f}")
+    line("", "noise floor [%]", f, lambda r: f"{r['floor_noise_only_pct']:.3f}")
+    line("", "shape error [um]", f, lambda r: f"{1000 * r['shape_error_mm']:.1f}")
+    g = rows("paper_ga")
+    line("the paper's GA", "held-out E_sil [%]", g, lambda r: f"{r['silhouette_error_pct']:.3f}")
+    line("", "shape error [mm]", g, lambda r: f"{r['shape_error_mm']:.2f}")
+    line("", "k/m error [%]", g, lambda r: f"{r['identifiable_error_pct']['k_over_m']:.1f}")
+    line("", "evaluations", g, lambda r: str(r["evaluations"]))
+    return "\n".join(out)
+
+
 def paper_table2(recording):
     """Silhouette error [%] with its excess over the held-out images' noise floor, the paper's
     numbers, and the shape error [um]."""
@@ -157,6 +184,47 @@ def paper_optimizers(recording):
     return "\n".join(out)
 
 
+def occlusion(recording):
+    d = _data(recording, "occlusion")
+    c = d["clean"]
+    out = ["| occluders (post width / hand radius, of the cloth's size in the view) | cloth hidden, mean / max | "
+           "held-out E_sil: ignore masks | occluder as background | shape error: ignore / background |",
+           "|---|---|---|---|---|",
+           f"| none | 0 | {c['heldout_pct']:.3f} % | | {c['shape_error_mm']:.3f} mm |"]
+    for r in d["rows"]:
+        out.append(f"| {100 * r['post_width']:.0f} % / {100 * r['hand_radius']:.0f} % | "
+                   f"{100 * r['hidden_fraction_mean']:.1f} % / {100 * r['hidden_fraction_max']:.1f} % | "
+                   f"{r['ignore']['heldout_pct']:.3f} % ({r['ratio_ignore']:.3f}x) | "
+                   f"{r['background']['heldout_pct']:.3g} % ({r['ratio_background']:.3g}x) | "
+                   f"{r['ignore']['shape_error_mm']:.3f} / {r['background']['shape_error_mm']:.3g} mm |")
+    return "\n".join(out)
+
+
+def occlusion_variants(recording):
+    """The same study with a model mismatch and with 1 or 2 training cameras: ratios to the clean fit."""
+    out = ["| variant | clean fit | cloth hidden (mean) | ignore masks | occluders as background |", "|---|---|---|---|---|"]
+    for name, label in (("occlusion_mismatch", "model mismatch (`--truth-dt-safety 0.125`)"),
+                        ("occlusion_quick_1cam", "1 training camera (`--quick --train-cameras 1`)"),
+                        ("occlusion_quick_2cam", "2 training cameras (`--quick --train-cameras 2`)")):
+        d = _data(recording, name)
+        hid = " / ".join(f"{100 * r['hidden_fraction_mean']:.0f} %" for r in d["rows"])
+        ig = " / ".join(f"{r['ratio_ignore']:.3f}x" for r in d["rows"])
+        bg = " / ".join(f"{r['ratio_background']:.3g}x" for r in d["rows"])
+        out.append(f"| {label} | {d['clean']['heldout_pct']:.3f} % | {hid} | {ig} | {bg} |")
+    return "\n".join(out)
+
+
+def stopping(recording):
+    d = _data(recording, "stopping")
+    out = ["| optimiser | seed | evaluations | stopped by | best training E_sil | k/m, d/m, l error [%] |",
+           "|---|---|---|---|---|---|"]
+    for r in d["runs"]:
+        why = r["stop_reason"] + (f" ({', '.join(r['converged_by'])})" if r.get("converged_by") else "")
+        out.append(f"| {r['optimizer']} | {r['seed']} | {r['evaluations']} | {why} | {r['best_E_sil_pct']:.4f} % | "
+                   f"{_rec_err(r['identifiable_error_pct'])} |")
+    return "\n".join(out)
+
+
 def recordings(recording):
     """The table of every recording: what, command, commit, when."""
     import glob
@@ -178,8 +246,12 @@ VIEWS = {
     "cross_simulator": cross_simulator,
     "demo.parameters": demo_parameters,
     "recordings": recordings,
+    "stopping": stopping,
+    "occlusion": occlusion,
+    "occlusion.variants": occlusion_variants,
     "paper.table1": paper_table1,
     "paper.table2": paper_table2,
     "paper.fig8": paper_fig8,
+    "paper.variants": paper_variants,
     "paper.optimizers": paper_optimizers,
 }

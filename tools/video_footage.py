@@ -198,7 +198,10 @@ def main(argv=None):
                "mean_iou": float(ious.mean()), "worst_iou": float(ious.min()),
                "camera_mean_iou": [float(v) for v in ious.mean(1)], "iou": ious.tolist(),
                "frame_times": [float(t) for t in cap.frame_times],
-               "sync_error_s": {k: abs(found[k] - true_sync[k]) for k in found if k in true_sync}}
+               "sync_error_s": {k: abs(found[k] - true_sync[k]) for k in found if k in true_sync},
+               "worst_frame": {"camera": cap.cameras[int(np.argmin(ious.min(1)))].name,
+                               "time": float(cap.frame_times[int(np.argmin(ious.min(0)))])}}
+        out["max_sync_error_s"] = max(out["sync_error_s"].values(), default=None)
         with open(a.json, "w") as f:
             json.dump(out, f, indent=1)
     return ious
