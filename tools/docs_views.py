@@ -214,6 +214,69 @@ def occlusion_variants(recording):
     return "\n".join(out)
 
 
+def bench(recording):
+    rec = recording("bench")
+    d = rec["data"]
+    nb, npy, fit, bm = d["numba"], d["numpy"], d["fit"], d.get("blender_model", {})
+    t = d["targets"]
+    out = [f"Measured on this {d['machine']['cpus']}-CPU machine, shared with other jobs (1-minute load "
+           f"{d['machine']['load_average_1min_at_start']:.1f} at the start, {rec['load_1min_after']:.1f} at the end):", "",
+           "| figure | measured | target |", "|---|---|---|",
+           f"| candidate evaluations per second (numba kernels) | **{nb['evals_per_s']:.1f}** (CPU {nb['cpu_ms_per_eval']:.1f} ms "
+           f"per evaluation: simulation {nb['sim_cpu_ms_per_eval']:.1f} ms, silhouettes "
+           f"{nb['silhouette_share_of_cpu_pct']:.0f} %) | {t['evals_per_s']:.0f} |",
+           f"| the numpy reference path (no numba) | {npy['evals_per_s']:.2f} evaluations per second (CPU "
+           f"{npy['cpu_ms_per_eval']:.0f} ms per evaluation): {nb['evals_per_s'] / npy['evals_per_s']:.0f}x slower | |",
+           f"| whole 16-camera fit ({fit['optimizer']}, converged after {fit['evaluations']} evaluations) | "
+           f"**{fit['wall_s']:.1f} s** | under {t['fit_seconds']:.0f} s |",
+           f"| one checkpoint write ({d['checkpoint_bytes'] / 1000:.0f} KB, temp file + fsync + rename) | "
+           f"{d['checkpoint_ms']:.1f} ms | |",
+           f"| peak memory of the bench process (capture, 240 observed silhouettes, numba) | "
+           f"{d['peak_memory_mb']:.0f} MB | |"]
+    if "evals_per_s" in bm:
+        f21 = bm["fit_21x21_4cams"]
+        out += [f"| **blender model**, same workload (16 x 16 quads, 0.5 s + 1.5 s at 24 fps, quality 5, batches of "
+                f"16 on 8 vector lanes) | **{bm['evals_per_s']:.1f}** evaluations per second, CPU "
+                f"{bm['cpu_ms_per_eval']:.1f} ms per evaluation (simulation {bm['sim_cpu_ms_per_eval']:.1f} ms) | "
+                f"{t['evals_per_s']:.0f} |",
+                f"| blender model: a 4-camera fit of a 21 x 21 cloth, default free set ({len(f21['free'])} settings), "
+                f"CMA-ES, {f21['evaluations']} evaluations | {f21['wall_s']:.0f} s wall, training E_sil "
+                f"{f21['best_E_sil_pct']:.2f} % | |"]
+    w = d.get("blender_workers", {}).get("runs", {})
+    if "1" in w and "2" in w:
+        out.append(f"| Blender's own solver as the evaluator (`--backend blender`, a 21 x 21 cloth onto a box, "
+                   f"{d['blender_workers']['frames_per_candidate']} frames per candidate): 1 / 2 Ray workers | "
+                   f"{w['1']['evals_per_s']:.1f} / {w['2']['evals_per_s']:.1f} evaluations per second "
+                   f"({w['2']['evals_per_s'] / w['1']['evals_per_s']:.2f}x) | 1.8x |")
+    return "\n".join(out)
+
+
+def raster_agreement(recording, name="raster_agreement"):
+    d = _data(recording, name)
+    sm, rows = d["summary"], d["rows"]
+    cams = {}
+    for r in rows:
+        cams.setdefault(r["camera"], []).append(r["xor_pct"])
+    worst = max(cams, key=lambda c: sum(cams[c]) / len(cams[c]))
+    out = [f"{sm['rig']}, {len(cams)} cameras x {sm['images'] // len(cams)} shapes = {sm['images']} images at "
+           f"{sm['height']} x {sm['width']}, Blender {sm['blender']} {sm['engine'].title()}:", "",
+           "| figure | value |", "|---|---|",
+           f"| XOR pixels / silhouette area, all {sm['images']} images | {sm['xor_px_total']} px of "
+           f"{sm['area_px_total']:,} px = **{sm['xor_pct_overall']:.4f} %** |",
+           f"| per image: mean / max | {sm['xor_pct_mean']:.4f} % / {sm['xor_pct_max']:.4f} % (max {sm['xor_px_max']} "
+           f"pixels) |",
+           f"| images with identical silhouettes | {sm['images_with_zero_xor']} of {sm['images']} |",
+           f"| worst camera (mean over its shapes) | {worst}, {sum(cams[worst]) / len(cams[worst]):.4f} % |",
+           f"| time per Blender silhouette (render + PNG write/read) | {sm['blender_ms_per_silhouette']:.0f} ms |",
+           f"| time per core silhouette (numpy rasteriser, same image) | {sm['core_ms_per_silhouette']:.1f} ms "
+           f"({sm['blender_ms_per_silhouette'] / sm['core_ms_per_silhouette']:.0f}x faster) |"]
+    return "\n".join(out)
+
+
+def raster_agreement_eevee(recording):
+    return raster_agreement(recording, "raster_agreement_eevee")
+
+
 def stopping(recording):
     d = _data(recording, "stopping")
     out = ["| optimiser | seed | evaluations | stopped by | best training E_sil | k/m, d/m, l error [%] |",
@@ -247,6 +310,9 @@ VIEWS = {
     "demo.parameters": demo_parameters,
     "recordings": recordings,
     "stopping": stopping,
+    "raster_agreement": raster_agreement,
+    "raster_agreement.eevee": raster_agreement_eevee,
+    "bench": bench,
     "occlusion": occlusion,
     "occlusion.variants": occlusion_variants,
     "paper.table1": paper_table1,
