@@ -184,6 +184,11 @@ def paper_optimizers(recording):
     return "\n".join(out)
 
 
+def _fmt(v, small=3):
+    """A figure with the digits that matter: 0.178, 2.61, 53.3, 301."""
+    return f"{v:.{small}f}" if abs(v) < 1 else f"{v:.2f}" if abs(v) < 10 else f"{v:.1f}" if abs(v) < 100 else f"{v:.0f}"
+
+
 def occlusion(recording):
     d = _data(recording, "occlusion")
     c = d["clean"]
@@ -195,8 +200,8 @@ def occlusion(recording):
         out.append(f"| {100 * r['post_width']:.0f} % / {100 * r['hand_radius']:.0f} % | "
                    f"{100 * r['hidden_fraction_mean']:.1f} % / {100 * r['hidden_fraction_max']:.1f} % | "
                    f"{r['ignore']['heldout_pct']:.3f} % ({r['ratio_ignore']:.3f}x) | "
-                   f"{r['background']['heldout_pct']:.3g} % ({r['ratio_background']:.3g}x) | "
-                   f"{r['ignore']['shape_error_mm']:.3f} / {r['background']['shape_error_mm']:.3g} mm |")
+                   f"{_fmt(r['background']['heldout_pct'])} % ({_fmt(r['ratio_background'])}x) | "
+                   f"{r['ignore']['shape_error_mm']:.3f} / {_fmt(r['background']['shape_error_mm'])} mm |")
     return "\n".join(out)
 
 
@@ -209,7 +214,7 @@ def occlusion_variants(recording):
         d = _data(recording, name)
         hid = " / ".join(f"{100 * r['hidden_fraction_mean']:.0f} %" for r in d["rows"])
         ig = " / ".join(f"{r['ratio_ignore']:.3f}x" for r in d["rows"])
-        bg = " / ".join(f"{r['ratio_background']:.3g}x" for r in d["rows"])
+        bg = " / ".join(f"{_fmt(r['ratio_background'])}x" for r in d["rows"])
         out.append(f"| {label} | {d['clean']['heldout_pct']:.3f} % | {hid} | {ig} | {bg} |")
     return "\n".join(out)
 
@@ -277,6 +282,77 @@ def raster_agreement_eevee(recording):
     return raster_agreement(recording, "raster_agreement_eevee")
 
 
+def footage_cameras(recording):
+    d = _data(recording, "footage")["auto"]
+    rows = d["rows"]
+    out = ["| camera | " + " | ".join(r["camera"].replace("cam", "") for r in rows) + " | mean |",
+           "|---" * (len(rows) + 2) + "|",
+           "| IoU | " + " | ".join(f"{r['iou']:.3f}" for r in rows) + f" | **{d['mean_iou']:.3f}** |",
+           "| E_sil vs truth [%] | " + " | ".join(f"{r['e_sil_pct']:.1f}" for r in rows) + f" | **{d['mean_e_sil_pct']:.2f}** |",
+           "| auto threshold | " + " | ".join(f"{r['threshold']:.1f}" for r in rows) + " | |"]
+    return "\n".join(out)
+
+
+FOOTAGE_VARIANTS = [("auto", "**defaults**", ""),
+                    ("single_plate", "one background plate (noise from the frames)", "`--single-plate`"),
+                    ("shadow_window_1", "per-pixel shadow factor", "`--shadow-window 1`"),
+                    ("no_refine", "no boundary refinement", "`--refine 0`"),
+                    ("otsu", "Otsu threshold", "`--threshold otsu`"),
+                    ("no_shadow", "no shadow model", "`--shadow-min 1`"),
+                    ("no_blur", "no blur", "`--blur 0`"),
+                    ("paper_recipe", "the paper's recipe: plain YUV difference, Otsu, no shadow model, no refinement",
+                     "`--threshold otsu --luma-weight 1 --shadow-min 1 --blur 0 --refine 0`")]
+
+
+def footage_variants(recording):
+    d = _data(recording, "footage")
+    out = ["| variant | flags | mean IoU | worst camera | E_sil vs truth [%] | warnings |", "|---|---|---|---|---|---|"]
+    for key, label, flags in FOOTAGE_VARIANTS:
+        v = d[key]
+        out.append(f"| {label} | {flags} | {v['mean_iou']:.3f} | {v['min_iou']:.3f} | {v['mean_e_sil_pct']:.1f} | "
+                   f"{len(v['warnings'])} |")
+    return "\n".join(out)
+
+
+def _mean(xs):
+    return sum(xs) / len(xs)
+
+
+def footage_fit(recording):
+    d = _data(recording, "footage_fit")
+    seeds = [d[k] for k in ("s0", "s1", "s2")]
+    out = ["| training cameras | held-out E_sil vs extracted [%] | same for the true params [%] | held-out E_sil vs "
+           "true masks [%] | shape error [mm] | k/m, d/m, l error [%] |", "|---|---|---|---|---|---|"]
+    for i, r0 in enumerate(seeds[0]):
+        rs = [s[i] for s in seeds]
+        e = {k: _mean([r["identifiable_error_pct"][k] for r in rs]) for k in ("k_over_m", "d_over_m", "l")}
+        out.append(f"| {r0['cameras']} | {_mean([r['heldout_sil_err_vs_extracted_pct'] for r in rs]):.2f} | "
+                   f"{_mean([r['gt_params_heldout_sil_err_vs_extracted_pct'] for r in rs]):.2f} | "
+                   f"{_mean([r['heldout_sil_err_vs_true_pct'] for r in rs]):.2f} | "
+                   f"{_mean([r['shape_error_mm'] for r in rs]):.2f} | "
+                   f"{e['k_over_m']:.1f} / {e['d_over_m']:.1f} / {e['l']:.1f} |")
+    return "\n".join(out)
+
+
+def blender_cloth_fit(recording):
+    from blender_cloth_experiment import format_rows
+
+    from addon.core.physics.paper import identifiable
+    fit = _data(recording, "blender_cloth")["fit"]
+    rows = [r for r in fit if "oracle" not in r]
+    out = format_rows(rows).replace("[1/s^2]", "[1/s²]").split("\n")
+    for i, r in enumerate(rows, 2):
+        if len(r["heldout"]) < 3:
+            out[i] = out[i].replace(f"| {r['heldout_sil_err_pct']:.2f} |",
+                                    f"| {r['heldout_sil_err_pct']:.2f} ({len(r['heldout'])} held-out cameras) |", 1)
+    for o in (r["oracle"] for r in fit if "oracle" in r):
+        i = identifiable(o["params"])
+        out.append(f"| *our model fitted to the true 3D shapes (oracle)* | *{o['all_cameras_sil_err_pct']:.2f} (all "
+                   f"cameras)* | *{o['shape_error_mm']:.2f}* | | *{i['k_over_m']:.3g}* | *{i['d_over_m']:.3g}* | "
+                   f"*{1000 * i['l']:.3f}* |")
+    return "\n".join(out)
+
+
 def stopping(recording):
     d = _data(recording, "stopping")
     out = ["| optimiser | seed | evaluations | stopped by | best training E_sil | k/m, d/m, l error [%] |",
@@ -310,6 +386,10 @@ VIEWS = {
     "demo.parameters": demo_parameters,
     "recordings": recordings,
     "stopping": stopping,
+    "blender_cloth.fit": blender_cloth_fit,
+    "footage.cameras": footage_cameras,
+    "footage.variants": footage_variants,
+    "footage.fit": footage_fit,
     "raster_agreement": raster_agreement,
     "raster_agreement.eevee": raster_agreement_eevee,
     "bench": bench,
