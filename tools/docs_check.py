@@ -62,8 +62,9 @@ NUM_RE = re.compile(r"(?<![\w.\-+/])(?<!\d,)[-−]?\d{1,3}(?:,\d{3})+(?:\.\d+)?(
                     r"(?:e[-+]?\d+)?(?![\d])")
 # not numbers of the docs (see the module docstring); each match is blanked before numbers are read
 NOT_FIGURES = [
+    r"\bx86-64\b",
     r"\b(?:Python|Blender|bpy|numpy|OpenCV|opencv|numba|llvmlite|cma|Ray|ray|Mesa|PyAV|av|pillow|Eevee|Cycles|"
-    r"COLMAP|Debian|Ubuntu|macOS|Windows|LTS|EGL|OpenGL|GL|CUDA|H\.)\s*v?\d+(?:\.\d+)*\+?"
+    r"COLMAP|Debian|Ubuntu|macOS|Windows|LTS|EGL|OpenGL|GL|CUDA|SAM|H\.)\s*v?\d+(?:\.\d+)*\+?"
     r"(?:\s*(?:to|-|and|or)\s*\d+\.\d+(?:\.\d+)*\+?)?",
     r"\b\d+\.\d+\.\d+(?:\.\d+)?\b",
     r"\b(?:[Ii]ssues?|[Ss]ections?|SPEC section|Tables?|Fig\.|Figs\.|Figure|[Ee]q\.|[Ee]qs\.|[Ee]quation|[Ss]tep|"
@@ -77,7 +78,7 @@ NOT_FIGURES = [
     r"\b\d+[A-Za-z_]*[A-Za-z_]\d+\w*\b",
     r"\b[23]D\b",
     r"\^-?\d+",
-    r"\b\d+\s+(?:training\s+|held-out\s+|other\s+|rig\s+)?cameras?\b",
+    r"\b\d+\s+(?:training\s+|held-out\s+|other\s+|rig\s+)?cameras?\b(?:\s+x\s+\d+)?",
 ]
 NOT_RE = re.compile("|".join(f"(?:{p})" for p in NOT_FIGURES), re.MULTILINE)
 
