@@ -125,6 +125,9 @@ def main(argv=None):
         with open(P["replay"]) as f:
             summary = {"fit_wall_s": wall, "workers": a.workers, "budget": a.budget, "population": a.population,
                        "resolution": a.resolution, "grid": a.grid, "replay": json.load(f)}
+        floor = summary["replay"]["one_setting_1pct_off_mm"].values()
+        summary["one_setting_1pct_off_range_mm"] = {"mean": [min(v[0] for v in floor), max(v[0] for v in floor)],
+                                                    "max": [min(v[1] for v in floor), max(v[1] for v in floor)]}
         with open(os.path.join(a.out, "summary.json"), "w") as f:
             json.dump(summary, f, indent=1)
 
