@@ -1,6 +1,6 @@
 # Silhouette Cloth Fit: every command sets up its own environment first.
 #   make demo   - the paper scenario on the built-in lab18 rig: Blender-rendered observations, fit,
-#                 tables and overlays under out/
+#                 overlays and the pictures of the README's "The demo" under out/demo, Table 1 in out/
 #   make test   - the whole test suite (pure core + Blender layer through the bpy module)
 #   make bench  - speed figures (out/bench.json)
 #   make paper  - the full paper protocol (Table 1, Fig. 8, Table 2, optimisers; out/paper.json)
@@ -27,7 +27,7 @@ $(STAMP): requirements.txt
 demo: venv
 	$(PY) demo_blend/build_demo.py --out out/demo --blend out/demo/demo.blend
 	$(PY) -m addon paper --quick --json out/paper_quick.json --out out/paper_quick --only table1
-	@echo "demo done: see out/demo/ (Blender-rendered capture, fit, overlays) and out/paper_quick.json"
+	@echo "demo done: pictures in out/demo/pictures/ (first guess vs fit, error curve, parameters), figures in out/demo/summary.json, capture/fit/overlays in out/demo/capture, Table 1 in out/paper_quick.json"
 
 test: venv
 	$(PY) -m pytest -q tests
