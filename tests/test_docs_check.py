@@ -64,7 +64,7 @@ def fake(tmp_path, monkeypatch):
     rec = {"format": F.FORMAT, "version": 1, "name": "t", "command": "python x.py", "commit": "abc1234",
            "dirty": False, "recorded_at": "2025-01-01T00:00:00Z",
            "data": {"err_pct": 0.0812, "rows": [{"material": "silk (soft)", "mm": 1.234}, {"material": "denim", "mm": 2.5}],
-                    "s": 31.2, "a": 52.0, "b": 3.3}}
+                    "s": 31.2, "a": 52.0, "b": 3.3, "xs": [1.0, 2.5, 0.3]}}
     (figs / "t.json").write_text(json.dumps(rec))
     (figs / "cited_p.json").write_text(json.dumps({"citation": "a paper", "data": {"x": [6.243]}}))
     monkeypatch.setattr(DC, "FIG_DIR", str(figs))
@@ -97,6 +97,7 @@ def test_a_stated_tolerance_is_honoured(fake):
     assert fake("about 30 s<!--fig t s-->\n")[0]
     assert not fake("about 30 s<!--fig t s~5%-->\n")[0]
     assert not fake("16x faster<!--fig t {a}/{b}~1%-->\n")[0]
+    assert not fake("worst 2.5 mm<!--fig t {max(xs)}-->\n")[0]
 
 
 def test_an_untagged_number_fails_and_inputs_do_not(fake):

@@ -13,7 +13,7 @@ comments, invisible on GitHub:
     the last numbers before the tag (one per KEY, in order) are figures of recording NAME. A KEY is
     a path into the recorded output (``rows.3.mean_mm``; ``rows[material^=silk,train_cameras=4]``
     picks the first list item whose fields match, ``^=`` a prefix) or an expression of paths in
-    braces (``{a.x}*1000``, ``{a}/{b}``), or ``@seconds`` (a field of the recording itself: how
+    braces (``{a.x}*1000``, ``{a}/{b}``, ``{max(a.list)}``, also ``min`` and ``mean``), or ``@seconds`` (a field of the recording itself: how
     long the command ran), optionally followed by ``~5%`` or ``~0.2``: the tolerance. Without one the quoted number must be the value rounded to the digits shown. ``_``
     skips a number (an input between figures).
 ``<!--cite NAME KEY ...-->``
@@ -178,6 +178,13 @@ def evaluate(rec, key):
     """A key's value: a path into the recorded output, ``@field`` a field of the recording itself,
     or an arithmetic expression of such paths in braces."""
     def value(path):
+        m = re.fullmatch(r"(min|max|mean)\((.+)\)", path)
+        if m:                                   # min / max / mean of a list (or a dict's values)
+            xs = value(m.group(2))
+            xs = list(xs.values()) if isinstance(xs, dict) else list(xs)
+            if not xs:
+                raise ValueError(f"{path}: empty")
+            return min(xs) if m.group(1) == "min" else max(xs) if m.group(1) == "max" else sum(xs) / len(xs)
         return lookup(rec, path[1:]) if path.startswith("@") else lookup(rec["data"], path)
     if "{" not in key:
         return value(key)
