@@ -389,6 +389,7 @@ def main(argv=None):
             g = check_units()
             print(f"free fall in Blender's cloth with one frame = {FRAME_DT} s: {g:.3f} m/s^2 (expected 9.81)")
             if a.json:
+                os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)
                 with open(a.json, "w") as fh:
                     json.dump({"frame_dt_s": FRAME_DT, "free_fall_m_s2": g}, fh, indent=1)
         elif a.cmd == "observe":
