@@ -362,7 +362,12 @@ def cmd_overlay(a):
     from .core.observation.capture import load_capture
     from .core.observation.overlay import capture_overlays
     cap = load_capture(a.capture)
-    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=_cams(cap, a.cameras), times=_times(a.times))
+    images = None
+    if a.on_images:
+        from .core.footage.extract import footage_images
+        images = footage_images(cap)
+    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=_cams(cap, a.cameras),
+                             times=_times(a.times), images=images)
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
 
 
@@ -536,6 +541,8 @@ def build_parser():
     s.add_argument("--out", default="out/overlays")
     s.add_argument("--cameras")
     s.add_argument("--times")
+    s.add_argument("--on-images", action="store_true",
+                   help="draw on the camera images the silhouettes were extracted from (image footage)")
     s.set_defaults(fn=cmd_overlay)
 
     s = sub.add_parser("paper", help="the paper's Table 1, Fig. 8 and Table 2 protocol")

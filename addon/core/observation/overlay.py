@@ -136,8 +136,11 @@ def write_rgb(path: str, rgb: np.ndarray):
 
 
 def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_name="contact_sheet.png",
-                     max_sheet=36):
-    """Write one overlay PNG per camera and frame plus a contact sheet; returns the list of paths."""
+                     max_sheet=36, images=None):
+    """Write one overlay PNG per camera and frame plus a contact sheet; returns the list of paths.
+    ``images(camera index, frame index)``: the camera's own picture of that frame (RGB uint8, e.g.
+    ``footage.extract.footage_images``); where it gives one, the comparison is drawn on it
+    (``overlay_on_image``) instead of on black."""
     from ..physics.models import model_and_row
     from .raster import silhouette
     model, row = model_and_row(params, getattr(capture, "model", None))
@@ -155,7 +158,8 @@ def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_n
         for j, f in enumerate(fidx):
             obs, ign = capture.load_observation(c, f)
             mod = silhouette(cam, X[j], sc.grid.triangles)
-            img = overlay_image(obs, mod, ign)
+            photo = images(c, f) if images is not None else None
+            img = overlay_on_image(photo, obs, mod, ign) if photo is not None else overlay_image(obs, mod, ign)
             xor = obs ^ mod if ign is None else (obs ^ mod) & ~ign
             e = np.count_nonzero(xor) / max(1, obs.sum())
             path = os.path.join(out_dir, cam.name, f"{f:03d}.png")
