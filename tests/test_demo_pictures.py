@@ -6,12 +6,16 @@ import sys
 
 import numpy as np
 import pytest
-
 from blender_support import bpy, factory  # noqa: F401
 
 from addon.core.errors import ClothFitError
-from addon.core.observation.overlay import (ON_IMAGE_EXTRA_RGB, ON_IMAGE_MISSING_RGB, ON_IMAGE_OUTLINE_RGB,
-                                            overlay_on_image, silhouette_box)
+from addon.core.observation.overlay import (
+    ON_IMAGE_EXTRA_RGB,
+    ON_IMAGE_MISSING_RGB,
+    ON_IMAGE_OUTLINE_RGB,
+    overlay_on_image,
+    silhouette_box,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

@@ -63,13 +63,13 @@ NUM_RE = re.compile(r"(?<![\w.\-+/])(?<!\d,)[-−]?\d{1,3}(?:,\d{3})+(?:\.\d+)?(
 # not numbers of the docs (see the module docstring); each match is blanked before numbers are read
 NOT_FIGURES = [
     r"\bx86-64\b",
-    r"\b(?:Python|Blender|bpy|numpy|OpenCV|opencv|numba|llvmlite|cma|Ray|ray|Mesa|PyAV|av|pillow|Eevee|Cycles|"
-    r"COLMAP|Debian|Ubuntu|macOS|Windows|LTS|EGL|OpenGL|GL|CUDA|SAM|H\.)\s*v?\d+(?:\.\d+)*\+?"
-    r"(?:\s*(?:to|-|and|or)\s*\d+\.\d+(?:\.\d+)*\+?)?",
+    (r"\b(?:Python|Blender|bpy|numpy|OpenCV|opencv|numba|llvmlite|cma|Ray|ray|Mesa|PyAV|av|pillow|Eevee|Cycles|"
+     r"COLMAP|Debian|Ubuntu|macOS|Windows|LTS|EGL|OpenGL|GL|CUDA|SAM|H\.)\s*v?\d+(?:\.\d+)*\+?"
+     r"(?:\s*(?:to|-|and|or)\s*\d+\.\d+(?:\.\d+)*\+?)?"),
     r"\b\d+\.\d+\.\d+(?:\.\d+)?\b",
-    r"\b(?:[Ii]ssues?|[Ss]ections?|SPEC section|Tables?|Fig\.|Figs\.|Figure|[Ee]q\.|[Ee]qs\.|[Ee]quation|[Ss]tep|"
-    r"[Pp]art|[Cc]ommit|[Ss]eeds?|[Ll]evel|[Cc]hapter|[Vv]ersion|format|[Pp]ass|[Cc]olumn|[Rr]ow)\s+\d+(?:\.\d+)?"
-    r"(?:\s*(?:,|and|or|to|-|/)\s*\d+(?:\.\d+)?)*",
+    (r"\b(?:[Ii]ssues?|[Ss]ections?|SPEC section|Tables?|Fig\.|Figs\.|Figure|[Ee]q\.|[Ee]qs\.|[Ee]quation|[Ss]tep|"
+     r"[Pp]art|[Cc]ommit|[Ss]eeds?|[Ll]evel|[Cc]hapter|[Vv]ersion|format|[Pp]ass|[Cc]olumn|[Rr]ow)\s+\d+(?:\.\d+)?"
+     r"(?:\s*(?:,|and|or|to|-|/)\s*\d+(?:\.\d+)?)*"),
     r"\b\d+(?:\.\d+)?\s*[x×]\s*\d+(?:\.\d+)?(?:\s*[x×]\s*\d+(?:\.\d+)?)?\b(?!\s*(?:faster|slower|fewer|more|the))",
     r"\b\d+(?:\.\d+)?-(?=[A-Za-z])",
     r"^\s*\d+\.\s",

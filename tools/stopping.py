@@ -21,10 +21,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from addon.core.fitting.job import FitConfig, FitJob  # noqa: E402
-from addon.core.observation import camera as C  # noqa: E402
-from addon.core.observation import synth  # noqa: E402
-from addon.core.physics.scenario import paper_scenario  # noqa: E402
+from addon.core.fitting.job import FitConfig, FitJob
+from addon.core.observation import camera as C
+from addon.core.observation import synth
+from addon.core.physics.scenario import paper_scenario
 
 TIMES = [0.1, 0.2, 0.3, 0.4, 0.6, 0.8]
 RUNS = [("cma-es", s) for s in range(5)] + [("spx-mgg", s) for s in range(3)]
