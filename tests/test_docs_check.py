@@ -98,6 +98,7 @@ def test_a_stated_tolerance_is_honoured(fake):
     assert not fake("about 30 s<!--fig t s~5%-->\n")[0]
     assert not fake("16x faster<!--fig t {a}/{b}~1%-->\n")[0]
     assert not fake("worst 2.5 mm<!--fig t {max(xs)}-->\n")[0]
+    assert not fake("1.23 to 2.5 mm<!--fig t {min(rows.*.mm)} {max(rows.*[material^=de].mm)}-->\n")[0]
 
 
 def test_an_untagged_number_fails_and_inputs_do_not(fake):

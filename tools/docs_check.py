@@ -12,7 +12,8 @@ comments, invisible on GitHub:
 ``<!--fig NAME KEY KEY ...-->``
     the last numbers before the tag (one per KEY, in order) are figures of recording NAME. A KEY is
     a path into the recorded output (``rows.3.mean_mm``; ``rows[material^=silk,train_cameras=4]``
-    picks the first list item whose fields match, ``^=`` a prefix) or an expression of paths in
+    picks the first list item whose fields match, ``^=`` a prefix; ``rows.*.mm`` or
+    ``rows.*[model=blender].mm`` is the list of every item's value, for ``min``/``max``/``mean``) or an expression of paths in
     braces (``{a.x}*1000``, ``{a}/{b}``, ``{max(a.list)}``, also ``min`` and ``mean``), or ``@seconds`` (a field of the recording itself: how
     long the command ran), optionally followed by ``~5%`` or ``~0.2``: the tolerance. Without one the quoted number must be the value rounded to the digits shown. ``_``
     skips a number (an input between figures).
@@ -143,6 +144,20 @@ def lookup(data, path):
     i = 0
     while i < len(parts):
         part = parts[i]
+        if part.startswith("*"):                # every item of a list (those that have the rest)
+            items = cur if isinstance(cur, list) else list(cur.values()) if isinstance(cur, dict) else None
+            if items is None:
+                raise KeyError(f"{path}: '*' of a {type(cur).__name__}")
+            if part != "*":                     # *[k=v]: the items whose fields match
+                items = [x for x in items if _match(x, part[2:-1])]
+            rest = ".".join(parts[i + 1:])
+            out = []
+            for x in items:
+                try:
+                    out.append(lookup(x, rest) if rest else x)
+                except (KeyError, IndexError, TypeError, ValueError):
+                    pass
+            return out
         # a key with dots in it ("median_evals_to_1.0"): join the following parts until one exists
         j = i
         while isinstance(cur, dict) and part not in cur and j + 1 < len(parts) and "[" not in part:
