@@ -374,7 +374,9 @@ def recordings(recording):
         if name.startswith("cited_"):
             out.append(f"| [{name}](docs/figures/{name}.json) | citation | - | - | - |")
             continue
-        out.append(f"| [{name}](docs/figures/{name}.json) | {rec.get('what', '')} | `{rec['command']}` | "
+        cmd = rec["command"].split(" && ")
+        cmd = f"`{cmd[0]}`" + (f" and {len(cmd) - 1} more" if len(cmd) > 1 else "")
+        out.append(f"| [{name}](docs/figures/{name}.json) | {rec.get('what', '')} | {cmd} | "
                    f"{rec['commit']}{' (dirty)' if rec.get('dirty') else ''} | {rec['recorded_at'][:10]} |")
     return "\n".join(out)
 
