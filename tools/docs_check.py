@@ -76,7 +76,7 @@ NOT_FIGURES = [
     r"^\s*\d+\.\s",
     r"\bt\s*(?:=|<=|>=|<|>|≤|≥)\s*-?\d+(?:\.\d+)?(?:\s*(?:\.\.\.|…|,|to)\s*-?\d+(?:\.\d+)?)*",
     r"\b[A-Za-z_]+\d+[A-Za-z_\d]*\b",
-    r"\b\d+[A-Za-z_]*[A-Za-z_]\d+\w*\b",
+    r"\b\d+(?![eE][-+]?\d)[A-Za-z_]*[A-Za-z_]\d+\w*\b",
     r"\b[23]D\b",
     r"\^-?\d+",
     r"\b\d+\s+(?:training\s+|held-out\s+|other\s+|rig\s+)?cameras?\b(?:\s+x\s+\d+)?",
