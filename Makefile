@@ -1,15 +1,19 @@
 # Silhouette Cloth Fit: every command sets up its own environment first.
 #   make demo   - the paper scenario on the built-in lab18 rig: Blender-rendered observations, fit,
-#                 tables and overlays under out/
+#                 overlays and the pictures of the README's "The demo" under out/demo, Table 1 in out/
 #   make test   - the whole test suite (pure core + Blender layer through the bpy module)
 #   make bench  - speed figures (out/bench.json)
 #   make paper  - the full paper protocol (Table 1, Fig. 8, Table 2, optimisers; out/paper.json)
+#   make docs-check   - every figure in README.md and docs/*.md against its recording in docs/figures/ (in make test)
+#   make docs-images  - run the demo again, record its figures (docs/figures/demo.json), copy its pictures to docs/img
+#   make docs-refresh - re-record every cheap source (demo, identifiability, ...) and regenerate the generated blocks
+#   make docs-rerun   - run the cheap sources again and compare with their recordings (nothing written)
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test bench paper extension clean
+.PHONY: venv demo test bench paper extension clean docs-check docs-images docs-refresh docs-rerun
 
 venv: $(STAMP)
 
@@ -26,7 +30,7 @@ $(STAMP): requirements.txt requirements-dev.txt pyproject.toml
 demo: venv
 	$(PY) demo_blend/build_demo.py --out out/demo --blend out/demo/demo.blend
 	$(PY) -m addon paper --quick --json out/paper_quick.json --out out/paper_quick --only table1 >/dev/null
-	@echo "demo done: see out/demo/ (Blender-rendered capture, fit, overlays) and out/paper_quick.json"
+	@echo "demo done: pictures in out/demo/pictures/ (first guess vs fit, error curve, parameters), figures in out/demo/summary.json, capture/fit/overlays in out/demo/capture, Table 1 in out/paper_quick.json"
 
 test: venv
 	$(PY) -m pytest -q tests
@@ -39,6 +43,22 @@ paper: venv
 
 extension: venv
 	$(PY) tools/build_extension.py
+
+docs-check: venv
+	$(PY) tools/docs_check.py
+
+docs-images: venv
+	$(PY) tools/figures.py record demo paper_quick
+	$(PY) tools/figures.py pictures
+	$(PY) tools/docs_check.py --write
+
+docs-refresh: venv
+	$(PY) tools/figures.py record cheap
+	$(PY) tools/figures.py pictures
+	$(PY) tools/docs_check.py --write
+
+docs-rerun: venv
+	$(PY) tools/figures.py rerun
 
 clean:
 	rm -rf out dist

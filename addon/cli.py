@@ -382,7 +382,12 @@ def cmd_overlay(a):
     from .core.observation.capture import load_capture
     from .core.observation.overlay import capture_overlays
     cap = load_capture(a.capture)
-    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=_cams(cap, a.cameras), times=_times(a.times))
+    images = None
+    if a.on_images:
+        from .core.footage.extract import footage_images
+        images = footage_images(cap)
+    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=_cams(cap, a.cameras),
+                             times=_times(a.times), images=images)
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
     return {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}
 
@@ -476,9 +481,11 @@ def cmd_blender(a):
 def cmd_blender_agreement(a):
     if a.grid < 2 or a.grid > 200:
         raise ClothFitError(f"--grid {a.grid}: must be 2..200")
+    import bpy
+
     from .blender import agreement
     out = {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps,
-           "cases": agreement.run(a.grid, a.settle, a.after, a.fps)}
+           "blender": bpy.app.version_string, "cases": agreement.run(a.grid, a.settle, a.after, a.fps)}
     if a.json:
         from .core.safeio import atomic_json
         atomic_json(a.json, out)
@@ -689,6 +696,8 @@ def build_parser():
     s.add_argument("--out", default="out/overlays",
                    help="folder for the images, <camera>/<frame>.png and contact_sheet.png (default: %(default)s)")
     _selection_args(s, "draw")
+    s.add_argument("--on-images", action="store_true",
+                   help="draw on the camera images the silhouettes were extracted from (image footage)")
 
     s = _command(sub, "paper", cmd_paper, "the paper's Table 1, Fig. 8 and Table 2 protocol",
                  "every table and figure as JSON (the same as --json)")

@@ -2,6 +2,7 @@
 import argparse
 import json
 import os
+import shutil
 
 import cv2
 import numpy as np
@@ -374,3 +375,33 @@ def test_cli_extract(tmp_path, capsys):
     os.remove(os.path.join(root, "cam00", "background.png"))
     assert cli(["extract", root, "-o", out]) == 2
     assert "no background image" in capsys.readouterr().err
+
+
+def test_overlays_on_the_footage_frames(tmp_path, capsys):
+    """overlay --on-images draws the comparison on the camera images the silhouettes came from."""
+    from addon.cli import main as cli
+    from addon.core.observation.overlay import capture_overlays
+    root, out = str(tmp_path / "f"), str(tmp_path / "c")
+    write_footage(root, n_cams=1, times=(0.1, 0.2))
+    X.extract_capture(root, out)
+    cap = load_capture(out)
+    images = X.footage_images(cap)
+    frame = images(0, 1)
+    assert frame.shape == (H, W, 3) and frame.dtype == np.uint8
+    assert np.array_equal(frame, cv2.imread(os.path.join(root, "cam00", "001.png"))[..., ::-1])
+    paths = capture_overlays(cap, {"m": 1e-5, "k": 10.0, "l": 0.1 / 15, "d": 1e-4}, str(tmp_path / "ov"),
+                             images=images)
+    ov = cv2.imread(paths[0])[..., ::-1]
+    far = np.ones((H, W), bool)
+    far[H // 4:3 * H // 4, W // 4:3 * W // 4] = False          # away from the cloth: the frame itself
+    same = np.all(ov == cv2.imread(os.path.join(root, "cam00", "000.png"))[..., ::-1], axis=2)
+    assert same[far].mean() > 0.9
+    assert cli(["overlay", out, "--params", '{"m": 1e-5, "k": 10, "l": 0.00667, "d": 1e-4}', "--out",
+                str(tmp_path / "ov2"), "--on-images"]) == 0
+    capsys.readouterr()
+    X.extract_capture(root, out + "u", undistort=True)
+    with pytest.raises(ClothFitError, match="undistorted"):
+        X.footage_images(load_capture(out + "u"))
+    shutil.rmtree(root)
+    with pytest.raises(ClothFitError, match="not extracted from image footage"):
+        X.footage_images(cap)

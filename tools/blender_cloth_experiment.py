@@ -370,7 +370,8 @@ def main(argv=None):
     o.add_argument("--out", required=True)
     o.add_argument("--rig", default=D.DEFAULT_RIG)
     o.add_argument("--resolution", help="HxW (default: the rig's)")
-    sub.add_parser("check-units", help="measure gravity in Blender's cloth with our time conversion")
+    c = sub.add_parser("check-units", help="measure gravity in Blender's cloth with our time conversion")
+    c.add_argument("--json", help="also write the measured acceleration to this file")
     f = sub.add_parser("fit", help="fit our model, score held-out cameras at the test times")
     f.add_argument("--capture", required=True)
     f.add_argument("--cameras", default="4,8,16")
@@ -387,6 +388,10 @@ def main(argv=None):
         if a.cmd == "check-units":
             g = check_units()
             print(f"free fall in Blender's cloth with one frame = {FRAME_DT} s: {g:.3f} m/s^2 (expected 9.81)")
+            if a.json:
+                os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)
+                with open(a.json, "w") as fh:
+                    json.dump({"frame_dt_s": FRAME_DT, "free_fall_m_s2": g}, fh, indent=1)
         elif a.cmd == "observe":
             res = [int(v) for v in a.resolution.lower().split("x")] if a.resolution else None
             observe(a.out, a.rig, resolution=res)

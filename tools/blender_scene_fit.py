@@ -85,6 +85,10 @@ def warm(a):
     subprocess.run(cmd, check=True, cwd=ROOT)
     with open(P["warm"]) as f:
         res = json.load(f)
+    with open(os.path.join(a.out, "warm_summary.json"), "w") as f:
+        json.dump({"times": len(times), "t_last": times[-1], "evaluations": res.get("evaluations"),
+                   "train_E_sil_pct": res.get("best_E_sil_mean_pct"), "seconds": time.time() - t0,
+                   "blender_cloth": res.get("blender_cloth")}, f, indent=1)
     print(f"warm start: the core blender model on the {len(times)} capture times before contact "
           f"(t <= {times[-1]:.3f} s), {res.get('evaluations')} evaluations in {time.time() - t0:.1f} s, "
           f"training E_sil {res.get('best_E_sil_mean_pct'):.3f} % -> {P['warm']}")
@@ -193,9 +197,25 @@ def main(argv=None):
         cmd += ["--init", a.init]
     t0 = time.time()
     subprocess.run(cmd, check=True, cwd=ROOT)
-    print(f"fit: {time.time() - t0:.1f} s wall (Ray start-up included)")
+    wall = time.time() - t0
+    print(f"fit: {wall:.1f} s wall (Ray start-up included)")
     if a.cmd == "all":
         _child("replay", a)
+        with open(P["replay"]) as f:
+            summary = {"fit_wall_s": wall, "workers": a.workers, "budget": a.budget, "population": a.population,
+                       "resolution": a.resolution, "grid": a.grid, "replay": json.load(f)}
+        floor = summary["replay"]["one_setting_1pct_off_mm"].values()
+        summary["one_setting_1pct_off_range_mm"] = {"mean": [min(v[0] for v in floor), max(v[0] for v in floor)],
+                                                    "max": [min(v[1] for v in floor), max(v[1] for v in floor)]}
+        with open(P["fit"]) as f:
+            summary["fit_blender_cloth"] = json.load(f)["blender_cloth"]
+        with open(os.path.join(P["capture"], "capture.json")) as f:
+            summary["true_blender_cloth"] = json.load(f)["meta"]["true_blender_cloth"]
+        if a.init and a.warm:
+            with open(os.path.join(a.out, "warm_summary.json")) as f:
+                summary["warm"] = json.load(f)
+        with open(os.path.join(a.out, "summary.json"), "w") as f:
+            json.dump(summary, f, indent=1)
 
 
 if __name__ == "__main__":

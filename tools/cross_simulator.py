@@ -189,16 +189,21 @@ def replay(out):
         json.dump(rows, f, indent=1)
 
 
-def table(out):
-    with open(os.path.join(out, "cross_simulator.json")) as f:
-        rows = json.load(f)
-    print("| material | model | train cams | held-out E_sil % (floor) | shape error mm | Blender replay mm | evals | s |")
-    print("|---|---|---|---|---|---|---|---|")
+def format_table(rows) -> str:
+    """The README's Markdown table of the rows of cross_simulator.json."""
+    out = ["| material | model | train cams | held-out E_sil % (floor) | shape error mm | Blender replay mm | evals | s |",
+           "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         rep = r.get("blender_replay_shape_error_mm")
-        print(f"| {r['material']} | {r['model']} | {r['train_cameras']} | {r['heldout_E_sil_pct']:.2f} "
-              f"({r['floor_heldout_E_sil_pct']:.2f}) | {r['shape_error_mm']:.3f} | "
-              f"{'-' if rep is None else f'{rep:.3f}'} | {r['evaluations']} | {r['wall_s']:.0f} |")
+        out.append(f"| {r['material']} | {r['model']} | {r['train_cameras']} | {r['heldout_E_sil_pct']:.2f} "
+                   f"({r['floor_heldout_E_sil_pct']:.2f}) | {r['shape_error_mm']:.3f} | "
+                   f"{'-' if rep is None else f'{rep:.3f}'} | {r['evaluations']} | {r['wall_s']:.0f} |")
+    return "\n".join(out)
+
+
+def table(out):
+    with open(os.path.join(out, "cross_simulator.json")) as f:
+        print(format_table(json.load(f)))
 
 
 def _mats(spec):

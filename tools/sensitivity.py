@@ -1,22 +1,24 @@
 """How sensitive is the paper scenario's motion to the parameters? (README figures on chaos.)
 
-    python tools/sensitivity.py
+    python tools/sensitivity.py [--json FILE]
 
 For several k and d/m it perturbs k by a relative 1e-7 and prints the largest vertex displacement
 over the 30 frames (t = 0.05 ... 1.5 s). A smooth, damped motion moves by ~1e-9 m; a chaotic one
 amplifies the perturbation to tenths of a millimetre or more. It also prints the displacement for
 larger perturbations of the ground truth (continuity of the motion in k/m).
 """
+import argparse
+import json
 import os
 import sys
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from addon.core import defaults as D  # noqa: E402
-from addon.core.physics.paper import Params  # noqa: E402
+from addon.core import defaults as D
+from addon.core.physics.models import simulate
+from addon.core.physics.paper import Params
 from addon.core.physics.scenario import paper_scenario
-from addon.core.physics.models import simulate  # noqa: E402
 
 
 def max_move(sc, base, rel):
@@ -25,18 +27,35 @@ def max_move(sc, base, rel):
     return float(np.abs(a - b).max())
 
 
-def main():
+DAMPINGS = (5, 6, 7, 8, 10)       # d/m [1/s]
+STIFFNESSES = (9.0, 10.0, 11.0)   # k [N/m]
+CHANGES = (1e-6, 1e-4, 1e-3, 1e-2)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="tools/sensitivity.py", description=__doc__.split("\n")[0])
+    ap.add_argument("--json", help="also write every figure to this file")
+    a = ap.parse_args(argv)
     sc = paper_scenario()
     m, l = D.GT_PARAMS["m"], D.GT_PARAMS["l"]
+    out = {"perturbation": 1e-7, "d_over_m": list(DAMPINGS), "k": list(STIFFNESSES), "max_move_m": {},
+           "ground_truth_changes": []}
     print("max vertex displacement [m] after perturbing k by a relative 1e-7")
-    print("k [N/m] | " + " | ".join(f"d/m = {dm:g} /s" for dm in (5, 6, 7, 8, 10)))
-    for k in (9.0, 10.0, 11.0):
-        cells = [f"{max_move(sc, Params(m, k, l, dm * m), 1e-7):.1e}" for dm in (5, 6, 7, 8, 10)]
-        print(f"{k:7.1f} | " + " | ".join(f"{c:>12s}" for c in cells))
+    print("k [N/m] | " + " | ".join(f"d/m = {dm:g} /s" for dm in DAMPINGS))
+    for k in STIFFNESSES:
+        moves = [max_move(sc, Params(m, k, l, dm * m), 1e-7) for dm in DAMPINGS]
+        out["max_move_m"][f"{k:g}"] = moves
+        print(f"{k:7.1f} | " + " | ".join(f"{c:12.1e}" for c in moves))
     gt = Params(**D.GT_PARAMS)
     print("ground truth: relative change of k -> max vertex displacement [m]")
-    for rel in (1e-6, 1e-4, 1e-3, 1e-2):
-        print(f"  {rel:g}: {max_move(sc, gt, rel):.2e}")
+    for rel in CHANGES:
+        mv = max_move(sc, gt, rel)
+        out["ground_truth_changes"].append({"relative_change": rel, "max_move_m": mv})
+        print(f"  {rel:g}: {mv:.2e}")
+    if a.json:
+        os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)
+        with open(a.json, "w") as f:
+            json.dump(out, f, indent=1)
 
 
 if __name__ == "__main__":

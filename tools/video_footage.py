@@ -165,6 +165,7 @@ def main(argv=None):
     ap.add_argument("--noise", type=float, default=4.0, help="sensor noise sigma [grey levels]")
     ap.add_argument("--sync", choices=["true", "flash"], default="flash")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", help="also write the IoU figures to this file")
     a = ap.parse_args(argv)
     from addon.cli import main as cli
     from addon.core.observation.capture import load_capture
@@ -186,6 +187,23 @@ def main(argv=None):
         print(f"{cam.name}: IoU mean {ious[ci].mean():.4f}, worst {ious[ci].min():.4f}")
     print(f"mean IoU {ious.mean():.4f} (worst frame {ious.min():.4f}) over {ious.size} silhouettes, "
           f"{a.cameras} cameras at {a.resolution}, sync from {'the flash' if a.sync == 'flash' else 'sync.json'}")
+    if a.json:
+        found = {}
+        if a.sync == "flash":
+            with open(os.path.join(a.out, "sync_found.json")) as f:
+                found = json.load(f)
+        with open(os.path.join(a.out, "sync.json")) as f:
+            true_sync = json.load(f)
+        out = {"cameras": [c.name for c in cap.cameras], "resolution": res, "sync": a.sync,
+               "mean_iou": float(ious.mean()), "worst_iou": float(ious.min()),
+               "camera_mean_iou": [float(v) for v in ious.mean(1)], "iou": ious.tolist(),
+               "frame_times": [float(t) for t in cap.frame_times],
+               "sync_error_s": {k: abs(found[k] - true_sync[k]) for k in found if k in true_sync},
+               "worst_frame": {"camera": cap.cameras[int(np.argmin(ious.min(1)))].name,
+                               "time": float(cap.frame_times[int(np.argmin(ious.min(0)))])}}
+        out["max_sync_error_s"] = max(out["sync_error_s"].values(), default=None)
+        with open(a.json, "w") as f:
+            json.dump(out, f, indent=1)
     return ious
 
 

@@ -533,6 +533,37 @@ def _natural_key(s: str):
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", s)]
 
 
+def footage_images(capture):
+    """For a capture extracted from image footage (``python -m addon extract``, not ``--videos``):
+    a function ``(camera index, frame index) -> RGB uint8`` frame the silhouette was extracted from
+    (``capture_overlays(images=...)`` draws on it). Raises ClothFitError if the capture names no
+    image footage, or if its silhouettes were undistorted (they no longer match the frames)."""
+    import cv2
+
+    from ..jsonio import read_json
+    footage = (capture.meta or {}).get("footage")
+    if not footage or not os.path.isdir(footage):
+        raise ClothFitError(f"{capture.root}: not extracted from image footage (no camera images to draw on)")
+    rep_path = os.path.join(capture.root, REPORT_JSON)
+    if os.path.isfile(rep_path) and read_json(rep_path, "extraction report").get("options", {}).get("undistort"):
+        raise ClothFitError(f"{capture.root}: the silhouettes were undistorted, so they no longer match the "
+                            f"camera images; draw the overlays without them")
+    cache = {}
+
+    def image(ci, fi):
+        name = capture.cameras[ci].name
+        if name not in cache:
+            cache[name] = list_camera_images(os.path.join(footage, name))[1]
+        frames = cache[name]
+        if fi >= len(frames):
+            raise ClothFitError(f"camera '{name}': no frame {fi} in {os.path.join(footage, name)}")
+        img = cv2.imread(frames[fi], cv2.IMREAD_COLOR)
+        if img is None:
+            raise ClothFitError(f"camera image {frames[fi]} is unreadable")
+        return np.ascontiguousarray(img[..., ::-1])
+    return image
+
+
 def list_camera_images(folder: str):
     """(background paths, frame paths) of a camera folder; backgrounds are files named
     ``background*`` or ``bg*`` (case-insensitive), frames are the other images, natural order."""

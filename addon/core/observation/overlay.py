@@ -3,7 +3,8 @@
 Colours (RGB; ``write_rgb`` converts to cv2's BGR when saving): agreement (both) white
 (255, 255, 255), missing (observed only) red (230, 40, 40), extra (model only) blue (40, 140, 255),
 background black; pixels of unknown truth (ignore masks: occluders) grey (110, 110, 110), darker
-(70, 70, 70) where the model is not.
+(70, 70, 70) where the model is not. ``overlay_on_image`` draws the same comparison on the camera's
+own picture (a footage frame, a render): red and blue tints and the model's outline in yellow.
 """
 from __future__ import annotations
 
@@ -38,6 +39,65 @@ def overlay_image(observed: np.ndarray, model: np.ndarray, ignore=None) -> np.nd
         img[g & m] = IGNORE_MODEL_RGB
         img[g & ~m] = IGNORE_RGB
     return img
+
+
+ON_IMAGE_MISSING_RGB = (255, 40, 40)     # tint where the cloth was observed but the model has none
+ON_IMAGE_EXTRA_RGB = (40, 150, 255)      # tint where the model has cloth the camera did not see
+ON_IMAGE_OUTLINE_RGB = (255, 230, 0)     # the model silhouette's outline
+
+
+def silhouette_box(masks, margin: float = 0.15, shape=None):
+    """(y0, y1, x0, x1): the box around every mask's pixels, grown by ``margin`` of its size on
+    each side, square where the image allows; the whole image if every mask is empty."""
+    masks = [np.asarray(m, dtype=bool) for m in masks]
+    h, w = shape or masks[0].shape
+    ys, xs = [], []
+    for m in masks:
+        yy, xx = np.nonzero(m)
+        ys += [yy.min(), yy.max()] if yy.size else []
+        xs += [xx.min(), xx.max()] if xx.size else []
+    if not ys:
+        return 0, h, 0, w
+    cy, cx = (min(ys) + max(ys)) / 2, (min(xs) + max(xs)) / 2
+    half = (1 + 2 * margin) * max(max(ys) - min(ys), max(xs) - min(xs), 8) / 2
+    half = min(half, h / 2, w / 2)
+    y0 = round(min(max(cy - half, 0), h - 2 * half))
+    x0 = round(min(max(cx - half, 0), w - 2 * half))
+    return y0, y0 + round(2 * half), x0, x0 + round(2 * half)
+
+
+def overlay_on_image(image: np.ndarray, observed: np.ndarray, model: np.ndarray, ignore=None, box=None,
+                     size: int | None = None, alpha: float = 0.55) -> np.ndarray:
+    """The camera's own picture (RGB uint8, e.g. a footage frame or a render) with the comparison
+    drawn on it: red tint where the cloth was observed but the model has none (missing), blue tint
+    where the model has cloth the observation does not (extra), the model silhouette's outline in
+    yellow; pixels of unknown truth (``ignore``) are left untinted. ``box`` (y0, y1, x0, x1) crops
+    (see ``silhouette_box``), ``size`` scales the crop's longer side to that many pixels (the
+    outline is drawn after scaling, so it stays one pixel wide)."""
+    import cv2
+    img = np.asarray(image)
+    o = np.asarray(observed, dtype=bool)
+    m = np.asarray(model, dtype=bool)
+    if img.ndim != 3 or img.shape[2] != 3 or img.shape[:2] != o.shape or o.shape != m.shape:
+        raise ClothFitError(f"overlay on image: image {img.shape}, observed {o.shape} and model {m.shape} "
+                            f"do not match (RGB image and silhouettes of one camera)")
+    g = np.zeros_like(o) if ignore is None else np.asarray(ignore, dtype=bool)
+    y0, y1, x0, x1 = box or (0, o.shape[0], 0, o.shape[1])
+    img, o, m, g = img[y0:y1, x0:x1], o[y0:y1, x0:x1], m[y0:y1, x0:x1], g[y0:y1, x0:x1]
+    if size:
+        f = size / max(img.shape[:2])
+        dsize = (max(1, round(img.shape[1] * f)), max(1, round(img.shape[0] * f)))
+        img = cv2.resize(img, dsize, interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR)
+        o, m, g = (cv2.resize(x.astype(np.uint8), dsize, interpolation=cv2.INTER_NEAREST).astype(bool)
+                   for x in (o, m, g))
+    out = img.astype(np.float32)
+    for sel, rgb in ((o & ~m & ~g, ON_IMAGE_MISSING_RGB), (~o & m & ~g, ON_IMAGE_EXTRA_RGB)):
+        out[sel] = (1 - alpha) * out[sel] + alpha * np.array(rgb, np.float32)
+    out = np.clip(out, 0, 255).astype(np.uint8)
+    contours, _ = cv2.findContours(m.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    out = np.ascontiguousarray(out)
+    cv2.drawContours(out, contours, -1, ON_IMAGE_OUTLINE_RGB, 1, cv2.LINE_AA)
+    return out
 
 
 def label(img: np.ndarray, text: str) -> np.ndarray:
@@ -76,8 +136,11 @@ def write_rgb(path: str, rgb: np.ndarray):
 
 
 def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_name="contact_sheet.png",
-                     max_sheet=36):
-    """Write one overlay PNG per camera and frame plus a contact sheet; returns the list of paths."""
+                     max_sheet=36, images=None):
+    """Write one overlay PNG per camera and frame plus a contact sheet; returns the list of paths.
+    ``images(camera index, frame index)``: the camera's own picture of that frame (RGB uint8, e.g.
+    ``footage.extract.footage_images``); where it gives one, the comparison is drawn on it
+    (``overlay_on_image``) instead of on black."""
     from ..physics.models import model_and_row
     from .raster import silhouette
     model, row = model_and_row(params, getattr(capture, "model", None))
@@ -95,7 +158,8 @@ def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_n
         for j, f in enumerate(fidx):
             obs, ign = capture.load_observation(c, f)
             mod = silhouette(cam, X[j], sc.grid.triangles)
-            img = overlay_image(obs, mod, ign)
+            photo = images(c, f) if images is not None else None
+            img = overlay_on_image(photo, obs, mod, ign) if photo is not None else overlay_image(obs, mod, ign)
             xor = obs ^ mod if ign is None else (obs ^ mod) & ~ign
             e = np.count_nonzero(xor) / max(1, obs.sum())
             path = os.path.join(out_dir, cam.name, f"{f:03d}.png")

@@ -1,0 +1,478 @@
+"""The commands behind the figures the docs quote, and their recorded outputs (docs/figures/).
+
+    python tools/figures.py list                      # every source: command, cost, recorded when / at which commit
+    python tools/figures.py record NAME [NAME...]     # run the command, write docs/figures/NAME.json
+    python tools/figures.py record NAME --from FILE   # record an output a run of that exact command already wrote
+    python tools/figures.py rerun [NAME...]           # run the cheap commands again, compare with the recording
+    python tools/figures.py pictures                  # copy the recorded demo run's pictures to docs/img
+
+A *source* is one command of this repository that writes a JSON file. ``record`` runs it and writes
+``docs/figures/NAME.json``: the command line, the commit it ran at (``dirty`` when addon/ or tools/
+had uncommitted changes), when, how long, the machine's load, and under ``data`` the JSON the
+command wrote. The docs quote those numbers (``tools/docs_check.py`` checks every quote against
+them); ``rerun`` runs the cheap sources again and compares the fresh output with the recording
+within each source's tolerance (timings are not compared: they depend on the machine's load).
+Expensive sources (a full paper run, the 45-minute cross-simulator experiment) are recorded once
+and only checked against their recording.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import fnmatch
+import json
+import math
+import os
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FIG_DIR = os.path.join(ROOT, "docs", "figures")
+RUN_DIR = os.path.join(ROOT, "out", "figures")
+FORMAT = "silhouette-cloth-fit/figures"
+
+# Keys whose values are wall-clock or CPU times (or depend on them): never compared by ``rerun``.
+TIMING = ("*seconds*", "*_s", "*wall*", "*per_s*", "*_ms*", "*time*", "*load*", "*speed*", "*evals_per_s*",
+          "*elapsed*", "*memory*", "*ready*", "*init*")
+
+# name -> source. ``argv``: the command ({out} = the JSON it writes, {py} = this Python);
+# ``output``: the file the command writes (default {out}); ``cost``: "cheap" (seconds to a few
+# minutes: ``rerun`` runs it) or "expensive"; ``rtol``/``atol``: rerun tolerance of the
+# deterministic figures (a fit with a fixed seed gives the same numbers: 0); ``what``: one line.
+SOURCES = {
+    "demo": {
+        "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
+        "output": "out/demo/summary.json", "cost": "cheap", "rtol": 1e-6,
+        "what": "make demo, first part: the Blender pipeline on lab18 (render, fit, overlays, pictures)"},
+    "paper_quick": {
+        "argv": ["{py}", "-m", "addon", "paper", "--quick", "--json", "{out}", "--out", "out/paper_quick",
+                 "--only", "table1"],
+        "cost": "cheap", "rtol": 1e-6, "what": "make demo, second part: Table 1 at 240 x 320"},
+    "identifiability": {
+        "argv": ["{py}", "-m", "addon", "identifiability", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
+        "what": "sensitivity and Cramer-Rao bounds of Blender's cloth settings"},
+    "blender_agreement": {
+        "argv": ["{py}", "-m", "addon", "blender-agreement", "--json", "{out}"], "cost": "cheap", "rtol": 0,
+        "atol": 1e-9, "what": "the core's blender model against Blender's own cloth, 12 cases"},
+    "sensitivity": {
+        "argv": ["{py}", "tools/sensitivity.py", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
+        "what": "how far a relative change of k moves the paper sheet (chaos below d/m = 8 /s)"},
+    "raster_agreement": {
+        "argv": ["{py}", "tools/raster_agreement.py", "--json", "{out}"], "cost": "cheap", "rtol": 0,
+        "what": "core rasteriser against Blender's Workbench renders, 540 images"},
+    "raster_agreement_eevee": {
+        "argv": ["{py}", "tools/raster_agreement.py", "--engine", "eevee", "--times", "0.1:1.5:0.2",
+                 "--json", "{out}"], "cost": "expensive",
+        "what": "core rasteriser against Blender's Eevee renders, 144 images (software GL: minutes)"},
+    "bench": {
+        "argv": ["{py}", "-m", "addon", "bench", "--json", "{out}"], "cost": "expensive",
+        "what": "speed figures (make bench)"},
+    "optimiser_ab": {
+        "argv": ["{py}", "tools/optimiser_ab.py", "all", "0-5", "--json", "{out}"], "cost": "expensive",
+        "what": "our CMA-ES plain / active against the cma package, cotton capture of the cross-simulator, seeds 0-5 "
+                "(needs tools/cross_simulator.py observe --out out/cross2)"},
+    "blender_scene_warm": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_warm", "--release", "corner",
+                 "--drop", "0.07", "--after", "0.75", "--every", "1", "--warm"],
+        "output": "out/scene_warm/summary.json", "cost": "expensive",
+        "what": "one-corner release onto a box: Blender fit from the core model's warm start"},
+    "blender_scene_cold": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_cold", "--release", "corner",
+                 "--drop", "0.07", "--after", "0.75", "--every", "1"],
+        "output": "out/scene_cold/summary.json", "cost": "expensive",
+        "what": "one-corner release onto a box: Blender fit from the scene's starting settings"},
+    "bench_blender_workers": {
+        "argv": ["{py}", "-m", "addon", "bench", "--blender-workers", "--json", "{out}"], "cost": "expensive",
+        "what": "Blender's solver as the evaluator with 1 and 2 Ray workers"},
+    "paper": {
+        "argv": ["{py}", "-m", "addon", "paper", "--json", "{out}", "--out", "out/paper"], "cost": "expensive",
+        "what": "the paper protocol: Table 1, Fig. 8, Table 2, optimisers (make paper)"},
+    "occlusion": {
+        "argv": ["{py}", "-m", "addon", "occlusion", "--json", "{out}"], "cost": "expensive",
+        "what": "the occluder study: ignore masks vs occluders counted as background"},
+    "cross_simulator": {
+        "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
+        "output": "out/cross2/cross_simulator.json", "cost": "expensive",
+        "what": "Blender's cloth as the truth, fitted by both core models (about 45 min)"},
+    "paper_mismatch": {
+        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--truth-dt-safety", "0.125", "--json", "{out}",
+                 "--out", "out/paper_mismatch"], "cost": "expensive",
+        "what": "Table 1 with a model mismatch: the truth simulated with a 4x finer time step"},
+    "paper_far": {
+        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--rig", "lab18_far", "--json", "{out}",
+                 "--out", "out/paper_far"], "cost": "expensive",
+        "what": "Table 1 on a room-sized rig (the cameras at 1.25 m)"},
+    "paper_ga": {
+        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--optimizer", "spx-mgg", "--population", "60",
+                 "--children", "30", "--json", "{out}", "--out", "out/paper_ga"], "cost": "expensive",
+        "what": "Table 1 with the paper's GA at its textbook sizes"},
+    "occlusion_mismatch": {
+        "argv": ["{py}", "-m", "addon", "occlusion", "--truth-dt-safety", "0.125", "--json", "{out}",
+                 "--out", "out/occlusion_mismatch"], "cost": "expensive",
+        "what": "the occluder study with a model mismatch"},
+    "occlusion_quick_1cam": {
+        "argv": ["{py}", "-m", "addon", "occlusion", "--quick", "--train-cameras", "1", "--json", "{out}",
+                 "--out", "out/occlusion_q1"], "cost": "expensive",
+        "what": "the occluder study, 1 training camera, 240 x 320, 700 evaluations"},
+    "occlusion_quick_2cam": {
+        "argv": ["{py}", "-m", "addon", "occlusion", "--quick", "--train-cameras", "2", "--json", "{out}",
+                 "--out", "out/occlusion_q2"], "cost": "expensive",
+        "what": "the occluder study, 2 training cameras, 240 x 320, 700 evaluations"},
+    "video_footage": {
+        "argv": ["{py}", "tools/video_footage.py", "--out", "out/video_footage", "--json", "{out}"],
+        "cost": "expensive", "what": "videos as phones record them, synced by a flash, extracted: IoU"},
+    "footage": {
+        "steps": [["{py}", "tools/render_footage.py", "render", "--out", "out/real/footage"],
+                  ["{py}", "-m", "addon", "extract", "out/real/footage", "-o", "out/real/capture"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture", "--json", "out/real/score_auto.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_single", "--single-plate", "--json", "out/real/score_single.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_sw1", "--shadow-window", "1", "--json", "out/real/score_sw1.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_norefine", "--refine", "0", "--json", "out/real/score_norefine.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_otsu", "--threshold", "otsu", "--json", "out/real/score_otsu.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_noshadow", "--shadow-min", "1", "--json", "out/real/score_noshadow.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_noblur", "--blur", "0", "--json", "out/real/score_noblur.json"],
+                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
+                   "out/real/capture_paper", "--threshold", "otsu", "--luma-weight", "1", "--shadow-min", "1",
+                   "--blur", "0", "--refine", "0", "--json", "out/real/score_paper.json"]],
+        "outputs": {"footage": "out/real/footage/footage.json", "auto": "out/real/score_auto.json",
+                    "single_plate": "out/real/score_single.json", "shadow_window_1": "out/real/score_sw1.json",
+                    "no_refine": "out/real/score_norefine.json", "otsu": "out/real/score_otsu.json",
+                    "no_shadow": "out/real/score_noshadow.json", "no_blur": "out/real/score_noblur.json",
+                    "paper_recipe": "out/real/score_paper.json"},
+        "cost": "expensive", "what": "photoreal footage rendered by Cycles, extracted: IoU per variant (about 20 min)"},
+    "footage_fit": {
+        "steps": [["{py}", "tools/render_footage.py", "fit", "--capture", "out/real/capture", "--footage",
+                   "out/real/footage", "--cameras", "2,4,8,16", "--evals", "3000", "--seed", str(s),
+                   "--json", f"out/real/fit_auto_s{s}.json"] for s in (0, 1, 2)]
+        + [["{py}", "tools/render_footage.py", "fit", "--capture", "out/real/capture_paper", "--footage",
+            "out/real/footage", "--cameras", "4,16", "--evals", "3000", "--seed", "0", "--json",
+            "out/real/fit_paper_s0.json"]],
+        "outputs": {"s0": "out/real/fit_auto_s0.json", "s1": "out/real/fit_auto_s1.json",
+                    "s2": "out/real/fit_auto_s2.json", "paper_recipe": "out/real/fit_paper_s0.json"},
+        "cost": "expensive", "what": "fits on the extracted footage silhouettes (needs the footage recording's files)"},
+    "blender_cloth": {
+        "steps": [["{py}", "tools/blender_cloth_experiment.py", "check-units", "--json", "out/blendercloth/units.json"],
+                  ["{py}", "tools/blender_cloth_experiment.py", "observe", "--out", "out/blendercloth/capture"],
+                  ["{py}", "tools/blender_cloth_experiment.py", "fit", "--capture", "out/blendercloth/capture",
+                   "--cameras", "4,8,16", "--oracle", "--json", "out/blendercloth/fit.json", "--overlays",
+                   "out/blendercloth/overlays"]],
+        "outputs": {"units": "out/blendercloth/units.json", "fit": "out/blendercloth/fit.json"},
+        "cost": "expensive", "what": "Blender's cloth simulator as the truth, fitted by the paper's sheet"},
+    "blender_scene_fit_pop12": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_pop12", "--population", "12"],
+        "output": "out/scene_fit_pop12/summary.json", "cost": "expensive",
+        "what": "the same, population 12"},
+    "blender_scene_fit_2400": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_2400", "--budget", "2400"],
+        "output": "out/scene_fit_2400/summary.json", "cost": "expensive",
+        "what": "the same, 2400 evaluations"},
+    "blender_scene_fit_480x640": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_480", "--resolution", "480x640"],
+        "output": "out/scene_fit_480/summary.json", "cost": "expensive",
+        "what": "the same, silhouettes at 480 x 640"},
+    "stopping": {
+        "argv": ["{py}", "tools/stopping.py", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
+        "what": "fits that stop by themselves: CMA-ES and SPX + MGG on a small capture, budget 100,000"},
+    "blender_scene_fit": {
+        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
+        "output": "out/scene_fit/summary.json", "cost": "expensive",
+        "what": "issue 10: a cloth dropped onto a box, fitted with Blender's own solver on Ray"},
+}
+
+
+def _fmt_argv(argv):
+    return " ".join("python" if a == sys.executable else shlex.quote(a) for a in argv)
+
+
+def source_argv(name, out_path):
+    s = SOURCES[name]
+    return [a.replace("{py}", sys.executable).replace("{out}", out_path) for a in s["argv"]]
+
+
+def source_steps(name):
+    """A multi-step source: [argv, ...] run in order; its output is {key: JSON of each file}."""
+    return [[a.replace("{py}", sys.executable) for a in step] for step in SOURCES[name]["steps"]]
+
+
+def source_output(name):
+    s = SOURCES[name]
+    return os.path.join(ROOT, s.get("output", os.path.join("out", "figures", f"{name}.json")))
+
+
+def git_state():
+    """(short commit, dirty) of the repository: dirty when the code (addon/, tools/, demo_blend/, rigs/;
+    not the docs tools) has uncommitted changes."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short=7", "HEAD"], cwd=ROOT, capture_output=True,
+                                text=True, check=True).stdout.strip()
+        st = subprocess.run(["git", "status", "--porcelain", "--", "addon", "tools", "demo_blend", "rigs",
+                             ":!tools/figures.py", ":!tools/docs_check.py", ":!tools/docs_views.py"],
+                            cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown", True
+    return commit, bool(st)
+
+
+def _load1():
+    try:
+        return round(os.getloadavg()[0], 2)
+    except OSError:
+        return None
+
+
+def figures_path(name):
+    return os.path.join(FIG_DIR, f"{name}.json")
+
+
+def load_recording(name):
+    path = figures_path(name)
+    if not os.path.isfile(path):
+        raise SystemExit(f"error: no recording {os.path.relpath(path, ROOT)}: run `python tools/figures.py record {name}`")
+    with open(path) as f:
+        rec = json.load(f)
+    if rec.get("format") != FORMAT:
+        raise SystemExit(f"error: {os.path.relpath(path, ROOT)} is not a figures recording (format {rec.get('format')!r})")
+    return rec
+
+
+def write_recording(name, data, argv_display, commit, dirty, seconds, load_before, load_after, started):
+    rec = {"format": FORMAT, "version": 1, "name": name, "what": SOURCES[name]["what"],
+           "command": argv_display, "commit": commit, "dirty": dirty, "recorded_at": started,
+           "seconds": None if seconds is None else round(seconds, 1), "cpus": os.cpu_count(),
+           "load_1min_before": load_before, "load_1min_after": load_after, "data": data}
+    os.makedirs(FIG_DIR, exist_ok=True)
+    path = figures_path(name)
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(rec, f, indent=1)
+        f.write("\n")
+    os.replace(tmp, path)
+    return path
+
+
+def run_source(name, out_path=None, log=None):
+    """Run the source's command; returns (argv, seconds, load before, load after, started, output path)."""
+    out_path = out_path or source_output(name)
+    os.makedirs(os.path.dirname(out_path), exist_ok=True)
+    argv = source_argv(name, out_path)
+    started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    l0 = _load1()
+    t0 = time.perf_counter()
+    print(f"[figures] {name}: {_fmt_argv(argv)}", flush=True)
+    r = subprocess.run(argv, check=False, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT if log else None)
+    seconds = time.perf_counter() - t0
+    if r.returncode != 0:
+        raise SystemExit(f"error: {name}: `{_fmt_argv(argv)}` exited with {r.returncode}")
+    if not os.path.isfile(out_path):
+        raise SystemExit(f"error: {name}: the command wrote no {os.path.relpath(out_path, ROOT)}")
+    return argv, seconds, l0, _load1(), started, out_path
+
+
+def run_steps(name):
+    """Run a multi-step source; returns (command text, seconds, load before, after, started, data)."""
+    steps = source_steps(name)
+    started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    l0 = _load1()
+    t0 = time.perf_counter()
+    for argv in steps:
+        print(f"[figures] {name}: {_fmt_argv(argv)}", flush=True)
+        r = subprocess.run(argv, check=False, cwd=ROOT)
+        if r.returncode != 0:
+            raise SystemExit(f"error: {name}: `{_fmt_argv(argv)}` exited with {r.returncode}")
+    seconds = time.perf_counter() - t0
+    data = {}
+    for key, rel in SOURCES[name]["outputs"].items():
+        with open(os.path.join(ROOT, rel)) as f:
+            data[key] = json.load(f)
+    return " && ".join(_fmt_argv(a) for a in steps), seconds, l0, _load1(), started, data
+
+
+def record(name, from_file=None):
+    if name not in SOURCES:
+        raise SystemExit(f"error: unknown source {name!r}; known: {', '.join(SOURCES)}")
+    commit, dirty = git_state()
+    if "steps" in SOURCES[name]:
+        cmd, seconds, l0, l1, started, data = run_steps(name)
+        path = write_recording(name, data, cmd, commit, dirty, seconds, l0, l1, started)
+        print(f"[figures] recorded {os.path.relpath(path, ROOT)} (commit {commit}{', dirty' if dirty else ''})")
+        return path
+    if from_file:
+        out_path = os.path.abspath(from_file)
+        argv = source_argv(name, os.path.relpath(out_path, ROOT))
+        seconds = l0 = l1 = None
+        started = datetime.datetime.fromtimestamp(os.path.getmtime(out_path), datetime.UTC).strftime(
+            "%Y-%m-%dT%H:%M:%SZ")
+        meta = out_path + ".run.json"       # written by `tools/figures.py run`: the run's own commit
+        if os.path.isfile(meta):
+            with open(meta) as f:
+                m = json.load(f)
+            commit, dirty, seconds, l0, l1, started = (m["commit"], m["dirty"], m["seconds"], m["load_1min_before"],
+                                                       m["load_1min_after"], m["started"])
+    else:
+        os.makedirs(RUN_DIR, exist_ok=True)
+        argv, seconds, l0, l1, started, out_path = run_source(name)
+    with open(out_path) as f:
+        data = json.load(f)
+    shown = [a if a != out_path else os.path.relpath(out_path, ROOT) for a in argv]
+    path = write_recording(name, data, _fmt_argv(shown), commit, dirty, seconds, l0, l1, started)
+    print(f"[figures] recorded {os.path.relpath(path, ROOT)} (commit {commit}{', dirty' if dirty else ''})")
+    return path
+
+
+def run_only(name):
+    """Run the command and leave its output plus a ``.run.json`` beside it (record it later with --from)."""
+    commit, dirty = git_state()
+    argv, seconds, l0, l1, started, out_path = run_source(name)
+    with open(out_path + ".run.json", "w") as f:
+        json.dump({"commit": commit, "dirty": dirty, "seconds": round(seconds, 1), "load_1min_before": l0,
+                   "load_1min_after": l1, "started": started, "argv": _fmt_argv(argv)}, f, indent=1)
+    return out_path
+
+
+# ------------------------------------------------------------------ rerun: is the recording still true?
+
+def _timing_key(path):
+    leaf = path.lower()
+    return any(fnmatch.fnmatch(leaf, p) for p in TIMING)
+
+
+def compare(old, new, rtol=0.0, atol=0.0, path=""):
+    """Differences between two JSON values beyond the tolerance, timing keys skipped: list of strings."""
+    if _timing_key(path):
+        return []
+    if isinstance(old, dict) and isinstance(new, dict):
+        out = []
+        for k in old:
+            if k not in new:
+                out.append(f"{path}.{k}: missing in the new output")
+            else:
+                out += compare(old[k], new[k], rtol, atol, f"{path}.{k}" if path else k)
+        return out
+    if isinstance(old, list) and isinstance(new, list):
+        if len(old) != len(new):
+            return [f"{path}: {len(old)} items recorded, {len(new)} now"]
+        out = []
+        for i, (a, b) in enumerate(zip(old, new)):
+            out += compare(a, b, rtol, atol, f"{path}.{i}")
+        return out
+    if isinstance(old, bool) or isinstance(new, bool) or not isinstance(old, (int, float)) \
+            or not isinstance(new, (int, float)):
+        if isinstance(old, str) and isinstance(new, str) and (os.sep in old or old.startswith("/")):
+            return []                          # paths differ between runs (temporary folders)
+        return [] if old == new else [f"{path}: recorded {old!r}, now {new!r}"]
+    if old is None or new is None:
+        return [] if old == new else [f"{path}: recorded {old!r}, now {new!r}"]
+    if math.isnan(old) and math.isnan(new):
+        return []
+    if abs(new - old) <= atol + rtol * abs(old):
+        return []
+    return [f"{path}: recorded {old!r}, now {new!r}"]
+
+
+def rerun(names):
+    bad = 0
+    for name in names:
+        s = SOURCES[name]
+        rec = load_recording(name)
+        if "steps" in s:
+            new = run_steps(name)[-1]
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                out_path = os.path.join(tmp, f"{name}.json") if "output" not in s else source_output(name)
+                run_source(name, out_path)
+                with open(out_path) as f:
+                    new = json.load(f)
+        diffs = compare(rec["data"], new, s.get("rtol", 0.0), s.get("atol", 0.0))
+        if diffs:
+            bad += 1
+            print(f"{name}: {len(diffs)} figures differ from the recording (commit {rec['commit']}):")
+            for d in diffs[:20]:
+                print("   ", d)
+        else:
+            print(f"{name}: the same as recorded (timings not compared)")
+    return 1 if bad else 0
+
+
+DEMO_PICTURES = os.path.join(ROOT, "out", "demo", "pictures")
+DOCS_IMG = os.path.join(ROOT, "docs", "img")
+
+
+def _sha256(path):
+    import hashlib
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()
+
+
+def copy_pictures():
+    """Copy the pictures of the recorded demo run (docs/figures/demo.json) from out/demo/pictures to
+    docs/img, refusing any picture that is not the one that run made."""
+    import shutil
+    pics = load_recording("demo")["data"]["story"]["pictures"]
+    for name, sha in pics.items():
+        src = os.path.join(DEMO_PICTURES, name)
+        if not os.path.isfile(src) or _sha256(src) != sha:
+            raise SystemExit(f"error: {os.path.relpath(src, ROOT)} is not the picture of the recorded demo run "
+                             f"(docs/figures/demo.json): run `make docs-images` (demo + record + copy)")
+        shutil.copyfile(src, os.path.join(DOCS_IMG, name))
+        print(f"[figures] docs/img/{name}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python tools/figures.py", description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    sub.add_parser("list", help="every source and its recording")
+    r = sub.add_parser("record", help="run a source's command and record its output in docs/figures/")
+    r.add_argument("names", nargs="+", help="source names (see list), or 'cheap'")
+    r.add_argument("--from", dest="from_file", help="record this file (written by the source's command) instead of running it")
+    r = sub.add_parser("run", help="run a source's command, keep its output for `record --from` (long runs)")
+    r.add_argument("names", nargs="+")
+    sub.add_parser("pictures", help="copy the recorded demo run's pictures to docs/img")
+    r = sub.add_parser("rerun", help="run the cheap sources again and compare with their recordings")
+    r.add_argument("names", nargs="*", help="default: every cheap source")
+    a = ap.parse_args(argv)
+    if a.cmd == "list":
+        for name, s in SOURCES.items():
+            p = figures_path(name)
+            if os.path.isfile(p):
+                rec = load_recording(name)
+                state = f"recorded {rec['recorded_at']} at {rec['commit']}{' (dirty)' if rec['dirty'] else ''}"
+            else:
+                state = "not recorded"
+            cmd = (" && ".join(_fmt_argv(a) for a in source_steps(name)) if "steps" in s
+                   else _fmt_argv(source_argv(name, "out/figures/" + name + ".json")))
+            print(f"{name:24s} {s['cost']:9s} {state}\n    {cmd}")
+        return 0
+    if a.cmd == "pictures":
+        copy_pictures()
+        return 0
+    names = a.names if a.cmd != "rerun" or a.names else [n for n, s in SOURCES.items() if s["cost"] == "cheap"]
+    if names == ["cheap"]:
+        names = [n for n, s in SOURCES.items() if s["cost"] == "cheap"]
+    for n in names:
+        if n not in SOURCES:
+            raise SystemExit(f"error: unknown source {n!r}; known: {', '.join(SOURCES)}")
+    if a.cmd == "record":
+        if a.from_file and len(names) != 1:
+            raise SystemExit("error: --from records one source")
+        for n in names:
+            record(n, a.from_file)
+        return 0
+    if a.cmd == "run":
+        for n in names:
+            run_only(n)
+        return 0
+    return rerun(names)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
