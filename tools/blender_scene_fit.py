@@ -192,7 +192,7 @@ def main(argv=None):
         meta = json.load(f)
     cmd = [sys.executable, "-m", "addon", "fit", P["capture"], "--backend", "blender", "--blend", P["blend"],
            "--frame-zero", str(meta["frame_zero"]), "--workers", str(a.workers), "--max-evaluations", str(a.budget),
-           "--population", str(a.population), "--seed", str(a.seed), "--out", P["fit"], "--quiet"]
+           "--population", str(a.population), "--seed", str(a.seed), "--out", P["fit"], "--quiet", "--force"]
     if a.init:
         cmd += ["--init", a.init]
     t0 = time.time()
