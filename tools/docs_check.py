@@ -438,7 +438,7 @@ def check_file(path, write=False, stats=None):
             else:
                 diff = next((k for k, (x, y) in enumerate(zip(lines[a:b], want)) if x != y), min(b - a, len(want)))
                 problems.append(Problem(path, a + 1 + diff, f"generated block {view} differs from its rendering "
-                                                            f"(run `make docs-figures`)"))
+                                                            f"(run `python tools/docs_check.py --write`)"))
     if write and new_lines != lines:
         with open(path, "w", encoding="utf-8") as f:
             f.write("\n".join(new_lines))
