@@ -175,11 +175,12 @@ def _kill_procs_with(text):
             time.sleep(0.2)
 
 
-def test_fit_on_a_running_cluster_by_address(scene, ray_fit, tmp_path):
+def test_fit_and_fit_many_on_a_running_cluster_by_address(scene, ray_fit, tmp_path):
     """``--address HOST:PORT``: a Ray cluster started apart (``ray start --head`` on loopback, as the
     README tells), the fit run from a directory outside the repository (its workers get ``addon``
     through Ray's ``py_modules``, not through the repository's path); the same result as the fit
-    on a local instance, and the cluster is left running for the next fit."""
+    on a local instance, and the cluster is left running for the next fit. ``fit-many --address``
+    on the same cluster gives the local fit of the capture."""
     pytest.importorskip("ray")
     tmp = tempfile.mkdtemp(prefix="cfrc", dir="/tmp")
     port = _free_port()
@@ -192,6 +193,7 @@ def test_fit_on_a_running_cluster_by_address(scene, ray_fit, tmp_path):
                             f"--temp-dir={tmp}"], cwd=tmp, env=env, capture_output=True, text=True, timeout=180)
         assert r.returncode == 0, (r.stdout + r.stderr)[-2000:]
         out = tmp_path / "fit.json"
+        blend, cap, f0 = scene
         args = _fit_args(scene, out, "--address", f"127.0.0.1:{port}")
         fit = subprocess.run([sys.executable, "-m", "addon"] + args, cwd=tmp, env=dict(env, PYTHONPATH=ROOT),
                              capture_output=True, text=True, timeout=600)
@@ -201,6 +203,20 @@ def test_fit_on_a_running_cluster_by_address(scene, ray_fit, tmp_path):
         ray_res = json.load(open(ray_fit[1]))
         assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
         assert _procs_with(tmp), "the fit must leave the user's cluster running"
+        # fit-many on the same cluster: core-model fits as Ray tasks, each the local fit of that capture
+        many = tmp_path / "many"
+        fm = subprocess.run([sys.executable, "-m", "addon", "fit-many", cap, "--address", f"127.0.0.1:{port}",
+                             "--workers", "2", "--max-evaluations", "14", "--seed", "5", "--out-dir", str(many)],
+                            cwd=tmp, env=dict(env, PYTHONPATH=ROOT), capture_output=True, text=True, timeout=600)
+        assert fm.returncode == 0, fm.stderr[-2000:]
+        assert json.loads(fm.stdout)["executor"] == "ray"
+        from addon.core.fitting.job import FitConfig, FitJob
+        from addon.core.observation.capture import load_capture
+        with open(many / f"000_{os.path.basename(cap)}.json") as f:
+            got = json.load(f)
+        local = FitJob(load_capture(cap), FitConfig(max_evaluations=14, seed=5)).run()
+        assert got["params"] == local["params"] and got["best_E_all"] == local["best_E_all"]
+        assert _procs_with(tmp), "fit-many must leave the user's cluster running"
     finally:
         _kill_procs_with(tmp)
         shutil.rmtree(tmp, ignore_errors=True)
