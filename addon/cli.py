@@ -422,13 +422,9 @@ def _paper_parallel(a):
 
 
 def cmd_tables(a):
+    from .core.jsonio import read_json
     from .core.studies.experiment import format_tables
-    try:
-        with open(a.json) as f:
-            d = json.load(f)
-    except (OSError, json.JSONDecodeError) as e:
-        raise ClothFitError(f"cannot read {a.json}: {e}") from None
-    return Text(format_tables(d))           # text tables by design (the JSON is the file itself)
+    return Text(format_tables(read_json(a.json, "paper JSON")))           # text tables by design (the JSON is the file itself)
 
 
 def cmd_bench(a):
