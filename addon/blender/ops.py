@@ -420,12 +420,13 @@ def end_steps(context, run):
     _redraw(context)
 
 
-def _ui_begin(context, run, text):
-    """Progress bar, timer (``run.timer``) and status text of a modal run (fit or long operator)."""
+def _ui_begin(context, run, text, interval=0.02):
+    """Progress bar, timer (``run.timer``, every ``interval`` s) and status text of a modal run (the
+    fits, a long operator)."""
     wm = context.window_manager
     wm.progress_begin(0, 1000)
     if context.window is not None:
-        run.timer = wm.event_timer_add(0.02, window=context.window)
+        run.timer = wm.event_timer_add(interval, window=context.window)
     _status(context, text)
 
 

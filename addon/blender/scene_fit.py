@@ -23,6 +23,7 @@ from bpy.props import FloatProperty, IntProperty
 from ..core.errors import ClothFitError
 from ..core.jsonio import read_json
 from .cloth import apply_settings, cloth_modifier
+from .ops import _status, _ui_begin, _ui_end
 
 RESULT_KEY = "clothfit_scene_fit_result"     # object custom property: the last fit's result JSON
 PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -30,6 +31,8 @@ PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath
 
 class SceneFitSession:
     """A fit of ``obj``'s Cloth settings running in its own process."""
+
+    timer = None        # the operator's UI timer while it runs modal (ops._ui_begin / _ui_end)
 
     def __init__(self, scene, obj, capture_dir, budget, workers=2, frame_zero=None, out_dir=None, extra=(),
                  address=None, cache_dir=None):
@@ -156,7 +159,6 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
                               description="Scene frame of capture time 0 (-1: the scene's start frame)")
 
     _session = None
-    _timer = None
 
     def _start(self, context):
         from .prefs import cache_folder, preferences
@@ -188,21 +190,12 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
         except (ClothFitError, OSError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        wm = context.window_manager
-        wm.progress_begin(0, 1000)
-        self._timer = wm.event_timer_add(0.5, window=context.window)
-        wm.modal_handler_add(self)
+        _ui_begin(context, self._session, None, interval=0.5)
+        context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
     def _end(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        ws = getattr(context, "workspace", None)
-        if ws is not None:
-            ws.status_text_set(None)
+        _ui_end(context, self._session)
         try:
             res = self._session.finish(context.scene)
         except ClothFitError as e:
@@ -224,10 +217,8 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
             return {"PASS_THROUGH"}
         n, e = s.progress()
         context.window_manager.progress_update(int(1000 * min(1.0, n / max(1, s.budget))))
-        ws = getattr(context, "workspace", None)
-        if ws is not None:
-            ws.status_text_set(f"Fitting '{s.obj_name}' with Blender's solver: {n}/{s.budget} candidates"
-                               + (f", E_sil {e:.3f} %" if e is not None else "") + " (Esc: stop, keep the best)")
+        _status(context, f"Fitting '{s.obj_name}' with Blender's solver: {n}/{s.budget} candidates"
+                + (f", E_sil {e:.3f} %" if e is not None else "") + " (Esc: stop, keep the best)")
         if s.running():
             return {"RUNNING_MODAL"}
         return self._end(context)
