@@ -14,6 +14,7 @@ import numpy as np
 
 from ...core import defaults as D
 from ...core.errors import ClothFitError
+from ...core.jsonio import read_json
 from ...core.observation.camera import select_training
 from ...core.physics.paper import Params
 from .building import simulate
@@ -220,11 +221,7 @@ def load_result(scene, path=None):
     path = path or (bpy.path.abspath(p.result_path) if p.result_path else os.path.join(capture_dir(scene), RESULT_JSON))
     if not os.path.isfile(path):
         raise ClothFitError(f"no fit result at {path}: run the fit first")
-    try:
-        with open(path) as f:
-            res = json.load(f)
-    except (OSError, json.JSONDecodeError) as e:
-        raise ClothFitError(f"fit result {path} is unreadable: {e}") from None
+    res = read_json(path, "fit result", expect=None)
     if not isinstance(res, dict) or not (isinstance(res.get("params"), dict) or
                                          isinstance(res.get("blender_cloth"), dict)):
         raise ClothFitError(f"fit result {path} has no parameters (the fit found none)")

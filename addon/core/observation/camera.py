@@ -15,7 +15,6 @@ World units are metres; the world is Z-up (as in Blender).
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -23,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ClothFitError
+from ..jsonio import read_json
 
 
 MAX_IMAGE_SIDE = 16384          # pixels per side of a camera image
@@ -267,13 +267,7 @@ def save_cameras(path: str, cameras, extra: dict | None = None):
 
 def load_cameras(path: str):
     """Read a cameras JSON (``{"cameras": [...]}``, a rig preset is the same format)."""
-    if not os.path.isfile(path):
-        raise ClothFitError(f"camera file not found: {path}")
-    try:
-        with open(path) as f:
-            d = json.load(f)
-    except (OSError, json.JSONDecodeError) as e:
-        raise ClothFitError(f"camera file {path} is not valid JSON: {e}") from None
+    d = read_json(path, "camera file", expect=None)
     if not isinstance(d, dict) or not isinstance(d.get("cameras"), list):
         raise ClothFitError(f"camera file {path}: expected an object with a 'cameras' list")
     if not d["cameras"]:
