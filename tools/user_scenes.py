@@ -508,6 +508,8 @@ def _exact(X, T) -> dict:
 
 
 def _fmt(r):
+    if r.get("skipped"):
+        return f"skipped: {r['skipped']}"
     if r.get("exploded"):
         return "exploded"
     e = r.get("heldout_E_sil_pct")
@@ -587,8 +589,11 @@ def drift_scene(out, name) -> dict:
     slips["settles_one_frame_longer"] = score(*v.run(weights_shift=1, frames_shift=1)[:2])
     slips["time_scale_real_time"] = score(*v.run(rows=sc.settings_row(time_scale=B.physical_time_scale(FPS))[None])[:2])
     slips["quality_5"] = score(*v.run(quality=5)[:2])
-    X24, t24, _ = declared(24.0)
-    slips["fps_24"] = score(X24, t24)
+    try:                                 # the model's default frame rate (24) instead of the scene's
+        X24, t24, _ = declared(24.0)
+        slips["fps_24"] = score(X24, t24)
+    except ClothFitError as e:           # the declared settling is not whole frames at 24 fps
+        slips["fps_24"] = {"mean_mm": None, "max_mm": None, "heldout_E_sil_pct": None, "skipped": str(e)}
     for slip in SLIPS:                   # Blender ran a copy of the scene with the slip
         ss, st = load_truth(out, f"{name}_{slip}")
         Tv = st["frames"][cf]
@@ -599,6 +604,111 @@ def drift_scene(out, name) -> dict:
         slips[slip] = r
     res["slips"] = slips
     return res
+
+
+SLIP_NAMES = {
+    "release_declared_one_frame_late": "t = 0 declared one frame after the release",
+    "settles_one_frame_longer": "cloth's first frame one frame earlier (settles one frame longer)",
+    "release_keyed_over_5_frames": "influence keyed over 5 frames (Blender)",
+    "pins_painted_0.95": "pins assigned weight 0.95 (Blender)",
+    "mix_left_below_cloth": "Vertex Weight Mix left below the Cloth (Blender)",
+    "quality_5": "quality 5 (the model's default) instead of 15",
+    "fps_24": "capture times read at 24 fps (the model's default)",
+    "time_scale_real_time": "time_scale for real time (sqrt(1000)/fps) instead of 1",
+}
+PART_NAMES = {"labels": "vertex numbering", "faces": "face list (order, first corner)",
+              "edges": "edge order (structural springs)", "rest": "first-frame positions (float32)",
+              "plan": "pins and release as declared"}
+
+
+def summary(rows) -> dict:
+    """The ranges the docs quote."""
+    hang = [n for n, r in rows.items() if "slips" in r]
+    out = {"hanging_scenes": hang}
+
+    def rng(vals):
+        vals = [v for v in vals if v is not None]
+        return [min(vals), max(vals)] if vals else None
+    if hang:
+        H = [rows[n] for n in hang]
+        out["scene_vs_blender_max_mm"] = max(r["scene_vs_blender_every_frame"]["max_mm"] for r in H)
+        out["one_float32_step_mm"] = max(r["scene_vs_blender_every_frame"]["one_float32_step_mm"] for r in H)
+        out["bitwise_equal_scenes"] = [n for n in hang if rows[n]["scene_vs_blender_every_frame"]["bitwise_equal"]]
+        out["slip_scene_models_max_mm"] = max(c["scene_model_of_the_slip"]["max_mm"] for r in H
+                                              for c in r["slips"].values() if "scene_model_of_the_slip" in c)
+        out["core_one_step_vs_blender_one_step_max_mm"] = max(r["core_one_step_vs_blender_one_step"]["max_mm"] for r in H)
+        out["declared_mean_mm"] = rng([r["declared"]["mean_mm"] for r in H])
+        out["declared_max_mm"] = rng([r["declared"]["max_mm"] for r in H])
+        out["declared_E_sil_pct"] = rng([r["declared"]["heldout_E_sil_pct"] for r in H])
+        out["floor_E_sil_pct"] = rng([r["floor_heldout_E_sil_pct"] for r in H])
+        out["rounding_alone_mean_mm"] = rng([c["mean_mm"] for r in H for k, c in r["rounding_causes"].items()
+                                             if k in PART_NAMES])
+        out["rounding_alone_max_mm"] = rng([c["max_mm"] for r in H for k, c in r["rounding_causes"].items()
+                                            if k in PART_NAMES])
+        out["blender_one_step_mean_mm"] = rng([r["blender_one_step"]["tension_stiffness"]["mean_mm"] for r in H])
+        out["blender_one_step_max_mm"] = rng([r["blender_one_step"]["tension_stiffness"]["max_mm"] for r in H])
+        out["slips"] = {k: {"mean_mm": rng([r["slips"][k]["mean_mm"] for r in H]),
+                            "max_mm": rng([r["slips"][k]["max_mm"] for r in H]),
+                            "E_sil_pct": rng([r["slips"][k]["heldout_E_sil_pct"] for r in H])}
+                        for k in SLIP_NAMES if all(k in r["slips"] for r in H)}
+    drop = [r for r in rows.values() if "contact_frame" in r]
+    if drop:
+        d = drop[0]
+        f = d["blender_one_step"]
+        out["collider"] = {"contact_frame": d["contact_frame"],
+                           "blender_one_step_mean_mm": rng([c["mean_mm"] for c in f.values()]),
+                           "blender_one_step_max_mm": rng([c["max_mm"] for c in f.values()]),
+                           "blender_one_step_E_sil_pct": rng([c["heldout_E_sil_pct"] for c in f.values()]),
+                           "floor_E_sil_pct": d["floor_heldout_E_sil_pct"]}
+    return out
+
+
+def _mm(c):
+    if c is None or c.get("mean_mm") is None:
+        return "-"
+    e = c.get("heldout_E_sil_pct")
+    return f"{c['mean_mm']:.3f} / {c['max_mm']:.3f}" + ("" if e is None else f" ({e:.2f} %)")
+
+
+def format_table(doc) -> str:
+    """Per scene: the core model as declared and as built from the scene, against Blender."""
+    rows = doc["scenes"]
+    out = ["| scene | mesh | core model as declared: mean / max mm (held-out E_sil) | "
+           "built from the scene | every frame, max mm | noise floor E_sil | Blender, one float32 step of "
+           "tension: mean / max mm (E_sil) |", "|---|---|---|---|---|---|---|"]
+    for n, r in rows.items():
+        spec = SCENES.get(n, {})
+        mesh = ("Grid" if spec.get("mesh") == "grid" else "subdivided Plane") + \
+            (f" turned {spec['rotate_z']:g} deg" if spec.get("rotate_z") else "") + \
+            ("; transform applied" if spec.get("apply") else "; transform kept")
+        order = "numbered as our grid" if r["vertex_order_is_grid_order"] else "its own numbering"
+        dec = "exploded (no collisions: falls through the block)" if r["declared"].get("exploded") else _mm(r["declared"])
+        ex = r["scene_vs_blender_every_frame"]
+        every = ("0 (bitwise)" if ex["bitwise_equal"] else f"{ex['max_mm']:.1e}" if ex["first_frame_beyond_one_step"] is None
+                 else f"exact to frame {ex['first_frame_beyond_one_step'] - 1}, then no collisions")
+        sc = _mm(r["scene"]) if "slips" in r else "-"
+        out.append(f"| {n} (quality {r['settings']['quality']}) | {mesh}; {order} | {dec} | {sc} | {every} | "
+                   f"{r['floor_heldout_E_sil_pct']:.2f} % | {_mm(r['blender_one_step']['tension_stiffness'])} |")
+    return "\n".join(out)
+
+
+def format_causes(doc) -> str:
+    """Each difference alone (the rest from the scene) against Blender, per hanging scene."""
+    rows = {n: r for n, r in doc["scenes"].items() if "slips" in r}
+    names = list(rows)
+    out = ["| difference from the scene, alone | " + " | ".join(f"{n}: mean / max mm (E_sil)" for n in names) + " |",
+           "|---|" + "---|" * len(names)]
+    for k, label in PART_NAMES.items():
+        cells = []
+        for n in names:
+            c = rows[n]["rounding_causes"][k]
+            cells.append("no change" if c.get("identical_to_scene") else _mm(c))
+        out.append(f"| {label} | " + " | ".join(cells) + " |")
+    out.append("| the declared grid's triangles (silhouettes only) | " + " | ".join(
+        f"({rows[n]['rounding_causes']['triangulation_only']['heldout_E_sil_pct']:.2f} %)" for n in names) + " |")
+    for k, label in SLIP_NAMES.items():
+        out.append(f"| {label} | " + " | ".join(_mm(rows[n]["slips"].get(k)) for n in names) + " |")
+    return "\n".join(out)
 
 
 def drift(out, names=None, json_path=None):
@@ -623,8 +733,11 @@ def drift(out, names=None, json_path=None):
                     print(f"    {k:34s} E_sil {c['heldout_E_sil_pct']:6.2f} %", flush=True)
                 else:
                     print(f"    {k:34s} {_fmt(c)}{extra}", flush=True)
-    doc = {"scenes": rows, "fps": FPS, "after_frames": AFTER, "grid": CUTS + 1, "cameras": len(rig()),
-           "drift_cpu_s": time.process_time() - c0, "drift_wall_s": time.perf_counter() - t0}
+    doc = {"scenes": rows, "summary": summary(rows), "fps": FPS, "after_frames": AFTER, "release_frame": RELEASE,
+           "grid": CUTS + 1, "cameras": len(rig()), "drift_cpu_s": time.process_time() - c0,
+           "drift_wall_s": time.perf_counter() - t0}
+    print(format_table(doc), flush=True)
+    print(format_causes(doc), flush=True)
     if json_path:
         from addon.core.safeio import atomic_json
         os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
