@@ -167,6 +167,38 @@ def test_a_users_declaration_slip_costs_millimetres(slip):
     assert d.mean() > 0.5 and d.max() > 3.0, (d.mean(), d.max())
 
 
+def test_capture_times_read_at_the_models_default_24_fps(monkeypatch):
+    """The core model's default frame rate (24) on a 20 fps scene: every capture time lands on
+    another frame of Blender's (the cloth advances per frame, not per second)."""
+    monkeypatch.setattr(US, "RELEASE", 6)                # 0.25 s of settling: whole frames at 20 and 24 fps
+    sc, X, _ = blender_run("cotton")
+    v = US.Variant(sc, "cotton")
+    scen = US.declared_scenario("cotton", v.grid, sc)
+    cf = US.capture_frames("cotton")
+    right = BlenderModel(US.FPS, 15).simulate(scen, sc.settings_row()[None]).positions[0]
+    wrong = BlenderModel(24, 15).simulate(scen, sc.settings_row()[None]).positions[0]
+    assert max_mm(right, X[cf][:, v.p]) < 0.5
+    assert max_mm(wrong, X[cf][:, v.p]) > 10.0
+
+
+def test_a_subdivision_above_the_cloth_is_simulated_subdivided():
+    """A Subdivision Surface modifier above the Cloth modifier: Blender simulates the subdivided
+    mesh; the reading takes its vertices, edges and faces, and the core model follows."""
+    obj = US.build_scene("silk", cuts=4)
+    scene = bpy.context.scene
+    sub = obj.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels = 1
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.modifier_move_to_index(modifier=sub.name, index=0)
+    n = US.n_frames("silk")
+    sc = read_scene_cloth(scene, obj, n)
+    assert sc.n_vertices == 81 and len(obj.data.vertices) == 25
+    X, _, _ = simulate_frames(scene, obj, n)
+    core, _ = sc.simulate()
+    assert follows(core[0], X)
+    assert np.linalg.norm(X[-1] - X[0], axis=-1).max() > 0.02
+
+
 def test_release_keyed_over_frames_is_soft_goals_followed_exactly():
     """Influence keys 4 frames apart (Bezier): the corner's weight passes through values between
     0 and 1 (soft goal springs of stiffness w^4 * pin_stiffness); the model from the scene's

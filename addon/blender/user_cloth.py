@@ -6,7 +6,8 @@ What the Cloth modifier reads (``blenkernel/intern/cloth.cc``): at its cache's f
 mesh it receives (the result of the modifiers above it), transformed to world space in float32
 (``mul_m4_v3``): rest lengths, rest angles and the first positions come from there; every later
 frame, the world positions of the same input for the pinned vertices and the weights of its pin
-group (``vertex_group_mass``) in that input. So the input is read with the Cloth modifier (and
+group (``vertex_group_mass``) in that input; its springs from that input's edges and faces (a
+Subdivision modifier above the cloth is simulated subdivided). So the input is read with the Cloth modifier (and
 everything below it) switched off, frame by frame: hooks, armatures, keyed Vertex Weight
 modifiers and object animation all show up as they reach the cloth, whatever the user used.
 
@@ -24,9 +25,9 @@ from ..core.physics.blender_scene import SceneCloth, world_f32
 from .cloth import cloth_modifier, read_settings, scene_fps
 
 
-def _input_mesh(obj, group_index):
-    """(local positions (V, 3) float32, pin weights (V,) float32, matrix_world float32) of the
-    evaluated object at the current frame."""
+def _input_mesh(obj, group_index, topology=False):
+    """(local positions (V, 3) float32, pin weights (V,) float32, matrix_world float32 and, with
+    ``topology``, (edges, faces, loop triangles)) of the evaluated object at the current frame."""
     dg = bpy.context.evaluated_depsgraph_get()
     ev = obj.evaluated_get(dg)
     me = ev.to_mesh()
@@ -41,9 +42,18 @@ def _input_mesh(obj, group_index):
                     if g.group == group_index:
                         w[v.index] = g.weight
         M = np.array(ev.matrix_world, dtype=np.float32)
+        topo = None
+        if topology:
+            edges = np.zeros(len(me.edges) * 2, dtype=np.int64)
+            me.edges.foreach_get("vertices", edges)
+            faces = [list(p.vertices) for p in me.polygons]
+            me.calc_loop_triangles()
+            tris = np.zeros(len(me.loop_triangles) * 3, dtype=np.int64)
+            me.loop_triangles.foreach_get("vertices", tris)
+            topo = (edges.reshape(-1, 2), faces, tris.reshape(-1, 3))
     finally:
         ev.to_mesh_clear()
-    return co.reshape(-1, 3), w, M
+    return co.reshape(-1, 3), w, M, topo
 
 
 def not_modelled(scene, obj, cl) -> list:
@@ -95,13 +105,14 @@ def read_scene_cloth(scene, obj, n_frames: int, info=None) -> SceneCloth:
     stack = list(obj.modifiers)
     below = stack[stack.index(cl):]                      # the cloth and what comes after it
     was = [m.show_viewport for m in below]
-    frames_co, frames_w, mats = [], [], []
+    frames_co, frames_w, mats, topo = [], [], [], None
     try:
         for m in below:
             m.show_viewport = False
         for f in range(f0, f0 + n_frames + 1):
             scene.frame_set(f)
-            co, w, M = _input_mesh(obj, gi)
+            co, w, M, t = _input_mesh(obj, gi, topology=topo is None)
+            topo = topo or t
             frames_co.append(co)
             frames_w.append(w)
             mats.append(M)
@@ -111,26 +122,18 @@ def read_scene_cloth(scene, obj, n_frames: int, info=None) -> SceneCloth:
         scene.frame_set(f0)
     V = frames_co[0].shape[0]
     if any(c.shape[0] != V for c in frames_co):
-        raise ClothFitError(f"object '{obj.name}': the cloth's input changes its vertex count over the frames")
-    if V != len(obj.data.vertices):
-        raise ClothFitError(f"object '{obj.name}': the modifiers above the cloth change the vertex count "
-                            f"({len(obj.data.vertices)} -> {V}); read the cloth as it is simulated")
+        raise ClothFitError(f"object '{obj.name}': the cloth's input changes its vertex count over the frames "
+                            f"(Blender restarts such a cloth)")
     W = np.array(frames_w)
     hv = np.nonzero((W > 0).any(0))[0]
     rest = world_f32(mats[0], frames_co[0])
     targets = np.array([world_f32(M, c[hv]) for M, c in zip(mats, frames_co)]).reshape(len(mats), hv.size, 3)
-    me = obj.data
-    edges = np.zeros(len(me.edges) * 2, dtype=np.int64)
-    me.edges.foreach_get("vertices", edges)
-    faces = [list(p.vertices) for p in me.polygons]
-    me.calc_loop_triangles()
-    tris = np.zeros(len(me.loop_triangles) * 3, dtype=np.int64)
-    me.loop_triangles.foreach_get("vertices", tris)
+    edges, faces, tris = topo          # the mesh the cloth receives (modifiers above it applied)
     g = np.array(scene.gravity, dtype=np.float64) * float(cs.effector_weights.gravity) * float(scene.use_gravity)
     meta = {"object": obj.name, "scene": scene.name, "pin_group": gname,
             "modifiers": [f"{m.name} ({m.type})" for m in stack],
             "matrix_world": np.array(mats[0], dtype=np.float64).tolist(),
             "not_modelled": not_modelled(scene, obj, cl), "blender": bpy.app.version_string}
     meta.update(info or {})
-    return SceneCloth(rest, faces, edges.reshape(-1, 2), tris.reshape(-1, 3), hv.astype(np.int64),
+    return SceneCloth(rest, faces, edges, tris, hv.astype(np.int64),
                       W[:, hv].astype(np.float64), targets, read_settings(cl), g, float(scene_fps(scene)), f0, meta)
