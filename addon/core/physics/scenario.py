@@ -25,6 +25,11 @@ MAX_TIME_S = 3600.0          # frame and key times [s]
 MAX_SETTLE_S = 60.0          # settling before t = 0 [s]
 MAX_GRAVITY = 1000.0         # [m/s^2]
 MAX_FRAMES = 100_000
+# the manipulation's unknowns a capture may declare (``Uncertainty``): bounds beyond these are not an
+# uncertain measurement but a wrong one (a release misread by more than a second, a pin 5 cm away)
+UNCERTAIN_KEYS = ("time_offset", "handles")
+MAX_TIME_OFFSET_S = 1.0
+MAX_HANDLE_OFFSET_M = 0.05
 
 
 class ClothGrid:
@@ -239,3 +244,85 @@ def paper_scenario(grid: ClothGrid | None = None, frame_times=None, released_cor
     for ci, v in enumerate(grid.corners()):
         handles.append(Handle(v, [0.0], grid.rest[v][None], 0.0 if v == grid.corners()[released_corner] else None))
     return Scenario(grid, handles, D.FRAME_TIMES if frame_times is None else frame_times)
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """What a capture could not measure exactly about its manipulation, as bounds the fit searches
+    within (capture.json key ``"uncertain"``, ``fit --uncertain``).
+
+    * ``time_offset`` [s]: the capture's clock against the manipulation's. The fit estimates
+      ``time_offset_s`` in ``[-time_offset, time_offset]``, defined by *true time = capture time -
+      time_offset_s*: the model is read at ``t - time_offset_s`` for a frame taken at capture time
+      ``t`` (the settle, the keys and the release shift with it against the frames).
+    * ``handles`` [m]: per handle (in the scenario's order) the bound of a 3-D offset of its whole
+      trajectory, each coordinate in ``[-b, b]``; one number = the same for every handle; 0 = exact.
+    """
+    time_offset: float = 0.0
+    handles: tuple = ()
+
+    @property
+    def active(self) -> bool:
+        return self.time_offset > 0 or any(b > 0 for b in self.handles)
+
+    def to_dict(self) -> dict:
+        h = list(self.handles)
+        return {"time_offset": self.time_offset,
+                "handles": h[0] if h and all(b == h[0] for b in h) else h}
+
+    @classmethod
+    def parse(cls, value, n_handles: int, source: str = "uncertain") -> "Uncertainty | None":
+        """From a capture's ``"uncertain"`` object (None/absent = nothing uncertain). Bounds must be
+        numbers >= 0 and at most ``MAX_TIME_OFFSET_S`` / ``MAX_HANDLE_OFFSET_M``; ``handles`` is one
+        bound or a list with one per handle."""
+        if value is None:
+            return None
+        if not isinstance(value, dict):
+            raise ClothFitError(f"{source}: expected an object {{'time_offset': s, 'handles': m}}, got {value!r}")
+        bad = sorted(set(value) - set(UNCERTAIN_KEYS))
+        if bad:
+            raise ClothFitError(f"{source}: unknown key {bad[0]!r} (known: {', '.join(UNCERTAIN_KEYS)})")
+        t = _bound(value.get("time_offset", 0.0), f"{source} time_offset", MAX_TIME_OFFSET_S, "s")
+        hv = value.get("handles", 0.0)
+        if isinstance(hv, (list, tuple)):
+            if len(hv) != n_handles:
+                raise ClothFitError(f"{source} handles: {len(hv)} bounds for {n_handles} handles (give one number "
+                                    f"or one per handle)")
+            hs = tuple(_bound(b, f"{source} handles[{i}]", MAX_HANDLE_OFFSET_M, "m") for i, b in enumerate(hv))
+        else:
+            hs = (_bound(hv, f"{source} handles", MAX_HANDLE_OFFSET_M, "m"),) * n_handles
+        return cls(t, hs)
+
+    @classmethod
+    def from_text(cls, text: str, n_handles: int, source: str = "--uncertain") -> "Uncertainty | None":
+        """``time_offset=0.05,handles=0.005`` (seconds, metres) or ``none``."""
+        text = str(text).strip()
+        if text.lower() == "none":
+            return cls(0.0, (0.0,) * n_handles)
+        d = {}
+        for part in filter(None, (p.strip() for p in text.split(","))):
+            key, eq, val = part.partition("=")
+            key = key.strip()
+            if not eq:
+                raise ClothFitError(f"{source}: {part!r} must be KEY=VALUE (keys: {', '.join(UNCERTAIN_KEYS)}), "
+                                    f"or 'none'")
+            if key in d:
+                raise ClothFitError(f"{source}: {key!r} given twice")
+            try:
+                d[key] = float(val)
+            except ValueError:
+                raise ClothFitError(f"{source}: {key} = {val.strip()!r} is not a number") from None
+        if not d:
+            raise ClothFitError(f"{source}: empty (give e.g. time_offset=0.05,handles=0.005, or none)")
+        return cls.parse(d, n_handles, source)
+
+
+def _bound(v, what: str, limit: float, unit: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise ClothFitError(f"{what}: {v!r} is not a number ({unit})")
+    v = float(v)
+    if not math.isfinite(v) or v < 0:
+        raise ClothFitError(f"{what}: {v!r} must be a bound >= 0 ({unit})")
+    if v > limit:
+        raise ClothFitError(f"{what}: {v:g} {unit} is absurd for an uncertain measurement (at most {limit:g} {unit})")
+    return v
