@@ -204,10 +204,9 @@ class Scenario:
                                 f"{MAX_GRAVITY:g} m/s^2")
         if np.any(np.diff(self.frame_times) <= 0):
             raise ClothFitError(f"scenario: frame times must increase, got {self.frame_times.tolist()}")
-        if self.frame_times[0] < 0:
-            raise ClothFitError(f"scenario: frame times must be >= 0 (t = 0 ends the settling), got {self.frame_times[0]}")
-        if self.settle_time < 0:
-            raise ClothFitError(f"scenario: settle_time {self.settle_time} must be >= 0")
+        if self.frame_times[0] < -self.settle_time - 1e-12:
+            raise ClothFitError(f"scenario: frame times must be >= -settle_time (the cloth settles from "
+                                f"t = -{self.settle_time:g} s to t = 0), got {self.frame_times[0]}")
         seen = set()
         for h in self.handles:
             if not (0 <= h.vertex < self.grid.n_vertices):
@@ -235,6 +234,17 @@ class Scenario:
 
     def with_frames(self, times):
         return Scenario(self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity)
+
+    def moved(self, time_offset: float = 0.0, handle_offsets=None) -> "Scenario":
+        """The manipulation a fit estimated (``Uncertainty``): the frames read ``time_offset`` s earlier
+        on the manipulation's clock (true time = capture time - time_offset; a frame before the
+        settle's start reads its start), every handle's trajectory moved by its offset (H, 3) [m]."""
+        hs = self.handles
+        if handle_offsets is not None:
+            off = np.asarray(handle_offsets, dtype=np.float64).reshape(len(hs), 3)
+            hs = [Handle(h.vertex, h.times, h.positions + off[k], h.release_time) for k, h in enumerate(hs)]
+        times = np.maximum(self.frame_times - float(time_offset), -self.settle_time)
+        return Scenario(self.grid, hs, times, self.settle_time, self.gravity)
 
 
 def paper_scenario(grid: ClothGrid | None = None, frame_times=None, released_corner: int = D.RELEASED_CORNER):
@@ -326,3 +336,34 @@ def _bound(v, what: str, limit: float, unit: str) -> float:
     if v > limit:
         raise ClothFitError(f"{what}: {v:g} {unit} is absurd for an uncertain measurement (at most {limit:g} {unit})")
     return v
+
+
+@dataclass
+class Offsets:
+    """Per-candidate estimates of a manipulation's unknowns (a fit's ``Uncertainty``): ``time`` (P,)
+    [s] (``time_offset_s``: the model is read at capture time - time) and ``handles`` (P, H, 3) [m]
+    (each handle's trajectory moved by it)."""
+    time: np.ndarray
+    handles: np.ndarray
+
+    def __post_init__(self):
+        self.time = np.asarray(self.time, dtype=np.float64).reshape(-1)
+        self.handles = np.asarray(self.handles, dtype=np.float64)
+        if self.handles.ndim != 3 or self.handles.shape[0] != self.time.size or self.handles.shape[2] != 3:
+            raise ClothFitError(f"offsets: {self.time.size} time offsets but handle offsets of shape "
+                                f"{self.handles.shape} (expected (P, H, 3))")
+
+    def __len__(self):
+        return self.time.size
+
+    def take(self, idx) -> "Offsets":
+        return Offsets(self.time[idx], self.handles[idx])
+
+    @property
+    def moves_handles(self) -> bool:
+        return bool(np.any(self.handles != 0))
+
+    @property
+    def span(self) -> float:
+        """The largest |time offset|."""
+        return float(np.abs(self.time).max(initial=0.0))
