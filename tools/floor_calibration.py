@@ -73,12 +73,13 @@ def true_floors(cap, positions, fit_res=None):
     return out
 
 
-def summarise(name, true, est, extra=None):
+def summarise(name, ident, true, est, extra=None):
+    """A row of the table; ``ident`` a short key for the docs' tags (``paper_480x640_n5``)."""
     true, est = np.asarray(true, float), np.asarray(est, float)
     tm, em = float(true.mean()), float(est.mean())
     pos = true > 0
     r = est[pos] / true[pos]
-    row = {"case": name, "n_images": int(true.size), "true_floor_pct": 100 * tm, "estimate_pct": 100 * em,
+    row = {"case": name, "id": ident, "n_images": int(true.size), "true_floor_pct": 100 * tm, "estimate_pct": 100 * em,
            "ratio": em / tm if tm > 0 else None,
            "image_ratio_median": float(np.median(r)) if r.size else None,
            "image_ratio_p10": float(np.percentile(r, 10)) if r.size else None,
@@ -98,7 +99,8 @@ def synth_cases(out, models, resolutions, noises, log):
                 t0 = time.process_time()
                 cf = capture_floor(cap)
                 secs = time.process_time() - t0
-                row = summarise(f"{model} {res[0]}x{res[1]} noise {100 * noise:g} %", true_floors(cap, X),
+                row = summarise(f"{model} {res[0]}x{res[1]} noise {100 * noise:g} %",
+                                f"{model}_{res[0]}x{res[1]}_n{100 * noise:g}", true_floors(cap, X),
                                 cf.per_image(), {"model": model, "resolution": list(res), "fit_resolution": list(res),
                                                  "noise": noise, "rate": cf.rate, "basis": cf.basis,
                                                  "rim_pct": 100 * cf.to_dict(False)["rim"],
@@ -119,7 +121,7 @@ def resampled_cases(out, fit_resolutions, noises, log):
             cf = capture_floor(cap, resolution=fr)
             d = cf.to_dict(False)
             row = summarise(f"paper 480x640 noise {100 * noise:g} % fitted at {fr[0]}x{fr[1]}",
-                            true_floors(cap, X, fr), cf.per_image(),
+                            f"paper_480x640_n{100 * noise:g}_at_{fr[0]}x{fr[1]}", true_floors(cap, X, fr), cf.per_image(),
                             {"model": "paper", "resolution": [480, 640], "fit_resolution": list(fr), "noise": noise,
                              "resampling_pct": 100 * d["resampling"], "noise_part_pct": 100 * d["noise"]})
             log(row)
@@ -139,7 +141,7 @@ def footage_case(footage, capture_dir, log):
             true[c, f] = np.count_nonzero(o ^ t) / np.count_nonzero(o)
             prof.append(residual_profile(o, t))
     d = cf.to_dict(False)
-    row = summarise("photoreal footage, extracted", true, cf.per_image(),
+    row = summarise("photoreal footage, extracted", "footage", true, cf.per_image(),
                     {"resolution": [cap.cameras[0].height, cap.cameras[0].width], "cameras": cap.camera_names,
                      "rim_pct": 100 * d["rim"], "rate": cf.rate,
                      "perfect_model": {k: float(np.nanmedian([p[k] for p in prof]))
