@@ -205,8 +205,12 @@ def floor_sheet(e_sil, floors, cameras, times, far: float = FAR_ABOVE, tiles=Non
         raise ClothFitError(f"floor sheet: tiles must be {C} x {F} images")
     cell = max(int(cell), 24)
     lw, hh, fh = max(60, cell // 2 + 20), 22, 26
-    img = np.full((hh + C * cell + fh, lw + F * cell, 3), 30, np.uint8)
     font, s = cv2.FONT_HERSHEY_SIMPLEX, 0.4
+    em, fm = float(e.mean()), float(f.mean())
+    summary = (f"mean E {100 * em:.2f}%  mean floor {100 * fm:.2f}%  x{_ratio_text(em, fm)}  "
+               f"{int(far_mask.sum())}/{e.size} images > {far:g}x their floor")
+    width = max(lw + F * cell, cv2.getTextSize(summary, font, s, 1)[0][0] + 8)
+    img = np.full((hh + C * cell + fh, width, 3), 30, np.uint8)
     for j, t in enumerate(times):
         cv2.putText(img, f"t={float(t):.2f}", (lw + j * cell + 4, 15), font, s, (230, 230, 230), 1, cv2.LINE_AA)
     for i, name in enumerate(cameras):
@@ -231,9 +235,6 @@ def floor_sheet(e_sil, floors, cameras, times, far: float = FAR_ABOVE, tiles=Non
             txt = "x" + ("inf" if not np.isfinite(ratio[i, j]) else f"{ratio[i, j]:.1f}")
             cv2.putText(img, txt, (x0 + b + 3, y0 + cell - b - 5), font, s, (0, 0, 0), 3, cv2.LINE_AA)
             cv2.putText(img, txt, (x0 + b + 3, y0 + cell - b - 5), font, s, rgb, 1, cv2.LINE_AA)
-    em, fm = float(e.mean()), float(f.mean())
-    summary = (f"mean E {100 * em:.2f}%  mean floor {100 * fm:.2f}%  x{_ratio_text(em, fm)}  "
-               f"{int(far_mask.sum())}/{e.size} images > {far:g}x their floor")
     cv2.putText(img, summary, (4, hh + C * cell + 18), font, s, floor_colour(floor_ratios([em], [fm])[0][0], far), 1,
                 cv2.LINE_AA)
     return img
