@@ -378,6 +378,26 @@ def cmd_evaluate(a):
     return r
 
 
+def _capture_floor(cap, cams, times, resolution):
+    from .core.observation.floor import capture_floor
+    fidx = None if times is None else [cap.frame_index(t) for t in times]
+    return capture_floor(cap, cams, fidx, resolution)
+
+
+def cmd_floor(a):
+    from .core.observation.capture import load_capture
+    cap = load_capture(a.capture)
+    cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times), _res(a.resolution))
+    d = cf.to_dict()
+    print(f"noise floor {100 * d['floor']:.3f} % E_sil per image (median {100 * d['floor_median']:.3f} %; "
+          f"resampling {100 * d['resampling']:.3f} %) over {d['n_images']} images; a 1-pixel shift of the outline "
+          f"costs {100 * d['rim']:.2f} %; {cf.limits}")
+    if a.json:
+        from .core.safeio import atomic_json
+        atomic_json(a.json, d)
+    return d
+
+
 def cmd_overlay(a):
     from .core.observation.capture import load_capture
     from .core.observation.overlay import capture_overlays
@@ -386,10 +406,17 @@ def cmd_overlay(a):
     if a.on_images:
         from .core.footage.extract import footage_images
         images = footage_images(cap)
-    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=_cams(cap, a.cameras),
-                             times=_times(a.times), images=images)
+    cams, times = _cams(cap, a.cameras), _times(a.times)
+    floors = None
+    if a.floor:
+        floors = _capture_floor(cap, cams, times, None).per_image()
+    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=cams, times=times, images=images,
+                             floors=floors)
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
-    return {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}
+    out = {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}
+    if a.floor:
+        out["images"], out["floor_sheet"] = paths[:-2], paths[-2]
+    return out
 
 
 def cmd_paper(a):
@@ -694,6 +721,17 @@ def build_parser():
     _selection_args(s, "draw")
     s.add_argument("--on-images", action="store_true",
                    help="draw on the camera images the silhouettes were extracted from (image footage)")
+    s.add_argument("--floor", action="store_true",
+                   help="estimate each image's noise floor (see the floor command), frame the contact sheet's tiles "
+                        "by E_sil / floor (green at it, amber above, red more than 3x) and write floor_sheet.png")
+
+    s = _command(sub, "floor", cmd_floor, "estimate the noise floor of a capture's silhouettes from the silhouettes",
+                 "the capture's floor, its parts and the per-image floors as JSON")
+    s.add_argument("capture", help="capture folder")
+    _selection_args(s, "estimate")
+    s.add_argument("--resolution", help="for a fit at HxW [px]: the silhouettes area-resampled as the fitter does "
+                                        "(default: the capture's)")
+    s.add_argument("--json", help="also write the result to this file")
 
     s = _command(sub, "paper", cmd_paper, "the paper's Table 1, Fig. 8 and Table 2 protocol",
                  "every table and figure as JSON (the same as --json)")

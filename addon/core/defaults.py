@@ -85,5 +85,8 @@ FIT_RESTARTS = 0                  # CMA-ES IPOP restarts (each with twice the po
 BLENDER_FIT_RESTARTS = 4          # the blender model's 8 free settings have local minima: restart until the budget
 FIT_EXPLODED_LIMIT = 100          # this many candidates, all exploded, and nothing finite: the fit is an error
 CHECKPOINT_INTERVAL_S = 2.0       # the CLI writes its checkpoint at most this often (and always at the end)
+FLOOR_FAR_ABOVE = 3.0             # issue 20: a fit error more than 3x its images' noise floor (observation/floor.py) is
+                                  # "far above" it; the estimate's calibration spread is +-25 % (docs/noise_floor.md),
+                                  # so 3x is well clear of it
 MAX_FIT_PIXELS = 16_000_000       # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
 MAX_IMAGE_SIDE = 16384
