@@ -181,12 +181,12 @@ def test_small_make_writes_a_valid_capture_that_our_model_does_not_reproduce(tmp
     # the edge-on cameras see a thin cloth at t = 0+ and a hanging one at the end
     # the noise-free variant's floor is 0; the noisy one's a few per cent
     fl = CT.floor(cap, list(range(len(cams))), list(cap.frame_times))
-    assert 0.5 < fl < 15
+    assert 0.05 < fl < 5                                      # 5 % of the boundary pixels: a fraction of a per cent
     assert all(e_sil(clean.load_silhouette(c, 0), clean.load_silhouette(c, 0)) == 0 for c in range(3))
     # the shapes lie on the truth (corners where the hands hold them, the released one fell)
     corners = cap.scenario.grid.corners()
     assert np.allclose(cap.shapes[:, corners[1]], [0.9 * CT.SIDE / 2, -0.9 * CT.SIDE / 2, CT.HEIGHT], atol=1e-5)
-    assert cap.shapes[-1, corners[0], 2] < CT.HEIGHT - 0.05
+    assert cap.shapes[-1, corners[0], 2] < CT.HEIGHT - 0.1               # 0.3 s after its release
     # our blender model at Blender's defaults (the capture's frame rate given) is far from it
     from addon.core.physics import blender as B
     s = B.check_settings({"time_scale": B.physical_time_scale(30.0)})

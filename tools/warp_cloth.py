@@ -69,7 +69,7 @@ class Material:
     poisson: float            # nu
     bending: float            # D [N m], bending rigidity per width (Kawabata B)
     drag_cd: float = 1.2      # C_d of a flat plate moving normal to itself
-    membrane_damping: float = 1e-5   # beta [s]: k_damp = beta mu (Kelvin-Voigt; kills membrane ringing)
+    membrane_damping: float = 0.0    # beta [s]: k_damp = beta mu; 0: Warp's F-rate damping also resists rigid rotation
     bending_damping: float = 0.02    # beta_b [s]: kd_e = beta_b ke_e
     source: str = ""
 
