@@ -82,15 +82,15 @@ BASELINE_MATERIALS = ("cotton", "silk")   # denim: made, held out for later work
 
 # ------------------------------------------------------------------------------------ scenario
 
-def frame_times():
-    return np.arange(1, int(round(AFTER * FPS)) + 1) / FPS
+def frame_times(after=AFTER):
+    return np.arange(1, int(round(after * FPS)) + 1) / FPS
 
 
 def hold_position(x, y):
     return (HOLD * x, HOLD * y, HEIGHT)
 
 
-def user_scenario(n=GRID_N):
+def user_scenario(n=GRID_N, after=AFTER):
     """What a user declares: a ``n x n`` grid of the cloth's measured size, pinned at its corners
     where the hands hold them, corner 0 released at t = 0."""
     from addon.core.physics.scenario import ClothGrid, Handle, Scenario
@@ -99,7 +99,7 @@ def user_scenario(n=GRID_N):
     for k, v in enumerate(grid.corners()):
         x, y = grid.rest[v][:2]
         handles.append(Handle(v, [0.0], [hold_position(x, y)], 0.0 if k == RELEASED else None))
-    return Scenario(grid, handles, frame_times(), SETTLE_SCENARIO)
+    return Scenario(grid, handles, frame_times(after), SETTLE_SCENARIO)
 
 
 def rig():
@@ -175,16 +175,14 @@ def make(out, materials=None, n_truth=TRUTH_N, grid_n=GRID_N, settle=SETTLE_TRUT
     from addon.core.observation.metrics import add_boundary_noise
     from addon.core.observation.raster import silhouette
     from addon.core.observation.synth import noise_rng
-    global AFTER
-    if after is not None:
-        AFTER = after
-    sc = user_scenario(grid_n)
+    sc = user_scenario(grid_n, AFTER if after is None else after)
     cams = rig() if cameras is None else cameras
     written = {}
     for name in materials or list(MATERIALS):
         mat = MATERIALS[name]
         t0 = time.time()
-        V, tris, X, facts = simulate_truth(mat, n_truth, settle=settle, ramp=min(RAMP, settle / 2))
+        V, tris, X, facts = simulate_truth(mat, n_truth, settle=settle, ramp=min(RAMP, settle / 2),
+                                           times=sc.frame_times)
         tri_of, w = barycentric_sampler(V, tris, sc.grid.rest[:, :2])
         shapes = sample(X, tris, tri_of, w)
         clean = [[silhouette(c, X[f], tris) for f in range(len(X))] for c in cams]
@@ -285,6 +283,37 @@ def baseline(out, json_path, materials=BASELINE_MATERIALS, max_evaluations=None)
     return rows
 
 
+def converge(material, json_path, meshes=(21, 29, 41)):
+    """How far the truth is from its continuum limit: the same material on finer meshes and with half
+    the step, sampled at the user's grid; mean and max distance [mm] to the finest mesh per frame."""
+    from addon.core.safeio import atomic_json
+    sc = user_scenario()
+    runs = {}
+    for n in meshes:
+        V, tris, X, facts = simulate_truth(MATERIALS[material], n)
+        tri_of, w = barycentric_sampler(V, tris, sc.grid.rest[:, :2])
+        runs[f"n{n}"] = (sample(X, tris, tri_of, w), facts)
+        print(f"{material} mesh {n} x {n}: {facts['cpu_s']:.0f} cpu s", flush=True)
+    V, tris, X, facts = simulate_truth(MATERIALS[material], TRUTH_N, dt=W.stable_dt(*W.sheet_mesh(TRUTH_N, SIDE),
+                                                                                   MATERIALS[material]) / 2)
+    tri_of, w = barycentric_sampler(V, tris, sc.grid.rest[:, :2])
+    runs[f"n{TRUTH_N}_half_dt"] = (sample(X, tris, tri_of, w), facts)
+    ref = runs[f"n{max(meshes)}"][0]
+    base = runs[f"n{TRUTH_N}"][0]
+    rows = []
+    for k, (P, facts) in runs.items():
+        d_ref = np.linalg.norm(P - ref, axis=-1) * 1000
+        d_base = np.linalg.norm(P - base, axis=-1) * 1000
+        rows.append({"run": k, "vs_finest_mean_mm": float(d_ref.mean()), "vs_finest_max_mm": float(d_ref.max()),
+                     "vs_truth_mesh_mean_mm": float(d_base.mean()), "vs_truth_mesh_max_mm": float(d_base.max()),
+                     "dt": facts["dt"], "cpu_s": facts["cpu_s"]})
+        print(f"{k:14s}: vs {max(meshes)} x {max(meshes)} mean {rows[-1]['vs_finest_mean_mm']:.2f} mm, max "
+              f"{rows[-1]['vs_finest_max_mm']:.2f} mm; vs the truth's mesh mean {rows[-1]['vs_truth_mesh_mean_mm']:.2f} mm",
+              flush=True)
+    atomic_json(json_path, {"material": material, "rows": rows})
+    return rows
+
+
 def format_table(rows):
     out = ["| material | fit | held-out E_sil % (floor) | shape error mm | evals | s |", "|---|---|---|---|---|---|"]
     for r in rows:
@@ -309,6 +338,9 @@ def main(argv=None):
     b.add_argument("--materials", default=",".join(BASELINE_MATERIALS), help="comma list (default: %(default)s)")
     b.add_argument("--make", action="store_true", help="run make first (same --out)")
     b.add_argument("--max-evaluations", type=int, default=None, help="budget per fit (default: the CLI's own)")
+    c = sub.add_parser("converge", help="the truth on finer meshes and with half the step (continuum check)")
+    c.add_argument("--material", default="silk", help="material (default: %(default)s, the finest folds)")
+    c.add_argument("--json", required=True, help="write the distances to this JSON file")
     t = sub.add_parser("table", help="print a baseline JSON as a Markdown table")
     t.add_argument("json")
     a = ap.parse_args(argv)
@@ -320,6 +352,8 @@ def main(argv=None):
             make(a.out, mats)
         rows = baseline(a.out, a.json, mats, a.max_evaluations)
         print(format_table(rows))
+    elif a.step == "converge":
+        converge(a.material, a.json)
     else:
         with open(a.json) as f:
             print(format_table(json.load(f)["rows"]))
