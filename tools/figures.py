@@ -97,6 +97,11 @@ SOURCES = {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json", "cost": "expensive",
         "what": "Blender's cloth as the truth, fitted by both core models (about 45 min)"},
+    "continuum_baseline": {
+        "argv": ["{py}", "tools/continuum_truth.py", "baseline", "--make", "--out", "out/continuum", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 20's baseline: a Warp continuum cloth (cotton, silk; 30 fps, a rig not ours) fitted by "
+                "today's CLI as a new user would, and with --fps 30 (about 40 min on a loaded machine)"},
     "paper_mismatch": {
         "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--truth-dt-safety", "0.125", "--json", "{out}",
                  "--out", "out/paper_mismatch"], "cost": "expensive",
