@@ -52,6 +52,16 @@ def cross_simulator(recording):
     return format_table(_data(recording, "cross_simulator"))
 
 
+def user_scenes(recording):
+    from user_scenes import format_table
+    return format_table(_data(recording, "user_scenes"))
+
+
+def user_scenes_causes(recording):
+    from user_scenes import format_causes
+    return format_causes(_data(recording, "user_scenes"))
+
+
 def demo_parameters(recording):
     d = _data(recording, "demo")["story"]
     idt, idg, idf = (d["identifiable"][k] for k in ("truth", "first_guess", "fitted"))
@@ -393,6 +403,8 @@ VIEWS = {
     "identifiability.default": identifiability_default,
     "blender_agreement": blender_agreement,
     "cross_simulator": cross_simulator,
+    "user_scenes": user_scenes,
+    "user_scenes.causes": user_scenes_causes,
     "demo.parameters": demo_parameters,
     "recordings": recordings,
     "stopping": stopping,

@@ -93,6 +93,11 @@ SOURCES = {
     "occlusion": {
         "argv": ["{py}", "-m", "addon", "occlusion", "--json", "{out}"], "cost": "expensive",
         "what": "the occluder study: ignore masks vs occluders counted as background"},
+    "user_scenes": {
+        "argv": ["{py}", "tools/user_scenes.py", "all", "--out", "out/user_scenes", "--json", "{out}"],
+        "cost": "cheap", "rtol": 1e-9, "atol": 1e-12,
+        "what": "issue 20: Blender scenes built as a user builds them; the core blender model's drift from them, "
+                "cause by cause"},
     "cross_simulator": {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json", "cost": "expensive",
