@@ -87,3 +87,29 @@ FIT_EXPLODED_LIMIT = 100          # this many candidates, all exploded, and noth
 CHECKPOINT_INTERVAL_S = 2.0       # the CLI writes its checkpoint at most this often (and always at the end)
 MAX_FIT_PIXELS = 16_000_000       # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
 MAX_IMAGE_SIDE = 16384
+
+# --- the manipulation measured from footage (footage/handles.py, `clothfit handles`, docs/phone_handles.md)
+HANDLE_MARK_SIGMA_PX = 1.0        # a person's click on a zoomed frame is good to about a pixel: the floor of the pixel
+                                  # noise behind each handle's uncertain bound (2 cameras leave 1 residual degree of freedom)
+HANDLE_MAX_RESIDUAL_PX = 4.0      # a camera missing its handle's triangulated point by more is a wrong mark or a drifted
+                                  # track, not noise: calibrations reproject to 0.2-1 px and clicks are good to ~1 px
+HANDLE_CLIP_SIZE_M = 0.015        # a clip's (fingertip's) size: the Lucas-Kanade window of a camera = its apparent size
+                                  # (a binder clip's jaw, a fingertip: 1-2.5 cm); a window much larger holds mostly
+                                  # still background that drags the track of a moving clip back
+HANDLE_LK_LEVELS = 3              # pyramid levels: follows motions up to ~2^3 x half a window (~80 px) per frame
+HANDLE_FB_MAX_PX = 1.0            # forward-backward disagreement beyond this = the track is lost (Kalal et al. 2010);
+                                  # on a textured clip LK's round trip agrees to ~0.05 px, a lost point by pixels
+HANDLE_REF_MAX_PX = 2.0           # a refinement against the marked frame's patch further than this from the frame-to-frame
+                                  # track is a false match (the patch changed): the frame-to-frame point is kept
+HANDLE_DEPARTURE_MIN_M = 0.001    # a released corner has left its pin when it is this far from it (and DEPARTURE_K times its
+HANDLE_DEPARTURE_K = 6.0          # held jitter): below the first frame's fall under gravity up to 60 fps (0.5 g / 60^2 =
+                                  # 1.4 mm), above a tracked point's triangulation noise (0.05-0.3 mm)
+HANDLE_RELEASE_FREE_FRAMES = 3    # frames after the departure used to extrapolate the release instant (the fall is a
+HANDLE_RELEASE_HELD_FRAMES = 8    # parabola for the first ~0.1 s) and held frames before it (they fix the pin)
+HANDLE_BOUND_K = 3.0              # a handle's uncertain bound: 3 sigma of its triangulated position ...
+HANDLE_BOUND_FLOOR_M = 0.001      # ... and never below 1 mm: where a clip grips the cloth is not known better
+HANDLE_MAX_PIN_OFFSET_M = 0.02    # a clip further than this from its vertex of the placed cloth: a wrong cloth size, 'at'
+                                  # or mark (10x the 1 mm goal of the triangulation, a few x a cloth's measuring error)
+HANDLE_SMOOTH_FRAMES = 2          # a moving handle's track: local quadratic over +-2 frames (Savitzky-Golay 5/2, exact for
+                                  # a constant acceleration) against the triangulation noise
+HANDLE_GRID_N = 16                # vertices along the cloth's longer side when no resolution is given (the paper's 16)
