@@ -365,3 +365,26 @@ def test_grid_resolution_puts_clips_on_vertices():
     assert HM.grid_resolution(0.3, 0.2, nx=5, ny=4) == (5, 4)
     with pytest.raises(ClothFitError):
         HM.grid_resolution(0.3, 0.2, nx=5)
+
+
+def test_release_of_a_corner_that_snaps_away():
+    """The core's paper sheet hung by four clips: the released corner springs back within milliseconds (a
+    jump, not a fall from rest). Its release frame is the departure frame at every phase; a fall from rest
+    (the synthetic clip) is recovered one frame before its departure when it started under the threshold."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "tools"))
+    import phone_handles as P
+    rng = np.random.default_rng(0)
+    for seed in range(6):
+        tr = P.truth(seed)
+        X = tr["positions"][:, tr["vertices"]["right"]] + rng.normal(0, 3e-5, (len(tr["times"]), 3))
+        r = HM.detect_release(tr["times"], X, 0, HM.HandleOptions())
+        assert r.release_frame == int(np.searchsorted(tr["times"], tr["release_time"], side="right"))
+        assert r.extrapolated_time is None                   # no parabola from rest fits a snap
+        lo, hi = tr["times"][r.release_frame - 1], tr["times"][r.release_frame]
+        assert lo <= r.release_time < hi
+    t = np.arange(20) / FPS
+    t_r = 0.2 + 0.9 / FPS                                    # 3 ms before frame 7: 0.05 mm of fall there
+    X = S.clip_tracks(t, t_r)["right"] + rng.normal(0, 1e-5, (20, 3))
+    r = HM.detect_release(t, X, 0, HM.HandleOptions())
+    assert r.departure_frame == 8 and r.back and r.release_frame == 7
+    assert abs(r.release_time - t_r) < 0.1 / FPS

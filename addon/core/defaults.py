@@ -101,11 +101,14 @@ HANDLE_FB_MAX_PX = 1.0            # forward-backward disagreement beyond this = 
                                   # on a textured clip LK's round trip agrees to ~0.05 px, a lost point by pixels
 HANDLE_REF_MAX_PX = 2.0           # a refinement against the marked frame's patch further than this from the frame-to-frame
                                   # track is a false match (the patch changed): the frame-to-frame point is kept
-HANDLE_DEPARTURE_MIN_M = 0.001    # a released corner has left its pin when it is this far from it (and DEPARTURE_K times its
-HANDLE_DEPARTURE_K = 6.0          # held jitter): below the first frame's fall under gravity up to 60 fps (0.5 g / 60^2 =
-                                  # 1.4 mm), above a tracked point's triangulation noise (0.05-0.3 mm)
-HANDLE_RELEASE_FREE_FRAMES = 3    # frames after the departure used to extrapolate the release instant (the fall is a
-HANDLE_RELEASE_HELD_FRAMES = 8    # parabola for the first ~0.1 s) and held frames before it (they fix the pin)
+HANDLE_DEPARTURE_MIN_M = 0.0005   # a released corner has left its pin when it is this far from it and DEPARTURE_K times its
+HANDLE_DEPARTURE_K = 8.0          # held jitter: a tracked clip's triangulated jitter is 0.01-0.1 mm (measured: synthetic and
+                                  # Cycles footage), so noise never passes 8 sigma; a fall from rest passes 0.5 mm 10 ms
+                                  # after the release (0.5 g s^2), and the frame before is recovered by extrapolation
+HANDLE_RELEASE_FREE_FRAMES = 3    # free frames a parabola from rest is fitted to, to see whether the release came before
+                                  # the previous frame (three: one more than the fewest, so that the fit can fail)
+HANDLE_PARABOLA_TOL = 0.03        # ... and it must fit them to 3 % of the fall: measured, a fall from rest with a jerk
+                                  # fits to 0.3 %, a corner that snaps away (a stretched cloth) no better than 7 %
 HANDLE_BOUND_K = 3.0              # a handle's uncertain bound: 3 sigma of its triangulated position ...
 HANDLE_BOUND_FLOOR_M = 0.001      # ... and never below 1 mm: where a clip grips the cloth is not known better
 HANDLE_MAX_PIN_OFFSET_M = 0.02    # a clip further than this from its vertex of the placed cloth: a wrong cloth size, 'at'

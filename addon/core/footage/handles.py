@@ -69,7 +69,6 @@ G = 9.81
 NCC_RETRY = 0.8          # a tracked patch less like the previous frame's than this: search for it (a slipped track)
 NCC_ACCEPT = 0.5         # a searched match less alike than this is no match (the track is lost)
 MAX_SEARCH_PX = 150      # radius of that search around the prediction
-RELEASE_CUBIC = False
 
 
 # ==================================================================== options
@@ -519,23 +518,51 @@ def triangulate_track(cams, tracks, k, opts: HandleOptions) -> Trajectory3D:
 @dataclass
 class Release:
     departure_frame: int        # first frame further from the pin than the threshold
-    release_frame: int          # first frame after the estimated release instant
-    release_time: float         # estimated release instant [s]
-    release_time_sd: float      # its standard deviation [s] (profile of the fit)
+    release_frame: int          # first frame after the release instant: the departure frame or the one before
+    release_time: float         # the release instant written to the scenario, inside the release frame's interval
+    extrapolated_time: float | None   # where the fall's parabola puts the instant (None: no parabola fits)
     threshold_m: float
     held_jitter_m: float        # RMS distance of the held frames from the pin
     pin: np.ndarray             # (3,)
-    fit_rms_m: float
+    back: bool                  # the release frame is the one before the departure (a slow start)
+
+
+def _parabola(t, X, pin, lo, hi, n=801):
+    """Least squares ``X = pin + A (t - t_r)^2 / 2`` over the given free frames, ``t_r`` searched in
+    ``[lo, hi]``: returns (t_r, A, rms)."""
+    best = (np.inf, None, None)
+    for tr in np.linspace(lo, hi, n):
+        s2 = 0.5 * np.maximum(t - tr, 0.0) ** 2
+        den = float(s2 @ s2)
+        if den <= 0:
+            continue
+        A = (s2 @ (X - pin)) / den
+        r = float(np.sum((X - pin - s2[:, None] * A) ** 2))
+        if r < best[0]:
+            best = (r, tr, A)
+    r, tr, A = best
+    return tr, A, math.sqrt(r / max(X.size, 1))
 
 
 def detect_release(times, X, marked: int, opts: HandleOptions, name="handle") -> Release:
     """Departure and release of a released handle from its 3-D track ``X (F, 3)`` (NaN = missing);
-    the handle is held at frame ``marked``."""
+    the handle is held at frame ``marked``.
+
+    *Departure frame*: the first frame further from the pin (the median of the held frames) than
+    ``max(departure_min, departure_k x the held jitter)``, and still off at the next frame.
+    *Release frame*: the departure frame, or the frame before it when the release came so shortly
+    before that frame that its fall was still under the threshold there. The decision: the first
+    ``HANDLE_RELEASE_FREE_FRAMES`` free frames are a fall from rest (a parabola ``X = pin + A s^2 / 2``,
+    ``s = t - t_release``, fits them to ``HANDLE_PARABOLA_TOL`` of the fall), the parabola through the
+    first two of them puts the instant before the previous frame, and its fall there agrees with the
+    one measured (within the threshold). A corner that snaps away (a stretched cloth springs back
+    within milliseconds) starts with a jump no parabola from rest fits: its departure frame stands.
+    *Release time*: the extrapolated instant when it lies in the release frame's interval, else the
+    interval's middle."""
     times = np.asarray(times, dtype=np.float64)
     F = len(times)
     ok = np.all(np.isfinite(X), axis=1)
     d0 = np.linalg.norm(X - X[marked], axis=1)
-    # the held jitter: frames up to the first that is clearly off (the minimum threshold) after the mark
     first_off = next((f for f in range(marked + 1, F) if ok[f] and d0[f] > opts.departure_min), None)
     if first_off is None:
         last = int(np.nonzero(ok)[0].max())
@@ -544,7 +571,8 @@ def detect_release(times, X, marked: int, opts: HandleOptions, name="handle") ->
                             f"its track stopped early")
     held = [f for f in range(0, first_off) if ok[f]]
     pin = np.median(X[held], axis=0)
-    jitter = float(np.sqrt(np.mean(np.sum((X[held] - pin) ** 2, axis=1))))
+    quiet = held[:-2] if len(held) >= 5 else held          # the last held frames may already carry the start of the fall
+    jitter = float(np.sqrt(np.mean(np.sum((X[quiet] - pin) ** 2, axis=1))))
     thr = max(opts.departure_min, opts.departure_k * jitter)
     d = np.linalg.norm(X - pin, axis=1)
     early = [f for f in range(0, marked) if ok[f] and d[f] > thr]
@@ -556,42 +584,24 @@ def detect_release(times, X, marked: int, opts: HandleOptions, name="handle") ->
     if dep is None:
         raise ClothFitError(f"handle '{name}' is declared released but never stays off its pin by more than "
                             f"{thr * 1000:.2f} mm")
-    # the release instant: X = p + A s^2 / 2 for s = t - t_r > 0, p before; least squares over the last held
-    # frames and the first free ones, t_r searched in the frames before the departure
-    lo = max(0, dep - D.HANDLE_RELEASE_HELD_FRAMES)
-    use = [f for f in range(lo, min(F, dep + D.HANDLE_RELEASE_FREE_FRAMES)) if ok[f]]
-    t_use, X_use = times[use], X[use]
-    period = float(np.median(np.diff(times))) if F > 1 else 1.0
-    # how far before the departure the release may lie: the fall at the first free frame stayed under the threshold
-    reach = max(2.0 * period, 2.0 * math.sqrt(2.0 * thr / G))
-    t_lo = max(times[lo], times[dep] - reach) if lo < dep else times[dep] - reach
-    t_hi = times[dep]
-
-    def ssr(tr):
-        s = np.maximum(t_use - tr, 0.0)
-        M = np.stack([np.ones_like(s), 0.5 * s * s] + ([s ** 3 / 6.0] if RELEASE_CUBIC else []), 1)
-        coef, *_ = np.linalg.lstsq(M, X_use, rcond=None)
-        r = X_use - M @ coef
-        return float(np.sum(r * r)), coef
-    grid = np.linspace(t_lo, t_hi, 401)
-    vals = np.array([ssr(t)[0] for t in grid])
-    j = int(np.argmin(vals))
-    a, b = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
-    for _ in range(60):                                  # golden section inside the best grid cell
-        c1, c2 = b - 0.618 * (b - a), a + 0.618 * (b - a)
-        if ssr(c1)[0] < ssr(c2)[0]:
-            b = c2
-        else:
-            a = c1
-    t_r = 0.5 * (a + b)
-    best, coef = ssr(t_r)
-    n_obs, n_par = 3 * len(use), 10 if RELEASE_CUBIC else 7
-    s2 = best / max(n_obs - n_par, 1)
-    inside = np.append(grid[vals <= best + s2], t_r)       # the profile's 1-sigma interval (delta SSR = s^2)
-    sd = max(float(0.5 * (inside.max() - inside.min())), (grid[1] - grid[0]) / 2)
-    rel_frame = int(np.searchsorted(times, t_r, side="right"))
-    return Release(int(dep), rel_frame, float(t_r), sd, float(thr), jitter, coef[0].copy(),
-                   float(math.sqrt(best / max(len(use), 1))))
+    free = [f for f in range(dep, min(F, dep + D.HANDLE_RELEASE_FREE_FRAMES)) if ok[f]]
+    period = float(times[dep] - times[dep - 1]) if dep > 0 else (float(np.median(np.diff(times))) if F > 1 else 1.0)
+    t_ext, back = None, False
+    if len(free) >= 3 and dep > 0:
+        _, _, rms = _parabola(times[free], X[free], pin, times[dep] - 4 * period, times[dep])
+        if rms <= max(D.HANDLE_PARABOLA_TOL * d[free[-1]], 3.0 * jitter):      # a fall from rest, not a snap
+            # the instant from the first two free frames: the least bent by the fall's jerk
+            tr, A, _ = _parabola(times[free[:2]], X[free[:2]], pin, times[dep] - 4 * period, times[dep])
+            prev = dep - 1
+            predicted = 0.5 * float(np.linalg.norm(A)) * max(times[prev] - tr, 0.0) ** 2
+            t_ext = tr
+            back = tr < times[prev] and (not ok[prev] or abs(d[prev] - predicted) < thr)
+    rel = dep - 1 if back else dep
+    lo = times[rel - 1] if rel > 0 else times[rel] - period
+    hi = times[rel]
+    t_r = t_ext if t_ext is not None and lo <= t_ext < hi else 0.5 * (lo + hi)
+    return Release(int(dep), int(rel), float(t_r), None if t_ext is None else float(t_ext), float(thr), jitter, pin,
+                   bool(back))
 
 
 # ================================================================== smoothing
@@ -880,9 +890,9 @@ def measure_handles(cameras, source: FootageSource, marks, cloth_size, grid_n=No
                "track_rms_px": float(np.nanmean(traj.rms_px)) if ok.any() else None}
         if rel is not None:
             row.update(departure_frame=rel.departure_frame, release_frame=rel.release_frame,
-                       release_time=rel.release_time, release_time_sd=rel.release_time_sd,
-                       release_threshold_mm=rel.threshold_m * 1000.0, held_jitter_mm=rel.held_jitter_m * 1000.0,
-                       release_fit_rms_mm=rel.fit_rms_m * 1000.0)
+                       release_time=rel.release_time, release_extrapolated_time=rel.extrapolated_time,
+                       release_before_departure=rel.back, release_threshold_mm=rel.threshold_m * 1000.0,
+                       held_jitter_mm=rel.held_jitter_m * 1000.0)
         if h.motion == "moving":
             end = rel.departure_frame if rel is not None else F
             sm = smooth_track(times[:end], traj.X[:end], opts.smooth)
@@ -954,9 +964,7 @@ def measure_handles(cameras, source: FootageSource, marks, cloth_size, grid_n=No
         row["uncertain_mm"] = b * 1000.0
     rels = [r for r in rel_info if r is not None]
     period = float(np.median(np.diff(times))) if F > 1 else 0.0
-    t_off = 0.0
-    if rels:
-        t_off = min(max(max(3.0 * r.release_time_sd for r in rels), 0.5 * period), period)
+    t_off = period if rels else 0.0      # the release frame is exact: the instant is within its frame interval
     unc = Uncertainty.parse({"time_offset": round(t_off, 6), "handles": bounds}, len(handles), "handles")
     report = {"cloth": {"width": width, "height": height, "nx": nx, "ny": ny, "spacing_mm": 1000.0 * grid.spacing,
                         "spacing_y_mm": 1000.0 * grid.side_y / (ny - 1), "origin": grid.origin.tolist(),
@@ -969,9 +977,9 @@ def measure_handles(cameras, source: FootageSource, marks, cloth_size, grid_n=No
               "handles": rows, "uncertain": unc.to_dict(),
               "uncertain_rule": (f"handles: {D.HANDLE_BOUND_K:g} x the largest standard deviation of the triangulated "
                                  f"pin (pixel noise = the residual's estimate, at least {opts.mark_sigma:g} px), at "
-                                 f"least {D.HANDLE_BOUND_FLOOR_M * 1000:g} mm; time_offset: 3 x the release instant's "
-                                 f"standard deviation, between half a frame and one frame period (0 without a "
-                                 f"release)"),
+                                 f"least {D.HANDLE_BOUND_FLOOR_M * 1000:g} mm; time_offset: one frame period when a "
+                                 f"handle is released (its release time lies in the release frame's interval), else "
+                                 f"0 (the handles are measured on the frames' own clock)"),
               "warnings": warnings}
     return {"scenario": scen, "uncertain": unc, "report": report}
 
