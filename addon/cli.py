@@ -489,6 +489,45 @@ def cmd_extract(a):
     return extract.run_args(a)
 
 
+def _pair(text, what, kind=float):
+    """``AxB`` -> (a, b)."""
+    try:
+        a_, b_ = (kind(x) for x in text.lower().replace("×", "x").split("x"))
+    except ValueError:
+        raise ClothFitError(f"{what} {text!r} must look like {'0.30x0.40' if kind is float else '16x21'}") from None
+    return a_, b_
+
+
+def cmd_handles(a):
+    from .core.footage import handles as H
+    size = _pair(a.size, "--size")
+    grid = None
+    if a.grid:
+        grid = _pair(a.grid, "--grid", int) if "x" in a.grid.lower() else None
+        if grid is None:
+            try:
+                grid = int(a.grid)
+            except ValueError:
+                raise ClothFitError(f"--grid {a.grid!r} must be a count (vertices along the longer side) or "
+                                    f"COLUMNSxROWS") from None
+    opts = H.HandleOptions(clip_size=a.clip_size, mark_sigma=a.mark_sigma, max_residual=a.max_residual,
+                           fb_max=a.fb_max, departure_min=a.departure_min / 1000.0,
+                           max_pin_offset=a.max_pin_offset / 1000.0, smooth=a.smooth, levels=a.levels,
+                           settle_time=a.settle)
+    tty = sys.stderr.isatty() or os.environ.get("CLOTHFIT_PROGRESS") == "1"
+
+    def progress(i, n, text):
+        if tty:
+            print(f"[{i}/{n}] {text}", file=sys.stderr)
+    doc = H.run(a.out, a.marks, size, footage=a.footage, videos=a.videos, sync=a.sync,
+                find_sync=a.find_sync == "flash", flash_time=a.flash_time, cameras=a.cameras,
+                times=_floats(a.times), fps=a.fps, start=a.start, frames=a.frames, grid=grid, options=opts,
+                progress=progress)
+    print(H.format_report(doc["report"]))
+    print(f"wrote {a.out}: the scenario for `clothfit extract --scenario {a.out}`")
+    return dict(doc["report"], out=a.out, uncertain=doc["uncertain"])
+
+
 def cmd_cameras(a):
     from .core.footage import calib_io
     return calib_io.run_args(a)
@@ -808,6 +847,55 @@ def build_parser():
                                     "write cameras (ours, a capture's or any calibration) as OpenCV YAML/JSON/XML, "
                                     "OpenCV files per camera or a COLMAP text model",
                                     "the command, --out and the camera names as JSON"), "export-cameras")
+    s = _command(sub, "handles", cmd_handles,
+                 "the manipulation from footage: marked clips triangulated, tracked, their release found, the "
+                 "cloth placed; writes the scenario for extract --scenario",
+                 "the report as JSON (per handle: vertex, residual px and mm, track length, release frame; the "
+                 "cloth's placement; the uncertain block)")
+    s.add_argument("footage", nargs="?", help="footage folder: <camera>/ frames (background* files skipped), optional "
+                                              "footage.json (or --videos)")
+    s.add_argument("--marks", required=True, help="marks JSON: per handle its pixel in >= 2 cameras at one frame, "
+                                                  "'at' on the cloth, motion, released (docs/phone_handles.md)")
+    s.add_argument("--size", required=True, help="the cloth's measured size WIDTHxHEIGHT [m], e.g. 0.30x0.40 (width "
+                                                 "= along grid columns, 'at' u; height = rows, 'at' v)")
+    s.add_argument("-o", "--out", required=True, help="scenario JSON to write (scenario + uncertain + report)")
+    s.add_argument("--grid", help="vertices along the longer side (the other side's makes square cells), or "
+                                  "COLUMNSxROWS (default: about 16, chosen so the clips' 'at' fall on vertices)")
+    s.add_argument("--cameras", help="calibration: our cameras JSON, OpenCV, COLMAP or EasyMocap (default: the "
+                                     "footage's footage.json / cameras.* / calibration.* / COLMAP folder)")
+    s.add_argument("--videos", help="folder of videos, one per camera: <camera>.<mp4|mov|mkv|avi>")
+    s.add_argument("--sync", help="with --videos: JSON {camera: video time [s] at t = 0} (written with --find-sync)")
+    s.add_argument("--find-sync", choices=["flash"], help="with --videos: sync times from a flash every camera sees")
+    s.add_argument("--flash-time", type=float, default=0.0, help="capture time [s] of the flash (default: %(default)s)")
+    s.add_argument("--times", help="frame times [s], comma separated (default: footage.json's, else --fps)")
+    s.add_argument("--fps", type=float, help="frames per second: frame k at START + k / FPS (every image of a folder; "
+                                             "with --videos, --frames of them)")
+    s.add_argument("--start", type=float, default=0.0, help="with --fps: time [s] of the first frame "
+                                                            "(default: %(default)s)")
+    s.add_argument("--frames", type=int, help="with --videos --fps: how many frames")
+    s.add_argument("--clip-size", type=float, default=D.HANDLE_CLIP_SIZE_M,
+                   help="a clip's size [m]: the tracking window is its size in each camera (default: %(default)s; "
+                        "'size' per handle in the marks)")
+    s.add_argument("--mark-sigma", type=float, default=D.HANDLE_MARK_SIGMA_PX,
+                   help="pixel noise of a mark (a click), the floor of each handle's uncertainty (default: %(default)s)")
+    s.add_argument("--max-residual", type=float, default=D.HANDLE_MAX_RESIDUAL_PX,
+                   help="a camera missing the triangulated point by more [px] is a wrong mark or a drifted track "
+                        "(default: %(default)s)")
+    s.add_argument("--fb-max", type=float, default=D.HANDLE_FB_MAX_PX,
+                   help="forward-backward tracking error [px] beyond which a track is lost (default: %(default)s)")
+    s.add_argument("--levels", type=int, default=D.HANDLE_LK_LEVELS,
+                   help="Lucas-Kanade pyramid levels (default: %(default)s)")
+    s.add_argument("--departure-min", type=float, default=1000.0 * D.HANDLE_DEPARTURE_MIN_M,
+                   help="a released handle has left its pin when further than this [mm] (and 6x its held jitter) "
+                        "(default: %(default)s)")
+    s.add_argument("--max-pin-offset", type=float, default=1000.0 * D.HANDLE_MAX_PIN_OFFSET_M,
+                   help="a clip further than this [mm] from its vertex of the placed cloth is an error "
+                        "(default: %(default)s)")
+    s.add_argument("--smooth", type=int, default=D.HANDLE_SMOOTH_FRAMES,
+                   help="moving handles: local quadratic over +-this many frames, 0 = raw (default: %(default)s)")
+    s.add_argument("--settle", type=float, default=D.SETTLE_TIME,
+                   help="seconds of settling before t = 0 written into the scenario (default: %(default)s)")
+
     pipeline.add_arguments(_command(sub, "blender", cmd_blender,
                                     "the whole pipeline through Blender (bpy module): rig, cloth, simulate, render "
                                     "silhouettes, fit, overlays, .blend", "a summary of the run as JSON"))

@@ -90,3 +90,32 @@ FLOOR_FAR_ABOVE = 3.0             # issue 20: a fit error more than 3x its image
                                   # so 3x is well clear of it
 MAX_FIT_PIXELS = 16_000_000       # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
 MAX_IMAGE_SIDE = 16384
+
+# --- the manipulation measured from footage (footage/handles.py, `clothfit handles`, docs/phone_handles.md)
+HANDLE_MARK_SIGMA_PX = 1.0        # a person's click on a zoomed frame is good to about a pixel: the floor of the pixel
+                                  # noise behind each handle's uncertain bound (2 cameras leave 1 residual degree of freedom)
+HANDLE_MAX_RESIDUAL_PX = 4.0      # a camera missing its handle's triangulated point by more is a wrong mark or a drifted
+                                  # track, not noise: calibrations reproject to 0.2-1 px and clicks are good to ~1 px
+HANDLE_CLIP_SIZE_M = 0.015        # a clip's (fingertip's) size: the Lucas-Kanade window of a camera = its apparent size
+                                  # (a binder clip's jaw, a fingertip: 1-2.5 cm); a window much larger holds mostly
+                                  # still background that drags the track of a moving clip back
+HANDLE_LK_LEVELS = 3              # pyramid levels: follows motions up to ~2^3 x half a window (~80 px) per frame
+HANDLE_FB_MAX_PX = 1.0            # forward-backward disagreement beyond this = the track is lost (Kalal et al. 2010);
+                                  # on a textured clip LK's round trip agrees to ~0.05 px, a lost point by pixels
+HANDLE_REF_MAX_PX = 2.0           # a refinement against the marked frame's patch further than this from the frame-to-frame
+                                  # track is a false match (the patch changed): the frame-to-frame point is kept
+HANDLE_DEPARTURE_MIN_M = 0.0005   # a released corner has left its pin when it is this far from it and DEPARTURE_K times its
+HANDLE_DEPARTURE_K = 8.0          # held jitter: a tracked clip's triangulated jitter is 0.01-0.1 mm (measured: synthetic and
+                                  # Cycles footage), so noise never passes 8 sigma; a fall from rest passes 0.5 mm 10 ms
+                                  # after the release (0.5 g s^2), and the frame before is recovered by extrapolation
+HANDLE_RELEASE_FREE_FRAMES = 3    # free frames a parabola from rest is fitted to, to see whether the release came before
+                                  # the previous frame (three: one more than the fewest, so that the fit can fail)
+HANDLE_PARABOLA_TOL = 0.03        # ... and it must fit them to 3 % of the fall: measured, a fall from rest with a jerk
+                                  # fits to 0.3 %, a corner that snaps away (a stretched cloth) no better than 7 %
+HANDLE_BOUND_K = 3.0              # a handle's uncertain bound: 3 sigma of its triangulated position ...
+HANDLE_BOUND_FLOOR_M = 0.001      # ... and never below 1 mm: where a clip grips the cloth is not known better
+HANDLE_MAX_PIN_OFFSET_M = 0.02    # a clip further than this from its vertex of the placed cloth: a wrong cloth size, 'at'
+                                  # or mark (10x the 1 mm goal of the triangulation, a few x a cloth's measuring error)
+HANDLE_SMOOTH_FRAMES = 2          # a moving handle's track: local quadratic over +-2 frames (Savitzky-Golay 5/2, exact for
+                                  # a constant acceleration) against the triangulation noise
+HANDLE_GRID_N = 16                # vertices along the cloth's longer side when no resolution is given (the paper's 16)

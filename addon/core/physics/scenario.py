@@ -33,10 +33,19 @@ MAX_HANDLE_OFFSET_M = 0.05
 
 
 class ClothGrid:
-    """Topology and rest geometry of the sheet."""
+    """Topology and rest geometry of the sheet.
+
+    The flat sheet in its own (local) frame: column ``j`` at ``x = -side/2 + j * side/(nx-1)``, row
+    ``i`` at ``y = -side_y/2 + i * side_y/(ny-1)``, ``z = 0``. It is *placed* in the world by
+    ``rest = origin + R(rotation) @ local``: ``origin`` is the world position of the sheet's centre
+    (default ``(0, 0, height)``: the paper's horizontal sheet centred on the z axis) and ``rotation``
+    a rotation vector (axis times angle [rad], default 0: local axes = world axes). A real cloth
+    hangs somewhere else, in some orientation (``footage/handles.py`` fits the placement to the
+    clips). ``height`` is the z of ``origin``.
+    """
 
     def __init__(self, nx: int = D.GRID_N, ny: int | None = None, side: float = D.CLOTH_SIDE,
-                 height: float = D.CLOTH_HEIGHT, side_y: float | None = None):
+                 height: float | None = None, side_y: float | None = None, origin=None, rotation=None):
         ny = nx if ny is None else ny
         for v in (nx, ny):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer, float)) or v != int(v):
@@ -49,17 +58,31 @@ class ClothGrid:
         for nm, v in (("side", side), ("side_y", side if side_y is None else side_y)):
             if not (isinstance(v, (int, float, np.floating)) and math.isfinite(v) and 0 < v <= MAX_SIZE_M):
                 raise ClothFitError(f"cloth {nm} must be a positive finite length up to {MAX_SIZE_M:g} m, got {v}")
+        if origin is not None:
+            origin = _vector3(origin, "cloth origin", MAX_SIZE_M)
+            if height is not None and abs(float(height) - origin[2]) > 1e-9:
+                raise ClothFitError(f"cloth height {height} differs from the z of its origin {origin[2]} "
+                                    f"(give one of them)")
+            height = float(origin[2])
+        height = D.CLOTH_HEIGHT if height is None else height
         if not (isinstance(height, (int, float, np.floating)) and math.isfinite(height) and abs(height) <= MAX_SIZE_M):
             raise ClothFitError(f"cloth height must be a finite number within +-{MAX_SIZE_M:g} m, got {height}")
         self.nx, self.ny = int(nx), int(ny)
         self.side = float(side)
         self.side_y = float(side if side_y is None else side_y)
         self.height = float(height)
+        self.origin = np.array([0.0, 0.0, self.height]) if origin is None else origin
+        self.rotation = np.zeros(3) if rotation is None else _vector3(rotation, "cloth rotation", 1e3)
+        self.R = rotation_matrix(self.rotation)
         self.spacing = self.side / (self.nx - 1)
         xs = np.linspace(-self.side / 2, self.side / 2, self.nx)
         ys = np.linspace(-self.side_y / 2, self.side_y / 2, self.ny)
         X, Y = np.meshgrid(xs, ys)  # (ny, nx)
-        self.rest = np.stack([X, Y, np.full_like(X, self.height)], -1).reshape(-1, 3)
+        self.local = np.stack([X, Y, np.zeros_like(X)], -1).reshape(-1, 3)
+        if self.placed:
+            self.rest = self.origin + self.local @ self.R.T
+        else:   # the paper's sheet, exactly as it always was (no rounding from a product with I)
+            self.rest = np.stack([X, Y, np.full_like(X, self.height)], -1).reshape(-1, 3)
         idx = np.arange(self.nx * self.ny).reshape(self.ny, self.nx)
         a = idx[:-1, :-1].ravel()
         b = idx[:-1, 1:].ravel()
@@ -87,17 +110,72 @@ class ClothGrid:
         nx, ny = self.nx, self.ny
         return [0, nx - 1, (ny - 1) * nx, ny * nx - 1]
 
+    @property
+    def placed(self) -> bool:
+        """True when the sheet is moved off the paper's placement (centre off the z axis or rotated)."""
+        return bool(self.origin[0] != 0.0 or self.origin[1] != 0.0 or np.any(self.rotation != 0.0))
+
     def to_dict(self):
-        return {"nx": self.nx, "ny": self.ny, "side": self.side, "side_y": self.side_y, "height": self.height}
+        d = {"nx": self.nx, "ny": self.ny, "side": self.side, "side_y": self.side_y, "height": self.height}
+        if self.placed:                # written only when used: older readers see the same keys as before
+            d["origin"] = self.origin.tolist()
+            d["rotation"] = self.rotation.tolist()
+        return d
 
     @classmethod
     def from_dict(cls, d, source="cloth"):
+        if not isinstance(d, dict):
+            raise ClothFitError(f"{source}: the cloth must be an object, got {d!r}")
         try:
+            origin = d.get("origin")
             return cls(int(d.get("nx", D.GRID_N)), int(d.get("ny", d.get("nx", D.GRID_N))),
-                       float(d.get("side", D.CLOTH_SIDE)), float(d.get("height", D.CLOTH_HEIGHT)),
-                       None if d.get("side_y") is None else float(d["side_y"]))
+                       float(d.get("side", D.CLOTH_SIDE)),
+                       None if d.get("height") is None else float(d["height"]),
+                       None if d.get("side_y") is None else float(d["side_y"]),
+                       origin=origin, rotation=d.get("rotation"))
+        except ClothFitError as e:
+            raise ClothFitError(f"{source}: {e}") from None
         except (TypeError, ValueError, AttributeError) as e:
             raise ClothFitError(f"{source}: bad cloth description {d!r} ({e})") from None
+
+
+def _vector3(v, what, limit):
+    try:
+        a = np.asarray(v, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{what} must be 3 numbers, got {v!r}") from None
+    if a.size != 3 or not np.all(np.isfinite(a)) or np.abs(a).max() > limit:
+        raise ClothFitError(f"{what} must be 3 finite numbers within +-{limit:g}, got {v!r}")
+    return a
+
+
+def rotation_matrix(rvec) -> np.ndarray:
+    """Rodrigues: the rotation matrix of a rotation vector (axis * angle [rad]); the same as cv2.Rodrigues."""
+    r = np.asarray(rvec, dtype=np.float64).reshape(3)
+    th = float(np.linalg.norm(r))
+    if th < 1e-15:
+        return np.eye(3)
+    k = r / th
+    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(th) * Kx + (1.0 - math.cos(th)) * (Kx @ Kx)
+
+
+def rotation_vector(R) -> np.ndarray:
+    """The rotation vector (axis * angle, angle in [0, pi]) of a rotation matrix; inverse of rotation_matrix."""
+    R = np.asarray(R, dtype=np.float64).reshape(3, 3)
+    c = max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))
+    th = math.acos(c)
+    if th < 1e-12:
+        return np.zeros(3)
+    if th > math.pi - 1e-6:        # near pi: the axis from the symmetric part
+        B = (R + np.eye(3)) / 2.0
+        k = np.sqrt(np.maximum(np.diag(B), 0.0))
+        i = int(np.argmax(k))
+        k = B[i] / max(k[i], 1e-12)
+        k /= np.linalg.norm(k)
+        return k * th
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2.0 * math.sin(th))
+    return w * th
 
 
 @dataclass
