@@ -19,6 +19,8 @@ import sys
 import threading
 import time
 
+import numpy as np
+
 from .core import defaults as D
 from .core.errors import ClothFitError
 
@@ -527,6 +529,66 @@ def cmd_handles(a):
     print(f"wrote {a.out}: the scenario for `clothfit extract --scenario {a.out}`")
     return dict(doc["report"], out=a.out, uncertain=doc["uncertain"])
 
+def _gravity(text):
+    """--gravity CAMERA:GX,GY,GZ -> (camera, (gx, gy, gz))."""
+    if not text:
+        return None
+    cam, sep, vec = text.rpartition(":")
+    if not sep or not cam:
+        raise ClothFitError(f"--gravity {text!r}: expected CAMERA:GX,GY,GZ (gravity in that camera's axes)")
+    v = _floats(vec, "--gravity")
+    if not v or len(v) != 3:
+        raise ClothFitError(f"--gravity {text!r}: expected three numbers after the camera name")
+    return cam, tuple(v)
+
+
+def cmd_calibrate(a):
+    from .core.footage import calibrate as CB
+    board = CB.parse_board(a.board, a.legacy_board)
+    if a.make_board:
+        if a.folder:
+            raise ClothFitError("--make-board writes a board to print: give no FOLDER")
+        stem = os.path.splitext(a.out)[0] if a.out.lower().endswith((".png", ".pdf")) else a.out
+        r = CB.make_board(board, stem + ".png", stem + ".pdf", a.dpi, a.margin)
+        print(f"wrote {r['png']} ({r['png_px'][0]} x {r['png_px'][1]} px at {r['png_dpi']:.1f} dpi) and {r['pdf']} "
+              f"({r['pdf_page_mm'][0]:.1f} x {r['pdf_page_mm'][1]:.1f} mm): print at 100 %, then measure a square "
+              f"({board.square_m * 1000:g} mm)")
+        return r
+    if not a.folder:
+        raise ClothFitError("calibrate needs FOLDER (one folder of images or one video per camera), or --make-board")
+    fixed = {}
+    if a.intrinsics:
+        from .core.footage.calib_io import import_cameras
+        fixed = {c.name: c for c in import_cameras(a.intrinsics)}
+    opts = CB.Options(distortion=a.distortion, square_pixels=not a.free_aspect, shared=a.shared_intrinsics,
+                      fixed=fixed, world=a.world, level=a.level, gravity=_gravity(a.gravity), min_views=a.min_views,
+                      min_corners=a.min_corners, blur_ratio=a.blur_ratio).check()
+    sync = None
+    if a.sync or a.find_sync:
+        src = CB.find_source(a.folder)
+        if src.kind != "videos":
+            raise ClothFitError(f"--sync / --find-sync are for videos; {a.folder} holds camera folders of images")
+        from .core.footage import video
+        if a.find_sync:
+            sync = video.flash_sync(a.folder, src.cameras, a.flash_time)
+            print("sync from the flash: " + ", ".join(f"{k} {v:.4f} s" for k, v in sync.items()))
+        else:
+            sync = video.read_sync(a.sync, src.cameras)
+    elif a.every is not None or a.times:
+        raise ClothFitError("--every and --times sample videos: they need --sync FILE or --find-sync flash")
+    res, det, src = CB.calibrate_folder(a.folder, board, opts, sync=sync, every=a.every,
+                                        times=_floats(a.times) if a.times else None, debug_dir=a.debug,
+                                        log=lambda s: print(s))
+    written = CB.write_outputs(res, a.out, a.export, a.format, a.report)
+    for c in res.report["cameras"]:
+        print(f"{c['name']:<12} RMS {c['rms_px']:.3f} px  views {c['views_used']} ({c['views_shared']} shared)  "
+              f"fx {c['fx']:.1f}  centre {[round(x, 3) for x in c['centre_m']]} m")
+    print(f"overall RMS {res.report['rms_px']:.3f} px over {res.report['corners']} corners, "
+          f"{res.report['moments']} moments; world: board at {res.report['world']['moment']}, up from "
+          f"{res.report['world']['up']}")
+    print("wrote " + ", ".join(written.values()))
+    return dict(res.report, written=written)
+
 
 def cmd_cameras(a):
     from .core.footage import calib_io
@@ -654,6 +716,70 @@ def _command(sub, name, fn, help, output):
                               f"{EXIT_BAD_DATA} bad data, {EXIT_USAGE} usage, {EXIT_INTERRUPTED} Ctrl-C "
                               f"(see {PROG} --help).")
     s.set_defaults(fn=fn)
+    return s
+
+
+def _calibrate_args(s):
+    from .core.footage import calibrate as CB
+    from .core.footage.calib_io import FORMATS
+    s.add_argument("folder", nargs="?",
+                   help="one folder per camera (named after it) of images named by moment, the same name in every "
+                        "camera = the same moment; or one video per camera, <camera>.<mp4|mov|mkv|avi>")
+    s.add_argument("--board", required=True,
+                   help="SQUARES_X,SQUARES_Y,SQUARE_M,MARKER_M,DICTIONARY in OpenCV's CharucoBoard layout, e.g. "
+                        "9,7,0.04,0.03,DICT_5X5_100 (sizes in metres: measure the print)")
+    s.add_argument("--legacy-board", action="store_true",
+                   help="the board was made by OpenCV before 4.6 (differs only for an even number of rows)")
+    s.add_argument("--out", required=True,
+                   help="cameras JSON to write (our format); with --make-board: the board's file name, .png and "
+                        ".pdf are written")
+    s.add_argument("--make-board", action="store_true",
+                   help="write a printable board (PNG and vector PDF at the stated square size) instead")
+    s.add_argument("--dpi", type=float, default=D.CALIB_BOARD_DPI,
+                   help="--make-board: PNG resolution [pixels per inch] (default: %(default)s)")
+    s.add_argument("--margin", type=float, default=D.CALIB_BOARD_MARGIN_M,
+                   help="--make-board: white margin round the board [m] (default: %(default)s)")
+    s.add_argument("--world", metavar="MOMENT",
+                   help="the moment whose board pose is the world: origin at the chessboard's centre, X along "
+                        "its squares_x side, Z up out of the face (default: the first moment seen)")
+    up = s.add_mutually_exclusive_group()
+    up.add_argument("--level", metavar="MOMENT",
+                    help="a moment where the board lies level: its normal is up (when the world board is not level)")
+    up.add_argument("--gravity", metavar="CAMERA:GX,GY,GZ",
+                    help="the direction gravity pulls, in that camera's axes (x right, y down, z forward in its "
+                         "images), e.g. from the phone's accelerometer (default: the world board's normal is up)")
+    s.add_argument("--distortion", default=D.CALIB_DISTORTION, choices=list(CB.DISTORTION_MODELS),
+                   help="the distortion coefficients estimated (OpenCV's k1, k2, p1, p2, k3) (default: %(default)s)")
+    s.add_argument("--free-aspect", action="store_true",
+                   help="estimate fx and fy separately (default: square pixels, fx = fy)")
+    s.add_argument("--intrinsics", metavar="FILE",
+                   help="hold these cameras' intrinsics and distortion fixed (matched by name; any file "
+                        "import-cameras reads); only their poses are estimated")
+    s.add_argument("--shared-intrinsics", action="store_true",
+                   help="one set of intrinsics for every estimated camera (the same phone model and zoom)")
+    s.add_argument("--min-views", type=int, default=D.CALIB_MIN_VIEWS,
+                   help="usable views a camera needs for its own intrinsics (default: %(default)s)")
+    s.add_argument("--min-corners", type=int, default=D.CALIB_MIN_CORNERS,
+                   help="ChArUco corners a view needs (default: %(default)s)")
+    s.add_argument("--blur-ratio", type=float, default=D.CALIB_BLUR_RATIO,
+                   help="skip a frame whose board sharpness is below this fraction of its camera's median, "
+                        "0 = keep all (default: %(default)s)")
+    s.add_argument("--sync", help="videos: JSON {camera: video time [s] at capture time 0}")
+    s.add_argument("--find-sync", choices=["flash"], help="videos: the sync from a flash every camera saw")
+    s.add_argument("--flash-time", type=float, default=0.0,
+                   help="videos: capture time [s] of the flash (default: %(default)s)")
+    s.add_argument("--every", type=float, default=None,
+                   help=f"videos: one moment every this many seconds over the span all videos cover "
+                        f"(default: {D.CALIB_VIDEO_EVERY_S})")
+    s.add_argument("--times", help="videos: the capture times [s] to use, comma separated (default: --every)")
+    s.add_argument("--debug", metavar="DIR",
+                   help="draw the detected markers and corners (and the calibration's reprojections) per camera "
+                        "and moment into DIR/<camera>/<moment>.jpg, also when the calibration fails")
+    s.add_argument("--export", metavar="PATH", help="also write the cameras in another format (see --format)")
+    s.add_argument("--format", default="auto", choices=[f for f in FORMATS if f != "easymocap"],
+                   help="format of --export; auto: by its extension, .json ours, .yml/.yaml/.xml OpenCV, "
+                        "anything else a COLMAP folder (default: %(default)s)")
+    s.add_argument("--report", metavar="FILE", help="also write the full report (stdout's JSON) to this file")
     return s
 
 
@@ -840,6 +966,11 @@ def build_parser():
     extract.add_arguments(_command(sub, "extract", cmd_extract,
                                    "silhouettes from camera images or videos: background difference, automatic "
                                    "threshold, clean-up; writes a capture", "the extraction report as JSON"))
+    _calibrate_args(_command(sub, "calibrate", cmd_calibrate,
+                             "calibrate cameras from a ChArUco board: intrinsics, distortion and poses, "
+                             "world = the board on the table, Z up", "the calibration report as JSON (per camera the "
+                             "reprojection RMS, the views used, every view's RMS), or the board written with "
+                             "--make-board"))
     calib_io.add_arguments(_command(sub, "import-cameras", cmd_cameras,
                                     "read a calibration (OpenCV YAML/JSON/XML, COLMAP, EasyMocap) into our cameras JSON",
                                     "the command, --out and the camera names as JSON"), "import-cameras")

@@ -119,3 +119,31 @@ HANDLE_MAX_PIN_OFFSET_M = 0.02    # a clip further than this from its vertex of 
 HANDLE_SMOOTH_FRAMES = 2          # a moving handle's track: local quadratic over +-2 frames (Savitzky-Golay 5/2, exact for
                                   # a constant acceleration) against the triangulation noise
 HANDLE_GRID_N = 16                # vertices along the cloth's longer side when no resolution is given (the paper's 16)
+
+# --- multi-camera calibration from a ChArUco board (clothfit calibrate, core/footage/calibrate.py)
+CALIB_MIN_VIEWS = 5          # usable views per camera whose intrinsics are estimated: f, cx, cy and the distortion
+                             # from a planar board need it seen at several tilts (Zhang's method: 3 views for f and
+                             # c alone; the distortion terms and a margin for dropped views make 5)
+CALIB_MIN_CORNERS = 8        # ChArUco corners a view needs: a board pose from fewer (4 is the minimum of a
+                             # homography) is at the mercy of one corner's error
+CALIB_BLUR_RATIO = 0.5       # a frame whose board sharpness (~1 / edge width) is below this fraction of its camera's
+                             # median is blurred and skipped: motion blur of a waved board doubles the edge width
+                             # at least; focus and exposure differences between sharp frames stay well above it
+CALIB_DISTORTION = "k1k2p1p2"    # phone lenses, corrected in software, leave small radial + tangential distortion;
+                                 # k3 over-fits unless the board reaches the image corners
+CALIB_LOSS = "soft_l1"       # robust loss of the bundle adjustment: a mis-detected corner does not pull the cameras
+CALIB_LOSS_SCALE_PX = 1.0    # where the loss turns robust: subpixel corners are far below it, bad ones far above
+CALIB_OUTLIER_PX = 2.0       # after the first adjustment, corners further than this (or CALIB_OUTLIER_SIGMAS
+CALIB_OUTLIER_SIGMAS = 5.0   # robust sigmas, whichever is larger) from the fit are dropped, then refined again
+CALIB_ROUNDS = 3             # adjust, drop outliers, adjust (again while something was dropped)
+CALIB_MAX_NFEV = 200         # least_squares evaluations per round: converged runs take tens
+CALIB_VIDEO_EVERY_S = 0.5    # videos: sample one moment every half second (a board waved slowly gives new poses;
+                             # more only adds near-duplicate views)
+CALIB_VIDEO_BATCH = 32       # frames decoded at once per video (memory: 32 x 1080 x 1920 x 3 bytes = 200 MB)
+CALIB_BOARD_DPI = 300        # --make-board PNG resolution: a 4 cm square is 472 px, far beyond any printer's grain
+CALIB_BOARD_MARGIN_M = 0.01  # white margin round the printed board: the outer markers need a quiet zone
+CALIB_CORNER_CHECK_PX = 1.0  # a ChArUco corner further than this from where its neighbours (a local homography over
+                             # two squares) put it is refined again from there, else dropped; lens distortion bends
+                             # a two-square neighbourhood by far less
+CALIB_MARKER_RATIO_TOL = 0.1 # markers measured more than 10 % larger or smaller than --board says = a board definition
+                             # that does not match the print (lens distortion changes a marker's size by far less)
