@@ -19,6 +19,8 @@ import sys
 import threading
 import time
 
+import numpy as np
+
 from .core import defaults as D
 from .core.errors import ClothFitError
 
@@ -378,6 +380,26 @@ def cmd_evaluate(a):
     return r
 
 
+def _capture_floor(cap, cams, times, resolution):
+    from .core.observation.floor import capture_floor
+    fidx = None if times is None else [cap.frame_index(t) for t in times]
+    return capture_floor(cap, cams, fidx, resolution)
+
+
+def cmd_floor(a):
+    from .core.observation.capture import load_capture
+    cap = load_capture(a.capture)
+    cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times), _res(a.resolution))
+    d = cf.to_dict()
+    print(f"noise floor {100 * d['floor']:.3f} % E_sil per image (median {100 * d['floor_median']:.3f} %; "
+          f"resampling {100 * d['resampling']:.3f} %) over {d['n_images']} images; a 1-pixel shift of the outline "
+          f"costs {100 * d['rim']:.2f} %; {cf.limits}")
+    if a.json:
+        from .core.safeio import atomic_json
+        atomic_json(a.json, d)
+    return d
+
+
 def cmd_overlay(a):
     from .core.observation.capture import load_capture
     from .core.observation.overlay import capture_overlays
@@ -386,10 +408,17 @@ def cmd_overlay(a):
     if a.on_images:
         from .core.footage.extract import footage_images
         images = footage_images(cap)
-    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=_cams(cap, a.cameras),
-                             times=_times(a.times), images=images)
+    cams, times = _cams(cap, a.cameras), _times(a.times)
+    floors = None
+    if a.floor:
+        floors = _capture_floor(cap, cams, times, None).per_image()
+    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=cams, times=times, images=images,
+                             floors=floors)
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
-    return {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}
+    out = {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}
+    if a.floor:
+        out["images"], out["floor_sheet"] = paths[:-2], paths[-2]
+    return out
 
 
 def cmd_paper(a):
@@ -460,6 +489,105 @@ def cmd_rig(a):
 def cmd_extract(a):
     from .core.footage import extract
     return extract.run_args(a)
+
+
+def _pair(text, what, kind=float):
+    """``AxB`` -> (a, b)."""
+    try:
+        a_, b_ = (kind(x) for x in text.lower().replace("×", "x").split("x"))
+    except ValueError:
+        raise ClothFitError(f"{what} {text!r} must look like {'0.30x0.40' if kind is float else '16x21'}") from None
+    return a_, b_
+
+
+def cmd_handles(a):
+    from .core.footage import handles as H
+    size = _pair(a.size, "--size")
+    grid = None
+    if a.grid:
+        grid = _pair(a.grid, "--grid", int) if "x" in a.grid.lower() else None
+        if grid is None:
+            try:
+                grid = int(a.grid)
+            except ValueError:
+                raise ClothFitError(f"--grid {a.grid!r} must be a count (vertices along the longer side) or "
+                                    f"COLUMNSxROWS") from None
+    opts = H.HandleOptions(clip_size=a.clip_size, mark_sigma=a.mark_sigma, max_residual=a.max_residual,
+                           fb_max=a.fb_max, departure_min=a.departure_min / 1000.0,
+                           max_pin_offset=a.max_pin_offset / 1000.0, smooth=a.smooth, levels=a.levels,
+                           settle_time=a.settle)
+    tty = sys.stderr.isatty() or os.environ.get("CLOTHFIT_PROGRESS") == "1"
+
+    def progress(i, n, text):
+        if tty:
+            print(f"[{i}/{n}] {text}", file=sys.stderr)
+    doc = H.run(a.out, a.marks, size, footage=a.footage, videos=a.videos, sync=a.sync,
+                find_sync=a.find_sync == "flash", flash_time=a.flash_time, cameras=a.cameras,
+                times=_floats(a.times), fps=a.fps, start=a.start, frames=a.frames, grid=grid, options=opts,
+                progress=progress)
+    print(H.format_report(doc["report"]))
+    print(f"wrote {a.out}: the scenario for `clothfit extract --scenario {a.out}`")
+    return dict(doc["report"], out=a.out, uncertain=doc["uncertain"])
+
+def _gravity(text):
+    """--gravity CAMERA:GX,GY,GZ -> (camera, (gx, gy, gz))."""
+    if not text:
+        return None
+    cam, sep, vec = text.rpartition(":")
+    if not sep or not cam:
+        raise ClothFitError(f"--gravity {text!r}: expected CAMERA:GX,GY,GZ (gravity in that camera's axes)")
+    v = _floats(vec, "--gravity")
+    if not v or len(v) != 3:
+        raise ClothFitError(f"--gravity {text!r}: expected three numbers after the camera name")
+    return cam, tuple(v)
+
+
+def cmd_calibrate(a):
+    from .core.footage import calibrate as CB
+    board = CB.parse_board(a.board, a.legacy_board)
+    if a.make_board:
+        if a.folder:
+            raise ClothFitError("--make-board writes a board to print: give no FOLDER")
+        stem = os.path.splitext(a.out)[0] if a.out.lower().endswith((".png", ".pdf")) else a.out
+        r = CB.make_board(board, stem + ".png", stem + ".pdf", a.dpi, a.margin)
+        print(f"wrote {r['png']} ({r['png_px'][0]} x {r['png_px'][1]} px at {r['png_dpi']:.1f} dpi) and {r['pdf']} "
+              f"({r['pdf_page_mm'][0]:.1f} x {r['pdf_page_mm'][1]:.1f} mm): print at 100 %, then measure a square "
+              f"({board.square_m * 1000:g} mm)")
+        return r
+    if not a.folder:
+        raise ClothFitError("calibrate needs FOLDER (one folder of images or one video per camera), or --make-board")
+    fixed = {}
+    if a.intrinsics:
+        from .core.footage.calib_io import import_cameras
+        fixed = {c.name: c for c in import_cameras(a.intrinsics)}
+    opts = CB.Options(distortion=a.distortion, square_pixels=not a.free_aspect, shared=a.shared_intrinsics,
+                      fixed=fixed, world=a.world, level=a.level, gravity=_gravity(a.gravity), min_views=a.min_views,
+                      min_corners=a.min_corners, blur_ratio=a.blur_ratio).check()
+    sync = None
+    if a.sync or a.find_sync:
+        src = CB.find_source(a.folder)
+        if src.kind != "videos":
+            raise ClothFitError(f"--sync / --find-sync are for videos; {a.folder} holds camera folders of images")
+        from .core.footage import video
+        if a.find_sync:
+            sync = video.flash_sync(a.folder, src.cameras, a.flash_time)
+            print("sync from the flash: " + ", ".join(f"{k} {v:.4f} s" for k, v in sync.items()))
+        else:
+            sync = video.read_sync(a.sync, src.cameras)
+    elif a.every is not None or a.times:
+        raise ClothFitError("--every and --times sample videos: they need --sync FILE or --find-sync flash")
+    res, det, src = CB.calibrate_folder(a.folder, board, opts, sync=sync, every=a.every,
+                                        times=_floats(a.times) if a.times else None, debug_dir=a.debug,
+                                        log=lambda s: print(s))
+    written = CB.write_outputs(res, a.out, a.export, a.format, a.report)
+    for c in res.report["cameras"]:
+        print(f"{c['name']:<12} RMS {c['rms_px']:.3f} px  views {c['views_used']} ({c['views_shared']} shared)  "
+              f"fx {c['fx']:.1f}  centre {[round(x, 3) for x in c['centre_m']]} m")
+    print(f"overall RMS {res.report['rms_px']:.3f} px over {res.report['corners']} corners, "
+          f"{res.report['moments']} moments; world: board at {res.report['world']['moment']}, up from "
+          f"{res.report['world']['up']}")
+    print("wrote " + ", ".join(written.values()))
+    return dict(res.report, written=written)
 
 
 def cmd_cameras(a):
@@ -591,6 +719,70 @@ def _command(sub, name, fn, help, output):
     return s
 
 
+def _calibrate_args(s):
+    from .core.footage import calibrate as CB
+    from .core.footage.calib_io import FORMATS
+    s.add_argument("folder", nargs="?",
+                   help="one folder per camera (named after it) of images named by moment, the same name in every "
+                        "camera = the same moment; or one video per camera, <camera>.<mp4|mov|mkv|avi>")
+    s.add_argument("--board", required=True,
+                   help="SQUARES_X,SQUARES_Y,SQUARE_M,MARKER_M,DICTIONARY in OpenCV's CharucoBoard layout, e.g. "
+                        "9,7,0.04,0.03,DICT_5X5_100 (sizes in metres: measure the print)")
+    s.add_argument("--legacy-board", action="store_true",
+                   help="the board was made by OpenCV before 4.6 (differs only for an even number of rows)")
+    s.add_argument("--out", required=True,
+                   help="cameras JSON to write (our format); with --make-board: the board's file name, .png and "
+                        ".pdf are written")
+    s.add_argument("--make-board", action="store_true",
+                   help="write a printable board (PNG and vector PDF at the stated square size) instead")
+    s.add_argument("--dpi", type=float, default=D.CALIB_BOARD_DPI,
+                   help="--make-board: PNG resolution [pixels per inch] (default: %(default)s)")
+    s.add_argument("--margin", type=float, default=D.CALIB_BOARD_MARGIN_M,
+                   help="--make-board: white margin round the board [m] (default: %(default)s)")
+    s.add_argument("--world", metavar="MOMENT",
+                   help="the moment whose board pose is the world: origin at the chessboard's centre, X along "
+                        "its squares_x side, Z up out of the face (default: the first moment seen)")
+    up = s.add_mutually_exclusive_group()
+    up.add_argument("--level", metavar="MOMENT",
+                    help="a moment where the board lies level: its normal is up (when the world board is not level)")
+    up.add_argument("--gravity", metavar="CAMERA:GX,GY,GZ",
+                    help="the direction gravity pulls, in that camera's axes (x right, y down, z forward in its "
+                         "images), e.g. from the phone's accelerometer (default: the world board's normal is up)")
+    s.add_argument("--distortion", default=D.CALIB_DISTORTION, choices=list(CB.DISTORTION_MODELS),
+                   help="the distortion coefficients estimated (OpenCV's k1, k2, p1, p2, k3) (default: %(default)s)")
+    s.add_argument("--free-aspect", action="store_true",
+                   help="estimate fx and fy separately (default: square pixels, fx = fy)")
+    s.add_argument("--intrinsics", metavar="FILE",
+                   help="hold these cameras' intrinsics and distortion fixed (matched by name; any file "
+                        "import-cameras reads); only their poses are estimated")
+    s.add_argument("--shared-intrinsics", action="store_true",
+                   help="one set of intrinsics for every estimated camera (the same phone model and zoom)")
+    s.add_argument("--min-views", type=int, default=D.CALIB_MIN_VIEWS,
+                   help="usable views a camera needs for its own intrinsics (default: %(default)s)")
+    s.add_argument("--min-corners", type=int, default=D.CALIB_MIN_CORNERS,
+                   help="ChArUco corners a view needs (default: %(default)s)")
+    s.add_argument("--blur-ratio", type=float, default=D.CALIB_BLUR_RATIO,
+                   help="skip a frame whose board sharpness is below this fraction of its camera's median, "
+                        "0 = keep all (default: %(default)s)")
+    s.add_argument("--sync", help="videos: JSON {camera: video time [s] at capture time 0}")
+    s.add_argument("--find-sync", choices=["flash"], help="videos: the sync from a flash every camera saw")
+    s.add_argument("--flash-time", type=float, default=0.0,
+                   help="videos: capture time [s] of the flash (default: %(default)s)")
+    s.add_argument("--every", type=float, default=None,
+                   help=f"videos: one moment every this many seconds over the span all videos cover "
+                        f"(default: {D.CALIB_VIDEO_EVERY_S})")
+    s.add_argument("--times", help="videos: the capture times [s] to use, comma separated (default: --every)")
+    s.add_argument("--debug", metavar="DIR",
+                   help="draw the detected markers and corners (and the calibration's reprojections) per camera "
+                        "and moment into DIR/<camera>/<moment>.jpg, also when the calibration fails")
+    s.add_argument("--export", metavar="PATH", help="also write the cameras in another format (see --format)")
+    s.add_argument("--format", default="auto", choices=[f for f in FORMATS if f != "easymocap"],
+                   help="format of --export; auto: by its extension, .json ours, .yml/.yaml/.xml OpenCV, "
+                        "anything else a COLMAP folder (default: %(default)s)")
+    s.add_argument("--report", metavar="FILE", help="also write the full report (stdout's JSON) to this file")
+    return s
+
+
 def build_parser():
     from . import version
     from .blender import pipeline
@@ -694,6 +886,17 @@ def build_parser():
     _selection_args(s, "draw")
     s.add_argument("--on-images", action="store_true",
                    help="draw on the camera images the silhouettes were extracted from (image footage)")
+    s.add_argument("--floor", action="store_true",
+                   help="estimate each image's noise floor (see the floor command), frame the contact sheet's tiles "
+                        "by E_sil / floor (green at it, amber above, red more than 3x) and write floor_sheet.png")
+
+    s = _command(sub, "floor", cmd_floor, "estimate the noise floor of a capture's silhouettes from the silhouettes",
+                 "the capture's floor, its parts and the per-image floors as JSON")
+    s.add_argument("capture", help="capture folder")
+    _selection_args(s, "estimate")
+    s.add_argument("--resolution", help="for a fit at HxW [px]: the silhouettes area-resampled as the fitter does "
+                                        "(default: the capture's)")
+    s.add_argument("--json", help="also write the result to this file")
 
     s = _command(sub, "paper", cmd_paper, "the paper's Table 1, Fig. 8 and Table 2 protocol",
                  "every table and figure as JSON (the same as --json)")
@@ -763,6 +966,11 @@ def build_parser():
     extract.add_arguments(_command(sub, "extract", cmd_extract,
                                    "silhouettes from camera images or videos: background difference, automatic "
                                    "threshold, clean-up; writes a capture", "the extraction report as JSON"))
+    _calibrate_args(_command(sub, "calibrate", cmd_calibrate,
+                             "calibrate cameras from a ChArUco board: intrinsics, distortion and poses, "
+                             "world = the board on the table, Z up", "the calibration report as JSON (per camera the "
+                             "reprojection RMS, the views used, every view's RMS), or the board written with "
+                             "--make-board"))
     calib_io.add_arguments(_command(sub, "import-cameras", cmd_cameras,
                                     "read a calibration (OpenCV YAML/JSON/XML, COLMAP, EasyMocap) into our cameras JSON",
                                     "the command, --out and the camera names as JSON"), "import-cameras")
@@ -770,6 +978,55 @@ def build_parser():
                                     "write cameras (ours, a capture's or any calibration) as OpenCV YAML/JSON/XML, "
                                     "OpenCV files per camera or a COLMAP text model",
                                     "the command, --out and the camera names as JSON"), "export-cameras")
+    s = _command(sub, "handles", cmd_handles,
+                 "the manipulation from footage: marked clips triangulated, tracked, their release found, the "
+                 "cloth placed; writes the scenario for extract --scenario",
+                 "the report as JSON (per handle: vertex, residual px and mm, track length, release frame; the "
+                 "cloth's placement; the uncertain block)")
+    s.add_argument("footage", nargs="?", help="footage folder: <camera>/ frames (background* files skipped), optional "
+                                              "footage.json (or --videos)")
+    s.add_argument("--marks", required=True, help="marks JSON: per handle its pixel in >= 2 cameras at one frame, "
+                                                  "'at' on the cloth, motion, released (docs/phone_handles.md)")
+    s.add_argument("--size", required=True, help="the cloth's measured size WIDTHxHEIGHT [m], e.g. 0.30x0.40 (width "
+                                                 "= along grid columns, 'at' u; height = rows, 'at' v)")
+    s.add_argument("-o", "--out", required=True, help="scenario JSON to write (scenario + uncertain + report)")
+    s.add_argument("--grid", help="vertices along the longer side (the other side's makes square cells), or "
+                                  "COLUMNSxROWS (default: about 16, chosen so the clips' 'at' fall on vertices)")
+    s.add_argument("--cameras", help="calibration: our cameras JSON, OpenCV, COLMAP or EasyMocap (default: the "
+                                     "footage's footage.json / cameras.* / calibration.* / COLMAP folder)")
+    s.add_argument("--videos", help="folder of videos, one per camera: <camera>.<mp4|mov|mkv|avi>")
+    s.add_argument("--sync", help="with --videos: JSON {camera: video time [s] at t = 0} (written with --find-sync)")
+    s.add_argument("--find-sync", choices=["flash"], help="with --videos: sync times from a flash every camera sees")
+    s.add_argument("--flash-time", type=float, default=0.0, help="capture time [s] of the flash (default: %(default)s)")
+    s.add_argument("--times", help="frame times [s], comma separated (default: footage.json's, else --fps)")
+    s.add_argument("--fps", type=float, help="frames per second: frame k at START + k / FPS (every image of a folder; "
+                                             "with --videos, --frames of them)")
+    s.add_argument("--start", type=float, default=0.0, help="with --fps: time [s] of the first frame "
+                                                            "(default: %(default)s)")
+    s.add_argument("--frames", type=int, help="with --videos --fps: how many frames")
+    s.add_argument("--clip-size", type=float, default=D.HANDLE_CLIP_SIZE_M,
+                   help="a clip's size [m]: the tracking window is its size in each camera (default: %(default)s; "
+                        "'size' per handle in the marks)")
+    s.add_argument("--mark-sigma", type=float, default=D.HANDLE_MARK_SIGMA_PX,
+                   help="pixel noise of a mark (a click), the floor of each handle's uncertainty (default: %(default)s)")
+    s.add_argument("--max-residual", type=float, default=D.HANDLE_MAX_RESIDUAL_PX,
+                   help="a camera missing the triangulated point by more [px] is a wrong mark or a drifted track "
+                        "(default: %(default)s)")
+    s.add_argument("--fb-max", type=float, default=D.HANDLE_FB_MAX_PX,
+                   help="forward-backward tracking error [px] beyond which a track is lost (default: %(default)s)")
+    s.add_argument("--levels", type=int, default=D.HANDLE_LK_LEVELS,
+                   help="Lucas-Kanade pyramid levels (default: %(default)s)")
+    s.add_argument("--departure-min", type=float, default=1000.0 * D.HANDLE_DEPARTURE_MIN_M,
+                   help="a released handle has left its pin when further than this [mm] (and 6x its held jitter) "
+                        "(default: %(default)s)")
+    s.add_argument("--max-pin-offset", type=float, default=1000.0 * D.HANDLE_MAX_PIN_OFFSET_M,
+                   help="a clip further than this [mm] from its vertex of the placed cloth is an error "
+                        "(default: %(default)s)")
+    s.add_argument("--smooth", type=int, default=D.HANDLE_SMOOTH_FRAMES,
+                   help="moving handles: local quadratic over +-this many frames, 0 = raw (default: %(default)s)")
+    s.add_argument("--settle", type=float, default=D.SETTLE_TIME,
+                   help="seconds of settling before t = 0 written into the scenario (default: %(default)s)")
+
     pipeline.add_arguments(_command(sub, "blender", cmd_blender,
                                     "the whole pipeline through Blender (bpy module): rig, cloth, simulate, render "
                                     "silhouettes, fit, overlays, .blend", "a summary of the run as JSON"))

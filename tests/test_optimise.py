@@ -554,14 +554,20 @@ def test_active_cma_minimises_an_ill_conditioned_ellipsoid_and_resumes_exactly()
     def f(X):
         return np.sum((scale * (np.atleast_2d(X) - 0.3)) ** 2, axis=1)
 
-    a = CMAES(space, seed=3, active=True, tolx=1e-12)
-    p = CMAES(space, seed=3, tolx=1e-12)
-    for _ in range(400):
-        for o in (a, p):
-            X = o.ask()
-            o.tell(X, f(X))
-        assert np.linalg.eigvalsh(a.C).min() > 0
-    assert a.best_f < 1e-4 and a.best_f < 1e-3 * p.best_f      # measured: 3.2e-6 against 1.28
+    # One seed is a coin toss (seed 3: 5.2e-5 against 4.6e-3); over 8 seeds, measured: active
+    # better in every one (ratio 7e-7 .. 0.062, median 7e-4), its median best 3e-5.
+    ratios, bests = [], []
+    for seed in range(8):
+        a = CMAES(space, seed=seed, active=True, tolx=1e-12)
+        p = CMAES(space, seed=seed, tolx=1e-12)
+        for _ in range(400):
+            for o in (a, p):
+                X = o.ask()
+                o.tell(X, f(X))
+            assert np.linalg.eigvalsh(a.C).min() > 0
+        ratios.append(a.best_f / p.best_f)
+        bests.append(a.best_f)
+    assert max(ratios) < 0.2 and np.median(ratios) < 1e-2 and np.median(bests) < 1e-4
     b = CMAES(space, seed=3, active=True)
     for _ in range(5):
         b.tell(b.ask(), f(b.ask()))

@@ -392,7 +392,14 @@ def recordings(recording):
     return "\n".join(out)
 
 
+def floor_calibration(recording):
+    from floor_calibration import table
+    d = _data(recording, "floor_calibration")["calibration"]
+    return table(d["synthetic"] + d["resampled"] + ([d["footage"]] if "footage" in d else []))
+
+
 VIEWS = {
+    "floor_calibration": floor_calibration,
     "identifiability.default": identifiability_default,
     "blender_agreement": blender_agreement,
     "cross_simulator": cross_simulator,

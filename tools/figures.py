@@ -102,6 +102,11 @@ SOURCES = {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json", "cost": "expensive",
         "what": "Blender's cloth as the truth, fitted by both core models (about 45 min)"},
+    "continuum_baseline": {
+        "argv": ["{py}", "tools/continuum_truth.py", "baseline", "--make", "--out", "out/continuum", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 20's baseline: a Warp continuum cloth (cotton, silk; 30 fps, a rig not ours) fitted by "
+                "today's CLI as a new user would, and with --fps 30 (about 40 min on a loaded machine)"},
     "paper_mismatch": {
         "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--truth-dt-safety", "0.125", "--json", "{out}",
                  "--out", "out/paper_mismatch"], "cost": "expensive",
@@ -165,6 +170,16 @@ SOURCES = {
         "outputs": {"s0": "out/real/fit_auto_s0.json", "s1": "out/real/fit_auto_s1.json",
                     "s2": "out/real/fit_auto_s2.json", "paper_recipe": "out/real/fit_paper_s0.json"},
         "cost": "expensive", "what": "fits on the extracted footage silhouettes (needs the footage recording's files)"},
+    "floor_calibration": {
+        "steps": [["{py}", "tools/render_footage.py", "render", "--out", "out/floor_cal/footage"]
+                  + [a for c in ("cam00", "cam03", "cam06", "cam09", "cam12", "cam15") for a in ("--camera", c)],
+                  ["{py}", "-m", "addon", "extract", "out/floor_cal/footage", "-o", "out/floor_cal/capture"],
+                  ["{py}", "tools/floor_calibration.py", "--out", "out/floor_cal", "--footage", "out/floor_cal/footage",
+                   "--capture", "out/floor_cal/capture", "--json", "out/floor_cal/calibration.json"]],
+        "outputs": {"calibration": "out/floor_cal/calibration.json"},
+        "cost": "expensive",
+        "what": "the noise-floor estimate against true floors: synthetic captures (both models, 4 resolutions, "
+                "5 noise levels, resampled fits) and photoreal footage (6 cameras)"},
     "blender_cloth": {
         "steps": [["{py}", "tools/blender_cloth_experiment.py", "check-units", "--json", "out/blendercloth/units.json"],
                   ["{py}", "tools/blender_cloth_experiment.py", "observe", "--out", "out/blendercloth/capture"],

@@ -85,5 +85,65 @@ FIT_RESTARTS = 0                  # CMA-ES IPOP restarts (each with twice the po
 BLENDER_FIT_RESTARTS = 4          # the blender model's 8 free settings have local minima: restart until the budget
 FIT_EXPLODED_LIMIT = 100          # this many candidates, all exploded, and nothing finite: the fit is an error
 CHECKPOINT_INTERVAL_S = 2.0       # the CLI writes its checkpoint at most this often (and always at the end)
+FLOOR_FAR_ABOVE = 3.0             # issue 20: a fit error more than 3x its images' noise floor (observation/floor.py) is
+                                  # "far above" it; the estimate's calibration spread is +-25 % (docs/noise_floor.md),
+                                  # so 3x is well clear of it
 MAX_FIT_PIXELS = 16_000_000       # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
 MAX_IMAGE_SIDE = 16384
+
+# --- the manipulation measured from footage (footage/handles.py, `clothfit handles`, docs/phone_handles.md)
+HANDLE_MARK_SIGMA_PX = 1.0        # a person's click on a zoomed frame is good to about a pixel: the floor of the pixel
+                                  # noise behind each handle's uncertain bound (2 cameras leave 1 residual degree of freedom)
+HANDLE_MAX_RESIDUAL_PX = 4.0      # a camera missing its handle's triangulated point by more is a wrong mark or a drifted
+                                  # track, not noise: calibrations reproject to 0.2-1 px and clicks are good to ~1 px
+HANDLE_CLIP_SIZE_M = 0.015        # a clip's (fingertip's) size: the Lucas-Kanade window of a camera = its apparent size
+                                  # (a binder clip's jaw, a fingertip: 1-2.5 cm); a window much larger holds mostly
+                                  # still background that drags the track of a moving clip back
+HANDLE_LK_LEVELS = 3              # pyramid levels: follows motions up to ~2^3 x half a window (~80 px) per frame
+HANDLE_FB_MAX_PX = 1.0            # forward-backward disagreement beyond this = the track is lost (Kalal et al. 2010);
+                                  # on a textured clip LK's round trip agrees to ~0.05 px, a lost point by pixels
+HANDLE_REF_MAX_PX = 2.0           # a refinement against the marked frame's patch further than this from the frame-to-frame
+                                  # track is a false match (the patch changed): the frame-to-frame point is kept
+HANDLE_DEPARTURE_MIN_M = 0.0005   # a released corner has left its pin when it is this far from it and DEPARTURE_K times its
+HANDLE_DEPARTURE_K = 8.0          # held jitter: a tracked clip's triangulated jitter is 0.01-0.1 mm (measured: synthetic and
+                                  # Cycles footage), so noise never passes 8 sigma; a fall from rest passes 0.5 mm 10 ms
+                                  # after the release (0.5 g s^2), and the frame before is recovered by extrapolation
+HANDLE_RELEASE_FREE_FRAMES = 3    # free frames a parabola from rest is fitted to, to see whether the release came before
+                                  # the previous frame (three: one more than the fewest, so that the fit can fail)
+HANDLE_PARABOLA_TOL = 0.03        # ... and it must fit them to 3 % of the fall: measured, a fall from rest with a jerk
+                                  # fits to 0.3 %, a corner that snaps away (a stretched cloth) no better than 7 %
+HANDLE_BOUND_K = 3.0              # a handle's uncertain bound: 3 sigma of its triangulated position ...
+HANDLE_BOUND_FLOOR_M = 0.001      # ... and never below 1 mm: where a clip grips the cloth is not known better
+HANDLE_MAX_PIN_OFFSET_M = 0.02    # a clip further than this from its vertex of the placed cloth: a wrong cloth size, 'at'
+                                  # or mark (10x the 1 mm goal of the triangulation, a few x a cloth's measuring error)
+HANDLE_SMOOTH_FRAMES = 2          # a moving handle's track: local quadratic over +-2 frames (Savitzky-Golay 5/2, exact for
+                                  # a constant acceleration) against the triangulation noise
+HANDLE_GRID_N = 16                # vertices along the cloth's longer side when no resolution is given (the paper's 16)
+
+# --- multi-camera calibration from a ChArUco board (clothfit calibrate, core/footage/calibrate.py)
+CALIB_MIN_VIEWS = 5          # usable views per camera whose intrinsics are estimated: f, cx, cy and the distortion
+                             # from a planar board need it seen at several tilts (Zhang's method: 3 views for f and
+                             # c alone; the distortion terms and a margin for dropped views make 5)
+CALIB_MIN_CORNERS = 8        # ChArUco corners a view needs: a board pose from fewer (4 is the minimum of a
+                             # homography) is at the mercy of one corner's error
+CALIB_BLUR_RATIO = 0.5       # a frame whose board sharpness (~1 / edge width) is below this fraction of its camera's
+                             # median is blurred and skipped: motion blur of a waved board doubles the edge width
+                             # at least; focus and exposure differences between sharp frames stay well above it
+CALIB_DISTORTION = "k1k2p1p2"    # phone lenses, corrected in software, leave small radial + tangential distortion;
+                                 # k3 over-fits unless the board reaches the image corners
+CALIB_LOSS = "soft_l1"       # robust loss of the bundle adjustment: a mis-detected corner does not pull the cameras
+CALIB_LOSS_SCALE_PX = 1.0    # where the loss turns robust: subpixel corners are far below it, bad ones far above
+CALIB_OUTLIER_PX = 2.0       # after the first adjustment, corners further than this (or CALIB_OUTLIER_SIGMAS
+CALIB_OUTLIER_SIGMAS = 5.0   # robust sigmas, whichever is larger) from the fit are dropped, then refined again
+CALIB_ROUNDS = 3             # adjust, drop outliers, adjust (again while something was dropped)
+CALIB_MAX_NFEV = 200         # least_squares evaluations per round: converged runs take tens
+CALIB_VIDEO_EVERY_S = 0.5    # videos: sample one moment every half second (a board waved slowly gives new poses;
+                             # more only adds near-duplicate views)
+CALIB_VIDEO_BATCH = 32       # frames decoded at once per video (memory: 32 x 1080 x 1920 x 3 bytes = 200 MB)
+CALIB_BOARD_DPI = 300        # --make-board PNG resolution: a 4 cm square is 472 px, far beyond any printer's grain
+CALIB_BOARD_MARGIN_M = 0.01  # white margin round the printed board: the outer markers need a quiet zone
+CALIB_CORNER_CHECK_PX = 1.0  # a ChArUco corner further than this from where its neighbours (a local homography over
+                             # two squares) put it is refined again from there, else dropped; lens distortion bends
+                             # a two-square neighbourhood by far less
+CALIB_MARKER_RATIO_TOL = 0.1 # markers measured more than 10 % larger or smaller than --board says = a board definition
+                             # that does not match the print (lens distortion changes a marker's size by far less)

@@ -25,16 +25,18 @@ def work_buffers(span_cap, max_h, max_w):
 
 @njit(**PARALLEL)
 def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
-                         events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
+                         events, n_events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
                          max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris,
                          max_h, max_w, span_cap, esil, codes):
-    """Simulate and score every candidate: esil[p, c, f]; codes[p] != 0 = exploded."""
+    """Simulate and score every candidate (its own key positions and events, as
+    ``paper_kernels.population_arrays`` gives them): esil[p, c, f]; codes[p] != 0 = exploded."""
     V = rest.shape[0]
     for p in prange(P.shape[0]):
         X = np.zeros((n_frames, V, 3))
-        code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos,
-                                release, events, frame_of_event, n_frames, gravity, settle_rate, safety,
-                                centre, limit, max_strain, max_steps, X)
+        ne = n_events[p]
+        code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos[p],
+                                release, events[p, :ne], frame_of_event[p, :ne], n_frames, gravity, settle_rate,
+                                safety, centre, limit, max_strain, max_steps, X)
         codes[p] = code
         if code != 0:
             continue

@@ -74,7 +74,6 @@ class SilhouetteObjective:
             # prefix sums inside it
             self._pre, self._pofs, self._bbs = _prefix_sums(obs, C, F)
             self._ipre, self._ipofs, self._ibbs = _prefix_sums(ign, C, F)
-            self._arrays = paper_kernels.scenario_arrays(scenario) if self.paper else None
             self._Ks = np.array([c.K for c in self.cameras])
             self._Rs = np.array([c.R for c in self.cameras])
             self._ts = np.array([c.t for c in self.cameras])
@@ -96,24 +95,29 @@ class SilhouetteObjective:
     def n_images(self):
         return int(self.areas.size)
 
-    def per_image(self, P):
-        """``(esil (P, C, F), exploded (P,))``; exploded candidates have ``inf`` everywhere."""
+    def per_image(self, P, offsets=None):
+        """``(esil (P, C, F), exploded (P,))``; exploded candidates have ``inf`` everywhere.
+        ``offsets`` (``scenario.Offsets``): each candidate's own estimate of the manipulation's
+        unknowns (time offset, handle offsets); None = the scenario as it is."""
+        if offsets is not None and len(offsets) != np.asarray(P).reshape(len(offsets), -1).shape[0]:
+            raise ClothFitError(f"objective: {len(offsets)} offsets for {np.asarray(P).shape[0]} candidates")
         if not self.paper:
-            return self._per_image_positions(P)
+            return self._per_image_positions(P, offsets)
         P = np.ascontiguousarray(np.asarray(P, dtype=np.float64).reshape(-1, 4))
         C, F = self.areas.shape
         self.evaluations += P.shape[0]
         if self.backend == "numba":
             esil = np.full((P.shape[0], C, F), np.inf)
             codes = np.zeros(P.shape[0], dtype=np.int64)
-            a = self._arrays
+            a = paper_kernels.population_arrays(self.scenario, P.shape[0], offsets=offsets)
             kernels.objective_population(P, *[a[k] for k in paper_kernels.ORDER], self._Ks, self._Rs, self._ts,
                                          self._dists, self._Hs, self._Ws, self._pre, self._pofs, self._bbs, self._ipre,
                                          self._ipofs, self._ibbs, self.areas, self._tris, self._maxh, self._maxw, self._span_cap, esil, codes)
             exploded = codes != 0
             esil[exploded] = np.inf
             return esil, exploded
-        sim = simulate_numpy(self.scenario, P)
+        sim = simulate_numpy(self.scenario, P) if offsets is None else self.model.simulate(
+            self.scenario, P, backend="numpy", offsets=offsets)
         esil = np.full((P.shape[0], C, F), np.inf)
         tris = self.scenario.grid.triangles
         for p in range(P.shape[0]):
@@ -126,13 +130,14 @@ class SilhouetteObjective:
                                                      self.ignore[c][f])
         return esil, sim.exploded
 
-    def _per_image_positions(self, rows):
+    def _per_image_positions(self, rows, offsets=None):
         """A model simulated on its own (Blender's cloth: SIMD batches), then scored."""
         rows = np.asarray(rows, dtype=np.float64)
         rows = rows.reshape(-1, len(self.model.row_names))
         C, F = self.areas.shape
         self.evaluations += rows.shape[0]
-        sim = self.model.simulate(self.scenario, rows, backend=self.backend)
+        sim = (self.model.simulate(self.scenario, rows, backend=self.backend) if offsets is None else
+               self.model.simulate(self.scenario, rows, backend=self.backend, offsets=offsets))
         esil = np.full((rows.shape[0], C, F), np.inf)
         ok = ~sim.exploded
         if self.backend == "numba":
@@ -161,8 +166,8 @@ class SilhouetteObjective:
         inter = int(np.count_nonzero(obs[r0:r0 + win.shape[0], c0:c0 + win.shape[1]] & win)) if nmod else 0
         return (area + nmod - 2 * inter) / area
 
-    def __call__(self, P):
-        esil, exploded = self.per_image(P)
+    def __call__(self, P, offsets=None):
+        esil, exploded = self.per_image(P, offsets)
         e = esil.sum(axis=(1, 2))
         e[exploded | ~np.isfinite(e)] = np.inf
         return e

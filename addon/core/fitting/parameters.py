@@ -25,6 +25,7 @@ from ..jsonio import read_json
 from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
+from ..physics.scenario import Offsets, Uncertainty
 from .optimise import SearchSpace
 
 PAPER_FREE = ("k_over_m", "d_over_m", "l_rel")
@@ -304,3 +305,88 @@ def settings_from_result(res: dict, model: BlenderModel, grid) -> dict:
     for n in scaled:
         s[n] = min(s[n], B.RANGES[n][1])
     return B.check_settings(s, "warm start from a paper-model result")
+
+
+class ManipulationParameters:
+    """The manipulation's unknowns a fit estimates with the cloth's settings (``Uncertainty``): the
+    time offset ``time_offset_s`` in ``[-b, b]`` and one 3-D offset per uncertain handle, each
+    coordinate in ``[-b_k, b_k]`` (linear coordinates: an offset of zero is the declared
+    manipulation). ``offsets(X)`` turns the coordinates of a population into ``scenario.Offsets``."""
+
+    def __init__(self, uncertainty: Uncertainty, scenario):
+        self.uncertainty = uncertainty
+        self.n_handles = len(scenario.handles)
+        names, bounds = [], {}
+        if uncertainty.time_offset > 0:
+            names.append("time_offset_s")
+            bounds["time_offset_s"] = (-uncertainty.time_offset, uncertainty.time_offset)
+        self.handle_coords = []                      # (name, handle index, axis)
+        for k, b in enumerate(uncertainty.handles):
+            if b > 0:
+                for a, ax in enumerate("xyz"):
+                    nm = f"handle{k}_{ax}"
+                    names.append(nm)
+                    bounds[nm] = (-b, b)
+                    self.handle_coords.append((nm, k, a))
+        self.names = names
+        self.bounds = bounds
+
+    @property
+    def n(self) -> int:
+        return len(self.names)
+
+    def offsets(self, M) -> Offsets:
+        """``M`` (P, n) coordinates in ``names`` order -> per-candidate offsets."""
+        M = np.atleast_2d(np.asarray(M, dtype=np.float64)).reshape(-1, self.n)
+        P = M.shape[0]
+        t = M[:, self.names.index("time_offset_s")] if "time_offset_s" in self.names else np.zeros(P)
+        h = np.zeros((P, self.n_handles, 3))
+        for nm, k, a in self.handle_coords:
+            h[:, k, a] = M[:, self.names.index(nm)]
+        return Offsets(t, h)
+
+    def describe(self, m, scenario, spread=None) -> dict:
+        """The fitted manipulation for a result: ``time_offset_s`` and ``handles`` (the capture's
+        scenario format, moved), each with its uncertainty (``spread``: per coordinate, e.g. the
+        search distribution's standard deviation; None = not estimated)."""
+        off = self.offsets(np.asarray(m)[None])
+        sd = dict(zip(self.names, spread)) if spread is not None else {}
+        moved = scenario.moved(0.0, off.handles[0])
+        handles = []
+        for k, h in enumerate(moved.handles):
+            d = h.to_dict()
+            d["offset_m"] = off.handles[0, k].tolist()
+            if self.uncertainty.handles[k] > 0:
+                d["offset_bound_m"] = self.uncertainty.handles[k]
+                d["offset_uncertainty_m"] = [sd.get(f"handle{k}_{ax}") for ax in "xyz"]
+            handles.append(d)
+        return {"time_offset_s": float(off.time[0]),
+                "time_offset_uncertainty_s": sd.get("time_offset_s"),
+                "uncertain": self.uncertainty.to_dict(),
+                "handles": handles}
+
+
+def fitted_scenario(scenario, result: dict):
+    """A scenario as a fit result estimated its manipulation: handles from the result's ``handles``
+    (same vertices, in the same order) and its frames read ``time_offset_s`` earlier; a result
+    without them leaves the scenario as it is."""
+    hs = result.get("handles")
+    t = result.get("time_offset_s") or 0.0
+    if not hs and not t:
+        return scenario
+    offsets = None
+    if hs:
+        if not isinstance(hs, list) or len(hs) != len(scenario.handles):
+            raise ClothFitError(f"result: {len(hs) if isinstance(hs, list) else 'bad'} fitted handles for a scenario "
+                                f"with {len(scenario.handles)}")
+        offsets = np.zeros((len(hs), 3))
+        for k, (d, h) in enumerate(zip(hs, scenario.handles)):
+            if not isinstance(d, dict) or int(d.get("vertex", -1)) != h.vertex:
+                raise ClothFitError(f"result: fitted handle #{k} is not on vertex {h.vertex} (the capture's)")
+            try:
+                offsets[k] = np.asarray(d.get("offset_m", [0.0, 0.0, 0.0]), dtype=np.float64).reshape(3)
+            except (TypeError, ValueError):
+                raise ClothFitError(f"result: fitted handle #{k} has a bad 'offset_m'") from None
+    if not (isinstance(t, (int, float)) and math.isfinite(t)):
+        raise ClothFitError(f"result: time_offset_s {t!r} is not a number")
+    return scenario.moved(float(t), offsets)

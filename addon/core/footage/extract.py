@@ -56,11 +56,17 @@ Footage layout read by :func:`extract_capture`::
 
     footage/
       footage.json        optional: {"cameras": "cameras.yml", "frame_times": [...],
-                                     "scenario": {...Scenario.to_dict()...}, "cloth_mass": 0.0025}
+                                     "scenario": {...Scenario.to_dict()...}, "cloth_mass": 0.0025,
+                                     "uncertain": {"time_offset": 0.02, "handles": 0.002}}
       cameras.yml         calibration in any format calib_io.import_cameras reads
       cam00/background.png      one or more plates: files named background* or bg*
       cam00/000.png ...         foreground frames, in natural sort order (= frame_times order)
       cam01/...
+
+The capture's ``uncertain`` block (``docs/capture_format.md``) is the one given (``--uncertain``), else
+the ``--scenario`` file's (``clothfit handles`` writes one beside its scenario), else footage.json's;
+frames read from videos at their timestamps otherwise declare one frame period for the time offset
+(the frame taken is the one on display, up to a frame before the asked time) and nothing for the handles.
 
 Camera folders are matched to the cameras by name. Distorted cameras are kept with their
 distortion (the fitter projects with it) unless ``undistort=True``, which undistorts the
@@ -604,13 +610,19 @@ def _find_calibration(footage_dir):
 
 
 def _resolve_scenario(scenario, frame_times, where):
+    return _resolve_scenario_uncertain(scenario, frame_times, where)[:2]
+
+
+def _resolve_scenario_uncertain(scenario, frame_times, where):
+    """(Scenario, note or None, the scenario file's ``uncertain`` block or None)."""
     from ..physics.scenario import Scenario, paper_scenario
+    unc = None
     if scenario is None:
         return paper_scenario(frame_times=frame_times), ("no scenario given: the paper's manipulation is assumed "
                                                          "(10 cm 16x16 cloth, 4 corners held at z = 0.1 m, corner 0 "
-                                                         "released at t = 0)")
+                                                         "released at t = 0)"), None
     if isinstance(scenario, Scenario):
-        return scenario.with_frames(frame_times), None
+        return scenario.with_frames(frame_times), None, None
     if isinstance(scenario, str):
         if not os.path.isfile(scenario):
             raise ClothFitError(f"scenario file not found: {scenario}")
@@ -619,19 +631,43 @@ def _resolve_scenario(scenario, frame_times, where):
                 d = json.load(f)
         except (OSError, json.JSONDecodeError) as e:
             raise ClothFitError(f"scenario file {scenario}: not valid JSON ({e})") from None
-        d = d.get("scenario", d) if isinstance(d, dict) else d
+        if isinstance(d, dict) and isinstance(d.get("scenario"), dict):
+            unc = d.get("uncertain")           # a `clothfit handles` file or a capture.json: its bounds
+            d = d["scenario"]
         where = scenario
         scenario = d
     if not isinstance(scenario, dict):
         raise ClothFitError(f"{where}: scenario must be an object (Scenario.to_dict())")
     d = dict(scenario)
     d["frame_times"] = list(frame_times)
-    return Scenario.from_dict(d, source=f"{where} scenario"), None
+    return Scenario.from_dict(d, source=f"{where} scenario"), None, unc
+
+
+def _uncertain_for(scen, explicit, from_scenario, from_footage, frame_period=None):
+    """The capture's ``uncertain`` block and where it came from: ``explicit`` (an Uncertainty, a dict or
+    ``--uncertain`` text), else the scenario file's, else footage.json's, else, for frames read from
+    videos at their timestamps, one frame period for the time (a frame is the one on display at the asked
+    time, up to a frame earlier, and a flash sync is good to a frame) and nothing for the handles."""
+    from ..physics.scenario import Uncertainty
+    n = len(scen.handles)
+    if explicit is not None:
+        if isinstance(explicit, Uncertainty):
+            return explicit, "given"
+        if isinstance(explicit, str):
+            u = Uncertainty.from_text(explicit, n, "--uncertain")
+            return (None if not u.active else u), "--uncertain"
+        return Uncertainty.parse(explicit, n, "uncertain"), "given"
+    for value, src in ((from_scenario, "the scenario file"), (from_footage, FOOTAGE_JSON)):
+        if value is not None:
+            return Uncertainty.parse(value, n, f"{src} uncertain"), src
+    if frame_period:
+        return Uncertainty(round(float(frame_period), 6), (0.0,) * n), "one frame period of the videos"
+    return None, None
 
 
 def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=None, scenario=None,
                     cloth_mass=None, options: ExtractOptions | None = None, camera_names=None,
-                    progress=None, should_stop=None, **option_overrides) -> dict:
+                    progress=None, should_stop=None, uncertain=None, **option_overrides) -> dict:
     """Extract every camera's silhouettes from a footage folder and write a capture.
 
     ``cameras``: a calibration path (anything ``calib_io.import_cameras`` reads) or a list of
@@ -640,6 +676,8 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
     ``footage.json``). ``scenario``: a Scenario, its dict, or a path to a JSON holding one (a
     capture.json works); default ``footage.json``'s, else the paper's scenario (with a warning).
     ``cloth_mass`` [kg]: default ``footage.json``'s. ``camera_names``: extract only these.
+    ``uncertain``: the capture's ``uncertain`` block (an Uncertainty, its dict or ``--uncertain`` text);
+    default: the scenario file's (``clothfit handles`` writes one), else ``footage.json``'s, else none.
     ``options`` or keyword overrides of :class:`ExtractOptions` fields. ``progress(i, n, name)``
     is called per camera. ``should_stop()`` is asked before each camera: True stops there, and the
     capture holds the cameras done so far (``report["stopped"]``, a warning; before the first
@@ -698,7 +736,8 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
         raise ClothFitError(f"frame times must be numbers, got {frame_times!r}") from None
     if scenario is None and meta.get("scenario") is not None:
         scenario = meta["scenario"]
-    scen, scen_note = _resolve_scenario(scenario, frame_times, meta_path)
+    scen, scen_note, scen_unc = _resolve_scenario_uncertain(scenario, frame_times, meta_path)
+    unc, unc_src = _uncertain_for(scen, uncertain, scen_unc, meta.get("uncertain"))
     if cloth_mass is None:
         cloth_mass = meta.get("cloth_mass")
 
@@ -764,7 +803,7 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
     if isinstance(meta.get("meta"), dict):
         cap_meta["footage_meta"] = meta["meta"]
     return _write_result(out_dir, footage_dir, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report,
-                         errors, warnings)
+                         errors, warnings, unc, unc_src)
 
 
 def _stop(should_stop, ci, n, report, warnings) -> bool:
@@ -796,7 +835,7 @@ def _extract_one(cam, bgs, frames, names, opts, report, errors, warnings):
 
 
 def _write_result(out_dir, source, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report, errors,
-                  warnings):
+                  warnings, uncertain=None, uncertain_source=None):
     """All cameras done: one error listing every problem (nothing written), else the capture + report."""
     from ..observation.capture import write_capture
     report["warnings"] = warnings
@@ -809,20 +848,23 @@ def _write_result(out_dir, source, out_cameras, scen, all_masks, cloth_mass, cap
                               "thresholds": {n: r["threshold"] for n, r in report["cameras"].items()}}
     if "stopped" in report:
         cap_meta["extraction"]["stopped"] = report["stopped"]
+    if uncertain is not None:
+        report["uncertain"] = dict(uncertain.to_dict(), source=uncertain_source)
     write_capture(out_dir, out_cameras, scen, all_masks, cloth_mass=cloth_mass, meta=cap_meta,
-                  allow_empty=opts.allow_empty)
+                  allow_empty=opts.allow_empty, uncertain=uncertain)
     atomic_json(os.path.join(out_dir, REPORT_JSON), report)
     return report
 
 
 def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras, frame_times, scenario=None,
                    cloth_mass=None, options: ExtractOptions | None = None, camera_names=None, progress=None,
-                   should_stop=None, **option_overrides) -> dict:
+                   should_stop=None, uncertain=None, **option_overrides) -> dict:
     """Silhouettes from one video per camera (``footage/video.py``: layout, timing rule) -> a capture.
 
     ``sync``: a sync file path or ``{camera: video time at t = 0}``; ``cameras``: a calibration path or
     Camera list; ``frame_times``: the capture times; ``progress(camera_index, n_cameras, text)``;
-    ``should_stop`` as in :func:`extract_capture`.
+    ``should_stop`` and ``uncertain`` as in :func:`extract_capture`, except that without one the capture
+    declares one frame period of the videos (the slowest) as its time offset bound.
     Video problems (no video, unreadable, sync or frame time outside it, wrong size) raise at once,
     one line naming the file; extraction problems of all cameras are reported together as in
     :func:`extract_capture`. Returns the report (also ``out_dir/extract_report.json``).
@@ -863,7 +905,8 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
         raise ClothFitError(f"capture times {frame_times} must be >= 0 and strictly increasing")
     sync_path = sync if isinstance(sync, str) else "sync"
     sync = video.read_sync(sync, [c.name for c in cameras]) if isinstance(sync, str) else dict(sync)
-    scen, scen_note = _resolve_scenario(scenario, frame_times, "extract --videos")
+    scen, scen_note, scen_unc = _resolve_scenario_uncertain(scenario, frame_times, "extract --videos")
+    _uncertain_for(scen, uncertain, scen_unc, None)           # a bad block fails before the videos are read
     errors, warnings = [], []
     if scen_note:
         warnings.append(scen_note)
@@ -892,8 +935,10 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
         progress(len(cameras), len(cameras), "done")
     cap_meta = {"generator": "addon.core.extract (videos)", "videos": os.path.abspath(videos_dir),
                 "sync": sync, "frame_timestamps": {n: r["frame_timestamps"] for n, r in report["video"].items()}}
+    fps = [r["mean_fps"] for r in report["video"].values() if r.get("mean_fps")]
+    unc, unc_src = _uncertain_for(scen, uncertain, scen_unc, None, 1.0 / min(fps) if fps else None)
     return _write_result(out_dir, videos_dir, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report,
-                         errors, warnings)
+                         errors, warnings, unc, unc_src)
 
 
 def _refuse_overwriting(out_dir, inputs):
@@ -944,6 +989,9 @@ def add_arguments(parser):
     parser.add_argument("--scenario", help="JSON with the scenario (cloth + handles), e.g. a capture.json "
                                            "(default: footage.json's, else the paper's scenario)")
     parser.add_argument("--cloth-mass", type=float, help="weighed cloth mass [kg] (default: footage.json's, if any)")
+    parser.add_argument("--uncertain", help="the capture's uncertain bounds, time_offset=S,handles=M (seconds, metres) "
+                                            "or none (default: the --scenario file's, else footage.json's, else with "
+                                            "--videos one frame period for the time)")
     parser.add_argument("--threshold", default="auto",
                         help="difference threshold: auto, otsu, noise or a number (default: %(default)s)")
     parser.add_argument("--camera-threshold", action="append", default=[], metavar="NAME=VALUE",
@@ -1014,7 +1062,7 @@ def run_args(args) -> dict:
             raise ClothFitError("extract: give a footage folder, or --videos DIR --plates DIR --sync SYNC.json")
         rep = extract_capture(args.footage, args.out, cameras=args.cameras, frame_times=times,
                               scenario=args.scenario, cloth_mass=args.cloth_mass, options=options_from_args(args),
-                              camera_names=args.camera_names)
+                              camera_names=args.camera_names, uncertain=getattr(args, "uncertain", None))
     print(format_report(rep))
     print(f"wrote capture {args.out} ({len(rep['cameras'])} cameras x {len(rep['frame_times'])} frames)")
     return rep
@@ -1051,7 +1099,8 @@ def _run_videos(args, times):
             sys.stderr.flush()
     try:
         return extract_videos(args.videos, args.plates, sync, args.out, cams, times, scenario=args.scenario,
-                              cloth_mass=args.cloth_mass, options=options_from_args(args), progress=progress)
+                              cloth_mass=args.cloth_mass, options=options_from_args(args), progress=progress,
+                              uncertain=getattr(args, "uncertain", None))
     finally:
         if tty:
             sys.stderr.write("\n")

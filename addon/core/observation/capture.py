@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import ClothFitError
 from ..safeio import atomic_write
-from ..physics.scenario import Scenario
+from ..physics.scenario import Scenario, Uncertainty
 from .camera import Camera, check_camera_name, load_cameras, save_cameras
 
 FORMAT = "silhouette-cloth-fit/capture"
@@ -399,7 +399,7 @@ class Capture:
 
     def __init__(self, root, cameras, scenario: Scenario, pattern: str = DEFAULT_PATTERN, shapes=None,
                  cloth_mass=None, meta=None, json_path=None, _file_frames=None, _all_camera_names=None, model=None,
-                 masks=None):
+                 masks=None, uncertain=None):
         self.root = os.path.abspath(str(root))
         self.json_path = json_path or os.path.join(self.root, CAPTURE_JSON)
         where = f"capture {self.json_path}"
@@ -431,6 +431,9 @@ class Capture:
         self.meta = meta
         self.model = _check_model(model, where)
         self.masks = check_mask_spec(masks, where)
+        if uncertain is not None and not isinstance(uncertain, Uncertainty):
+            uncertain = Uncertainty.parse(uncertain, len(scenario.handles), f"{where}: uncertain")
+        self.uncertain = uncertain        # what the manipulation could not measure (None: all exact)
         self._check_unique_paths()
 
     # ------------------------------------------------------------------ basics
@@ -590,7 +593,7 @@ class Capture:
         shapes = None if self.shapes is None else self.shapes[frames]
         return Capture(self.root, [self.cameras[c] for c in cams], scen, self.pattern, shapes, self.cloth_mass,
                        dict(self.meta), self.json_path, self._file_frames[frames], self._all_camera_names, model=self.model,
-                       masks=self.masks)
+                       masks=self.masks, uncertain=self.uncertain)
 
     # ---------------------------------------------------------------- validate
     def validate(self, full: bool = True, allow_empty: bool = False, binarize_threshold=None) -> "Capture":
@@ -686,6 +689,8 @@ class Capture:
         if self.model is not None:
             d["model"] = self.model
         d.update(self.masks)
+        if self.uncertain is not None:
+            d["uncertain"] = self.uncertain.to_dict()
         d["meta"] = self.meta
         return d
 
@@ -851,7 +856,7 @@ def load_capture(path, validate: bool = False) -> Capture:
 
     masks = check_mask_spec({k: d.get(k) for k in MASK_KEYS}, where)
     cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, json_path=json_path,
-                  model=d.get("model"), masks=masks)
+                  model=d.get("model"), masks=masks, uncertain=d.get("uncertain"))
     if validate:
         cap.validate(full=True)
     return cap
@@ -895,7 +900,7 @@ def _json_default(o):
 
 def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, cloth_mass=None, meta=None,
                   pattern: str = DEFAULT_PATTERN, allow_empty: bool = False, finalize: bool = True, model=None,
-                  ignore=None, ignore_pattern: str = DEFAULT_IGNORE_PATTERN):
+                  ignore=None, ignore_pattern: str = DEFAULT_IGNORE_PATTERN, uncertain=None):
     """Write a capture directory and return it as a ``Capture`` (or a ``PendingCapture``).
 
     ``silhouettes[c][f]`` (bool / 0-1 / 0-255 arrays of camera c's height x width) for every
@@ -920,7 +925,8 @@ def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, c
     """
     root = os.path.abspath(os.fspath(root))
     masks = {"ignore": ignore_pattern} if ignore is not None else None
-    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, model=model, masks=masks)
+    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, model=model, masks=masks,
+                  uncertain=uncertain)
     where = f"capture {cap.json_path}"
     if os.path.splitext(cap.pattern)[1].lower() != ".png":
         raise ClothFitError(f"{where}: silhouettes pattern {cap.pattern!r} must end with .png "

@@ -378,6 +378,22 @@ def hinge_angles(X, hinge, pa, pb):
 
 # --------------------------------------------------------------------------- the manipulation in frames
 
+def settle_frames(settle_time: float, fps: float) -> int:
+    """Blender steps whole frames: the settle (which only brings the cloth to rest before t = 0) is
+    rounded to the nearest whole number of frames at ``fps`` (``settle_note`` says so)."""
+    return int(round(settle_time * fps))
+
+
+def settle_note(settle_time: float, fps: float) -> str | None:
+    """A sentence when ``settle_time`` is not a whole number of frames at ``fps``, else None."""
+    n = settle_time * fps
+    sf = settle_frames(settle_time, fps)
+    if abs(n - sf) <= 1e-6:
+        return None
+    return (f"settle_time {settle_time:g} s is {n:.2f} frames at {fps:g} fps: rounded to {sf} frames "
+            f"({sf / fps:.4g} s); the settle only brings the cloth to rest before t = 0")
+
+
 @dataclass
 class FramePlan:
     """A scenario on Blender's timeline: frame ``frame_start`` is the first (rest) frame, the
@@ -408,11 +424,7 @@ class FramePlan:
     def from_scenario(cls, scenario: Scenario, fps: float) -> "FramePlan":
         if not (fps > 0 and math.isfinite(fps)):
             raise ClothFitError(f"frame rate {fps} must be a positive number")
-        settle = scenario.settle_time * fps
-        sf = int(round(settle))
-        if abs(settle - sf) > 1e-6:
-            raise ClothFitError(f"settle_time {scenario.settle_time} s is not a whole number of frames at {fps:g} fps "
-                                f"({settle:.4f} frames)")
+        sf = settle_frames(scenario.settle_time, fps)
         ft = np.asarray(scenario.frame_times, dtype=np.float64) * fps + sf
         fr = np.round(ft)
         exact = np.abs(ft - fr) < 1e-6
@@ -432,6 +444,11 @@ class FramePlan:
             held = h.held(t) | (t < 0)
             weights[:, k] = np.where(held, getattr(h, "weight", 1.0), 0.0)
         return cls(float(fps), sf, n_frames, hv, targets, weights, lo, hi, w, int((~exact).sum()))
+
+    @property
+    def settle_time(self) -> float:
+        """The settle actually simulated [s]: whole frames (``settle_frames``)."""
+        return self.settle_frames / self.fps
 
     def frame_of(self, t):
         return self.settle_frames + np.asarray(t) * self.fps

@@ -38,8 +38,8 @@ D3 = (F32(-46.164), F32(102.579), F32(-78.166), F32(23.116))               # and
 CG_MAX = 100
 
 # lane parameters (columns of the float32 parameter table)
-P_MASS, P_DRAG, P_KT, P_KC, P_KS, P_DT, P_DC, P_DS, P_BEND, P_BDAMP, P_KGOAL, P_KB, P_CB = range(13)
-N_LANE_PARAMS = 13
+P_MASS, P_DRAG, P_KT, P_KC, P_KS, P_DT, P_DC, P_DS, P_BEND, P_BDAMP, P_KGOAL, P_KB, P_CB, P_AVG = range(14)
+N_LANE_PARAMS = 14
 # codes
 OK, NONFINITE, FLEW, STRETCHED = 0, 1, 2, 3
 REASONS = ["", "non-finite state", "flew away", "spring overstretched"]
@@ -242,7 +242,7 @@ if simd.available():  # pragma: no branch
                 i6 = b.mul(i, c(6))
                 j6 = b.mul(j, c(6))
                 s6 = b.mul(s, c(6))
-                L0 = vb.f(rl_, s)
+                L0 = vb.ld(rl_, s)
                 # ---- angular bending across the hinge this spring carries
                 with b.if_then(b.and_(ang_on, b.icmp_signed(">=", hb, c(0)))):
                     pa_row = b.gep(pa_, [b.mul(hb, maxl)])
@@ -267,7 +267,7 @@ if simd.available():  # pragma: no branch
                     va = [vb.sub(va[a], ve[a]) for a in range(3)]
                     vbb = [vb.sub(vbb[a], ve[a]) for a in range(3)]
                     k = vb.mul(vb.mul(prow(P_BEND), L0), vb.k(0.1))
-                    force = vb.mul(k, vb.sub(ang, vb.f(ra_, hb)))
+                    force = vb.mul(k, vb.sub(ang, vb.ld(ra_, hb)))
                     force = vb.add(force, vb.mul(vb.neg(prow(P_BDAMP)), vb.add(vb.dot3(va, da), vb.dot3(vbb, db))))
                     fa = vb.div(force, vb.splat(b.sitofp(la, _ir.FloatType())))
                     fbv = vb.div(force, vb.splat(b.sitofp(lb, _ir.FloatType())))
@@ -348,7 +348,7 @@ if simd.available():  # pragma: no branch
 
 @njit(**JIT)
 def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb,
-              restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg, avg_eps, L):
+              restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg, L):
     """cloth_calc_force for every lane: forces F and the blocks of dF/dx (Xd diagonal, Xo per spring)
     and dF/dv (Vd, Vo); ``act[s, l]`` = spring s has a block in lane l."""
     V = X.shape[0] // 3
@@ -375,10 +375,10 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
         # interp_v3_v3v3(goal_x, xold, xconst, t); goal_v = xconst - xold
         sfac = ONE - tg
         for l in range(L):
-            gx0 = sfac * xold[h, 0] + tg * xconst[h, 0]
-            gx1 = sfac * xold[h, 1] + tg * xconst[h, 1]
-            gx2 = sfac * xold[h, 2] + tg * xconst[h, 2]
-            k = gw * par[l, P_KGOAL] / avg_eps
+            gx0 = sfac * xold[h, 0, l] + tg * xconst[h, 0, l]
+            gx1 = sfac * xold[h, 1, l] + tg * xconst[h, 1, l]
+            gx2 = sfac * xold[h, 2, l] + tg * xconst[h, 2, l]
+            k = gw * par[l, P_KGOAL] / par[l, P_AVG]
             e0 = gx0 - X[3 * v, l]
             e1 = gx1 - X[3 * v + 1, l]
             e2 = gx2 - X[3 * v + 2, l]
@@ -428,12 +428,14 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
 
 @njit(**JIT)
 def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular,
-                   hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, avg_eps, par, keep, out,
+                   hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, par, keep, out,
                    centre, limit, max_ratio, codes, iterations):
     """Simulate the W = simd.W lanes of ``par`` (W, N_LANE_PARAMS) in lockstep through every frame.
 
-    ``targets`` (n_frames + 1, H, 3) float32 pin targets per frame, ``weights`` (n_frames + 1, H)
-    pin weights; ``tg_steps``/``tp_steps`` the goal and pin interpolation factors of each step;
+    The manipulation may differ between lanes (a fit of uncertain pins): ``targets``
+    (n_frames + 1, H, 3, W) float32 pin targets per frame and lane, ``restlen`` (S, W) and
+    ``restang`` (B, W) each lane's rest lengths and angles (of its first frame), the mean structural
+    rest length in ``par[:, P_AVG]``; ``weights`` (n_frames + 1, H) pin weights; ``tg_steps``/``tp_steps`` the goal and pin interpolation factors of each step;
     ``keep`` (n_frames + 1,) index into ``out`` (L, K, V, 3) of the frames to keep, or -1.
     ``codes[l]`` != 0: the lane exploded (it is reset to rest and ignored from then on)."""
     L = simd.W
@@ -450,7 +452,7 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
     for h in range(H):
         for a in range(3):
             for l in range(L):
-                X[3 * hv[h] + a, l] = targets[0, h, a]
+                X[3 * hv[h] + a, l] = targets[0, h, a, l]
     F = np.zeros((3 * V, L), dtype=np.float32)
     Xd = np.zeros((6 * V, L), dtype=np.float32)
     Vd = np.zeros((6 * V, L), dtype=np.float32)
@@ -467,8 +469,8 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
     to = np.zeros((3 * V, L), dtype=np.float32)
     temp = np.zeros((3 * V, L), dtype=np.float32)
     free = np.ones(V, dtype=np.float32)
-    xold = np.zeros((H, 3), dtype=np.float32)
-    xconst = np.zeros((H, 3), dtype=np.float32)
+    xold = np.zeros((H, 3, L), dtype=np.float32)
+    xconst = np.zeros((H, 3, L), dtype=np.float32)
     goal = np.zeros(H, dtype=np.float32)
     pinned = np.zeros(H, dtype=np.bool_)
     delta = np.zeros((1, L), dtype=np.float32)
@@ -489,7 +491,8 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
         alive[l] = True
     for h in range(H):
         for a in range(3):
-            xconst[h, a] = targets[0, h, a]
+            for l in range(L):
+                xconst[h, a, l] = targets[0, h, a, l]
     if keep[0] >= 0:
         for l in range(L):
             for v in range(V):
@@ -505,18 +508,17 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
             goal[h] = ww * ww
             pinned[h] = goal[h] >= SNAP
             for a in range(3):
-                xold[h, a] = xconst[h, a]
-                xconst[h, a] = targets[fr, h, a]
+                for l in range(L):
+                    xold[h, a, l] = xconst[h, a, l]
+                    xconst[h, a, l] = targets[fr, h, a, l]
             if pinned[h]:
                 free[hv[h]] = ZERO
                 for a in range(3):
-                    vv = (xconst[h, a] - xold[h, a]) * inv_ts
                     for l in range(L):
-                        Vel[3 * hv[h] + a, l] = vv
+                        Vel[3 * hv[h] + a, l] = (xconst[h, a, l] - xold[h, a, l]) * inv_ts
         for st in range(n_steps):
             _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb,
-                      h_lb, restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg_steps[st], avg_eps,
-                      L)
+                      h_lb, restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg_steps[st], L)
             # A = M - (dF/dv dt + dF/dx dt^2); B = F dt + (dF/dx v) dt^2
             for v in range(V):
                 for qq in range(6):
@@ -581,9 +583,8 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
             for h in range(H):
                 if pinned[h]:
                     for a in range(3):
-                        x = sp * xold[h, a] + tp * xconst[h, a]
                         for l in range(L):
-                            X[3 * hv[h] + a, l] = x
+                            X[3 * hv[h] + a, l] = sp * xold[h, a, l] + tp * xconst[h, a, l]
         # explosion checks, once per frame
         for l in range(L):
             if not alive[l]:
@@ -609,7 +610,7 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
                         e0 = X[3 * j, l] - X[3 * i, l]
                         e1 = X[3 * j + 1, l] - X[3 * i + 1, l]
                         e2 = X[3 * j + 2, l] - X[3 * i + 2, l]
-                        if math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) > max_ratio * restlen[s]:
+                        if math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) > max_ratio * restlen[s, l]:
                             code = STRETCHED
                             break
             if code != OK:
@@ -629,15 +630,16 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
 
 @njit(**PARALLEL)
 def simulate_population(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular,
-                        hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, avg_eps, par, lane_start,
+                        hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, par, lane_start,
                         keep, out, centre, limit, max_ratio, codes, iterations):
-    """Batches of simd.W lanes ``lane_start[b]:lane_start[b] + W`` of ``par`` in parallel threads."""
+    """Batches of simd.W lanes ``lane_start[b]:lane_start[b] + W`` of ``par`` in parallel threads;
+    ``restlen`` (NB, S, W), ``restang`` (NB, B, W) and ``targets`` (NB, n_frames + 1, H, 3, W) per batch."""
     nb = lane_start.shape[0]
     for b in prange(nb):
         a = lane_start[b]
         e = a + simd.W
-        simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular, hv,
-                       targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, avg_eps, par[a:e], keep,
+        simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen[b], h_pa, h_la, h_pb, h_lb, restang[b], angular,
+                       hv, targets[b], weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, par[a:e], keep,
                        out[a:e], centre, limit, max_ratio, codes[a:e], iterations[a:e])
 
 
@@ -663,9 +665,8 @@ class Prepared:
         self.h_pb = np.ascontiguousarray(net.hinge_pb, dtype=np.int64)
         self.h_la = (self.h_pa >= 0).sum(1).astype(np.int64)
         self.h_lb = (self.h_pb >= 0).sum(1).astype(np.int64)
-        self.restlen, self.avg, self.restang = setup(self.rest, self.sp_i, self.sp_j,
-                                                     np.ascontiguousarray(net.struct_creation, dtype=np.int64),
-                                                     self.h_spring, self.h_pa, self.h_la, self.h_pb, self.h_lb)
+        self.struct_creation = np.ascontiguousarray(net.struct_creation, dtype=np.int64)
+        self.restlen, self.avg, self.restang = self._setup(self.rest)
         self.avg_eps = F32(self.avg + FLT_EPS)
         self.angular = 1 if net.bending_model == "ANGULAR" else 0
         self.hv = np.ascontiguousarray(plan.handle_vertices, dtype=np.int64)
@@ -693,13 +694,48 @@ class Prepared:
         self.keep[frames] = np.arange(frames.size)
         self.kept = frames
 
-    def lane_params(self, rows) -> np.ndarray:
-        """float32 lane parameters from rows of FLOAT_SETTINGS values, computed as Blender does."""
+    def _setup(self, first):
+        """(rest lengths, mean structural rest length, rest angles) of a first frame (V, 3) float32."""
+        return setup(first, self.sp_i, self.sp_j, self.struct_creation, self.h_spring, self.h_pa, self.h_la,
+                     self.h_pb, self.h_lb)
+
+    def manipulation(self, offsets):
+        """Each candidate's pin targets (P, n_frames + 1, H, 3), rest lengths (P, S), rest angles (P, B)
+        and ``avg_spring_len + FLT_EPSILON`` (P,), float32, for handle offsets (P, H, 3) [m] (None: the
+        plan's own handles for every candidate). An offset moves a handle's whole trajectory, its
+        position in the first frame included, so the candidate's rest shape is that of a Blender mesh
+        built with the handles there (Blender's rest lengths are the first frame's)."""
+        if offsets is None:
+            return None
+        offsets = np.asarray(offsets, dtype=np.float64)
+        P = offsets.shape[0]
+        H = self.hv.size
+        if offsets.shape != (P, H, 3):
+            raise ValueError(f"handle offsets must be (P, {H}, 3), got {offsets.shape}")
+        base = np.asarray(self.plan.targets, dtype=np.float64)
+        targets = np.empty((P,) + base.shape, dtype=np.float32)
+        restlen = np.empty((P, self.restlen.size), dtype=np.float32)
+        restang = np.empty((P, self.restang.size), dtype=np.float32)
+        avg = np.empty(P, dtype=np.float32)
+        first = np.asarray(self.net.rest, dtype=np.float64).copy()
+        for p in range(P):
+            t = base + offsets[p][None]
+            targets[p] = t
+            first[self.hv] = t[0]
+            restlen[p], a, restang[p] = self._setup(np.ascontiguousarray(first, dtype=np.float32))
+            avg[p] = F32(a + FLT_EPS)
+        return targets, restlen, restang, avg
+
+    def lane_params(self, rows, avg_eps=None) -> np.ndarray:
+        """float32 lane parameters from rows of FLOAT_SETTINGS values, computed as Blender does
+        (``avg_eps``: per row, for candidates with their own rest shape; default the plan's)."""
         from .blender import FLOAT_SETTINGS
         rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(FLOAT_SETTINGS))
         col = {n: rows[:, k].astype(np.float32) for k, n in enumerate(FLOAT_SETTINGS)}
         P = np.zeros((rows.shape[0], N_LANE_PARAMS), dtype=np.float32)
-        a = self.avg_eps
+        a = np.full(rows.shape[0], self.avg_eps, dtype=np.float32) if avg_eps is None else \
+            np.asarray(avg_eps, dtype=np.float32)
+        P[:, P_AVG] = a
         P[:, P_MASS] = col["mass"]
         P[:, P_DRAG] = col["air_damping"] * F32(0.01)
         P[:, P_KT] = col["tension_stiffness"] / a
@@ -715,30 +751,56 @@ class Prepared:
         P[:, P_CB] = P[:, P_KB] * col["bending_damping"]
         return P
 
-    def run(self, rows):
-        """Simulate the candidates ``rows``: (frames kept (P, K, V, 3) float32, codes, CG iterations).
+    def run(self, rows, offsets=None):
+        """Simulate the candidates ``rows`` (with handle ``offsets`` (P, H, 3) [m], see
+        ``manipulation``): (frames kept (P, K, V, 3) float32, codes, CG iterations).
 
         The candidates are padded to whole batches of ``simd.W`` lanes (copies of the last one)."""
-        par = self.lane_params(rows)
-        n = par.shape[0]
+        man = self.manipulation(offsets)
+        n = np.asarray(rows).reshape(-1, np.asarray(rows).shape[-1]).shape[0]
         W = simd.W
         nb = -(-n // W)
-        padded = np.concatenate([par, np.repeat(par[-1:], nb * W - n, axis=0)]) if nb * W > n else par
+        pad = np.concatenate([np.arange(n), np.full(nb * W - n, n - 1)])
+        if man is None:
+            par = self.lane_params(rows)
+            restlen = np.ascontiguousarray(np.broadcast_to(self.restlen[None, :, None], (nb,) + self.restlen.shape + (W,)))
+            restang = np.ascontiguousarray(np.broadcast_to(self.restang[None, :, None], (nb,) + self.restang.shape + (W,)))
+            targets = np.ascontiguousarray(np.broadcast_to(self.targets[None, ..., None], (nb,) + self.targets.shape + (W,)))
+        else:
+            tg, rl, ra, avg = man
+            par = self.lane_params(rows, avg)
+
+            def lanes(a):           # (P, ...) -> (NB, ..., W): the candidates of each batch on the last axis
+                a = a[pad].reshape((nb, W) + a.shape[1:])
+                return np.ascontiguousarray(np.moveaxis(a, 1, -1))
+            restlen, restang, targets = lanes(rl), lanes(ra), lanes(tg)
+        padded = np.ascontiguousarray(par[pad])
         out = np.zeros((nb * W, self.kept.size, self.rest.shape[0], 3), dtype=np.float32)
         codes = np.zeros(nb * W, dtype=np.int64)
         its = np.zeros(nb * W, dtype=np.int64)
-        simulate_population(self.rest, self.sp_i, self.sp_j, self.sp_kind, self.sp_hinge, self.restlen, self.h_pa,
-                            self.h_la, self.h_pb, self.h_lb, self.restang, self.angular, self.hv, self.targets,
+        simulate_population(self.rest, self.sp_i, self.sp_j, self.sp_kind, self.sp_hinge, restlen, self.h_pa,
+                            self.h_la, self.h_pb, self.h_lb, restang, self.angular, self.hv, targets,
                             self.weights, self.tg.size, self.dt, self.tg, self.tp, self.inv_ts, self.g,
-                            self.avg_eps, np.ascontiguousarray(padded), np.arange(nb, dtype=np.int64) * W, self.keep,
+                            padded, np.arange(nb, dtype=np.int64) * W, self.keep,
                             out, self.centre, self.limit, self.max_ratio, codes, its)
         return out[:n], codes[:n], its[:n]
 
-    def sample(self, out):
-        """Positions at the capture times (P, F, V, 3) float64 from the kept frames."""
-        plan = self.plan
-        lo = self.keep[plan.lo]
-        hi = self.keep[plan.hi]
-        w = plan.w[None, :, None, None]
+    def sample(self, out, frames=None):
+        """Positions (P, F, V, 3) float64 from the kept frames: at the capture times, or at
+        ``frames`` (P, F) fractional frame numbers from the start frame (a candidate's own reading
+        of the capture times, e.g. shifted by its time offset), linear between whole frames."""
         o = out.astype(np.float64)
-        return (1.0 - w) * o[:, lo] + w * o[:, hi]
+        if frames is None:
+            plan = self.plan
+            w = plan.w[None, :, None, None]
+            return (1.0 - w) * o[:, self.keep[plan.lo]] + w * o[:, self.keep[plan.hi]]
+        frames = np.asarray(frames, dtype=np.float64)
+        lo = np.floor(frames + 1e-9).astype(np.int64)
+        w = np.clip(frames - lo, 0.0, 1.0)
+        hi = np.where(w > 1e-9, lo + 1, lo)
+        klo, khi = self.keep[lo], self.keep[hi]
+        if (klo < 0).any() or (khi < 0).any():
+            raise ValueError("a frame to read was not kept (all_frames=True reads any frame)")
+        p = np.arange(o.shape[0])[:, None]
+        w = w[..., None, None]
+        return (1.0 - w) * o[p, klo] + w * o[p, khi]

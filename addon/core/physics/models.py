@@ -23,7 +23,7 @@ from ..errors import ClothFitError
 from . import blender as B
 from . import blender_kernels, jit, paper_kernels
 from .paper import PARAM_NAMES, Params, SimResult, _as_params, simulate_numpy
-from .scenario import Scenario
+from .scenario import Offsets, Scenario
 
 MODEL_NAMES = ("paper", "blender")
 
@@ -50,11 +50,14 @@ class PaperModel:
     def to_dict(self) -> dict:
         return {"name": self.name}
 
-    def simulate(self, scenario: Scenario, rows, backend: str = "auto") -> SimResult:
+    def simulate(self, scenario: Scenario, rows, backend: str = "auto", offsets: Offsets | None = None) -> SimResult:
+        """``offsets``: each candidate's own manipulation (``Scenario.moved``), None = the scenario's."""
         P = _as_params(rows)
         if _backend(backend) == "numba":
-            return paper_kernels.simulate(scenario, P, self.safety)
-        return simulate_numpy(scenario, P, self.safety)
+            return paper_kernels.simulate(scenario, P, self.safety, offsets)
+        if offsets is None:
+            return simulate_numpy(scenario, P, self.safety)
+        return _each(P, offsets, lambda p, sc: simulate_numpy(sc, p, self.safety), scenario)
 
 
 class BlenderModel:
@@ -74,6 +77,7 @@ class BlenderModel:
         self.quality = s["quality"]
         self.bending_model = s["bending_model"]
         self._cache = {}
+        self._spans = {}
 
     def to_dict(self) -> dict:
         return {"name": self.name, "fps": self.fps, "quality": self.quality, "bending_model": self.bending_model}
@@ -91,8 +95,22 @@ class BlenderModel:
             first[plan.handle_vertices] = plan.targets[0]
             net = B.Network.from_grid(scenario.grid, self.bending_model, first_frame=first)
             hit = (scenario, net, plan, {})
-            self._cache = {key: hit}
+            if len(self._cache) >= 4:                 # a few scenarios (a fit's and its time-spanning one)
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[key] = hit
         return hit[1], hit[2]
+
+    def spanning(self, scenario: Scenario, span: float) -> Scenario:
+        """The scenario with its frames extended by ``span`` seconds either way (within the settle):
+        what candidates that read the frames up to ``span`` s earlier or later need simulated."""
+        key = ("span", id(scenario), float(span))
+        hit = self._spans.get(key)
+        if hit is None or hit[0] is not scenario:
+            t = scenario.frame_times
+            ext = np.concatenate([[max(t[0] - span, -scenario.settle_time)], t, [t[-1] + span]])
+            hit = (scenario, scenario.with_frames(np.unique(ext)))
+            self._spans = {key: hit}
+        return hit[1]
 
     def check_rows(self, rows) -> np.ndarray:
         rows = np.asarray(rows, dtype=np.float64)
@@ -105,8 +123,12 @@ class BlenderModel:
             B.check_settings(self.settings(r), "blender model")
         return rows
 
-    def simulate(self, scenario: Scenario, rows, backend: str = "auto") -> SimResult:
+    def simulate(self, scenario: Scenario, rows, backend: str = "auto", offsets: Offsets | None = None) -> SimResult:
+        """``offsets``: each candidate's own manipulation (its frames read ``offsets.time`` s earlier,
+        its handles moved, its rest shape that of its own first frame); None = the scenario's."""
         rows = self.check_rows(rows)
+        if offsets is not None:
+            return self._simulate_offsets(scenario, rows, backend, offsets)
         net, plan = self.plan(scenario)
         n = rows.shape[0]
         V = net.n_vertices
@@ -137,14 +159,51 @@ class BlenderModel:
         reason = ["" if c == 0 else f"exploded ({blender_kernels.REASONS[c]})" for c in codes]
         return SimResult(out, exploded, steps, reason)
 
-    def prepared(self, scenario: Scenario, time_scale: float):
+    def prepared(self, scenario: Scenario, time_scale: float, all_frames: bool = False):
         """The kernel's float32 arrays for a scenario and time step, built once."""
         net, plan = self.plan(scenario)
         store = self._cache[id(scenario)][3]
-        prep = store.get(time_scale)
+        prep = store.get((time_scale, all_frames))
         if prep is None:
-            prep = store[time_scale] = blender_kernels.Prepared(net, plan, self.quality, time_scale, scenario.gravity)
+            prep = store[(time_scale, all_frames)] = blender_kernels.Prepared(net, plan, self.quality, time_scale,
+                                                                              scenario.gravity, all_frames)
         return prep
+
+    def _simulate_offsets(self, scenario, rows, backend, offsets: Offsets) -> SimResult:
+        n = rows.shape[0]
+        if len(offsets) != n:
+            raise ClothFitError(f"blender model: {len(offsets)} offsets for {n} candidates")
+        if _backend(backend) == "numpy":
+            return _each(rows, offsets, lambda r, sc: self.simulate(sc, r, "numpy"), scenario)
+        ext = self.spanning(scenario, offsets.span)
+        net, plan = self.plan(ext)
+        F, V = scenario.frame_times.size, net.n_vertices
+        out = np.full((n, F, V, 3), np.nan)
+        codes = np.zeros(n, dtype=np.int64)
+        steps = np.zeros(n, dtype=np.int64)
+        ts_col = B.FLOAT_SETTINGS.index("time_scale")
+        moved = offsets.moves_handles
+        for ts in np.unique(rows[:, ts_col]):
+            sel = np.nonzero(rows[:, ts_col] == ts)[0]
+            prep = self.prepared(ext, float(ts), all_frames=True)
+            frames, c, _ = prep.run(rows[sel], offsets.handles[sel] if moved else None)
+            t = scenario.frame_times[None, :] - offsets.time[sel, None]
+            read = np.maximum(plan.frame_of(t), 0.0)
+            out[sel] = prep.sample(frames, read)
+            codes[sel] = c
+            steps[sel] = prep.tg.size * plan.n_frames
+        exploded = codes != 0
+        out[exploded] = np.nan
+        reason = ["" if c == 0 else f"exploded ({blender_kernels.REASONS[c]})" for c in codes]
+        return SimResult(out, exploded, steps, reason)
+
+
+def _each(rows, offsets: Offsets, simulate_one, scenario: Scenario) -> SimResult:
+    """The reference path of a population with offsets: each candidate on its own moved scenario."""
+    parts = [simulate_one(rows[p:p + 1], scenario.moved(offsets.time[p], offsets.handles[p]))
+             for p in range(len(offsets))]
+    return SimResult(np.concatenate([r.positions for r in parts]), np.concatenate([r.exploded for r in parts]),
+                     np.concatenate([np.atleast_1d(r.substeps) for r in parts]), [x for r in parts for x in r.reason])
 
 
 def get_model(spec=None):

@@ -179,12 +179,15 @@ def simulate_one(par, nx, ny, rest, springs, rest_factor, hv, key_start, key_tim
 
 @njit(**PARALLEL)
 def simulate_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
-                        events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
+                        events, n_events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
                         max_strain, max_steps, out, codes, steps):
+    """Every candidate p with its own handle keys ``key_pos[p]`` and events ``events[p, :n_events[p]]``
+    (a fit of an uncertain manipulation; otherwise all the same)."""
     for p in prange(P.shape[0]):
-        code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos,
-                                release, events, frame_of_event, n_frames, gravity, settle_rate, safety,
-                                centre, limit, max_strain, max_steps, out[p])
+        ne = n_events[p]
+        code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos[p],
+                                release, events[p, :ne], frame_of_event[p, :ne], n_frames, gravity, settle_rate,
+                                safety, centre, limit, max_strain, max_steps, out[p])
         codes[p] = code
         steps[p] = st
 
@@ -218,13 +221,37 @@ def scenario_arrays(scenario, safety=D.DT_SAFETY):
 
 
 ORDER = ["nx", "ny", "rest", "springs", "rest_factor", "hv", "key_start", "key_times", "key_pos", "release", "events",
-          "frame_of_event", "n_frames", "gravity", "settle_rate", "safety", "centre", "limit", "max_strain",
-          "max_steps"]
+          "n_events", "frame_of_event", "n_frames", "gravity", "settle_rate", "safety", "centre", "limit",
+          "max_strain", "max_steps"]
 
 
-def simulate(scenario, P, safety=D.DT_SAFETY):
-    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 4)
+def population_arrays(scenario, n, safety=D.DT_SAFETY, offsets=None):
+    """``scenario_arrays`` for ``n`` candidates: ``key_pos`` (n, K, 3), ``events`` and
+    ``frame_of_event`` (n, E) and ``n_events`` (n,) per candidate: the same for all, or each
+    candidate's own manipulation (``scenario.Offsets``: its frames read earlier by its time offset,
+    its handles moved)."""
     a = scenario_arrays(scenario, safety)
+    if offsets is None:
+        a["key_pos"] = np.ascontiguousarray(np.broadcast_to(a["key_pos"], (n,) + a["key_pos"].shape))
+        a["events"] = np.ascontiguousarray(np.broadcast_to(a["events"], (n,) + a["events"].shape))
+        a["frame_of_event"] = np.ascontiguousarray(np.broadcast_to(a["frame_of_event"], (n,) + a["frame_of_event"].shape))
+        a["n_events"] = np.full(n, a["events"].shape[1], dtype=np.int64)
+        return a
+    per = [scenario_arrays(scenario.moved(offsets.time[p], offsets.handles[p]), safety) for p in range(n)]
+    E = max(q["events"].size for q in per)
+    ev = np.zeros((n, E))
+    foe = np.full((n, E), -1, dtype=np.int64)
+    for p, q in enumerate(per):
+        ev[p, :q["events"].size] = q["events"]
+        foe[p, :q["events"].size] = q["frame_of_event"]
+    a.update(key_pos=np.ascontiguousarray([q["key_pos"] for q in per]), events=ev, frame_of_event=foe,
+             n_events=np.array([q["events"].size for q in per], dtype=np.int64))
+    return a
+
+
+def simulate(scenario, P, safety=D.DT_SAFETY, offsets=None):
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 4)
+    a = population_arrays(scenario, P.shape[0], safety, offsets)
     V = a["rest"].shape[0]
     out = np.zeros((P.shape[0], a["n_frames"], V, 3))
     codes = np.zeros(P.shape[0], dtype=np.int64)

@@ -25,13 +25,27 @@ MAX_TIME_S = 3600.0          # frame and key times [s]
 MAX_SETTLE_S = 60.0          # settling before t = 0 [s]
 MAX_GRAVITY = 1000.0         # [m/s^2]
 MAX_FRAMES = 100_000
+# the manipulation's unknowns a capture may declare (``Uncertainty``): bounds beyond these are not an
+# uncertain measurement but a wrong one (a release misread by more than a second, a pin 5 cm away)
+UNCERTAIN_KEYS = ("time_offset", "handles")
+MAX_TIME_OFFSET_S = 1.0
+MAX_HANDLE_OFFSET_M = 0.05
 
 
 class ClothGrid:
-    """Topology and rest geometry of the sheet."""
+    """Topology and rest geometry of the sheet.
+
+    The flat sheet in its own (local) frame: column ``j`` at ``x = -side/2 + j * side/(nx-1)``, row
+    ``i`` at ``y = -side_y/2 + i * side_y/(ny-1)``, ``z = 0``. It is *placed* in the world by
+    ``rest = origin + R(rotation) @ local``: ``origin`` is the world position of the sheet's centre
+    (default ``(0, 0, height)``: the paper's horizontal sheet centred on the z axis) and ``rotation``
+    a rotation vector (axis times angle [rad], default 0: local axes = world axes). A real cloth
+    hangs somewhere else, in some orientation (``footage/handles.py`` fits the placement to the
+    clips). ``height`` is the z of ``origin``.
+    """
 
     def __init__(self, nx: int = D.GRID_N, ny: int | None = None, side: float = D.CLOTH_SIDE,
-                 height: float = D.CLOTH_HEIGHT, side_y: float | None = None):
+                 height: float | None = None, side_y: float | None = None, origin=None, rotation=None):
         ny = nx if ny is None else ny
         for v in (nx, ny):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer, float)) or v != int(v):
@@ -44,17 +58,31 @@ class ClothGrid:
         for nm, v in (("side", side), ("side_y", side if side_y is None else side_y)):
             if not (isinstance(v, (int, float, np.floating)) and math.isfinite(v) and 0 < v <= MAX_SIZE_M):
                 raise ClothFitError(f"cloth {nm} must be a positive finite length up to {MAX_SIZE_M:g} m, got {v}")
+        if origin is not None:
+            origin = _vector3(origin, "cloth origin", MAX_SIZE_M)
+            if height is not None and abs(float(height) - origin[2]) > 1e-9:
+                raise ClothFitError(f"cloth height {height} differs from the z of its origin {origin[2]} "
+                                    f"(give one of them)")
+            height = float(origin[2])
+        height = D.CLOTH_HEIGHT if height is None else height
         if not (isinstance(height, (int, float, np.floating)) and math.isfinite(height) and abs(height) <= MAX_SIZE_M):
             raise ClothFitError(f"cloth height must be a finite number within +-{MAX_SIZE_M:g} m, got {height}")
         self.nx, self.ny = int(nx), int(ny)
         self.side = float(side)
         self.side_y = float(side if side_y is None else side_y)
         self.height = float(height)
+        self.origin = np.array([0.0, 0.0, self.height]) if origin is None else origin
+        self.rotation = np.zeros(3) if rotation is None else _vector3(rotation, "cloth rotation", 1e3)
+        self.R = rotation_matrix(self.rotation)
         self.spacing = self.side / (self.nx - 1)
         xs = np.linspace(-self.side / 2, self.side / 2, self.nx)
         ys = np.linspace(-self.side_y / 2, self.side_y / 2, self.ny)
         X, Y = np.meshgrid(xs, ys)  # (ny, nx)
-        self.rest = np.stack([X, Y, np.full_like(X, self.height)], -1).reshape(-1, 3)
+        self.local = np.stack([X, Y, np.zeros_like(X)], -1).reshape(-1, 3)
+        if self.placed:
+            self.rest = self.origin + self.local @ self.R.T
+        else:   # the paper's sheet, exactly as it always was (no rounding from a product with I)
+            self.rest = np.stack([X, Y, np.full_like(X, self.height)], -1).reshape(-1, 3)
         idx = np.arange(self.nx * self.ny).reshape(self.ny, self.nx)
         a = idx[:-1, :-1].ravel()
         b = idx[:-1, 1:].ravel()
@@ -82,17 +110,72 @@ class ClothGrid:
         nx, ny = self.nx, self.ny
         return [0, nx - 1, (ny - 1) * nx, ny * nx - 1]
 
+    @property
+    def placed(self) -> bool:
+        """True when the sheet is moved off the paper's placement (centre off the z axis or rotated)."""
+        return bool(self.origin[0] != 0.0 or self.origin[1] != 0.0 or np.any(self.rotation != 0.0))
+
     def to_dict(self):
-        return {"nx": self.nx, "ny": self.ny, "side": self.side, "side_y": self.side_y, "height": self.height}
+        d = {"nx": self.nx, "ny": self.ny, "side": self.side, "side_y": self.side_y, "height": self.height}
+        if self.placed:                # written only when used: older readers see the same keys as before
+            d["origin"] = self.origin.tolist()
+            d["rotation"] = self.rotation.tolist()
+        return d
 
     @classmethod
     def from_dict(cls, d, source="cloth"):
+        if not isinstance(d, dict):
+            raise ClothFitError(f"{source}: the cloth must be an object, got {d!r}")
         try:
+            origin = d.get("origin")
             return cls(int(d.get("nx", D.GRID_N)), int(d.get("ny", d.get("nx", D.GRID_N))),
-                       float(d.get("side", D.CLOTH_SIDE)), float(d.get("height", D.CLOTH_HEIGHT)),
-                       None if d.get("side_y") is None else float(d["side_y"]))
+                       float(d.get("side", D.CLOTH_SIDE)),
+                       None if d.get("height") is None else float(d["height"]),
+                       None if d.get("side_y") is None else float(d["side_y"]),
+                       origin=origin, rotation=d.get("rotation"))
+        except ClothFitError as e:
+            raise ClothFitError(f"{source}: {e}") from None
         except (TypeError, ValueError, AttributeError) as e:
             raise ClothFitError(f"{source}: bad cloth description {d!r} ({e})") from None
+
+
+def _vector3(v, what, limit):
+    try:
+        a = np.asarray(v, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{what} must be 3 numbers, got {v!r}") from None
+    if a.size != 3 or not np.all(np.isfinite(a)) or np.abs(a).max() > limit:
+        raise ClothFitError(f"{what} must be 3 finite numbers within +-{limit:g}, got {v!r}")
+    return a
+
+
+def rotation_matrix(rvec) -> np.ndarray:
+    """Rodrigues: the rotation matrix of a rotation vector (axis * angle [rad]); the same as cv2.Rodrigues."""
+    r = np.asarray(rvec, dtype=np.float64).reshape(3)
+    th = float(np.linalg.norm(r))
+    if th < 1e-15:
+        return np.eye(3)
+    k = r / th
+    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(th) * Kx + (1.0 - math.cos(th)) * (Kx @ Kx)
+
+
+def rotation_vector(R) -> np.ndarray:
+    """The rotation vector (axis * angle, angle in [0, pi]) of a rotation matrix; inverse of rotation_matrix."""
+    R = np.asarray(R, dtype=np.float64).reshape(3, 3)
+    c = max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))
+    th = math.acos(c)
+    if th < 1e-12:
+        return np.zeros(3)
+    if th > math.pi - 1e-6:        # near pi: the axis from the symmetric part
+        B = (R + np.eye(3)) / 2.0
+        k = np.sqrt(np.maximum(np.diag(B), 0.0))
+        i = int(np.argmax(k))
+        k = B[i] / max(k[i], 1e-12)
+        k /= np.linalg.norm(k)
+        return k * th
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2.0 * math.sin(th))
+    return w * th
 
 
 @dataclass
@@ -199,10 +282,9 @@ class Scenario:
                                 f"{MAX_GRAVITY:g} m/s^2")
         if np.any(np.diff(self.frame_times) <= 0):
             raise ClothFitError(f"scenario: frame times must increase, got {self.frame_times.tolist()}")
-        if self.frame_times[0] < 0:
-            raise ClothFitError(f"scenario: frame times must be >= 0 (t = 0 ends the settling), got {self.frame_times[0]}")
-        if self.settle_time < 0:
-            raise ClothFitError(f"scenario: settle_time {self.settle_time} must be >= 0")
+        if self.frame_times[0] < -self.settle_time - 1e-12:
+            raise ClothFitError(f"scenario: frame times must be >= -settle_time (the cloth settles from "
+                                f"t = -{self.settle_time:g} s to t = 0), got {self.frame_times[0]}")
         seen = set()
         for h in self.handles:
             if not (0 <= h.vertex < self.grid.n_vertices):
@@ -231,6 +313,17 @@ class Scenario:
     def with_frames(self, times):
         return Scenario(self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity)
 
+    def moved(self, time_offset: float = 0.0, handle_offsets=None) -> "Scenario":
+        """The manipulation a fit estimated (``Uncertainty``): the frames read ``time_offset`` s earlier
+        on the manipulation's clock (true time = capture time - time_offset; a frame before the
+        settle's start reads its start), every handle's trajectory moved by its offset (H, 3) [m]."""
+        hs = self.handles
+        if handle_offsets is not None:
+            off = np.asarray(handle_offsets, dtype=np.float64).reshape(len(hs), 3)
+            hs = [Handle(h.vertex, h.times, h.positions + off[k], h.release_time) for k, h in enumerate(hs)]
+        times = np.maximum(self.frame_times - float(time_offset), -self.settle_time)
+        return Scenario(self.grid, hs, times, self.settle_time, self.gravity)
+
 
 def paper_scenario(grid: ClothGrid | None = None, frame_times=None, released_corner: int = D.RELEASED_CORNER):
     """SPEC 5: all four corners held at the flat square, settle, release one corner at t = 0."""
@@ -239,3 +332,116 @@ def paper_scenario(grid: ClothGrid | None = None, frame_times=None, released_cor
     for ci, v in enumerate(grid.corners()):
         handles.append(Handle(v, [0.0], grid.rest[v][None], 0.0 if v == grid.corners()[released_corner] else None))
     return Scenario(grid, handles, D.FRAME_TIMES if frame_times is None else frame_times)
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """What a capture could not measure exactly about its manipulation, as bounds the fit searches
+    within (capture.json key ``"uncertain"``, ``fit --uncertain``).
+
+    * ``time_offset`` [s]: the capture's clock against the manipulation's. The fit estimates
+      ``time_offset_s`` in ``[-time_offset, time_offset]``, defined by *true time = capture time -
+      time_offset_s*: the model is read at ``t - time_offset_s`` for a frame taken at capture time
+      ``t`` (the settle, the keys and the release shift with it against the frames).
+    * ``handles`` [m]: per handle (in the scenario's order) the bound of a 3-D offset of its whole
+      trajectory, each coordinate in ``[-b, b]``; one number = the same for every handle; 0 = exact.
+    """
+    time_offset: float = 0.0
+    handles: tuple = ()
+
+    @property
+    def active(self) -> bool:
+        return self.time_offset > 0 or any(b > 0 for b in self.handles)
+
+    def to_dict(self) -> dict:
+        h = list(self.handles)
+        return {"time_offset": self.time_offset,
+                "handles": h[0] if h and all(b == h[0] for b in h) else h}
+
+    @classmethod
+    def parse(cls, value, n_handles: int, source: str = "uncertain") -> "Uncertainty | None":
+        """From a capture's ``"uncertain"`` object (None/absent = nothing uncertain). Bounds must be
+        numbers >= 0 and at most ``MAX_TIME_OFFSET_S`` / ``MAX_HANDLE_OFFSET_M``; ``handles`` is one
+        bound or a list with one per handle."""
+        if value is None:
+            return None
+        if not isinstance(value, dict):
+            raise ClothFitError(f"{source}: expected an object {{'time_offset': s, 'handles': m}}, got {value!r}")
+        bad = sorted(set(value) - set(UNCERTAIN_KEYS))
+        if bad:
+            raise ClothFitError(f"{source}: unknown key {bad[0]!r} (known: {', '.join(UNCERTAIN_KEYS)})")
+        t = _bound(value.get("time_offset", 0.0), f"{source} time_offset", MAX_TIME_OFFSET_S, "s")
+        hv = value.get("handles", 0.0)
+        if isinstance(hv, (list, tuple)):
+            if len(hv) != n_handles:
+                raise ClothFitError(f"{source} handles: {len(hv)} bounds for {n_handles} handles (give one number "
+                                    f"or one per handle)")
+            hs = tuple(_bound(b, f"{source} handles[{i}]", MAX_HANDLE_OFFSET_M, "m") for i, b in enumerate(hv))
+        else:
+            hs = (_bound(hv, f"{source} handles", MAX_HANDLE_OFFSET_M, "m"),) * n_handles
+        return cls(t, hs)
+
+    @classmethod
+    def from_text(cls, text: str, n_handles: int, source: str = "--uncertain") -> "Uncertainty | None":
+        """``time_offset=0.05,handles=0.005`` (seconds, metres) or ``none``."""
+        text = str(text).strip()
+        if text.lower() == "none":
+            return cls(0.0, (0.0,) * n_handles)
+        d = {}
+        for part in filter(None, (p.strip() for p in text.split(","))):
+            key, eq, val = part.partition("=")
+            key = key.strip()
+            if not eq:
+                raise ClothFitError(f"{source}: {part!r} must be KEY=VALUE (keys: {', '.join(UNCERTAIN_KEYS)}), "
+                                    f"or 'none'")
+            if key in d:
+                raise ClothFitError(f"{source}: {key!r} given twice")
+            try:
+                d[key] = float(val)
+            except ValueError:
+                raise ClothFitError(f"{source}: {key} = {val.strip()!r} is not a number") from None
+        if not d:
+            raise ClothFitError(f"{source}: empty (give e.g. time_offset=0.05,handles=0.005, or none)")
+        return cls.parse(d, n_handles, source)
+
+
+def _bound(v, what: str, limit: float, unit: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise ClothFitError(f"{what}: {v!r} is not a number ({unit})")
+    v = float(v)
+    if not math.isfinite(v) or v < 0:
+        raise ClothFitError(f"{what}: {v!r} must be a bound >= 0 ({unit})")
+    if v > limit:
+        raise ClothFitError(f"{what}: {v:g} {unit} is absurd for an uncertain measurement (at most {limit:g} {unit})")
+    return v
+
+
+@dataclass
+class Offsets:
+    """Per-candidate estimates of a manipulation's unknowns (a fit's ``Uncertainty``): ``time`` (P,)
+    [s] (``time_offset_s``: the model is read at capture time - time) and ``handles`` (P, H, 3) [m]
+    (each handle's trajectory moved by it)."""
+    time: np.ndarray
+    handles: np.ndarray
+
+    def __post_init__(self):
+        self.time = np.asarray(self.time, dtype=np.float64).reshape(-1)
+        self.handles = np.asarray(self.handles, dtype=np.float64)
+        if self.handles.ndim != 3 or self.handles.shape[0] != self.time.size or self.handles.shape[2] != 3:
+            raise ClothFitError(f"offsets: {self.time.size} time offsets but handle offsets of shape "
+                                f"{self.handles.shape} (expected (P, H, 3))")
+
+    def __len__(self):
+        return self.time.size
+
+    def take(self, idx) -> "Offsets":
+        return Offsets(self.time[idx], self.handles[idx])
+
+    @property
+    def moves_handles(self) -> bool:
+        return bool(np.any(self.handles != 0))
+
+    @property
+    def span(self) -> float:
+        """The largest |time offset|."""
+        return float(np.abs(self.time).max(initial=0.0))

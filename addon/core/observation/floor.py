@@ -1,0 +1,426 @@
+"""The noise floor of a capture's silhouettes, estimated from the silhouettes themselves (no truth).
+
+The floor of an image is the ``E_sil`` (eq. 6) that a perfect model (the true shape, rasterised at
+pixel centres at the fit resolution) would score against the observed silhouette as the fitter sees
+it: it comes from the observation's own errors and from resampling the images to the fit resolution.
+A fit whose error ends far above its images' floor is limited by something else (the model, the time
+scale, the manipulation) or by errors this estimate cannot see (below). ``docs/noise_floor.md`` has
+the calibration (``tools/floor_calibration.py``).
+
+The estimate has two parts:
+
+* **noise** (random, pixel-scale boundary errors: flipped boundary pixels, ragged segmentation). A
+  3 x 3 majority vote (median) flips every isolated wrong pixel on a straight edge and leaves a clean
+  digitised straight edge, whatever its slope, unchanged (its staircase is not noise). So on the
+  *straight* stretches of the outline (curvature radius above ``STRAIGHT_RADIUS`` px, where a clean
+  outline gives no votes) the votes per boundary pixel measure the noise rate; the floor is that rate
+  times the boundary length over the area. Corners and pixel-sized details (where a clean outline
+  gets votes too) only enter through the boundary length. A capture pools the rate over its images
+  (``capture_floor``), so an image with little straight outline borrows its capture's rate.
+* **resampling** (the fit runs at a lower resolution than the images): the fitter area-averages each
+  image and thresholds at one half (``fitting/job.resample_silhouette``; a copy lives here, see
+  ``resample_silhouette``), the model is rasterised at the low-resolution pixel centres; the two
+  disagree along the outline even for a perfect observation (ties of a 2 x 2 block count as cloth:
+  about 1 % at half resolution). Estimated by running both paths on a smooth sub-pixel version of the
+  observed shape (a Gaussian blur, ``PROXY_SIGMA`` image pixels) at ``len(PROXY_SHIFTS)`` sub-pixel
+  offsets, plus the noise that survives the resampling (the image against its median, resampled).
+
+What it cannot see (say so wherever the number is shown): errors that look like shape. A segmenter
+that is biased (loses or adds a rim along the whole outline: the usual case of real extraction), or
+that drops a low-contrast part of the cloth, produces a clean, smooth silhouette, and no check of an
+image against itself can tell it from the true one. On the photoreal footage (``docs/noise_floor.md``)
+the estimate is about a tenth of the true floor there, while 80 % of that floor lies within one pixel of
+the observed outline. So the estimate is a lower bound for real footage; ``rim`` (the ``E_sil`` of a
+one-pixel shift of the whole outline) is the scale of such a bias, and ``residual_profile`` says
+where a fit's residual lies (on that rim or in the bulk, one-sided or not, and the outline shift in
+pixels that would explain it). Clean silhouettes with real pixel-scale detail (a cloth edge that
+zig-zags at one pixel at low resolution) read as noise and raise the estimate.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .. import defaults as D
+from ..errors import ClothFitError
+
+# --- calibration (tools/floor_calibration.py, docs/noise_floor.md)
+STRAIGHT_RADIUS = 20.0       # px: outline with a larger curvature radius counts as straight (a 3 x 3 median never
+                             # changes a clean digitised edge there: measured baseline < 0.01 % at 240 x 320)
+CURVATURE_SIGMA = 2.0        # px: blur of the silhouette for its curvature (isolated flipped pixels barely move it)
+POOL_STRENGTH = 200.0        # straight boundary pixels: an image's rate is shrunk to its capture's pooled rate with
+                             # this weight (an image with 200 straight boundary pixels gets half its own rate)
+MIN_STRAIGHT = 50            # fewer straight boundary pixels in the whole capture: use every boundary pixel's votes
+                             # (corners vote too: an over-estimate, flagged by ``basis``)
+PROXY_SIGMA = 2.0            # image px: blur of the smooth shape used for the resampling part (1: the staircase
+                             # ripple adds disagreements; 3: rounds pixel-sized features away at 8x downsampling)
+PROXY_SHIFTS = ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25),
+                (0.25, 0.25))  # sub-pixel offsets of the shape (image px) the resampling part is averaged over
+FAR_ABOVE = D.FLOOR_FAR_ABOVE  # a fit error more than this times its floor is "far above" it (issue 20)
+
+LIMITS = ("lower bound for real footage: a segmenter's bias (a rim lost or added along the whole outline) and "
+          "dropped low-contrast parts look like shape and are invisible to any check of an image against itself")
+
+
+# ============================================================================ helpers
+
+def _mask(m, where: str) -> np.ndarray:
+    from .capture import _mask_from_array
+    return _mask_from_array(m, where)
+
+
+def _fit_shape(fit_shape, native, where):
+    if fit_shape is None:
+        return tuple(native)
+    try:
+        h, w = fit_shape
+        ok = all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in (h, w)) and h > 0 and w > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ClothFitError(f"{where}: fit resolution {fit_shape!r} must be two positive integers (height, width)")
+    return int(h), int(w)
+
+
+def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Silhouette at another resolution exactly as the fitter makes it (``fitting/job.resample_silhouette``:
+    area average, object where it is at least one half). A copy, because observation/ must not import
+    fitting/; ``tests/test_floor.py`` checks the two agree."""
+    import cv2
+    if mask.shape == (height, width):
+        return mask.astype(bool)
+    img = cv2.resize(mask.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
+    return img >= 0.5
+
+
+def resample_ignore(mask, height: int, width: int):
+    """An ignore mask at another resolution as the fitter makes it (unknown where any part was unknown)."""
+    import cv2
+    if mask is None or mask.shape == (height, width):
+        return mask
+    img = cv2.resize(mask.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
+    return img > 0
+
+
+def inner_boundary(mask: np.ndarray) -> np.ndarray:
+    """Object pixels with a 4-neighbour outside (the image border counts as outside)."""
+    p = np.pad(mask, 1, mode="constant")
+    return mask & (~p[:-2, 1:-1] | ~p[2:, 1:-1] | ~p[1:-1, :-2] | ~p[1:-1, 2:])
+
+
+def majority3(mask: np.ndarray) -> np.ndarray:
+    """3 x 3 median (majority of 9) of a binary image; outside the image counts as background."""
+    import cv2
+    p = np.pad(mask.astype(np.uint8), 1, mode="constant")
+    s = cv2.boxFilter(p, cv2.CV_16U, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    return (s >= 5)[1:-1, 1:-1]
+
+
+def curvature(mask: np.ndarray, sigma: float = CURVATURE_SIGMA) -> np.ndarray:
+    """|curvature| [1/px] of the level lines of the blurred silhouette (div of the unit gradient)."""
+    import cv2
+    u = cv2.GaussianBlur(mask.astype(np.float64), (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
+    uy, ux = np.gradient(u)
+    uyy, uyx = np.gradient(uy)
+    uxy, uxx = np.gradient(ux)
+    g2 = ux * ux + uy * uy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = (uxx * uy * uy - 2.0 * ux * uy * uxy + uyy * ux * ux) / g2 ** 1.5
+    return np.where(g2 > 1e-12, np.abs(k), np.inf)
+
+
+def _grid_sample(u, xs, ys):
+    import cv2
+    mx, my = np.meshgrid(np.asarray(xs, np.float32), np.asarray(ys, np.float32))
+    return cv2.remap(u, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+
+# ============================================================================ one image
+
+@dataclass
+class FloorEstimate:
+    """The floor of one image at the fit resolution. Fractions like ``E_sil`` (x 100 for %)."""
+    floor: float            # estimated E_sil of a perfect model = noise + resampling
+    noise: float            # part from random pixel-scale boundary errors
+    resampling: float       # part from resampling to the fit resolution (0 at the images' own)
+    rim: float              # inner-boundary pixels / area at the fit resolution: E_sil of a 1-pixel shift of
+                            # the whole outline (the scale of a segmenter's bias, which ``floor`` cannot see)
+    votes: int              # pixels the 3 x 3 majority flips on straight outline (image resolution)
+    straight: int           # inner-boundary pixels on straight outline (image resolution)
+    boundary: int           # inner-boundary pixels (image resolution, outside the ignore mask and image border)
+    area: int               # observed area outside the ignore mask (image resolution)
+    fit_area: int           # the same at the fit resolution (eq. 6's normaliser)
+    shape: tuple            # image (H, W)
+    fit_shape: tuple        # fit (h, w)
+    basis: str = "straight outline"   # where the noise rate came from
+
+    @property
+    def rate(self) -> float:
+        """Majority votes per straight boundary pixel (this image alone)."""
+        return self.votes / self.straight if self.straight else float("nan")
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["shape"], d["fit_shape"] = list(self.shape), list(self.fit_shape)
+        return d
+
+
+def _prepare(observed, ignore, where):
+    o = _mask(observed, where)
+    g = None
+    if ignore is not None:
+        g = _mask(ignore, f"{where} ignore mask")
+        if g.shape != o.shape:
+            raise ClothFitError(f"{where}: ignore mask is {g.shape[0]}x{g.shape[1]} but the silhouette is "
+                                f"{o.shape[0]}x{o.shape[1]}")
+        g = g if g.any() else None
+    if g is not None:
+        o = o & ~g
+    if not o.any():
+        raise ClothFitError(f"{where}: the observed silhouette is empty" + (" outside the ignore mask" if g is not None
+                                                                            else "") + ", its floor is undefined")
+    return o, g
+
+
+def _counts(o, g):
+    """(votes on straight outline, straight boundary, boundary, all votes on the boundary band) at the image's
+    own resolution, over pixels whose surroundings are known (away from the ignore mask and the image border)."""
+    import cv2
+    valid = np.ones(o.shape, bool)
+    valid[0, :] = valid[-1, :] = valid[:, 0] = valid[:, -1] = False
+    if g is not None:
+        r = int(math.ceil(1.5 * CURVATURE_SIGMA))
+        valid &= ~(cv2.dilate(g.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0)
+    # work in the silhouette's box (plus a margin for the blur): same result, far less work
+    ys, xs = np.nonzero(o)
+    m = int(math.ceil(4 * CURVATURE_SIGMA)) + 2
+    y0, y1 = max(0, ys.min() - m), min(o.shape[0], ys.max() + m + 1)
+    x0, x1 = max(0, xs.min() - m), min(o.shape[1], xs.max() + m + 1)
+    oc, vc = o[y0:y1, x0:x1], valid[y0:y1, x0:x1]
+    med = majority3(oc)
+    votes = (oc ^ med) & vc
+    straight = curvature(oc) < 1.0 / STRAIGHT_RADIUS
+    inner = inner_boundary(med) & vc
+    return (int(np.count_nonzero(votes & straight)), int(np.count_nonzero(inner & straight)),
+            int(np.count_nonzero(inner)), int(np.count_nonzero(votes)))
+
+
+def _resampling_part(o, g, fit_shape):
+    """(resampling part, noise surviving the resampling, fit-resolution observation) as counts."""
+    H, W = o.shape
+    h, w = fit_shape
+    import cv2
+    r = resample_silhouette(o, h, w)
+    gl = resample_ignore(g, h, w)
+    known = np.ones((h, w), bool) if gl is None else ~gl
+    r = r & known
+    u = cv2.GaussianBlur(o.astype(np.float32), (0, 0), PROXY_SIGMA, borderType=cv2.BORDER_CONSTANT)
+    sx, sy = W / w, H / h
+    xs_lo, ys_lo = (np.arange(w) + 0.5) * sx - 0.5, (np.arange(h) + 0.5) * sy - 0.5
+    total = 0
+    for dx, dy in PROXY_SHIFTS:
+        hi = _grid_sample(u, np.arange(W) + dx, np.arange(H) + dy) >= 0.5
+        lo = _grid_sample(u, xs_lo + dx, ys_lo + dy) >= 0.5
+        total += int(np.count_nonzero((resample_silhouette(hi, h, w) ^ lo) & known))
+    resamp = total / len(PROXY_SHIFTS)
+    noise = int(np.count_nonzero((r ^ resample_silhouette(majority3(o), h, w)) & known))
+    return resamp, noise, r
+
+
+def estimate_floor(observed, ignore=None, fit_shape=None, rate=None, name: str = "silhouette") -> FloorEstimate:
+    """The floor of one observed silhouette (bool / 0-1 / 0-255 (H, W)), ``E_sil`` units.
+
+    ``ignore``: pixels of unknown truth (as in the fit: they leave eq. 6); ``fit_shape`` (h, w): the
+    fit's resolution (default: the image's own); ``rate``: a noise rate (votes per straight boundary
+    pixel) to use instead of this image's own (``capture_floor`` passes the capture's pooled one).
+    Bad input (not a 2D binary image, an ignore mask of another size, nothing observed outside the
+    ignore mask, a bad fit resolution): a one-line ``ClothFitError`` naming ``name``. See the module
+    docstring for what the estimate can and cannot see."""
+    o, g = _prepare(observed, ignore, name)
+    return _estimate(o, g, _fit_shape(fit_shape, o.shape, name), _counts(o, g), rate, name)
+
+
+def _estimate(o, g, fs, counts, rate, name) -> FloorEstimate:
+    votes, straight, boundary, all_votes = counts
+    area = int(np.count_nonzero(o))
+    basis = "straight outline"
+    if rate is None:
+        if straight >= MIN_STRAIGHT:
+            rate = votes / straight
+        else:
+            rate, basis = (all_votes / boundary if boundary else 0.0), "whole outline (upper bound)"
+    if fs == o.shape:
+        noise = rate * boundary / area
+        resamp = 0.0
+        r, fit_area, gl = o, area, g
+    else:
+        resamp_n, noise_n, r = _resampling_part(o, g, fs)
+        fit_area = int(np.count_nonzero(r))
+        if fit_area == 0:
+            raise ClothFitError(f"{name}: the observed silhouette vanishes at the fit resolution {fs[0]}x{fs[1]}")
+        resamp, noise = resamp_n / fit_area, noise_n / fit_area
+        basis = "resampled image against its median"
+        gl = resample_ignore(g, *fs)
+    ib = inner_boundary(r)
+    ib[0, :] = ib[-1, :] = ib[:, 0] = ib[:, -1] = False
+    if gl is not None:
+        ib &= ~gl
+    rim = int(np.count_nonzero(ib)) / fit_area
+    return FloorEstimate(float(noise + resamp), float(noise), float(resamp), float(rim), votes, straight, boundary,
+                         area, fit_area, tuple(o.shape), tuple(fs), basis)
+
+
+# ============================================================================ a capture
+
+@dataclass
+class CaptureFloor:
+    """The floors of a capture's chosen images at the fit resolution."""
+    images: list                 # [cam][frame] FloorEstimate
+    camera_names: list
+    frame_times: list
+    fit_resolution: list | None  # (h, w), None = the images' own
+    rate: float                  # pooled votes per straight boundary pixel (all chosen images)
+    basis: str
+    limits: str = LIMITS
+    method: dict = field(default_factory=lambda: {"straight_radius_px": STRAIGHT_RADIUS,
+                                                  "pool_strength": POOL_STRENGTH, "proxy_sigma_px": PROXY_SIGMA})
+
+    def per_image(self) -> np.ndarray:
+        """(C, F) floors."""
+        return np.array([[e.floor for e in row] for row in self.images], dtype=np.float64)
+
+    @property
+    def floor(self) -> float:
+        """The capture's floor: the mean of its images' floors (compare with the mean E_sil per image)."""
+        return float(self.per_image().mean())
+
+    def to_dict(self, per_image: bool = True) -> dict:
+        P = self.per_image()
+        parts = {k: float(np.mean([[getattr(e, k) for e in row] for row in self.images]))
+                 for k in ("noise", "resampling", "rim")}
+        d = {"floor": float(P.mean()), "floor_median": float(np.median(P)), **parts,
+             "rate": self.rate, "basis": self.basis, "n_images": int(P.size),
+             "fit_resolution": self.fit_resolution, "limits": self.limits, "method": self.method}
+        if per_image:
+            d["cameras"] = self.camera_names
+            d["frame_times"] = self.frame_times
+            d["per_image"] = [[round(float(x), 7) for x in row] for row in P]
+        return d
+
+
+def pooled_floors(observed, ignore=None, fit_shape=None, names=None):
+    """``(estimates, rate, basis)`` for silhouettes ``observed[c][f]`` (and ``ignore[c][f]``, None or
+    entries None) at their own resolution, for a fit at ``fit_shape`` (h, w; default their own):
+    ``estimates[c][f]`` are ``FloorEstimate``; the noise rate is pooled over all of them (``rate``) and
+    each image's own rate shrunk towards it with weight ``POOL_STRENGTH``; ``basis`` says where the
+    rate came from. ``names[c][f]`` name the images in error messages."""
+    C = len(observed)
+    if C == 0 or any(len(row) == 0 for row in observed):
+        raise ClothFitError("floor: no silhouettes given")
+    if names is None:
+        names = [[f"silhouette [{c}][{f}]" for f in range(len(observed[c]))] for c in range(C)]
+    prepared = [[_prepare(observed[c][f], None if ignore is None or ignore[c] is None else ignore[c][f],
+                          names[c][f]) for f in range(len(observed[c]))] for c in range(C)]
+    fs = None if fit_shape is None else _fit_shape(fit_shape, (1, 1), "floor: fit resolution")
+    counts = [[_counts(o, g) for o, g in row] for row in prepared]
+    V = sum(k[0] for row in counts for k in row)
+    S = sum(k[1] for row in counts for k in row)
+    if S >= MIN_STRAIGHT:
+        pooled, basis = V / S, "straight outline"
+    else:
+        B = sum(k[2] for row in counts for k in row)
+        pooled, basis = (sum(k[3] for row in counts for k in row) / B if B else 0.0), "whole outline (upper bound)"
+    images = []
+    for c in range(C):
+        row = []
+        for f, (o, g) in enumerate(prepared[c]):
+            v, st = counts[c][f][:2]
+            rate = (v + POOL_STRENGTH * pooled) / (st + POOL_STRENGTH) if basis == "straight outline" else pooled
+            est = _estimate(o, g, o.shape if fs is None else fs, counts[c][f], rate, names[c][f])
+            if est.basis == "straight outline":
+                est.basis = basis
+            row.append(est)
+        images.append(row)
+    return images, float(pooled), basis
+
+
+def capture_floor(capture, cams=None, fidx=None, resolution=None) -> CaptureFloor:
+    """Floors of ``capture``'s cameras ``cams`` (indices, default all) at frames ``fidx`` (indices,
+    default all), for a fit at ``resolution`` (h, w; default the images' own), as ``fitting/job.
+    load_observed`` would feed them to the fitter (``pooled_floors`` on the images as stored)."""
+    cams = list(range(len(capture.cameras))) if cams is None else [int(c) for c in cams]
+    fidx = list(range(capture.n_frames)) if fidx is None else [int(f) for f in fidx]
+    if not cams or not fidx:
+        raise ClothFitError(f"floor of capture {getattr(capture, 'root', '')}: no cameras or no frames chosen")
+    observed, ignore = capture.load_observations(cams, fidx)
+    names = [[f"camera '{capture.cameras[c].name}' frame {f}" for f in fidx] for c in cams]
+    images, rate, basis = pooled_floors(observed, ignore, resolution, names)
+    return CaptureFloor(images, [capture.cameras[c].name for c in cams],
+                        [float(capture.frame_times[f]) for f in fidx],
+                        None if resolution is None else [int(x) for x in resolution], rate, basis)
+
+
+# ============================================================================ a fit against its floor
+
+def floor_ratios(e_sil, floors, far: float = FAR_ABOVE):
+    """``(ratio, far_mask)``: per image ``E_sil / floor`` (same shapes, e.g. (C, F)) and where it exceeds
+    ``far``. A floor of 0 gives inf where E_sil > 0 (and 1 where both are 0)."""
+    e = np.asarray(e_sil, dtype=np.float64)
+    f = np.asarray(floors, dtype=np.float64)
+    if e.shape != f.shape:
+        raise ClothFitError(f"floor ratios: {e.shape} errors but {f.shape} floors")
+    if not (np.all(np.isfinite(f)) and np.all(f >= 0)):
+        raise ClothFitError("floor ratios: floors must be finite and non-negative")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(f > 0, e / np.where(f > 0, f, 1.0), np.where(e > 0, np.inf, 1.0))
+    return r, r > far
+
+
+def residual_profile(observed, model, ignore=None, width: float = 1.0, name: str = "silhouette") -> dict:
+    """Where a fit's residual (``observed`` XOR ``model``, outside ``ignore``) lies, for naming its cause:
+
+    * ``e_sil``: eq. 6;
+    * ``rim_share``: the share of the XOR pixels within ``width`` px of the observed outline (NaN when
+      they agree). Well below 1: much of the residual is in the bulk (shape, timing, manipulation,
+      model). Near 1: a thin sliver along the outline, which is what a biased segmenter leaves, but
+      also what any small misfit leaves (below about 1 % E_sil every residual is a rim), so it
+      separates causes only for large residuals;
+    * ``balance``: (model-only - observed-only) / XOR pixels, in -1..1 (NaN when they agree). A segmenter
+      that loses (adds) a rim all round gives near +1 (-1); a shape in the wrong place gives near 0;
+    * ``bias_px``: ``e_sil / rim``: the uniform shift of the whole outline, in pixels, that would cost
+      this error (``rim``: inner-boundary pixels / area). "A segmentation bias of this many pixels would
+      explain the residual" is a statement a user can check against their footage.
+
+    Measured (docs/noise_floor.md): the perfect model on the photoreal footage has rim share 0.83 and
+    bias 0.47 px; the true shape 0.15 s late on synthetic footage, rim share 0.16 at 36 % E_sil."""
+    import cv2
+    o = _mask(observed, name)
+    m = _mask(model, f"{name} model")
+    if o.shape != m.shape:
+        raise ClothFitError(f"{name}: observed {o.shape} and model {m.shape} silhouettes differ in size")
+    known = np.ones(o.shape, bool)
+    if ignore is not None:
+        g = _mask(ignore, f"{name} ignore mask")
+        if g.shape != o.shape:
+            raise ClothFitError(f"{name}: ignore mask {g.shape} and silhouettes {o.shape} differ in size")
+        known = ~g
+        o = o & known
+    area = int(np.count_nonzero(o))
+    if area == 0:
+        raise ClothFitError(f"{name}: the observed silhouette is empty, E_sil is undefined")
+    x = (o ^ m) & known
+    n = int(np.count_nonzero(x))
+    ib = inner_boundary(o) & known
+    rim = int(np.count_nonzero(ib)) / area
+    out = {"e_sil": n / area, "rim": rim, "bias_px": (n / area) / rim if rim else float("nan"),
+           "rim_share": float("nan"), "balance": float("nan")}
+    if n:
+        d_in = cv2.distanceTransform(np.pad(o, 1).astype(np.uint8), cv2.DIST_L2, 3)[1:-1, 1:-1]
+        d_out = cv2.distanceTransform(np.pad(~o, 1, constant_values=True).astype(np.uint8), cv2.DIST_L2,
+                                      3)[1:-1, 1:-1]
+        d = np.where(o, d_in, d_out)
+        out["rim_share"] = int(np.count_nonzero(x & (d <= width))) / n
+        out["balance"] = (int(np.count_nonzero(x & m)) - int(np.count_nonzero(x & o))) / n
+    return out
