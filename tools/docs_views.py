@@ -392,6 +392,11 @@ def recordings(recording):
     return "\n".join(out)
 
 
+def issue20_goals(recording):
+    from issue20_goals import format_table
+    return format_table(_data(recording, "issue20_goals"))
+
+
 def floor_calibration(recording):
     from floor_calibration import table
     d = _data(recording, "floor_calibration")["calibration"]
@@ -399,6 +404,7 @@ def floor_calibration(recording):
 
 
 VIEWS = {
+    "issue20_goals": issue20_goals,
     "floor_calibration": floor_calibration,
     "identifiability.default": identifiability_default,
     "blender_agreement": blender_agreement,

@@ -98,6 +98,10 @@ SOURCES = {
         "cost": "cheap", "rtol": 1e-9, "atol": 1e-12,
         "what": "issue 20: Blender scenes built as a user builds them; the core blender model's drift from them, "
                 "cause by cause"},
+    "issue20_goals": {
+        "argv": ["{py}", "tools/issue20_goals.py", "all", "--json", "{out}"], "cost": "expensive",
+        "what": "issue 20's goals measured through the CLI on fresh captures (exact model, offsets, continuum, "
+                "collider, time); each goal also alone: tools/issue20_goals.py GOAL --json FILE"},
     "cross_simulator": {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json", "cost": "expensive",
