@@ -91,8 +91,10 @@ def test_rows_pass_fail_and_not_measured():
     none = G.row("offsets", "offsets", "time_offset_error_ms", None, run, "not estimated: needs the lead's fit --uncertain")
     assert (ok["pass"], bad["pass"], none["pass"]) == (True, False, None)
     assert ok["target"] == 1.2 and bad["target"] == 180.0
-    table = G.format_table({"rows": [ok, bad, none], "runs": {"exact": {"commit": "abc1234", "main_commit": "def5678",
-                                                                      "dirty": False, "before": True}}})
+    for r in (ok, bad, none):
+        r["label"] = "before"
+    table = G.format_table({"rows": [ok, bad, none], "runs": {"exact (before)": {
+        "commit": "abc1234", "main_commit": "def5678", "dirty": False}}})
     lines = table.splitlines()
     assert lines[0].startswith("| capture | goal | figure | target | pass | command | wall s | load |")
     body = lines[2:5]
@@ -100,14 +102,18 @@ def test_rows_pass_fail_and_not_measured():
     assert "200 s" in body[1] and "FAIL" in body[1]
     assert "not measured (not estimated: needs the lead's fit --uncertain)" in body[2] and "| - |" in body[2]
     assert all(r.count("|") - r.count("\\|") == 9 for r in body)        # the pipe in the command escaped
-    assert "exact at abc1234 (main def5678, before the lead's features)" in table
+    assert "exact (before): held-out E_sil / floor" in body[0]
+    assert "exact (before) at abc1234 (main def5678)" in table
 
 
 def test_merge_keeps_the_other_goals_rows(tmp_path):
     path = str(tmp_path / "goals.json")
     run = {"command": "c", "wall_s": 1.0, "cpu_s": 1.0, "load": "load 0"}
-    G.merge_rows(path, "time", [G.row("time", "t", "wall_s", 100.0, run)])
-    G.merge_rows(path, "exact", [G.row("exact", "e", "heldout_ratio", 2.0, run)])
-    doc = G.merge_rows(path, "time", [G.row("time", "t", "wall_s", 120.0, run)])
-    assert [(r["goal"], r["value"]) for r in doc["rows"]] == [("exact", 2.0), ("time", 120.0)]
-    assert set(doc["runs"]) == {"exact", "time"} and doc["runs"]["time"]["commit"]
+    G.merge_rows(path, "time", [G.row("time", "t", "wall_s", 100.0, run)], label="before")
+    G.merge_rows(path, "exact", [G.row("exact", "e", "heldout_ratio", 2.0, run)], label="before")
+    G.merge_rows(path, "time", [G.row("time", "t", "wall_s", 90.0, run)], label="after")
+    doc = G.merge_rows(path, "time", [G.row("time", "t", "wall_s", 120.0, run)], label="before")
+    assert [(r["goal"], r["label"], r["value"]) for r in doc["rows"]] == [
+        ("exact", "before", 2.0), ("time", "before", 120.0), ("time", "after", 90.0)]
+    assert set(doc["runs"]) == {"exact (before)", "time (before)", "time (after)"}
+    assert doc["runs"]["time (before)"]["commit"]

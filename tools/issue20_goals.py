@@ -111,7 +111,8 @@ def commits() -> dict:
                             capture_output=True).returncode == 0
     base = git("rev-parse", "--short=7", "main") if merged else git("merge-base", "HEAD", "main")
     return {"commit": head, "main_commit": (base or "")[:7] or None,
-            "dirty": bool(git("status", "--porcelain", "--", "addon", "tools"))}
+            "dirty": bool(git("status", "--porcelain", "--", "addon", "tools", ":!tools/figures.py", ":!tools/docs_check.py",
+                              ":!tools/docs_views.py"))}
 
 
 def load_text() -> str:
@@ -175,19 +176,23 @@ def row(goal, capture, key, value, run, status="measured", details=None, target_
             "details": details or {}}
 
 
-def merge_rows(path, goal, rows, extra=None) -> dict:
-    """Replace ``goal``'s rows in the JSON at ``path`` (others kept); returns the document."""
+def merge_rows(path, goal, rows, extra=None, label="after") -> dict:
+    """Replace the rows of ``goal`` measured as ``label`` ("before": the fit without the lead's issue-20
+    features; "after": with them) in the JSON at ``path``, others kept; returns the document."""
     from addon.core.jsonio import read_json
     from addon.core.safeio import atomic_json
     doc = read_json(path, "goals JSON") if os.path.isfile(path) else {}
-    kept = [r for r in doc.get("rows", []) if r["goal"] != goal]
+    for r in rows:
+        r["label"] = label
+    kept = [r for r in doc.get("rows", []) if (r["goal"], r.get("label", "before")) != (goal, label)]
     order = {g: i for i, g in enumerate(GOALS)}
     doc = {"what": "issue 20's goals measured on captures nobody tuned on, through the CLI (tools/issue20_goals.py)",
            "inputs": {"exact": EXACT, "offsets": OFFSETS, "time": TIME, "collider": COLLIDER,
                       "today_heldout_pct": TODAY_PCT, "train_cameras": TRAIN_CAMERAS},
            "runs": dict(doc.get("runs", {})),
-           "rows": sorted(kept + rows, key=lambda r: order.get(r["goal"], 99))}
-    doc["runs"][goal] = dict(commits(), finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **(extra or {}))
+           "rows": sorted(kept + rows, key=lambda r: (order.get(r["goal"], 99), r.get("label") != "before"))}
+    doc["runs"][f"{goal} ({label})"] = dict(commits(), finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                                            **(extra or {}))
     atomic_json(path, doc)
     return doc
 
@@ -214,14 +219,14 @@ def format_table(doc) -> str:
             fig += f" ({r['status']})"
         ok = "-" if r["pass"] is None else ("pass" if r["pass"] else "FAIL")
         wall = "-" if r.get("wall_s") is None else f"{r['wall_s']:.0f}"
-        cells = [r["capture"], f"{r['goal']}: {r['what']}", fig, tgt, ok, f"`{r.get('command') or '-'}`", wall,
+        cells = [r["capture"], f"{r['goal']} ({r.get('label', 'before')}): {r['what']}", fig, tgt, ok, f"`{r.get('command') or '-'}`", wall,
                  r.get("load") or "-"]
         out.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
     runs = doc.get("runs", {})
     if runs:
         out += ["", "Commits: " + "; ".join(
-            f"{g} at {v.get('commit')}{' (dirty)' if v.get('dirty') else ''} (main {v.get('main_commit')}"
-            f"{', before the lead' + chr(39) + 's features' if v.get('before') else ''})" for g, v in runs.items())]
+            f"{g} at {v.get('commit')}{' (dirty)' if v.get('dirty') else ''} (main {v.get('main_commit')})"
+            for g, v in runs.items())]
     return "\n".join(out)
 
 
@@ -382,7 +387,7 @@ def goal_offsets(a, run):
                         {"offset_m": None if not h else h.get("offset_m"), "expected_m": exp[k].tolist()}))
     print(f"offsets: held-out {ev['silhouette_error_pct']:.3f} % / floor {fl['silhouette_error_pct']:.3f} % = "
           f"{ratio:.2f}x; time offset {t}; fit {frun['wall_s']:.0f} s ({frun['load']})", flush=True)
-    return rows, {"before": not feature}
+    return rows, {}
 
 
 def goal_continuum(a, run):
@@ -573,7 +578,7 @@ def main(argv=None):
     before = not has_uncertain_option()        # the lead's issue-20 features (fit --uncertain, ...) not in yet
     for g in (GOALS if a.cmd == "all" else (a.cmd,)):
         rows, extra = RUNNERS[g](a, run)
-        merge_rows(a.json, g, rows, dict({"before": before}, **extra))
+        merge_rows(a.json, g, rows, extra, "before" if before else "after")
     with open(a.json) as f:
         print(format_table(json.load(f)))
     return 0
