@@ -160,6 +160,15 @@ class Runner:
                      "load_after": load_text()}
 
 
+def fit_says(path) -> dict:
+    """What a fit result states beyond its settings: the floor block (its errors beside the images'
+    noise floor), the quality it chose, its manipulation note, the model it ended with."""
+    from addon.core.jsonio import read_json
+    r = read_json(path, "fit result")
+    return {k: r.get(k) for k in ("floor", "quality_choice", "manipulation_note", "model", "stages")
+            if r.get(k) is not None}
+
+
 def has_uncertain_option() -> bool:
     p = subprocess.run([sys.executable, "-m", "addon", "fit", "--help"], cwd=ROOT, capture_output=True, text=True)
     return "--uncertain" in p.stdout
@@ -333,7 +342,8 @@ def goal_exact(a, run):
            "train_E_sil_pct": fit.get("best_E_sil_mean_pct"), "evaluations": fit.get("evaluations"),
            "stop_reason": fit.get("stop_reason"), "fit_floor_block": fit.get("floor"),
            "blender_cloth": fit.get("blender_cloth"), "true_settings": EXACT["settings"], "noise_seed": EXACT["seed"],
-           "heldout": f"evaluate --cameras heldout:{TRAIN_CAMERAS} --times test (14 cameras x 15 frames)"}
+           "heldout": f"evaluate --cameras heldout:{TRAIN_CAMERAS} --times test (14 cameras x 15 frames)",
+           "fit_says": fit_says(res)}
     print(f"exact: held-out {ev['silhouette_error_pct']:.3f} % / floor {fl['silhouette_error_pct']:.3f} % = "
           f"{ratio:.2f}x; shape {ev.get('shape_error_mm', float('nan')):.2f} mm; fit {frun['wall_s']:.0f} s "
           f"({frun['load']})", flush=True)
@@ -368,13 +378,15 @@ def goal_offsets(a, run):
            "time_offset_s": full.get("time_offset_s"), "handles": full.get("handles"),
            "true_settings_on_declared_setup_pct": declared["silhouette_error_pct"],
            "floor": "the true settings on the unshifted capture (the true set-up), scored the same way",
-           "times": "train / test: the paper's times plus the 20 ms the release was marked early"}
+           "times": "train / test: the paper's times plus the 20 ms the release was marked early",
+           "fit_says": fit_says(res)}
     rows = [row("offsets", "offsets (release 20 ms early, pins 2 mm off)", "heldout_ratio", ratio, frun, status,
                 det)]
     t = full.get("time_offset_s")
     terr = None if t is None else abs(float(t) - shift["expected_time_offset_s"]) * 1000
-    rows.append(row("offsets", "offsets", "time_offset_error_ms", terr, frun,
-                    "measured" if t is not None else "not estimated: needs the lead's fit --uncertain",
+    why = ("not estimated: needs the lead's fit --uncertain" if not feature else
+           f"not reported by the fit: {full.get('manipulation_note') or 'no time_offset_s'}")
+    rows.append(row("offsets", "offsets", "time_offset_error_ms", terr, frun, "measured" if t is not None else why,
                     {"time_offset_s": t, "expected_s": shift["expected_time_offset_s"]}))
     hs = full.get("handles") or []
     exp = np.asarray(shift["expected_handle_offset_m"])
@@ -383,7 +395,7 @@ def goal_offsets(a, run):
         err = None if not h or h.get("offset_m") is None else float(
             np.linalg.norm(np.asarray(h["offset_m"]) - exp[k]) * 1000)
         rows.append(row("offsets", f"offsets pin {k}" + (f" (vertex {h['vertex']})" if h else ""), "pin_error_mm",
-                        err, frun, "measured" if err is not None else "not estimated: needs the lead's fit --uncertain",
+                        err, frun, "measured" if err is not None else why,
                         {"offset_m": None if not h else h.get("offset_m"), "expected_m": exp[k].tolist()}))
     print(f"offsets: held-out {ev['silhouette_error_pct']:.3f} % / floor {fl['silhouette_error_pct']:.3f} % = "
           f"{ratio:.2f}x; time offset {t}; fit {frun['wall_s']:.0f} s ({frun['load']})", flush=True)
@@ -420,7 +432,8 @@ def goal_continuum(a, run):
                "train_E_sil_pct": fit.get("best_E_sil_mean_pct"), "evaluations": fit.get("evaluations"),
                "stop_reason": fit.get("stop_reason"), "blender_cloth": fit.get("blender_cloth"),
                "blender_scene": fit.get("blender_scene"), "result_floor_block": full.get("floor"),
-               "heldout": f"{len(held)} held-out cameras x the {len(odd)} odd frames (continuum_truth's split)"}
+               "heldout": f"{len(held)} held-out cameras x the {len(odd)} odd frames (continuum_truth's split)",
+               "fit_says": fit_says(res)}
         rows.append(row("continuum", f"continuum {m} (Warp)", "heldout_vs_today",
                         ev["silhouette_error_pct"] / TODAY_PCT[m], frun, details=det))
         rows.append(row("continuum", f"continuum {m} (Warp)", "shape_mm", ev.get("shape_error_mm"), frun,
@@ -524,7 +537,7 @@ def goal_collider(a, run):
            "replay_start_mean_mm": None if start is None else float(start.mean()),
            "replay_start_max_mm": None if start is None else float(start.max()),
            "train_E_sil_pct": fit.get("best_E_sil_mean_pct"), "evaluations": fit.get("evaluations"),
-           "blender_cloth": fit.get("blender_cloth"), "truth_settings": SOFT}
+           "blender_cloth": fit.get("blender_cloth"), "truth_settings": SOFT, "fit_says": fit_says(res)}
     print(f"collider: Blender replay of the fit {det['replay_fit_mean_mm']} mm mean vs the start "
           f"{det['replay_start_mean_mm']} mm; fit {frun['wall_s']:.0f} s ({frun['load']})", flush=True)
     return [row("collider", "collider (user's .blend, soft cloth onto a block)", "replay_vs_start", ratio, frun,
@@ -540,7 +553,7 @@ def goal_time(a, run):
                      "--quiet"])
     det = {"cpu_s": frun["cpu_s"], "evaluations": fit.get("evaluations"), "stop_reason": fit.get("stop_reason"),
            "train_E_sil_pct": fit.get("best_E_sil_mean_pct"), "elapsed_s_in_result": fit.get("elapsed_s"),
-           "grid": TIME["grid"], "resolution": TIME["resolution"]}
+           "grid": TIME["grid"], "resolution": TIME["resolution"], "fit_says": fit_says(res)}
     print(f"time: {frun['wall_s']:.0f} s wall, {frun['cpu_s']:.0f} s CPU ({frun['load']}), "
           f"{fit.get('evaluations')} evaluations", flush=True)
     return [row("time", "time (21 x 21, 4 cameras, 15 frames, 480 x 640)", "wall_s", frun["wall_s"], frun,
@@ -577,8 +590,9 @@ def main(argv=None):
     run = Runner(os.path.join(a.out, "goals.log"))
     before = not has_uncertain_option()        # the lead's issue-20 features (fit --uncertain, ...) not in yet
     for g in (GOALS if a.cmd == "all" else (a.cmd,)):
+        at = commits()                         # the code the goal runs (taken before it runs)
         rows, extra = RUNNERS[g](a, run)
-        merge_rows(a.json, g, rows, extra, "before" if before else "after")
+        merge_rows(a.json, g, rows, dict(at, **extra), "before" if before else "after")
     with open(a.json) as f:
         print(format_table(json.load(f)))
     return 0
