@@ -310,7 +310,7 @@ class FitJob:
         self.opt = self._main_optimizer()
         self.stage = "search"
         self.stage_quality = self.start_quality
-        self.stage_end = cfg.max_evaluations - reserved
+        self.stage_end = self.search_end = cfg.max_evaluations - reserved
         self.done_evals = 0
         self.records = []                 # finished stages
         self.best_by_quality = {}         # quality (or None) -> [best_f, best_x]
@@ -838,28 +838,101 @@ class FitJob:
                 "start_f": self.start_f}
 
     def _load_stages(self, st: dict, path):
-        try:
-            self.stage = st["stage"]
-            if self.stage not in ("search", "rung", "profile", "done"):
-                raise ValueError(f"stage {self.stage!r}")
-            self.stage_quality = st["stage_quality"]
-            if self.stage != "search":          # the search's end follows the budget asked for now
-                self.stage_end = int(st["stage_end"])
-            self.done_evals = int(st["done_evals"])
-            self.records = list(st["records"])
-            self.best_by_quality = {q: [float(f), [float(v) for v in x]] for q, f, x in st["best_by_quality"]}
-            self.history_prev = list(st["history_prev"])
-            self.search_stop = st["search_stop"]
-            self.profile = st["profile"]
-            self.start_f = None if st.get("start_f") is None else float(st["start_f"])
-            if (st["ladder"] is None) != (self.ladder is None):
-                raise ValueError("quality ladder present in one and not the other")
-            if st["ladder"] is not None:
-                self.ladder = Ladder.from_state(st["ladder"])
-        except (KeyError, TypeError, ValueError) as e:
-            raise ClothFitError(f"checkpoint {path}: bad 'stages' ({e})") from None
+        """The stages' state of a checkpoint, checked field by field (one-line errors)."""
+        def bad(what):
+            return ClothFitError(f"checkpoint {path}: bad 'stages' ({what})")
+
+        def is_int(v, lo=0):
+            return isinstance(v, int) and not isinstance(v, bool) and v >= lo
+
+        def is_num(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        def is_q(v):
+            return v is None or is_int(v, 1) and v <= 80
+
+        if not isinstance(st, dict):
+            raise bad("not an object")
+        keys = {"stage", "stage_quality", "stage_end", "done_evals", "records", "best_by_quality", "history_prev",
+                "search_stop", "ladder", "profile", "start_f"}
+        if set(st) != keys:
+            raise bad(f"fields {sorted(set(st) ^ keys)}")
+        if st["stage"] not in ("search", "rung", "profile", "done"):
+            raise bad(f"stage {st['stage']!r}")
+        if not is_q(st["stage_quality"]) or not is_int(st["stage_end"]) or not is_int(st["done_evals"]):
+            raise bad("stage_quality, stage_end or done_evals")
+        recs = st["records"]
+        if not isinstance(recs, list) or not all(
+                isinstance(r, dict) and r.get("stage") in ("search", "rung") and is_q(r.get("quality"))
+                and is_int(r.get("evaluations")) and is_int(r.get("generations"))
+                and (r.get("best_f") is None or is_num(r.get("best_f"))) and r.get("stop") in ("converged", "budget")
+                for r in recs):
+            raise bad("records")
+        bq = st["best_by_quality"]
+        if not isinstance(bq, list) or not all(
+                isinstance(e, list) and len(e) == 3 and is_q(e[0]) and is_num(e[1]) and isinstance(e[2], list)
+                and len(e[2]) == self.space.n and all(is_num(v) for v in e[2]) for e in bq):
+            raise bad("best_by_quality")
+        hp = st["history_prev"]
+        if not isinstance(hp, list) or not all(
+                isinstance(e, list) and len(e) == 2 and is_int(e[0]) and (e[1] is None or is_num(e[1])) for e in hp):
+            raise bad("history_prev")
+        if st["search_stop"] not in (None, "converged", "budget"):
+            raise bad("search_stop")
+        if st["start_f"] is not None and not is_num(st["start_f"]):
+            raise bad("start_f")
+        prof = st["profile"]
+        if prof is not None and (self.manip is None or not isinstance(prof, dict) or set(prof) != set(self.manip.names)
+                                 or not all(isinstance(v, dict) and isinstance(v.get("separated"), bool) and
+                                            (v.get("uncertainty") is None or is_num(v.get("uncertainty")))
+                                            for v in prof.values())):
+            raise bad("profile")
+        if (st["ladder"] is None) != (self.ladder is None):
+            raise bad("a quality ladder in one and not the other")
+        ladder = None if st["ladder"] is None else Ladder.from_state(st["ladder"])
+        if ladder is not None and (not isinstance(st["ladder"], dict) or ladder.start != self.ladder.start
+                                   or ladder.probe_only != self.ladder.probe_only
+                                   or any(q not in ladder.rungs for q in ladder.tried)):
+            raise bad("quality ladder")
+        if st["stage"] == "rung" and (ladder is None or st["stage_quality"] not in ladder.rungs):
+            raise bad("a rung outside the ladder")
+        self.stage = st["stage"]
+        self.stage_quality = st["stage_quality"]
+        if self.stage != "search":          # the search's end follows the budget asked for now
+            self.stage_end = st["stage_end"]
+        self.done_evals = st["done_evals"]
+        self.records = [dict(r) for r in recs]
+        self.best_by_quality = {e[0]: [float(e[1]), [float(v) for v in e[2]]] for e in bq}
+        self.history_prev = [list(e) for e in hp]
+        self.search_stop = st["search_stop"]
+        self.profile = prof
+        self.start_f = None if st["start_f"] is None else float(st["start_f"])
+        if ladder is not None:
+            self.ladder = ladder
+        if self.stage_quality is not None and self.ladder is not None and self.stage_quality not in self.ladder.rungs:
+            raise bad("stage_quality outside the ladder")
         if self.stage_quality is not None:
             self._activate(self.stage_quality)
+
+    def _reopen_search(self):
+        """A search that stopped on its budget and was followed by nothing but its profile continues
+        when resumed with a larger budget (the profile is made again at its new end)."""
+        last = self.records[-1] if self.records else None
+        if not (self.stage in ("done", "profile") and last and last["stage"] == "search" and last["stop"] == "budget"
+                and len(self.records) == 1 and self.config.max_evaluations > self.evaluations):
+            return
+        self.records = []
+        self.done_evals = 0 if self.start_f is None else 1
+        self.history_prev = []
+        self.search_stop = None
+        self.profile = None
+        self.stage = "search"
+        self.stage_end = self.search_end
+        if self.ladder is not None:
+            self.ladder.tried.pop(self.stage_quality, None)
+            if self.stage_quality in self.ladder.order:
+                self.ladder.order.remove(self.stage_quality)
+        self.stop_reason = None
 
     def checkpoint_dict(self) -> dict:
         return {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "identity": self.identity(),
@@ -895,19 +968,19 @@ class FitJob:
                                 f"({'; '.join(diff)}); resume with the same capture and options, or start afresh "
                                 f"with --force or another --out")
         opt = optimizer_from_state(ck["optimizer_state"])
-        if not isinstance(ck["stages"], dict) or ck["stages"].get("stage", "search") == "search":
-            mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, getattr(job.opt, "popsize", None),
-                    getattr(job.opt, "population", None), getattr(job.opt, "children", None),
-                    getattr(job.opt, "restarts", None))
-            theirs = (type(opt), opt.space.state_dict(), opt.seed, getattr(opt, "popsize", None),
-                      getattr(opt, "population", None), getattr(opt, "children", None), getattr(opt, "restarts", None))
-            if mine != theirs:
-                raise ClothFitError(f"checkpoint {path}: its optimiser state does not match its recorded fit "
-                                    f"(optimiser, bounds, seed or population differ)")
-        if not isinstance(ck["stages"], dict):
-            raise ClothFitError(f"checkpoint {path}: 'stages' must be an object")
-        job.opt = opt
         job._load_stages(ck["stages"], path)
+        main = job.stage == "search" or (job.stage in ("done", "profile") and len(job.records) == 1)
+        mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, getattr(job.opt, "popsize", None),
+                getattr(job.opt, "population", None), getattr(job.opt, "children", None),
+                getattr(job.opt, "restarts", None))
+        theirs = (type(opt), opt.space.state_dict(), opt.seed, getattr(opt, "popsize", None),
+                  getattr(opt, "population", None), getattr(opt, "children", None), getattr(opt, "restarts", None))
+        n = 7 if main else 3                 # a rung's optimiser is a warm-started CMA-ES of the same space
+        if mine[:n] != theirs[:n]:
+            raise ClothFitError(f"checkpoint {path}: its optimiser state does not match its recorded fit "
+                                f"(optimiser, bounds, seed or population differ)")
+        job.opt = opt
+        job._reopen_search()
         job.elapsed = ck["elapsed"]
         job.exploded = ck["exploded"]
         job.finished = False
