@@ -193,7 +193,8 @@ def merge_rows(path, goal, rows, extra=None, label="after") -> dict:
     doc = read_json(path, "goals JSON") if os.path.isfile(path) else {}
     for r in rows:
         r["label"] = label
-    kept = [r for r in doc.get("rows", []) if (r["goal"], r.get("label", "before")) != (goal, label)]
+    new = {(r["goal"], r["label"], r["capture"]) for r in rows}      # a goal run for some captures keeps the others'
+    kept = [r for r in doc.get("rows", []) if (r["goal"], r.get("label", "before"), r["capture"]) not in new]
     order = {g: i for i, g in enumerate(GOALS)}
     doc = {"what": "issue 20's goals measured on captures nobody tuned on, through the CLI (tools/issue20_goals.py)",
            "inputs": {"exact": EXACT, "offsets": OFFSETS, "time": TIME, "collider": COLLIDER,
@@ -407,12 +408,14 @@ def goal_continuum(a, run):
     from addon.core.observation.camera import select_training
     from addon.core.observation.capture import load_capture
     cdir = _p(a, "continuum")
-    mats = [m for m in CT.BASELINE_MATERIALS if a.remake or not os.path.isfile(os.path.join(cdir, m, "capture.json"))]
+    chosen = [m for m in (a.materials or ",".join(CT.BASELINE_MATERIALS)).split(",") if m]
+    mats = [m for m in chosen if a.remake or not os.path.isfile(os.path.join(cdir, m, "capture.json"))
+            or not os.path.isfile(os.path.join(cdir, m + "_clean", "capture.json"))]
     if mats:
         run([sys.executable, os.path.join(ROOT, "tools", "continuum_truth.py"), "make", "--out", cdir,
              "--materials", ",".join(mats)], parse=False)
     rows = []
-    for m in CT.BASELINE_MATERIALS:
+    for m in chosen:
         cap = os.path.join(cdir, m)
         c = load_capture(cap)
         even, odd = CT.even_odd(c)
@@ -572,6 +575,8 @@ def main(argv=None):
         s.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
         s.add_argument("--json", default="out/issue20/goals.json", help="rows merged into this JSON (default: %(default)s)")
         s.add_argument("--remake", action="store_true", help="make the goal's capture again")
+        if g in ("continuum", "all"):
+            s.add_argument("--materials", default=None, help="continuum: comma list (default: cotton,silk)")
     t = sub.add_parser("table", help="print a goals JSON as the Markdown table")
     t.add_argument("json")
     c = sub.add_parser("_collider", help=argparse.SUPPRESS)
