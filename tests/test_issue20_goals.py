@@ -86,7 +86,7 @@ def test_shift_capture_copies_the_capture_with_the_declared_scenario_and_the_unc
 
 def test_rows_pass_fail_and_not_measured():
     run = {"command": "python -m addon fit a|b", "wall_s": 12.34, "cpu_s": 20.0, "load": "load 1.00, 2.00, 3.00"}
-    ok = G.row("exact", "exact", "heldout_ratio", 1.1, run)
+    ok = G.row("exact", "exact", "heldout_ratio", 1.1, run, details={"heldout_E_sil_pct": 0.4125, "floor_E_sil_pct": 0.375})
     bad = G.row("time", "time", "wall_s", 200.0, run)
     none = G.row("offsets", "offsets", "time_offset_error_ms", None, run, "not estimated: needs the lead's fit --uncertain")
     assert (ok["pass"], bad["pass"], none["pass"]) == (True, False, None)
@@ -98,8 +98,8 @@ def test_rows_pass_fail_and_not_measured():
     lines = table.splitlines()
     assert lines[0].startswith("| capture | goal | figure | target | pass | command | wall s | load |")
     body = lines[2:5]
-    assert "1.10x" in body[0] and "<= 1.20x" in body[0] and "| pass |" in body[0]
-    assert "200 s" in body[1] and "FAIL" in body[1]
+    assert "1.10x (0.41 % / 0.375 %)" in body[0] and "<= 1.20x" in body[0] and "| pass |" in body[0]
+    assert "200 s (CPU 20 s)" in body[1] and "FAIL" in body[1]
     assert "not measured (not estimated: needs the lead's fit --uncertain)" in body[2] and "| - |" in body[2]
     assert all(r.count("|") - r.count("\\|") == 9 for r in body)        # the pipe in the command escaped
     assert "exact (before): held-out E_sil / floor" in body[0]

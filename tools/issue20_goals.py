@@ -217,6 +217,20 @@ def _fmt_value(v, unit):
     return f"{v:.2f}{unit.split(' ')[0]}" if unit.startswith("x") else f"{v:.3g} {unit}"
 
 
+def _basis(r) -> str:
+    """The figures a ratio row is made of, for the table."""
+    d = r.get("details") or {}
+    if "heldout_E_sil_pct" in d and "floor_E_sil_pct" in d:
+        return f"{d['heldout_E_sil_pct']:.2f} % / {d['floor_E_sil_pct']:.3f} %"
+    if "today_heldout_pct" in d:
+        return f"{d['heldout_E_sil_pct']:.1f} % / today's {d['today_heldout_pct']:g} %"
+    if d.get("replay_fit_mean_mm") is not None and d.get("replay_start_mean_mm") is not None:
+        return f"{d['replay_fit_mean_mm']:.2f} mm / {d['replay_start_mean_mm']:.2f} mm"
+    if r["goal"] == "time" and r.get("cpu_s") is not None:
+        return f"CPU {r['cpu_s']:.0f} s"
+    return ""
+
+
 def format_table(doc) -> str:
     """The rows as a Markdown table (one line per row), then the commits each goal ran at."""
     out = ["| capture | goal | figure | target | pass | command | wall s | load |",
@@ -225,6 +239,8 @@ def format_table(doc) -> str:
         unit = r["unit"]
         tgt = f"<= {r['target']:.2f}{unit.split(' ')[0]}" if unit.startswith("x") else f"<= {r['target']:g} {unit}"
         fig = _fmt_value(r["value"], unit)
+        if r["value"] is not None and _basis(r):
+            fig += f" ({_basis(r)})"
         if r.get("status") not in (None, "measured"):
             fig += f" ({r['status']})"
         ok = "-" if r["pass"] is None else ("pass" if r["pass"] else "FAIL")
@@ -376,7 +392,8 @@ def goal_offsets(a, run):
     det = {"heldout_E_sil_pct": ev["silhouette_error_pct"], "floor_E_sil_pct": fl["silhouette_error_pct"],
            "shape_error_mm": ev.get("shape_error_mm"), "train_E_sil_pct": fit.get("best_E_sil_mean_pct"),
            "evaluations": fit.get("evaluations"), "shift": shift, "fit_has_uncertain_option": feature,
-           "time_offset_s": full.get("time_offset_s"), "handles": full.get("handles"),
+           "time_offset_s": full.get("time_offset_s"), "time_offset_uncertainty_s": full.get("time_offset_uncertainty_s"),
+           "handles": full.get("handles"),
            "true_settings_on_declared_setup_pct": declared["silhouette_error_pct"],
            "floor": "the true settings on the unshifted capture (the true set-up), scored the same way",
            "times": "train / test: the paper's times plus the 20 ms the release was marked early",
