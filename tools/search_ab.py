@@ -1,0 +1,192 @@
+"""A/B of search strategies on exact-model captures: held-out error against the noise floor.
+
+Runs strategies x seeds in-process (one process, one fit at a time) on one or more synthetic
+captures that record their true settings (``meta.true_blender_cloth``), and writes one JSON line
+per fit::
+
+    capture, strategy, seed, evals, train_pct, heldout_pct, floor_pct, jitter_floor_pct, ratio,
+    stop_reason, cpu_s, wall_s, best_x
+
+``train_pct`` is the fit's own objective (E_sil per training image, %: 4 spread cameras, the
+training frames); ``heldout_pct`` scores its best settings on the 4 held-out cameras at the test
+frames; ``floor_pct`` scores the TRUE settings the same way; ``jitter_floor_pct`` is the median
+held-out error of the true settings perturbed by 1e-7 relative (Blender's float32 solver makes
+the error jump that much: no search can be expected below it). ``ratio = heldout / floor``.
+
+    .venv/bin/python tools/search_ab.py CAPTURE [CAPTURE ...] --strategies baseline,cma-polish \
+        --seeds 0-9 --out docs/figures/search_ab.jsonl
+    .venv/bin/python tools/search_ab.py --summary docs/figures/search_ab.jsonl
+
+Strategies are presets of ``make_optimizer`` (STRATEGIES below); ``baseline`` is what
+``FitJob`` builds today for the blender model (cma-es, popsize 4 + 3 ln n, IPOP restarts 4).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from addon.core import defaults as D                      # noqa: E402
+from addon.core.fitting.job import FitConfig, FitJob       # noqa: E402
+from addon.core.fitting.optimise import make_optimizer     # noqa: E402
+from addon.core.observation.capture import load_capture    # noqa: E402
+from addon.core.observation.camera import select_training  # noqa: E402
+
+BUDGET = D.FIT_EVALUATIONS
+
+# name -> (optimiser, kwargs); popsize None = FitJob's 4 + 3 ln n; tolx/tolfun as FitJob sets them
+STRATEGIES = {
+    "baseline": ("cma-es", {"restarts": 4}),
+    "active16": ("cma-es", {"popsize": 16, "active": True}),
+    "pop32": ("cma-es", {"popsize": 32}),
+    "cma-polish": ("cma-polish", {}),
+}
+
+
+def parse_seeds(spec):
+    out = []
+    for part in spec.split(","):
+        if "-" in part:
+            a, b = part.split("-")
+            out += list(range(int(a), int(b) + 1))
+        else:
+            out.append(int(part))
+    return out
+
+
+class Bench:
+    """One capture: the training objective (as `fit --cameras n:4 --times train`), the held-out
+    objective (held-out cameras, test frames), the truth's coordinates and floors."""
+
+    def __init__(self, path, jitter_samples=4):
+        self.path = path
+        cap = load_capture(path)
+        train, held = select_training(cap.cameras, 4)
+        self.job = FitJob(cap, FitConfig(train_cameras=train, train_times=list(D.TRAIN_TIMES)))
+        self.hjob = FitJob(cap, FitConfig(train_cameras=held, train_times=list(D.TEST_TIMES)))
+        t = cap.meta["true_blender_cloth"]
+        par = self.job.par
+        self.truth = np.array([par._coord(n, t[n]) for n in par.free])
+        self.floor = self.held(self.truth)
+        self.train_floor = self.train(self.truth)
+        rng = np.random.default_rng(12345)
+        X = self.truth[None] * (1 + 1e-7 * rng.choice([-1.0, 1.0], size=(jitter_samples, len(self.truth))))
+        hs = self.hjob.objective(self.job.par.rows(X)) / self.hjob.objective.n_images * 100
+        self.jitter = float(np.median(hs))
+
+    def train(self, x):
+        o = self.job.objective
+        return float(o(self.job.par.rows(np.asarray(x)[None]))[0] / o.n_images * 100)
+
+    def held(self, x):
+        o = self.hjob.objective
+        return float(o(self.job.par.rows(np.asarray(x)[None]))[0] / o.n_images * 100)
+
+    def make(self, strategy, seed):
+        name, kw = STRATEGIES[strategy]
+        kw = dict(kw)
+        n = self.job.space.n
+        kw.setdefault("popsize", 4 + int(3 * math.log(n)))
+        kw.setdefault("tolx", D.FIT_TOLX)
+        kw.setdefault("tolfun", D.FIT_TOLFUN_PER_IMAGE * self.job.objective.n_images)
+        return make_optimizer(name, self.job.space, seed=seed, **kw)
+
+    def fit(self, strategy, seed, budget=BUDGET, trace=False):
+        opt = self.make(strategy, seed)
+        obj = self.job.objective
+        c0, t0 = time.process_time(), time.time()
+        while opt.evaluations < budget and not opt.stopped:
+            X = opt.ask()
+            f = obj(self.job.par.rows(X))
+            opt.tell(X, f)
+            if trace and opt.generation % 10 == 0:
+                print(f"  gen {opt.generation} evals {opt.evaluations} best {opt.best_f / obj.n_images * 100:.3f}"
+                      f" {getattr(opt, 'phase_info', lambda: '')()}", file=sys.stderr, flush=True)
+        cpu, wall = time.process_time() - c0, time.time() - t0
+        xb = opt.best_x
+        h = self.held(xb)
+        stop = opt.stop_reason if opt.stopped else "budget"
+        return {"capture": self.path, "strategy": strategy, "seed": seed, "evals": int(opt.evaluations),
+                "train_pct": opt.best_f / obj.n_images * 100, "heldout_pct": h, "floor_pct": self.floor,
+                "jitter_floor_pct": self.jitter, "train_floor_pct": self.train_floor, "ratio": h / self.floor,
+                "stop_reason": stop, "cpu_s": cpu, "wall_s": wall,
+                "best_x": [float(v) for v in xb], "truth_x": [float(v) for v in self.truth],
+                "load": os.getloadavg()[0]}
+
+
+def summary(rows):
+    """Per (capture, strategy): seeds, median / best / worst ratio, seeds <= 1.2x, mean CPU."""
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["capture"], r["strategy"]), []).append(r)
+    out = []
+    for (cap, strat), rs in sorted(groups.items()):
+        ratios = np.array([r["ratio"] for r in rs])
+        out.append({"capture": cap, "strategy": strat, "seeds": len(rs),
+                    "median_ratio": float(np.median(ratios)), "best_ratio": float(ratios.min()),
+                    "worst_ratio": float(ratios.max()), "within_1_2": int(np.sum(ratios <= 1.2)),
+                    "within_1_5": int(np.sum(ratios <= 1.5)),
+                    "median_heldout_pct": float(np.median([r["heldout_pct"] for r in rs])),
+                    "floor_pct": rs[0]["floor_pct"], "jitter_floor_pct": rs[0]["jitter_floor_pct"],
+                    "median_train_pct": float(np.median([r["train_pct"] for r in rs])),
+                    "mean_evals": float(np.mean([r["evals"] for r in rs])),
+                    "mean_cpu_s": float(np.mean([r["cpu_s"] for r in rs]))})
+    return out
+
+
+def print_table(summ, file=sys.stderr):
+    print("| capture | strategy | seeds | median ratio | best | worst | <= 1.2x | <= 1.5x | median held-out % "
+          "| floor % | jitter floor % | mean CPU s |", file=file)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|", file=file)
+    for s in summ:
+        print(f"| {os.path.basename(s['capture'].rstrip('/'))} | {s['strategy']} | {s['seeds']} | "
+              f"{s['median_ratio']:.2f} | {s['best_ratio']:.2f} | {s['worst_ratio']:.2f} | {s['within_1_2']} | "
+              f"{s['within_1_5']} | {s['median_heldout_pct']:.3f} | {s['floor_pct']:.3f} | "
+              f"{s['jitter_floor_pct']:.3f} | {s['mean_cpu_s']:.0f} |", file=file)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("captures", nargs="*", help="capture folders made by `synth --model blender`")
+    ap.add_argument("--strategies", default="baseline", help=f"comma list of {', '.join(STRATEGIES)}")
+    ap.add_argument("--seeds", default="0-4", help="seeds, e.g. 0-9 or 0,3,5")
+    ap.add_argument("--budget", type=int, default=BUDGET, help="evaluations per fit")
+    ap.add_argument("--out", help="JSONL file to append rows to")
+    ap.add_argument("--summary", nargs="*", help="only summarise these JSONL files")
+    ap.add_argument("--json-summary", help="write the summary (and rows) as one JSON document here")
+    ap.add_argument("--trace", action="store_true", help="progress of each fit on stderr")
+    a = ap.parse_args(argv)
+    if a.summary:
+        rows = [json.loads(line) for p in a.summary for line in open(p) if line.strip()]
+    else:
+        rows = []
+        for cap in a.captures:
+            b = Bench(cap)
+            print(f"{cap}: floor {b.floor:.3f} %, jitter floor {b.jitter:.3f} %, train floor {b.train_floor:.3f} %",
+                  file=sys.stderr, flush=True)
+            for strat in a.strategies.split(","):
+                for seed in parse_seeds(a.seeds):
+                    r = b.fit(strat, seed, a.budget, a.trace)
+                    rows.append(r)
+                    print(json.dumps({k: v for k, v in r.items() if k not in ("best_x", "truth_x")}),
+                          file=sys.stderr, flush=True)
+                    if a.out:
+                        with open(a.out, "a") as fh:
+                            fh.write(json.dumps(r) + "\n")
+    summ = summary(rows)
+    print_table(summ)
+    if a.json_summary:
+        from addon.core.safeio import atomic_json
+        atomic_json(a.json_summary, {"summary": summ, "rows": rows})
+    print(json.dumps({"summary": summ}))
+
+
+if __name__ == "__main__":
+    main()
