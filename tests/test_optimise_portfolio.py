@@ -151,3 +151,65 @@ def test_corrupt_state_is_one_line_error(change, match):
     with pytest.raises(ClothFitError, match=match) as e:
         optimizer_from_state(d)
     assert "\n" not in str(e.value)
+
+
+# --------------------------------------------------------------------------- coordinate polish
+
+def test_coordinate_polish_keeps_a_step_per_coordinate():
+    """A knife edge in x0 (the value jumps past 0.2) and a flat, far optimum in x1: the edge
+    coordinate's step shrinks while x1's grows and walks the distance."""
+    sp = SearchSpace(["a", "b"], {"a": (0.0, 1.0), "b": (0.0, 1.0)})
+
+    def f(X):
+        X = np.atleast_2d(X)
+        return np.where(X[:, 0] > 0.2, 10.0, (0.2 - X[:, 0]) + 0.01 * (X[:, 1] - 0.9) ** 2)
+
+    p = make_optimizer("coord-polish", sp, initial=[[0.15, 0.1]], step=0.05, tolx=1e-9)
+    assert type(p).__name__ == "CoordinatePolish"
+    steps_b = []
+    while not p.stopped and p.evaluations < 3000:
+        X = p.ask()
+        p.tell(X, f(X))
+        steps_b.append(p.steps[1])
+    assert abs(p.best_x[1] - 0.9) < 1e-3 and 0.2 - 1e-3 < p.best_x[0] <= 0.2
+    assert max(steps_b) >= 0.2                    # x1 took large steps while x0's shrank
+    assert p.stopped and p.stop_reason == "tolx"
+
+
+def test_coordinate_polish_with_f0_does_not_evaluate_its_start_and_resumes():
+    sp = space(3)
+    p = make_optimizer("coord-polish", sp, initial=[[1.0, 1.0, 1.0]], f0=float(rastrigin([[1.0, 1.0, 1.0]])[0]))
+    assert len(p.ask()) == 6
+    q = make_optimizer("coord-polish", sp, initial=[[1.0, 1.0, 1.0]])
+    assert len(q.ask()) == 7                      # its start is evaluated too
+    for _ in range(6):
+        q.tell(q.ask(), rastrigin(q.ask()))
+    r = optimizer_from_state(json.loads(json.dumps(q.state_dict(), allow_nan=False)))
+    for _ in range(10):
+        X, Y = q.ask(), r.ask()
+        np.testing.assert_array_equal(X, Y)
+        q.tell(X, rastrigin(X))
+        r.tell(Y, rastrigin(Y))
+    assert q.state_dict() == r.state_dict()
+
+
+def test_portfolio_coordinate_polish_after_refine_cut_resumes_exactly():
+    kw = dict(seed=4, runs=2, explore=0.3, budget=600, refine_until=0.6, polish="coord", max_polishes=3,
+              tolx=1e-6)
+    ref = CMAPortfolio(space(), **kw)
+    opt = CMAPortfolio(space(), **kw)
+    phases = []
+    while not ref.stopped and ref.evaluations < 20000:
+        opt = optimizer_from_state(json.loads(json.dumps(opt.state_dict(), allow_nan=False)))
+        X, Y = ref.ask(), opt.ask()
+        np.testing.assert_array_equal(X, Y)
+        if not phases or phases[-1][0] != ref.phase:
+            phases.append((ref.phase, ref.evaluations))
+        ref.tell(X, rastrigin(X))
+        opt.tell(Y, rastrigin(Y))
+    assert [p for p, _ in phases] == ["explore", "refine", "polish"]
+    assert 360 <= dict(phases)["polish"] <= 360 + 2 * ref.popsize     # the refine is cut at 0.6 x budget
+    assert ref.stop_reason == "polishes" and type(ref.children[-1]).__name__ == "CoordinatePolish"
+    assert opt.state_dict() == ref.state_dict()
+    # the polish never loses the best point: the portfolio's best is the last polish's
+    assert ref.best_f == min(c.best_f for c in ref.children if c is not None)

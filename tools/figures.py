@@ -74,6 +74,11 @@ SOURCES = {
         "argv": ["{py}", "tools/optimiser_ab.py", "all", "0-5", "--json", "{out}"], "cost": "expensive",
         "what": "our CMA-ES plain / active against the cma package, cotton capture of the cross-simulator, seeds 0-5 "
                 "(needs tools/cross_simulator.py observe --out out/cross2)"},
+    "search_ab": {
+        "argv": ["{py}", "tools/search_ab.py", "synth:fresh", "--strategies", "baseline,FINAL", "--seeds", "0-9",
+                 "--json-summary", "{out}"], "cost": "expensive",
+        "what": "issue 20 item 3: search strategies on a fresh exact-model capture (blender model, lab18, 240 x 320, "
+                "5 % noise, tension 25 shear 8), held-out error over the floor, seeds 0-9 (about 40 CPU min)"},
     "blender_scene_warm": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_warm", "--release", "corner",
                  "--drop", "0.07", "--after", "0.75", "--every", "1", "--warm"],

@@ -46,8 +46,41 @@ STRATEGIES = {
     "baseline": ("cma-es", {"restarts": 4}),
     "active16": ("cma-es", {"popsize": 16, "active": True}),
     "pop32": ("cma-es", {"popsize": 32}),
-    "cma-polish": ("cma-polish", {}),
+    "pf4": ("cma-portfolio", {"runs": 4, "explore": 0.6, "polish_sigma": 0.02}),
+    "pf2p16": ("cma-portfolio", {"runs": 2, "explore": 0.6, "popsize": 16, "polish_sigma": 0.02}),
+    "pf8": ("cma-portfolio", {"runs": 8, "explore": 0.7, "polish_sigma": 0.02}),
+    # one long active CMA-ES run with a large population (faster covariance learning per evaluation
+    # in the narrow, curved valley of the damping settings), local active restarts from the best
+    # point if it stops before the budget
+    "active32": ("cma-portfolio", {"runs": 1, "explore": 0.0, "popsize": 32, "active": True,
+                                   "polish": "cma", "polish_sigma": 0.05}),
 }
+
+
+# captures the tool makes itself (``synth:NAME``, under out/search_ab/NAME): the blender model on the
+# lab18 rig at 240 x 320 with 5 % boundary noise; "default" is Blender's default material (the issue's
+# capture), "fresh" another material and noise seed, kept apart for judging
+SYNTH = {
+    "default": ["--seed", "0"],
+    "fresh": ["--seed", "7", "--params", json.dumps({"tension_stiffness": 25, "compression_stiffness": 25,
+                                                   "shear_stiffness": 8, "bending_stiffness": 1,
+                                                   "air_damping": 1.5})],
+}
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def capture_path(spec):
+    """A capture folder, or ``synth:NAME``: made once under out/search_ab/NAME (SYNTH above)."""
+    if not spec.startswith("synth:"):
+        return spec
+    name = spec.split(":", 1)[1]
+    out = os.path.join(ROOT, "out", "search_ab", name)
+    if not os.path.isfile(os.path.join(out, "capture.json")):
+        import subprocess
+        subprocess.run([sys.executable, "-m", "addon", "synth", "--out", out, "--model", "blender", "--rig", "lab18",
+                        "--resolution", "240x320", "--noise", "0.05"] + SYNTH[name],
+                       cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+    return out
 
 
 def parse_seeds(spec):
@@ -96,6 +129,8 @@ class Bench:
         kw.setdefault("popsize", 4 + int(3 * math.log(n)))
         kw.setdefault("tolx", D.FIT_TOLX)
         kw.setdefault("tolfun", D.FIT_TOLFUN_PER_IMAGE * self.job.objective.n_images)
+        if name == "cma-portfolio":
+            kw.setdefault("budget", BUDGET)
         return make_optimizer(name, self.job.space, seed=seed, **kw)
 
     def fit(self, strategy, seed, budget=BUDGET, trace=False):
@@ -113,7 +148,8 @@ class Bench:
         xb = opt.best_x
         h = self.held(xb)
         stop = opt.stop_reason if opt.stopped else "budget"
-        return {"capture": self.path, "strategy": strategy, "seed": seed, "evals": int(opt.evaluations),
+        return {"capture": self.path, "strategy": strategy, "seed": seed, "budget": int(budget),
+                "evals": int(opt.evaluations),
                 "train_pct": opt.best_f / obj.n_images * 100, "heldout_pct": h, "floor_pct": self.floor,
                 "jitter_floor_pct": self.jitter, "train_floor_pct": self.train_floor, "ratio": h / self.floor,
                 "stop_reason": stop, "cpu_s": cpu, "wall_s": wall,
@@ -162,18 +198,32 @@ def main(argv=None):
     ap.add_argument("--summary", nargs="*", help="only summarise these JSONL files")
     ap.add_argument("--json-summary", help="write the summary (and rows) as one JSON document here")
     ap.add_argument("--trace", action="store_true", help="progress of each fit on stderr")
+    ap.add_argument("--reuse", nargs="*", default=[],
+                    help="JSONL files of earlier runs of this tool: a fit with the same capture name, strategy, "
+                         "seed and budget is taken from them instead of run again (the fits are deterministic)")
     a = ap.parse_args(argv)
     if a.summary:
         rows = [json.loads(line) for p in a.summary for line in open(p) if line.strip()]
     else:
         rows = []
-        for cap in a.captures:
+        old = {}
+        for p in a.reuse:
+            for line in open(p):
+                if line.strip():
+                    r = json.loads(line)
+                    old[(os.path.basename(r["capture"].rstrip("/")), r["strategy"], r["seed"], r.get("budget", BUDGET))] = r
+        for spec in a.captures:
+            cap = capture_path(spec)
             b = Bench(cap)
             print(f"{cap}: floor {b.floor:.3f} %, jitter floor {b.jitter:.3f} %, train floor {b.train_floor:.3f} %",
                   file=sys.stderr, flush=True)
             for strat in a.strategies.split(","):
                 for seed in parse_seeds(a.seeds):
-                    r = b.fit(strat, seed, a.budget, a.trace)
+                    key = (os.path.basename(cap.rstrip("/")), strat, seed, a.budget)
+                    if key in old:
+                        r = dict(old[key], capture=spec, reused=True)
+                    else:
+                        r = dict(b.fit(strat, seed, a.budget, a.trace), capture=spec)
                     rows.append(r)
                     print(json.dumps({k: v for k, v in r.items() if k not in ("best_x", "truth_x")}),
                           file=sys.stderr, flush=True)

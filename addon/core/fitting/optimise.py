@@ -975,10 +975,128 @@ class CMAES(Optimizer):
         return opt
 
 
+# --------------------------------------------------------------------------- coordinate polish
+
+class CoordinatePolish(Optimizer):
+    """A batch coordinate pattern search from one point, with a step per coordinate.
+
+    Each generation asks ``2 n`` probes ``x +- s_i e_i`` (reflected into the unit cube), plus the
+    *pattern* probe (the last generation's improving coordinate moves all at once) when there is
+    one. ``tell`` moves ``x`` to the best probe if it beats ``f(x)``; a coordinate whose probe
+    beat ``f(x)`` doubles its step (up to ``max_step``), the others halve it. So a coordinate on a
+    knife edge soon takes tiny steps while a flat, weakly identified one keeps large ones: what a
+    single CMA-ES step size cannot do before its covariance has learnt the scales. Deterministic (no
+    random numbers); stops (``tolx``) when every step is below ``tolx``.
+    """
+
+    name = "coord-polish"
+
+    def __init__(self, space: SearchSpace, seed=None, initial=None, f0=None, step: float = 0.05,
+                 max_step: float = 0.3, tolx: float = 1e-11):
+        super().__init__(space, seed, initial)
+        self.step0 = _unit_step(step, "coord-polish: step")
+        self.max_step = _unit_step(max_step, "coord-polish: max_step")
+        self.tolx = _nonneg(tolx, "coord-polish: tolx")
+        n = space.n
+        self.x = self._initial_u[0].copy() if len(self._initial_u) else np.full(n, 0.5)
+        self.fx = math.inf if f0 is None else float(f0)
+        if not (self.fx == math.inf or math.isfinite(self.fx)):
+            raise ClothFitError(f"coord-polish: f0 must be a number, got {f0!r}")
+        if math.isfinite(self.fx):
+            self.best_f, self._best_u = self.fx, self.x.copy()
+        self.steps = np.full(n, self.step0)
+        self.pattern = None            # the next pattern probe (unit cube), or None
+        self._pending = None
+        self.stop_reason = None
+        self._stopped = False
+
+    @property
+    def stopped(self) -> bool:
+        return self._stopped
+
+    def _probes(self):
+        n = self.space.n
+        P = np.repeat(self.x[None], 2 * n + (0 if math.isfinite(self.fx) else 1), axis=0)
+        for i in range(n):
+            P[2 * i, i] += self.steps[i]
+            P[2 * i + 1, i] -= self.steps[i]
+        if self.pattern is not None:
+            P = np.vstack([P, self.pattern[None]])
+        return reflect_unit(P)
+
+    def ask(self) -> np.ndarray:
+        if self._pending is None:
+            self._pending = self._probes()
+        return self.space.decode(self._pending)
+
+    def tell(self, X, f) -> None:
+        P = self._pending
+        self._check_told(X, P)
+        f = sanitize_fitness(f, len(P))
+        n = self.space.n
+        if not math.isfinite(self.fx):
+            self.fx = float(f[2 * n])                 # x itself was evaluated (no f0 given)
+        better = np.array([min(f[2 * i], f[2 * i + 1]) < self.fx for i in range(n)])
+        move = np.zeros(n)
+        for i in np.nonzero(better)[0]:
+            j = 2 * i if f[2 * i] <= f[2 * i + 1] else 2 * i + 1
+            move[i] = P[j, i] - self.x[i]
+        self.steps = np.where(better, np.minimum(2 * self.steps, self.max_step), 0.5 * self.steps)
+        k = int(np.argmin(f))
+        old = self.x.copy()
+        if f[k] < self.fx:
+            self.x, self.fx = P[k].copy(), float(f[k])
+        self.pattern = reflect_unit(old + move) if better.sum() >= 2 else None
+        self._pending = None
+        self._record(P, f)
+        if np.all(self.steps < self.tolx):
+            self._stopped, self.stop_reason = True, "tolx"
+
+    STATE_KEYS = ("step0", "max_step", "tolx", "x", "fx", "steps", "pattern", "pending", "stop_reason", "stopped",
+                  "initial_u")
+
+    def state_dict(self) -> dict:
+        d = self._base_state()
+        d.update({"step0": self.step0, "max_step": self.max_step, "tolx": self.tolx, "x": self.x.tolist(),
+                  "fx": _float_to_json(self.fx), "steps": self.steps.tolist(),
+                  "pattern": None if self.pattern is None else self.pattern.tolist(),
+                  "pending": None if self._pending is None else self._pending.tolist(),
+                  "stop_reason": self.stop_reason, "stopped": self._stopped, "initial_u": self._initial_u.tolist()})
+        return d
+
+    @classmethod
+    def from_state(cls, d: dict) -> "CoordinatePolish":
+        w = cls.name
+        space = cls._check_state(d, w, cls.STATE_KEYS)
+        n = space.n
+        opt = cls(space, seed=d["seed"], step=_num(d, "step0", w, float), max_step=_num(d, "max_step", w, float),
+                  tolx=_num(d, "tolx", w, float, 0.0))
+        opt._load_base(d)
+        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        opt.x = _array(d, "x", w, (n,))
+        if opt.x.min() < 0 or opt.x.max() > 1:
+            raise ClothFitError(f"checkpoint: {w} 'x' must lie in the unit cube")
+        opt.fx = _float_from_json(_num(d, "fx", w, float, allow_none=True))
+        opt.steps = _array(d, "steps", w, (n,))
+        if opt.steps.min() < 0 or opt.steps.max() > opt.max_step:
+            raise ClothFitError(f"checkpoint: {w} 'steps' must lie in [0, max_step]")
+        opt.pattern = _array(d, "pattern", w, (n,), allow_none=True)
+        opt._pending = _array(d, "pending", w, (None, n), allow_none=True)
+        if opt._pending is not None and (opt._pending.min() < 0 or opt._pending.max() > 1):
+            raise ClothFitError(f"checkpoint: {w} 'pending' must lie in the unit cube")
+        opt.stop_reason = _stop_reason(d, w, ("tolx",))
+        st = _field(d, "stopped", w)
+        if not isinstance(st, bool):
+            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
+        opt._stopped = st
+        return opt
+
+
 # --------------------------------------------------------------------------- CMA-ES portfolio
 
 PORTFOLIO_PHASES = ("explore", "refine", "polish")
 PORTFOLIO_STOPS = CMA_STOPS + ("polishes",)
+PORTFOLIO_POLISH = ("cma", "coord")
 
 
 class CMAPortfolio(Optimizer):
@@ -1007,8 +1125,12 @@ class CMAPortfolio(Optimizer):
     def __init__(self, space: SearchSpace, seed=None, initial=None, popsize=None, sigma0: float = 0.3,
                  tolx: float = 1e-11, tolfun: float = 1e-11, active: bool = True, runs: int = 4,
                  explore: float = 0.5, budget: int | None = None, polish_sigma: float = 0.05,
-                 max_polishes: int = 20):
+                 max_polishes: int = 20, polish: str = "cma", refine_until: float = 1.0):
         super().__init__(space, seed, initial)
+        if polish not in PORTFOLIO_POLISH:
+            raise ClothFitError(f"cma-portfolio: polish must be one of {list(PORTFOLIO_POLISH)}, got {polish!r}")
+        self.polish = polish
+        self.refine_until = _fraction(refine_until, "cma-portfolio: refine_until")
         self.popsize = _pos_int(D.CMA_POPSIZE if popsize is None else popsize, "cma-portfolio: popsize")
         if self.popsize < 2:
             raise ClothFitError(f"cma-portfolio: popsize must be >= 2, got {self.popsize}")
@@ -1100,7 +1222,8 @@ class CMAPortfolio(Optimizer):
                 self.phase = "refine"
                 continue
             last = self.children[self._next()]
-            if not last.stopped:
+            cut = self.phase == "refine" and self.evaluations >= self.refine_until * self.budget
+            if not last.stopped and not cut:
                 return
             if self.phase == "polish" and self.polishes >= self.max_polishes:
                 self._stopped = True
@@ -1108,8 +1231,16 @@ class CMAPortfolio(Optimizer):
                 return
             self.phase = "polish"
             self.polishes += 1
-            c = self._child(self.polish_sigma, True)
-            c._start_run(self._best_u if self._best_u is not None else np.full(self.space.n, 0.5), c.popsize)
+            u = self._best_u if self._best_u is not None else np.full(self.space.n, 0.5)
+            if self.polish == "coord":
+                c = CoordinatePolish(self.space, initial=[self.space.decode(u)], step=self.polish_sigma,
+                                     f0=self.best_f if self._best_u is not None else None, tolx=self.tolx)
+                c.x = u.copy()                    # exactly the best point (decode/encode may round)
+                if self._best_u is not None:
+                    c._best_u = u.copy()
+            else:
+                c = self._child(self.polish_sigma, True)
+                c._start_run(u, c.popsize)
             self.children.append(c)
 
     def ask(self) -> np.ndarray:
@@ -1138,7 +1269,7 @@ class CMAPortfolio(Optimizer):
         self._advance()
 
     STATE_KEYS = ("popsize", "sigma0", "polish_sigma", "tolx", "tolfun", "active", "runs", "explore", "budget",
-                  "max_polishes", "phase", "round", "round_spent", "polishes", "stop_reason", "run_stops",
+                  "max_polishes", "polish", "refine_until", "phase", "round", "round_spent", "polishes", "stop_reason", "run_stops",
                   "stopped", "current", "alive", "children", "rng", "initial_u")
 
     def state_dict(self) -> dict:
@@ -1146,6 +1277,7 @@ class CMAPortfolio(Optimizer):
         d.update({"popsize": self.popsize, "sigma0": self.sigma0, "polish_sigma": self.polish_sigma,
                   "tolx": self.tolx, "tolfun": self.tolfun, "active": self.active, "runs": self.runs,
                   "explore": self.explore, "budget": self.budget, "max_polishes": self.max_polishes,
+                  "polish": self.polish, "refine_until": self.refine_until,
                   "phase": self.phase, "round": self.round, "round_spent": self.round_spent,
                   "polishes": self.polishes, "stop_reason": self.stop_reason, "run_stops": list(self.run_stops),
                   "stopped": self._stopped, "current": self._current, "alive": list(self.alive),
@@ -1170,6 +1302,10 @@ class CMAPortfolio(Optimizer):
         opt.explore = _num(d, "explore", w, float, 0.0, 1.0)
         opt.budget = _num(d, "budget", w, int, 1, 10 ** 12)
         opt.max_polishes = _num(d, "max_polishes", w, int, 1, 10 ** 6)
+        opt.polish = _field(d, "polish", w)
+        if opt.polish not in PORTFOLIO_POLISH:
+            raise ClothFitError(f"checkpoint: {w} 'polish' must be one of {list(PORTFOLIO_POLISH)}")
+        opt.refine_until = _num(d, "refine_until", w, float, 0.0, 1.0)
         opt.n_rounds = int(math.ceil(math.log2(opt.runs))) + 1
         opt._load_base(d)
         opt.phase = _field(d, "phase", w)
@@ -1195,8 +1331,12 @@ class CMAPortfolio(Optimizer):
             if k is None:
                 opt.children.append(None)
                 continue
-            c = CMAES.from_state(k)
-            if c.space.state_dict() != space.state_dict() or c.popsize != opt.popsize or c.restarts != 0:
+            polish_child = len(opt.children) >= opt.runs and opt.polish == "coord"
+            if not isinstance(k, dict) or k.get("algorithm") != ("coord-polish" if polish_child else "cma-es"):
+                raise ClothFitError(f"checkpoint: {w} 'children' hold a state of the wrong algorithm")
+            c = (CoordinatePolish if polish_child else CMAES).from_state(k)
+            if c.space.state_dict() != space.state_dict() or (
+                    not polish_child and (c.popsize != opt.popsize or c.restarts != 0)):
                 raise ClothFitError(f"checkpoint: {w} 'children' hold a run of another space or population")
             opt.children.append(c)
         al = _field(d, "alive", w)
@@ -1215,6 +1355,16 @@ class CMAPortfolio(Optimizer):
         return opt
 
 
+def _fraction(v, what):
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{what} must be a fraction in [0, 1], got {v!r}") from None
+    if not (math.isfinite(x) and 0.0 <= x <= 1.0):
+        raise ClothFitError(f"{what} must be a fraction in [0, 1], got {v!r}")
+    return x
+
+
 def _unit_step(v, what):
     try:
         x = float(v)
@@ -1227,10 +1377,11 @@ def _unit_step(v, what):
 
 # --------------------------------------------------------------------------- factory
 
-OPTIMIZERS = {"spx-mgg": SPXMGG, "cma-es": CMAES, "cma-portfolio": CMAPortfolio}
+OPTIMIZERS = {"spx-mgg": SPXMGG, "cma-es": CMAES, "cma-portfolio": CMAPortfolio, "coord-polish": CoordinatePolish}
 ALIASES = {"spx-mgg": "spx-mgg", "spx_mgg": "spx-mgg", "ga": "spx-mgg", "spxmgg": "spx-mgg",
            "cma-es": "cma-es", "cma": "cma-es", "cma_es": "cma-es", "cmaes": "cma-es",
-           "cma-portfolio": "cma-portfolio", "cma_portfolio": "cma-portfolio", "portfolio": "cma-portfolio"}
+           "cma-portfolio": "cma-portfolio", "cma_portfolio": "cma-portfolio", "portfolio": "cma-portfolio",
+           "coord-polish": "coord-polish", "coord_polish": "coord-polish"}
 
 
 def canonical_name(name: str) -> str:
