@@ -157,6 +157,54 @@ class Bench:
                 "load": os.getloadavg()[0]}
 
 
+GROUPS = {"all": None, "tension_shear": ("tension_stiffness", "shear_stiffness"),
+          "compression_bending": ("compression_stiffness", "bending_stiffness"),
+          "dampings_air": ("tension_damping", "shear_damping", "bending_damping", "air_damping")}
+RELATIVE = (1e-7, 1e-3, 1e-2, 1e-1, 3e-1)
+
+
+def landscape(b, samples=4, seed=1):
+    """The training and held-out error of the truth perturbed by +-rel (random signs, relative to each
+    setting) in a group of settings: how close to the truth a search must come."""
+    rng = np.random.default_rng(seed)
+    free = list(b.job.par.free)
+    out = []
+    for group, names in GROUPS.items():
+        idx = list(range(len(free))) if names is None else [free.index(n) for n in names if n in free]
+        for rel in RELATIVE:
+            X = np.repeat(b.truth[None], samples, axis=0)
+            X[:, idx] *= 1 + rel * rng.choice([-1.0, 1.0], size=(samples, len(idx)))
+            tr = b.job.objective(b.job.par.rows(X)) / b.job.objective.n_images * 100
+            he = b.hjob.objective(b.job.par.rows(X)) / b.hjob.objective.n_images * 100
+            out.append({"group": group, "relative": rel, "train_pct": [float(v) for v in tr],
+                        "heldout_pct": [float(v) for v in he], "median_ratio": float(np.median(he) / b.floor),
+                        "min_ratio": float(np.min(he) / b.floor), "max_ratio": float(np.max(he) / b.floor)})
+    return {"capture": b.path, "floor_pct": b.floor, "train_floor_pct": b.train_floor, "jitter_floor_pct": b.jitter,
+            "rows": out}
+
+
+def local_start(b, rel=0.05, sigma=0.02, budget=1000, seed=0):
+    """A CMA-ES run (active, popsize 10) started in the truth's own basin: every setting off by
+    +-rel, step ``sigma``: does the search converge to the truth once it is close?"""
+    from addon.core.fitting.optimise import CMAES
+    rng = np.random.default_rng(seed)
+    x0 = b.truth * (1 + rel * rng.choice([-1.0, 1.0], size=len(b.truth)))
+    obj, sp = b.job.objective, b.job.space
+    o = CMAES(sp, seed=seed, initial=[x0], sigma0=sigma, popsize=10, active=True, tolx=D.FIT_TOLX,
+              tolfun=D.FIT_TOLFUN_PER_IMAGE * obj.n_images)
+    trace = [{"evals": 0, "train_pct": b.train(x0), "ratio": b.held(x0) / b.floor,
+              "max_abs_du": float(np.abs(sp.encode(x0) - sp.encode(b.truth)).max())}]
+    while o.evaluations < budget and not o.stopped:
+        X = o.ask()
+        o.tell(X, obj(b.job.par.rows(X)))
+        if o.generation % 20 == 0 or o.evaluations >= budget or o.stopped:
+            du = sp.encode(o.best_x) - sp.encode(b.truth)
+            trace.append({"evals": int(o.evaluations), "train_pct": o.best_f / obj.n_images * 100,
+                          "ratio": b.held(o.best_x) / b.floor, "max_abs_du": float(np.abs(du).max()),
+                          "du": {n: float(v) for n, v in zip(b.job.par.free, du)}})
+    return {"relative": rel, "sigma0": sigma, "budget": budget, "trace": trace}
+
+
 def summary(rows):
     """Per (capture, strategy): seeds, median / best / worst ratio, seeds <= 1.2x, mean CPU."""
     groups = {}
@@ -198,10 +246,25 @@ def main(argv=None):
     ap.add_argument("--summary", nargs="*", help="only summarise these JSONL files")
     ap.add_argument("--json-summary", help="write the summary (and rows) as one JSON document here")
     ap.add_argument("--trace", action="store_true", help="progress of each fit on stderr")
+    ap.add_argument("--landscape", help="instead of fits: the errors of the truth perturbed group by group "
+                                        "(settings x relative size), written as JSON here")
+    ap.add_argument("--local", type=float, help="with --landscape: also a CMA-ES run started this far (relative) "
+                                                "from the truth, 1000 evaluations")
     ap.add_argument("--reuse", nargs="*", default=[],
                     help="JSONL files of earlier runs of this tool: a fit with the same capture name, strategy, "
                          "seed and budget is taken from them instead of run again (the fits are deterministic)")
     a = ap.parse_args(argv)
+    if a.landscape:
+        from addon.core.safeio import atomic_json
+        out = []
+        for c in a.captures:
+            b = Bench(capture_path(c))
+            d = landscape(b)
+            if a.local:
+                d["local_start"] = local_start(b, rel=a.local)
+            out.append(d)
+        atomic_json(a.landscape, {"captures": out})
+        return
     if a.summary:
         rows = [json.loads(line) for p in a.summary for line in open(p) if line.strip()]
     else:
