@@ -63,6 +63,15 @@ With ``restarts = R > 0`` (IPOP-CMA-ES, Auger & Hansen 2005) a run that stops is
 new one from a uniformly random mean with twice the population, up to ``R`` times; the best
 over all runs is kept. ``stopped`` is True once the last run has ended.
 
+Portfolio and coordinate polish
+-------------------------------
+:class:`CMAPortfolio` ("cma-portfolio") spends a known ``budget`` on several :class:`CMAES` runs:
+successive halving among ``runs`` runs, the best continued, then polishes from the best point
+(active CMA-ES or :class:`CoordinatePolish`). :class:`CoordinatePolish` ("coord-polish") is a
+batch coordinate pattern search with a step per coordinate. Both keep the same ask/tell and
+exact-resume contract (docs/search.md has what they were measured to do: neither beat plain
+IPOP CMA-ES on the exact-model captures).
+
 SPX + MGG stops when its population has collapsed (spread below ``tolx`` in every unit-cube
 coordinate) or when the best value has not improved by more than ``tolfun`` during the last
 ``stall_evaluations`` evaluations (both off unless set).
