@@ -621,12 +621,12 @@ class FitJob:
         if self.stage in ("search", "rung") and self.ladder is not None and self.best_by_quality:
             q = self.ladder.next()
             rung = self._rung_budget()
-            if q is not None and left >= rung:
+            if q is not None and left >= max(1, rung // 2):    # the search's last generation may eat into a rung
                 f, x = self.best_by_quality[self.chosen_quality()]
                 self.stage, self.stage_quality = "rung", q
                 self._activate(q)
                 self.opt = self._rung_optimizer(x)
-                self.stage_end = self.done_evals + rung
+                self.stage_end = self.done_evals + min(rung, left)
                 return
         if self.stage in ("search", "rung") and self.manip is not None and self.best_by_quality:
             self.stage = "profile"
