@@ -246,6 +246,8 @@ def main(argv=None):
     ap.add_argument("--summary", nargs="*", help="only summarise these JSONL files")
     ap.add_argument("--json-summary", help="write the summary (and rows) as one JSON document here")
     ap.add_argument("--trace", action="store_true", help="progress of each fit on stderr")
+    ap.add_argument("--only-reused", action="store_true",
+                    help="with --reuse: take the fits found there and run none (a seed missing there is left out)")
     ap.add_argument("--landscape", help="instead of fits: the errors of the truth perturbed group by group "
                                         "(settings x relative size), written as JSON here")
     ap.add_argument("--local", type=float, help="with --landscape: also a CMA-ES run started this far (relative) "
@@ -276,6 +278,14 @@ def main(argv=None):
                     r = json.loads(line)
                     old[(os.path.basename(r["capture"].rstrip("/")), r["strategy"], r["seed"], r.get("budget", BUDGET))] = r
         for spec in a.captures:
+            if a.only_reused:
+                cap = spec.split(":", 1)[1] if spec.startswith("synth:") else spec
+                for strat in a.strategies.split(","):
+                    for seed in parse_seeds(a.seeds):
+                        key = (os.path.basename(cap.rstrip("/")), strat, seed, a.budget)
+                        if key in old:
+                            rows.append(dict(old[key], capture=spec, reused=True))
+                continue
             cap = capture_path(spec)
             b = Bench(cap)
             print(f"{cap}: floor {b.floor:.3f} %, jitter floor {b.jitter:.3f} %, train floor {b.train_floor:.3f} %",
