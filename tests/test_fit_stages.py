@@ -155,3 +155,20 @@ def test_a_fit_never_answers_worse_than_the_settings_it_was_given(caps, tmp_path
     r = job.run()
     assert r["start_E_sil_mean_pct"] is not None and r["best_E_sil_mean_pct"] <= r["start_E_sil_mean_pct"]
     assert r["start_E_sil_mean_pct"] < 0.5           # the truth itself, noise-free
+
+
+def test_the_portfolio_runs_as_a_fit_and_a_polish_is_refused_as_one(caps, tmp_path):
+    """``--optimizer cma-portfolio`` (docs/search.md) is a fit's search with the budget it shares; the
+    coordinate polish is not a search and is refused in one line."""
+    _, cap = caps
+    cfg = dict(free=FREE, fixed=FIXED, max_evaluations=120, seed=4, optimizer="cma-portfolio")
+    ref = FitJob(cap, FitConfig(**cfg)).run()
+    assert ref["optimizer"] == "cma-portfolio" and 100 <= ref["evaluations"] <= 130
+    ck = str(tmp_path / "ck.json")
+    job = FitJob(cap, FitConfig(**cfg), checkpoint=ck)
+    for _ in range(4):
+        job.step()
+    job.save_checkpoint(ck)
+    assert FitJob.resume(ck, capture=cap).run()["best_E_all"] == ref["best_E_all"]
+    with pytest.raises(ClothFitError, match="coord-polish' is a polish"):
+        FitJob(cap, FitConfig(free=FREE, optimizer="coord-polish"))

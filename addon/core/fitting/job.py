@@ -135,7 +135,9 @@ class FitConfig:
             raise ClothFitError(f"fit config: train_times must be a list of finite numbers, got {tt!r}")
         if not isinstance(self.optimizer, str):
             raise ClothFitError(f"fit config: optimizer must be a name, got {self.optimizer!r}")
-        canonical_name(self.optimizer)
+        if canonical_name(self.optimizer) not in FIT_OPTIMIZERS:
+            raise ClothFitError(f"fit config: optimizer {self.optimizer!r} is a polish, not a fit's search: choose one "
+                                f"of {', '.join(FIT_OPTIMIZERS)}")
         if self.resolution is not None:
             check_resolution(self.resolution, "fit config: resolution")
         if self.backend not in ("auto", "numba", "numpy"):
@@ -205,6 +207,7 @@ def load_observed(capture, cams, fidx, resolution=None):
     return cameras, observed, ignore
 
 
+FIT_OPTIMIZERS = ("cma-es", "spx-mgg", "cma-portfolio")   # the searches a fit may run (coord-polish is a polish)
 STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
 CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
 CHECKPOINT_VERSION = 3          # 3: the fit's stages (quality ladder, manipulation profile)
@@ -307,6 +310,7 @@ class FitJob:
             reserved = (D.QUALITY_RUNGS_RESERVED if not self.ladder.probe_only else 1) * self._rung_budget()
         if self.manip is not None:
             reserved += 2 * self.manip.n            # the profile: the objective either side of each offset
+        self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
         self.stage_quality = self.start_quality
@@ -404,7 +408,7 @@ class FitJob:
 
     def _optimizer_kw(self, warm_x=None):
         cfg = self.config
-        is_cma = self.optimizer_name == "cma-es"
+        is_cma = self.optimizer_name in ("cma-es", "cma-portfolio")
         tolfun = D.FIT_TOLFUN_PER_IMAGE * self.objective.n_images
         kw = {"tolx": D.FIT_TOLX, "tolfun": tolfun}
         initial = None
@@ -419,7 +423,10 @@ class FitJob:
                 kw["sigma0"] = D.WARM_START_SIGMA
         paper = isinstance(self.par, PaperParameters)
         n = self.space.n
-        if is_cma:
+        if self.optimizer_name == "cma-portfolio" and warm_x is None:   # docs/search.md: runs share the budget
+            kw["budget"] = max(1, self.search_budget())
+            kw["popsize"] = cfg.population if cfg.population is not None else 4 + int(3 * math.log(n))
+        elif is_cma:
             kw["restarts"] = (0 if warm_x is not None else cfg.restarts if cfg.restarts is not None else
                               D.FIT_RESTARTS if paper else D.BLENDER_FIT_RESTARTS)
             # Hansen's default population 4 + 3 ln n (7 for the paper's 3 free quantities)
@@ -432,12 +439,18 @@ class FitJob:
             kw["stall_evaluations"] = D.FIT_GA_STALL
         return kw
 
+    def search_budget(self) -> int:
+        """The main search's share of the budget (the rest is kept for the ladder and the profile)."""
+        return getattr(self, "search_end", self.config.max_evaluations)
+
     def _main_optimizer(self):
         return make_optimizer(self.optimizer_name, self.space, self.config.seed, **self._optimizer_kw())
 
     def _rung_optimizer(self, x0):
         # a rung is always CMA-ES: a warm start is a local search whatever the main optimiser was
         kw = self._optimizer_kw(warm_x=x0)
+        if self.optimizer_name == "cma-portfolio":
+            kw.pop("budget", None)
         if self.optimizer_name != "cma-es":
             kw = {"tolx": kw["tolx"], "tolfun": kw["tolfun"], "initial": kw["initial"],
                   "sigma0": D.WARM_START_SIGMA, "restarts": 0, "popsize": 4 + int(3 * math.log(self.space.n))}
@@ -487,8 +500,8 @@ class FitJob:
             "mass": float(self.m),
             "optimizer": self.optimizer_name,
             "population": int(getattr(opt, "popsize", getattr(opt, "population", 0))),
-            "children": getattr(opt, "children", None),
-            "restarts": getattr(opt, "restarts", None),
+            "children": _int_attr(opt, "children"),
+            "restarts": _int_attr(opt, "restarts"),
             "seed": int(self.config.seed),
             "bounds": self.space.state_dict(),
             "initial": None if self.par.initial is None else np.asarray(self.par.initial).tolist(),
@@ -970,11 +983,10 @@ class FitJob:
         opt = optimizer_from_state(ck["optimizer_state"])
         job._load_stages(ck["stages"], path)
         main = job.stage == "search" or (job.stage in ("done", "profile") and len(job.records) == 1)
-        mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, getattr(job.opt, "popsize", None),
-                getattr(job.opt, "population", None), getattr(job.opt, "children", None),
-                getattr(job.opt, "restarts", None))
-        theirs = (type(opt), opt.space.state_dict(), opt.seed, getattr(opt, "popsize", None),
-                  getattr(opt, "population", None), getattr(opt, "children", None), getattr(opt, "restarts", None))
+        mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, _int_attr(job.opt, "popsize"),
+                _int_attr(job.opt, "population"), _int_attr(job.opt, "children"), _int_attr(job.opt, "restarts"))
+        theirs = (type(opt), opt.space.state_dict(), opt.seed, _int_attr(opt, "popsize"),
+                  _int_attr(opt, "population"), _int_attr(opt, "children"), _int_attr(opt, "restarts"))
         n = 7 if main else 3                 # a rung's optimiser is a warm-started CMA-ES of the same space
         if mine[:n] != theirs[:n]:
             raise ClothFitError(f"checkpoint {path}: its optimiser state does not match its recorded fit "
@@ -989,6 +1001,13 @@ class FitJob:
         if job.finished:
             job._finalise()
         return job
+
+
+def _int_attr(opt, name):
+    """An optimiser's size setting (``popsize``, ``children``...) when it is a number, else None (the
+    portfolio's ``children`` are its CMA-ES runs)."""
+    v = getattr(opt, name, None)
+    return int(v) if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else None
 
 
 def joint_space(par_space, manip):
