@@ -637,6 +637,11 @@ def check_detections(det: Detections, board: Board, source: Source):
     extra = sorted(i for i in det.marker_ids if i >= board.n_markers)
     in_board = [i for i in det.marker_ids if i < board.n_markers]
     if extra and len(extra) >= max(2, len(in_board) // 4):
+        other = sniff_dictionary(source, board, det)    # a wrong dictionary decodes a print into stray ids too
+        if other:
+            raise ClothFitError(f"--board {board.text}: stray {board.dictionary} ids up to {max(extra)}, but {other} "
+                                f"markers are there: the board definition does not match the printed board "
+                                f"(its dictionary)")
         raise ClothFitError(f"--board {board.text}: markers with ids up to {max(extra)} were found but this board has "
                             f"ids 0..{board.n_markers - 1}: the board definition does not match the printed board "
                             f"(its numbers of squares?)")
@@ -672,18 +677,22 @@ def sniff_dictionary(source: Source, board: Board, det: Detections, per_camera: 
                 frames.append(read_grey(path))
     if not frames:
         return None
-    best, best_n = None, 0
-    for name, (bits, size) in sorted(dictionaries().items(), key=lambda kv: (kv[1][0], kv[1][1])):
-        if name == board.dictionary:
-            continue
+    def count(name):
         d = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)))
         n = 0
         for g in frames:
             _, ids, _ = d.detectMarkers(g)
             n += 0 if ids is None else len(ids)
+        return n
+    own = count(board.dictionary)        # stray decodings of another dictionary's print: a few, not most
+    best, best_n = None, 0
+    for name, (bits, size) in sorted(dictionaries().items(), key=lambda kv: (kv[1][0], kv[1][1])):
+        if name == board.dictionary:
+            continue
+        n = count(name)
         if n > best_n + 1:
             best, best_n = name, n
-    return best if best_n >= 3 else None
+    return best if best_n >= 3 and best_n > 2 * own else None
 
 
 # ================================================================= camera geometry
