@@ -132,6 +132,13 @@ def test_bad_inputs(dataset, tmp_path, capsys):
     left = {c: len(os.listdir(os.path.join(root, c))) for c in ("phone2", "phone3")}
     assert min(left.values()) >= 3, left
     _one_line_error(capsys, args(root, "--min-views", "3"), "not connected by shared views", "phone0", "phone2")
+    # the first moment (the world frame: the board flat on the table) not found: never silently another world
+    root = _copy(dataset, tmp_path / "d")
+    for c in os.listdir(root):
+        p = os.path.join(root, c, "m000.png")
+        if os.path.exists(p):
+            cv2.imwrite(p, np.full((400, 300), 120, np.uint8))
+    _one_line_error(capsys, args(root), "first moment m000", "--world")
     # nothing half-written
     assert not os.path.exists(out)
     # a bad --board text
