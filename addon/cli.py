@@ -59,17 +59,18 @@ def _params(args, default=None):
 def _model_spec(a):
     """--model/--fps/--quality/--bending-model -> a model dict (None: not asked for)."""
     name = getattr(a, "model", None)
+    given = lambda k: getattr(a, k, None) is not None and not (k == "quality" and getattr(a, k) == "auto")  # noqa: E731
     if name is None:
-        if any(getattr(a, k, None) is not None for k in ("fps", "quality", "bending_model")):
+        if any(given(k) for k in ("fps", "quality", "bending_model")):
             name = "blender"
         else:
             return None
     spec = {"name": name}
     if name == "blender":
         for k in ("fps", "quality", "bending_model"):
-            if getattr(a, k, None) is not None:
+            if given(k):
                 spec[k] = getattr(a, k)
-    elif any(getattr(a, k, None) is not None for k in ("fps", "quality", "bending_model")):
+    elif any(given(k) for k in ("fps", "quality", "bending_model")):
         raise ClothFitError("--fps, --quality and --bending-model belong to --model blender")
     return spec
 
@@ -178,9 +179,10 @@ def _backend_args(a):
         return {"backend": "auto" if a.backend == "core" else a.backend}
     if not a.blend:
         raise ClothFitError("--backend blender needs --blend SCENE.blend")
-    if any(getattr(a, k, None) is not None for k in ("fps", "quality", "bending_model")) or a.model == "paper":
+    if any(getattr(a, k, None) is not None for k in ("fps", "bending_model")) or a.model == "paper" or \
+            getattr(a, "quality", None) not in (None, "auto"):
         raise ClothFitError("with --backend blender the scene's Cloth modifier and frame rate define the model: "
-                            "drop --model/--fps/--quality/--bending-model")
+                            "drop --model/--fps/--quality N/--bending-model (--quality auto lets the fit choose)")
     if a.workers is not None and a.workers < 1:
         raise ClothFitError(f"--workers {a.workers}: must be at least 1")
     return {"backend": "auto", "evaluator": "blender", "blend": a.blend, "blend_object": a.object,
@@ -227,7 +229,7 @@ def cmd_fit(a):
                     population=a.population, children=a.children, target_error=a.target,
                     model=None if a.backend == "blender" else _model_spec(a), free=_names(a.free),
                     fixed=_json_arg(a.fixed, "--fixed"), init=a.init, bounds=_json_arg(a.bounds, "--bounds"),
-                    restarts=a.restarts)
+                    restarts=a.restarts, quality="auto" if a.quality == "auto" else None, uncertain=a.uncertain)
     for k, v in _backend_args(a).items():
         setattr(cfg, k, v)
     cfg = cfg.checked()
@@ -278,8 +280,10 @@ def cmd_fit(a):
         raise ClothFitError(f"fit failed: {job.error} (the result so far is in {a.out})")
     keys = ("params", "identifiable") if r.get("params") else ("blender_cloth", "blender_scene")
     summary = {k: r[k] for k in keys + ("identifiable_error_pct", "best_E_sil_mean_pct", "evaluations",
-                                        "stop_reason", "elapsed_s", "cancelled") if k in r}
+                                        "stop_reason", "elapsed_s", "cancelled", "quality_choice", "time_offset_s",
+                                        "floor") if k in r}
     summary.update(out=a.out, checkpoint=ck)
+    _fit_report(r)
     if "identifiable_error_pct" in r:
         print("recovery error [%]: " + ", ".join(f"{k} {v:.3g}" for k, v in r["identifiable_error_pct"].items()
                                                   if v is not None))
@@ -289,6 +293,35 @@ def cmd_fit(a):
         raise Interrupted(f"the best result so far ({r['evaluations']} evaluations) is in {a.out}", summary)
     print(f"wrote {a.out}")
     return summary
+
+
+def _fit_report(r):
+    """The result's lines for people (stderr): quality chosen, manipulation, the floor and its warning."""
+    qc = r.get("quality_choice")
+    if qc:
+        tried = ", ".join(f"{t['quality']}: {t['train_E_sil_pct']:.3f} %" for t in qc["tried"])
+        print(f"quality {qc['chosen']} ({qc['rule']}; tried {tried})", file=sys.stderr)
+        if qc.get("advice"):
+            print(f"note: {qc['advice']}", file=sys.stderr)
+    if "time_offset_s" in r or r.get("manipulation_note"):
+        t = r.get("time_offset_s")
+        u = r.get("time_offset_uncertainty_s")
+        if t is not None:
+            print(f"time offset {1000 * t:+.1f} ms" + (f" (+-{1000 * u:.1f} ms)" if u else ""), file=sys.stderr)
+        for k, h in enumerate(r.get("handles") or []):
+            if h.get("offset_bound_m"):
+                print(f"handle {k} (vertex {h['vertex']}) moved by "
+                      f"{', '.join(f'{1000 * v:+.2f}' for v in h['offset_m'])} mm", file=sys.stderr)
+        if r.get("manipulation_note"):
+            print(f"note: {r['manipulation_note']}", file=sys.stderr)
+    fl = r.get("floor") or {}
+    if fl.get("train_floor_pct") is not None:
+        line = f"training E_sil {fl['train_E_sil_pct']:.3f} % (floor {fl['train_floor_pct']:.3f} %)"
+        if fl.get("heldout_E_sil_pct") is not None:
+            line += f"; held-out {fl['heldout_E_sil_pct']:.3f} % (floor {fl['heldout_floor_pct']:.3f} %)"
+        print(line, file=sys.stderr)
+    if fl.get("warning"):
+        print(f"warning: {fl['warning']}", file=sys.stderr)
 
 
 def cmd_fit_many(a):
@@ -303,7 +336,8 @@ def cmd_fit_many(a):
         cfg = FitConfig(train_cameras=_cams(cap, a.cameras), train_times=_times(a.times), optimizer=a.optimizer,
                         seed=a.seed, max_evaluations=a.max_evaluations or D.FIT_EVALUATIONS,
                         resolution=_res(a.resolution), cloth_mass=a.cloth_mass, population=a.population,
-                        model=_model_spec(a))
+                        model=_model_spec(a), quality="auto" if a.quality == "auto" else None,
+                        uncertain=a.uncertain)
         configs.append(asdict(cfg))
     os.makedirs(a.out_dir, exist_ok=True)
     t0 = time.time()
@@ -354,10 +388,20 @@ def cmd_export_blender_cloth(a):
                             "(fit with --model blender, or warm-start one from it with --init)")
     s = model.settings(row)
     out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
+    manip = {k: res[k] for k in ("time_offset_s", "handles") if res.get(k) is not None}
+    if manip:                                 # the manipulation the fit estimated: where the pins go, when it lets go
+        out["manipulation"] = manip
     if a.python:                              # the one command whose stdout is not JSON: Python, by request
         lines = [f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
                  "cloth = bpy.context.object.modifiers['Cloth'].settings"]
         lines += [f"cloth.{k} = {s[k]!r}" for k in ("quality", "bending_model") + B.FLOAT_SETTINGS]
+        if manip.get("time_offset_s") is not None:
+            lines.append(f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
+                         f"happened at capture time + time_offset_s")
+        for h in manip.get("handles") or []:
+            if any(h.get("offset_m") or []):
+                lines.append(f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
+                             f"from the capture's measurement")
         return Text("\n".join(lines))
     return out
 
@@ -458,7 +502,7 @@ def cmd_tables(a):
 
 def cmd_bench(a):
     from .core.studies.bench import run_bench
-    return run_bench(a.json, quick=a.quick, only_blender_workers=a.blender_workers)
+    return run_bench(a.json, quick=a.quick, only_blender_workers=a.blender_workers, only_default_fit=a.default_fit)
 
 
 def cmd_identifiability(a):
@@ -663,14 +707,25 @@ class ArgumentParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
 
 
+def _quality_arg(text):
+    if str(text).strip().lower() == "auto":
+        return "auto"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of steps per frame or 'auto'") from None
+
+
 def _model_args(s, default_text="the capture's, else paper"):
     from .core.physics import blender as B
     s.add_argument("--model", choices=["paper", "blender"], default=None,
                    help=f"cloth model: the paper's mass-spring sheet or Blender's cloth solver (default: {default_text})")
     s.add_argument("--fps", type=float, default=None,
                    help=f"blender model: scene frame rate [frames/s] the settings are for (default: {D.BLENDER_FPS})")
-    s.add_argument("--quality", type=int, default=None,
-                   help=f"blender model: solver steps per frame (default: {B.DEFAULTS['quality']}, Blender's)")
+    s.add_argument("--quality", type=_quality_arg, default=None,
+                   help="blender model: solver steps per frame, or 'auto' (default: the capture's, else the fit "
+                        f"chooses from {', '.join(map(str, D.QUALITY_LADDER))} starting at {B.DEFAULTS['quality']}, "
+                        "Blender's; --backend blender: the scene's, one rung above it tried)")
     s.add_argument("--bending-model", choices=list(B.BENDING_MODELS), default=None,
                    help=f"blender model: Blender's bending model (default: {B.DEFAULTS['bending_model']})")
 
@@ -693,6 +748,10 @@ def _search_args(s):
                         f"--resume the checkpoint's)")
     s.add_argument("--population", type=int, default=None,
                    help="optimiser population (default: GA 7n = 21, CMA-ES 4 + 3 ln n = 7)")
+    s.add_argument("--uncertain", default=None,
+                   help="what the manipulation could not measure, estimated with the cloth: 'time_offset=S,handles=M' "
+                        "(bounds in seconds and metres; true time = capture time - time_offset_s), or 'none' "
+                        "(default: the capture's 'uncertain' block)")
     s.add_argument("--resolution", help="fit at HxW [px], e.g. 120x160; silhouettes area-resampled "
                                         "(default: the capture's)")
     s.add_argument("--cloth-mass", type=float, default=None,
@@ -934,6 +993,9 @@ def build_parser():
     s.add_argument("--blender-workers", action="store_true",
                    help="only Blender's solver as the fit's evaluator: evaluations/s with 1 and 2 Ray workers, "
                         "Ray's start-up cost (needs bpy and ray)")
+    s.add_argument("--default-fit", action="store_true",
+                   help="only the time to answer: the default fit of a 21 x 21 cloth, 4 cameras x 15 frames at "
+                        "480 x 640, quality chosen and the manipulation's unknowns estimated (target 3 minutes)")
 
     s = _command(sub, "identifiability", cmd_identifiability,
                  "which Blender cloth settings silhouettes can identify (sensitivity and Cramer-Rao table)",

@@ -88,7 +88,7 @@ def test_the_ga_stops_when_it_stagnates(cap, monkeypatch):
     assert r["evaluations"] < 20_000
 
 
-def _bowl(self, P):
+def _bowl(self, P, offsets=None):
     P = np.asarray(P)
     return np.log(P[:, 1] / P[:, 0] / 2e6) ** 2 + np.log(P[:, 3] / P[:, 0] / 9.0) ** 2 + 1.0
 

@@ -171,15 +171,12 @@ SOURCES = {
                     "s2": "out/real/fit_auto_s2.json", "paper_recipe": "out/real/fit_paper_s0.json"},
         "cost": "expensive", "what": "fits on the extracted footage silhouettes (needs the footage recording's files)"},
     "floor_calibration": {
-        "steps": [["{py}", "tools/render_footage.py", "render", "--out", "out/floor_cal/footage"]
-                  + [a for c in ("cam00", "cam03", "cam06", "cam09", "cam12", "cam15") for a in ("--camera", c)],
-                  ["{py}", "-m", "addon", "extract", "out/floor_cal/footage", "-o", "out/floor_cal/capture"],
-                  ["{py}", "tools/floor_calibration.py", "--out", "out/floor_cal", "--footage", "out/floor_cal/footage",
-                   "--capture", "out/floor_cal/capture", "--json", "out/floor_cal/calibration.json"]],
+        "steps": [["{py}", "tools/floor_calibration.py", "--out", "out/floor_cal", "--json",
+                   "out/floor_cal/calibration.json"]],
         "outputs": {"calibration": "out/floor_cal/calibration.json"},
         "cost": "expensive",
-        "what": "the noise-floor estimate against true floors: synthetic captures (both models, 4 resolutions, "
-                "5 noise levels, resampled fits) and photoreal footage (6 cameras)"},
+        "what": "the noise-floor estimate against true floors on synthetic captures (both models, 4 resolutions, "
+                "5 noise levels, resampled fits); the photoreal part (--footage, --capture) is not recorded yet"},
     "blender_cloth": {
         "steps": [["{py}", "tools/blender_cloth_experiment.py", "check-units", "--json", "out/blendercloth/units.json"],
                   ["{py}", "tools/blender_cloth_experiment.py", "observe", "--out", "out/blendercloth/capture"],

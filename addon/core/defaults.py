@@ -147,3 +147,19 @@ CALIB_CORNER_CHECK_PX = 1.0  # a ChArUco corner further than this from where its
                              # a two-square neighbourhood by far less
 CALIB_MARKER_RATIO_TOL = 0.1 # markers measured more than 10 % larger or smaller than --board says = a board definition
                              # that does not match the print (lens distortion changes a marker's size by far less)
+
+# --- a fit's stages after its main search (issue 20; fitting/quality.py, fitting/job.py)
+QUALITY_LADDER = (3, 5, 8, 12, 18, 27)   # the qualities a fit may choose from: steps ~1.5x apart (a quality-15
+                                         # cloth lies between two rungs; past 27 a 21 x 21 cloth costs > 5x quality 5)
+QUALITY_TOLERANCE = 0.05     # the lowest rung whose training error is within 5 % of the best rung's is chosen: a
+                             # cheaper solver for a difference of the size of one seed's luck (issue 20 A/B spreads)
+QUALITY_RUNG_FRACTION = 0.07 # each rung: a warm-started CMA-ES run of 7 % of the budget (175 of 2500 evaluations:
+                             # 17 generations of 10, enough to re-settle a converged fit at a neighbouring quality)
+QUALITY_RUNGS_RESERVED = 4   # the budget kept for rungs (4 x 7 % = 28 %): one down, up to three up (5 -> 8 -> 12 -> 18)
+QUALITY_CLEARLY_BETTER = 0.10   # climbing continues while a rung fits > 10 % better than every lower one
+SCENE_QUALITY_PROBE = 0.05   # --backend blender: the budget of the one rung above the scene's quality it tries
+PROFILE_STEP = 0.1           # the manipulation's uncertainty: the objective at +-10 % of each bound around the best
+PROFILE_RISE = 0.01          # uncertainty = the offset at which the training error rises by 1 % (a quadratic
+                             # through the three points); flat or concave = the fit cannot separate it
+MIN_FRAMES_FOR_TIME_OFFSET = 2   # a time offset needs >= 2 training frames after the release: one frame's shape is
+                                 # matched as well by a stiffer cloth read earlier as by a softer one read later

@@ -102,10 +102,19 @@ class BlendSceneEvaluator:
         self.frames(times)
         return SceneScenario(self.mesh, np.asarray(times, dtype=np.float64))
 
-    def simulate(self, scenario, rows, backend: str = "auto") -> SimResult:
+    def simulate(self, scenario, rows, backend: str = "auto", offsets=None) -> SimResult:
+        """``offsets`` (``scenario.Offsets``): each candidate reads the scene ``offsets.time[p]`` s
+        earlier (fractional frames, clamped at the cache's first frame); handle offsets are not
+        supported (the scene's pins are its own objects)."""
         rows = np.atleast_2d(np.asarray(rows, dtype=np.float64))
         frames = self.frames(scenario.frame_times).tolist()
-        args = [(B.check_settings(self.settings(r), "candidate Blender settings"), frames) for r in rows]
+        per = [frames] * len(rows)
+        if offsets is not None:
+            if offsets.moves_handles:
+                raise ClothFitError("handle offsets cannot be simulated on a Blender scene (its pins are its own)")
+            lo = float(self.info["cache_start"])
+            per = [np.maximum(np.asarray(frames) - float(t) * self.fps, lo).tolist() for t in offsets.time]
+        args = [(B.check_settings(self.settings(r), "candidate Blender settings"), per[p]) for p, r in enumerate(rows)]
         t0 = time.perf_counter()
         out = self.executor.map("simulate", args)
         self.seconds += time.perf_counter() - t0

@@ -278,7 +278,13 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
         pass
     if obj is None or (own is not None and obj == own):
         sc, _ = scene_scenario(scene)
+        from ...core.physics.scenario import fitted_scenario
+        sc = fitted_scenario(sc, {"handles": res.get("handles")})     # the pins where the fit put them
         net, plan = model.plan(sc)
+        t_off = res.get("time_offset_s")
+        if t_off:
+            note += (f"; the fit read the footage {1000 * t_off:+.1f} ms off: the release is at capture time "
+                     f"{1000 * t_off:+.1f} ms")
         old = bpy.data.objects.get(BLENDER_CLOTH_NAME)
         if old is not None:
             me = old.data

@@ -6,6 +6,7 @@ import numpy as np
 from ..errors import ClothFitError
 from ..observation.metrics import shape_error_mm
 from ..physics.models import model_and_row
+from ..physics.scenario import fitted_scenario
 from .job import load_observed
 from .objective import SilhouetteObjective
 
@@ -23,7 +24,7 @@ def evaluate(capture, params, cameras=None, times=None, resolution=None, backend
     times = list(capture.frame_times) if times is None else list(times)
     fidx = [capture.frame_index(t) for t in times]
     tt = [float(capture.frame_times[i]) for i in fidx]
-    sc = capture.scenario.with_frames(tt)
+    sc = fitted_scenario(capture.scenario.with_frames(tt), params)   # a result's estimated manipulation
     camobjs, observed, ignore = load_observed(capture, cams, fidx, resolution)
     obj = SilhouetteObjective(sc, camobjs, observed, backend=backend, model=model, ignore=ignore)
     esil, exploded = obj.per_image(row[None])

@@ -42,8 +42,11 @@ from ..physics.paper import identifiable
 from ..safeio import atomic_json as safe_atomic_json
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from .objective import SilhouetteObjective
-from .optimise import canonical_name, make_optimizer, optimizer_from_state
-from .parameters import PaperParameters, SceneParameters, make_parameters
+from ..physics.models import BlenderModel
+from ..physics.scenario import Uncertainty
+from .optimise import SearchSpace, canonical_name, make_optimizer, optimizer_from_state
+from .parameters import ManipulationParameters, PaperParameters, SceneParameters, declared_model, make_parameters
+from .quality import Ladder
 
 
 @dataclass
@@ -77,6 +80,9 @@ class FitConfig:
     executor: str = "auto"                # blender: "ray", "process" (no Ray) or "auto"
     restarts: int | None = None           # cma-es: IPOP restarts after convergence (population doubled each);
                                           # None = the model's default (paper 0, blender BLENDER_FIT_RESTARTS)
+    uncertain: object = None              # the manipulation's unknowns to estimate: None = the capture's
+                                          # 'uncertain' block; "none" = nothing; "time_offset=S,handles=M" or an
+                                          # object {time_offset, handles} (physics/scenario.Uncertainty)
 
     @classmethod
     def from_dict(cls, d):
@@ -117,7 +123,8 @@ class FitConfig:
         intval("population", 2, 10 ** 6)
         intval("children", 1, 10 ** 6)
         intval("restarts", 0, 20)
-        intval("quality", 1, 80)
+        if self.quality != "auto":
+            intval("quality", 1, 80)
         numval("target_error", 0.0)
         numval("cloth_mass", 1e-12)
         numval("fps", 1e-3, 1e4)
@@ -144,6 +151,9 @@ class FitConfig:
             v = getattr(self, name)
             if v is not None and not isinstance(v, str):
                 raise ClothFitError(f"fit config: {name} must be a string, got {v!r}")
+        if self.uncertain is not None and not isinstance(self.uncertain, (str, dict)):
+            raise ClothFitError(f"fit config: uncertain must be 'none', 'time_offset=S,handles=M' or an object, "
+                                f"got {self.uncertain!r}")
         if self.model is not None and not isinstance(self.model, (str, dict)):
             raise ClothFitError(f"fit config: model must be a name or a model object, got {self.model!r}")
         return self
@@ -197,8 +207,8 @@ def load_observed(capture, cams, fidx, resolution=None):
 
 STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
 CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
-CHECKPOINT_VERSION = 2
-CHECKPOINT_KEYS = ("format", "version", "identity", "config", "capture", "optimizer_state", "elapsed", "exploded",
+CHECKPOINT_VERSION = 3          # 3: the fit's stages (quality ladder, manipulation profile)
+CHECKPOINT_KEYS = ("format", "version", "identity", "config", "capture", "optimizer_state", "stages", "elapsed", "exploded",
                    "finished", "cancelled", "stop_reason", "error", "result")
 MAX_CHECKPOINT_BYTES = 64 * 1024 * 1024
 
@@ -230,6 +240,13 @@ def silhouettes_hash(observed, ignore=None) -> str:
 
 
 class FitJob:
+    """A fit in stages, one generation per ``step()``: the main search; then, where the quality is
+    the fit's to choose, the quality ladder's rungs (``quality.Ladder``: short warm-started CMA-ES runs
+    at neighbouring qualities); then, where the manipulation has unknowns, their profile (the
+    objective either side of the best offsets: their uncertainty, or that the fit cannot separate
+    them). At the end, ``diagnose.report`` puts the training and held-out errors beside the images'
+    noise floor."""
+
     def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None,
                  checkpoint_interval: float = 0.0, evaluator=None):
         """``evaluator``: where candidates are simulated when not by the core's models: a model-like
@@ -268,6 +285,7 @@ class FitJob:
         self.capture_hash = capture_hash(capture)
         self.silhouettes_hash = silhouettes_hash(observed, ignore)
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
+        self._images = (cameras, observed, ignore, names)
         if evaluator is not None:
             self.scenario = evaluator.scenario(self.train_times)
             self.par = SceneParameters(capture, cfg, evaluator)
@@ -276,20 +294,133 @@ class FitJob:
             self.par = make_parameters(capture, cfg)
         self.objective = SilhouetteObjective(self.scenario, cameras, observed, backend=cfg.backend, names=names,
                                              model=self.par.model, ignore=ignore)
+        self._objectives = {}
         self.m, self.m_source = self.par.m, self.par.m_source
-        self.space = self.par.space
+        self.manip, self.manip_note = self._manipulation(capture, cfg, evaluator)
+        self.npar = self.par.space.n
+        self.space = joint_space(self.par.space, self.manip)
         self.optimizer_name = canonical_name(cfg.optimizer)
+        self.ladder = self._ladder(capture, cfg, evaluator)
+        self.start_quality = None if self.ladder is None else self.ladder.start
+        reserved = 0
+        if self.ladder is not None:
+            reserved = (D.QUALITY_RUNGS_RESERVED if not self.ladder.probe_only else 1) * self._rung_budget()
+        if self.manip is not None:
+            reserved += 2 * self.manip.n            # the profile: the objective either side of each offset
+        self.opt = self._main_optimizer()
+        self.stage = "search"
+        self.stage_quality = self.start_quality
+        self.stage_end = self.search_end = cfg.max_evaluations - reserved
+        self.done_evals = 0
+        self.records = []                 # finished stages
+        self.best_by_quality = {}         # quality (or None) -> [best_f, best_x]
+        self.history_prev = []
+        self.search_stop = None
+        self.profile = None
+        self.final = None
+        self.start_x = self._start_point()
+        self.start_f = None               # its training error, once evaluated (the fit never ends worse)
+        self.started = time.time()
+        self.elapsed = 0.0
+        self.finished = False
+        self.cancelled = False
+        self.error = None
+        self.stop_reason = None
+        self.exploded = 0
+
+    # ------------------------------------------------------------- set-up
+    def _manipulation(self, capture, cfg, evaluator):
+        """(ManipulationParameters or None, note): what of the manipulation the fit estimates."""
+        sc = capture.scenario
+        nh = len(sc.handles)
+        if cfg.uncertain is None:
+            unc = capture.uncertain
+        elif isinstance(cfg.uncertain, str):
+            unc = Uncertainty.from_text(cfg.uncertain, nh, "fit: uncertain")
+        else:
+            unc = Uncertainty.parse(cfg.uncertain, nh, "fit: uncertain")
+        if unc is None or not unc.active:
+            return None, None
+        notes = []
+        if evaluator is not None and any(b > 0 for b in unc.handles):
+            raise ClothFitError("fit: uncertain handles cannot be estimated with --backend blender (the scene's pins "
+                                "are its own objects): give --uncertain time_offset=S,handles=0, or fit the capture "
+                                "with the core model")
+        n_frames = len(self.train_times)
+        rel = [h.release_time for h in sc.handles if h.release_time is not None]
+        after = sum(t >= min(rel) for t in self.train_times) if rel else n_frames
+        t_bound, h_bounds = unc.time_offset, unc.handles
+        if t_bound > 0 and after < D.MIN_FRAMES_FOR_TIME_OFFSET:
+            notes.append(f"time_offset not estimated: {after} training frame(s) after the release cannot separate "
+                         f"it from the cloth's settings (need {D.MIN_FRAMES_FOR_TIME_OFFSET})")
+            t_bound = 0.0
+        if any(b > 0 for b in h_bounds) and n_frames < 2:
+            notes.append("handle offsets not estimated: one training frame cannot separate them from the cloth's "
+                         "settings")
+            h_bounds = (0.0,) * nh
+        unc = Uncertainty(t_bound, tuple(h_bounds))
+        note = "; ".join(notes) or None
+        if not unc.active:
+            return None, note
+        return ManipulationParameters(unc, self.scenario), note
+
+    def _ladder(self, capture, cfg, evaluator):
+        """The quality ladder where the fit chooses the quality (blender model; None otherwise)."""
+        if isinstance(self.par, PaperParameters):
+            return None
+        if evaluator is not None:
+            return Ladder(evaluator.quality, probe_only=cfg.quality != "auto",
+                          max_rungs=1 if cfg.quality != "auto" else D.QUALITY_RUNGS_RESERVED)
+        if cfg.quality != "auto" and (cfg.quality is not None or cfg.init or "quality" in declared_model(capture, cfg)):
+            return None
+        return Ladder(self.par.model.quality)
+
+    def _start_point(self):
+        """Where the user's own settings are (a scene's Cloth modifier, a warm start), or None: it is
+        evaluated first and kept, so the fit never answers worse than what it was given."""
+        x = None
+        if self.par.initial is not None:
+            x = np.asarray(self.par.initial[0], dtype=np.float64)
+        elif self.evaluator is not None:
+            x = self.par.space.clip(np.array([self.par._coord(n, self.par.fixed[n]) for n in self.par.free])[None])[0]
+        if x is None:
+            return None
+        return np.concatenate([x, np.zeros(self.space.n - self.npar)])
+
+    def _evaluate_start(self):
+        f = float(self.evaluate(self.start_x[None])[0])
+        self.done_evals += 1
+        self.start_f = f if math.isfinite(f) else float("inf")
+        if math.isfinite(f):
+            q = self.stage_quality
+            have = self.best_by_quality.get(q)
+            if have is None or f < have[0]:
+                self.best_by_quality[q] = [f, self.start_x.tolist()]
+
+    def _rung_budget(self) -> int:
+        frac = D.SCENE_QUALITY_PROBE if (self.ladder is not None and self.ladder.probe_only) else \
+            D.QUALITY_RUNG_FRACTION
+        return max(1, int(round(frac * self.config.max_evaluations)))
+
+    def _optimizer_kw(self, warm_x=None):
+        cfg = self.config
         is_cma = self.optimizer_name == "cma-es"
         tolfun = D.FIT_TOLFUN_PER_IMAGE * self.objective.n_images
         kw = {"tolx": D.FIT_TOLX, "tolfun": tolfun}
-        if self.par.initial is not None:          # warm start: from the given result, a closer search
-            kw["initial"] = self.par.initial
+        initial = None
+        if warm_x is not None:
+            initial = [np.asarray(warm_x, dtype=np.float64)]
+        elif self.par.initial is not None:          # warm start: from the given result, a closer search
+            initial = [np.concatenate([np.asarray(x, dtype=np.float64), np.zeros(self.space.n - self.npar)])
+                       for x in self.par.initial]
+        if initial is not None:
+            kw["initial"] = initial
             if is_cma:
                 kw["sigma0"] = D.WARM_START_SIGMA
         paper = isinstance(self.par, PaperParameters)
         n = self.space.n
         if is_cma:
-            kw["restarts"] = (cfg.restarts if cfg.restarts is not None else
+            kw["restarts"] = (0 if warm_x is not None else cfg.restarts if cfg.restarts is not None else
                               D.FIT_RESTARTS if paper else D.BLENDER_FIT_RESTARTS)
             # Hansen's default population 4 + 3 ln n (7 for the paper's 3 free quantities)
             kw["popsize"] = cfg.population if cfg.population is not None else 4 + int(3 * math.log(n))
@@ -299,19 +430,50 @@ class FitJob:
             kw["children"] = (cfg.children if cfg.children is not None else
                               D.FIT_GA_CHILDREN if paper else 5 * n)
             kw["stall_evaluations"] = D.FIT_GA_STALL
-        self.opt = make_optimizer(self.optimizer_name, self.space, cfg.seed, **kw)
-        self.started = time.time()
-        self.elapsed = 0.0
-        self.finished = False
-        self.cancelled = False
-        self.error = None
-        self.stop_reason = None
-        self.exploded = 0
+        return kw
+
+    def _main_optimizer(self):
+        return make_optimizer(self.optimizer_name, self.space, self.config.seed, **self._optimizer_kw())
+
+    def _rung_optimizer(self, x0):
+        # a rung is always CMA-ES: a warm start is a local search whatever the main optimiser was
+        kw = self._optimizer_kw(warm_x=x0)
+        if self.optimizer_name != "cma-es":
+            kw = {"tolx": kw["tolx"], "tolfun": kw["tolfun"], "initial": kw["initial"],
+                  "sigma0": D.WARM_START_SIGMA, "restarts": 0, "popsize": 4 + int(3 * math.log(self.space.n))}
+        return make_optimizer("cma-es", self.space, self.config.seed, **kw)
+
+    def _model_at(self, quality):
+        """The parameter set-up's model at ``quality`` (the main one when None)."""
+        if quality is None or self.evaluator is not None:
+            return self.par.model
+        base = self.par.model
+        return BlenderModel(base.fps, int(quality), base.bending_model)
+
+    def _activate(self, quality):
+        """Simulate at ``quality`` from now on: the objective, the settings the result reports."""
+        if quality is None:
+            return
+        if self.evaluator is not None:
+            self.evaluator.quality = int(quality)
+            self.par.fixed["quality"] = int(quality)
+            return
+        if quality not in self._objectives:
+            if quality == self.start_quality and not self._objectives:
+                self._objectives[quality] = self.objective
+            else:
+                cameras, observed, ignore, names = self._images
+                self._objectives[quality] = SilhouetteObjective(
+                    self.scenario, cameras, observed, backend=self.config.backend, names=names,
+                    model=self._model_at(quality), ignore=ignore)
+        self.objective = self._objectives[quality]
+        self.par.model = self.objective.model
+        self.par.fixed["quality"] = int(quality)
 
     # ------------------------------------------------------------- identity
     def identity(self) -> dict:
         """What this job is a fit of: a checkpoint is only resumed by a job with the same identity."""
-        opt = self.opt
+        opt = self.opt if self.stage == "search" else self._main_optimizer()
         ident = {
             "capture_hash": self.capture_hash,
             "silhouettes_hash": self.silhouettes_hash,
@@ -319,8 +481,9 @@ class FitJob:
             "camera_indices": list(self.train_cameras),
             "times": list(self.train_times),
             "resolution": None if self.config.resolution is None else [int(x) for x in self.config.resolution],
-            "model": self.par.model.to_dict(),
-            "fixed": getattr(self.par, "fixed", None),
+            "model": self._model_at(self.start_quality).to_dict(),
+            "fixed": None if getattr(self.par, "fixed", None) is None else
+            dict(self.par.fixed, quality=self.start_quality or self.par.fixed.get("quality")),
             "mass": float(self.m),
             "optimizer": self.optimizer_name,
             "population": int(getattr(opt, "popsize", getattr(opt, "population", 0))),
@@ -329,6 +492,8 @@ class FitJob:
             "seed": int(self.config.seed),
             "bounds": self.space.state_dict(),
             "initial": None if self.par.initial is None else np.asarray(self.par.initial).tolist(),
+            "quality_ladder": None if self.ladder is None else {"start": self.ladder.start,
+                                                                "probe_only": self.ladder.probe_only},
             "scene": None if self.evaluator is None else {
                 "blend": os.path.abspath(self.config.blend) if self.config.blend else None,
                 "object": self.config.blend_object, "frame_zero": self.config.frame_zero},
@@ -338,51 +503,168 @@ class FitJob:
     # ------------------------------------------------------------- mapping
     def to_params(self, X):
         """Free vectors -> the model's parameter rows (paper: (P, 4) rows of m, k, l, d)."""
-        return self.par.rows(X)
+        return self.par.rows(np.atleast_2d(X)[:, :self.npar])
+
+    def evaluate(self, X, objective=None):
+        """Training error (sum of E_sil over the training images) of candidates ``X`` (search space)."""
+        obj = objective or self.objective
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        rows = self.par.rows(X[:, :self.npar])
+        if self.manip is None:
+            return obj(rows)
+        return obj(rows, offsets=self.manip.offsets(X[:, self.npar:]))
 
     # ---------------------------------------------------------------- state
     @property
     def evaluations(self):
-        return int(self.opt.evaluations)
+        return int(self.done_evals + (self.opt.evaluations if self.stage in ("search", "rung") else 0))
 
     @property
     def generation(self):
-        return int(self.opt.generation)
+        return int(sum(r["generations"] for r in self.records) +
+                   (self.opt.generation if self.stage in ("search", "rung") else 0))
 
     @property
     def progress(self):
         return 1.0 if self.finished else min(1.0, self.evaluations / max(1, self.config.max_evaluations))
 
+    def chosen_quality(self):
+        if self.ladder is None:
+            return None
+        return self.ladder.chosen() if self.ladder.tried else self.start_quality
+
+    def _best(self):
+        """(best_f, best_x) at the chosen quality: the stages' records, or the running search's."""
+        q = self.chosen_quality()
+        if q in self.best_by_quality:
+            f, x = self.best_by_quality[q]
+            return float(f), np.asarray(x, dtype=np.float64)
+        if self.stage == "search" and self.opt.best_x is not None:
+            return float(self.opt.best_f), np.asarray(self.opt.best_x, dtype=np.float64)
+        return float("inf"), None
+
     @property
     def best_error(self):
-        """Best E_all found so far (sum over the training images)."""
-        return float(self.opt.best_f) if self.opt.best_x is not None else float("inf")
+        """Best E_all found so far (sum over the training images) at the chosen quality."""
+        return self._best()[0]
+
+    @property
+    def best_x(self):
+        return self._best()[1]
 
     @property
     def best_params(self):
         """The best parameters so far: paper m, k, l, d; Blender the ClothSettings values."""
-        if self.opt.best_x is None:
+        x = self.best_x
+        if x is None:
             return None
         if isinstance(self.par, PaperParameters):
-            return self.par.params(self.opt.best_x)
-        return self.par.settings(self.opt.best_x)
+            return self.par.params(x[:self.npar])
+        with self._at_quality(self.chosen_quality()):
+            return self.par.settings(x[:self.npar])
+
+    @contextlib.contextmanager
+    def _at_quality(self, quality):
+        was = self.stage_quality
+        if quality is not None and quality != was:
+            self._activate(quality)
+        try:
+            yield
+        finally:
+            if quality is not None and quality != was and was is not None:
+                self._activate(was)
+
+    def _track(self):
+        """The running stage's best into ``best_by_quality``."""
+        if self.opt.best_x is None:
+            return
+        q = self.stage_quality
+        have = self.best_by_quality.get(q)
+        if have is None or self.opt.best_f < have[0]:
+            self.best_by_quality[q] = [float(self.opt.best_f), np.asarray(self.opt.best_x, dtype=np.float64).tolist()]
 
     def _update_stop(self):
-        """Set ``finished`` and ``stop_reason`` from the state after a generation."""
+        """After a generation: finish the job, or end the running stage and start the next."""
         if self.finished:
             return
         n_img = self.objective.n_images
-        if self.opt.best_x is None and self.evaluations >= D.FIT_EXPLODED_LIMIT:
+        if self.stage == "search" and self.opt.best_x is None and self.evaluations >= D.FIT_EXPLODED_LIMIT:
             self.error = (f"every one of the {self.evaluations} candidates tried made the simulation explode or "
                           f"fail: check the capture's scenario (settle_time, gravity, cloth size) and the bounds")
             self.stop_reason = "error"
         elif self.config.target_error is not None and self.best_error / n_img <= self.config.target_error:
             self.stop_reason = "target"
-        elif self.opt.stopped:
-            self.stop_reason = "converged"
-        elif self.evaluations >= self.config.max_evaluations:
-            self.stop_reason = "budget"
+        elif self.stage in ("search", "rung") and (self.opt.stopped or self.evaluations >= self.stage_end):
+            self._next_stage()
+        elif self.stage == "done" or self.evaluations >= self.config.max_evaluations and self.stage != "profile":
+            self._next_stage()
         self.finished = self.stop_reason is not None
+
+    def _end_running(self):
+        if self.stage in ("search", "rung"):
+            self._track()
+            self.records.append({"stage": self.stage, "quality": self.stage_quality,
+                                 "evaluations": int(self.opt.evaluations), "generations": int(self.opt.generation),
+                                 "best_f": _finite(self.opt.best_f) if self.opt.best_x is not None else None,
+                                 "stop": "converged" if self.opt.stopped else "budget"})
+            self.history_prev += [[int(a) + self.done_evals, b] for a, b in self._opt_history()]
+            self.done_evals += int(self.opt.evaluations)
+            if self.stage == "search":
+                self.search_stop = "converged" if self.opt.stopped else "budget"
+            if self.ladder is not None and self.stage_quality in self.best_by_quality:
+                self.ladder.record(self.stage_quality, self.best_by_quality[self.stage_quality][0])
+
+    def _next_stage(self):
+        """End the running stage; start a rung, the profile, or finish."""
+        self._end_running()
+        left = self.config.max_evaluations - self.done_evals
+        if self.stage in ("search", "rung") and self.ladder is not None and self.best_by_quality:
+            q = self.ladder.next()
+            rung = self._rung_budget()
+            if q is not None and left >= rung:
+                f, x = self.best_by_quality[self.chosen_quality()]
+                self.stage, self.stage_quality = "rung", q
+                self._activate(q)
+                self.opt = self._rung_optimizer(x)
+                self.stage_end = self.done_evals + rung
+                return
+        if self.stage in ("search", "rung") and self.manip is not None and self.best_by_quality:
+            self.stage = "profile"
+            self._activate(self.chosen_quality())
+            self.stage_quality = self.chosen_quality()
+            return
+        self.stage = "done"
+        if self.chosen_quality() is not None:
+            self._activate(self.chosen_quality())
+            self.stage_quality = self.chosen_quality()
+        self.stop_reason = self.search_stop or "budget"
+
+    def _profile_step(self):
+        """The objective either side of the best offsets: each one's uncertainty (``PROFILE_RISE``)."""
+        f0, x0 = self._best()
+        names = self.manip.names
+        h = np.array([D.PROFILE_STEP * self.manip.bounds[n][1] for n in names])
+        X = np.repeat(x0[None], 2 * len(names), 0)
+        for i in range(len(names)):
+            X[2 * i, self.npar + i] += h[i]
+            X[2 * i + 1, self.npar + i] -= h[i]
+        f = self.evaluate(X)
+        self.exploded += int(np.sum(~np.isfinite(f)))
+        self.done_evals += len(X)
+        prof = {}
+        for i, n in enumerate(names):
+            fp, fm = float(f[2 * i]), float(f[2 * i + 1])
+            a = (fp + fm - 2 * f0) / (2 * h[i] ** 2) if math.isfinite(fp) and math.isfinite(fm) else float("nan")
+            unc = math.sqrt(D.PROFILE_RISE * f0 / a) if a > 0 and f0 > 0 else None
+            prof[n] = {"step": float(h[i]), "E_plus": _finite(fp), "E_minus": _finite(fm), "E_best": _finite(f0),
+                       "uncertainty": unc,
+                       "separated": unc is not None and unc < self.manip.bounds[n][1]}
+        self.profile = prof
+        self.stage = "done"
+        self.stop_reason = self.search_stop or "budget"
+
+    def _opt_history(self):
+        return [[int(a), float(b) if math.isfinite(b) else None] for a, b in self.opt.history]
 
     def step(self) -> bool:
         """Run one generation. Returns False once the job is finished (converged, budget, target,
@@ -390,12 +672,20 @@ class FitJob:
         if self.finished:
             return False
         t0 = time.time()
-        X = self.opt.ask()
-        f = self.objective(self.to_params(X))
-        self.exploded += int(np.sum(~np.isfinite(f)))
-        self.opt.tell(X, f)
+        if self.stage == "profile":
+            self._profile_step()
+        elif self.stage == "search" and self.start_x is not None and self.start_f is None:
+            self._evaluate_start()
+        elif self.stage in ("search", "rung"):
+            X = self.opt.ask()
+            f = self.evaluate(X)
+            self.exploded += int(np.sum(~np.isfinite(f)))
+            self.opt.tell(X, f)
+            self._track()
         self.elapsed += time.time() - t0
         self._update_stop()
+        if self.finished:
+            self._finalise()
         if self.checkpoint and (self.finished or time.monotonic() - self._last_save >= self.checkpoint_interval):
             self.save_checkpoint(self.checkpoint)
         return not self.finished
@@ -414,12 +704,24 @@ class FitJob:
             raise
         return self.result()
 
+    def _finalise(self):
+        """Once, at the end: the errors beside the noise floor (``diagnose.report``)."""
+        if self.final is not None or self.error or self.best_x is None:
+            return
+        from .diagnose import report
+        try:
+            self.final = report(self)
+        except ClothFitError as e:            # never a reason to lose the result
+            self.final = {"error": str(e)}
+
     def cancel(self):
         """Stop; the best result so far is kept (and written to the checkpoint)."""
         self.cancelled = True
         if not self.finished:
             self.stop_reason = "cancelled"
         self.finished = True
+        if self.stage in ("search", "rung"):
+            self._track()
         if self.checkpoint:
             self.save_checkpoint(self.checkpoint)
 
@@ -433,9 +735,39 @@ class FitJob:
                 self.save_checkpoint(self.checkpoint)
 
     # --------------------------------------------------------------- output
+    def manipulation(self) -> dict:
+        """The result's fitted manipulation: ``time_offset_s``, ``handles`` with uncertainties (from the
+        profile), what could not be separated, or nothing when the manipulation had no unknowns."""
+        x = self.best_x
+        if self.manip is None or x is None:
+            return {"manipulation_note": self.manip_note} if self.manip_note else {}
+        m = np.array(x[self.npar:], dtype=np.float64)
+        spread = None
+        notes = [self.manip_note] if self.manip_note else []
+        if self.profile is not None:
+            spread = [self.profile[n]["uncertainty"] for n in self.manip.names]
+            flat = [n for n in self.manip.names if not self.profile[n]["separated"]]
+            for n in flat:
+                m[self.manip.names.index(n)] = 0.0
+            if flat:
+                notes.append(f"cannot be separated from the cloth's settings (the error is flat within the bound): "
+                             f"{', '.join(flat)}; the capture's own value kept, not reported")
+        d = self.manip.describe(m, self.capture.scenario, spread)
+        if self.profile is not None and "time_offset_s" in self.manip.names \
+                and not self.profile["time_offset_s"]["separated"]:
+            d["time_offset_s"] = None
+        if self.profile is None:
+            notes.append("uncertainties not estimated (the fit stopped before its profile)")
+        d["manipulation_profile"] = self.profile
+        if notes:
+            d["manipulation_note"] = "; ".join(notes)
+        return d
+
     def result(self) -> dict:
         bp = self.best_params
         n_img = self.objective.n_images
+        history = self.history_prev + ([[a + self.done_evals, b] for a, b in self._opt_history()]
+                                       if self.stage in ("search", "rung") else [])
         res = {
             "format": "silhouette-cloth-fit/result", "version": 1,
             "capture": os.path.abspath(self.capture.root),
@@ -453,17 +785,27 @@ class FitJob:
             "exploded_candidates": self.exploded,
             "best_E_all": _finite(self.best_error), "best_E_sil_mean_pct": _finite(100.0 * self.best_error / n_img),
             "n_train_images": n_img,
-            "model": self.par.model.to_dict(),
+            "model": self._model_at(self.chosen_quality()).to_dict(),
             "params": bp if isinstance(self.par, PaperParameters) else None,
             "identifiable": identifiable(bp) if bp and isinstance(self.par, PaperParameters) else None,
             "mass_source": self.m_source,
             "note": self.par.note,
             "finished": self.finished, "cancelled": self.cancelled, "error": self.error,
             "elapsed_s": self.elapsed, "backend": self.objective.backend,
-            "history": [[int(a), float(b) if math.isfinite(b) else None] for a, b in self.opt.history],
+            "stages": self.records,
+            "start_E_sil_mean_pct": None if self.start_f is None else _finite(100.0 * self.start_f / n_img),
+            "history": history,
         }
         if bp and not isinstance(self.par, PaperParameters):
-            res.update(self.par.describe(self.opt.best_x))
+            with self._at_quality(self.chosen_quality()):
+                res.update(self.par.describe(self.best_x[:self.npar]))
+        if self.ladder is not None and self.ladder.tried:
+            res["quality_choice"] = self.ladder.describe(n_img)
+            if isinstance(res.get("blender_cloth"), dict):
+                res["blender_cloth"]["quality"] = self.chosen_quality()
+        res.update(self.manipulation())
+        if self.final is not None:
+            res["floor"] = self.final
         if self.evaluator is not None:
             res["raster_backend"] = res["backend"]
             res.update(self.evaluator.describe())
@@ -487,10 +829,115 @@ class FitJob:
     def save_result(self, path):
         atomic_json(path, self.result())
 
+    def stages_state(self) -> dict:
+        return {"stage": self.stage, "stage_quality": self.stage_quality, "stage_end": self.stage_end,
+                "done_evals": self.done_evals, "records": self.records,
+                "best_by_quality": [[q, f, x] for q, (f, x) in self.best_by_quality.items()],
+                "history_prev": self.history_prev, "search_stop": self.search_stop,
+                "ladder": None if self.ladder is None else self.ladder.state_dict(), "profile": self.profile,
+                "start_f": self.start_f}
+
+    def _load_stages(self, st: dict, path):
+        """The stages' state of a checkpoint, checked field by field (one-line errors)."""
+        def bad(what):
+            return ClothFitError(f"checkpoint {path}: bad 'stages' ({what})")
+
+        def is_int(v, lo=0):
+            return isinstance(v, int) and not isinstance(v, bool) and v >= lo
+
+        def is_num(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        def is_q(v):
+            return v is None or is_int(v, 1) and v <= 80
+
+        if not isinstance(st, dict):
+            raise bad("not an object")
+        keys = {"stage", "stage_quality", "stage_end", "done_evals", "records", "best_by_quality", "history_prev",
+                "search_stop", "ladder", "profile", "start_f"}
+        if set(st) != keys:
+            raise bad(f"fields {sorted(set(st) ^ keys)}")
+        if st["stage"] not in ("search", "rung", "profile", "done"):
+            raise bad(f"stage {st['stage']!r}")
+        if not is_q(st["stage_quality"]) or not is_int(st["stage_end"]) or not is_int(st["done_evals"]):
+            raise bad("stage_quality, stage_end or done_evals")
+        recs = st["records"]
+        if not isinstance(recs, list) or not all(
+                isinstance(r, dict) and r.get("stage") in ("search", "rung") and is_q(r.get("quality"))
+                and is_int(r.get("evaluations")) and is_int(r.get("generations"))
+                and (r.get("best_f") is None or is_num(r.get("best_f"))) and r.get("stop") in ("converged", "budget")
+                for r in recs):
+            raise bad("records")
+        bq = st["best_by_quality"]
+        if not isinstance(bq, list) or not all(
+                isinstance(e, list) and len(e) == 3 and is_q(e[0]) and is_num(e[1]) and isinstance(e[2], list)
+                and len(e[2]) == self.space.n and all(is_num(v) for v in e[2]) for e in bq):
+            raise bad("best_by_quality")
+        hp = st["history_prev"]
+        if not isinstance(hp, list) or not all(
+                isinstance(e, list) and len(e) == 2 and is_int(e[0]) and (e[1] is None or is_num(e[1])) for e in hp):
+            raise bad("history_prev")
+        if st["search_stop"] not in (None, "converged", "budget"):
+            raise bad("search_stop")
+        if st["start_f"] is not None and not is_num(st["start_f"]):
+            raise bad("start_f")
+        prof = st["profile"]
+        if prof is not None and (self.manip is None or not isinstance(prof, dict) or set(prof) != set(self.manip.names)
+                                 or not all(isinstance(v, dict) and isinstance(v.get("separated"), bool) and
+                                            (v.get("uncertainty") is None or is_num(v.get("uncertainty")))
+                                            for v in prof.values())):
+            raise bad("profile")
+        if (st["ladder"] is None) != (self.ladder is None):
+            raise bad("a quality ladder in one and not the other")
+        ladder = None if st["ladder"] is None else Ladder.from_state(st["ladder"])
+        if ladder is not None and (not isinstance(st["ladder"], dict) or ladder.start != self.ladder.start
+                                   or ladder.probe_only != self.ladder.probe_only
+                                   or any(q not in ladder.rungs for q in ladder.tried)):
+            raise bad("quality ladder")
+        if st["stage"] == "rung" and (ladder is None or st["stage_quality"] not in ladder.rungs):
+            raise bad("a rung outside the ladder")
+        self.stage = st["stage"]
+        self.stage_quality = st["stage_quality"]
+        if self.stage != "search":          # the search's end follows the budget asked for now
+            self.stage_end = st["stage_end"]
+        self.done_evals = st["done_evals"]
+        self.records = [dict(r) for r in recs]
+        self.best_by_quality = {e[0]: [float(e[1]), [float(v) for v in e[2]]] for e in bq}
+        self.history_prev = [list(e) for e in hp]
+        self.search_stop = st["search_stop"]
+        self.profile = prof
+        self.start_f = None if st["start_f"] is None else float(st["start_f"])
+        if ladder is not None:
+            self.ladder = ladder
+        if self.stage_quality is not None and self.ladder is not None and self.stage_quality not in self.ladder.rungs:
+            raise bad("stage_quality outside the ladder")
+        if self.stage_quality is not None:
+            self._activate(self.stage_quality)
+
+    def _reopen_search(self):
+        """A search that stopped on its budget and was followed by nothing but its profile continues
+        when resumed with a larger budget (the profile is made again at its new end)."""
+        last = self.records[-1] if self.records else None
+        if not (self.stage in ("done", "profile") and last and last["stage"] == "search" and last["stop"] == "budget"
+                and len(self.records) == 1 and self.config.max_evaluations > self.evaluations):
+            return
+        self.records = []
+        self.done_evals = 0 if self.start_f is None else 1
+        self.history_prev = []
+        self.search_stop = None
+        self.profile = None
+        self.stage = "search"
+        self.stage_end = self.search_end
+        if self.ladder is not None:
+            self.ladder.tried.pop(self.stage_quality, None)
+            if self.stage_quality in self.ladder.order:
+                self.ladder.order.remove(self.stage_quality)
+        self.stop_reason = None
+
     def checkpoint_dict(self) -> dict:
         return {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "identity": self.identity(),
                 "config": asdict(self.config), "capture": os.path.abspath(self.capture.root),
-                "optimizer_state": self.opt.state_dict(), "elapsed": self.elapsed,
+                "optimizer_state": self.opt.state_dict(), "stages": self.stages_state(), "elapsed": self.elapsed,
                 "exploded": self.exploded, "finished": self.finished, "cancelled": self.cancelled,
                 "stop_reason": self.stop_reason, "error": self.error, "result": self.result()}
 
@@ -521,21 +968,38 @@ class FitJob:
                                 f"({'; '.join(diff)}); resume with the same capture and options, or start afresh "
                                 f"with --force or another --out")
         opt = optimizer_from_state(ck["optimizer_state"])
+        job._load_stages(ck["stages"], path)
+        main = job.stage == "search" or (job.stage in ("done", "profile") and len(job.records) == 1)
         mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, getattr(job.opt, "popsize", None),
                 getattr(job.opt, "population", None), getattr(job.opt, "children", None),
                 getattr(job.opt, "restarts", None))
         theirs = (type(opt), opt.space.state_dict(), opt.seed, getattr(opt, "popsize", None),
                   getattr(opt, "population", None), getattr(opt, "children", None), getattr(opt, "restarts", None))
-        if mine != theirs:
+        n = 7 if main else 3                 # a rung's optimiser is a warm-started CMA-ES of the same space
+        if mine[:n] != theirs[:n]:
             raise ClothFitError(f"checkpoint {path}: its optimiser state does not match its recorded fit "
                                 f"(optimiser, bounds, seed or population differ)")
         job.opt = opt
+        job._reopen_search()
         job.elapsed = ck["elapsed"]
         job.exploded = ck["exploded"]
         job.finished = False
         job.cancelled = False
         job._update_stop()
+        if job.finished:
+            job._finalise()
         return job
+
+
+def joint_space(par_space, manip):
+    """The cloth's search space followed by the manipulation's unknowns (linear, zero = as declared)."""
+    if manip is None:
+        return par_space
+    names = list(par_space.names) + list(manip.names)
+    bounds = {n: (float(lo), float(hi)) for n, lo, hi in zip(par_space.names, par_space.lo, par_space.hi)}
+    bounds.update(manip.bounds)
+    logs = {n: bool(v) for n, v in zip(par_space.names, par_space.log)}
+    return SearchSpace(names, bounds, logs)
 
 
 def identity_diff(saved, now) -> list:

@@ -25,7 +25,7 @@ from ..jsonio import read_json
 from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
-from ..physics.scenario import Offsets, Uncertainty
+from ..physics.scenario import Offsets, Uncertainty, fitted_scenario  # noqa: F401 (the fitted manipulation)
 from .optimise import SearchSpace
 
 PAPER_FREE = ("k_over_m", "d_over_m", "l_rel")
@@ -118,7 +118,7 @@ class BlenderParameters:
             base.update({k: v for k, v in init["blender_cloth"].items() if k in ("quality", "bending_model")})
             fps = float((init.get("blender_scene") or {}).get("fps", fps))
         fps = fps if cfg.fps is None else cfg.fps
-        quality = cfg.quality if cfg.quality is not None else base["quality"]
+        quality = cfg.quality if cfg.quality not in (None, "auto") else base["quality"]
         bending = cfg.bending_model if cfg.bending_model is not None else base["bending_model"]
         self.model = BlenderModel(fps, quality, bending)
         m, src = point_mass(capture, cfg.cloth_mass, None)
@@ -253,9 +253,24 @@ class SceneParameters(BlenderParameters):
             self.note += "; " + self.init_note
 
 
+def declared_model(capture, cfg) -> dict:
+    """The model asked for: ``cfg.model``, over the capture's own ``model`` where both are Blender's
+    (``--model blender`` on a capture that declares its frame rate and quality keeps them), else the
+    capture's; {} for none."""
+    spec = cfg.model if cfg.model is not None else getattr(capture, "model", None)
+    if isinstance(spec, str):
+        spec = {"name": spec}
+    spec = dict(spec or {})
+    cap = getattr(capture, "model", None)
+    cap = {"name": cap} if isinstance(cap, str) else dict(cap or {})
+    if cfg.model is not None and spec.get("name") == "blender" and cap.get("name") == "blender":
+        spec = dict(cap, **spec)
+    return spec
+
+
 def make_parameters(capture, cfg):
     """The search of ``cfg.model``, else the capture's own ``model``, else the paper's sheet."""
-    spec = cfg.model if cfg.model is not None else getattr(capture, "model", None)
+    spec = declared_model(capture, cfg) or None
     model = get_model(spec)
     return PaperParameters(capture, cfg) if model.name == "paper" else BlenderParameters(capture, cfg, model)
 
@@ -364,29 +379,3 @@ class ManipulationParameters:
                 "time_offset_uncertainty_s": sd.get("time_offset_s"),
                 "uncertain": self.uncertainty.to_dict(),
                 "handles": handles}
-
-
-def fitted_scenario(scenario, result: dict):
-    """A scenario as a fit result estimated its manipulation: handles from the result's ``handles``
-    (same vertices, in the same order) and its frames read ``time_offset_s`` earlier; a result
-    without them leaves the scenario as it is."""
-    hs = result.get("handles")
-    t = result.get("time_offset_s") or 0.0
-    if not hs and not t:
-        return scenario
-    offsets = None
-    if hs:
-        if not isinstance(hs, list) or len(hs) != len(scenario.handles):
-            raise ClothFitError(f"result: {len(hs) if isinstance(hs, list) else 'bad'} fitted handles for a scenario "
-                                f"with {len(scenario.handles)}")
-        offsets = np.zeros((len(hs), 3))
-        for k, (d, h) in enumerate(zip(hs, scenario.handles)):
-            if not isinstance(d, dict) or int(d.get("vertex", -1)) != h.vertex:
-                raise ClothFitError(f"result: fitted handle #{k} is not on vertex {h.vertex} (the capture's)")
-            try:
-                offsets[k] = np.asarray(d.get("offset_m", [0.0, 0.0, 0.0]), dtype=np.float64).reshape(3)
-            except (TypeError, ValueError):
-                raise ClothFitError(f"result: fitted handle #{k} has a bad 'offset_m'") from None
-    if not (isinstance(t, (int, float)) and math.isfinite(t)):
-        raise ClothFitError(f"result: time_offset_s {t!r} is not a number")
-    return scenario.moved(float(t), offsets)

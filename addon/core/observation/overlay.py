@@ -257,12 +257,14 @@ def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_n
     framed and labelled by ``mark_floor`` and ``floor_sheet.png`` (``floor_sheet``) is written too,
     second to last in the list (the per-image PNGs are unchanged)."""
     from ..physics.models import model_and_row
+    from ..physics.scenario import fitted_scenario
     from .raster import silhouette
     model, row = model_and_row(params, getattr(capture, "model", None))
     cams = list(range(len(capture.cameras))) if cameras is None else list(cameras)
     times = list(capture.frame_times) if times is None else list(times)
     fidx = [capture.frame_index(t) for t in times]
     sc = capture.scenario.with_frames([float(capture.frame_times[i]) for i in fidx])
+    sc = fitted_scenario(sc, params)           # a fit result's estimated manipulation (time offset, handles)
     sim = model.simulate(sc, row[None])
     if sim.exploded[0]:
         raise ClothFitError(f"overlay: the {model.name} model with these parameters explodes ({sim.reason[0]})")

@@ -445,3 +445,29 @@ class Offsets:
     def span(self) -> float:
         """The largest |time offset|."""
         return float(np.abs(self.time).max(initial=0.0))
+
+
+def fitted_scenario(scenario, result: dict):
+    """A scenario as a fit result estimated its manipulation: handles from the result's ``handles``
+    (same vertices, in the same order) and its frames read ``time_offset_s`` earlier; a result
+    without them leaves the scenario as it is."""
+    hs = result.get("handles")
+    t = result.get("time_offset_s") or 0.0
+    if not hs and not t:
+        return scenario
+    offsets = None
+    if hs:
+        if not isinstance(hs, list) or len(hs) != len(scenario.handles):
+            raise ClothFitError(f"result: {len(hs) if isinstance(hs, list) else 'bad'} fitted handles for a scenario "
+                                f"with {len(scenario.handles)}")
+        offsets = np.zeros((len(hs), 3))
+        for k, (d, h) in enumerate(zip(hs, scenario.handles)):
+            if not isinstance(d, dict) or int(d.get("vertex", -1)) != h.vertex:
+                raise ClothFitError(f"result: fitted handle #{k} is not on vertex {h.vertex} (the capture's)")
+            try:
+                offsets[k] = np.asarray(d.get("offset_m", [0.0, 0.0, 0.0]), dtype=np.float64).reshape(3)
+            except (TypeError, ValueError):
+                raise ClothFitError(f"result: fitted handle #{k} has a bad 'offset_m'") from None
+    if not (isinstance(t, (int, float)) and math.isfinite(t)):
+        raise ClothFitError(f"result: time_offset_s {t!r} is not a number")
+    return scenario.moved(float(t), offsets)

@@ -8,6 +8,7 @@
 """
 from __future__ import annotations
 
+import json
 import os
 import platform
 import tempfile
@@ -177,7 +178,51 @@ def bench_blender_workers(tmp, grid=21, workers=(1, 2), candidates=48, echo=prin
     return out
 
 
-def run_bench(json_path, quick=False, only_blender_workers=False):
+def bench_default_fit(tmp, echo=print, max_evaluations=None):
+    """Issue 20's time to answer: the default fit of a 21 x 21 blender-model cloth (1 s settle + 1.5 s
+    at 24 fps, 25 cm), 4 training cameras, 15 training frames at 480 x 640, the quality chosen by the
+    fit (the capture declares none) and the manipulation's unknowns estimated (time offset 50 ms,
+    handles 5 mm); wall and CPU time with the load, against the 3-minute target."""
+    from ..physics.scenario import ClothGrid, Scenario, paper_scenario
+    sc0 = paper_scenario(ClothGrid(21, 21, 0.25), frame_times=D.FRAME_TIMES)
+    sc = Scenario(sc0.grid, sc0.handles, sc0.frame_times, 1.0, sc0.gravity)
+    truth = {"tension_stiffness": 15.0, "shear_stiffness": 5.0, "bending_stiffness": 0.5, "air_damping": 1.0}
+    root = os.path.join(tmp, "default21")
+    synth_capture(root, truth, model={"name": "blender", "fps": 24}, rig="lab18", resolution=(480, 640),
+                  scenario=sc, seed=0)
+    path = os.path.join(root, "capture.json")
+    with open(path) as f:
+        d = json.load(f)
+    d["model"] = {"name": "blender", "fps": 24}          # no declared quality: the fit chooses it
+    d["uncertain"] = {"time_offset": 0.05, "handles": 0.005}
+    from ..safeio import atomic_json
+    atomic_json(path, d)
+    cap = load_capture(root)
+    train, _ = select_training(cap.cameras, 4)
+    load = os.getloadavg()[0]
+    t0, c0 = time.perf_counter(), time.process_time()
+    job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=0,
+                                max_evaluations=max_evaluations or D.FIT_EVALUATIONS))
+    r = job.run()
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    out = {"workload": "21 x 21 blender cloth, 4 cameras x 15 frames at 480 x 640, quality chosen, time offset and "
+                       "4 handle offsets estimated", "evaluations": r["evaluations"], "wall_s": wall, "cpu_s": cpu,
+           "load_1min_at_start": load, "target_s": 180.0, "ratio_to_target": wall / 180.0,
+           "quality_choice": r.get("quality_choice"), "stages": r.get("stages"),
+           "train_E_sil_pct": r["best_E_sil_mean_pct"], "floor": r.get("floor")}
+    echo(f"default fit (21 x 21, 4 cameras x 15 frames at 480 x 640, quality chosen, manipulation estimated; "
+         f"{r['evaluations']} evaluations): {wall:.0f} s wall, {cpu:.0f} s CPU (target 180 s, ratio "
+         f"{wall / 180.0:.2f}; 1-min load {load:.2f} at the start); quality "
+         f"{(r.get('quality_choice') or {}).get('chosen')}", flush=True)
+    return out
+
+
+def run_bench(json_path, quick=False, only_blender_workers=False, only_default_fit=False):
+    if only_default_fit:
+        out = {"default_fit": bench_default_fit(tempfile.mkdtemp(prefix="clothfit_bench_"))}
+        from ..safeio import atomic_json
+        atomic_json(json_path, out)
+        return out
     if only_blender_workers:
         out = {"blender_workers": bench_blender_workers(tempfile.mkdtemp(prefix="clothfit_bench_"))}
         from ..safeio import atomic_json

@@ -1,0 +1,165 @@
+"""A fit's errors beside the noise floor of its own images, and when far above it, why (issue 20).
+
+``report(job)`` (called once when a ``FitJob`` finishes) scores the best candidate on the training
+images and on held-out ones (the capture's cameras and frames the fit did not see: other cameras at
+other frames where both exist), and puts each beside the floor estimated from those images alone
+(``observation/floor.py``: no truth needed). A fit more than ``FLOOR_FAR_ABOVE`` times its floor says
+so, with the likely cause among those it can test by a few evaluations of the best settings:
+
+* **quality**: the ladder's error still fell at its highest rung, or (quality fixed) twice the
+  quality fits clearly better;
+* **time scale**: Blender's default Speed Multiplier 1 (a user scene not set to real time) fits
+  clearly better than the physical one;
+* **manipulation**: reading the capture half a frame earlier or later fits clearly better (the
+  release or the clock is off: declare ``uncertain``);
+* **model**: none of these: the cloth does not move like this simulator, or the observation has an
+  error the floor estimate cannot see (a segmenter's bias).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import defaults as D
+from ..errors import ClothFitError
+from ..observation.floor import capture_floor
+from ..physics import blender as B
+from .objective import SilhouetteObjective
+
+CLEARLY = D.QUALITY_CLEARLY_BETTER      # a probe "fits clearly better" below (1 - CLEARLY) x the best error
+
+
+def _heldout(job):
+    """(camera indices, frame indices) the fit did not see, or None."""
+    cap = job.capture
+    cams = [c for c in range(len(cap.cameras)) if c not in job.train_cameras]
+    frames = [f for f in range(cap.n_frames) if f not in job.train_frames]
+    if not cams and not frames:
+        return None
+    return (cams or list(job.train_cameras)), (frames or list(job.train_frames))
+
+
+def _objective(job, cams, fidx):
+    from .job import load_observed
+    cap = job.capture
+    times = [float(cap.frame_times[i]) for i in fidx]
+    sc = job.evaluator.scenario(times) if job.evaluator is not None else cap.scenario.with_frames(times)
+    cameras, observed, ignore = load_observed(cap, cams, fidx, job.config.resolution)
+    return SilhouetteObjective(sc, cameras, observed, backend=job.config.backend, model=job.objective.model,
+                               ignore=ignore)
+
+
+def _probes(job, x, f0):
+    """[(cause, what, error ratio to the best)] of the tests that apply to this fit."""
+    out = []
+    lad = job.ladder
+    if lad is not None and lad.tried and not lad.probe_only:
+        top = max(lad.tried)
+        if job.chosen_quality() == top and lad.next() is None and top < max(lad.rungs):
+            out.append(("quality", f"the error still fell at the highest quality tried ({top})", 0.0))
+    if lad is None and job.evaluator is None and getattr(job.par.model, "name", "") == "blender":
+        q = job.par.model.quality
+        from ..physics.models import BlenderModel
+        cameras, observed, ignore, names = job._images
+        obj = SilhouetteObjective(job.scenario, cameras, observed, backend=job.config.backend, names=names,
+                                  model=BlenderModel(job.par.model.fps, min(80, 2 * q), job.par.model.bending_model),
+                                  ignore=ignore)
+        f = float(job.evaluate(x[None], objective=obj)[0])
+        out.append(("quality", f"quality {min(80, 2 * q)} instead of {q}", f / f0))
+    if job.evaluator is None and getattr(job.par.model, "name", "") == "blender":
+        X = np.atleast_2d(x)
+        rows = job.par.rows(X[:, :job.npar])
+        k = B.FLOAT_SETTINGS.index("time_scale")
+        if abs(rows[0, k] - 1.0) > 1e-3:
+            rows[:, k] = 1.0
+            if job.manip is None:
+                f = float(job.objective(rows)[0])
+            else:
+                f = float(job.objective(rows, offsets=job.manip.offsets(X[:, job.npar:]))[0])
+            out.append(("time scale", "Blender's default Speed Multiplier 1 instead of the real-time one", f / f0))
+    if job.manip is None or "time_offset_s" not in job.manip.names:
+        ft = np.asarray(job.capture.frame_times, dtype=np.float64)
+        dt = float(np.median(np.diff(ft))) if ft.size > 1 else 1.0 / 24
+        from ..physics.scenario import Offsets
+        P = job.par.rows(np.atleast_2d(x)[:, :job.npar])
+        H = len(getattr(job.scenario, "handles", []))
+        if H and job.evaluator is None:
+            base = np.zeros((2, H, 3))
+            if job.manip is not None:
+                base[:] = job.manip.offsets(np.atleast_2d(x)[:, job.npar:]).handles[0]
+            off = Offsets(np.array([0.5 * dt, -0.5 * dt]), base)
+            f = job.objective(np.repeat(P, 2, 0), offsets=off)
+            out.append(("manipulation", f"the capture read half a frame ({1000 * 0.5 * dt:.0f} ms) earlier or later",
+                        float(np.min(f)) / f0))
+    return out
+
+
+def _still_improving(job):
+    """A description when the main search stopped on its budget while its best still fell by more
+    than ``CLEARLY`` over its last fifth, else None."""
+    rec = [r for r in job.records if r["stage"] == "search"]
+    if not rec or rec[0]["stop"] != "budget":
+        return None
+    n = rec[0]["evaluations"]
+    hist = [(e, f) for e, f in job.history_prev if e <= n and f is not None]
+    if len(hist) < 2:
+        return None
+    before = [f for e, f in hist if e <= 0.8 * n]
+    if not before:
+        return None
+    if hist[-1][1] < (1.0 - CLEARLY) * before[-1]:
+        return (f"the search stopped on its budget ({n} evaluations) with its error still falling "
+                f"({100 * (1 - hist[-1][1] / before[-1]):.0f} % over its last fifth): a larger --max-evaluations")
+    return None
+
+
+def report(job) -> dict:
+    """The result's ``floor`` block (see the module's text)."""
+    x = job.best_x
+    if x is None:
+        raise ClothFitError("no candidate to report on")
+    cap, res = job.capture, job.config.resolution
+    n = job.objective.n_images
+    f0 = float(job.best_error)
+    tf = capture_floor(cap, job.train_cameras, job.train_frames, res)
+    d = {"train_E_sil_pct": 100.0 * f0 / n, "train_floor_pct": 100.0 * tf.floor,
+         "threshold": D.FLOOR_FAR_ABOVE, "floor_basis": tf.basis, "floor_limits": tf.limits}
+    d["train_ratio"] = d["train_E_sil_pct"] / d["train_floor_pct"] if tf.floor > 0 else None
+    ho = _heldout(job)
+    if ho is not None:
+        cams, fidx = ho
+        try:
+            obj = _objective(job, cams, fidx)
+            e = float(job.evaluate(x[None], objective=obj)[0]) / obj.n_images
+            hf = capture_floor(cap, cams, fidx, res)
+            d.update(heldout_cameras=[cap.cameras[c].name for c in cams], heldout_n_frames=len(fidx),
+                     heldout_E_sil_pct=100.0 * e if np.isfinite(e) else None, heldout_floor_pct=100.0 * hf.floor)
+            d["heldout_ratio"] = (d["heldout_E_sil_pct"] / d["heldout_floor_pct"]
+                                  if hf.floor > 0 and d["heldout_E_sil_pct"] is not None else None)
+        except ClothFitError as err:
+            d["heldout_error"] = str(err)
+    ratios = [r for r in (d.get("train_ratio"), d.get("heldout_ratio")) if r is not None]
+    d["far_above"] = bool(ratios) and max(ratios) > D.FLOOR_FAR_ABOVE
+    d["likely_cause"] = None
+    d["warning"] = None
+    if d["far_above"]:
+        probes = _probes(job, x, f0) if np.isfinite(f0) and f0 > 0 else []
+        d["probes"] = [{"cause": c, "tried": w, "error_ratio": r} for c, w, r in probes]
+        hits = sorted((r, c, w) for c, w, r in probes if r < 1.0 - CLEARLY)
+        still = _still_improving(job)
+        if not hits and still:
+            hits = [(0.0, "search", still)]
+        if hits:
+            d["likely_cause"] = f"{hits[0][1]} ({hits[0][2]}: error x{hits[0][0]:.2f})" if hits[0][0] > 0 else \
+                f"{hits[0][1]} ({hits[0][2]})"
+        else:
+            d["likely_cause"] = ("model: the cloth does not move like this simulator at any settings tried, or the "
+                                 "silhouettes carry an error the floor cannot see (a segmenter's bias; tested: "
+                                 + ", ".join(sorted({c for c, _, _ in probes})) + ")" if probes else
+                                 "model: the cloth does not move like this simulator (nothing else testable)")
+        worst = max(ratios)
+        d["warning"] = (f"the fit ends {worst:.1f}x above its images' noise floor (training {d['train_E_sil_pct']:.2f} % "
+                        f"against {d['train_floor_pct']:.2f} %" +
+                        (f"; held-out {d['heldout_E_sil_pct']:.2f} % against {d['heldout_floor_pct']:.2f} %"
+                         if d.get("heldout_E_sil_pct") is not None else "") +
+                        f"): likely cause: {d['likely_cause']}")
+    return d
