@@ -211,7 +211,8 @@ SOURCES = {
         "what": "the same, seed 102"},
     "phone_rig_e2e": {
         "argv": ["{py}", "tools/phone_rig.py", "e2e", "--out", "out/phone_rig/e2e_s7", "--seed", "7", "--scale", "0.3",
-                 "--poses", "10", "--frames", "15", "--samples", "4", "--evals", "300", "--json", "{out}"],
+                 "--poses", "10", "--frames", "15", "--samples", "4", "--evals", "300", "--uncertain-evals", "600",
+                 "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 18 end to end: phones -> calibrate, handles, extract, fit, export-blender-cloth on Cycles "
                 "renders, against the same fit given the true cameras and manipulation"},
