@@ -205,10 +205,6 @@ SOURCES = {
                  "--scale", "0.375", "--poses", "14", "--samples", "4", "--json", "{out}"], "cost": "expensive",
         "what": "issue 18: clothfit calibrate on Cycles renders of a ChArUco board before 4 phones (seed 101), against "
                 "the true cameras"},
-    "phone_rig_calib_s102": {
-        "argv": ["{py}", "tools/phone_rig.py", "calibrate", "--out", "out/phone_rig/calib_s102", "--seed", "102",
-                 "--scale", "0.375", "--poses", "14", "--samples", "4", "--json", "{out}"], "cost": "expensive",
-        "what": "the same, seed 102"},
     "phone_rig_e2e": {
         "argv": ["{py}", "tools/phone_rig.py", "e2e", "--out", "out/phone_rig/e2e_s7", "--seed", "7", "--scale", "0.3",
                  "--poses", "10", "--frames", "15", "--samples", "4", "--evals", "300", "--uncertain-evals", "600",
