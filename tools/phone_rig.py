@@ -774,7 +774,13 @@ def run_e2e(a) -> dict:
     return out
 
 
-def make_pictures(out: str, dest: str, cams=("phone0", "phone2"), frames=(0, -1), width=220) -> list:
+def _small_png(path, img):
+    """A PNG of few colours (pictures for the docs: tens of kB, not hundreds)."""
+    from PIL import Image
+    Image.fromarray(img[:, :, ::-1]).quantize(96, dither=Image.Dither.NONE).save(path, optimize=True)
+
+
+def make_pictures(out: str, dest: str, cams=("phone0", "phone2"), frames=(0, -1), width=200) -> list:
     """Small PNGs of a run for the tutorial (docs/img): the board's detected corners (flat, held up), and two
     phones' frames with the clicks (frame 0) and the extracted silhouette's outline."""
     import cv2
@@ -788,7 +794,7 @@ def make_pictures(out: str, dest: str, cams=("phone0", "phone2"), frames=(0, -1)
     shots = sorted(os.listdir(dbg))
     tiles = [small(cv2.imread(os.path.join(dbg, f))) for f in (shots[0], shots[len(shots) // 2])]
     path = os.path.join(dest, "phone_rig_board.png")
-    cv2.imwrite(path, np.concatenate(tiles, 1))
+    _small_png(path, np.concatenate(tiles, 1))
     written.append(path)
     with open(os.path.join(out, "marks.json")) as f:
         marks = json.load(f)
@@ -809,7 +815,7 @@ def make_pictures(out: str, dest: str, cams=("phone0", "phone2"), frames=(0, -1)
                                (255, 160, 0), 2)
             tiles.append(small(img))
     path = os.path.join(dest, "phone_rig_footage.png")
-    cv2.imwrite(path, np.concatenate(tiles, 1))
+    _small_png(path, np.concatenate(tiles, 1))
     written.append(path)
     return written
 
