@@ -133,7 +133,8 @@ def test_fit_on_local_ray_writes_the_result_and_leaves_no_process(ray_fit):
     assert r.returncode == 0, r.stderr[-2000:]
     res = json.load(open(out))
     assert res["backend"] == "blender" and res["executor"] == "ray" and res["workers"] == 2
-    assert res["evaluations"] == BUDGET and res["blender_evaluations"] == BUDGET and res["seconds"] > 0
+    # the scene's own settings first (the fit never answers worse than them), then two generations of 6
+    assert res["evaluations"] == BUDGET + 1 and res["blender_evaluations"] == BUDGET + 1 and res["seconds"] > 0
     assert res["scene"]["colliders"] == ["Table"] and res["scene"]["object"] == "Cloth"
     assert set(res["blender_cloth"]) >= {"tension_stiffness", "mass", "time_scale", "quality"}
     assert res["best_E_all"] is not None
@@ -199,7 +200,7 @@ def test_fit_and_fit_many_on_a_running_cluster_by_address(scene, ray_fit, tmp_pa
                              capture_output=True, text=True, timeout=600)
         assert fit.returncode == 0, fit.stderr[-2000:]
         res = json.load(open(out))
-        assert res["executor"] == "ray" and res["evaluations"] == BUDGET
+        assert res["executor"] == "ray" and res["evaluations"] == BUDGET + 1      # + the scene's own settings
         ray_res = json.load(open(ray_fit[1]))
         assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
         assert _procs_with(tmp), "the fit must leave the user's cluster running"
@@ -266,7 +267,7 @@ def test_worker_killed_mid_fit_is_restarted_and_its_candidates_evaluated_again(s
     else:
         assert d["pids"][1] not in d["after"]              # a new pool
     res = d["res"]
-    assert res["evaluations"] == BUDGET and res["blender_evaluations"] == BUDGET
+    assert res["evaluations"] == BUDGET + 1 and res["blender_evaluations"] == BUDGET + 1   # + the scene's own
     ray_res = json.load(open(ray_fit[1]))
     assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
     assert _procs_with(tmp) == []
@@ -321,7 +322,9 @@ def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_se
     cs = obj.modifiers["Cloth (Cloth Fit)"].settings
     for k in ("tension_stiffness", "bending_stiffness", "air_damping", "time_scale"):
         assert getattr(cs, k) == pytest.approx(res["blender_cloth"][k], rel=1e-6)
-    assert cs.tension_stiffness != before
+    # six candidates may find nothing better than the scene's own settings: then those are the answer
+    assert res["best_E_sil_mean_pct"] <= res["start_E_sil_mean_pct"]
+    assert (cs.tension_stiffness != before) == (res["best_E_sil_mean_pct"] < res["start_E_sil_mean_pct"])
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 

@@ -102,7 +102,9 @@ def test_fitjob_runs_over_a_model_like_evaluator(cap):
     job = FitJob(cap, FitConfig(evaluator="blender", max_evaluations=12, population=6, seed=1), evaluator=ev)
     res = job.run()
     assert res["backend"] == "blender" and res["raster_backend"] in ("numba", "numpy")
-    assert res["evaluations"] == 12 and res["blender_evaluations"] == 12 and res["seconds"] >= 0
+    # the scene's own settings first, then two generations of 6
+    assert res["evaluations"] == 13 and res["blender_evaluations"] == 13 and res["seconds"] >= 0
+    assert res["best_E_sil_mean_pct"] <= res["start_E_sil_mean_pct"]
     assert res["blender_cloth"]["time_scale"] == 1.25
 
 

@@ -74,6 +74,21 @@ SOURCES = {
         "argv": ["{py}", "tools/optimiser_ab.py", "all", "0-5", "--json", "{out}"], "cost": "expensive",
         "what": "our CMA-ES plain / active against the cma package, cotton capture of the cross-simulator, seeds 0-5 "
                 "(needs tools/cross_simulator.py observe --out out/cross2)"},
+    "search_landscape": {
+        "argv": ["{py}", "tools/search_ab.py", "synth:default", "--landscape", "{out}", "--local", "0.05"],
+        "cost": "expensive",
+        "what": "issue 20 item 3: the exact-model capture's truth perturbed group by group (train and held-out "
+                "error), and a CMA-ES run started 5 % from the truth (about 2 CPU min)"},
+    "search_tune": {
+        "argv": ["{py}", "tools/search_ab.py", "--summary", "docs/figures/search_tune_rows.jsonl", "--json-summary",
+                 "{out}"], "cost": "cheap", "rtol": 0,
+        "what": "issue 20 item 3: the strategies tried on the tuning capture (rows written by tools/search_ab.py)"},
+    "search_ab": {
+        "argv": ["{py}", "tools/search_ab.py", "synth:fresh", "--strategies", "baseline,active32", "--seeds", "0-9",
+                 "--reuse", "docs/figures/search_ab_rows.jsonl", "--json-summary", "{out}"], "cost": "expensive",
+        "what": "issue 20 item 3: search strategies on a fresh exact-model capture (blender model, lab18, 240 x 320, "
+                "5 % noise, tension 25 shear 8), held-out error over the floor, seeds 0-9: the fits are taken from the "
+                "rows file where present (deterministic), else run (about 2 CPU min each)"},
     "blender_scene_warm": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_warm", "--release", "corner",
                  "--drop", "0.07", "--after", "0.75", "--every", "1", "--warm"],

@@ -12,8 +12,10 @@ so, with the likely cause among those it can test by a few evaluations of the be
   clearly better than the physical one;
 * **manipulation**: reading the capture half a frame earlier or later fits clearly better (the
   release or the clock is off: declare ``uncertain``);
-* **model**: none of these: the cloth does not move like this simulator, or the observation has an
-  error the floor estimate cannot see (a segmenter's bias).
+* **search**: it stopped on its budget with its error still falling over its last fifth;
+* none of these: the search stopped in a local minimum, the cloth does not move like this
+  simulator, or the observation has an error the floor estimate cannot see (a segmenter's bias):
+  the result says which were tested and that it cannot tell these apart.
 """
 from __future__ import annotations
 
@@ -152,10 +154,10 @@ def report(job) -> dict:
             d["likely_cause"] = f"{hits[0][1]} ({hits[0][2]}: error x{hits[0][0]:.2f})" if hits[0][0] > 0 else \
                 f"{hits[0][1]} ({hits[0][2]})"
         else:
-            d["likely_cause"] = ("model: the cloth does not move like this simulator at any settings tried, or the "
-                                 "silhouettes carry an error the floor cannot see (a segmenter's bias; tested: "
-                                 + ", ".join(sorted({c for c, _, _ in probes})) + ")" if probes else
-                                 "model: the cloth does not move like this simulator (nothing else testable)")
+            d["likely_cause"] = ("none of those tested (" + ", ".join(sorted({c for c, _, _ in probes} | {"search"}))
+                                 + "): the search may have stopped in a local minimum (another --seed, a larger "
+                                 "--max-evaluations), the cloth may not move like this simulator, or the silhouettes "
+                                 "carry an error the floor cannot see (a segmenter's bias)")
         worst = max(ratios)
         d["warning"] = (f"the fit ends {worst:.1f}x above its images' noise floor (training {d['train_E_sil_pct']:.2f} % "
                         f"against {d['train_floor_pct']:.2f} %" +

@@ -63,6 +63,15 @@ With ``restarts = R > 0`` (IPOP-CMA-ES, Auger & Hansen 2005) a run that stops is
 new one from a uniformly random mean with twice the population, up to ``R`` times; the best
 over all runs is kept. ``stopped`` is True once the last run has ended.
 
+Portfolio and coordinate polish
+-------------------------------
+:class:`CMAPortfolio` ("cma-portfolio") spends a known ``budget`` on several :class:`CMAES` runs:
+successive halving among ``runs`` runs, the best continued, then polishes from the best point
+(active CMA-ES or :class:`CoordinatePolish`). :class:`CoordinatePolish` ("coord-polish") is a
+batch coordinate pattern search with a step per coordinate. Both keep the same ask/tell and
+exact-resume contract (docs/search.md has what they were measured to do: neither beat plain
+IPOP CMA-ES on the exact-model captures).
+
 SPX + MGG stops when its population has collapsed (spread below ``tolx`` in every unit-cube
 coordinate) or when the best value has not improved by more than ``tolfun`` during the last
 ``stall_evaluations`` evaluations (both off unless set).
@@ -975,11 +984,413 @@ class CMAES(Optimizer):
         return opt
 
 
+# --------------------------------------------------------------------------- coordinate polish
+
+class CoordinatePolish(Optimizer):
+    """A batch coordinate pattern search from one point, with a step per coordinate.
+
+    Each generation asks ``2 n`` probes ``x +- s_i e_i`` (reflected into the unit cube), plus the
+    *pattern* probe (the last generation's improving coordinate moves all at once) when there is
+    one. ``tell`` moves ``x`` to the best probe if it beats ``f(x)``; a coordinate whose probe
+    beat ``f(x)`` doubles its step (up to ``max_step``), the others halve it. So a coordinate on a
+    knife edge soon takes tiny steps while a flat, weakly identified one keeps large ones: what a
+    single CMA-ES step size cannot do before its covariance has learnt the scales. Deterministic (no
+    random numbers); stops (``tolx``) when every step is below ``tolx``.
+    """
+
+    name = "coord-polish"
+
+    def __init__(self, space: SearchSpace, seed=None, initial=None, f0=None, step: float = 0.05,
+                 max_step: float = 0.3, tolx: float = 1e-11):
+        super().__init__(space, seed, initial)
+        self.step0 = _unit_step(step, "coord-polish: step")
+        self.max_step = _unit_step(max_step, "coord-polish: max_step")
+        self.tolx = _nonneg(tolx, "coord-polish: tolx")
+        n = space.n
+        self.x = self._initial_u[0].copy() if len(self._initial_u) else np.full(n, 0.5)
+        self.fx = math.inf if f0 is None else float(f0)
+        if not (self.fx == math.inf or math.isfinite(self.fx)):
+            raise ClothFitError(f"coord-polish: f0 must be a number, got {f0!r}")
+        if math.isfinite(self.fx):
+            self.best_f, self._best_u = self.fx, self.x.copy()
+        self.steps = np.full(n, self.step0)
+        self.pattern = None            # the next pattern probe (unit cube), or None
+        self._pending = None
+        self.stop_reason = None
+        self._stopped = False
+
+    @property
+    def stopped(self) -> bool:
+        return self._stopped
+
+    def _probes(self):
+        n = self.space.n
+        P = np.repeat(self.x[None], 2 * n + (0 if math.isfinite(self.fx) else 1), axis=0)
+        for i in range(n):
+            P[2 * i, i] += self.steps[i]
+            P[2 * i + 1, i] -= self.steps[i]
+        if self.pattern is not None:
+            P = np.vstack([P, self.pattern[None]])
+        return reflect_unit(P)
+
+    def ask(self) -> np.ndarray:
+        if self._pending is None:
+            self._pending = self._probes()
+        return self.space.decode(self._pending)
+
+    def tell(self, X, f) -> None:
+        P = self._pending
+        self._check_told(X, P)
+        f = sanitize_fitness(f, len(P))
+        n = self.space.n
+        if not math.isfinite(self.fx):
+            self.fx = float(f[2 * n])                 # x itself was evaluated (no f0 given)
+        better = np.array([min(f[2 * i], f[2 * i + 1]) < self.fx for i in range(n)])
+        move = np.zeros(n)
+        for i in np.nonzero(better)[0]:
+            j = 2 * i if f[2 * i] <= f[2 * i + 1] else 2 * i + 1
+            move[i] = P[j, i] - self.x[i]
+        self.steps = np.where(better, np.minimum(2 * self.steps, self.max_step), 0.5 * self.steps)
+        k = int(np.argmin(f))
+        old = self.x.copy()
+        if f[k] < self.fx:
+            self.x, self.fx = P[k].copy(), float(f[k])
+        self.pattern = reflect_unit(old + move) if better.sum() >= 2 else None
+        self._pending = None
+        self._record(P, f)
+        if np.all(self.steps < self.tolx):
+            self._stopped, self.stop_reason = True, "tolx"
+
+    STATE_KEYS = ("step0", "max_step", "tolx", "x", "fx", "steps", "pattern", "pending", "stop_reason", "stopped",
+                  "initial_u")
+
+    def state_dict(self) -> dict:
+        d = self._base_state()
+        d.update({"step0": self.step0, "max_step": self.max_step, "tolx": self.tolx, "x": self.x.tolist(),
+                  "fx": _float_to_json(self.fx), "steps": self.steps.tolist(),
+                  "pattern": None if self.pattern is None else self.pattern.tolist(),
+                  "pending": None if self._pending is None else self._pending.tolist(),
+                  "stop_reason": self.stop_reason, "stopped": self._stopped, "initial_u": self._initial_u.tolist()})
+        return d
+
+    @classmethod
+    def from_state(cls, d: dict) -> "CoordinatePolish":
+        w = cls.name
+        space = cls._check_state(d, w, cls.STATE_KEYS)
+        n = space.n
+        opt = cls(space, seed=d["seed"], step=_num(d, "step0", w, float), max_step=_num(d, "max_step", w, float),
+                  tolx=_num(d, "tolx", w, float, 0.0))
+        opt._load_base(d)
+        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        opt.x = _array(d, "x", w, (n,))
+        if opt.x.min() < 0 or opt.x.max() > 1:
+            raise ClothFitError(f"checkpoint: {w} 'x' must lie in the unit cube")
+        opt.fx = _float_from_json(_num(d, "fx", w, float, allow_none=True))
+        opt.steps = _array(d, "steps", w, (n,))
+        if opt.steps.min() < 0 or opt.steps.max() > opt.max_step:
+            raise ClothFitError(f"checkpoint: {w} 'steps' must lie in [0, max_step]")
+        opt.pattern = _array(d, "pattern", w, (n,), allow_none=True)
+        opt._pending = _array(d, "pending", w, (None, n), allow_none=True)
+        if opt._pending is not None and (opt._pending.min() < 0 or opt._pending.max() > 1):
+            raise ClothFitError(f"checkpoint: {w} 'pending' must lie in the unit cube")
+        opt.stop_reason = _stop_reason(d, w, ("tolx",))
+        st = _field(d, "stopped", w)
+        if not isinstance(st, bool):
+            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
+        opt._stopped = st
+        return opt
+
+
+# --------------------------------------------------------------------------- CMA-ES portfolio
+
+PORTFOLIO_PHASES = ("explore", "refine", "polish")
+PORTFOLIO_STOPS = CMA_STOPS + ("polishes",)
+PORTFOLIO_POLISH = ("cma", "coord")
+
+
+class CMAPortfolio(Optimizer):
+    """A portfolio of CMA-ES runs for a budget: successive halving, the winner continued, polishes.
+
+    * ``explore`` (``explore`` x ``budget`` evaluations): ``runs`` CMA-ES runs (population
+      ``popsize``, step ``sigma0``), the first from the centre (or the mean of ``initial``), the
+      others from uniformly random means, take generations in turn (the run with the fewest
+      evaluations next). The exploration is cut into ``ceil(log2 runs) + 1`` rounds of equal
+      evaluations; after each round but the last, the better half of the runs (by their best
+      value) go on and the others are dropped (successive halving). A run that stops by its
+      own criteria simply stops taking evaluations.
+    * ``refine``: the best run left goes on until it stops by its own criteria.
+    * ``polish``: new CMA-ES runs (active, step ``polish_sigma``, population ``popsize``) from the
+      best point found so far, one after the other, each until it stops; after
+      ``max_polishes`` of them the portfolio stops (``stop_reason`` "polishes").
+
+    Every run is this module's :class:`CMAES` (``restarts=0``), seeded from the portfolio's own
+    generator, so a seed reproduces a run; ``state_dict`` holds the runs' own states and the
+    schedule, and resumes exactly. ``budget`` only shapes the schedule: the caller still
+    decides when to stop asking (``run(fn, budget)``).
+    """
+
+    name = "cma-portfolio"
+
+    def __init__(self, space: SearchSpace, seed=None, initial=None, popsize=None, sigma0: float = 0.3,
+                 tolx: float = 1e-11, tolfun: float = 1e-11, active: bool = True, runs: int = 4,
+                 explore: float = 0.5, budget: int | None = None, polish_sigma: float = 0.05,
+                 max_polishes: int = 20, polish: str = "cma", refine_until: float = 1.0):
+        super().__init__(space, seed, initial)
+        if polish not in PORTFOLIO_POLISH:
+            raise ClothFitError(f"cma-portfolio: polish must be one of {list(PORTFOLIO_POLISH)}, got {polish!r}")
+        self.polish = polish
+        self.refine_until = _fraction(refine_until, "cma-portfolio: refine_until")
+        self.popsize = _pos_int(D.CMA_POPSIZE if popsize is None else popsize, "cma-portfolio: popsize")
+        if self.popsize < 2:
+            raise ClothFitError(f"cma-portfolio: popsize must be >= 2, got {self.popsize}")
+        self.sigma0 = _unit_step(sigma0, "cma-portfolio: sigma0")
+        self.polish_sigma = _unit_step(polish_sigma, "cma-portfolio: polish_sigma")
+        self.tolx = _nonneg(tolx, "cma-portfolio: tolx")
+        self.tolfun = _nonneg(tolfun, "cma-portfolio: tolfun")
+        if not isinstance(active, (bool, np.bool_)):
+            raise ClothFitError(f"cma-portfolio: active must be true or false, got {active!r}")
+        self.active = bool(active)
+        self.runs = _pos_int(runs, "cma-portfolio: runs")
+        if self.runs > 64:
+            raise ClothFitError(f"cma-portfolio: runs must be at most 64, got {runs}")
+        try:
+            self.explore = float(explore)
+        except (TypeError, ValueError):
+            raise ClothFitError(f"cma-portfolio: explore must be a fraction in [0, 1], got {explore!r}") from None
+        if not (math.isfinite(self.explore) and 0.0 <= self.explore <= 1.0):
+            raise ClothFitError(f"cma-portfolio: explore must be a fraction in [0, 1], got {explore!r}")
+        self.budget = _pos_int(D.FIT_EVALUATIONS if budget is None else budget, "cma-portfolio: budget")
+        self.max_polishes = _pos_int(max_polishes, "cma-portfolio: max_polishes")
+        self.n_rounds = int(math.ceil(math.log2(self.runs))) + 1
+        self.phase = "explore"
+        self.round = 0
+        self.round_spent = 0
+        self.polishes = 0
+        self.stop_reason = None
+        self.run_stops = []
+        self._stopped = False
+        self._current = None           # the run whose batch is pending (between ask and tell)
+        n = space.n
+        x0 = self._initial_u.mean(axis=0) if len(self._initial_u) else np.full(n, 0.5)
+        starts = [x0] + [self.rng.random(n) for _ in range(self.runs - 1)]
+        self.children = []
+        for i, u in enumerate(starts):
+            init = self.space.decode(self._initial_u) if (i == 0 and len(self._initial_u)) else None
+            c = self._child(self.sigma0, self.active, init)
+            if i > 0:
+                c._start_run(u, c.popsize)
+            self.children.append(c)
+        self.alive = list(range(self.runs))
+        self._advance()
+
+    def _child(self, sigma, active, initial=None):
+        s = int(self.rng.integers(0, 2 ** 63 - 1))
+        return CMAES(self.space, seed=s, initial=initial, popsize=self.popsize, sigma0=sigma, restarts=0,
+                     tolx=self.tolx, tolfun=self.tolfun, active=active)
+
+    @property
+    def round_budget(self) -> float:
+        return self.explore * self.budget / self.n_rounds
+
+    @property
+    def stopped(self) -> bool:
+        return self._stopped
+
+    @property
+    def run_popsize(self) -> int:
+        return self.popsize
+
+    def phase_info(self) -> str:
+        return f"{self.phase} round {self.round} alive {self.alive} polishes {self.polishes}"
+
+    def _next(self):
+        """The run to ask next (None once stopped)."""
+        if self.phase == "explore":
+            live = [i for i in self.alive if not self.children[i].stopped]
+            return min(live, key=lambda i: (self.children[i].evaluations, i))
+        return len(self.children) - 1 if self.phase == "polish" else self.alive[0]
+
+    def _advance(self):
+        """Move the schedule on after a tell (or at the start): rounds, halving, phases."""
+        while not self._stopped:
+            if self.phase == "explore":
+                live = [i for i in self.alive if not self.children[i].stopped]
+                if live and self.round_spent < self.round_budget:
+                    return
+                if self.round < self.n_rounds - 1 and len(self.alive) > 1:
+                    keep = sorted(self.alive, key=lambda i: (self.children[i].best_f, i))
+                    keep = keep[:int(math.ceil(len(keep) / 2))]
+                    for i in self.alive:
+                        if i not in keep:
+                            self.children[i] = None          # dropped: its state is no longer kept
+                    self.alive = sorted(keep, key=lambda i: (self.children[i].best_f, i))
+                    self.round += 1
+                    self.round_spent = 0
+                    continue
+                self.alive = sorted(self.alive, key=lambda i: (self.children[i].best_f, i))[:1]
+                self.phase = "refine"
+                continue
+            last = self.children[self._next()]
+            cut = self.phase == "refine" and self.evaluations >= self.refine_until * self.budget
+            if not last.stopped and not cut:
+                return
+            if self.phase == "polish" and self.polishes >= self.max_polishes:
+                self._stopped = True
+                self.stop_reason = "polishes"
+                return
+            self.phase = "polish"
+            self.polishes += 1
+            u = self._best_u if self._best_u is not None else np.full(self.space.n, 0.5)
+            if self.polish == "coord":
+                c = CoordinatePolish(self.space, initial=[self.space.decode(u)], step=self.polish_sigma,
+                                     f0=self.best_f if self._best_u is not None else None, tolx=self.tolx)
+                c.x = u.copy()                    # exactly the best point (decode/encode may round)
+                if self._best_u is not None:
+                    c._best_u = u.copy()
+            else:
+                c = self._child(self.polish_sigma, True)
+                c._start_run(u, c.popsize)
+            self.children.append(c)
+
+    def ask(self) -> np.ndarray:
+        if self._stopped:
+            raise ClothFitError("cma-portfolio: ask() after the portfolio has stopped")
+        if self._current is None:
+            self._current = self._next()
+        return self.children[self._current].ask()
+
+    def tell(self, X, f) -> None:
+        if self._current is None:
+            raise ClothFitError("tell() called without a pending ask()")
+        c = self.children[self._current]
+        U = None if c._pending is None else reflect_unit(c._pending)
+        self._check_told(X, U)
+        f = sanitize_fitness(f, len(U))
+        c.tell(X, f)
+        self._record(U, f)
+        if c.stopped:
+            self.run_stops.append(c.stop_reason)
+            del self.run_stops[:-100]
+            self.stop_reason = c.stop_reason
+        if self.phase == "explore":
+            self.round_spent += len(f)
+        self._current = None
+        self._advance()
+
+    STATE_KEYS = ("popsize", "sigma0", "polish_sigma", "tolx", "tolfun", "active", "runs", "explore", "budget",
+                  "max_polishes", "polish", "refine_until", "phase", "round", "round_spent", "polishes", "stop_reason", "run_stops",
+                  "stopped", "current", "alive", "children", "rng", "initial_u")
+
+    def state_dict(self) -> dict:
+        d = self._base_state()
+        d.update({"popsize": self.popsize, "sigma0": self.sigma0, "polish_sigma": self.polish_sigma,
+                  "tolx": self.tolx, "tolfun": self.tolfun, "active": self.active, "runs": self.runs,
+                  "explore": self.explore, "budget": self.budget, "max_polishes": self.max_polishes,
+                  "polish": self.polish, "refine_until": self.refine_until,
+                  "phase": self.phase, "round": self.round, "round_spent": self.round_spent,
+                  "polishes": self.polishes, "stop_reason": self.stop_reason, "run_stops": list(self.run_stops),
+                  "stopped": self._stopped, "current": self._current, "alive": list(self.alive),
+                  "children": [None if c is None else c.state_dict() for c in self.children],
+                  "rng": self.rng.bit_generator.state, "initial_u": self._initial_u.tolist()})
+        return d
+
+    @classmethod
+    def from_state(cls, d: dict) -> "CMAPortfolio":
+        w = cls.name
+        space = cls._check_state(d, w, cls.STATE_KEYS)
+        n = space.n
+        opt = cls.__new__(cls)
+        Optimizer.__init__(opt, space, d["seed"], None)
+        opt.popsize = _num(d, "popsize", w, int, 2, 10 ** 6)
+        opt.sigma0 = _unit_step(_num(d, "sigma0", w, float), f"checkpoint: {w} 'sigma0'")
+        opt.polish_sigma = _unit_step(_num(d, "polish_sigma", w, float), f"checkpoint: {w} 'polish_sigma'")
+        opt.tolx = _num(d, "tolx", w, float, 0.0)
+        opt.tolfun = _num(d, "tolfun", w, float, 0.0)
+        opt.active = _active(d, w)
+        opt.runs = _num(d, "runs", w, int, 1, 64)
+        opt.explore = _num(d, "explore", w, float, 0.0, 1.0)
+        opt.budget = _num(d, "budget", w, int, 1, 10 ** 12)
+        opt.max_polishes = _num(d, "max_polishes", w, int, 1, 10 ** 6)
+        opt.polish = _field(d, "polish", w)
+        if opt.polish not in PORTFOLIO_POLISH:
+            raise ClothFitError(f"checkpoint: {w} 'polish' must be one of {list(PORTFOLIO_POLISH)}")
+        opt.refine_until = _num(d, "refine_until", w, float, 0.0, 1.0)
+        opt.n_rounds = int(math.ceil(math.log2(opt.runs))) + 1
+        opt._load_base(d)
+        opt.phase = _field(d, "phase", w)
+        if opt.phase not in PORTFOLIO_PHASES:
+            raise ClothFitError(f"checkpoint: {w} 'phase' must be one of {list(PORTFOLIO_PHASES)}")
+        opt.round = _num(d, "round", w, int, 0, opt.n_rounds - 1)
+        opt.round_spent = _num(d, "round_spent", w, int, 0, 10 ** 12)
+        opt.polishes = _num(d, "polishes", w, int, 0, opt.max_polishes)
+        opt.stop_reason = _stop_reason(d, w, PORTFOLIO_STOPS)
+        rs = _field(d, "run_stops", w)
+        if not isinstance(rs, list) or len(rs) > 100 or any(r not in CMA_STOPS for r in rs):
+            raise ClothFitError(f"checkpoint: {w} 'run_stops' must be a list of stop criteria")
+        opt.run_stops = list(rs)
+        st = _field(d, "stopped", w)
+        if not isinstance(st, bool):
+            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
+        opt._stopped = st
+        kids = _field(d, "children", w)
+        if not isinstance(kids, list) or not opt.runs <= len(kids) <= opt.runs + opt.max_polishes:
+            raise ClothFitError(f"checkpoint: {w} 'children' must be a list of CMA-ES states")
+        opt.children = []
+        for k in kids:
+            if k is None:
+                opt.children.append(None)
+                continue
+            polish_child = len(opt.children) >= opt.runs and opt.polish == "coord"
+            if not isinstance(k, dict) or k.get("algorithm") != ("coord-polish" if polish_child else "cma-es"):
+                raise ClothFitError(f"checkpoint: {w} 'children' hold a state of the wrong algorithm")
+            c = (CoordinatePolish if polish_child else CMAES).from_state(k)
+            if c.space.state_dict() != space.state_dict() or (
+                    not polish_child and (c.popsize != opt.popsize or c.restarts != 0)):
+                raise ClothFitError(f"checkpoint: {w} 'children' hold a run of another space or population")
+            opt.children.append(c)
+        al = _field(d, "alive", w)
+        if (not isinstance(al, list) or not al or len(set(al)) != len(al)
+                or any(isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(opt.children)
+                       or opt.children[i] is None for i in al)):
+            raise ClothFitError(f"checkpoint: {w} 'alive' must list kept runs")
+        opt.alive = list(al)
+        cur = _field(d, "current", w)
+        if cur is not None and (isinstance(cur, bool) or not isinstance(cur, int) or not 0 <= cur < len(opt.children)
+                                or opt.children[cur] is None or opt.children[cur]._pending is None):
+            raise ClothFitError(f"checkpoint: {w} 'current' must be a run with a pending batch, or null")
+        opt._current = cur
+        opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
+        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        return opt
+
+
+def _fraction(v, what):
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{what} must be a fraction in [0, 1], got {v!r}") from None
+    if not (math.isfinite(x) and 0.0 <= x <= 1.0):
+        raise ClothFitError(f"{what} must be a fraction in [0, 1], got {v!r}")
+    return x
+
+
+def _unit_step(v, what):
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{what} must be a positive number (unit cube), got {v!r}") from None
+    if not (math.isfinite(x) and 0 < x <= 10):
+        raise ClothFitError(f"{what} must be a positive number (unit cube), got {v!r}")
+    return x
+
+
 # --------------------------------------------------------------------------- factory
 
-OPTIMIZERS = {"spx-mgg": SPXMGG, "cma-es": CMAES}
+OPTIMIZERS = {"spx-mgg": SPXMGG, "cma-es": CMAES, "cma-portfolio": CMAPortfolio, "coord-polish": CoordinatePolish}
 ALIASES = {"spx-mgg": "spx-mgg", "spx_mgg": "spx-mgg", "ga": "spx-mgg", "spxmgg": "spx-mgg",
-           "cma-es": "cma-es", "cma": "cma-es", "cma_es": "cma-es", "cmaes": "cma-es"}
+           "cma-es": "cma-es", "cma": "cma-es", "cma_es": "cma-es", "cmaes": "cma-es",
+           "cma-portfolio": "cma-portfolio", "cma_portfolio": "cma-portfolio", "portfolio": "cma-portfolio",
+           "coord-polish": "coord-polish", "coord_polish": "coord-polish"}
 
 
 def canonical_name(name: str) -> str:
