@@ -1048,7 +1048,7 @@ def build_parser():
     s.add_argument("footage", nargs="?", help="footage folder: <camera>/ frames (background* files skipped), optional "
                                               "footage.json (or --videos)")
     s.add_argument("--marks", required=True, help="marks JSON: per handle its pixel in >= 2 cameras at one frame, "
-                                                  "'at' on the cloth, motion, released (docs/phone_handles.md)")
+                                                  "'at' on the cloth, motion, released (docs/phone_rig.md, step 6)")
     s.add_argument("--size", required=True, help="the cloth's measured size WIDTHxHEIGHT [m], e.g. 0.30x0.40 (width "
                                                  "= along grid columns, 'at' u; height = rows, 'at' v)")
     s.add_argument("-o", "--out", required=True, help="scenario JSON to write (scenario + uncertain + report)")

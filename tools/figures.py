@@ -220,6 +220,18 @@ SOURCES = {
     "stopping": {
         "argv": ["{py}", "tools/stopping.py", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
         "what": "fits that stop by themselves: CMA-ES and SPX + MGG on a small capture, budget 100,000"},
+    "phone_rig_calib_s101": {
+        "argv": ["{py}", "tools/phone_rig.py", "calibrate", "--out", "out/phone_rig/calib_s101", "--seed", "101",
+                 "--scale", "0.375", "--poses", "14", "--samples", "4", "--json", "{out}"], "cost": "expensive",
+        "what": "issue 18: clothfit calibrate on Cycles renders of a ChArUco board before 4 phones (seed 101), against "
+                "the true cameras"},
+    "phone_rig_e2e": {
+        "argv": ["{py}", "tools/phone_rig.py", "e2e", "--out", "out/phone_rig/e2e_s7", "--seed", "7", "--scale", "0.3",
+                 "--poses", "10", "--frames", "15", "--samples", "4", "--evals", "300", "--uncertain-evals", "600",
+                 "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 18 end to end: phones -> calibrate, handles, extract, fit, export-blender-cloth on Cycles "
+                "renders, against the same fit given the true cameras and manipulation"},
     "blender_scene_fit": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
         "output": "out/scene_fit/summary.json", "cost": "expensive",

@@ -91,7 +91,7 @@ FLOOR_FAR_ABOVE = 3.0             # issue 20: a fit error more than 3x its image
 MAX_FIT_PIXELS = 16_000_000       # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
 MAX_IMAGE_SIDE = 16384
 
-# --- the manipulation measured from footage (footage/handles.py, `clothfit handles`, docs/phone_handles.md)
+# --- the manipulation measured from footage (footage/handles.py, `clothfit handles`, docs/phone_rig.md)
 HANDLE_MARK_SIGMA_PX = 1.0        # a person's click on a zoomed frame is good to about a pixel: the floor of the pixel
                                   # noise behind each handle's uncertain bound (2 cameras leave 1 residual degree of freedom)
 HANDLE_MAX_RESIDUAL_PX = 4.0      # a camera missing its handle's triangulated point by more is a wrong mark or a drifted

@@ -539,6 +539,7 @@ class Detections:
     stats: dict                                # {camera: {"frames", "found", "few_corners", "blurred", ...}}
     marker_ids: set = field(default_factory=set)
     debug_frames: dict = field(default_factory=dict)   # {(camera, moment): encoded JPEG} when asked
+    moments: list = field(default_factory=list)        # every moment read, natural order (the first = the world's)
 
 
 def detect_views(source: Source, board: Board, min_corners: int = D.CALIB_MIN_CORNERS,
@@ -549,6 +550,7 @@ def detect_views(source: Source, board: Board, min_corners: int = D.CALIB_MIN_CO
     det = Detector(board)
     views, sizes, stats, debug = {}, {}, {}, {}
     all_markers: set = set()
+    read: set = set()
     for ci, cam in enumerate(source.cameras):
         frames = _frames(source, cam, sync, times)
         found = {}
@@ -556,6 +558,7 @@ def detect_views(source: Source, board: Board, min_corners: int = D.CALIB_MIN_CO
         st = {"frames": 0, "found": 0, "few_corners": 0, "collinear": 0, "blurred": 0, "markers_only": 0}
         for moment, grey, where in frames:
             st["frames"] += 1
+            read.add(moment)
             h, w = grey.shape[:2]
             if cam not in sizes:
                 sizes[cam] = (w, h)
@@ -595,7 +598,7 @@ def detect_views(source: Source, board: Board, min_corners: int = D.CALIB_MIN_CO
         views[cam] = found
         st["views"] = len(found)
         stats[cam] = st
-    return Detections(views, sizes, stats, all_markers, debug)
+    return Detections(views, sizes, stats, all_markers, debug, sorted(read, key=_natural_key))
 
 
 def _frames(source: Source, cam: str, sync, times):
@@ -637,6 +640,11 @@ def check_detections(det: Detections, board: Board, source: Source):
     extra = sorted(i for i in det.marker_ids if i >= board.n_markers)
     in_board = [i for i in det.marker_ids if i < board.n_markers]
     if extra and len(extra) >= max(2, len(in_board) // 4):
+        other = sniff_dictionary(source, board, det)    # a wrong dictionary decodes a print into stray ids too
+        if other:
+            raise ClothFitError(f"--board {board.text}: stray {board.dictionary} ids up to {max(extra)}, but {other} "
+                                f"markers are there: the board definition does not match the printed board "
+                                f"(its dictionary)")
         raise ClothFitError(f"--board {board.text}: markers with ids up to {max(extra)} were found but this board has "
                             f"ids 0..{board.n_markers - 1}: the board definition does not match the printed board "
                             f"(its numbers of squares?)")
@@ -672,18 +680,22 @@ def sniff_dictionary(source: Source, board: Board, det: Detections, per_camera: 
                 frames.append(read_grey(path))
     if not frames:
         return None
-    best, best_n = None, 0
-    for name, (bits, size) in sorted(dictionaries().items(), key=lambda kv: (kv[1][0], kv[1][1])):
-        if name == board.dictionary:
-            continue
+    def count(name):
         d = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)))
         n = 0
         for g in frames:
             _, ids, _ = d.detectMarkers(g)
             n += 0 if ids is None else len(ids)
+        return n
+    own = count(board.dictionary)        # stray decodings of another dictionary's print: a few, not most
+    best, best_n = None, 0
+    for name, (bits, size) in sorted(dictionaries().items(), key=lambda kv: (kv[1][0], kv[1][1])):
+        if name == board.dictionary:
+            continue
+        n = count(name)
         if n > best_n + 1:
             best, best_n = name, n
-    return best if best_n >= 3 else None
+    return best if best_n >= 3 and best_n > 2 * own else None
 
 
 # ================================================================= camera geometry
@@ -1207,7 +1219,15 @@ def calibrate_views(board: Board, det: Detections, opts: Options, log=None) -> R
         _components_check(views, "after dropping the views far off the joint fit, ")
     # world frame
     moments = prob.moments
-    world = opts.world if opts.world is not None else moments[0]
+    world = opts.world
+    if world is None:
+        # the world is the board flat on the table at the first moment filmed: never silently another one
+        world = det.moments[0] if det.moments else moments[0]
+        if world not in board_pose:
+            seen = [c for c in views if world in det.views.get(c, {})]
+            raise ClothFitError(f"the board at the first moment {world} (the world frame: the board flat on the "
+                                f"table) is in no usable view{' (its views were dropped: ' + ', '.join(seen) + ')' if seen else ''}"
+                                f": retake it where every phone sees it, or give --world MOMENT of another flat view")
     R_w, t_w, frame = world_frame(board, cam_pose, board_pose, world, opts)
     cams_out = []
     for c in prob.cams:

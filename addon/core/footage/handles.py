@@ -1,6 +1,6 @@
 """The manipulation measured from footage: clips and fingertips marked once, tracked, triangulated.
 
-``clothfit handles`` (``docs/phone_handles.md``). The user marks every held point of the cloth (a clip,
+``clothfit handles`` (``docs/phone_rig.md``, step 6). The user marks every held point of the cloth (a clip,
 a fingertip: a *handle*) in at least two cameras at one frame (a marks JSON, below). This module
 
 1. **triangulates** each mark (linear DLT on the undistorted rays, then Gauss-Newton on the pixel

@@ -1,0 +1,60 @@
+"""issue 18, end to end without the truth in the inputs (the small version of ``tools/phone_rig.py e2e``).
+
+Cycles renders (tiny: 3 phones, few samples) of a ChArUco board on the table, then of a cloth hung by four
+clips with one let go; then, as a user runs them, ``clothfit calibrate``, ``handles``, ``extract``, ``fit``
+and ``export-blender-cloth`` on those images, the clicks, the cloth's size and its mass only. The truth
+(cameras, the cloth's motion by Blender's cloth model, the release instant) stays in the tool; the same
+fit given the true cameras and manipulation is the reference. The full run is the recorded
+``docs/figures/phone_rig_e2e.json``.
+"""
+import json
+import os
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "tools"))
+
+# the small rig: 3 phones at 324 x 576, 1 Cycles sample, 9 board poses, 12 frames, fits of 30 evaluations.
+# Measured once (seed 11, `tools/phone_rig.py e2e --out out/phone_rig/ci_s11 --seed 11 --scale 0.3 --cameras 3
+# --poses 9 --frames 12 --samples 1 --evals 30 --uncertain-evals 30`): 810 s wall / 330 s CPU at a load of 8-11
+# (this test alone: 178 s at a load of 0.4-2.5)
+# on the shared 2-core machine (64 renders); calibration RMS 0.34 px, worst focal 0.55 %, worst centre 2.9 mm;
+# clips within 1.9 mm; release frame 3 for a true 4 (the handles' departure test fires a frame early at this
+# size); replay 1.27 mm given the truth, shape ratio 1.29. Tolerances about 2x those, the ratio at the goal.
+SEED, SCALE, POSES, FRAMES, SAMPLES, EVALS = "11", "0.3", "9", "12", "1", "30"
+RMS_PX, FOCAL_PCT, CENTRE_MM, HANDLES_MM, ORACLE_MM, RATIO = 0.7, 1.2, 6.0, 4.0, 3.0, 2.0
+RELEASE_FRAMES = 1
+
+bpy_missing = False
+try:
+    import importlib.util
+    bpy_missing = importlib.util.find_spec("bpy") is None
+except Exception:       # pragma: no cover
+    bpy_missing = True
+
+
+@pytest.mark.skipif(bpy_missing, reason="needs the bpy module (pinned in requirements-dev.txt)")
+def test_phone_rig_end_to_end_small(tmp_path):
+    import phone_rig as PR
+    out = str(tmp_path / "e2e")
+    js = str(tmp_path / "e2e.json")
+    assert PR.main(["e2e", "--out", out, "--seed", SEED, "--scale", SCALE, "--cameras", "3", "--poses", POSES,
+                    "--frames", FRAMES, "--samples", SAMPLES, "--evals", EVALS, "--json", js]) == 0
+    r = json.load(open(js))
+    # every step of the user's pipeline wrote its file
+    for f in ("cameras.json", "scenario.json", "capture/capture.json", "fit.json", "blender_cloth.json"):
+        assert os.path.exists(os.path.join(out, f)), f
+    cloth = json.load(open(os.path.join(out, "blender_cloth.json")))
+    assert set(PR.FREE) <= set(cloth["blender_cloth"])
+    # tolerances: see the measurement above
+    c = r["calibration"]
+    assert c["rms_px"] < RMS_PX, c
+    assert c["worst"]["focal_pct"] < FOCAL_PCT, c
+    assert c["worst"]["centre_mm"] < CENTRE_MM, c
+    assert r["handles_max_mm"] < HANDLES_MM, r["handles_mm"]
+    assert abs(r["release_frame"] - r["true_release_frame"]) <= RELEASE_FRAMES, (r["release_frame"],
+                                                                                  r["true_release_frame"])
+    assert r["fit"]["truth_given"]["replay"]["mean_mm"] < ORACLE_MM, r["fit"]
+    assert r["shape_ratio"] < RATIO, r["fit"]
