@@ -193,7 +193,7 @@ def bench_default_fit(tmp, echo=print, max_evaluations=None):
     path = os.path.join(root, "capture.json")
     with open(path) as f:
         d = json.load(f)
-    d["model"] = {"name": "blender", "fps": 24}          # no declared quality: the fit chooses it
+    d["model"] = {"name": "blender", "fps": 24}          # (a loaded model names a quality: auto below)
     d["uncertain"] = {"time_offset": 0.05, "handles": 0.005}
     from ..safeio import atomic_json
     atomic_json(path, d)
@@ -201,7 +201,7 @@ def bench_default_fit(tmp, echo=print, max_evaluations=None):
     train, _ = select_training(cap.cameras, 4)
     load = os.getloadavg()[0]
     t0, c0 = time.perf_counter(), time.process_time()
-    job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=0,
+    job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=0, quality="auto",
                                 max_evaluations=max_evaluations or D.FIT_EVALUATIONS))
     r = job.run()
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
