@@ -42,6 +42,7 @@ from ..physics.paper import identifiable
 from ..safeio import atomic_json as safe_atomic_json
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from .objective import SilhouetteObjective
+from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
 from ..physics.models import BlenderModel
 from ..physics.scenario import Uncertainty
 from .optimise import SearchSpace, canonical_name, make_optimizer, optimizer_from_state
@@ -175,24 +176,6 @@ def check_resolution(res, what="resolution"):
         raise ClothFitError(f"{what} {h}x{w} must be positive, at most {D.MAX_IMAGE_SIDE} per side and "
                             f"{D.MAX_FIT_PIXELS} pixels in all")
     return [h, w]
-
-
-def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Silhouette at another resolution: area-average and threshold at one half."""
-    import cv2
-    if mask.shape == (height, width):
-        return mask.astype(bool)
-    img = cv2.resize(mask.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
-    return img >= 0.5
-
-
-def resample_ignore(mask, height: int, width: int):
-    """An ignore mask at another resolution: a pixel is unknown when any part of it was (None stays None)."""
-    import cv2
-    if mask is None or mask.shape == (height, width):
-        return mask
-    img = cv2.resize(mask.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
-    return img > 0
 
 
 def load_observed(capture, cams, fidx, resolution=None):

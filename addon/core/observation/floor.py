@@ -18,8 +18,7 @@ The estimate has two parts:
   gets votes too) only enter through the boundary length. A capture pools the rate over its images
   (``capture_floor``), so an image with little straight outline borrows its capture's rate.
 * **resampling** (the fit runs at a lower resolution than the images): the fitter area-averages each
-  image and thresholds at one half (``fitting/job.resample_silhouette``; a copy lives here, see
-  ``resample_silhouette``), the model is rasterised at the low-resolution pixel centres; the two
+  image and thresholds at one half (``resample_silhouette``, the one the fitter uses), the model is rasterised at the low-resolution pixel centres; the two
   disagree along the outline even for a perfect observation (ties of a 2 x 2 block count as cloth:
   about 1 % at half resolution). Estimated by running both paths on a smooth sub-pixel version of the
   observed shape (a Gaussian blur, ``PROXY_SIGMA`` image pixels) at ``len(PROXY_SHIFTS)`` sub-pixel
@@ -85,9 +84,8 @@ def _fit_shape(fit_shape, native, where):
 
 
 def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Silhouette at another resolution exactly as the fitter makes it (``fitting/job.resample_silhouette``:
-    area average, object where it is at least one half). A copy, because observation/ must not import
-    fitting/; ``tests/test_floor.py`` checks the two agree."""
+    """Silhouette at another resolution as the fitter makes it (``fitting/job.load_observed`` calls this):
+    area average, object where it is at least one half."""
     import cv2
     if mask.shape == (height, width):
         return mask.astype(bool)
