@@ -116,8 +116,9 @@ def test_console_script_from_a_wheel(tmp_path):
     (wheel,) = (tmp_path / "dist").glob("silhouette_cloth_fit-*.whl")
     import zipfile
     names = zipfile.ZipFile(wheel).namelist()
-    assert "addon/cli.py" in names and "addon/rigs/lab18.json" in names
-    assert not [n for n in names if n.split("/")[0] in ("tests", "tools", "docs", "demo_blend", "rigs")]
+    assert "clothfit/__main__.py" in names and "clothfit/rigs/lab18.json" in names
+    tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
+    assert tops == {"clothfit"}, tops                 # the wheel's only top-level package
     site = tmp_path / "site"
     r = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site),
                         str(wheel)], capture_output=True, text=True, timeout=300)
@@ -130,7 +131,7 @@ def test_console_script_from_a_wheel(tmp_path):
                        timeout=120)
     assert r.returncode == 0, r.stderr
     assert len(json.loads(r.stdout)["cameras"]) == 8
-    r = subprocess.run([sys.executable, "-c", "import addon; print(addon.__file__)"], cwd=tmp_path, env=env,
+    r = subprocess.run([sys.executable, "-c", "import clothfit; print(clothfit.__file__)"], cwd=tmp_path, env=env,
                        capture_output=True, text=True, timeout=120)
     assert r.stdout.strip().startswith(str(site)), r.stdout       # the wheel's copy ran, not the checkout
 

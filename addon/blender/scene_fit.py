@@ -22,11 +22,11 @@ from bpy.props import FloatProperty, IntProperty
 
 from ..core.errors import ClothFitError
 from ..core.jsonio import read_json
+from ..core.location import IMPORT_NAME, PACKAGE_PARENT
 from .cloth import apply_settings, cloth_modifier
 from .ops import _status, _ui_begin, _ui_end
 
 RESULT_KEY = "clothfit_scene_fit_result"     # object custom property: the last fit's result JSON
-PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 class SceneFitSession:
@@ -58,7 +58,7 @@ class SceneFitSession:
         self.log_path = os.path.join(self.out_dir, "fit.log")
         self.budget = int(budget)
         f0 = scene.frame_start if frame_zero is None else frame_zero
-        cmd = [os.environ.get("CLOTHFIT_PYTHON") or sys.executable, "-m", "addon", "fit", capture_dir,
+        cmd = [os.environ.get("CLOTHFIT_PYTHON") or sys.executable, "-m", IMPORT_NAME, "fit", capture_dir,
                "--backend", "blender", "--blend", self.blend, "--object", obj.name, "--frame-zero", str(f0),
                "--max-evaluations", str(self.budget), "--out", self.result_path, "--quiet"] + list(extra)
         if workers:

@@ -18,9 +18,21 @@ import time
 
 from ..core.errors import ClothFitError
 
-REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-ADDON_DIR = os.path.join(REPO_ROOT, "addon")
+from ..core.location import IMPORT_NAME, PACKAGE_DIR, PACKAGE_PARENT
 MAX_RESTARTS = 3          # a Ray actor killed mid-job is restarted this many times (its task re-run)
+
+
+def _package_for_upload() -> str:
+    """The package folder Ray uploads to a remote cluster's workers, named as they import it: the
+    folder itself, or (a checkout, where ``clothfit`` is mapped onto ``addon/``) a copy named
+    :data:`IMPORT_NAME` in a temporary folder."""
+    if os.path.basename(PACKAGE_DIR) == IMPORT_NAME:
+        return PACKAGE_DIR
+    import shutil
+    import tempfile
+    dst = os.path.join(tempfile.mkdtemp(prefix="clothfit_upload_"), IMPORT_NAME)
+    shutil.copytree(PACKAGE_DIR, dst, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    return dst
 
 
 def ray_available() -> bool:
@@ -35,7 +47,7 @@ def check_driver(what="Blender workers"):
     if "bpy" in sys.modules:
         raise ClothFitError(f"this process has imported bpy, so the {what} it would start could not import it "
                             f"(No module named '_bpy'): run the fit from a process without bpy "
-                            f"(python -m addon fit ...), or connect to a running Ray cluster started outside Blender")
+                            f"(python -m clothfit fit ...), or connect to a running Ray cluster started outside Blender")
 
 
 def check_address(address, timeout=3.0):
@@ -149,13 +161,13 @@ class RayExecutor(Executor):
             check_address(address)
             try:
                 ray.init(address=address, include_dashboard=False, log_to_driver=False,
-                         runtime_env={"py_modules": [ADDON_DIR]})
+                         runtime_env={"py_modules": [_package_for_upload()]})
             except Exception as e:   # ConnectionError, TimeoutError, ValueError... from Ray
                 msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
                 raise ClothFitError(f"cannot connect to the Ray cluster at {address}: {msg}") from None
         else:
             old = os.environ.get("PYTHONPATH")
-            os.environ["PYTHONPATH"] = REPO_ROOT + (os.pathsep + old if old else "")
+            os.environ["PYTHONPATH"] = PACKAGE_PARENT + (os.pathsep + old if old else "")
             os.environ.setdefault("RAY_AUTH_MODE", "disabled")
             kw = {"_temp_dir": os.environ["CLOTHFIT_RAY_TMPDIR"]} if os.environ.get("CLOTHFIT_RAY_TMPDIR") else {}
             try:
@@ -243,7 +255,7 @@ class ProcessExecutor(Executor):
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
         env_old = os.environ.get("PYTHONPATH")
-        os.environ["PYTHONPATH"] = REPO_ROOT + (os.pathsep + env_old if env_old else "")
+        os.environ["PYTHONPATH"] = PACKAGE_PARENT + (os.pathsep + env_old if env_old else "")
         try:
             self.pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
                                             initializer=_pool_init, initargs=(self.factory, self.args))

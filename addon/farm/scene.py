@@ -17,11 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import ClothFitError
+from ..core.location import qualified
 from ..core.physics import blender as B
 from ..core.physics.paper import SimResult
 from .executors import make_executor
 
-WORKER = "addon.blender.scene_worker:BlendScene"
+WORKER = qualified("blender.scene_worker:BlendScene")
 
 
 @dataclass

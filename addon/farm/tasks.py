@@ -7,9 +7,10 @@ from __future__ import annotations
 import os
 import time
 
+from ..core.location import qualified
 from .executors import make_executor
 
-RUNNER = "addon.farm.tasks:FitRunner"
+RUNNER = qualified("farm.tasks:FitRunner")
 
 
 class FitRunner:
@@ -34,7 +35,7 @@ def fit_many(captures, configs, workers=None, address=None, executor="auto"):
         return res, ex.kind, ex.workers
 
 
-PAPER_RUNNER = "addon.farm.tasks:PaperRunner"
+PAPER_RUNNER = qualified("farm.tasks:PaperRunner")
 PAPER_PARTS = ("table1", "fig8", "table2", "optimizers")
 PART_KEYS = {"table1": ("table1", "identifiable"), "fig8": ("fig8",), "table2": ("table2",),
              "optimizers": ("optimizers",)}

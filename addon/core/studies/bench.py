@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 from .. import defaults as D
+from ..location import IMPORT_NAME, PACKAGE_PARENT
 from ..fitting.job import FitConfig, FitJob
 from ..fitting.objective import SilhouetteObjective
 from ..observation.camera import select_training
@@ -93,7 +94,7 @@ def _bench_blender_model(tmp, quick, paper_rate):
     return res
 
 
-SCENE_SCRIPT = ("import sys; from addon.blender import collider_scene as CS; "
+SCENE_SCRIPT = ("import sys; from " + IMPORT_NAME + ".blender import collider_scene as CS; "
                 "sc = CS.collider_scenario(int(sys.argv[2]), settle=0.25, after=0.5); print(CS.build_scene(sys.argv[1], sc))")
 
 
@@ -117,8 +118,7 @@ def bench_blender_workers(tmp, grid=21, workers=(1, 2), candidates=48, echo=prin
         echo("[blender workers] skipped: Ray is not installed")
         return {"skipped": "ray not installed"}
     blend = os.path.join(tmp, "bench_scene.blend")
-    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-    r = subprocess.run([sys.executable, "-c", SCENE_SCRIPT, blend, str(grid)], cwd=root, capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-c", SCENE_SCRIPT, blend, str(grid)], cwd=PACKAGE_PARENT, capture_output=True, text=True)
     if r.returncode != 0:
         echo("[blender workers] skipped: building the scene needs the bpy module")
         return {"skipped": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "scene build failed"}
