@@ -502,7 +502,9 @@ def cmd_tables(a):
 
 def cmd_bench(a):
     from .core.studies.bench import run_bench
-    return run_bench(a.json, quick=a.quick, only_blender_workers=a.blender_workers, only_default_fit=a.default_fit)
+    from .farm.bench import bench_blender_workers
+    return run_bench(a.json, quick=a.quick, only_blender_workers=a.blender_workers, only_default_fit=a.default_fit,
+                     blender_workers=bench_blender_workers)
 
 
 def cmd_identifiability(a):

@@ -17,7 +17,6 @@ import time
 import numpy as np
 
 from .. import defaults as D
-from ..location import IMPORT_NAME, PACKAGE_PARENT
 from ..fitting.job import FitConfig, FitJob
 from ..fitting.objective import SilhouetteObjective
 from ..observation.camera import select_training
@@ -94,90 +93,6 @@ def _bench_blender_model(tmp, quick, paper_rate):
     return res
 
 
-SCENE_SCRIPT = ("import sys; from " + IMPORT_NAME + ".blender import collider_scene as CS; "
-                "sc = CS.collider_scenario(int(sys.argv[2]), settle=0.25, after=0.5); print(CS.build_scene(sys.argv[1], sc))")
-
-
-def bench_blender_workers(tmp, grid=21, workers=(1, 2), candidates=48, echo=print):
-    """Blender's own solver as the fit's evaluator (``--backend blender``): evaluations per second
-    with 1 and 2 Ray workers on a ``grid`` x ``grid`` cloth falling onto a box (0.25 s hung, 0.5 s
-    after the release, 24 fps, collisions on; ``addon/blender/collider_scene.py``), the batch of
-    ``candidates`` scored by the core objective (4 cameras at 120 x 160), and Ray's start-up cost
-    (``ray.init`` of a local instance; then until every worker has loaded the .blend). The scene is
-    built by a child process with the bpy module; this process never imports bpy."""
-    import subprocess
-    import sys
-    from ..observation.camera import load_rig
-    from ..physics import blender as B
-    try:
-        from ...farm.executors import ray_available
-        from ...farm.scene import BlendSceneEvaluator
-    except ImportError as e:                     # pragma: no cover - the CLI ships both
-        return {"skipped": str(e)}
-    if not ray_available():
-        echo("[blender workers] skipped: Ray is not installed")
-        return {"skipped": "ray not installed"}
-    blend = os.path.join(tmp, "bench_scene.blend")
-    r = subprocess.run([sys.executable, "-c", SCENE_SCRIPT, blend, str(grid)], cwd=PACKAGE_PARENT, capture_output=True, text=True)
-    if r.returncode != 0:
-        echo("[blender workers] skipped: building the scene needs the bpy module")
-        return {"skipped": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "scene build failed"}
-    f0 = int(r.stdout.strip().splitlines()[-1])
-    times = np.arange(1, 13) / 24.0
-    cams = [c.resized(120, 160) for c in load_rig("ring8")[:4]]
-    out = {"grid": grid, "frames_per_candidate": int(f0 - 1 + 12), "candidates_per_batch": candidates, "runs": {}}
-    rng = np.random.default_rng(0)
-    for w in workers:
-        t0 = time.perf_counter()
-        ev = BlendSceneEvaluator(blend, frame_zero=f0, workers=w, executor="ray")
-        try:
-            ev.executor.pids()                   # every worker has loaded the scene
-            ready = time.perf_counter() - t0
-            sc = ev.scenario(times)
-            base = B.settings_row(ev.initial)
-            P = np.repeat(base[None], candidates, 0)
-            for n in ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping"):
-                P[:, B.FLOAT_SETTINGS.index(n)] *= rng.uniform(0.7, 1.4, candidates)
-            first = ev.simulate(sc, P[:1])
-            X = first.positions[0]
-            from ..observation.raster import silhouette as _sil
-            obs = [[_sil(c, X[f], sc.grid.triangles) for f in range(len(times))] for c in cams]
-            obj = SilhouetteObjective(sc, cams, obs, backend="auto", model=ev)
-            obj(P[:2])                           # jit warm-up
-            t1 = time.perf_counter()
-            c1 = time.process_time()
-            busy0, cpu0 = ev.worker_seconds, ev.worker_cpu_seconds
-            obj(P)
-            wall = time.perf_counter() - t1
-            busy, wcpu = ev.worker_seconds - busy0, ev.worker_cpu_seconds - cpu0
-            # worker_s_per_eval: the simulation time a worker reports per candidate; if it grows with
-            # the worker count, the workers share CPUs (other load), not a limit of the dispatch.
-            # busy_fraction: summed worker simulation time / (workers x wall): 1.0 = no idle worker.
-            out["runs"][str(w)] = {"evals_per_s": candidates / wall, "wall_s": wall,
-                                   "driver_cpu_ms_per_eval": 1000 * (time.process_time() - c1) / candidates,
-                                   "worker_s_per_eval": busy / candidates, "busy_fraction": busy / (w * wall),
-                                   # > 1: Blender's solver uses more than one thread per worker
-                                   "worker_cpu_per_wall": wcpu / busy if busy > 0 else None,
-                                   "ray_init_s": ev.executor.startup_s, "ready_s": ready}
-        finally:
-            ev.close()
-        r = out["runs"][str(w)]
-        echo(f"[blender workers] {w} worker(s): {candidates / wall:.2f} Blender evaluations/s "
-             f"({grid} x {grid} cloth onto a box, {out['frames_per_candidate']} frames each, scored on 4 cameras); "
-             f"a worker simulates one in {r['worker_s_per_eval']:.3f} s using {r['worker_cpu_per_wall'] or 0:.2f} CPUs, "
-             f"workers busy {100 * r['busy_fraction']:.0f} % of the wall time; "
-             f"Ray start-up {ev.executor.startup_s:.1f} s, workers ready (.blend loaded) after {ready:.1f} s", flush=True)
-    try:
-        out["load_average_1min_at_end"] = os.getloadavg()[0]
-    except OSError:
-        pass
-    if "1" in out["runs"] and "2" in out["runs"]:
-        out["speedup_2_workers"] = out["runs"]["2"]["evals_per_s"] / out["runs"]["1"]["evals_per_s"]
-        echo(f"[blender workers] 2 workers / 1 worker: {out['speedup_2_workers']:.2f}x (goal 1.8x; 1-minute load "
-             f"{out.get('load_average_1min_at_end', float('nan')):.1f} on {os.cpu_count()} CPUs)", flush=True)
-    return out
-
-
 def bench_default_fit(tmp, echo=print, max_evaluations=None):
     """Issue 20's time to answer: the default fit of a 21 x 21 blender-model cloth (1 s settle + 1.5 s
     at 24 fps, 25 cm), 4 training cameras, 15 training frames at 480 x 640, the quality chosen by the
@@ -217,14 +132,20 @@ def bench_default_fit(tmp, echo=print, max_evaluations=None):
     return out
 
 
-def run_bench(json_path, quick=False, only_blender_workers=False, only_default_fit=False):
+def run_bench(json_path, quick=False, only_blender_workers=False, only_default_fit=False, blender_workers=None):
+    """The speed figures, written to ``json_path``. ``blender_workers(tmp) -> dict``: the figures of
+    Blender's solver on workers (``farm.bench.bench_blender_workers``, passed in by the CLI: the farm
+    is a layer above the core); without it they are reported as skipped."""
+    if blender_workers is None:
+        def blender_workers(tmp):
+            return {"skipped": "Blender workers are measured by the CLI's bench (farm layer)"}
     if only_default_fit:
         out = {"default_fit": bench_default_fit(tempfile.mkdtemp(prefix="clothfit_bench_"))}
         from ..safeio import atomic_json
         atomic_json(json_path, out)
         return out
     if only_blender_workers:
-        out = {"blender_workers": bench_blender_workers(tempfile.mkdtemp(prefix="clothfit_bench_"))}
+        out = {"blender_workers": blender_workers(tempfile.mkdtemp(prefix="clothfit_bench_"))}
         from ..safeio import atomic_json
         atomic_json(json_path, out)
         return out
@@ -306,7 +227,7 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
               f"figures are pessimistic; CPU ms per evaluation is the load-independent figure", flush=True)
     if jit.available():
         out["blender_model"] = _bench_blender_model(tmp, quick, out.get("numba", {}).get("evals_per_s"))
-    out["blender_workers"] = bench_blender_workers(tmp)
+    out["blender_workers"] = blender_workers(tmp)
     from ..safeio import atomic_json
     atomic_json(json_path, out)
     return out
