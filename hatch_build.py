@@ -37,9 +37,9 @@ class CustomBuildHook(BuildHookInterface):
             return
         tmp = tempfile.mkdtemp(prefix="clothfit_editable_")
         package = os.path.join(self.root, "addon").replace(os.sep, "/")
-        with open(os.path.join(tmp, "_clothfit_editable.py"), "w") as f:
+        with open(os.path.join(tmp, "_clothfit_finder.py"), "w") as f:
             f.write(FINDER.format(package=package))
-        with open(os.path.join(tmp, "_clothfit_editable.pth"), "w") as f:
-            f.write("import _clothfit_editable\n")
-        build_data["force_include_editable"][os.path.join(tmp, "_clothfit_editable.py")] = "_clothfit_editable.py"
-        build_data["force_include_editable"][os.path.join(tmp, "_clothfit_editable.pth")] = "_clothfit_editable.pth"
+        with open(os.path.join(tmp, "_clothfit_finder.pth"), "w") as f:
+            f.write("import _clothfit_finder\n")
+        build_data["force_include_editable"][os.path.join(tmp, "_clothfit_finder.py")] = "_clothfit_finder.py"
+        build_data["force_include_editable"][os.path.join(tmp, "_clothfit_finder.pth")] = "_clothfit_finder.pth"
