@@ -4,6 +4,7 @@
 #   make test   - the whole test suite (pure core + Blender layer through the bpy module)
 #   make bench  - speed figures (out/bench.json)
 #   make paper  - the full paper protocol (Table 1, Fig. 8, Table 2, optimisers; out/paper.json)
+#   make docs   - the docs site (MkDocs, strict: a broken link or reference fails) -> out/site
 #   make docs-check   - every figure in README.md and docs/*.md against its recording in docs/figures/ (in make test)
 #   make docs-images  - run the demo again, record its figures (docs/figures/demo.json), copy its pictures to docs/img
 #   make docs-refresh - re-record every cheap source (demo, identifiability, ...) and regenerate the generated blocks
@@ -13,7 +14,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test bench paper extension clean docs-check docs-images docs-refresh docs-rerun
+.PHONY: venv demo test bench paper extension clean docs docs-check docs-images docs-refresh docs-rerun
 
 venv: $(STAMP)
 
@@ -43,6 +44,9 @@ paper: venv
 
 extension: venv
 	$(PY) tools/build_extension.py
+
+docs: venv
+	$(PY) -m mkdocs build --strict --site-dir out/site
 
 docs-check: venv
 	$(PY) tools/docs_check.py

@@ -1,4 +1,4 @@
-"""make docs-check: every number in README.md and docs/*.md is generated from, or checked against,
+"""make docs-check: every number in README.md and docs/**/*.md is generated from, or checked against,
 a recording in docs/figures/ (tools/docs_check.py); and the checker itself catches what it must."""
 import json
 import os
@@ -14,7 +14,7 @@ import figures as F
 
 
 def test_docs_agree_with_their_recordings():
-    """The CI hook: the README and docs/*.md against docs/figures/ (fast: nothing is re-run)."""
+    """The CI hook: the README and the docs pages (docs/**/*.md) against docs/figures/ (fast: nothing is re-run)."""
     problems = []
     for f in DC.default_files():
         p, _ = DC.check_file(f)
@@ -43,12 +43,18 @@ def test_cited_paper_numbers_are_the_ones_the_code_prints():
 
 
 def test_readme_pictures_are_the_recorded_demo_runs():
-    """docs/img copies of the demo's pictures are byte for byte the pictures of the recorded run."""
+    """docs/img copies of the demo's pictures are byte for byte the pictures of the recorded run; the
+    README shows one of them, the docs pages (demo, add-on) the others."""
     pics = DC.recording("demo")["data"]["story"]["pictures"]
     with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
         readme = f.read()
-    shown = [n for n in pics if f"docs/img/{n}" in readme]
-    assert len(shown) >= 3, "the README shows the demo's pictures"
+    pages = ""
+    for path in DC.default_files()[1:]:
+        with open(path, encoding="utf-8") as f:
+            pages += f.read()
+    assert any(f"docs/img/{n}" in readme for n in pics), "the README shows a picture of the demo"
+    shown = [n for n in pics if f"](img/{n})" in pages]
+    assert len(shown) >= 3, "the docs pages show the demo's pictures"
     for n in pics:
         p = os.path.join(ROOT, "docs", "img", n)
         if os.path.isfile(p):

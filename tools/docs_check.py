@@ -1,6 +1,6 @@
 """Every number the docs quote is generated from, or checked against, a recorded output.
 
-    python tools/docs_check.py [FILE.md ...]     # check (default: README.md and docs/*.md); exit 1 on a problem
+    python tools/docs_check.py [FILE.md ...]     # check (default: README.md and docs/**/*.md); exit 1 on a problem
     python tools/docs_check.py --write           # regenerate the generated blocks from the recordings
     python tools/docs_check.py --untagged        # list only the numbers that carry no tag
 
@@ -469,12 +469,13 @@ def check_file(path, write=False, stats=None):
 
 
 def default_files():
-    return [os.path.join(ROOT, "README.md")] + sorted(glob.glob(os.path.join(ROOT, "docs", "*.md")))
+    """README.md and every page of the docs site (docs/, subfolders included)."""
+    return [os.path.join(ROOT, "README.md")] + sorted(glob.glob(os.path.join(ROOT, "docs", "**", "*.md"), recursive=True))
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python tools/docs_check.py", description=__doc__.split("\n")[0])
-    ap.add_argument("files", nargs="*", help="Markdown files (default: README.md, docs/*.md)")
+    ap.add_argument("files", nargs="*", help="Markdown files (default: README.md, docs/**/*.md)")
     ap.add_argument("--write", action="store_true", help="rewrite the generated blocks from the recordings")
     ap.add_argument("--untagged", action="store_true", help="list only numbers without a tag")
     a = ap.parse_args(argv)

@@ -383,11 +383,11 @@ def recordings(recording):
         name = os.path.basename(p)[:-5]
         rec = recording(name)
         if name.startswith("cited_"):
-            out.append(f"| [{name}](docs/figures/{name}.json) | citation | - | - | - |")
+            out.append(f"| [{name}](figures/{name}.json) | citation | - | - | - |")
             continue
         cmd = rec["command"].split(" && ")
         cmd = f"`{cmd[0]}`" + (f" and {len(cmd) - 1} more" if len(cmd) > 1 else "")
-        out.append(f"| [{name}](docs/figures/{name}.json) | {rec.get('what', '')} | {cmd} | "
+        out.append(f"| [{name}](figures/{name}.json) | {rec.get('what', '')} | {cmd} | "
                    f"{rec['commit']}{' (dirty)' if rec.get('dirty') else ''} | {rec['recorded_at'][:10]} |")
     return "\n".join(out)
 
