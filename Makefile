@@ -46,7 +46,7 @@ extension: venv
 	$(PY) tools/build_extension.py
 
 docs: venv
-	$(PY) -m mkdocs build --strict --site-dir out/site
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir out/site
 
 docs-check: venv
 	$(PY) tools/docs_check.py

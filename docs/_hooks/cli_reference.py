@@ -53,33 +53,6 @@ def render(parser=None):
     return "\n".join(out)
 
 
-def _tolerate_unparsable_editable_finders():
-    """griffe (mkdocstrings' loader) reads every ``.pth`` on ``sys.path``; a file named like
-    scikit-build-core's editable loader (``_NAME_editable.py``, as our ``hatch_build.py`` writes
-    ``_clothfit_editable.py``) it parses by that tool's format and fails with an IndexError on ours.
-    Such a file then counts as one griffe cannot read (its own ``UnhandledEditableModuleError``,
-    which it skips): the API pages load ``addon`` from the repository root (``paths: [.]``)."""
-    try:
-        from griffe._internal import finder
-    except ImportError:
-        return
-    original = finder._handle_editable_module
-    if getattr(original, "_clothfit_tolerant", False):
-        return
-
-    def tolerant(path):
-        try:
-            return original(path)
-        except (IndexError, ValueError) as e:
-            raise finder.UnhandledEditableModuleError(path) from e
-    tolerant._clothfit_tolerant = True
-    finder._handle_editable_module = tolerant
-
-
-def on_startup(command, dirty):
-    _tolerate_unparsable_editable_finders()
-
-
 def on_page_markdown(markdown, page, config, files):
     if MARKER not in markdown:
         return markdown
