@@ -13,6 +13,7 @@ numba is required (the callers are numba kernels); without numba the module stil
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import SupportsFloat
 
 from .jit import available
 
@@ -200,7 +201,7 @@ if available():  # pragma: no branch
             self.zero = ir.Constant(_VEC, [0.0] * W)
 
         # constants and scalars
-        def k(self, x: float) -> ir.Constant:
+        def k(self, x: SupportsFloat) -> ir.Constant:
             """A float32 constant in every lane (x is rounded to float32 first)."""
             import numpy as np
             return ir.Constant(_VEC, [float(np.float32(x))] * W)
