@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import json
+import os
+from typing import Any
 
 from .errors import ClothFitError
 
 
-def read_json(path, what: str = "JSON file", expect=dict):
+def read_json(path: str | os.PathLike, what: str = "JSON file", expect: type | None = dict) -> Any:
     """The parsed contents of ``path``; a missing, unreadable or corrupt file, or one whose top level
     is not ``expect``, raises a one-line ``ClothFitError`` naming ``what`` and the file."""
     try:

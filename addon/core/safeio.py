@@ -9,19 +9,22 @@ import contextlib
 import json
 import os
 import tempfile
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 
 from .errors import ClothFitError
 
 
-def json_text(obj, strict: bool = False, default=None) -> str:
+def json_text(obj: Any, strict: bool = False, default: Callable[[Any], Any] | None = None) -> str:
     """The JSON text the project writes (indent 1; numpy scalars and arrays as numbers and lists);
     ``strict``: no NaN / Infinity (ValueError)."""
     return json.dumps(obj, indent=1, default=default or _default, allow_nan=not strict)
 
 
-def atomic_json(path, obj, strict: bool = False, default=None):
+def atomic_json(path: str | os.PathLike, obj: Any, strict: bool = False,
+                default: Callable[[Any], Any] | None = None) -> None:
     """Write JSON safely (see :func:`atomic_write`); ``strict``: no NaN / Infinity."""
     try:
         text = json_text(obj, strict, default)
@@ -30,7 +33,7 @@ def atomic_json(path, obj, strict: bool = False, default=None):
     atomic_write(path, (text + "\n").encode("utf-8"))
 
 
-def atomic_write(path, data: bytes):
+def atomic_write(path: str | os.PathLike, data: bytes) -> None:
     """Write a file safely: a new unique temporary file next to ``path`` (created exclusively by
     ``mkstemp``, so a planted file or symlink is never followed), flushed and fsynced, then renamed
     over ``path`` (a rename replaces a symlink at ``path`` itself, never its target). Two writers
@@ -66,7 +69,7 @@ def atomic_write(path, data: bytes):
 
 
 @contextlib.contextmanager
-def exclusive_lock(path):
+def exclusive_lock(path: str | os.PathLike) -> Iterator[None]:
     """Hold an exclusive advisory lock on ``path + '.lock'`` (POSIX ``flock``; released when the
     process ends, even by kill -9). Another holder -> ClothFitError at once."""
     lock_path = os.fspath(path) + ".lock"

@@ -19,6 +19,8 @@ so, with the likely cause among those it can test by a few evaluations of the be
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .. import defaults as D
@@ -26,6 +28,9 @@ from ..errors import ClothFitError
 from ..observation.floor import capture_floor
 from ..physics import blender as B
 from .objective import SilhouetteObjective
+
+if TYPE_CHECKING:
+    from .job import FitJob
 
 CLEARLY = D.QUALITY_CLEARLY_BETTER      # a probe "fits clearly better" below (1 - CLEARLY) x the best error
 
@@ -114,7 +119,7 @@ def _still_improving(job):
     return None
 
 
-def report(job) -> dict:
+def report(job: FitJob) -> dict:
     """The result's ``floor`` block (see the module's text)."""
     x = job.best_x
     if x is None:

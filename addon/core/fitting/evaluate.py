@@ -1,6 +1,9 @@
 """Scores of a parameter set on a capture: silhouette error per image, shape error where known."""
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from ..errors import ClothFitError
@@ -10,8 +13,12 @@ from ..physics.scenario import fitted_scenario
 from .job import load_observed
 from .objective import SilhouetteObjective
 
+if TYPE_CHECKING:
+    from ..observation.capture import Capture
 
-def evaluate(capture, params, cameras=None, times=None, resolution=None, backend="auto") -> dict:
+
+def evaluate(capture: Capture, params: dict[str, Any], cameras: Iterable[int] | None = None,
+             times: Iterable[float] | None = None, resolution: Sequence[int] | None = None, backend: str = "auto") -> dict:
     """Mean ``E_sil x 100`` over the images of ``cameras`` (indices) at ``times`` and, if the capture
     has ground-truth shapes, the mean vertex distance [mm] per shape and overall. ``params``: a fit
     result (its model is used), paper m, k, l, d, or ClothSettings values (the capture's model).

@@ -13,12 +13,14 @@ there is neither missing nor extra, and the normaliser is the observed area outs
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ClothFitError
 from ..observation.raster import rasterize_window
 from ..physics import jit, paper_kernels
 from ..physics.models import PaperModel, get_model
 from ..physics.paper import simulate_numpy
+from ..physics.scenario import Offsets
 from . import kernels
 
 
@@ -92,10 +94,10 @@ class SilhouetteObjective:
             self._tris = np.ascontiguousarray(scenario.grid.triangles, dtype=np.int64)
 
     @property
-    def n_images(self):
+    def n_images(self) -> int:
         return int(self.areas.size)
 
-    def per_image(self, P, offsets=None):
+    def per_image(self, P: ArrayLike, offsets: Offsets | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(esil (P, C, F), exploded (P,))``; exploded candidates have ``inf`` everywhere.
         ``offsets`` (``scenario.Offsets``): each candidate's own estimate of the manipulation's
         unknowns (time offset, handle offsets); None = the scenario as it is."""

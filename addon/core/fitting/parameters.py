@@ -16,8 +16,12 @@ the rest is searched per unit mass, in log scale.
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
@@ -27,6 +31,11 @@ from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
 from ..physics.scenario import Offsets, Uncertainty, fitted_scenario  # noqa: F401 (the fitted manipulation)
 from .optimise import SearchSpace
+
+if TYPE_CHECKING:
+    from ..observation.capture import Capture
+    from ..physics.scenario import ClothGrid, Scenario
+    from .job import FitConfig
 
 PAPER_FREE = ("k_over_m", "d_over_m", "l_rel")
 
@@ -48,7 +57,8 @@ BLENDER_BOUNDS_AT_DEFAULT_MASS = {
 FITTABLE = tuple(BLENDER_BOUNDS_AT_DEFAULT_MASS)
 
 
-def point_mass(capture, cfg_mass, default, n_vertices=None):
+def point_mass(capture: Capture, cfg_mass: float | None, default: float | None, n_vertices: int | None = None
+               ) -> tuple[float | None, str | None]:
     """(mass per vertex, source) from the given total mass, the capture's, or ``default``; the
     total is spread over ``n_vertices`` (default: the capture's grid)."""
     n = capture.scenario.grid.n_vertices if n_vertices is None else int(n_vertices)
@@ -61,7 +71,7 @@ def point_mass(capture, cfg_mass, default, n_vertices=None):
     return default, None
 
 
-def free_set(cfg, bending_model: str) -> tuple:
+def free_set(cfg: FitConfig, bending_model: str) -> tuple:
     """The Blender settings a fit searches (``cfg.free`` or the default set), checked."""
     free = tuple(cfg.free) if cfg.free else BLENDER_FREE[bending_model]
     bad = [n for n in free if n not in FITTABLE]
@@ -92,16 +102,16 @@ class PaperParameters:
         self.initial = None
         self.note = "m is not observable from silhouettes (only k/m, d/m and l are): m is fixed and k, d scale with it"
 
-    def rows(self, X):
+    def rows(self, X: ArrayLike) -> np.ndarray:
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         m = self.m
         return np.stack([np.full(len(X), m), X[:, 0] * m, X[:, 2] * self.spacing, X[:, 1] * m], 1)
 
-    def params(self, x):
+    def params(self, x: ArrayLike) -> dict[str, float]:
         r = self.rows(x)[0]
         return {"m": float(r[0]), "k": float(r[1]), "l": float(r[2]), "d": float(r[3])}
 
-    def describe(self, x) -> dict:
+    def describe(self, x: ArrayLike) -> dict:
         p = self.params(x)
         return {"model": self.model.to_dict(), "params": p, "identifiable": identifiable(p)}
 
@@ -166,7 +176,7 @@ class BlenderParameters:
     def _coord(self, name, value):
         return value / self.m if name in self.scaled else value
 
-    def rows(self, X):
+    def rows(self, X: ArrayLike) -> np.ndarray:
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         base = B.settings_row(self.fixed)
         R = np.repeat(base[None], len(X), 0)
@@ -175,10 +185,10 @@ class BlenderParameters:
             R[:, col] = X[:, k] * self.m if n in self.scaled else X[:, k]
         return R
 
-    def settings(self, x) -> dict:
+    def settings(self, x: ArrayLike) -> dict:
         return self.model.settings(self.rows(x)[0])
 
-    def describe(self, x) -> dict:
+    def describe(self, x: ArrayLike) -> dict:
         s = self.settings(x)
         per_mass = {n: s[n] / s["mass"] for n in sorted(self.scaled)}
         return {"model": self.model.to_dict(), "blender_cloth": s, "blender_scene": {"fps": self.model.fps},
@@ -253,7 +263,7 @@ class SceneParameters(BlenderParameters):
             self.note += "; " + self.init_note
 
 
-def declared_model(capture, cfg) -> dict:
+def declared_model(capture: Capture, cfg: FitConfig) -> dict:
     """The model asked for: ``cfg.model``, over the capture's own ``model`` where both are Blender's
     (``--model blender`` on a capture that declares its frame rate and quality keeps them), else the
     capture's; {} for none."""
@@ -268,14 +278,14 @@ def declared_model(capture, cfg) -> dict:
     return spec
 
 
-def make_parameters(capture, cfg):
+def make_parameters(capture: Capture, cfg: FitConfig) -> PaperParameters | BlenderParameters:
     """The search of ``cfg.model``, else the capture's own ``model``, else the paper's sheet."""
     spec = declared_model(capture, cfg) or None
     model = get_model(spec)
     return PaperParameters(capture, cfg) if model.name == "paper" else BlenderParameters(capture, cfg, model)
 
 
-def load_init(path) -> dict:
+def load_init(path: str | os.PathLike) -> dict[str, Any]:
     """A result JSON to warm-start from."""
     res = read_json(path, "warm-start result")
     if not (res.get("blender_cloth") or res.get("params")):
@@ -292,7 +302,7 @@ def _rescale(settings: dict, mass: float, bending_model: str) -> dict:
     return out
 
 
-def settings_from_result(res: dict, model: BlenderModel, grid) -> dict:
+def settings_from_result(res: dict, model: BlenderModel, grid: ClothGrid) -> dict:
     """Blender settings from a fit result: its ``blender_cloth``, or, for a paper-model result, an
     approximation (the paper's springs as structural = compression = shear stiffness, its viscous
     damping as air damping, in Blender's time unit at the model's frame rate)."""
@@ -350,7 +360,7 @@ class ManipulationParameters:
     def n(self) -> int:
         return len(self.names)
 
-    def offsets(self, M) -> Offsets:
+    def offsets(self, M: ArrayLike) -> Offsets:
         """``M`` (P, n) coordinates in ``names`` order -> per-candidate offsets."""
         M = np.atleast_2d(np.asarray(M, dtype=np.float64)).reshape(-1, self.n)
         P = M.shape[0]
@@ -360,7 +370,7 @@ class ManipulationParameters:
             h[:, k, a] = M[:, self.names.index(nm)]
         return Offsets(t, h)
 
-    def describe(self, m, scenario, spread=None) -> dict:
+    def describe(self, m: ArrayLike, scenario: Scenario, spread: Sequence[float] | None = None) -> dict:
         """The fitted manipulation for a result: ``time_offset_s`` and ``handles`` (the capture's
         scenario format, moved), each with its uncertainty (``spread``: per coordinate, e.g. the
         search distribution's standard deviation; None = not estimated)."""

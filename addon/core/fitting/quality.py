@@ -32,7 +32,7 @@ class Ladder:
         self.tried: dict[int, float] = {}
         self.order: list[int] = []
 
-    def record(self, quality: int, error: float):
+    def record(self, quality: int, error: float) -> None:
         q = int(quality)
         if q not in self.order:
             self.order.append(q)
@@ -47,7 +47,7 @@ class Ladder:
         i = self.rungs.index(q)
         return self.rungs[i - 1] if i > 0 else None
 
-    def next(self):
+    def next(self) -> int | None:
         """The next quality to try, or None when the ladder is done."""
         if self.start not in self.tried or len(self.order) - 1 >= self.max_rungs:
             return None
@@ -77,7 +77,7 @@ class Ladder:
         ok = [q for q, e in self.tried.items() if e <= (1.0 + self.tolerance) * best]
         return min(ok)
 
-    def clearly_better_above(self):
+    def clearly_better_above(self) -> tuple[int, float] | None:
         """probe_only: (quality, error ratio to the start) of a higher rung that fits clearly better, else None."""
         base = self.tried.get(self.start)
         for q in sorted(self.tried):

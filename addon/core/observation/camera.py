@@ -17,9 +17,12 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ClothFitError
 from ..jsonio import read_json
@@ -28,7 +31,7 @@ from ..jsonio import read_json
 MAX_IMAGE_SIDE = 16384          # pixels per side of a camera image
 
 
-def check_camera_name(name, where: str = "camera"):
+def check_camera_name(name: Any, where: str = "camera") -> str:
     """A camera name becomes a folder name (silhouettes, debug images): refuse anything that is not
     one plain path component."""
     if (not isinstance(name, str) or not name or name in (".", "..") or name != name.strip()
@@ -39,7 +42,7 @@ def check_camera_name(name, where: str = "camera"):
     return name
 
 
-def check_image_size(width, height, where: str = "camera"):
+def check_image_size(width: Any, height: Any, where: str = "camera") -> tuple[int, int]:
     """(width, height) as positive integers up to MAX_IMAGE_SIDE (numbers such as 640.0 accepted)."""
     out = []
     for nm, v in (("width", width), ("height", height)):
@@ -74,7 +77,7 @@ class Camera:
         self.validate()
 
     # ------------------------------------------------------------------ checks
-    def validate(self, source: str = "camera"):
+    def validate(self, source: str = "camera") -> None:
         where = f"{source} '{self.name}'"
         for nm, arr in (("K", self.K), ("R", self.R), ("t", self.t), ("dist", self.dist)):
             if not np.all(np.isfinite(arr)):
@@ -211,7 +214,7 @@ def _distort(x, y, dist):
 
 # ---------------------------------------------------------------- construction
 
-def look_at(eye, target, up=(0.0, 0.0, 1.0)):
+def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
     """R, t of an OpenCV camera at ``eye`` looking at ``target`` with world ``up`` up in the image."""
     eye = np.asarray(eye, dtype=np.float64)
     target = np.asarray(target, dtype=np.float64)
@@ -228,15 +231,17 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)):
     return R, t
 
 
-def intrinsics(fx, width, height, fy=None, cx=None, cy=None):
+def intrinsics(fx: float, width: float, height: float, fy: float | None = None, cx: float | None = None,
+               cy: float | None = None) -> np.ndarray:
     fy = fx if fy is None else fy
     cx = (width - 1) / 2.0 if cx is None else cx
     cy = (height - 1) / 2.0 if cy is None else cy
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
-def ring_rig(n_per_ring=(8, 8, 2), elevations_deg=(30.0, -10.0, 70.0), distance=0.6,
-             target=(0.0, 0.0, 0.0), width=640, height=480, fx=900.0, azimuth_offsets_deg=None):
+def ring_rig(n_per_ring: Sequence[int] = (8, 8, 2), elevations_deg: Sequence[float] = (30.0, -10.0, 70.0),
+             distance: float = 0.6, target: ArrayLike = (0.0, 0.0, 0.0), width: int = 640, height: int = 480,
+             fx: float = 900.0, azimuth_offsets_deg: Sequence[float] | None = None) -> list[Camera]:
     """A parametric rig: rings of cameras at given elevations, all looking at ``target``."""
     cams = []
     target = np.asarray(target, dtype=np.float64)
@@ -256,7 +261,7 @@ def ring_rig(n_per_ring=(8, 8, 2), elevations_deg=(30.0, -10.0, 70.0), distance=
 
 # -------------------------------------------------------------------- rig io
 
-def save_cameras(path: str, cameras, extra: dict | None = None):
+def save_cameras(path: str, cameras: Iterable[Camera], extra: dict | None = None) -> None:
     d = {"convention": "opencv: x_cam = R X + t, +Z forward, +Y down, pixel centres at integers",
          "cameras": [c.to_dict() for c in cameras]}
     if extra:
@@ -265,7 +270,7 @@ def save_cameras(path: str, cameras, extra: dict | None = None):
     atomic_json(path, d)
 
 
-def load_cameras(path: str):
+def load_cameras(path: str) -> list[Camera]:
     """Read a cameras JSON (``{"cameras": [...]}``, a rig preset is the same format)."""
     d = read_json(path, "camera file", expect=None)
     if not isinstance(d, dict) or not isinstance(d.get("cameras"), list):
@@ -295,13 +300,13 @@ def rig_path(name_or_path: str) -> str:
     return p
 
 
-def load_rig(name_or_path: str):
+def load_rig(name_or_path: str) -> list[Camera]:
     return load_cameras(rig_path(name_or_path))
 
 
 # ------------------------------------------------------- training-camera rule
 
-def spread_order(cameras, first: int = 0):
+def spread_order(cameras: Sequence[Camera], first: int = 0) -> list[int]:
     """Order camera indices so that every prefix is spread around the rig.
 
     Rule (documented in the README): start with camera ``first``; then repeatedly
@@ -323,7 +328,7 @@ def spread_order(cameras, first: int = 0):
     return order
 
 
-def select_training(cameras, n: int, first: int = 0):
+def select_training(cameras: Sequence[Camera], n: int, first: int = 0) -> tuple[list[int], list[int]]:
     if n < 1 or n > len(cameras):
         raise ClothFitError(f"number of training cameras {n} must be within 1..{len(cameras)}")
     order = spread_order(cameras, first)

@@ -38,12 +38,18 @@ zig-zags at one pixel at low resolution) read as noise and raise the estimate.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
+
+if TYPE_CHECKING:
+    from .capture import Capture
 
 # --- calibration (tools/floor_calibration.py, docs/noise_floor.md)
 STRAIGHT_RADIUS = 20.0       # px: outline with a larger curvature radius counts as straight (a 3 x 3 median never
@@ -93,7 +99,7 @@ def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray
     return img >= 0.5
 
 
-def resample_ignore(mask, height: int, width: int):
+def resample_ignore(mask: np.ndarray | None, height: int, width: int) -> np.ndarray | None:
     """An ignore mask at another resolution as the fitter makes it (unknown where any part was unknown)."""
     import cv2
     if mask is None or mask.shape == (height, width):
@@ -227,7 +233,8 @@ def _resampling_part(o, g, fit_shape):
     return resamp, noise, r
 
 
-def estimate_floor(observed, ignore=None, fit_shape=None, rate=None, name: str = "silhouette") -> FloorEstimate:
+def estimate_floor(observed: np.ndarray, ignore: np.ndarray | None = None, fit_shape: Sequence[int] | None = None,
+                   rate: float | None = None, name: str = "silhouette") -> FloorEstimate:
     """The floor of one observed silhouette (bool / 0-1 / 0-255 (H, W)), ``E_sil`` units.
 
     ``ignore``: pixels of unknown truth (as in the fit: they leave eq. 6); ``fit_shape`` (h, w): the
@@ -308,7 +315,10 @@ class CaptureFloor:
         return d
 
 
-def pooled_floors(observed, ignore=None, fit_shape=None, names=None):
+def pooled_floors(observed: Sequence[Sequence[np.ndarray]],
+                  ignore: Sequence[Sequence[np.ndarray | None] | None] | None = None,
+                  fit_shape: Sequence[int] | None = None, names: Sequence[Sequence[str]] | None = None
+                  ) -> tuple[list[list[FloorEstimate]], float, str]:
     """``(estimates, rate, basis)`` for silhouettes ``observed[c][f]`` (and ``ignore[c][f]``, None or
     entries None) at their own resolution, for a fit at ``fit_shape`` (h, w; default their own):
     ``estimates[c][f]`` are ``FloorEstimate``; the noise rate is pooled over all of them (``rate``) and
@@ -344,7 +354,8 @@ def pooled_floors(observed, ignore=None, fit_shape=None, names=None):
     return images, float(pooled), basis
 
 
-def capture_floor(capture, cams=None, fidx=None, resolution=None) -> CaptureFloor:
+def capture_floor(capture: Capture, cams: Iterable[int] | None = None, fidx: Iterable[int] | None = None,
+                  resolution: Sequence[int] | None = None) -> CaptureFloor:
     """Floors of ``capture``'s cameras ``cams`` (indices, default all) at frames ``fidx`` (indices,
     default all), for a fit at ``resolution`` (h, w; default the images' own), as ``fitting/job.
     load_observed`` would feed them to the fitter (``pooled_floors`` on the images as stored)."""
@@ -362,7 +373,7 @@ def capture_floor(capture, cams=None, fidx=None, resolution=None) -> CaptureFloo
 
 # ============================================================================ a fit against its floor
 
-def floor_ratios(e_sil, floors, far: float = FAR_ABOVE):
+def floor_ratios(e_sil: ArrayLike, floors: ArrayLike, far: float = FAR_ABOVE) -> tuple[np.ndarray, np.ndarray]:
     """``(ratio, far_mask)``: per image ``E_sil / floor`` (same shapes, e.g. (C, F)) and where it exceeds
     ``far``. A floor of 0 gives inf where E_sil > 0 (and 1 where both are 0)."""
     e = np.asarray(e_sil, dtype=np.float64)
@@ -376,7 +387,8 @@ def floor_ratios(e_sil, floors, far: float = FAR_ABOVE):
     return r, r > far
 
 
-def residual_profile(observed, model, ignore=None, width: float = 1.0, name: str = "silhouette") -> dict:
+def residual_profile(observed: np.ndarray, model: np.ndarray, ignore: np.ndarray | None = None, width: float = 1.0,
+                     name: str = "silhouette") -> dict:
     """Where a fit's residual (``observed`` XOR ``model``, outside ``ignore``) lies, for naming its cause:
 
     * ``e_sil``: eq. 6;

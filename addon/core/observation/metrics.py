@@ -1,6 +1,8 @@
 """Silhouette error (paper eq. 6, 7), shape error, and the boundary-noise model (SPEC 4, 5)."""
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from ..errors import ClothFitError
@@ -19,7 +21,7 @@ def e_sil(observed: np.ndarray, model: np.ndarray, name: str = "silhouette") -> 
     return float(np.count_nonzero(observed ^ model)) / area
 
 
-def e_all(observed, model) -> float:
+def e_all(observed: Iterable[Iterable[np.ndarray]], model: Iterable[Iterable[np.ndarray]]) -> float:
     """Eq. 7: sum of ``E_sil`` over all (shape, camera) pairs; inputs are nested [cam][frame]."""
     return float(sum(e_sil(o, m) for oc, mc in zip(observed, model) for o, m in zip(oc, mc)))
 
@@ -34,7 +36,7 @@ def shape_error_mm(model_positions: np.ndarray, true_positions: np.ndarray) -> n
     return np.where(np.isfinite(d), d, np.inf)
 
 
-def boundary_pixels(mask: np.ndarray):
+def boundary_pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inner boundary (object pixels with a 4-neighbour outside) and outer boundary (background
     pixels with an object 4-neighbour), as boolean images."""
     m = np.asarray(mask, dtype=bool)

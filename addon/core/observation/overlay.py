@@ -15,11 +15,17 @@ adds both to its contact sheet and writes ``floor_sheet.png``; without floors it
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ClothFitError
 from .floor import FAR_ABOVE, floor_ratios
+
+if TYPE_CHECKING:
+    from .capture import Capture
 
 AGREE_RGB = (255, 255, 255)
 MISSING_RGB = (230, 40, 40)
@@ -28,7 +34,7 @@ IGNORE_MODEL_RGB = (110, 110, 110)
 IGNORE_RGB = (70, 70, 70)
 
 
-def overlay_image(observed: np.ndarray, model: np.ndarray, ignore=None) -> np.ndarray:
+def overlay_image(observed: np.ndarray, model: np.ndarray, ignore: np.ndarray | None = None) -> np.ndarray:
     """RGB uint8 image: white = both, red = observed only (missing), blue = model only (extra);
     ``ignore`` pixels (truth unknown) grey: light where the model covers them, dark elsewhere."""
     o = np.asarray(observed, dtype=bool)
@@ -53,7 +59,8 @@ ON_IMAGE_EXTRA_RGB = (40, 150, 255)      # tint where the model has cloth the ca
 ON_IMAGE_OUTLINE_RGB = (255, 230, 0)     # the model silhouette's outline
 
 
-def silhouette_box(masks, margin: float = 0.15, shape=None):
+def silhouette_box(masks: Iterable[np.ndarray], margin: float = 0.15, shape: tuple[int, int] | None = None
+                   ) -> tuple[int, int, int, int]:
     """(y0, y1, x0, x1): the box around every mask's pixels, grown by ``margin`` of its size on
     each side, square where the image allows; the whole image if every mask is empty."""
     masks = [np.asarray(m, dtype=bool) for m in masks]
@@ -73,7 +80,8 @@ def silhouette_box(masks, margin: float = 0.15, shape=None):
     return y0, y0 + round(2 * half), x0, x0 + round(2 * half)
 
 
-def overlay_on_image(image: np.ndarray, observed: np.ndarray, model: np.ndarray, ignore=None, box=None,
+def overlay_on_image(image: np.ndarray, observed: np.ndarray, model: np.ndarray, ignore: np.ndarray | None = None,
+                     box: tuple[int, int, int, int] | None = None,
                      size: int | None = None, alpha: float = 0.55) -> np.ndarray:
     """The camera's own picture (RGB uint8, e.g. a footage frame or a render) with the comparison
     drawn on it: red tint where the cloth was observed but the model has none (missing), blue tint
@@ -115,7 +123,7 @@ def label(img: np.ndarray, text: str) -> np.ndarray:
     return out
 
 
-def contact_sheet(images, cols: int = 6, tile_width: int = 213) -> np.ndarray:
+def contact_sheet(images: Sequence[np.ndarray], cols: int = 6, tile_width: int = 213) -> np.ndarray:
     """Tile RGB images (resized to ``tile_width``) into one image."""
     import cv2
     if not images:
@@ -154,7 +162,7 @@ def _thumb(img, size):
                       interpolation=cv2.INTER_AREA)
 
 
-def floor_colour(ratio: float, far: float = FAR_ABOVE):
+def floor_colour(ratio: float, far: float = FAR_ABOVE) -> tuple[int, int, int]:
     """RGB of an ``E_sil / floor`` ratio: green (<= FLOOR_NEAR), amber (<= far), red (> far, or not finite)."""
     if not np.isfinite(ratio) or ratio > far:
         return FLOOR_FAR_RGB
@@ -166,7 +174,8 @@ def _ratio_text(e: float, floor: float) -> str:
     return "inf" if not np.isfinite(r) else f"{r:.1f}"
 
 
-def mark_floor(img: np.ndarray, e_sil: float, floor: float, far: float = FAR_ABOVE, text: str | None = None):
+def mark_floor(img: np.ndarray, e_sil: float, floor: float, far: float = FAR_ABOVE, text: str | None = None
+               ) -> np.ndarray:
     """A copy of ``img`` (RGB uint8) framed in ``floor_colour`` of ``e_sil / floor`` and labelled at the
     bottom ``E 4.20% floor 0.36% x11.7`` (``text`` is put in front of it)."""
     import cv2
@@ -186,7 +195,8 @@ def mark_floor(img: np.ndarray, e_sil: float, floor: float, far: float = FAR_ABO
     return out
 
 
-def floor_sheet(e_sil, floors, cameras, times, far: float = FAR_ABOVE, tiles=None, cell: int = 96) -> np.ndarray:
+def floor_sheet(e_sil: ArrayLike, floors: ArrayLike, cameras: Sequence[str], times: Sequence[float],
+                far: float = FAR_ABOVE, tiles: Sequence[Sequence[np.ndarray]] | None = None, cell: int = 96) -> np.ndarray:
     """One RGB image: a grid of cameras (rows) x frames (columns), each cell coloured by its image's
     ``E_sil / floor`` (``floor_colour``) and showing the ratio; ``tiles[c][f]`` (RGB images, e.g. the
     overlays) are drawn as thumbnails inside the coloured frame. A header names the frame times, the
@@ -240,15 +250,18 @@ def floor_sheet(e_sil, floors, cameras, times, far: float = FAR_ABOVE, tiles=Non
     return img
 
 
-def write_rgb(path: str, rgb: np.ndarray):
+def write_rgb(path: str, rgb: np.ndarray) -> None:
     import cv2
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     if not cv2.imwrite(path, rgb[..., ::-1]):
         raise ClothFitError(f"could not write image {path}")
 
 
-def capture_overlays(capture, params, out_dir, cameras=None, times=None, sheet_name="contact_sheet.png",
-                     max_sheet=36, images=None, floors=None, far: float = FAR_ABOVE):
+def capture_overlays(capture: Capture, params: dict[str, Any], out_dir: str | os.PathLike,
+                     cameras: Iterable[int] | None = None, times: Iterable[float] | None = None,
+                     sheet_name: str = "contact_sheet.png", max_sheet: int = 36,
+                     images: Callable[[int, int], np.ndarray | None] | None = None, floors: ArrayLike | None = None,
+                     far: float = FAR_ABOVE) -> list[str]:
     """Write one overlay PNG per camera and frame plus a contact sheet; returns the list of paths.
     ``images(camera index, frame index)``: the camera's own picture of that frame (RGB uint8, e.g.
     ``footage.extract.footage_images``); where it gives one, the comparison is drawn on it

@@ -38,7 +38,7 @@ def _chunk(typ: bytes, body: bytes) -> bytes:
     return struct.pack(">I", len(body)) + typ + body + struct.pack(">I", zlib.crc32(typ + body) & 0xFFFFFFFF)
 
 
-def png_info(data: bytes, where: str):
+def png_info(data: bytes, where: str) -> tuple[int, int, int, int]:
     """``(width, height, bit_depth, colour_type)`` of PNG bytes (error naming ``where`` otherwise)."""
     if data[:8] != SIGNATURE:
         raise ClothFitError(f"{where}: not a PNG file (label images must be PNG)")

@@ -15,10 +15,16 @@ camera (NaN) are skipped.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+if TYPE_CHECKING:
+    from .camera import Camera
 
-def triangle_spans(pts: np.ndarray, tris: np.ndarray, height: int, width: int):
+
+def triangle_spans(pts: np.ndarray, tris: np.ndarray, height: int, width: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Row spans of all triangles: arrays ``row, x_start, x_end`` (inclusive, clipped to the image)."""
     P = pts[tris]  # (T, 3, 2)
     ok = np.all(np.isfinite(P), axis=(1, 2))
@@ -72,7 +78,8 @@ def rasterize(pts: np.ndarray, tris: np.ndarray, height: int, width: int) -> np.
     return np.cumsum(diff[:, :width], axis=1) > 0.5
 
 
-def silhouette(camera, vertices: np.ndarray, tris: np.ndarray, height=None, width=None) -> np.ndarray:
+def silhouette(camera: Camera, vertices: np.ndarray, tris: np.ndarray, height: int | None = None,
+               width: int | None = None) -> np.ndarray:
     """Silhouette of a mesh (world vertices ``(V, 3)``) seen by ``camera``."""
     h = camera.height if height is None else height
     w = camera.width if width is None else width
@@ -80,7 +87,7 @@ def silhouette(camera, vertices: np.ndarray, tris: np.ndarray, height=None, widt
     return rasterize(cam.project(vertices), tris, h, w)
 
 
-def reference_fill(pts, tris, height, width):
+def reference_fill(pts: np.ndarray, tris: np.ndarray, height: int, width: int) -> np.ndarray:
     """Slow brute-force reference: test every pixel centre against every triangle (for tests)."""
     yy, xx = np.mgrid[0:height, 0:width]
     q = np.stack([xx.ravel(), yy.ravel()], -1).astype(np.float64)
@@ -101,7 +108,7 @@ def reference_fill(pts, tris, height, width):
     return out.reshape(height, width)
 
 
-def rasterize_window(pts: np.ndarray, tris: np.ndarray, height: int, width: int):
+def rasterize_window(pts: np.ndarray, tris: np.ndarray, height: int, width: int) -> tuple[int, int, np.ndarray]:
     """Like ``rasterize`` but only over the silhouette's bounding box: returns ``(r0, c0, mask)``
     with ``mask`` covering rows ``r0..`` and columns ``c0..`` (an empty mask for nothing visible)."""
     row, c0, c1 = triangle_spans(np.asarray(pts, dtype=np.float64), np.asarray(tris), height, width)

@@ -5,6 +5,10 @@ the same capture format.
 """
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
 from .. import defaults as D
@@ -12,9 +16,9 @@ from ..errors import ClothFitError
 from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model, simulate
 from ..physics.paper import Params
-from ..physics.scenario import paper_scenario
-from .camera import load_rig
-from .capture import write_capture
+from ..physics.scenario import Scenario, paper_scenario
+from .camera import Camera, load_rig
+from .capture import Capture, write_capture
 from .metrics import add_boundary_noise
 from .raster import silhouette
 
@@ -24,8 +28,11 @@ def noise_rng(seed: int, cam: int, frame: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), int(cam), int(frame)])
 
 
-def synth_capture(root, params=None, rig=D.DEFAULT_RIG, noise=D.NOISE_FRACTION, resolution=None, seed=0,
-                  scenario=None, cameras=None, truth_dt_safety=D.TRUTH_DT_SAFETY, model=None):
+def synth_capture(root: str | os.PathLike, params: dict[str, Any] | None = None, rig: str = D.DEFAULT_RIG,
+                  noise: float = D.NOISE_FRACTION, resolution: Sequence[int] | None = None, seed: int = 0,
+                  scenario: Scenario | None = None, cameras: Sequence[Camera] | None = None,
+                  truth_dt_safety: float = D.TRUTH_DT_SAFETY,
+                  model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None) -> Capture:
     """Simulate ``params`` on ``scenario`` (default: the paper's) with ``model`` (default: the paper's
     sheet, ``params`` = m, k, l, d, default the ground truth; ``"blender"`` or a Blender model dict:
     ``params`` = ClothSettings values, missing ones Blender's defaults, ``time_scale`` the real-time

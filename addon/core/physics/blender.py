@@ -50,13 +50,15 @@ unchanged: silhouettes cannot tell them apart (``mass_scaled``).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .scenario import Scenario
+from .scenario import ClothGrid, Scenario
 
 # --------------------------------------------------------------------------- settings
 
@@ -117,7 +119,7 @@ def mass_scaled(bending_model: str = "ANGULAR") -> tuple:
     return MASS_SCALED + (("bending_damping",) if bending_model == "ANGULAR" else ())
 
 
-def physical_time_scale(fps: float, gravity=D.GRAVITY) -> float:
+def physical_time_scale(fps: float, gravity: ArrayLike = D.GRAVITY) -> float:
     """Speed Multiplier that makes Blender's cloth move in real time at ``fps`` frames per second.
 
     Blender's solver advances ``time_scale`` time units per frame with gravity ``0.001 g`` per unit
@@ -169,14 +171,14 @@ def settings_row(s: dict) -> np.ndarray:
     return np.array([float(s[n]) for n in FLOAT_SETTINGS], dtype=np.float64)
 
 
-def row_settings(row, quality: int, bending_model: str) -> dict:
+def row_settings(row: ArrayLike, quality: int, bending_model: str) -> dict:
     """Row of FLOAT_SETTINGS values -> complete settings dict (ClothSettings names)."""
     d = {"quality": int(quality), "bending_model": bending_model}
     d.update({n: float(v) for n, v in zip(FLOAT_SETTINGS, np.asarray(row, dtype=np.float64).reshape(-1))})
     return d
 
 
-def steps_per_frame(time_scale: float, quality: int):
+def steps_per_frame(time_scale: float, quality: int) -> tuple[float, np.ndarray]:
     """Blender's step loop for one frame, in float32 as Blender runs it.
 
     Returns ``(dt, step_starts)``: the step length and the start time of every step in solver
@@ -235,11 +237,12 @@ class Network:
     faces: list
 
     @property
-    def n_vertices(self):
+    def n_vertices(self) -> int:
         return int(self.rest.shape[0])
 
     @classmethod
-    def from_mesh(cls, rest, faces, bending_model: str = "ANGULAR", edges=None) -> "Network":
+    def from_mesh(cls, rest: ArrayLike, faces: Iterable[Iterable[int]], bending_model: str = "ANGULAR",
+                  edges: ArrayLike | None = None) -> "Network":
         """Springs of the mesh ``(rest, faces)``; ``edges`` gives the mesh's edge order (default: each
         face's sides in face order, which is what Cloth Fit builds its Blender meshes with)."""
         rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
@@ -339,7 +342,8 @@ class Network:
                    np.array(tris, dtype=np.int64).reshape(-1, 3), faces)
 
     @classmethod
-    def from_grid(cls, grid, bending_model: str = "ANGULAR", first_frame=None) -> "Network":
+    def from_grid(cls, grid: ClothGrid, bending_model: str = "ANGULAR",
+                  first_frame: np.ndarray | None = None) -> "Network":
         """The grid's quads; ``first_frame`` (V, 3) replaces the rest positions (Blender's rest shape
         is the first frame's mesh)."""
         rest = grid.rest if first_frame is None else first_frame
@@ -365,7 +369,7 @@ def _unit(v):
     return np.where(ln > 0, v / np.where(ln > 0, ln, 1.0), 0.0)
 
 
-def hinge_angles(X, hinge, pa, pb):
+def hinge_angles(X: np.ndarray, hinge: np.ndarray, pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
     """Bending angle across every hinge at positions X (Blender's sign convention)."""
     if len(hinge) == 0:
         return np.zeros(0)
@@ -417,7 +421,7 @@ class FramePlan:
     between: int                  # capture times that fall between frames
 
     @property
-    def release_frame(self):      # relative to the start frame
+    def release_frame(self) -> int:      # relative to the start frame
         return self.settle_frames
 
     @classmethod
@@ -450,10 +454,10 @@ class FramePlan:
         """The settle actually simulated [s]: whole frames (``settle_frames``)."""
         return self.settle_frames / self.fps
 
-    def frame_of(self, t):
+    def frame_of(self, t: np.ndarray) -> np.ndarray:
         return self.settle_frames + np.asarray(t) * self.fps
 
-    def sample(self, frames):
+    def sample(self, frames: np.ndarray) -> np.ndarray:
         """Positions at the capture times from positions at every frame ``(n_frames + 1, V, 3)``."""
         return (1.0 - self.w)[:, None, None] * frames[self.lo] + self.w[:, None, None] * frames[self.hi]
 
@@ -629,7 +633,7 @@ def _cg_filtered(A, B, pinned):
     return dV, it
 
 
-def simulate_reference(net: Network, plan: FramePlan, settings: dict, gravity=D.GRAVITY,
+def simulate_reference(net: Network, plan: FramePlan, settings: dict, gravity: ArrayLike = D.GRAVITY,
                        keep_frames: bool = False) -> Trajectory:
     """One candidate, step by step as Blender's solver runs it (numpy; the numba kernels of
     ``blender_kernels`` compute the same and are tested against it)."""

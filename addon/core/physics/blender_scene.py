@@ -23,14 +23,16 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ClothFitError
 from . import blender as B
+from .scenario import ClothGrid
 
 FORMAT = "silhouette-cloth-fit/scene-cloth"
 
 
-def world_f32(matrix, local) -> np.ndarray:
+def world_f32(matrix: ArrayLike, local: ArrayLike) -> np.ndarray:
     """World positions of ``local`` (V, 3) under the 4 x 4 ``matrix`` (row-major, as mathutils
     prints it) computed as Blender's ``mul_m4_v3`` does in float32:
     ``((x m[r,0] + y m[r,1]) + m[r,2] z) + m[r,3]`` per row ``r``. Returned as float64 (exact)."""
@@ -72,14 +74,14 @@ class SceneCloth:
     def n_vertices(self) -> int:
         return int(self.rest.shape[0])
 
-    def network(self, bending_model=None, edges="mesh") -> B.Network:
+    def network(self, bending_model: str | None = None, edges: str | ArrayLike | None = "mesh") -> B.Network:
         """The spring network of the scene's mesh; ``edges="mesh"`` keeps the mesh's edge order
         (Blender builds its structural springs in it), ``None`` takes each face's sides in face
         order instead (what the core builds for its own grid)."""
         bm = bending_model or self.settings.get("bending_model", "ANGULAR")
         return B.Network.from_mesh(self.rest, self.faces, bm, edges=self.edges if isinstance(edges, str) else edges)
 
-    def plan(self, frames=None, release_frame: int = 0) -> B.FramePlan:
+    def plan(self, frames: ArrayLike | None = None, release_frame: int = 0) -> B.FramePlan:
         """Frame plan reading the scene's frames ``frames`` (relative to ``frame_start``, may be
         fractional: linear between whole frames; default every frame)."""
         n = self.n_frames
@@ -96,13 +98,13 @@ class SceneCloth:
                            np.asarray(self.targets, dtype=np.float64), np.asarray(self.weights, dtype=np.float64),
                            lo, hi, w, int((~exact).sum()))
 
-    def settings_row(self, **changes) -> np.ndarray:
+    def settings_row(self, **changes: float | str) -> np.ndarray:
         s = dict(self.settings)
         s.update(changes)
         return B.settings_row(B.check_settings(s, "scene cloth settings"))
 
-    def simulate(self, rows=None, net: B.Network | None = None, plan: B.FramePlan | None = None,
-                 quality: int | None = None):
+    def simulate(self, rows: ArrayLike | None = None, net: B.Network | None = None, plan: B.FramePlan | None = None,
+                 quality: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Every frame ``(P, n_frames + 1, V, 3)`` (float64 of the kernel's float32) and the
         explosion codes, for parameter rows (default: the scene's own settings). All rows must share
         one ``time_scale`` (the kernel runs one time step)."""
@@ -120,7 +122,7 @@ class SceneCloth:
 
     # ------------------------------------------------------------------ files
 
-    def save(self, path):
+    def save(self, path: str | os.PathLike) -> None:
         """Write the scene cloth as one ``.npz`` (arrays, and the rest as JSON text)."""
         from ..safeio import atomic_write, json_text
         import io
@@ -134,7 +136,7 @@ class SceneCloth:
         atomic_write(path, buf.getvalue())
 
     @classmethod
-    def load(cls, path) -> "SceneCloth":
+    def load(cls, path: str | os.PathLike) -> "SceneCloth":
         if not os.path.isfile(path):
             raise ClothFitError(f"scene cloth {path}: file not found")
         try:
@@ -153,7 +155,7 @@ class SceneCloth:
                    float(meta["fps"]), int(meta["frame_start"]), meta.get("info", {}))
 
 
-def grid_order(positions, grid, tol: float = 1e-6):
+def grid_order(positions: ArrayLike, grid: ClothGrid, tol: float = 1e-6) -> np.ndarray | None:
     """The permutation ``p`` with ``positions[p[g]]`` at grid vertex ``g`` of ``grid`` (a
     ``ClothGrid``), matching each mesh vertex to the nearest grid point within ``tol`` times the
     spacing; None when the mesh is not that grid (different count, or a vertex off every point,

@@ -9,6 +9,8 @@ magnitude faster, and run the candidates of a population in parallel threads. Se
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from typing import Any
 
 try:  # pragma: no cover - depends on the environment
     if os.environ.get("CLOTHFIT_NO_NUMBA"):
@@ -20,7 +22,7 @@ except ImportError:  # pragma: no cover
     numba = None
     _HAVE = False
 
-    def njit(*args, **kwargs):  # the kernels are defined but never called without numba
+    def njit(*args: Any, **kwargs: Any) -> Callable[..., Any]:  # the kernels are defined but never called without numba
         if args and callable(args[0]):
             return args[0]
         return lambda f: f

@@ -15,8 +15,11 @@ historical call.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
@@ -50,7 +53,8 @@ class PaperModel:
     def to_dict(self) -> dict:
         return {"name": self.name}
 
-    def simulate(self, scenario: Scenario, rows, backend: str = "auto", offsets: Offsets | None = None) -> SimResult:
+    def simulate(self, scenario: Scenario, rows: Params | dict[str, float] | ArrayLike | Iterable[Params | dict[str, float]],
+                 backend: str = "auto", offsets: Offsets | None = None) -> SimResult:
         """``offsets``: each candidate's own manipulation (``Scenario.moved``), None = the scenario's."""
         P = _as_params(rows)
         if _backend(backend) == "numba":
@@ -82,10 +86,10 @@ class BlenderModel:
     def to_dict(self) -> dict:
         return {"name": self.name, "fps": self.fps, "quality": self.quality, "bending_model": self.bending_model}
 
-    def settings(self, row) -> dict:
+    def settings(self, row: ArrayLike) -> dict:
         return B.row_settings(row, self.quality, self.bending_model)
 
-    def plan(self, scenario: Scenario):
+    def plan(self, scenario: Scenario) -> tuple[B.Network, B.FramePlan]:
         """(network, frame plan) of a scenario, built once per scenario object."""
         key = id(scenario)
         hit = self._cache.get(key)
@@ -112,7 +116,7 @@ class BlenderModel:
             self._spans = {key: hit}
         return hit[1]
 
-    def check_rows(self, rows) -> np.ndarray:
+    def check_rows(self, rows: ArrayLike) -> np.ndarray:
         rows = np.asarray(rows, dtype=np.float64)
         if rows.ndim == 1:
             rows = rows[None]
@@ -123,7 +127,8 @@ class BlenderModel:
             B.check_settings(self.settings(r), "blender model")
         return rows
 
-    def simulate(self, scenario: Scenario, rows, backend: str = "auto", offsets: Offsets | None = None) -> SimResult:
+    def simulate(self, scenario: Scenario, rows: ArrayLike, backend: str = "auto",
+                 offsets: Offsets | None = None) -> SimResult:
         """``offsets``: each candidate's own manipulation (its frames read ``offsets.time`` s earlier,
         its handles moved, its rest shape that of its own first frame); None = the scenario's."""
         rows = self.check_rows(rows)
@@ -159,7 +164,7 @@ class BlenderModel:
         reason = ["" if c == 0 else f"exploded ({blender_kernels.REASONS[c]})" for c in codes]
         return SimResult(out, exploded, steps, reason)
 
-    def prepared(self, scenario: Scenario, time_scale: float, all_frames: bool = False):
+    def prepared(self, scenario: Scenario, time_scale: float, all_frames: bool = False) -> blender_kernels.Prepared:
         """The kernel's float32 arrays for a scenario and time step, built once."""
         net, plan = self.plan(scenario)
         store = self._cache[id(scenario)][3]
@@ -206,7 +211,7 @@ def _each(rows, offsets: Offsets, simulate_one, scenario: Scenario) -> SimResult
                      np.concatenate([np.atleast_1d(r.substeps) for r in parts]), [x for r in parts for x in r.reason])
 
 
-def get_model(spec=None):
+def get_model(spec: str | dict[str, Any] | PaperModel | BlenderModel | Any = None) -> PaperModel | BlenderModel | Any:
     """A model from a name ("paper", "blender") or a ``to_dict()``; None = the paper model."""
     if spec is None:
         return PaperModel()
@@ -230,7 +235,8 @@ def get_model(spec=None):
     raise ClothFitError(f"unknown model {spec['name']!r}: choose one of {', '.join(MODEL_NAMES)}")
 
 
-def model_and_row(res: dict, default_model=None):
+def model_and_row(res: dict[str, Any], default_model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None
+                  ) -> tuple[PaperModel | BlenderModel | Any, np.ndarray]:
     """(model, one parameter row) to replay ``res``: a fit result (its ``model``, ``blender_cloth``,
     ``blender_scene`` or ``params``), a paper parameter object (m, k, l, d) or an object of
     ClothSettings values (for ``default_model``'s frame rate, else Blender's default 24 fps)."""
@@ -261,8 +267,9 @@ def model_and_row(res: dict, default_model=None):
     return model, np.array([p.m, p.k, p.l, p.d])
 
 
-def simulate(scenario: Scenario, params, backend: str = "auto", safety: float = D.DT_SAFETY,
-             model=None) -> SimResult:
+def simulate(scenario: Scenario, params: Params | dict[str, float] | ArrayLike | Iterable[Params | dict[str, float]],
+             backend: str = "auto", safety: float = D.DT_SAFETY,
+             model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None) -> SimResult:
     """Simulate a population of ``model`` (default: the paper's sheet, rows (m, k, l, d)).
     ``safety`` scales the paper model's time step (``dt <= safety * sqrt(m/k)``); synthetic ground
     truth may use a finer step than the fitter (``defaults.TRUTH_DT_SAFETY``)."""

@@ -33,13 +33,16 @@ Only k/m, d/m and l enter the equations (``model.identifiable``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .scenario import Scenario
+from .scenario import ClothGrid, Scenario
 
 PARAM_NAMES = ("m", "k", "l", "d")
 
@@ -51,11 +54,11 @@ class Params:
     l: float
     d: float
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, float]:
         return {n: float(getattr(self, n)) for n in PARAM_NAMES}
 
     @classmethod
-    def from_dict(cls, d, source="parameters"):
+    def from_dict(cls, d: Mapping[str, Any], source: str = "parameters") -> Params:
         try:
             p = cls(*(float(d[n]) for n in PARAM_NAMES))
         except KeyError as e:
@@ -65,7 +68,7 @@ class Params:
         p.check(source)
         return p
 
-    def check(self, source="parameters"):
+    def check(self, source: str = "parameters") -> None:
         for n in PARAM_NAMES:
             v = getattr(self, n)
             if not math.isfinite(v):
@@ -75,7 +78,7 @@ class Params:
         if self.d < 0:
             raise ClothFitError(f"{source}: damping d = {self.d} must be >= 0")
 
-    def identifiable(self):
+    def identifiable(self) -> dict[str, float]:
         return identifiable(self.as_dict())
 
 
@@ -127,7 +130,8 @@ def event_times(scenario: Scenario) -> np.ndarray:
     return ev[ev >= -scenario.settle_time - 1e-15]
 
 
-def step_plan(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY):
+def step_plan(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per candidate: step ``dt``, number of whole steps, remainder step (0 = none) for an interval."""
     m, k = params[:, 0], params[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -142,7 +146,7 @@ def step_plan(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY):
 MAX_TOTAL_STEPS = D.MAX_TOTAL_STEPS
 
 
-def check_params(params: np.ndarray):
+def check_params(params: np.ndarray) -> np.ndarray:
     bad = ~np.all(np.isfinite(params), axis=1) | (params[:, 0] <= 0) | (params[:, 1] <= 0) | (params[:, 2] <= 0) | (params[:, 3] < 0)
     return bad
 
@@ -152,7 +156,7 @@ def _handle_tables(scenario):
     return hv
 
 
-def handle_state(scenario, t):
+def handle_state(scenario: Scenario, t: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions (..., H, 3), velocities and held mask (..., H) of the handles at times ``t``."""
     t = np.asarray(t, dtype=np.float64)
     pos = np.stack([h.position(t) for h in scenario.handles], -2) if scenario.handles else np.zeros(t.shape + (0, 3))
@@ -161,7 +165,7 @@ def handle_state(scenario, t):
     return pos, vel, held
 
 
-def initial_state(scenario, n):
+def initial_state(scenario: Scenario, n: int) -> tuple[np.ndarray, np.ndarray]:
     x = np.broadcast_to(scenario.grid.rest, (n,) + scenario.grid.rest.shape).copy()
     t0 = -scenario.settle_time
     if scenario.handles:
@@ -171,7 +175,7 @@ def initial_state(scenario, n):
     return x, np.zeros_like(x)
 
 
-def explosion_limits(scenario):
+def explosion_limits(scenario: Scenario) -> tuple[np.ndarray, float]:
     g = scenario.grid
     size = max(g.side, g.side_y)
     if scenario.handles:
@@ -291,14 +295,14 @@ def _max_strain(x, L):
     return np.max(r, axis=0)
 
 
-def spring_energy(x: np.ndarray, grid, k: float, l: float) -> float:
+def spring_energy(x: np.ndarray, grid: ClothGrid, k: float, l: float) -> float:
     """Elastic energy of one configuration ``x`` (V, 3): sum 1/2 k (|e| - l_ij)^2."""
     s = grid.springs
     ln = np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1)
     return float(0.5 * k * np.sum((ln - l * grid.rest_factor) ** 2))
 
 
-def spring_forces(x: np.ndarray, grid, k: float, l: float) -> np.ndarray:
+def spring_forces(x: np.ndarray, grid: ClothGrid, k: float, l: float) -> np.ndarray:
     """Spring forces on each vertex of one configuration (V, 3), from the spring list."""
     s = grid.springs
     d = x[s[:, 1]] - x[s[:, 0]]

@@ -4,12 +4,15 @@ thread. Same formulas, same order of operations (tests compare them with the num
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from .jit import JIT, PARALLEL, njit, prange
 from .paper import SimResult, event_times, explosion_limits
+from .scenario import Offsets, Scenario
 
 REASONS = ["", "invalid parameters", "non-finite state", "flew away", "spring overstretched", "too many steps"]
 
@@ -192,7 +195,7 @@ def simulate_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, ke
         steps[p] = st
 
 
-def scenario_arrays(scenario, safety=D.DT_SAFETY):
+def scenario_arrays(scenario: Scenario, safety: float = D.DT_SAFETY) -> dict[str, Any]:
     """Flatten a Scenario into the plain arrays the kernels take."""
     grid = scenario.grid
     hs = scenario.handles
@@ -225,7 +228,8 @@ ORDER = ["nx", "ny", "rest", "springs", "rest_factor", "hv", "key_start", "key_t
           "max_strain", "max_steps"]
 
 
-def population_arrays(scenario, n, safety=D.DT_SAFETY, offsets=None):
+def population_arrays(scenario: Scenario, n: int, safety: float = D.DT_SAFETY,
+                      offsets: Offsets | None = None) -> dict[str, Any]:
     """``scenario_arrays`` for ``n`` candidates: ``key_pos`` (n, K, 3), ``events`` and
     ``frame_of_event`` (n, E) and ``n_events`` (n,) per candidate: the same for all, or each
     candidate's own manipulation (``scenario.Offsets``: its frames read earlier by its time offset,
@@ -249,7 +253,8 @@ def population_arrays(scenario, n, safety=D.DT_SAFETY, offsets=None):
     return a
 
 
-def simulate(scenario, P, safety=D.DT_SAFETY, offsets=None):
+def simulate(scenario: Scenario, P: ArrayLike, safety: float = D.DT_SAFETY,
+             offsets: Offsets | None = None) -> SimResult:
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 4)
     a = population_arrays(scenario, P.shape[0], safety, offsets)
     V = a["rest"].shape[0]

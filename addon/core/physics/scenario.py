@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
@@ -102,10 +104,10 @@ class ClothGrid:
         self.quads = np.stack([a, b, dd, c], 1).astype(np.int64)
 
     @property
-    def n_vertices(self):
+    def n_vertices(self) -> int:
         return self.nx * self.ny
 
-    def corners(self):
+    def corners(self) -> list[int]:
         """Indices of the four corners: (0,0), (0,nx-1), (ny-1,0), (ny-1,nx-1)."""
         nx, ny = self.nx, self.ny
         return [0, nx - 1, (ny - 1) * nx, ny * nx - 1]
@@ -115,7 +117,7 @@ class ClothGrid:
         """True when the sheet is moved off the paper's placement (centre off the z axis or rotated)."""
         return bool(self.origin[0] != 0.0 or self.origin[1] != 0.0 or np.any(self.rotation != 0.0))
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         d = {"nx": self.nx, "ny": self.ny, "side": self.side, "side_y": self.side_y, "height": self.height}
         if self.placed:                # written only when used: older readers see the same keys as before
             d["origin"] = self.origin.tolist()
@@ -123,7 +125,7 @@ class ClothGrid:
         return d
 
     @classmethod
-    def from_dict(cls, d, source="cloth"):
+    def from_dict(cls, d: Any, source: str = "cloth") -> ClothGrid:
         if not isinstance(d, dict):
             raise ClothFitError(f"{source}: the cloth must be an object, got {d!r}")
         try:
@@ -149,7 +151,7 @@ def _vector3(v, what, limit):
     return a
 
 
-def rotation_matrix(rvec) -> np.ndarray:
+def rotation_matrix(rvec: ArrayLike) -> np.ndarray:
     """Rodrigues: the rotation matrix of a rotation vector (axis * angle [rad]); the same as cv2.Rodrigues."""
     r = np.asarray(rvec, dtype=np.float64).reshape(3)
     th = float(np.linalg.norm(r))
@@ -160,7 +162,7 @@ def rotation_matrix(rvec) -> np.ndarray:
     return np.eye(3) + math.sin(th) * Kx + (1.0 - math.cos(th)) * (Kx @ Kx)
 
 
-def rotation_vector(R) -> np.ndarray:
+def rotation_vector(R: ArrayLike) -> np.ndarray:
     """The rotation vector (axis * angle, angle in [0, pi]) of a rotation matrix; inverse of rotation_matrix."""
     R = np.asarray(R, dtype=np.float64).reshape(3, 3)
     c = max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))
@@ -208,14 +210,14 @@ class Handle:
             raise ClothFitError(f"handle on vertex {self.vertex}: release_time {self.release_time} must be finite "
                                 f"and within {MAX_TIME_S:g} s")
 
-    def position(self, t):
+    def position(self, t: ArrayLike) -> np.ndarray:
         """Positions at times ``t`` (array) -> ``t.shape + (3,)``."""
         t = np.asarray(t, dtype=np.float64)
         if self.times.size == 1:
             return np.broadcast_to(self.positions[0], t.shape + (3,)).copy()
         return np.stack([np.interp(t, self.times, self.positions[:, a]) for a in range(3)], -1)
 
-    def velocity(self, t):
+    def velocity(self, t: ArrayLike) -> np.ndarray:
         t = np.asarray(t, dtype=np.float64)
         out = np.zeros(t.shape + (3,))
         if self.times.size == 1:
@@ -226,20 +228,20 @@ class Handle:
         out[inside] = vel[seg[inside]]
         return out
 
-    def held(self, t):
+    def held(self, t: ArrayLike) -> np.ndarray | np.bool_:
         t = np.asarray(t, dtype=np.float64)
         if self.release_time is None:
             return np.ones(t.shape, dtype=bool)
         return t <= self.release_time  # held up to and including the release instant
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         d = {"vertex": int(self.vertex), "times": self.times.tolist(), "positions": self.positions.tolist()}
         if self.release_time is not None:
             d["release_time"] = float(self.release_time)
         return d
 
     @classmethod
-    def from_dict(cls, d, n_vertices=None, source="handle"):
+    def from_dict(cls, d: dict[str, Any], n_vertices: int | None = None, source: str = "handle") -> Handle:
         try:
             v = int(d["vertex"])
             h = cls(v, d.get("times", [0.0]), d["positions"], None if d.get("release_time") is None else float(d["release_time"]))
@@ -293,13 +295,13 @@ class Scenario:
                 raise ClothFitError(f"scenario: vertex {h.vertex} has two handles")
             seen.add(h.vertex)
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return {"cloth": self.grid.to_dict(), "handles": [h.to_dict() for h in self.handles],
                 "frame_times": self.frame_times.tolist(), "settle_time": self.settle_time,
                 "gravity": self.gravity.tolist()}
 
     @classmethod
-    def from_dict(cls, d, source="scenario"):
+    def from_dict(cls, d: dict[str, Any], source: str = "scenario") -> Scenario:
         grid = ClothGrid.from_dict(d.get("cloth", {}), source=f"{source} cloth")
         hs = d.get("handles")
         if not isinstance(hs, list):
@@ -310,10 +312,10 @@ class Scenario:
         return cls(grid, handles, d["frame_times"], float(d.get("settle_time", D.SETTLE_TIME)),
                    d.get("gravity", D.GRAVITY))
 
-    def with_frames(self, times):
+    def with_frames(self, times: ArrayLike) -> Scenario:
         return Scenario(self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity)
 
-    def moved(self, time_offset: float = 0.0, handle_offsets=None) -> "Scenario":
+    def moved(self, time_offset: float = 0.0, handle_offsets: ArrayLike | None = None) -> "Scenario":
         """The manipulation a fit estimated (``Uncertainty``): the frames read ``time_offset`` s earlier
         on the manipulation's clock (true time = capture time - time_offset; a frame before the
         settle's start reads its start), every handle's trajectory moved by its offset (H, 3) [m]."""
@@ -325,7 +327,8 @@ class Scenario:
         return Scenario(self.grid, hs, times, self.settle_time, self.gravity)
 
 
-def paper_scenario(grid: ClothGrid | None = None, frame_times=None, released_corner: int = D.RELEASED_CORNER):
+def paper_scenario(grid: ClothGrid | None = None, frame_times: ArrayLike | None = None,
+                   released_corner: int = D.RELEASED_CORNER) -> Scenario:
     """SPEC 5: all four corners held at the flat square, settle, release one corner at t = 0."""
     grid = grid or ClothGrid()
     handles = []
@@ -359,7 +362,7 @@ class Uncertainty:
                 "handles": h[0] if h and all(b == h[0] for b in h) else h}
 
     @classmethod
-    def parse(cls, value, n_handles: int, source: str = "uncertain") -> "Uncertainty | None":
+    def parse(cls, value: Any, n_handles: int, source: str = "uncertain") -> "Uncertainty | None":
         """From a capture's ``"uncertain"`` object (None/absent = nothing uncertain). Bounds must be
         numbers >= 0 and at most ``MAX_TIME_OFFSET_S`` / ``MAX_HANDLE_OFFSET_M``; ``handles`` is one
         bound or a list with one per handle."""
@@ -434,7 +437,7 @@ class Offsets:
     def __len__(self):
         return self.time.size
 
-    def take(self, idx) -> "Offsets":
+    def take(self, idx: np.ndarray | list[int] | slice) -> "Offsets":
         return Offsets(self.time[idx], self.handles[idx])
 
     @property
@@ -447,7 +450,7 @@ class Offsets:
         return float(np.abs(self.time).max(initial=0.0))
 
 
-def fitted_scenario(scenario, result: dict):
+def fitted_scenario(scenario: Scenario, result: dict[str, Any]) -> Scenario:
     """A scenario as a fit result estimated its manipulation: handles from the result's ``handles``
     (same vertices, in the same order) and its frames read ``time_offset_s`` earlier; a result
     without them leaves the scenario as it is."""

@@ -12,6 +12,9 @@ numba is required (the callers are numba kernels); without numba the module stil
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import SupportsFloat
+
 from .jit import available
 
 W = 8   # lanes per vector: 8 float32 = 256 bits (AVX2; two per AVX-512 register on Zen 4)
@@ -198,52 +201,52 @@ if available():  # pragma: no branch
             self.zero = ir.Constant(_VEC, [0.0] * W)
 
         # constants and scalars
-        def k(self, x):
+        def k(self, x: SupportsFloat) -> ir.Constant:
             """A float32 constant in every lane (x is rounded to float32 first)."""
             import numpy as np
             return ir.Constant(_VEC, [float(np.float32(x))] * W)
 
-        def splat(self, x):
+        def splat(self, x: ir.Value) -> ir.Value:
             return _splat(self.b, x)
 
-        def i(self, data, k):
+        def i(self, data: ir.Value, k: ir.Value) -> ir.Value:
             return _i(self.b, data, k)
 
-        def f(self, data, k):
+        def f(self, data: ir.Value, k: ir.Value) -> ir.Value:
             """Element k of a float32 array, in every lane."""
             return _splat(self.b, self.b.load(self.b.gep(data, [k])))
 
         # memory: rows of lane arrays
-        def ld(self, data, row):
+        def ld(self, data: ir.Value, row: ir.Value) -> ir.Value:
             return _ld(self.b, data, row)
 
-        def st(self, data, row, v):
+        def st(self, data: ir.Value, row: ir.Value, v: ir.Value) -> None:
             _st(self.b, data, row, v)
 
-        def ld3(self, data, v3):
+        def ld3(self, data: ir.Value, v3: ir.Value) -> list[ir.Value]:
             return [_ld(self.b, data, self.b.add(v3, _c(a))) for a in range(3)]
 
         # arithmetic
-        def add(self, x, y):
+        def add(self, x: ir.Value, y: ir.Value) -> ir.Value:
             return self.b.fadd(x, y)
 
-        def sub(self, x, y):
+        def sub(self, x: ir.Value, y: ir.Value) -> ir.Value:
             return self.b.fsub(x, y)
 
-        def mul(self, x, y):
+        def mul(self, x: ir.Value, y: ir.Value) -> ir.Value:
             return self.b.fmul(x, y)
 
-        def div(self, x, y):
+        def div(self, x: ir.Value, y: ir.Value) -> ir.Value:
             return self.b.fdiv(x, y)
 
-        def neg(self, x):
+        def neg(self, x: ir.Value) -> ir.Value:
             return self.b.fneg(x)
 
-        def sqrt(self, x):
+        def sqrt(self, x: ir.Value) -> ir.Value:
             fn = cgutils.get_or_insert_function(self.b.module, ir.FunctionType(_VEC, [_VEC]), f"llvm.sqrt.v{W}f32")
             return self.b.call(fn, [x])
 
-        def atan2(self, y, x):
+        def atan2(self, y: ir.Value, x: ir.Value) -> ir.Value:
             """glibc's atan2f lane by lane (what Blender calls)."""
             fnty = ir.FunctionType(_F, [_F, _F])
             fn = cgutils.get_or_insert_function(self.b.module, fnty, "atan2f")
@@ -255,25 +258,25 @@ if available():  # pragma: no branch
             return out
 
         # comparisons (ordered: false when a NaN is involved, like C's <, >, >=) and selection
-        def lt(self, x, y):
+        def lt(self, x: ir.Value, y: ir.Value) -> ir.Value:
             return self.b.fcmp_ordered("<", x, y)
 
-        def gt(self, x, y):
+        def gt(self, x: ir.Value, y: ir.Value) -> ir.Value:
             return self.b.fcmp_ordered(">", x, y)
 
-        def ge(self, x, y):
+        def ge(self, x: ir.Value, y: ir.Value) -> ir.Value:
             return self.b.fcmp_ordered(">=", x, y)
 
-        def land(self, m, n):
+        def land(self, m: ir.Value, n: ir.Value) -> ir.Value:
             return self.b.and_(m, n)
 
-        def sel(self, m, x, y):
+        def sel(self, m: ir.Value, x: ir.Value, y: ir.Value) -> ir.Value:
             return self.b.select(m, x, y)
 
-        def true(self):
+        def true(self) -> ir.Constant:
             return ir.Constant(ir.VectorType(ir.IntType(1), W), [1] * W)
 
-        def splat_bool(self, bit):
+        def splat_bool(self, bit: ir.Value) -> ir.Value:
             """An i1 scalar in every lane."""
             m = ir.VectorType(ir.IntType(1), W)
             v = self.b.insert_element(ir.Constant(m, ir.Undefined), bit, ir.Constant(ir.IntType(32), 0))
@@ -281,22 +284,22 @@ if available():  # pragma: no branch
                                          ir.Constant(ir.VectorType(ir.IntType(32), W), [0] * W))
 
         # 3-vectors as lists of lane vectors
-        def dot3(self, a, b):
+        def dot3(self, a: Sequence[ir.Value], b: Sequence[ir.Value]) -> ir.Value:
             return self.add(self.add(self.mul(a[0], b[0]), self.mul(a[1], b[1])), self.mul(a[2], b[2]))
 
-        def cross3(self, a, b):
+        def cross3(self, a: Sequence[ir.Value], b: Sequence[ir.Value]) -> list[ir.Value]:
             return [self.sub(self.mul(a[1], b[2]), self.mul(a[2], b[1])),
                     self.sub(self.mul(a[2], b[0]), self.mul(a[0], b[2])),
                     self.sub(self.mul(a[0], b[1]), self.mul(a[1], b[0]))]
 
-        def normalize3(self, a):
+        def normalize3(self, a: Sequence[ir.Value]) -> list[ir.Value]:
             """normalize_v3: a / |a| if |a|^2 > 1e-35, else 0."""
             d = self.dot3(a, a)
             ok = self.gt(d, self.k(1.0e-35))
             f = self.div(self.k(1.0), self.sqrt(d))
             return [self.sel(ok, self.mul(x, f), self.zero) for x in a]
 
-        def normal_tri(self, p, q, r):
+        def normal_tri(self, p: Sequence[ir.Value], q: Sequence[ir.Value], r: Sequence[ir.Value]) -> list[ir.Value]:
             """normal_tri_v3(n, p, q, r) = normalize((p - q) x (q - r))."""
             n1 = [self.sub(p[a], q[a]) for a in range(3)]
             n2 = [self.sub(q[a], r[a]) for a in range(3)]
@@ -304,13 +307,13 @@ if available():  # pragma: no branch
                                     self.sub(self.mul(n1[2], n2[0]), self.mul(n1[0], n2[2])),
                                     self.sub(self.mul(n1[0], n2[1]), self.mul(n1[1], n2[0]))])
 
-        def var(self, init):
+        def var(self, init: ir.Value) -> ir.Value:
             p = cgutils.alloca_once(self.b, _VEC)
             self.b.store(init, p)
             return p
 
-        def get(self, p):
+        def get(self, p: ir.Value) -> ir.Value:
             return self.b.load(p)
 
-        def set(self, p, v):
+        def set(self, p: ir.Value, v: ir.Value) -> None:
             self.b.store(v, p)

@@ -23,6 +23,8 @@ import json
 import math
 import os
 import time
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -31,7 +33,7 @@ from ..errors import ClothFitError
 from ..fitting.evaluate import evaluate
 from ..fitting.job import FitConfig, FitJob
 from ..observation.camera import select_training
-from ..observation.capture import load_capture
+from ..observation.capture import Capture, load_capture
 from ..observation.raster import silhouette
 from ..observation.synth import synth_capture
 from ..physics.paper import identifiable, identifiable_errors
@@ -47,7 +49,7 @@ OPT_VARIANTS = [("spx-mgg", {"optimizer": "spx-mgg", "population": D.GA_POPULATI
                 ("cma-es", {"optimizer": "cma-es"})]
 
 
-def noise_floor(capture, cams, times):
+def noise_floor(capture: Capture, cams: Iterable[int], times: Iterable[float]) -> float:
     """Mean E_sil x 100 of the truth's own (noise-free) silhouettes against the observations."""
     fidx = [capture.frame_index(t) for t in times]
     tris = capture.scenario.grid.triangles
@@ -64,7 +66,9 @@ def _log(msg):
     print(msg, flush=True)
 
 
-def fit_and_score(train_cap, test_cap, n_cams, train_times, optimizer, evals, seed, resolution=None, sizes=None):
+def fit_and_score(train_cap: Capture, test_cap: Capture, n_cams: int, train_times: Sequence[float], optimizer: str,
+                  evals: int, seed: int, resolution: Sequence[int] | None = None, sizes: dict[str, int] | None = None
+                  ) -> tuple[dict[str, Any], list[int]]:
     train, held = select_training(train_cap.cameras, n_cams)
     t0 = time.time()
     job = FitJob(train_cap, FitConfig(train_cameras=train, train_times=train_times, optimizer=optimizer,
@@ -85,8 +89,10 @@ def fit_and_score(train_cap, test_cap, n_cams, train_times, optimizer, evals, se
     return row, held
 
 
-def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=None, max_evaluations=None,
-              only=None, truth_dt_safety=None, population=None, children=None, rig=None):
+def run_paper(json_path: str | os.PathLike, quick: bool = False, out_dir: str | os.PathLike = "out/paper", seed: int = 0,
+              optimizer: str | None = None, max_evaluations: int | None = None, only: str | None = None,
+              truth_dt_safety: float | None = None, population: int | None = None, children: int | None = None,
+              rig: str | None = None) -> dict[str, Any]:
     S = dict(QUICK if quick else FULL)
     for name, v, lo in (("max_evaluations", max_evaluations, 1), ("population", population, 2),
                         ("children", children, 1)):
@@ -170,7 +176,8 @@ def run_paper(json_path, quick=False, out_dir="out/paper", seed=0, optimizer=Non
     return out
 
 
-def compare_optimizers(cap, n_cams, seeds, evals, levels=(2.0, 1.0, 0.5)):
+def compare_optimizers(cap: Capture, n_cams: int, seeds: int, evals: int, levels: Sequence[float] = (2.0, 1.0, 0.5)
+                       ) -> dict[str, Any]:
     """Evaluations each optimiser needs to bring the mean training E_sil below ``levels`` [%]."""
     train, _ = select_training(cap.cameras, n_cams)
     out = {"cameras": n_cams, "seeds": seeds, "budget": evals, "levels_pct": list(levels), "runs": [],
@@ -212,7 +219,7 @@ def _dump(path, obj):
     atomic_json(path, obj)
 
 
-def format_tables(out) -> str:
+def format_tables(out: dict[str, Any]) -> str:
     L = []
     if "table1" in out:
         L.append("Table 1 (held-out cameras, test shapes)           ours                paper")

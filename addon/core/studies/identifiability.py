@@ -21,13 +21,16 @@ scaling it with every stiffness and damping leaves the motion unchanged (tested)
 """
 from __future__ import annotations
 
+import os
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
 from .. import defaults as D
 from ..physics import blender as B
 from ..physics.models import BlenderModel
-from ..physics.scenario import paper_scenario
+from ..physics.scenario import Scenario, paper_scenario
 
 CANDIDATES = ("tension_stiffness", "compression_stiffness", "shear_stiffness", "bending_stiffness",
               "tension_damping", "compression_damping", "shear_damping", "bending_damping", "air_damping")
@@ -41,7 +44,8 @@ SIGMA_M = 0.5e-3          # positions resolved to 0.5 mm (about one pixel of the
 STEP = 0.05               # +-5 % in log
 
 
-def jacobian(settings: dict, names=CANDIDATES, fps: float = D.BLENDER_FPS, scenario=None):
+def jacobian(settings: dict, names: Sequence[str] = CANDIDATES, fps: float = D.BLENDER_FPS,
+             scenario: Scenario | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(J (N, len(names)) metres per unit log setting, base positions (F, V, 3))."""
     scenario = scenario or paper_scenario(frame_times=D.TRAIN_TIMES)
     s = B.check_settings(dict(settings, time_scale=settings.get("time_scale", B.physical_time_scale(fps))))
@@ -63,7 +67,7 @@ def jacobian(settings: dict, names=CANDIDATES, fps: float = D.BLENDER_FPS, scena
     return J, X[0]
 
 
-def bounds_pct(J, cols, sigma=SIGMA_M):
+def bounds_pct(J: np.ndarray, cols: Sequence[int], sigma: float = SIGMA_M) -> list[float]:
     """Cramer-Rao relative std [%] of the log settings ``cols`` free together."""
     F = J[:, cols].T @ J[:, cols] / sigma ** 2
     try:
@@ -73,7 +77,7 @@ def bounds_pct(J, cols, sigma=SIGMA_M):
     return [100.0 * float(np.sqrt(max(c, 0.0))) for c in np.diag(cov)]
 
 
-def table(material: str, settings: dict, default_free, sigma=SIGMA_M) -> dict:
+def table(material: str, settings: dict, default_free: Sequence[str], sigma: float = SIGMA_M) -> dict:
     names = list(CANDIDATES)
     J, _ = jacobian(settings, names)
     n_obs = J.shape[0] // 3
@@ -90,7 +94,7 @@ def table(material: str, settings: dict, default_free, sigma=SIGMA_M) -> dict:
             "observed_points": n_obs, "rows": rows}
 
 
-def format_table(t) -> str:
+def format_table(t: dict[str, Any]) -> str:
     out = [f"{t['material']}: Cramer-Rao relative std of each setting (positions to {t['sigma_mm']:g} mm, "
            f"{t['observed_points']} vertex observations)",
            f"  {'setting':24s} {'mm per +10 %':>12s} {'alone %':>9s} {'all free %':>11s} {'default set %':>14s}"]
@@ -101,7 +105,8 @@ def format_table(t) -> str:
     return "\n".join(out)
 
 
-def run(json_path=None, materials=None, echo=print):
+def run(json_path: str | os.PathLike | None = None, materials: Iterable[str] | None = None,
+        echo: Callable[[str], Any] = print) -> list[dict[str, Any]]:
     from ..fitting.parameters import BLENDER_FREE
     out = []
     for name in materials or MATERIALS:

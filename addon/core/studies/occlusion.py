@@ -24,23 +24,27 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
 from .. import defaults as D
 from ..fitting.evaluate import evaluate
 from ..fitting.job import FitConfig, FitJob
-from ..observation.camera import select_training
-from ..observation.capture import write_capture
+from ..observation.camera import Camera, select_training
+from ..observation.capture import Capture, write_capture
 from ..observation.synth import synth_capture
 from ..physics.paper import identifiable_errors
+from ..physics.scenario import Scenario
 
 POST_WIDTH = 0.15       # of the cloth's width in the view
 HAND_RADIUS = 0.12      # of the cloth's extent (bounding-box diagonal) in the view
 DEFAULT_SCALES = (1.0, 1.33, 1.67)   # occluder sizes studied, times POST_WIDTH and HAND_RADIUS
 
 
-def occluder_masks(camera, shapes, scenario, scale=1.0):
+def occluder_masks(camera: Camera, shapes: np.ndarray, scenario: Scenario, scale: float = 1.0
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """``(post, hand)`` bool images of one camera (fixed over the frames): see the module text."""
     H, W = camera.height, camera.width
     uv = camera.project(shapes.reshape(-1, 3)).reshape(-1, 2)
@@ -64,7 +68,9 @@ def occluder_masks(camera, shapes, scenario, scale=1.0):
     return post, hand
 
 
-def make_captures(root, resolution, scales=(1.0,), noise=D.NOISE_FRACTION, seed=0, truth_dt_safety=D.TRUTH_DT_SAFETY):
+def make_captures(root: str | os.PathLike, resolution: Sequence[int] | None, scales: Iterable[float] = (1.0,),
+                  noise: float = D.NOISE_FRACTION, seed: int = 0, truth_dt_safety: float = D.TRUTH_DT_SAFETY
+                  ) -> tuple[Capture, dict[float, tuple[Capture, Capture, list[float]]]]:
     """Write the clean capture and, per occluder scale, the ignore and background captures under
     ``root``; returns ``clean, {scale: (ignore, background, hidden fractions)}``."""
     clean = synth_capture(os.path.join(root, "clean"), rig=D.DEFAULT_RIG, noise=noise, resolution=resolution,
@@ -99,8 +105,10 @@ def _fit(cap, clean, train, held, evaluations, seed):
             "train_E_sil_pct": r["best_E_sil_mean_pct"], "seconds": time.time() - t0}
 
 
-def run_occlusion(json_path, out_dir="out/occlusion", quick=False, n_train=4, evaluations=None, seed=0,
-                  resolution=None, scales=DEFAULT_SCALES, truth_dt_safety=None, log=print):
+def run_occlusion(json_path: str | os.PathLike | None, out_dir: str | os.PathLike = "out/occlusion", quick: bool = False,
+                  n_train: int = 4, evaluations: int | None = None, seed: int = 0,
+                  resolution: Sequence[int] | None = None, scales: Iterable[float] = DEFAULT_SCALES,
+                  truth_dt_safety: float | None = None, log: Callable[[str], Any] = print) -> dict[str, Any]:
     """Run the study, print a table, write ``json_path``; returns the result dict."""
     resolution = resolution or ([240, 320] if quick else None)
     evaluations = evaluations or (700 if quick else 2000)
