@@ -116,7 +116,7 @@ def test_console_script_from_a_wheel(tmp_path):
     (wheel,) = (tmp_path / "dist").glob("silhouette_cloth_fit-*.whl")
     import zipfile
     names = zipfile.ZipFile(wheel).namelist()
-    assert "addon/cli.py" in names and "addon/rigs/lab18.json" in names
+    assert "addon/cli/__init__.py" in names and "addon/rigs/lab18.json" in names
     assert not [n for n in names if n.split("/")[0] in ("tests", "tools", "docs", "demo_blend", "rigs")]
     site = tmp_path / "site"
     r = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site),
