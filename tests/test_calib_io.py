@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from addon.core.footage import calib_io as CI
+from addon.core.footage import colmap as CM
 from addon.core.observation.camera import Camera, intrinsics, load_rig, look_at
 from addon.core.errors import ClothFitError
 from addon.core.observation.raster import rasterize
@@ -148,7 +149,7 @@ def test_duplicate_names_refused(tmp_path):
 
 def colmap_project(model, params, qvec, tvec, X):
     """COLMAP's own projection, written from its documentation (pixel centres at +0.5)."""
-    R = CI._quat_to_R(np.asarray(qvec, float))
+    R = CM._quat_to_R(np.asarray(qvec, float))
     Xc = X @ R.T + np.asarray(tvec)
     u, v = Xc[:, 0] / Xc[:, 2], Xc[:, 1] / Xc[:, 2]
     p = list(params)
@@ -253,18 +254,18 @@ def test_quaternion_round_trip():
     Rs = [cv2.Rodrigues(rng.normal(size=3))[0] for _ in range(50)]
     Rs += [np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, 1.0]), np.eye(3)]
     for R in Rs:
-        q = CI._R_to_quat(R)
-        assert q[0] >= 0 and np.allclose(CI._quat_to_R(q), R, atol=1e-12)
+        q = CM._R_to_quat(R)
+        assert q[0] >= 0 and np.allclose(CM._quat_to_R(q), R, atol=1e-12)
 
 
 def test_colmap_refuses_what_it_cannot_hold():
     c = rig(1)[0]
     c.K[0, 1] = 1.0
     with pytest.raises(ClothFitError, match="skew"):
-        CI.intrinsics_to_colmap(c)
+        CM.intrinsics_to_colmap(c)
     c = rig(1, [[0.1, 0, 0, 0, 0, 0, 0, 0, 0.01, 0, 0, 0]])[0]
     with pytest.raises(ClothFitError, match="no COLMAP model"):
-        CI.intrinsics_to_colmap(c)
+        CM.intrinsics_to_colmap(c)
 
 
 # ------------------------------------------------------------------- distortion

@@ -180,3 +180,34 @@ def test_non_numeric_times_or_camera_count(cap, opt, value):
 def test_camera_index_out_of_range(cap):
     rc, out, err = run("evaluate", cap, "--cameras", "99")
     assert_one_line_error(rc, out, err, "99")
+
+
+def test_max_evaluations_zero_is_refused_by_fit_and_fit_many(cap, tmp_path):
+    """``fit`` and ``fit-many`` build their FitConfig with one function (cli/fitting.fit_config): a budget
+    given is the budget, so ``--max-evaluations 0`` is bad data in both (fit-many used to read 0 as
+    the default budget), refused before any work starts and before anything is written."""
+    for args in (("fit", cap, "--out", tmp_path / "f.json"),
+                 ("fit-many", cap, "--out-dir", tmp_path / "many", "--executor", "process")):
+        rc, out, err = run(*args, "--max-evaluations", 0)
+        assert_one_line_error(rc, out, err, "max_evaluations", "got 0")
+    assert not (tmp_path / "f.json").exists() and not (tmp_path / "many").exists()
+
+
+def test_fit_config_is_shared_and_reads_only_what_the_command_declares(cap):
+    from argparse import Namespace
+
+    from addon.cli.fitting import fit_config
+    from addon.core import defaults as D
+    from addon.core.observation.capture import load_capture
+    c = load_capture(str(cap))
+    base = dict(cameras="0,1", times="0.1,0.2", optimizer="cma-es", seed=3, max_evaluations=None, resolution="30x40",
+                cloth_mass=None, population=None, quality=None, uncertain=None, model=None, fps=None,
+                bending_model=None)
+    many = fit_config(Namespace(**base), c).checked()            # fit-many's options only
+    assert many.max_evaluations == D.FIT_EVALUATIONS and many.train_cameras == [0, 1]
+    assert many.train_times == [0.1, 0.2] and many.resolution == [30, 40] and many.seed == 3
+    one = fit_config(Namespace(**base, backend="auto", children=4, target=0.01, free=None, fixed=None, init=None,
+                               bounds=None, restarts=2), c).checked()
+    assert (one.children, one.target_error, one.restarts) == (4, 0.01, 2)
+    assert {k: v for k, v in vars(one).items() if k not in ("children", "target_error", "restarts")} == \
+        {k: v for k, v in vars(many).items() if k not in ("children", "target_error", "restarts")}

@@ -116,7 +116,7 @@ def test_console_script_from_a_wheel(tmp_path):
     (wheel,) = (tmp_path / "dist").glob("silhouette_cloth_fit-*.whl")
     import zipfile
     names = zipfile.ZipFile(wheel).namelist()
-    assert "clothfit/__main__.py" in names and "clothfit/rigs/lab18.json" in names
+    assert "clothfit/__main__.py" in names and "clothfit/cli/__init__.py" in names and "clothfit/rigs/lab18.json" in names
     tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert tops == {"clothfit"}, tops                 # the wheel's only top-level package
     site = tmp_path / "site"

@@ -338,17 +338,18 @@ def test_cli_glue(tmp_path, capsys):
     scen = tmp_path / "scen.json"
     from addon.core.physics.scenario import paper_scenario
     scen.write_text(json.dumps({"scenario": paper_scenario(frame_times=[9.0]).to_dict()}))
-    p = X.add_arguments(argparse.ArgumentParser())
+    from addon.cli.footage import add_extract_arguments, cmd_extract
+    p = add_extract_arguments(argparse.ArgumentParser())
     args = p.parse_args([root, "-o", out, "--cameras", os.path.join(root, "cameras.yml"), "--times", "0.1,0.2,0.3",
                          "--camera-threshold", "cam01=12", "--scenario", str(scen), "--cloth-mass", "0.003"])
-    rep = X.run_args(args)
+    rep = cmd_extract(args)
     assert rep["cameras"]["cam01"]["threshold"] == 12.0
     assert "wrote capture" in capsys.readouterr().out
     cap = load_capture(out)
     assert np.allclose(cap.frame_times, [0.1, 0.2, 0.3]) and cap.cloth_mass == 0.003
     bad = p.parse_args([root, "-o", out, "--camera-threshold", "cam01"])
     with pytest.raises(ClothFitError, match="NAME=VALUE"):
-        X.run_args(bad)
+        cmd_extract(bad)
 
 
 def test_boundary_refinement_moves_edge_to_half_contrast():

@@ -370,10 +370,11 @@ def test_synth_truth_dt_safety_zero(tmp_path):
 
 def test_unexpected_exceptions_are_one_line_too(monkeypatch, tmp_path):
     import addon.cli as mod
+    import addon.cli.studies as studies
 
     def boom(a):
         raise RuntimeError("disk on fire\nsecond line")
-    monkeypatch.setattr(mod, "cmd_rig", boom)
+    monkeypatch.setattr(studies, "cmd_rig", boom)
     monkeypatch.delenv(mod.DEBUG_ENV, raising=False)
     line = one_line_error(*fit("rig"), "RuntimeError", "disk on fire", mod.DEBUG_ENV, code=1)
     assert "second line" in line                  # folded onto the one line

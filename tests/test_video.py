@@ -17,7 +17,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(
 
 from addon.cli import main as cli  # noqa: E402
 from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.footage import calib_io, video  # noqa: E402
+from addon.core.footage import calib_io, colmap, video  # noqa: E402
 from addon.core.observation import camera as C  # noqa: E402
 from addon.core.observation.capture import load_capture  # noqa: E402
 from video_footage import FLASH_BEFORE, iou, make_video_footage  # noqa: E402
@@ -145,7 +145,7 @@ def write_colmap_bin(folder, cams, model="OPENCV"):
     with open(os.path.join(folder, "images.bin"), "wb") as f:
         f.write(struct.pack("<Q", len(cams)))
         for i, c in enumerate(cams):
-            q = calib_io._R_to_quat(c.R)
+            q = colmap._R_to_quat(c.R)
             f.write(struct.pack("<idddddddi", 10 + i, *q, *c.t, i + 1))
             f.write(f"{c.name}.jpg".encode() + b"\0")
             f.write(struct.pack("<Q", 2))
@@ -163,7 +163,7 @@ def test_colmap_binary_model(tmp_path):
     assert got[1].dist[:4].tolist() == [0.02, -0.002, 0.0005, 0.0]
     # the same cameras through the text model
     txt = str(tmp_path / "txt")
-    calib_io.write_colmap(txt, got)
+    colmap.write_colmap(txt, got)
     for a, b in zip(calib_io.import_cameras(txt), got):
         assert np.allclose(a.K, b.K) and np.allclose(a.R, b.R) and np.allclose(a.dist[:4], b.dist[:4])
     data = open(os.path.join(folder, "images.bin"), "rb").read()
