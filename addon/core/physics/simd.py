@@ -12,9 +12,13 @@ numba is required (the callers are numba kernels); without numba the module stil
 """
 from __future__ import annotations
 
+import os
+
 from .jit import available
 
 W = 8   # lanes per vector: 8 float32 = 256 bits (AVX2; two per AVX-512 register on Zen 4)
+# CLOTHFIT_NO_SIMD=1: the Blender kernel runs on simd_plain.py's numba loops instead (docs/kernels.md)
+ENABLED = available() and os.environ.get("CLOTHFIT_NO_SIMD", "") in ("", "0")
 
 if available():  # pragma: no branch
     from llvmlite import ir
