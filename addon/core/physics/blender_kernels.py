@@ -12,7 +12,9 @@ drifts by up to millimetres on soft cloth.
 Candidates run as SIMD lanes: every array has the lane (candidate) axis last, and every operation
 is a loop over the lanes, so one batch of L candidates costs about as much as one candidate;
 each lane keeps its own CG (a lane that has converged stops changing). ``simulate_population``
-runs the batches in parallel threads.
+runs the batches in parallel threads. The lane operations are hand-written LLVM IR (``simd.py``,
+``blender_springs.py``; why, what they gain, and ``CLOTHFIT_NO_SIMD=1`` to run their plain numba
+twins instead: ``docs/kernels.md``).
 """
 from __future__ import annotations
 
