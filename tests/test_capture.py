@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from addon.core.observation import camera as camera_mod
-from addon.core.observation.capture import (DEFAULT_PATTERN, FORMAT, Capture, PendingCapture, finalize_capture, load_capture, read_shapes, read_silhouette, save_silhouette, write_capture)
+from addon.core.observation.capture import (DEFAULT_PATTERN, FORMAT, Capture, PendingCapture, finalize_capture, load_capture, read_shapes, write_capture)
+from addon.core.observation.silhouette_files import read_silhouette, save_silhouette
 from addon.core.errors import ClothFitError
 from addon.core.physics.scenario import ClothGrid, paper_scenario
 

@@ -54,6 +54,9 @@ SOURCES = {
     "identifiability": {
         "argv": ["{py}", "-m", "addon", "identifiability", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
         "what": "sensitivity and Cramer-Rao bounds of Blender's cloth settings"},
+    "simd": {
+        "argv": ["{py}", "tools/simd_bench.py", "--json", "{out}"], "cost": "cheap", "rtol": 0, "atol": 0,
+        "what": "the hand-written LLVM IR kernels against their plain numba twins (CLOTHFIT_NO_SIMD=1)"},
     "blender_agreement": {
         "argv": ["{py}", "-m", "addon", "blender-agreement", "--json", "{out}"], "cost": "cheap", "rtol": 0,
         "atol": 1e-9, "what": "the core's blender model against Blender's own cloth, 12 cases"},

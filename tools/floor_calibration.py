@@ -34,7 +34,8 @@ if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
 from addon.core.observation.camera import load_rig  # noqa: E402
-from addon.core.observation.capture import load_capture, read_silhouette  # noqa: E402
+from addon.core.observation.capture import load_capture  # noqa: E402
+from addon.core.observation.silhouette_files import read_silhouette  # noqa: E402
 from addon.core.observation.floor import capture_floor, resample_silhouette, residual_profile  # noqa: E402
 from addon.core.observation.raster import silhouette  # noqa: E402
 from addon.core.observation.synth import synth_capture  # noqa: E402

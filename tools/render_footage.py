@@ -322,7 +322,7 @@ def render_footage(out, rig=D.DEFAULT_RIG, times=None, resolution=DEFAULT_RES, e
     import cv2
     import bpy
 
-    from addon.core.observation.capture import save_silhouette
+    from addon.core.observation.silhouette_files import save_silhouette
     from addon.core.physics.models import simulate
 
     times = list(DEFAULT_TIMES if times is None else times)
@@ -418,7 +418,8 @@ def score(footage, capture_dir, single_plate=False, **extract_kw):
     """Extract ``footage`` into ``capture_dir`` and compare with the true masks: IoU per camera."""
     import tempfile
 
-    from addon.core.observation.capture import load_capture, read_silhouette
+    from addon.core.observation.capture import load_capture
+    from addon.core.observation.silhouette_files import read_silhouette
     from addon.core.footage.extract import extract_capture
     t0 = time.time()
     src = single_plate_view(footage, tempfile.mkdtemp(prefix="footage_1plate_")) if single_plate else footage
@@ -459,7 +460,8 @@ def format_score(s):
 def fit_footage(capture_dir, footage, n_train=(4,), evals=1500, seed=0, optimizer="spx-mgg", train_times=None):
     """Fit on ``n`` training cameras' extracted silhouettes; score on the held-out cameras."""
     from addon.core.observation.camera import select_training
-    from addon.core.observation.capture import load_capture, write_capture, read_silhouette, read_shapes
+    from addon.core.observation.capture import load_capture, read_shapes, write_capture
+    from addon.core.observation.silhouette_files import read_silhouette
     from addon.core.fitting.evaluate import evaluate
     from addon.core.fitting.job import FitConfig, FitJob
     from addon.core.physics.paper import identifiable, identifiable_errors

@@ -37,9 +37,9 @@ def render_steps(scene, out_dir=None, noise=None, seed=None, engine=None) -> Ste
 def _render_work(steps, scene, out_dir, noise, seed, engine):
     from ...core.observation.capture import (
         finalize_capture,
-        save_silhouette,
         write_capture,
     )
+    from ...core.observation.silhouette_files import save_silhouette
     from ...core.observation.metrics import add_boundary_noise
     from ...core.observation.synth import noise_rng
     p = props(scene)

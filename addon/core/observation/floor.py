@@ -72,7 +72,7 @@ LIMITS = ("lower bound for real footage: a segmenter's bias (a rim lost or added
 # ============================================================================ helpers
 
 def _mask(m, where: str) -> np.ndarray:
-    from .capture import _mask_from_array
+    from .silhouette_files import _mask_from_array
     return _mask_from_array(m, where)
 
 

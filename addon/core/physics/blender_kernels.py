@@ -12,7 +12,9 @@ drifts by up to millimetres on soft cloth.
 Candidates run as SIMD lanes: every array has the lane (candidate) axis last, and every operation
 is a loop over the lanes, so one batch of L candidates costs about as much as one candidate;
 each lane keeps its own CG (a lane that has converged stops changing). ``simulate_population``
-runs the batches in parallel threads.
+runs the batches in parallel threads. The lane operations are hand-written LLVM IR (``simd.py``,
+``blender_springs.py``; why, what they gain, and ``CLOTHFIT_NO_SIMD=1`` to run their plain numba
+twins instead: ``docs/kernels.md``).
 """
 from __future__ import annotations
 
@@ -20,30 +22,24 @@ import math
 
 import numpy as np
 
-from . import simd
+from . import simd as _simd_ir
+from . import simd_plain
 from .jit import JIT, PARALLEL, njit, prange
+from .blender_constants import (C4, CG_EPS, CG_MAX, D3, F32, FLEW, FLT_EPS, KIND_STRUCT, NONFINITE, NORM_EPS,
+                                N_LANE_PARAMS, OK, ONE, P_AVG, P_BDAMP, P_BEND, P_CB, P_DC, P_DRAG, P_DS, P_DT, P_KB,
+                                P_KC, P_KGOAL, P_KS, P_KT, P_MASS, SNAP, STRETCHED, ZERO)
+from .blender_constants import REASONS  # noqa: F401  (blender_kernels.REASONS: models.py)
+from .blender_springs import _springs_plain
 
-F32 = np.float32
-ZERO = F32(0.0)
-ONE = F32(1.0)
-HALF = F32(0.5)
-TENTH = F32(0.1)
-TWENTY = F32(20.0)
-FLT_EPS = F32(1.1920928955078125e-07)      # FLT_EPSILON, also Blender's ALMOST_ZERO
-NORM_EPS = F32(1.0e-35)                     # normalize_v3's threshold
-CG_EPS = F32(0.01)
-SNAP = F32(0.999)                           # SOFTGOALSNAP
-C4 = (F32(-11.541), F32(34.193), F32(-39.083), F32(23.116), F32(-9.713))   # Choi & Ko's fb
-D3 = (F32(-46.164), F32(102.579), F32(-78.166), F32(23.116))               # and its derivative
-CG_MAX = 100
-
-# lane parameters (columns of the float32 parameter table)
-P_MASS, P_DRAG, P_KT, P_KC, P_KS, P_DT, P_DC, P_DS, P_BEND, P_BDAMP, P_KGOAL, P_KB, P_CB, P_AVG = range(14)
-N_LANE_PARAMS = 14
-# codes
-OK, NONFINITE, FLEW, STRETCHED = 0, 1, 2, 3
-REASONS = ["", "non-finite state", "flew away", "spring overstretched"]
-KIND_STRUCT, KIND_SHEAR, KIND_BEND = 0, 1, 2
+# The lane operations: simd.py's and blender_springs.py's hand-written LLVM IR, or with CLOTHFIT_NO_SIMD=1
+# their plain numba twins (docs/kernels.md). The kernels that call them are then not cached, so that a cached
+# build of the other path is never loaded for them.
+if _simd_ir.ENABLED:  # pragma: no branch
+    from .blender_springs import _springs_v
+    simd, LANES_JIT, LANES_PARALLEL = _simd_ir, JIT, PARALLEL
+else:
+    _springs_v, simd = _springs_plain, simd_plain
+    LANES_JIT, LANES_PARALLEL = dict(JIT, cache=False), dict(PARALLEL, cache=False)
 
 
 @njit(**JIT)
@@ -156,197 +152,7 @@ def _add_block(Mb, k, l, o00, o01, o02, o11, o12, o22):
     Mb[6 * k + 5, l] += o22
 
 
-if simd.available():  # pragma: no branch
-    from llvmlite import ir as _ir
-    from numba import types as _types
-    from numba.core import cgutils as _cg
-    from numba.extending import intrinsic as _intrinsic
-
-    def _fb_v(vb, x):
-        xx = vb.mul(x, x)
-        xxx = vb.mul(xx, x)
-        xxxx = vb.mul(xxx, x)
-        r = vb.add(vb.mul(vb.k(C4[0]), xxxx), vb.mul(vb.k(C4[1]), xxx))
-        r = vb.add(vb.add(r, vb.mul(vb.k(C4[2]), xx)), vb.mul(vb.k(C4[3]), x))
-        return vb.add(r, vb.k(C4[4]))
-
-    def _fbderiv_v(vb, x):
-        xx = vb.mul(x, x)
-        xxx = vb.mul(xx, x)
-        r = vb.add(vb.mul(vb.k(D3[0]), xxx), vb.mul(vb.k(D3[1]), xx))
-        return vb.add(vb.add(r, vb.mul(vb.k(D3[2]), x)), vb.k(D3[3]))
-
-    def _choi_ko(vb, ln, L0, kb, cb):
-        """fbstar and fbstar_jacobi: (force along the spring, its -d/dlength), lane by lane."""
-        x = vb.div(ln, L0)
-        tfb = vb.mul(kb, _fb_v(vb, x))
-        lin = vb.mul(cb, vb.sub(ln, L0))
-        use_lin = vb.lt(tfb, lin)
-        return vb.sel(use_lin, lin, tfb), vb.sel(use_lin, vb.neg(cb), vb.mul(vb.neg(kb), _fbderiv_v(vb, x)))
-
-    def _poly_avg_v(vb, P, pa_row, n):
-        """poly_avg over the n corners listed at pa_row (pointer to int64), lane vectors."""
-        b = vb.b
-        fact = vb.splat(b.fdiv(_ir.Constant(_ir.FloatType(), 1.0), b.sitofp(n, _ir.FloatType())))
-        acc = [vb.var(vb.zero) for _ in range(3)]
-        with _cg.for_range(b, n) as lp:
-            v3 = b.mul(b.load(b.gep(pa_row, [lp.index])), _ir.Constant(_ir.IntType(64), 3))
-            x = vb.ld3(P, v3)
-            for a in range(3):
-                vb.set(acc[a], vb.add(vb.get(acc[a]), vb.mul(x[a], fact)))
-        return [vb.get(a) for a in acc]
-
-    def _addrow(vb, data, row, v, mask=None):
-        old = vb.ld(data, row)
-        new = vb.add(old, v)
-        vb.st(data, row, new if mask is None else vb.sel(mask, new, old))
-
-    def _subrow(vb, data, row, v, mask=None):
-        old = vb.ld(data, row)
-        new = vb.sub(old, v)
-        vb.st(data, row, new if mask is None else vb.sel(mask, new, old))
-
-    @_intrinsic
-    def _springs_v(typingctx, X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la,
-                   h_pb, h_lb, restang, par, angular):
-        """The spring part of cloth_calc_force for W lanes at once, spring by spring in Blender's list
-        order: the hinge's angular bending force (explicit), then the spring's linear force, its
-        Jacobian blocks (diagonal into Xd/Vd, off-diagonal into Xo/Vo) and damping; per-lane
-        branches (tension or compression, active or not) become selections."""
-        sig = _types.void(X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb,
-                          h_lb, restang, par, angular)
-
-        def codegen(context, builder, signature, args):
-            from .simd import VB, _data
-            vb = VB(context, builder)
-            b = builder
-            I64 = _ir.IntType(64)
-
-            def c(i):
-                return _ir.Constant(I64, i)
-
-            (x_, v_, f_, xd_, vd_, xo_, vo_, si_, sj_, sk_, sh_, rl_, pa_, la_, pb_, lb_, ra_, par_) = (
-                _data(context, builder, t, a) for t, a in zip(signature.args[:18], args[:18]))
-            ang_on = b.icmp_signed("!=", args[18], c(0))
-            S = b.extract_value(context.make_array(signature.args[7])(context, builder, args[7]).shape, 0)
-            maxl = b.extract_value(context.make_array(signature.args[12])(context, builder, args[12]).shape, 1)
-            prow = lambda k: vb.ld(par_, c(k))  # noqa: E731  lane parameter rows
-            with _cg.for_range(b, S) as lp:
-                s = lp.index
-                i = vb.i(si_, s)
-                j = vb.i(sj_, s)
-                kind = vb.i(sk_, s)
-                hb = vb.i(sh_, s)
-                i3 = b.mul(i, c(3))
-                j3 = b.mul(j, c(3))
-                i6 = b.mul(i, c(6))
-                j6 = b.mul(j, c(6))
-                s6 = b.mul(s, c(6))
-                L0 = vb.ld(rl_, s)
-                # ---- angular bending across the hinge this spring carries
-                with b.if_then(b.and_(ang_on, b.icmp_signed(">=", hb, c(0)))):
-                    pa_row = b.gep(pa_, [b.mul(hb, maxl)])
-                    pb_row = b.gep(pb_, [b.mul(hb, maxl)])
-                    la = vb.i(la_, hb)
-                    lb = vb.i(lb_, hb)
-                    Xi = vb.ld3(x_, i3)
-                    Xj = vb.ld3(x_, j3)
-                    ma = _poly_avg_v(vb, x_, pa_row, la)
-                    da = vb.normal_tri(Xj, Xi, ma)
-                    mb = _poly_avg_v(vb, x_, pb_row, lb)
-                    db = vb.normal_tri(Xi, Xj, mb)
-                    e = vb.normalize3([vb.sub(Xi[a], Xj[a]) for a in range(3)])
-                    cos = vb.dot3(da, db)
-                    sin = vb.dot3(vb.cross3(da, db), e)
-                    ang = vb.atan2(sin, cos)
-                    va = _poly_avg_v(vb, v_, pa_row, la)
-                    vbb = _poly_avg_v(vb, v_, pb_row, lb)
-                    Vi = vb.ld3(v_, i3)
-                    Vj = vb.ld3(v_, j3)
-                    ve = [vb.mul(vb.add(Vi[a], Vj[a]), vb.k(0.5)) for a in range(3)]
-                    va = [vb.sub(va[a], ve[a]) for a in range(3)]
-                    vbb = [vb.sub(vbb[a], ve[a]) for a in range(3)]
-                    k = vb.mul(vb.mul(prow(P_BEND), L0), vb.k(0.1))
-                    force = vb.mul(k, vb.sub(ang, vb.ld(ra_, hb)))
-                    force = vb.add(force, vb.mul(vb.neg(prow(P_BDAMP)), vb.add(vb.dot3(va, da), vb.dot3(vbb, db))))
-                    fa = vb.div(force, vb.splat(b.sitofp(la, _ir.FloatType())))
-                    fbv = vb.div(force, vb.splat(b.sitofp(lb, _ir.FloatType())))
-                    with _cg.for_range(b, la) as lq:
-                        u3 = b.mul(b.load(b.gep(pa_row, [lq.index])), c(3))
-                        for a in range(3):
-                            _addrow(vb, f_, b.add(u3, c(a)), vb.mul(da[a], fa))
-                    with _cg.for_range(b, lb) as lq:
-                        u3 = b.mul(b.load(b.gep(pb_row, [lq.index])), c(3))
-                        for a in range(3):
-                            _addrow(vb, f_, b.add(u3, c(a)), vb.mul(db[a], fbv))
-                    fh = vb.mul(force, vb.k(0.5))
-                    fe = [vb.add(vb.mul(da[a], fh), vb.mul(db[a], fh)) for a in range(3)]
-                    for a in range(3):
-                        _subrow(vb, f_, b.add(i3, c(a)), fe[a])
-                    for a in range(3):
-                        _subrow(vb, f_, b.add(j3, c(a)), fe[a])
-                # ---- the linear spring
-                Xi = vb.ld3(x_, i3)
-                Xj = vb.ld3(x_, j3)
-                Vi = vb.ld3(v_, i3)
-                Vj = vb.ld3(v_, j3)
-                ext = [vb.sub(Xj[a], Xi[a]) for a in range(3)]
-                w = [vb.sub(Vj[a], Vi[a]) for a in range(3)]
-                ln = vb.sqrt(vb.dot3(ext, ext))
-                okd = vb.gt(ln, vb.k(FLT_EPS))
-                inv = vb.div(vb.k(1.0), ln)
-                d = [vb.sel(okd, vb.mul(ext[a], inv), vb.zero) for a in range(3)]
-                pp = [vb.mul(d[0], d[0]), vb.mul(d[1], d[0]), vb.mul(d[2], d[0]),
-                      vb.mul(d[1], d[1]), vb.mul(d[2], d[1]), vb.mul(d[2], d[2])]
-                diag = (True, False, False, True, False, True)
-                is_struct = b.icmp_signed("==", kind, c(KIND_STRUCT))
-                is_bend = b.icmp_signed("==", kind, c(KIND_BEND))
-                # tension (structural or shear)
-                kt = vb.sel(vb.splat_bool(is_struct), prow(P_KT), prow(P_KS))
-                dtn = vb.sel(vb.splat_bool(is_struct), prow(P_DT), prow(P_DS))
-                tension = vb.land(vb.ge(ln, L0), vb.gt(ln, vb.zero))
-                sf_t = vb.mul(kt, vb.sub(ln, L0))
-                r_ = vb.div(L0, ln)
-                one = vb.k(1.0)
-                jt = [vb.mul(vb.sub(vb.mul(vb.sub(one if diag[q] else vb.zero, pp[q]), r_), one if diag[q] else vb.zero), kt)
-                      for q in range(6)]
-                # compression: Choi & Ko (structural springs with angular bending; linear bending springs)
-                kb = vb.sel(vb.splat_bool(is_bend), prow(P_KB), prow(P_KC))
-                cb = vb.sel(vb.splat_bool(is_bend), prow(P_CB), prow(P_KC))
-                sf_c, jac = _choi_ko(vb, ln, L0, kb, cb)
-                jc = [vb.mul(pp[q], jac) for q in range(6)]
-                # which lanes have a force, and which branch
-                struct_compress = b.and_(is_struct, ang_on)
-                act_lin = vb.sel(vb.splat_bool(struct_compress), vb.true(), tension)
-                act_bend = vb.lt(ln, L0)
-                act = vb.sel(vb.splat_bool(is_bend), act_bend, act_lin)
-                use_t = vb.land(tension, vb.splat_bool(b.not_(is_bend)))
-                sf = vb.sel(use_t, sf_t, sf_c)
-                damping = vb.sel(use_t, dtn, prow(P_DC))
-                fv = [vb.mul(d[a], sf) for a in range(3)]
-                jx = [vb.sel(use_t, jt[q], jc[q]) for q in range(6)]
-                # damping along the spring (not for linear bending springs)
-                dv = vb.mul(damping, vb.dot3(w, d))
-                fd = [vb.add(fv[a], vb.mul(d[a], dv)) for a in range(3)]
-                fv = [vb.sel(vb.splat_bool(is_bend), fv[a], fd[a]) for a in range(3)]
-                nd = vb.neg(damping)
-                jv = [vb.sel(vb.splat_bool(is_bend), vb.zero, vb.mul(pp[q], nd)) for q in range(6)]
-                for a in range(3):
-                    _addrow(vb, f_, b.add(i3, c(a)), fv[a], act)
-                for a in range(3):
-                    _subrow(vb, f_, b.add(j3, c(a)), fv[a], act)
-                for q in range(6):
-                    _addrow(vb, xd_, b.add(i6, c(q)), jx[q], act)
-                    _addrow(vb, xd_, b.add(j6, c(q)), jx[q], act)
-                    vb.st(xo_, b.add(s6, c(q)), vb.sel(act, vb.sub(vb.zero, jx[q]), vb.zero))
-                    _addrow(vb, vd_, b.add(i6, c(q)), jv[q], act)
-                    _addrow(vb, vd_, b.add(j6, c(q)), jv[q], act)
-                    vb.st(vo_, b.add(s6, c(q)), vb.sel(act, vb.sub(vb.zero, jv[q]), vb.zero))
-            return context.get_dummy_value()
-        return sig, codegen
-
-
-@njit(**JIT)
+@njit(**LANES_JIT)
 def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb,
               restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg, L):
     """cloth_calc_force for every lane: forces F and the blocks of dF/dx (Xd diagonal, Xo per spring)
@@ -426,7 +232,7 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
                parT, angular)
 
 
-@njit(**JIT)
+@njit(**LANES_JIT)
 def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular,
                    hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, par, keep, out,
                    centre, limit, max_ratio, codes, iterations):
@@ -628,7 +434,7 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
                         out[l, k, v, a] = X[3 * v + a, l]
 
 
-@njit(**PARALLEL)
+@njit(**LANES_PARALLEL)
 def simulate_population(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular,
                         hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, par, lane_start,
                         keep, out, centre, limit, max_ratio, codes, iterations):

@@ -9,15 +9,25 @@ candidate. LLVM's own loop vectoriser does not vectorise the short lane loops (W
 these explicit vectors.
 
 numba is required (the callers are numba kernels); without numba the module still imports.
+
+Why by hand, what it gains, how to run without it (``docs/kernels.md``): the lanes must compute
+Blender's float32 operations in Blender's order (its CG's stopping iteration depends on rounding),
+which rules out ``fastmath``, and without it LLVM leaves the lane loops scalar. Measured by
+``python tools/simd_bench.py`` (``docs/figures/simd.json``): the Blender model takes about 14 times
+less CPU per candidate than on the plain numba twins (``simd_plain.py``), with the same trajectory
+to the bit. ``CLOTHFIT_NO_SIMD=1`` runs those twins instead (``ENABLED`` below).
 """
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from typing import SupportsFloat
 
 from .jit import available
 
 W = 8   # lanes per vector: 8 float32 = 256 bits (AVX2; two per AVX-512 register on Zen 4)
+# CLOTHFIT_NO_SIMD=1: the Blender kernel runs on simd_plain.py's numba loops instead (docs/kernels.md)
+ENABLED = available() and os.environ.get("CLOTHFIT_NO_SIMD", "") in ("", "0")
 
 if available():  # pragma: no branch
     from llvmlite import ir
