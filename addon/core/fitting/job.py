@@ -45,9 +45,10 @@ from .objective import SilhouetteObjective
 from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
 from ..physics.models import BlenderModel
 from ..physics.scenario import Uncertainty
-from .optimise import SearchSpace, canonical_name, make_optimizer, optimizer_from_state
+from .optimise import FIT_OPTIMIZERS, canonical_name, make_optimizer, optimizer_from_state
 from .parameters import ManipulationParameters, PaperParameters, SceneParameters, declared_model, make_parameters
 from .quality import Ladder
+from .space import SearchSpace
 
 
 @dataclass
@@ -190,7 +191,6 @@ def load_observed(capture, cams, fidx, resolution=None):
     return cameras, observed, ignore
 
 
-FIT_OPTIMIZERS = ("cma-es", "spx-mgg", "cma-portfolio")   # the searches a fit may run (coord-polish is a polish)
 STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
 CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
 CHECKPOINT_VERSION = 3          # 3: the fit's stages (quality ladder, manipulation profile)

@@ -26,7 +26,7 @@ from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
 from ..physics.scenario import Offsets, Uncertainty, fitted_scenario  # noqa: F401 (the fitted manipulation)
-from .optimise import SearchSpace
+from .space import SearchSpace
 
 PAPER_FREE = ("k_over_m", "d_over_m", "l_rel")
 
