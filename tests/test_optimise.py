@@ -12,7 +12,7 @@ import pytest
 
 from addon.core import defaults as D
 from addon.core.errors import ClothFitError
-from addon.core.fitting.cmaes import CMAES
+from addon.core.fitting.evolution_strategy import CMAES
 from addon.core.fitting.ga import SPXMGG, spx_children
 from addon.core.fitting.optimise import make_optimizer, optimizer_from_state
 from addon.core.fitting.space import SearchSpace, reflect_unit, sanitize_fitness

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from addon.core.errors import ClothFitError
-from addon.core.fitting.cmaes import CMAES
+from addon.core.fitting.evolution_strategy import CMAES
 from addon.core.fitting.optimise import make_optimizer, optimizer_from_state
 from addon.core.fitting.portfolio import CMAPortfolio
 from addon.core.fitting.space import SearchSpace

@@ -16,7 +16,7 @@ The optimisers, one per module, each with ``ask`` / ``tell`` / ``stopped`` and a
 * :mod:`.space`: :class:`SearchSpace` (bounds, log scale, the unit-cube encoding) and the shared validators;
 * :mod:`.steppable`: :class:`Optimizer`, the common ask/tell machinery (best so far, history, checkpoints);
 * :mod:`.ga`: :class:`SPXMGG` ("spx-mgg"), the paper's GA;
-* :mod:`.cmaes`: :class:`CMAES` ("cma-es"), with active CMA and IPOP restarts;
+* :mod:`.evolution_strategy`: :class:`CMAES` ("cma-es"), with active CMA and IPOP restarts;
 * :mod:`.portfolio`: :class:`CMAPortfolio` ("cma-portfolio");
 * :mod:`.polish`: :class:`CoordinatePolish` ("coord-polish").
 
@@ -26,7 +26,7 @@ This module only names them: :data:`OPTIMIZERS`, :data:`FIT_OPTIMIZERS`, :func:`
 from __future__ import annotations
 
 from ..errors import ClothFitError
-from .cmaes import CMAES
+from .evolution_strategy import CMAES
 from .ga import SPXMGG
 from .polish import CoordinatePolish
 from .portfolio import CMAPortfolio

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .cmaes import CMA_STOPS, CMAES
+from .evolution_strategy import CMA_STOPS, CMAES
 from .polish import CoordinatePolish
 from .space import (
     SearchSpace,
