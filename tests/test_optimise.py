@@ -1,4 +1,4 @@
-"""Tests of addon/core/fitting/optimise.py: encoding, SPX, MGG, CMA-ES, non-finite fitness, checkpoints."""
+"""Tests of the optimisers (addon/core/fitting/optimise.py and its modules): encoding, SPX, MGG, CMA-ES, non-finite fitness, checkpoints."""
 import os
 import sys
 
@@ -12,7 +12,11 @@ import pytest
 
 from addon.core import defaults as D
 from addon.core.errors import ClothFitError
-from addon.core.fitting.optimise import (CMAES, SPXMGG, Optimizer, SearchSpace, make_optimizer, optimizer_from_state, reflect_unit, sanitize_fitness, spx_children)
+from addon.core.fitting.evolution_strategy import CMAES
+from addon.core.fitting.ga import SPXMGG, spx_children
+from addon.core.fitting.optimise import make_optimizer, optimizer_from_state
+from addon.core.fitting.space import SearchSpace, reflect_unit, sanitize_fitness
+from addon.core.fitting.steppable import Optimizer
 
 SHIFT = np.array([1.2, -0.7, 2.3, 0.4])
 # a physical-looking space, independent of the project's current defaults

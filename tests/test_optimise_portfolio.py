@@ -1,4 +1,4 @@
-"""Tests of the CMA-ES portfolio (addon/core/fitting/optimise.py CMAPortfolio): its schedule
+"""Tests of the CMA-ES portfolio (addon/core/fitting/portfolio.py CMAPortfolio): its schedule
 (successive halving, refine, polishes), exact JSON resume in every phase, bad checkpoints."""
 import os
 import sys
@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from addon.core.errors import ClothFitError
-from addon.core.fitting.optimise import (CMAES, CMAPortfolio, SearchSpace, make_optimizer,
-                                          optimizer_from_state)
+from addon.core.fitting.evolution_strategy import CMAES
+from addon.core.fitting.optimise import make_optimizer, optimizer_from_state
+from addon.core.fitting.portfolio import CMAPortfolio
+from addon.core.fitting.space import SearchSpace
 
 
 def space(n=4):

@@ -186,7 +186,7 @@ def landscape(b, samples=4, seed=1):
 def local_start(b, rel=0.05, sigma=0.02, budget=1000, seed=0):
     """A CMA-ES run (active, popsize 10) started in the truth's own basin: every setting off by
     +-rel, step ``sigma``: does the search converge to the truth once it is close?"""
-    from addon.core.fitting.optimise import CMAES
+    from addon.core.fitting.evolution_strategy import CMAES
     rng = np.random.default_rng(seed)
     x0 = b.truth * (1 + rel * rng.choice([-1.0, 1.0], size=len(b.truth)))
     obj, sp = b.job.objective, b.job.space

@@ -45,9 +45,29 @@ from .objective import SilhouetteObjective
 from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
 from ..physics.models import BlenderModel
 from ..physics.scenario import Uncertainty
-from .optimise import SearchSpace, canonical_name, make_optimizer, optimizer_from_state
+from .optimise import FIT_OPTIMIZERS, canonical_name, make_optimizer, optimizer_from_state
 from .parameters import ManipulationParameters, PaperParameters, SceneParameters, declared_model, make_parameters
 from .quality import Ladder
+from .space import SearchSpace
+
+
+_CMA = ("cma-es", "cma-portfolio")
+# FitConfig's optimiser options: field -> (the optimiser's keyword, the optimisers it applies to). None (the
+# default) leaves the optimiser as it has always been built; only options that are set enter the fit's identity.
+SEARCH_OPTIONS = {
+    "sigma0": ("sigma0", _CMA),
+    "cma_active": ("active", _CMA),
+    "tolx": ("tolx", FIT_OPTIMIZERS),
+    "tolfun_per_image": ("tolfun", FIT_OPTIMIZERS),
+    "ga_eps": ("eps", ("spx-mgg",)),
+    "ga_stall": ("stall_evaluations", ("spx-mgg",)),
+    "portfolio_runs": ("runs", ("cma-portfolio",)),
+    "portfolio_explore": ("explore", ("cma-portfolio",)),
+    "portfolio_polish": ("polish", ("cma-portfolio",)),
+    "portfolio_polish_sigma": ("polish_sigma", ("cma-portfolio",)),
+    "portfolio_max_polishes": ("max_polishes", ("cma-portfolio",)),
+    "portfolio_refine_until": ("refine_until", ("cma-portfolio",)),
+}
 
 
 @dataclass
@@ -84,6 +104,19 @@ class FitConfig:
     uncertain: object = None              # the manipulation's unknowns to estimate: None = the capture's
                                           # 'uncertain' block; "none" = nothing; "time_offset=S,handles=M" or an
                                           # object {time_offset, handles} (physics/scenario.Uncertainty)
+    # the optimiser's own settings (SEARCH_OPTIONS; None = the default it has always had)
+    sigma0: float | None = None           # cma-es, cma-portfolio: first step (unit cube; 0.3, from --init WARM_START_SIGMA)
+    cma_active: bool | None = None        # cma-es, cma-portfolio: active CMA (default: cma-es off, cma-portfolio on)
+    tolx: float | None = None             # unit-cube step (GA: population spread) = converged (D.FIT_TOLX)
+    tolfun_per_image: float | None = None  # spread of recent bests per training image = converged (D.FIT_TOLFUN_PER_IMAGE)
+    ga_eps: float | None = None           # spx-mgg: simplex expansion (sqrt(n + 2))
+    ga_stall: int | None = None           # spx-mgg: evaluations without improvement = stagnated (D.FIT_GA_STALL)
+    portfolio_runs: int | None = None     # cma-portfolio: CMA-ES runs at the start (4)
+    portfolio_explore: float | None = None  # cma-portfolio: budget share of successive halving (0.5)
+    portfolio_polish: str | None = None   # cma-portfolio: "cma" (active CMA-ES) or "coord" (coordinate polish)
+    portfolio_polish_sigma: float | None = None  # cma-portfolio: a polish's first step (0.05)
+    portfolio_max_polishes: int | None = None    # cma-portfolio: polishes before it stops (20)
+    portfolio_refine_until: float | None = None  # cma-portfolio: budget share after which refining gives way (1.0)
 
     @classmethod
     def from_dict(cls, d):
@@ -159,7 +192,27 @@ class FitConfig:
                                 f"got {self.uncertain!r}")
         if self.model is not None and not isinstance(self.model, (str, dict)):
             raise ClothFitError(f"fit config: model must be a name or a model object, got {self.model!r}")
+        for name, lo, hi in (("sigma0", 1e-9, 10.0), ("tolx", 0.0, 1.0), ("tolfun_per_image", 0.0, math.inf),
+                             ("ga_eps", 1e-9, 1e6), ("portfolio_explore", 0.0, 1.0),
+                             ("portfolio_polish_sigma", 1e-9, 10.0), ("portfolio_refine_until", 0.0, 1.0)):
+            numval(name, lo, hi)
+        intval("ga_stall", 1)
+        intval("portfolio_runs", 1, 64)
+        intval("portfolio_max_polishes", 1, 10 ** 6)
+        if self.cma_active is not None and not isinstance(self.cma_active, bool):
+            raise ClothFitError(f"fit config: cma_active must be true or false, got {self.cma_active!r}")
+        if self.portfolio_polish not in (None, "cma", "coord"):
+            raise ClothFitError(f"fit config: portfolio_polish must be 'cma' or 'coord', got {self.portfolio_polish!r}")
+        opt = canonical_name(self.optimizer)
+        for name, (_, optimizers) in SEARCH_OPTIONS.items():
+            if getattr(self, name) is not None and opt not in optimizers:
+                raise ClothFitError(f"fit config: {name} is a setting of {' and '.join(optimizers)}, not of {opt}")
         return self
+
+    def search_options(self) -> dict:
+        """The optimiser options this config sets (SEARCH_OPTIONS not None): a fit's identity holds them,
+        so a checkpoint is resumed only with the same ones (and one from before they existed, without)."""
+        return {name: getattr(self, name) for name in SEARCH_OPTIONS if getattr(self, name) is not None}
 
 
 def check_resolution(res, what="resolution"):
@@ -190,7 +243,6 @@ def load_observed(capture, cams, fidx, resolution=None):
     return cameras, observed, ignore
 
 
-FIT_OPTIMIZERS = ("cma-es", "spx-mgg", "cma-portfolio")   # the searches a fit may run (coord-polish is a polish)
 STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
 CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
 CHECKPOINT_VERSION = 3          # 3: the fit's stages (quality ladder, manipulation profile)
@@ -392,8 +444,9 @@ class FitJob:
     def _optimizer_kw(self, warm_x=None):
         cfg = self.config
         is_cma = self.optimizer_name in ("cma-es", "cma-portfolio")
-        tolfun = D.FIT_TOLFUN_PER_IMAGE * self.objective.n_images
-        kw = {"tolx": D.FIT_TOLX, "tolfun": tolfun}
+        tolfun = (D.FIT_TOLFUN_PER_IMAGE if cfg.tolfun_per_image is None else cfg.tolfun_per_image) \
+            * self.objective.n_images
+        kw = {"tolx": D.FIT_TOLX if cfg.tolx is None else cfg.tolx, "tolfun": tolfun}
         initial = None
         if warm_x is not None:
             initial = [np.asarray(warm_x, dtype=np.float64)]
@@ -420,6 +473,13 @@ class FitJob:
             kw["children"] = (cfg.children if cfg.children is not None else
                               D.FIT_GA_CHILDREN if paper else 5 * n)
             kw["stall_evaluations"] = D.FIT_GA_STALL
+        for name, value in cfg.search_options().items():       # the config's own settings of this optimiser
+            key, optimizers = SEARCH_OPTIONS[name]
+            if name in ("sigma0", "tolx", "tolfun_per_image") or self.optimizer_name not in optimizers:
+                continue                        # set above (a rung's sigma0 stays the warm start's)
+            kw[key] = value
+        if cfg.sigma0 is not None and warm_x is None:
+            kw["sigma0"] = cfg.sigma0
         return kw
 
     def search_budget(self) -> int:
@@ -494,6 +554,8 @@ class FitJob:
                 "blend": os.path.abspath(self.config.blend) if self.config.blend else None,
                 "object": self.config.blend_object, "frame_zero": self.config.frame_zero},
         }
+        if self.config.search_options():      # only when set: a checkpoint from before them resumes
+            ident["search_options"] = self.config.search_options()
         return json.loads(json.dumps(ident, default=_default))
 
     # ------------------------------------------------------------- mapping

@@ -30,7 +30,7 @@ from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
 from ..physics.scenario import Offsets, Uncertainty, fitted_scenario  # noqa: F401 (the fitted manipulation)
-from .optimise import SearchSpace
+from .space import SearchSpace
 
 if TYPE_CHECKING:
     from ..observation.capture import Capture

@@ -1,0 +1,137 @@
+"""Coordinate polish ("coord-polish"): a batch coordinate pattern search with a step per coordinate."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import ClothFitError
+from .space import (
+    SearchSpace,
+    _array,
+    _field,
+    _float_from_json,
+    _float_to_json,
+    _num,
+    _number,
+    _stop_reason,
+    reflect_unit,
+    sanitize_fitness,
+)
+from .steppable import Optimizer
+
+
+class CoordinatePolish(Optimizer):
+    """A batch coordinate pattern search from one point, with a step per coordinate.
+
+    Each generation asks ``2 n`` probes ``x +- s_i e_i`` (reflected into the unit cube), plus the
+    *pattern* probe (the last generation's improving coordinate moves all at once) when there is
+    one. ``tell`` moves ``x`` to the best probe if it beats ``f(x)``; a coordinate whose probe
+    beat ``f(x)`` doubles its step (up to ``max_step``), the others halve it. So a coordinate on a
+    knife edge soon takes tiny steps while a flat, weakly identified one keeps large ones: what a
+    single CMA-ES step size cannot do before its covariance has learnt the scales. Deterministic (no
+    random numbers); stops (``tolx``) when every step is below ``tolx``.
+    """
+
+    name = "coord-polish"
+
+    def __init__(self, space: SearchSpace, seed=None, initial=None, f0=None, step: float = 0.05,
+                 max_step: float = 0.3, tolx: float = 1e-11):
+        super().__init__(space, seed, initial)
+        self.step0 = _number(step, "coord-polish: step (unit cube)", 0.0, 10.0, lo_open=True)
+        self.max_step = _number(max_step, "coord-polish: max_step (unit cube)", 0.0, 10.0, lo_open=True)
+        self.tolx = _number(tolx, "coord-polish: tolx")
+        n = space.n
+        self.x = self._initial_u[0].copy() if len(self._initial_u) else np.full(n, 0.5)
+        self.fx = math.inf if f0 is None else float(f0)
+        if not (self.fx == math.inf or math.isfinite(self.fx)):
+            raise ClothFitError(f"coord-polish: f0 must be a number, got {f0!r}")
+        if math.isfinite(self.fx):
+            self.best_f, self._best_u = self.fx, self.x.copy()
+        self.steps = np.full(n, self.step0)
+        self.pattern = None            # the next pattern probe (unit cube), or None
+        self._pending = None
+        self.stop_reason = None
+        self._stopped = False
+
+    @property
+    def stopped(self) -> bool:
+        return self._stopped
+
+    def _probes(self):
+        n = self.space.n
+        P = np.repeat(self.x[None], 2 * n + (0 if math.isfinite(self.fx) else 1), axis=0)
+        for i in range(n):
+            P[2 * i, i] += self.steps[i]
+            P[2 * i + 1, i] -= self.steps[i]
+        if self.pattern is not None:
+            P = np.vstack([P, self.pattern[None]])
+        return reflect_unit(P)
+
+    def ask(self) -> np.ndarray:
+        if self._pending is None:
+            self._pending = self._probes()
+        return self.space.decode(self._pending)
+
+    def tell(self, X, f) -> None:
+        P = self._pending
+        self._check_told(X, P)
+        f = sanitize_fitness(f, len(P))
+        n = self.space.n
+        if not math.isfinite(self.fx):
+            self.fx = float(f[2 * n])                 # x itself was evaluated (no f0 given)
+        better = np.array([min(f[2 * i], f[2 * i + 1]) < self.fx for i in range(n)])
+        move = np.zeros(n)
+        for i in np.nonzero(better)[0]:
+            j = 2 * i if f[2 * i] <= f[2 * i + 1] else 2 * i + 1
+            move[i] = P[j, i] - self.x[i]
+        self.steps = np.where(better, np.minimum(2 * self.steps, self.max_step), 0.5 * self.steps)
+        k = int(np.argmin(f))
+        old = self.x.copy()
+        if f[k] < self.fx:
+            self.x, self.fx = P[k].copy(), float(f[k])
+        self.pattern = reflect_unit(old + move) if better.sum() >= 2 else None
+        self._pending = None
+        self._record(P, f)
+        if np.all(self.steps < self.tolx):
+            self._stopped, self.stop_reason = True, "tolx"
+
+    STATE_KEYS = ("step0", "max_step", "tolx", "x", "fx", "steps", "pattern", "pending", "stop_reason", "stopped",
+                  "initial_u")
+
+    def state_dict(self) -> dict:
+        d = self._base_state()
+        d.update({"step0": self.step0, "max_step": self.max_step, "tolx": self.tolx, "x": self.x.tolist(),
+                  "fx": _float_to_json(self.fx), "steps": self.steps.tolist(),
+                  "pattern": None if self.pattern is None else self.pattern.tolist(),
+                  "pending": None if self._pending is None else self._pending.tolist(),
+                  "stop_reason": self.stop_reason, "stopped": self._stopped, "initial_u": self._initial_u.tolist()})
+        return d
+
+    @classmethod
+    def from_state(cls, d: dict) -> "CoordinatePolish":
+        w = cls.name
+        space = cls._check_state(d, w, cls.STATE_KEYS)
+        n = space.n
+        opt = cls(space, seed=d["seed"], step=_num(d, "step0", w, float), max_step=_num(d, "max_step", w, float),
+                  tolx=_num(d, "tolx", w, float, 0.0))
+        opt._load_base(d)
+        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        opt.x = _array(d, "x", w, (n,))
+        if opt.x.min() < 0 or opt.x.max() > 1:
+            raise ClothFitError(f"checkpoint: {w} 'x' must lie in the unit cube")
+        opt.fx = _float_from_json(_num(d, "fx", w, float, allow_none=True))
+        opt.steps = _array(d, "steps", w, (n,))
+        if opt.steps.min() < 0 or opt.steps.max() > opt.max_step:
+            raise ClothFitError(f"checkpoint: {w} 'steps' must lie in [0, max_step]")
+        opt.pattern = _array(d, "pattern", w, (n,), allow_none=True)
+        opt._pending = _array(d, "pending", w, (None, n), allow_none=True)
+        if opt._pending is not None and (opt._pending.min() < 0 or opt._pending.max() > 1):
+            raise ClothFitError(f"checkpoint: {w} 'pending' must lie in the unit cube")
+        opt.stop_reason = _stop_reason(d, w, ("tolx",))
+        st = _field(d, "stopped", w)
+        if not isinstance(st, bool):
+            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
+        opt._stopped = st
+        return opt
+

@@ -1,0 +1,317 @@
+"""The search space of a fit: bounded real parameters <-> the unit cube, and the small
+validators every optimiser shares (settings, non-finite fitness, checkpoint fields).
+
+Encoding
+--------
+:class:`SearchSpace` maps each parameter to ``[0, 1]``: linearly between its bounds, or
+linearly in ``log(x)`` for a log-scaled (scale) parameter, whose bounds must then be > 0.
+The optimisers work only in this unit cube, ``ask`` returns decoded real values, and
+``decode`` clips to the bounds, so a candidate can never leave them.
+
+Non-finite fitness
+------------------
+An exploded or failed model is a bad candidate, never a crash (SPEC 4): every non-finite value
+(``nan``, ``+inf``, ``-inf``) is treated as ``+inf``, the worst. Such a candidate can never
+become ``best_x``; in MGG it ranks last in its family; CMA-ES, which is rank based, ranks it
+after every finite value. ``best_x`` stays ``None`` and ``best_f`` ``inf`` until a finite value
+has been told.
+
+Validators
+----------
+``_number``, ``_integer`` and ``_flag`` check an optimiser's settings; ``_num``, ``_array``,
+``_field`` ... check a checkpoint's fields. Each raises a one-line :class:`ClothFitError`
+naming the value at fault.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import ClothFitError
+
+# --------------------------------------------------------------------------- helpers
+
+def _new_rng(seed):
+    return np.random.Generator(np.random.PCG64(seed))
+
+
+def _rng_from_state(state):
+    rng = np.random.Generator(np.random.PCG64())
+    rng.bit_generator.state = state
+    return rng
+
+
+def _float_to_json(v):
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _float_from_json(v):
+    return math.inf if v is None else float(v)
+
+
+def sanitize_fitness(f, count: int) -> np.ndarray:
+    """``f`` as a float (count,) array with every non-finite value replaced by ``+inf``."""
+    try:
+        arr = np.asarray(f, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ClothFitError(f"fitness values must be numbers, got {f!r}") from exc
+    if arr.shape[0] != count:
+        raise ClothFitError(f"fitness: expected {count} values (one per candidate), got {arr.shape[0]}")
+    return np.where(np.isfinite(arr), arr, np.inf)
+
+
+def reflect_unit(U: np.ndarray) -> np.ndarray:
+    """Reflect values into [0, 1] at the faces of the unit cube (triangle wave, any distance)."""
+    V = np.mod(np.asarray(U, dtype=np.float64), 2.0)
+    return np.where(V > 1.0, 2.0 - V, V)
+
+
+# --------------------------------------------------------------------------- state validation
+
+def _field(d, key, where):
+    if key not in d:
+        raise ClothFitError(f"checkpoint: {where} state lacks '{key}'")
+    return d[key]
+
+
+def _check_keys(d, allowed, where):
+    unknown = sorted(set(d) - set(allowed))
+    if unknown:
+        raise ClothFitError(f"checkpoint: {where} state has unknown fields {unknown} (not written by this version)")
+
+
+def _num(d, key, where, kind=float, lo=None, hi=None, allow_none=False):
+    v = _field(d, key, where)
+    if v is None and allow_none:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (kind is int and not isinstance(v, int)):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be {'an integer' if kind is int else 'a number'}, "
+                            f"got {type(v).__name__}")
+    if kind is float and not math.isfinite(v):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be finite, got {v!r}")
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise ClothFitError(f"checkpoint: {where} '{key}' = {v!r} outside [{lo}, {hi}]")
+    return kind(v)
+
+
+def _array(d, key, where, shape, allow_none=False, inf_as_none=False):
+    """A nested list of numbers of the given shape (None in shape = any length), all finite
+    (or ``None`` = +inf where ``inf_as_none``)."""
+    v = _field(d, key, where)
+    if v is None and allow_none:
+        return None
+    if not isinstance(v, list):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be a list of numbers, got {type(v).__name__}")
+    try:
+        if inf_as_none:
+            flat = np.array([math.inf if x is None else x for x in v], dtype=object)
+            if any(isinstance(x, (bool, list, dict, str)) for x in flat):
+                raise TypeError
+            A = flat.astype(np.float64)
+        else:
+            A = np.array(v, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be a (nested) list of numbers") from None
+    if A.size == 0 and len(shape) == 2 and shape[0] is None and shape[1] is not None:
+        A = A.reshape(0, shape[1])
+    if A.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, A.shape)):
+        want = "x".join("*" if s is None else str(s) for s in shape)
+        raise ClothFitError(f"checkpoint: {where} '{key}' has shape {A.shape}, expected {want}")
+    if A.size > 10_000_000:
+        raise ClothFitError(f"checkpoint: {where} '{key}' is too large ({A.size} numbers)")
+    bad = np.isnan(A) | (np.isinf(A) if not inf_as_none else np.isneginf(A))
+    if bad.any():
+        raise ClothFitError(f"checkpoint: {where} '{key}' holds non-finite values")
+    return A
+
+
+def _rng_state_from_json(v, where):
+    """A PCG64 bit-generator state made of plain integers, validated."""
+    if (not isinstance(v, dict) or set(v) != {"bit_generator", "state", "has_uint32", "uinteger"}
+            or v["bit_generator"] != "PCG64" or not isinstance(v["state"], dict)
+            or set(v["state"]) != {"state", "inc"}):
+        raise ClothFitError(f"checkpoint: {where} 'rng' is not a PCG64 generator state")
+    ints = [v["state"]["state"], v["state"]["inc"], v["has_uint32"], v["uinteger"]]
+    if not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < 2 ** 128 for i in ints):
+        raise ClothFitError(f"checkpoint: {where} 'rng' must hold non-negative integers below 2**128")
+    try:
+        return _rng_from_state(v)
+    except (TypeError, ValueError) as exc:
+        raise ClothFitError(f"checkpoint: {where} 'rng' is invalid ({exc})") from None
+
+
+def _stop_reason(d, where, allowed):
+    v = _field(d, "stop_reason", where)
+    if v is not None and v not in allowed:
+        raise ClothFitError(f"checkpoint: {where} 'stop_reason' {v!r} is not one of {list(allowed)}")
+    return v
+
+
+
+def _active(d, where):
+    v = d.get("active", False)          # older checkpoints: plain CMA-ES
+    if not isinstance(v, bool):
+        raise ClothFitError(f"checkpoint: {where} 'active' must be true or false")
+    return v
+
+
+def _number(v, what, lo=0.0, hi=math.inf, lo_open=False):
+    """``v`` as a finite float in ``[lo, hi]`` (``(lo, hi]`` where ``lo_open``), else a one-line
+    ClothFitError naming ``what``: every real-valued setting of every optimiser goes through here."""
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        x = math.nan
+    if not (math.isfinite(x) and (x > lo if lo_open else x >= lo) and x <= hi):
+        span = f">= {lo:g}" if hi == math.inf and not lo_open else f"in {'(' if lo_open else '['}{lo:g}, {hi:g}]"
+        raise ClothFitError(f"{what} must be a finite number {span}, got {v!r}")
+    return x
+
+
+def _flag(v, what):
+    """``v`` as a bool (a numpy bool too; not 0 / 1 / "yes"), else a one-line ClothFitError."""
+    if not isinstance(v, (bool, np.bool_)):
+        raise ClothFitError(f"{what} must be true or false, got {v!r}")
+    return bool(v)
+
+
+def _integer(v, what, lo=1, hi=None):
+    """``v`` as an int in ``lo..hi`` (no upper bound when None; a bool is not an integer), else a
+    one-line ClothFitError naming ``what``."""
+    if (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) < lo
+            or (hi is not None and int(v) > hi)):
+        span = f">= {lo}" if hi is None else f"in {lo}..{hi}"
+        raise ClothFitError(f"{what} must be an integer {span}, got {v!r}")
+    return int(v)
+
+# --------------------------------------------------------------------------- search space
+
+class SearchSpace:
+    """Bounded real parameters <-> the unit cube ``[0, 1]^n`` (log scale where asked).
+
+    ``names``: the free parameters in order; ``bounds``: name -> (lo, hi) (extra keys ignored);
+    ``log_scaled``: name -> bool (missing = linear).
+    """
+
+    def __init__(self, names, bounds: dict, log_scaled: dict | None = None):
+        names = [str(n) for n in names]
+        if not names:
+            raise ClothFitError("search space: no parameter names given")
+        if len(set(names)) != len(names):
+            raise ClothFitError(f"search space: duplicate parameter names in {names}")
+        log_scaled = dict(log_scaled or {})
+        lo, hi, logs = [], [], []
+        for name in names:
+            if name not in bounds:
+                raise ClothFitError(f"search space: no bounds given for parameter '{name}'")
+            try:
+                a, b = bounds[name]
+                a, b = float(a), float(b)
+            except (TypeError, ValueError) as exc:
+                raise ClothFitError(f"search space: bounds of parameter '{name}' must be a pair of "
+                                    f"numbers (lo, hi), got {bounds[name]!r}") from exc
+            if not (math.isfinite(a) and math.isfinite(b)):
+                raise ClothFitError(f"search space: bounds of parameter '{name}' must be finite, "
+                                    f"got ({a}, {b})")
+            if not a < b:
+                raise ClothFitError(f"search space: parameter '{name}' needs lo < hi, got ({a}, {b})")
+            is_log = bool(log_scaled.get(name, False))
+            if is_log and a <= 0.0:
+                raise ClothFitError(f"search space: parameter '{name}' is log-scaled, so its bounds "
+                                    f"must be > 0, got ({a}, {b})")
+            lo.append(a)
+            hi.append(b)
+            logs.append(is_log)
+        self.names = names
+        self.lo = np.array(lo)
+        self.hi = np.array(hi)
+        self.log = np.array(logs, dtype=bool)
+        self._tlo = np.where(self.log, np.log(np.where(self.log, self.lo, 1.0)), self.lo)
+        self._thi = np.where(self.log, np.log(np.where(self.log, self.hi, 1.0)), self.hi)
+
+    @property
+    def n(self) -> int:
+        return len(self.names)
+
+    @property
+    def bounds(self) -> dict:
+        return {n: (float(a), float(b)) for n, a, b in zip(self.names, self.lo, self.hi)}
+
+    @property
+    def log_scaled(self) -> dict:
+        return {n: bool(g) for n, g in zip(self.names, self.log)}
+
+    def _rows(self, X, what):
+        try:
+            A = np.asarray(X, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ClothFitError(f"{what}: expected numbers, got {X!r}") from exc
+        if A.ndim not in (1, 2) or A.shape[-1] != self.n:
+            raise ClothFitError(f"{what}: expected shape ({self.n},) or (B, {self.n}) for "
+                                f"parameters {self.names}, got {A.shape}")
+        return A
+
+    def encode(self, X) -> np.ndarray:
+        """Real values (n,) or (B, n) -> unit-cube coordinates, same shape (not clipped)."""
+        A = self._rows(X, "encode")
+        A2 = A.reshape(-1, self.n)
+        bad = ~np.isfinite(A2) | (self.log & (A2 <= 0.0))
+        if bad.any():
+            j = int(np.nonzero(bad.any(axis=0))[0][0])
+            raise ClothFitError(f"encode: parameter '{self.names[j]}' has a non-finite"
+                                f"{' or non-positive (log-scaled)' if self.log[j] else ''} value "
+                                f"{A2[bad[:, j], j][0]!r}")
+        T = np.where(self.log, np.log(np.where(self.log, A2, 1.0)), A2)
+        U = (T - self._tlo) / (self._thi - self._tlo)
+        return U.reshape(A.shape)
+
+    def decode(self, U) -> np.ndarray:
+        """Unit-cube coordinates (n,) or (B, n) -> real values, clipped to the bounds."""
+        A = self._rows(U, "decode")
+        A = np.clip(A, 0.0, 1.0)
+        T = self._tlo + A * (self._thi - self._tlo)
+        X = np.where(self.log, np.exp(T), T)
+        return np.clip(X, self.lo, self.hi)
+
+    def clip(self, X) -> np.ndarray:
+        """Real values clipped to the bounds."""
+        return np.clip(self._rows(X, "clip"), self.lo, self.hi)
+
+    def to_dict(self, x) -> dict:
+        """One real vector -> {name: value}."""
+        x = self._rows(x, "to_dict").reshape(self.n)
+        return {n: float(v) for n, v in zip(self.names, x)}
+
+    def from_dict(self, values: dict) -> np.ndarray:
+        """{name: value} -> one real vector (n,)."""
+        missing = [n for n in self.names if n not in values]
+        if missing:
+            raise ClothFitError(f"parameter values: missing {missing}")
+        return np.array([float(values[n]) for n in self.names])
+
+    def state_dict(self) -> dict:
+        return {"names": list(self.names),
+                "bounds": {n: [float(a), float(b)] for n, a, b in zip(self.names, self.lo, self.hi)},
+                "log_scaled": self.log_scaled}
+
+    @classmethod
+    def from_state(cls, d: dict) -> "SearchSpace":
+        if not isinstance(d, dict):
+            raise ClothFitError("checkpoint: search space must be an object")
+        _check_keys(d, ("names", "bounds", "log_scaled"), "search space")
+        names, bounds, logs = d.get("names"), d.get("bounds"), d.get("log_scaled") or {}
+        if (not isinstance(names, list) or not all(isinstance(n, str) for n in names) or len(names) > 1000
+                or not isinstance(bounds, dict) or not isinstance(logs, dict)
+                or not all(isinstance(v, list) and len(v) == 2 for v in bounds.values())
+                or not all(isinstance(v, bool) for v in logs.values())):
+            raise ClothFitError("checkpoint: search space needs 'names' (strings), 'bounds' (name: [lo, hi]) "
+                                "and 'log_scaled' (name: true/false)")
+        return cls(names, {k: tuple(v) for k, v in bounds.items()}, logs)
+
+    def __repr__(self):
+        parts = [f"{n}=[{a:g}, {b:g}]{' log' if g else ''}"
+                 for n, a, b, g in zip(self.names, self.lo, self.hi, self.log)]
+        return f"SearchSpace({', '.join(parts)})"
+
