@@ -211,3 +211,22 @@ def test_fit_config_is_shared_and_reads_only_what_the_command_declares(cap):
     assert (one.children, one.target_error, one.restarts) == (4, 0.01, 2)
     assert {k: v for k, v in vars(one).items() if k not in ("children", "target_error", "restarts")} == \
         {k: v for k, v in vars(many).items() if k not in ("children", "target_error", "restarts")}
+
+
+def test_search_options_reach_fitconfig():
+    """``--search NAME=VALUE`` (fit, fit-many): an optimiser setting of FitConfig from the command line,
+    e.g. active CMA, which our A/B found better; a bad name or value is a one-line error."""
+    from addon.cli import build_parser
+    from addon.cli.fitting import search_options
+    from addon.core.errors import ClothFitError
+    from addon.core.fitting.job import FitConfig
+    for cmd in (["fit", "cap", "--out", "f.json"], ["fit-many", "cap"]):
+        a = build_parser().parse_args(cmd + ["--search", "cma_active=true", "--search", "sigma0=0.2"])
+        assert a.search == ["cma_active=true", "sigma0=0.2"]
+    opts = search_options(["cma_active=true", "sigma0=0.2", "ga_stall=300"])
+    assert opts == {"cma_active": True, "sigma0": 0.2, "ga_stall": 300}
+    cfg = FitConfig(optimizer="cma-es", **search_options(["cma_active=on"])).checked()
+    assert cfg.cma_active is True
+    for bad in ("cma_activ=true", "sigma0", "sigma0=big"):
+        with pytest.raises(ClothFitError, match="--search"):
+            search_options([bad])

@@ -228,6 +228,9 @@ def _search_args(s):
                         f"--resume the checkpoint's)")
     s.add_argument("--population", type=int, default=None,
                    help="optimiser population (default: GA 7n = 21, CMA-ES 4 + 3 ln n = 7)")
+    s.add_argument("--search", action="append", default=[], metavar="NAME=VALUE",
+                   help="an optimiser setting, repeatable: sigma0, cma_active (true/false), tolx, tolfun_per_image, "
+                        "ga_eps, ga_stall, portfolio_runs, ... (FitConfig's search options; default: the optimiser's)")
     s.add_argument("--uncertain", default=None,
                    help="what the manipulation could not measure, estimated with the cloth: 'time_offset=S,handles=M' "
                         "(bounds in seconds and metres; true time = capture time - time_offset_s), or 'none' "

@@ -119,7 +119,30 @@ def fit_config(a, cap):
                   fixed=_json_arg(a.fixed, "--fixed"), init=a.init, bounds=_json_arg(a.bounds, "--bounds"),
                   restarts=a.restarts)
     kw.update(quality="auto" if a.quality == "auto" else None, uncertain=a.uncertain)
+    kw.update(search_options(getattr(a, "search", None) or []))
     return FitConfig(**kw)
+
+
+def search_options(items):
+    """``--search NAME=VALUE`` (repeatable) -> FitConfig's search options; values are numbers or
+    true/false (checked with the config: ``FitConfig.checked``)."""
+    from ..core.fitting.job import SEARCH_OPTIONS
+    out = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or name not in SEARCH_OPTIONS:
+            raise ClothFitError(f"--search {item}: give NAME=VALUE with NAME one of {', '.join(SEARCH_OPTIONS)}")
+        text = text.strip().lower()
+        if text in ("true", "on", "yes", "false", "off", "no"):
+            out[name] = text in ("true", "on", "yes")
+            continue
+        try:
+            value = float(text)
+        except ValueError:
+            raise ClothFitError(f"--search {item}: the value must be a number or true/false") from None
+        out[name] = int(value) if value.is_integer() and "." not in text and "e" not in text else value
+    return out
 
 
 def cmd_fit(a):
