@@ -1,6 +1,6 @@
 import sys, os; sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-"""The mass-spring model (SPEC 2): topology, forces, integrator, backends, explosions, handles,
+"""The mass-spring model (docs/method.md#spec-2): topology, forces, integrator, backends, explosions, handles,
 parameter validation and identifiability."""
 
 import math
@@ -407,7 +407,7 @@ def test_identifiable_combinations():
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("factor", [3.7, 0.013])
 def test_scaling_m_k_d_together_gives_identical_motion(backend, factor):
-    """SPEC 2 identifiability: the motion depends on k/m, d/m and l only."""
+    """docs/method.md#identifiability-what-silhouettes-can-tell: the motion depends on k/m, d/m and l only."""
     sc = paper_scenario(frame_times=[0.05, 0.3, 0.7, 1.2])
     scaled = [GT["m"] * factor, GT["k"] * factor, GT["l"], GT["d"] * factor]
     other = [GT["m"], GT["k"] * 1.3, GT["l"], GT["d"] * 1.3]       # scaling k, d but not m does change it

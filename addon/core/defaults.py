@@ -6,7 +6,7 @@ import math
 
 GRAVITY = (0.0, 0.0, -9.81)
 
-# --- the cloth (SPEC 2): 10 cm square, 16 x 16 point masses, 450 triangles, 705 springs
+# --- the cloth (docs/method.md#spec-2): 10 cm square, 16 x 16 point masses, 450 triangles, 705 springs
 GRID_N = 16
 CLOTH_SIDE = 0.10
 CLOTH_HEIGHT = 0.10          # the held corners sit at z = 0.10 m, cloth centred on the z axis
@@ -19,9 +19,9 @@ CLOTH_HEIGHT = 0.10          # the held corners sit at z = 0.10 m, cloth centred
 # reproducible regime; the search space still includes the chaotic one.
 GT_PARAMS = {"m": 1.0e-5, "k": 10.0, "l": CLOTH_SIDE / (GRID_N - 1), "d": 1.0e-4}
 
-# --- simulation (SPEC 2): semi-implicit Euler, damping treated implicitly.
+# --- simulation (docs/method.md#spec-2): semi-implicit Euler, damping treated implicitly.
 DT_SAFETY = 0.5              # dt <= DT_SAFETY * sqrt(m / k); Gershgorin bound for a node with 6 springs: 2/sqrt(12) = 0.577
-TRUTH_DT_SAFETY = DT_SAFETY  # step of the synthetic ground truth: the same model as the fitter's (SPEC 5: "our own
+TRUTH_DT_SAFETY = DT_SAFETY  # step of the synthetic ground truth: the same model as the fitter's (docs/method.md#spec-5: "our own
                              # model with known parameters"); `synth --truth-dt-safety 0.125` makes a 4x finer truth
 SETTLE_TIME = 0.5            # seconds of settling under gravity with all handles held, before t = 0
 SETTLE_DAMPING_RATE = 40.0   # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
@@ -34,7 +34,7 @@ MAX_STRAIN = 5.0             # a spring longer than (1 + MAX_STRAIN) * rest leng
 BLENDER_FPS = 24
 WARM_START_SIGMA = 0.1      # CMA-ES step size (unit cube) when a fit starts from a given result (--init)
 
-# --- capture (SPEC 5): 30 shapes every 0.05 s, train on even tenths, test on the odd twentieths
+# --- capture (docs/method.md#spec-5): 30 shapes every 0.05 s, train on even tenths, test on the odd twentieths
 FRAME_TIMES = [round(0.05 * i, 2) for i in range(1, 31)]
 TRAIN_TIMES = [round(0.10 * i, 2) for i in range(1, 16)]
 TEST_TIMES = [round(0.05 + 0.10 * i, 2) for i in range(15)]
@@ -47,19 +47,19 @@ TABLE2_CAMERAS = [2, 4, 8]
 TABLE2_RESOLUTIONS = [(60, 80), (120, 160), (240, 320)]
 FIG8_SHAPES = [3, 5, 7, 9, 11, 13, 15]
 
-# --- the paper's numbers (SPEC 5), printed beside ours
+# --- the paper's numbers (docs/method.md#spec-5), printed beside ours
 PAPER_TABLE1 = {1: (6.243, 5.999), 2: (3.495, 4.328), 4: (3.051, 3.399), 8: (1.893, 2.740), 16: (0.767, 2.160)}
 PAPER_TABLE2 = {(60, 80): {2: 5.1243, 4: 3.1907, 8: 2.4966},
                 (120, 160): {2: 4.7966, 4: 3.1548, 8: 2.4185},
                 (240, 320): {2: 4.0927, 4: 2.9281, 8: 2.2197}}
 
-# --- search space. m is fixed from the (weighed) cloth mass: SPEC 2, identifiability. The optimiser
+# --- search space. m is fixed from the (weighed) cloth mass: docs/method.md#identifiability-what-silhouettes-can-tell. The optimiser
 # searches the identifiable quantities, all in log scale: k/m [1/s^2], d/m [1/s], and l relative to the
 # capture's grid spacing; k = (k/m) m and d = (d/m) m are reported for the given m.
 SEARCH_BOUNDS = {"k_over_m": (5.0e4, 5.0e6), "d_over_m": (0.2, 50.0), "l_rel": (0.6, 1.4)}
 LOG_SCALED = {"k_over_m": True, "d_over_m": True, "l_rel": True}
 
-# --- optimisers (SPEC 7)
+# --- optimisers (docs/method.md#spec-7)
 N_FREE = 3
 # SPX + MGG sizes. The optimiser's own defaults are the textbook values, population 20n and 10n children
 # (robust on hard test functions such as Rosenbrock). A cloth fit uses population 7n with 5n children:

@@ -1,4 +1,4 @@
-"""SPX + MGG: the paper's real-coded GA (refs [13] [14], SPEC 7) as a steppable optimiser.
+"""SPX + MGG: the paper's real-coded GA (refs [13] [14], docs/method.md#spec-7) as a steppable optimiser.
 
 * Simplex crossover (Tsutsui et al.): ``n + 1`` parents ``x_0..x_n`` drawn at random without
   replacement from the population, centroid ``G``, expanded vertices

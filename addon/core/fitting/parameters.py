@@ -1,7 +1,7 @@
 """What a fit searches, for each model: the free coordinates, their bounds, and the map from a
 free vector to the model's parameter rows and back to the numbers a user reads.
 
-Identifiability (SPEC 2, section 9): in both models the motion depends on ratios to the mass
+Identifiability (docs/method.md#spec-2, #spec-9): in both models the motion depends on ratios to the mass
 (scaling the mass, every stiffness and every damping together leaves it unchanged), so the mass
 is fixed from the cloth's weighed mass (``cloth_mass``, total; per vertex = cloth_mass / V) and
 the rest is searched per unit mass, in log scale.

@@ -10,7 +10,7 @@ The optimisers work only in this unit cube, ``ask`` returns decoded real values,
 
 Non-finite fitness
 ------------------
-An exploded or failed model is a bad candidate, never a crash (SPEC 4): every non-finite value
+An exploded or failed model is a bad candidate, never a crash (docs/method.md#spec-4): every non-finite value
 (``nan``, ``+inf``, ``-inf``) is treated as ``+inf``, the worst. Such a candidate can never
 become ``best_x``; in MGG it ranks last in its family; CMA-ES, which is rank based, ranks it
 after every finite value. ``best_x`` stays ``None`` and ``best_f`` ``inf`` until a finite value

@@ -1,4 +1,4 @@
-"""The on-disk capture format (SPEC 6): cameras, frame times, handles, silhouettes, shapes.
+"""The on-disk capture format (docs/capture_format.md): cameras, frame times, handles, silhouettes, shapes.
 
 One capture is one directory (full description: ``docs/capture_format.md``)::
 
@@ -99,7 +99,7 @@ class Capture:
 
     @property
     def point_mass(self):
-        """``cloth_mass / n_vertices`` [kg] (the fixed m of SPEC 2), or None."""
+        """``cloth_mass / n_vertices`` [kg] (the fixed m of docs/method.md#spec-2), or None."""
         return None if self.cloth_mass is None else self.cloth_mass / self.scenario.grid.n_vertices
 
     def __repr__(self):

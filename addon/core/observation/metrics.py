@@ -1,4 +1,4 @@
-"""Silhouette error (paper eq. 6, 7), shape error, and the boundary-noise model (SPEC 4, 5)."""
+"""Silhouette error (paper eq. 6, 7), shape error, and the boundary-noise model (docs/method.md#spec-4, #spec-5)."""
 from __future__ import annotations
 
 from collections.abc import Iterable

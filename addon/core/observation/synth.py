@@ -1,4 +1,4 @@
-"""Synthetic captures: our own model with known parameters, rasterised by the core (SPEC 5).
+"""Synthetic captures: our own model with known parameters, rasterised by the core (docs/method.md#spec-5).
 
 The Blender layer has its own path that renders the observations with Blender instead; both write
 the same capture format.

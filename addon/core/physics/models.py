@@ -42,7 +42,7 @@ def _backend(backend: str) -> str:
 
 
 class PaperModel:
-    """The paper's sheet (SPEC 2): rows ``(m, k, l, d)``."""
+    """The paper's sheet (docs/method.md#spec-2): rows ``(m, k, l, d)``."""
 
     name = "paper"
     row_names = PARAM_NAMES

@@ -1,4 +1,4 @@
-"""The paper's mass-spring sheet (SPEC 2): parameters, identifiability and the numpy reference
+"""The paper's mass-spring sheet (docs/method.md#spec-2): parameters, identifiability and the numpy reference
 simulator (vectorised over candidates; ``paper_kernels`` is its numba twin).
 
 Parameters (per point mass / per spring): point mass ``m`` [kg], spring coefficient ``k`` [N/m],

@@ -329,7 +329,7 @@ class Scenario:
 
 def paper_scenario(grid: ClothGrid | None = None, frame_times: ArrayLike | None = None,
                    released_corner: int = D.RELEASED_CORNER) -> Scenario:
-    """SPEC 5: all four corners held at the flat square, settle, release one corner at t = 0."""
+    """docs/method.md#spec-5: all four corners held at the flat square, settle, release one corner at t = 0."""
     grid = grid or ClothGrid()
     handles = []
     for ci, v in enumerate(grid.corners()):

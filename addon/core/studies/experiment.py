@@ -1,4 +1,4 @@
-"""The paper's experiment (SPEC 5): Table 1, the Fig. 8 sweep, Table 2, and SPX+MGG vs CMA-ES.
+"""The paper's experiment (docs/method.md#spec-5): Table 1, the Fig. 8 sweep, Table 2, and SPX+MGG vs CMA-ES.
 
 Protocol, all on our ground truth (``defaults.GT_PARAMS``, simulated with a 4x finer step than the
 fitter uses) and the ``lab18`` rig:
