@@ -10,11 +10,8 @@ A job stops (``stop_reason``) when the optimiser has converged by its own criter
 ("converged"), the evaluation budget is spent ("budget"), the target error is reached
 ("target"), it is cancelled ("cancelled") or it failed ("error": e.g. every candidate exploded).
 
-A checkpoint records what it is a fit of (``identity()``: a hash of the capture's cameras, frame
-times and the training silhouettes; cameras, times, resolution, model, optimiser, population,
-seed, bounds...). ``FitJob.resume`` refuses a checkpoint whose identity differs from the job asked
-for, naming the differing fields; only the budget (``max_evaluations``) and the target may change.
-Checkpoints hold plain numbers only (no pickle) and are checked field by field when read.
+The checkpoint (what the job is a fit of, its optimiser and stages; resumed only by the same fit)
+is ``checkpoint.py``'s; the result (``FitResult``) is ``result.py``'s.
 
 The model is the paper's sheet (default) or Blender's cloth (``FitConfig.model``); what is searched
 for each lives in ``parameters.py``. Identifiability (SPEC 2): the motion depends on ratios to the
@@ -28,7 +25,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import time
 from dataclasses import dataclass
 
@@ -36,7 +32,6 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..physics.paper import identifiable
 from ..jsonio import write_json
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from . import checkpoint
@@ -49,6 +44,8 @@ from ..physics.scenario import Uncertainty
 from .optimise import SearchSpace, canonical_name, make_optimizer, optimizer_from_state
 from .parameters import ManipulationParameters, PaperParameters, SceneParameters, declared_model, make_parameters
 from .quality import Ladder
+from .result import FitResult, job_result
+from .result import finite_or_none as _finite
 
 
 @dataclass
@@ -703,71 +700,12 @@ class FitJob:
             d["manipulation_note"] = "; ".join(notes)
         return d
 
-    def result(self) -> dict:
-        bp = self.best_params
-        n_img = self.objective.n_images
-        history = self.history_prev + ([[a + self.done_evals, b] for a, b in self._opt_history()]
-                                       if self.stage in ("search", "rung") else [])
-        res = {
-            "format": "silhouette-cloth-fit/result", "version": 1,
-            "capture": os.path.abspath(self.capture.root),
-            "capture_hash": self.capture_hash, "silhouettes_hash": self.silhouettes_hash,
-            "optimizer": self.config.optimizer, "seed": self.config.seed,
-            "train_cameras": [self.capture.cameras[c].name for c in self.train_cameras],
-            "train_camera_indices": self.train_cameras,
-            "train_times": self.train_times,
-            "resolution": self.config.resolution,
-            "evaluations": self.evaluations, "generations": self.generation,
-            "max_evaluations": self.config.max_evaluations,
-            "stop_reason": self.stop_reason,
-            "converged_by": list(getattr(self.opt, "run_stops", None) or
-                                 ([self.opt.stop_reason] if getattr(self.opt, "stop_reason", None) else [])),
-            "exploded_candidates": self.exploded,
-            "best_E_all": _finite(self.best_error), "best_E_sil_mean_pct": _finite(100.0 * self.best_error / n_img),
-            "n_train_images": n_img,
-            "model": self._model_at(self.chosen_quality()).to_dict(),
-            "params": bp if isinstance(self.par, PaperParameters) else None,
-            "identifiable": identifiable(bp) if bp and isinstance(self.par, PaperParameters) else None,
-            "mass_source": self.m_source,
-            "note": self.par.note,
-            "finished": self.finished, "cancelled": self.cancelled, "error": self.error,
-            "elapsed_s": self.elapsed, "backend": self.objective.backend,
-            "stages": self.records,
-            "start_E_sil_mean_pct": None if self.start_f is None else _finite(100.0 * self.start_f / n_img),
-            "history": history,
-        }
-        if bp and not isinstance(self.par, PaperParameters):
-            with self._at_quality(self.chosen_quality()):
-                res.update(self.par.describe(self.best_x[:self.npar]))
-        if self.ladder is not None and self.ladder.tried:
-            res["quality_choice"] = self.ladder.describe(n_img)
-            if isinstance(res.get("blender_cloth"), dict):
-                res["blender_cloth"]["quality"] = self.chosen_quality()
-        res.update(self.manipulation())
-        if self.final is not None:
-            res["floor"] = self.final
-        if self.evaluator is not None:
-            res["raster_backend"] = res["backend"]
-            res.update(self.evaluator.describe())
-            res["seconds"] = self.elapsed
-        gt = (self.capture.meta or {}).get("true_params")
-        if gt and bp and isinstance(self.par, PaperParameters):
-            # the capture's own record of its truth: free-form metadata, never a reason to lose the result
-            from ..physics.paper import Params
-            try:
-                truth = Params.from_dict(gt, "capture meta.true_params").as_dict()
-            except ClothFitError as e:
-                res["true_params_ignored"] = str(e)
-            else:
-                res["true_params"] = truth
-                res["true_identifiable"] = identifiable(truth)
-                est, tru = identifiable(bp), identifiable(truth)
-                res["identifiable_error_pct"] = {k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None)
-                                                 for k in est}
-        return res
+    def result(self) -> FitResult:
+        """The result so far (``result.FitResult``; ``to_json()`` is what the result file holds)."""
+        return job_result(self)
 
     def save_result(self, path):
-        atomic_json(path, self.result())
+        self.result().save(path)
 
     def checkpoint_dict(self) -> dict:
         return checkpoint.checkpoint_dict(self)
@@ -794,10 +732,6 @@ def joint_space(par_space, manip):
     bounds.update(manip.bounds)
     logs = {n: bool(v) for n, v in zip(par_space.names, par_space.log)}
     return SearchSpace(names, bounds, logs)
-
-
-def _finite(x):
-    return float(x) if math.isfinite(x) else None
 
 
 def atomic_json(path, obj):
