@@ -60,3 +60,16 @@ def write_json(path, obj, strict: bool = False, default=None):
     except (TypeError, ValueError) as e:
         raise ClothFitError(f"cannot write {path}: the data is not strict JSON ({e})") from None
     atomic_write(path, (text + "\n").encode("utf-8"))
+
+
+def loads(text, what: str = "JSON text", expect=None):
+    """JSON text (a scene property, an option) parsed; not JSON, or a top level that is not
+    ``expect``, raises a one-line ``ClothFitError`` naming ``what``."""
+    try:
+        d = json.loads(text)
+    except (ValueError, RecursionError) as e:
+        raise ClothFitError(f"{what}: not valid JSON ({e})") from None
+    if expect is not None and not isinstance(d, expect):
+        raise ClothFitError(f"{what}: expected a JSON {'object' if expect is dict else expect.__name__}, "
+                            f"got {type(d).__name__}")
+    return d

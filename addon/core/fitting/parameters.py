@@ -21,12 +21,12 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..jsonio import read_json
 from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
 from ..physics.scenario import Offsets, Uncertainty, fitted_scenario  # noqa: F401 (the fitted manipulation)
 from .optimise import SearchSpace
+from .result import FitResult
 
 PAPER_FREE = ("k_over_m", "d_over_m", "l_rel")
 
@@ -275,12 +275,9 @@ def make_parameters(capture, cfg):
     return PaperParameters(capture, cfg) if model.name == "paper" else BlenderParameters(capture, cfg, model)
 
 
-def load_init(path) -> dict:
-    """A result JSON to warm-start from."""
-    res = read_json(path, "warm-start result")
-    if not (res.get("blender_cloth") or res.get("params")):
-        raise ClothFitError(f"warm-start result {path}: no 'blender_cloth' or 'params' in it (not a fit result)")
-    return res
+def load_init(path) -> FitResult:
+    """A result JSON to warm-start from (checked: ``FitResult.from_json``)."""
+    return FitResult.from_json(path, "warm-start result")
 
 
 def _rescale(settings: dict, mass: float, bending_model: str) -> dict:

@@ -8,7 +8,6 @@
 """
 from __future__ import annotations
 
-import json
 import os
 import platform
 import tempfile
@@ -19,6 +18,7 @@ import numpy as np
 from .. import defaults as D
 from ..fitting.job import FitConfig, FitJob
 from ..fitting.objective import SilhouetteObjective
+from ..jsonio import read_json, write_json
 from ..observation.camera import select_training
 from ..observation.capture import load_capture
 from ..observation.raster import silhouette
@@ -191,12 +191,10 @@ def bench_default_fit(tmp, echo=print, max_evaluations=None):
     synth_capture(root, truth, model={"name": "blender", "fps": 24}, rig="lab18", resolution=(480, 640),
                   scenario=sc, seed=0)
     path = os.path.join(root, "capture.json")
-    with open(path) as f:
-        d = json.load(f)
+    d = read_json(path, "capture")
     d["model"] = {"name": "blender", "fps": 24}          # (a loaded model names a quality: auto below)
     d["uncertain"] = {"time_offset": 0.05, "handles": 0.005}
-    from ..safeio import atomic_json
-    atomic_json(path, d)
+    write_json(path, d)
     cap = load_capture(root)
     train, _ = select_training(cap.cameras, 4)
     load = os.getloadavg()[0]
