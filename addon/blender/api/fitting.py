@@ -216,7 +216,8 @@ def run_fit(scene, callback=None):
     return sess.job.result(), level, msg
 
 
-def load_result(scene, path=None):
+def load_result(scene, path=None) -> FitResult:
+    """The scene's fit result (``FitResult``, checked: it must hold parameters)."""
     p = props(scene)
     path = path or (bpy.path.abspath(p.result_path) if p.result_path else os.path.join(capture_dir(scene), RESULT_JSON))
     if not os.path.isfile(path):

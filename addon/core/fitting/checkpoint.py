@@ -102,6 +102,7 @@ def stages_state(job) -> dict:
             "ladder": None if job.ladder is None else job.ladder.state_dict(), "profile": job.profile,
             "start_f": job.start_f}
 
+
 def load_stages(job, st: dict, path):
     """The stages' state of a checkpoint, checked field by field (one-line errors)."""
     def bad(what):
@@ -178,6 +179,7 @@ def load_stages(job, st: dict, path):
         raise bad("stage_quality outside the ladder")
     if job.stage_quality is not None:
         job._activate(job.stage_quality)
+
 
 def reopen_search(job):
     """A search that stopped on its budget and was followed by nothing but its profile continues
