@@ -8,6 +8,7 @@ import json
 import numpy as np
 
 from .errors import ClothFitError
+from .safeio import atomic_write
 
 
 def read_json(path, what: str = "JSON file", expect=dict):
@@ -54,7 +55,6 @@ def plain(obj):
 def write_json(path, obj, strict: bool = False, default=None):
     """Write ``obj`` as JSON (indent 1, a final newline) safely: temporary file, fsync, rename
     (``safeio.atomic_write``); ``strict``: no NaN / Infinity. One-line ClothFitError."""
-    from .safeio import atomic_write
     try:
         text = dumps(obj, strict, default=default)
     except (TypeError, ValueError) as e:

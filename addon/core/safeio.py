@@ -13,13 +13,15 @@ from .errors import ClothFitError
 
 
 def json_text(obj, strict: bool = False, default=None) -> str:
-    """The JSON text the project writes: ``jsonio.dumps`` (indent 1, the one encoder)."""
+    """The JSON text the project writes: ``jsonio.dumps`` (indent 1, the one encoder). Kept for its
+    callers; new code calls ``jsonio`` (this module knows bytes, not JSON)."""
     from .jsonio import dumps
     return dumps(obj, strict, default=default)
 
 
 def atomic_json(path, obj, strict: bool = False, default=None):
-    """Write JSON safely: ``jsonio.write_json`` (see :func:`atomic_write`); ``strict``: no NaN / Infinity."""
+    """Write JSON safely: ``jsonio.write_json`` (see :func:`atomic_write`); ``strict``: no NaN / Infinity.
+    Kept for its callers; new code calls ``jsonio.write_json``."""
     from .jsonio import write_json
     write_json(path, obj, strict, default)
 

@@ -216,7 +216,7 @@ def write_checkpoint(path, ck: dict):
     write_json(path, ck, strict=True)
 
 
-def resume(cls, path, capture=None, config=None, checkpoint_interval: float = 0.0,
+def resume(cls, config_type, path, capture=None, config=None, checkpoint_interval: float = 0.0,
            evaluator=None):
     """Continue a job from its checkpoint. ``config`` is the fit asked for now (default: the
     checkpoint's own); a checkpoint of another fit (another capture, cameras, times, resolution,
@@ -224,9 +224,8 @@ def resume(cls, path, capture=None, config=None, checkpoint_interval: float = 0.
     budget (``max_evaluations``) and the target may differ. ``evaluator``: the workers of a
     Blender-scene fit."""
     from ..observation.capture import load_capture
-    from .job import FitConfig
     ck = read_checkpoint(path)
-    saved_cfg = FitConfig.from_dict(ck["config"])
+    saved_cfg = config_type.from_dict(ck["config"])
     if config is None:
         config = saved_cfg
     cap = capture or load_capture(ck["capture"])

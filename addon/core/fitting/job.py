@@ -702,7 +702,7 @@ class FitJob:
 
     def result(self) -> FitResult:
         """The result so far (``result.FitResult``; ``to_json()`` is what the result file holds)."""
-        return job_result(self)
+        return job_result(self, isinstance(self.par, PaperParameters))
 
     def save_result(self, path):
         self.result().save(path)
@@ -720,7 +720,7 @@ class FitJob:
         """Continue a job from its checkpoint (``checkpoint.resume``: a checkpoint of another fit is refused
         naming the differing fields; only the budget and the target may differ). ``evaluator``: the workers
         of a Blender-scene fit."""
-        return checkpoint.resume(cls, path, capture, config, checkpoint_interval, evaluator)
+        return checkpoint.resume(cls, FitConfig, path, capture, config, checkpoint_interval, evaluator)
 
 
 def joint_space(par_space, manip):

@@ -174,11 +174,10 @@ class FitResult(dict):
         return "\n".join(lines)
 
 
-def job_result(job) -> "FitResult":
-    """The result of ``job`` (a ``fitting.job.FitJob``) so far: what a fit writes."""
-    from .parameters import PaperParameters
+def job_result(job, paper: bool) -> "FitResult":
+    """The result of ``job`` (a ``fitting.job.FitJob``) so far: what a fit writes. ``paper``: a fit of
+    the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``)."""
     bp = job.best_params
-    paper = isinstance(job.par, PaperParameters)
     n_img = job.objective.n_images
     history = job.history_prev + ([[a + job.done_evals, b] for a, b in job._opt_history()]
                                   if job.stage in ("search", "rung") else [])

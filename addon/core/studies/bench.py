@@ -218,13 +218,11 @@ def bench_default_fit(tmp, echo=print, max_evaluations=None):
 def run_bench(json_path, quick=False, only_blender_workers=False, only_default_fit=False):
     if only_default_fit:
         out = {"default_fit": bench_default_fit(tempfile.mkdtemp(prefix="clothfit_bench_"))}
-        from ..safeio import atomic_json
-        atomic_json(json_path, out)
+        write_json(json_path, out)
         return out
     if only_blender_workers:
         out = {"blender_workers": bench_blender_workers(tempfile.mkdtemp(prefix="clothfit_bench_"))}
-        from ..safeio import atomic_json
-        atomic_json(json_path, out)
+        write_json(json_path, out)
         return out
     S = QUICK if quick else FULL
     tmp = tempfile.mkdtemp(prefix="clothfit_bench_")
@@ -305,6 +303,5 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
     if jit.available():
         out["blender_model"] = _bench_blender_model(tmp, quick, out.get("numba", {}).get("evals_per_s"))
     out["blender_workers"] = bench_blender_workers(tmp)
-    from ..safeio import atomic_json
-    atomic_json(json_path, out)
+    write_json(json_path, out)
     return out
