@@ -214,10 +214,11 @@ def draw_results(layout, scene, p):
 
 
 def draw_blender_cloth(layout, p):
-    import json
+    from ..core.errors import ClothFitError
+    from ..core.jsonio import loads
     try:
-        s = json.loads(p.fit_best_blender)
-    except ValueError:
+        s = loads(p.fit_best_blender, "fitted Blender cloth", expect=dict)
+    except ClothFitError:
         layout.label(text="Fitted Blender cloth unreadable", icon="ERROR")
         return
     col = layout.column(align=True)

@@ -21,6 +21,7 @@ import bpy
 from bpy.props import FloatProperty, IntProperty
 
 from ..core.errors import ClothFitError
+from ..core.fitting.result import FitResult
 from ..core.jsonio import read_json
 from ..core.location import IMPORT_NAME, PACKAGE_PARENT
 from .cloth import apply_settings, cloth_modifier
@@ -107,7 +108,7 @@ class SceneFitSession:
                 lines = [ln for ln in f.read().splitlines() if ln.strip()]
             last = next((ln for ln in reversed(lines) if ln.startswith("error: ")), lines[-1] if lines else "")
             raise ClothFitError(f"the fit wrote no result ({last.removeprefix('error: ') or 'no output'})")
-        res = read_json(self.result_path, "fit result")
+        res = FitResult.from_json(self.result_path, "fit result", need_parameters=False)
         obj = scene.objects.get(self.obj_name)
         if obj is not None:
             obj[RESULT_KEY] = self.result_path
@@ -138,10 +139,10 @@ def apply_result(obj, result_path=None) -> dict:
     path = result_path or obj.get(RESULT_KEY)
     if not path:
         raise ClothFitError(f"object '{obj.name}' has no fitted settings yet (run Fit This Cloth's Settings)")
-    res = read_json(path, "fit result")
-    if not res.get("blender_cloth"):
+    res = FitResult.from_json(path, "fit result", need_parameters=False)
+    if not res.is_blender:
         raise ClothFitError(f"fit result {path}: no blender_cloth (the fit never evaluated a candidate?)")
-    return apply_settings(cl, res["blender_cloth"])
+    return apply_settings(cl, res.blender_cloth)
 
 
 class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):

@@ -1,11 +1,16 @@
-"""The one JSON file reader of the core: one error style for every file a user hands over."""
+"""The one place the project reads and writes JSON: one reader (one error style for every file a
+user hands over), one encoder (numpy scalars and arrays as numbers and lists), one text form
+(indent 1) and one safe writer."""
 from __future__ import annotations
 
 import json
 import os
 from typing import Any
 
+import numpy as np
+
 from .errors import ClothFitError
+from .safeio import atomic_write
 
 
 def read_json(path: str | os.PathLike, what: str = "JSON file", expect: type | None = dict) -> Any:
@@ -24,5 +29,49 @@ def read_json(path: str | os.PathLike, what: str = "JSON file", expect: type | N
         raise ClothFitError(f"{what} {path}: not valid JSON ({e})") from None
     if expect is not None and not isinstance(d, expect):
         raise ClothFitError(f"{what} {path}: expected a JSON {'object' if expect is dict else expect.__name__}, "
+                            f"got {type(d).__name__}")
+    return d
+
+
+def encode(o):
+    """The project's one JSON encoder (``json.dumps(default=encode)``): numpy scalars as numbers,
+    arrays as (nested) lists; anything else is a TypeError."""
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o)}")
+
+
+def dumps(obj, strict: bool = False, indent=1, sort_keys: bool = False, default=None) -> str:
+    """JSON text with the project's encoder; ``strict``: no NaN / Infinity (ValueError); ``indent``
+    None for one line (hashes)."""
+    return json.dumps(obj, indent=indent, sort_keys=sort_keys, default=default or encode, allow_nan=not strict)
+
+
+def plain(obj):
+    """``obj`` as the plain JSON values a reader of its file gets back (numpy values converted)."""
+    return json.loads(dumps(obj, indent=None))
+
+
+def write_json(path, obj, strict: bool = False, default=None):
+    """Write ``obj`` as JSON (indent 1, a final newline) safely: temporary file, fsync, rename
+    (``safeio.atomic_write``); ``strict``: no NaN / Infinity. One-line ClothFitError."""
+    try:
+        text = dumps(obj, strict, default=default)
+    except (TypeError, ValueError) as e:
+        raise ClothFitError(f"cannot write {path}: the data is not strict JSON ({e})") from None
+    atomic_write(path, (text + "\n").encode("utf-8"))
+
+
+def loads(text, what: str = "JSON text", expect=None):
+    """JSON text (a scene property, an option) parsed; not JSON, or a top level that is not
+    ``expect``, raises a one-line ``ClothFitError`` naming ``what``."""
+    try:
+        d = json.loads(text)
+    except (ValueError, RecursionError) as e:
+        raise ClothFitError(f"{what}: not valid JSON ({e})") from None
+    if expect is not None and not isinstance(d, expect):
+        raise ClothFitError(f"{what}: expected a JSON {'object' if expect is dict else expect.__name__}, "
                             f"got {type(d).__name__}")
     return d

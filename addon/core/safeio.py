@@ -6,31 +6,27 @@ leaves a half-written file under the destination's name. Every failure is one Cl
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import tempfile
 from collections.abc import Callable, Iterator
 from typing import Any
 
-import numpy as np
-
 from .errors import ClothFitError
 
 
 def json_text(obj: Any, strict: bool = False, default: Callable[[Any], Any] | None = None) -> str:
-    """The JSON text the project writes (indent 1; numpy scalars and arrays as numbers and lists);
-    ``strict``: no NaN / Infinity (ValueError)."""
-    return json.dumps(obj, indent=1, default=default or _default, allow_nan=not strict)
+    """The JSON text the project writes: ``jsonio.dumps`` (indent 1, the one encoder). Kept for its
+    callers; new code calls ``jsonio`` (this module knows bytes, not JSON)."""
+    from .jsonio import dumps
+    return dumps(obj, strict, default=default)
 
 
 def atomic_json(path: str | os.PathLike, obj: Any, strict: bool = False,
                 default: Callable[[Any], Any] | None = None) -> None:
-    """Write JSON safely (see :func:`atomic_write`); ``strict``: no NaN / Infinity."""
-    try:
-        text = json_text(obj, strict, default)
-    except (TypeError, ValueError) as e:
-        raise ClothFitError(f"cannot write {path}: the data is not strict JSON ({e})") from None
-    atomic_write(path, (text + "\n").encode("utf-8"))
+    """Write JSON safely: ``jsonio.write_json`` (see :func:`atomic_write`); ``strict``: no NaN / Infinity.
+    Kept for its callers; new code calls ``jsonio.write_json``."""
+    from .jsonio import write_json
+    write_json(path, obj, strict, default)
 
 
 def atomic_write(path: str | os.PathLike, data: bytes) -> None:
@@ -94,10 +90,3 @@ def exclusive_lock(path: str | os.PathLike) -> Iterator[None]:
     finally:
         os.close(fd)
 
-
-def _default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o)}")

@@ -16,6 +16,7 @@ backgrounds), ``fitting`` (fit session, run, apply), ``overlays``; ``steps`` cut
 steps for the modal operators (``render_steps``, ``simulate_steps``, ``extract_steps``).
 """
 from ...core.errors import ClothFitError  # noqa: F401
+from ...core.fitting.result import FitResult  # noqa: F401 (what run_fit and load_result return)
 from .. import render as R  # noqa: F401
 from .. import scene as S  # noqa: F401
 from .building import (  # noqa: F401

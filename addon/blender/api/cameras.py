@@ -4,10 +4,10 @@ cameras imported (OpenCV, COLMAP, our JSON) and exported. Cameras that still sho
 camera are exported exactly (``reading.exact_rig_cameras``)."""
 from __future__ import annotations
 
-import json
 import os
 
 from ...core.errors import ClothFitError
+from ...core.jsonio import read_json
 from .. import scene as S
 from .reading import (
     abspath,
@@ -62,11 +62,10 @@ def _refuse_capture_files(dst, fmt):
         return
     cap_files = {CAMERAS_JSON, CAPTURE_JSON}
     try:
-        with open(os.path.join(folder, CAPTURE_JSON)) as f:
-            ref = json.load(f).get("cameras")
+        ref = read_json(os.path.join(folder, CAPTURE_JSON), "capture").get("cameras")
         if isinstance(ref, str):
             cap_files.add(os.path.basename(ref))
-    except (OSError, ValueError, AttributeError):
+    except ClothFitError:
         pass
     hit = [n for n in names if n in cap_files]
     if hit:

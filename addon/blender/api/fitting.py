@@ -5,7 +5,6 @@ result back into the scene (``apply_fit``: m, k, l, d; ``apply_blender_cloth``: 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import time
 
@@ -14,7 +13,8 @@ import numpy as np
 
 from ...core import defaults as D
 from ...core.errors import ClothFitError
-from ...core.jsonio import read_json
+from ...core.fitting.result import FitResult
+from ...core.jsonio import dumps
 from ...core.observation.camera import select_training
 from ...core.physics.paper import Params
 from .building import simulate
@@ -125,7 +125,7 @@ def _publish(scene, job):
             p.fit_best_m, p.fit_best_k, p.fit_best_l, p.fit_best_d = bp["m"], bp["k"], bp["l"], bp["d"]
             p.fit_best_blender = ""
         else:
-            p.fit_best_blender = json.dumps(bp)
+            p.fit_best_blender = dumps(bp, indent=None)
         p.fit_has_result = True
 
 
@@ -216,16 +216,13 @@ def run_fit(scene, callback=None):
     return sess.job.result(), level, msg
 
 
-def load_result(scene, path=None):
+def load_result(scene, path=None) -> FitResult:
+    """The scene's fit result (``FitResult``, checked: it must hold parameters)."""
     p = props(scene)
     path = path or (bpy.path.abspath(p.result_path) if p.result_path else os.path.join(capture_dir(scene), RESULT_JSON))
     if not os.path.isfile(path):
         raise ClothFitError(f"no fit result at {path}: run the fit first")
-    res = read_json(path, "fit result", expect=None)
-    if not isinstance(res, dict) or not (isinstance(res.get("params"), dict) or
-                                         isinstance(res.get("blender_cloth"), dict)):
-        raise ClothFitError(f"fit result {path} has no parameters (the fit found none)")
-    return res
+    return FitResult.from_json(path, "fit result")
 
 
 def apply_fit(scene, result=None):
@@ -255,10 +252,10 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
     mesh its Cloth modifier is added or updated (its own pin group is kept). The scene's frame rate
     is set to the one the settings are for (``set_fps``), else a differing rate is an error.
     Returns (object, message)."""
-    from ...core.physics.models import BlenderModel, model_and_row
+    from ...core.physics.models import BlenderModel
     from .. import cloth as BC
-    res = result if result is not None else load_result(scene)
-    model, row = model_and_row(res)
+    res = FitResult.from_json(result) if result is not None else load_result(scene)
+    model, row = res.replay()
     if not isinstance(model, BlenderModel):
         raise ClothFitError("the fit result is a paper-model fit: it has no Blender cloth settings "
                             "(fit with the Blender Cloth model)")

@@ -108,8 +108,8 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
                "cameras": cap.camera_names, "E_sil_pct": (100 * errs).tolist(),
                "mean_E_sil_pct": float(100 * errs.mean()), "contact_sheet": sheet_path,
                "contact_sheet_frame": sheet_fi}
-    from ...core.safeio import atomic_json
-    atomic_json(os.path.join(out_dir, "summary.json"), summary)
+    from ...core.jsonio import write_json
+    write_json(os.path.join(out_dir, "summary.json"), summary)
     p.overlay_dir = out_dir
     p.overlay_error = summary["mean_E_sil_pct"]
     show_observations(scene, p.view_frame if p.view_frame in fidx else fidx[0], cap, kind="overlay")

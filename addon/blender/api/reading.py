@@ -8,7 +8,6 @@ smaller readers below are what it is made of, and stay usable from scripts.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -17,6 +16,7 @@ import bpy
 import numpy as np
 
 from ...core.errors import ClothFitError
+from ...core.jsonio import dumps, loads, read_json
 from ...core.observation.camera import Camera, load_rig, ring_rig
 from ...core.physics.paper import Params
 from ...core.physics.scenario import ClothGrid, Handle, Scenario, paper_scenario
@@ -114,14 +114,11 @@ def cameras_to_json(cameras) -> str:
         if not np.any(c.dist != 0):
             d.pop("dist", None)
         out.append(d)
-    return json.dumps(out)
+    return dumps(out, indent=None)
 
 
 def cameras_from_json(text, where="scene.clothfit.rig_cameras_json"):
-    try:
-        data = json.loads(text)
-    except ValueError as e:
-        raise ClothFitError(f"{where}: not valid JSON ({e})") from None
+    data = loads(text, where)
     if not isinstance(data, list):
         raise ClothFitError(f"{where}: expected a list of cameras")
     return [Camera.from_dict(d, where) for d in data]
@@ -340,9 +337,8 @@ def refuse_foreign_capture(root, own_prefix, who, what):
     if not os.path.isfile(path):
         return
     try:
-        with open(path) as f:
-            gen = str((json.load(f).get("meta") or {}).get("generator", ""))
-    except (OSError, ValueError, AttributeError):
+        gen = str((read_json(path, "capture").get("meta") or {}).get("generator", ""))
+    except (ClothFitError, AttributeError):
         gen = "?"
     if not gen.startswith(own_prefix):
         raise ClothFitError(f"{root} already holds a capture written by {gen or 'another tool'!r}; {who} "

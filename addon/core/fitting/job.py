@@ -10,11 +10,8 @@ A job stops (``stop_reason``) when the optimiser has converged by its own criter
 ("converged"), the evaluation budget is spent ("budget"), the target error is reached
 ("target"), it is cancelled ("cancelled") or it failed ("error": e.g. every candidate exploded).
 
-A checkpoint records what it is a fit of (``identity()``: a hash of the capture's cameras, frame
-times and the training silhouettes; cameras, times, resolution, model, optimiser, population,
-seed, bounds...). ``FitJob.resume`` refuses a checkpoint whose identity differs from the job asked
-for, naming the differing fields; only the budget (``max_evaluations``) and the target may change.
-Checkpoints hold plain numbers only (no pickle) and are checked field by field when read.
+The checkpoint (what the job is a fit of, its optimiser and stages; resumed only by the same fit)
+is ``checkpoint.py``'s; the result (``FitResult``) is ``result.py``'s.
 
 The model is the paper's sheet (default) or Blender's cloth (``FitConfig.model``); what is searched
 for each lives in ``parameters.py``. Identifiability (SPEC 2): the motion depends on ratios to the
@@ -27,20 +24,19 @@ takes, with the scene frame rate they belong to).
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import json
 import math
-import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..physics.paper import identifiable
-from ..safeio import atomic_json as safe_atomic_json
+from ..jsonio import write_json
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
+from . import checkpoint
+from .checkpoint import STOP_REASONS, capture_hash, silhouettes_hash  # noqa: F401 (re-exported)
+from .checkpoint import identity_diff, read_checkpoint  # noqa: F401 (re-exported for the CLI and tests)
 from .objective import SilhouetteObjective
 from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
 from ..physics.models import BlenderModel
@@ -68,6 +64,8 @@ SEARCH_OPTIONS = {
     "portfolio_max_polishes": ("max_polishes", ("cma-portfolio",)),
     "portfolio_refine_until": ("refine_until", ("cma-portfolio",)),
 }
+from .result import FitResult, job_result
+from .result import finite_or_none as _finite
 
 
 @dataclass
@@ -243,38 +241,6 @@ def load_observed(capture, cams, fidx, resolution=None):
     return cameras, observed, ignore
 
 
-STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
-CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
-CHECKPOINT_VERSION = 3          # 3: the fit's stages (quality ladder, manipulation profile)
-CHECKPOINT_KEYS = ("format", "version", "identity", "config", "capture", "optimizer_state", "stages", "elapsed", "exploded",
-                   "finished", "cancelled", "stop_reason", "error", "result")
-MAX_CHECKPOINT_BYTES = 64 * 1024 * 1024
-
-
-def capture_hash(capture) -> str:
-    """sha256 of a capture's cameras (name, size, K, R, t, dist), frame times and scenario."""
-    return hashlib.sha256(json.dumps({"cameras": [c.to_dict() for c in capture.cameras],
-                                      "frame_times": [float(t) for t in capture.frame_times],
-                                      "scenario": capture.scenario.to_dict()},
-                                     sort_keys=True, default=_default).encode()).hexdigest()
-
-
-def silhouettes_hash(observed, ignore=None) -> str:
-    """sha256 of the training silhouettes and their ignore masks (as fitted), in order."""
-    h = hashlib.sha256()
-    for c, oc in enumerate(observed):
-        for f, o in enumerate(oc):
-            masks = [o]
-            g = None if ignore is None else ignore[c][f]
-            masks.append(g)
-            for m in masks:
-                if m is None:
-                    h.update(b"none")
-                    continue
-                m = np.asarray(m, dtype=bool)
-                h.update(np.asarray(m.shape, dtype=np.int64).tobytes())
-                h.update(np.packbits(m).tobytes())
-    return h.hexdigest()
 
 
 class FitJob:
@@ -529,34 +495,7 @@ class FitJob:
     # ------------------------------------------------------------- identity
     def identity(self) -> dict:
         """What this job is a fit of: a checkpoint is only resumed by a job with the same identity."""
-        opt = self.opt if self.stage == "search" else self._main_optimizer()
-        ident = {
-            "capture_hash": self.capture_hash,
-            "silhouettes_hash": self.silhouettes_hash,
-            "cameras": [self.capture.cameras[c].name for c in self.train_cameras],
-            "camera_indices": list(self.train_cameras),
-            "times": list(self.train_times),
-            "resolution": None if self.config.resolution is None else [int(x) for x in self.config.resolution],
-            "model": self._model_at(self.start_quality).to_dict(),
-            "fixed": None if getattr(self.par, "fixed", None) is None else
-            dict(self.par.fixed, quality=self.start_quality or self.par.fixed.get("quality")),
-            "mass": float(self.m),
-            "optimizer": self.optimizer_name,
-            "population": int(getattr(opt, "popsize", getattr(opt, "population", 0))),
-            "children": _int_attr(opt, "children"),
-            "restarts": _int_attr(opt, "restarts"),
-            "seed": int(self.config.seed),
-            "bounds": self.space.state_dict(),
-            "initial": None if self.par.initial is None else np.asarray(self.par.initial).tolist(),
-            "quality_ladder": None if self.ladder is None else {"start": self.ladder.start,
-                                                                "probe_only": self.ladder.probe_only},
-            "scene": None if self.evaluator is None else {
-                "blend": os.path.abspath(self.config.blend) if self.config.blend else None,
-                "object": self.config.blend_object, "frame_zero": self.config.frame_zero},
-        }
-        if self.config.search_options():      # only when set: a checkpoint from before them resumes
-            ident["search_options"] = self.config.search_options()
-        return json.loads(json.dumps(ident, default=_default))
+        return checkpoint.identity(self)
 
     # ------------------------------------------------------------- mapping
     def to_params(self, X):
@@ -821,238 +760,27 @@ class FitJob:
             d["manipulation_note"] = "; ".join(notes)
         return d
 
-    def result(self) -> dict:
-        bp = self.best_params
-        n_img = self.objective.n_images
-        history = self.history_prev + ([[a + self.done_evals, b] for a, b in self._opt_history()]
-                                       if self.stage in ("search", "rung") else [])
-        res = {
-            "format": "silhouette-cloth-fit/result", "version": 1,
-            "capture": os.path.abspath(self.capture.root),
-            "capture_hash": self.capture_hash, "silhouettes_hash": self.silhouettes_hash,
-            "optimizer": self.config.optimizer, "seed": self.config.seed,
-            "train_cameras": [self.capture.cameras[c].name for c in self.train_cameras],
-            "train_camera_indices": self.train_cameras,
-            "train_times": self.train_times,
-            "resolution": self.config.resolution,
-            "evaluations": self.evaluations, "generations": self.generation,
-            "max_evaluations": self.config.max_evaluations,
-            "stop_reason": self.stop_reason,
-            "converged_by": list(getattr(self.opt, "run_stops", None) or
-                                 ([self.opt.stop_reason] if getattr(self.opt, "stop_reason", None) else [])),
-            "exploded_candidates": self.exploded,
-            "best_E_all": _finite(self.best_error), "best_E_sil_mean_pct": _finite(100.0 * self.best_error / n_img),
-            "n_train_images": n_img,
-            "model": self._model_at(self.chosen_quality()).to_dict(),
-            "params": bp if isinstance(self.par, PaperParameters) else None,
-            "identifiable": identifiable(bp) if bp and isinstance(self.par, PaperParameters) else None,
-            "mass_source": self.m_source,
-            "note": self.par.note,
-            "finished": self.finished, "cancelled": self.cancelled, "error": self.error,
-            "elapsed_s": self.elapsed, "backend": self.objective.backend,
-            "stages": self.records,
-            "start_E_sil_mean_pct": None if self.start_f is None else _finite(100.0 * self.start_f / n_img),
-            "history": history,
-        }
-        if bp and not isinstance(self.par, PaperParameters):
-            with self._at_quality(self.chosen_quality()):
-                res.update(self.par.describe(self.best_x[:self.npar]))
-        if self.ladder is not None and self.ladder.tried:
-            res["quality_choice"] = self.ladder.describe(n_img)
-            if isinstance(res.get("blender_cloth"), dict):
-                res["blender_cloth"]["quality"] = self.chosen_quality()
-        res.update(self.manipulation())
-        if self.final is not None:
-            res["floor"] = self.final
-        if self.evaluator is not None:
-            res["raster_backend"] = res["backend"]
-            res.update(self.evaluator.describe())
-            res["seconds"] = self.elapsed
-        gt = (self.capture.meta or {}).get("true_params")
-        if gt and bp and isinstance(self.par, PaperParameters):
-            # the capture's own record of its truth: free-form metadata, never a reason to lose the result
-            from ..physics.paper import Params
-            try:
-                truth = Params.from_dict(gt, "capture meta.true_params").as_dict()
-            except ClothFitError as e:
-                res["true_params_ignored"] = str(e)
-            else:
-                res["true_params"] = truth
-                res["true_identifiable"] = identifiable(truth)
-                est, tru = identifiable(bp), identifiable(truth)
-                res["identifiable_error_pct"] = {k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None)
-                                                 for k in est}
-        return res
+    def result(self) -> FitResult:
+        """The result so far (``result.FitResult``; ``to_json()`` is what the result file holds)."""
+        return job_result(self, isinstance(self.par, PaperParameters))
 
     def save_result(self, path):
-        atomic_json(path, self.result())
-
-    def stages_state(self) -> dict:
-        return {"stage": self.stage, "stage_quality": self.stage_quality, "stage_end": self.stage_end,
-                "done_evals": self.done_evals, "records": self.records,
-                "best_by_quality": [[q, f, x] for q, (f, x) in self.best_by_quality.items()],
-                "history_prev": self.history_prev, "search_stop": self.search_stop,
-                "ladder": None if self.ladder is None else self.ladder.state_dict(), "profile": self.profile,
-                "start_f": self.start_f}
-
-    def _load_stages(self, st: dict, path):
-        """The stages' state of a checkpoint, checked field by field (one-line errors)."""
-        def bad(what):
-            return ClothFitError(f"checkpoint {path}: bad 'stages' ({what})")
-
-        def is_int(v, lo=0):
-            return isinstance(v, int) and not isinstance(v, bool) and v >= lo
-
-        def is_num(v):
-            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-        def is_q(v):
-            return v is None or is_int(v, 1) and v <= 80
-
-        if not isinstance(st, dict):
-            raise bad("not an object")
-        keys = {"stage", "stage_quality", "stage_end", "done_evals", "records", "best_by_quality", "history_prev",
-                "search_stop", "ladder", "profile", "start_f"}
-        if set(st) != keys:
-            raise bad(f"fields {sorted(set(st) ^ keys)}")
-        if st["stage"] not in ("search", "rung", "profile", "done"):
-            raise bad(f"stage {st['stage']!r}")
-        if not is_q(st["stage_quality"]) or not is_int(st["stage_end"]) or not is_int(st["done_evals"]):
-            raise bad("stage_quality, stage_end or done_evals")
-        recs = st["records"]
-        if not isinstance(recs, list) or not all(
-                isinstance(r, dict) and r.get("stage") in ("search", "rung") and is_q(r.get("quality"))
-                and is_int(r.get("evaluations")) and is_int(r.get("generations"))
-                and (r.get("best_f") is None or is_num(r.get("best_f"))) and r.get("stop") in ("converged", "budget")
-                for r in recs):
-            raise bad("records")
-        bq = st["best_by_quality"]
-        if not isinstance(bq, list) or not all(
-                isinstance(e, list) and len(e) == 3 and is_q(e[0]) and is_num(e[1]) and isinstance(e[2], list)
-                and len(e[2]) == self.space.n and all(is_num(v) for v in e[2]) for e in bq):
-            raise bad("best_by_quality")
-        hp = st["history_prev"]
-        if not isinstance(hp, list) or not all(
-                isinstance(e, list) and len(e) == 2 and is_int(e[0]) and (e[1] is None or is_num(e[1])) for e in hp):
-            raise bad("history_prev")
-        if st["search_stop"] not in (None, "converged", "budget"):
-            raise bad("search_stop")
-        if st["start_f"] is not None and not is_num(st["start_f"]):
-            raise bad("start_f")
-        prof = st["profile"]
-        if prof is not None and (self.manip is None or not isinstance(prof, dict) or set(prof) != set(self.manip.names)
-                                 or not all(isinstance(v, dict) and isinstance(v.get("separated"), bool) and
-                                            (v.get("uncertainty") is None or is_num(v.get("uncertainty")))
-                                            for v in prof.values())):
-            raise bad("profile")
-        if (st["ladder"] is None) != (self.ladder is None):
-            raise bad("a quality ladder in one and not the other")
-        ladder = None if st["ladder"] is None else Ladder.from_state(st["ladder"])
-        if ladder is not None and (not isinstance(st["ladder"], dict) or ladder.start != self.ladder.start
-                                   or ladder.probe_only != self.ladder.probe_only
-                                   or any(q not in ladder.rungs for q in ladder.tried)):
-            raise bad("quality ladder")
-        if st["stage"] == "rung" and (ladder is None or st["stage_quality"] not in ladder.rungs):
-            raise bad("a rung outside the ladder")
-        self.stage = st["stage"]
-        self.stage_quality = st["stage_quality"]
-        if self.stage != "search":          # the search's end follows the budget asked for now
-            self.stage_end = st["stage_end"]
-        self.done_evals = st["done_evals"]
-        self.records = [dict(r) for r in recs]
-        self.best_by_quality = {e[0]: [float(e[1]), [float(v) for v in e[2]]] for e in bq}
-        self.history_prev = [list(e) for e in hp]
-        self.search_stop = st["search_stop"]
-        self.profile = prof
-        self.start_f = None if st["start_f"] is None else float(st["start_f"])
-        if ladder is not None:
-            self.ladder = ladder
-        if self.stage_quality is not None and self.ladder is not None and self.stage_quality not in self.ladder.rungs:
-            raise bad("stage_quality outside the ladder")
-        if self.stage_quality is not None:
-            self._activate(self.stage_quality)
-
-    def _reopen_search(self):
-        """A search that stopped on its budget and was followed by nothing but its profile continues
-        when resumed with a larger budget (the profile is made again at its new end)."""
-        last = self.records[-1] if self.records else None
-        if not (self.stage in ("done", "profile") and last and last["stage"] == "search" and last["stop"] == "budget"
-                and len(self.records) == 1 and self.config.max_evaluations > self.evaluations):
-            return
-        self.records = []
-        self.done_evals = 0 if self.start_f is None else 1
-        self.history_prev = []
-        self.search_stop = None
-        self.profile = None
-        self.stage = "search"
-        self.stage_end = self.search_end
-        if self.ladder is not None:
-            self.ladder.tried.pop(self.stage_quality, None)
-            if self.stage_quality in self.ladder.order:
-                self.ladder.order.remove(self.stage_quality)
-        self.stop_reason = None
+        self.result().save(path)
 
     def checkpoint_dict(self) -> dict:
-        return {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "identity": self.identity(),
-                "config": asdict(self.config), "capture": os.path.abspath(self.capture.root),
-                "optimizer_state": self.opt.state_dict(), "stages": self.stages_state(), "elapsed": self.elapsed,
-                "exploded": self.exploded, "finished": self.finished, "cancelled": self.cancelled,
-                "stop_reason": self.stop_reason, "error": self.error, "result": self.result()}
+        return checkpoint.checkpoint_dict(self)
 
     def save_checkpoint(self, path):
-        atomic_json(path, self.checkpoint_dict())
+        checkpoint.write_checkpoint(path, self.checkpoint_dict())
         self._last_save = time.monotonic()
 
     @classmethod
     def resume(cls, path, capture=None, config: FitConfig | None = None, checkpoint_interval: float = 0.0,
                evaluator=None):
-        """Continue a job from its checkpoint. ``config`` is the fit asked for now (default: the
-        checkpoint's own); a checkpoint of another fit (another capture, cameras, times, resolution,
-        model, optimiser, population, seed, bounds...) is refused naming the differing fields. The
-        budget (``max_evaluations``) and the target may differ. ``evaluator``: the workers of a
-        Blender-scene fit."""
-        from ..observation.capture import load_capture
-        ck = read_checkpoint(path)
-        saved_cfg = FitConfig.from_dict(ck["config"])
-        if config is None:
-            config = saved_cfg
-        cap = capture or load_capture(ck["capture"])
-        job = cls(cap, config, checkpoint=path, checkpoint_interval=checkpoint_interval,
-                  evaluator=evaluator)
-        diff = identity_diff(ck["identity"], job.identity())
-        if diff:
-            names = list(dict.fromkeys(d.split(":")[0].split(".")[0] for d in diff))
-            raise ClothFitError(f"checkpoint {path} is of another fit: {', '.join(names)} differ "
-                                f"({'; '.join(diff)}); resume with the same capture and options, or start afresh "
-                                f"with --force or another --out")
-        opt = optimizer_from_state(ck["optimizer_state"])
-        job._load_stages(ck["stages"], path)
-        main = job.stage == "search" or (job.stage in ("done", "profile") and len(job.records) == 1)
-        mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, _int_attr(job.opt, "popsize"),
-                _int_attr(job.opt, "population"), _int_attr(job.opt, "children"), _int_attr(job.opt, "restarts"))
-        theirs = (type(opt), opt.space.state_dict(), opt.seed, _int_attr(opt, "popsize"),
-                  _int_attr(opt, "population"), _int_attr(opt, "children"), _int_attr(opt, "restarts"))
-        n = 7 if main else 3                 # a rung's optimiser is a warm-started CMA-ES of the same space
-        if mine[:n] != theirs[:n]:
-            raise ClothFitError(f"checkpoint {path}: its optimiser state does not match its recorded fit "
-                                f"(optimiser, bounds, seed or population differ)")
-        job.opt = opt
-        job._reopen_search()
-        job.elapsed = ck["elapsed"]
-        job.exploded = ck["exploded"]
-        job.finished = False
-        job.cancelled = False
-        job._update_stop()
-        if job.finished:
-            job._finalise()
-        return job
-
-
-def _int_attr(opt, name):
-    """An optimiser's size setting (``popsize``, ``children``...) when it is a number, else None (the
-    portfolio's ``children`` are its CMA-ES runs)."""
-    v = getattr(opt, name, None)
-    return int(v) if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else None
+        """Continue a job from its checkpoint (``checkpoint.resume``: a checkpoint of another fit is refused
+        naming the differing fields; only the budget and the target may differ). ``evaluator``: the workers
+        of a Blender-scene fit."""
+        return checkpoint.resume(cls, FitConfig, path, capture, config, checkpoint_interval, evaluator)
 
 
 def joint_space(par_space, manip):
@@ -1066,103 +794,9 @@ def joint_space(par_space, manip):
     return SearchSpace(names, bounds, logs)
 
 
-def identity_diff(saved, now) -> list:
-    """Human-readable differences between two ``identity()`` dicts."""
-    if not isinstance(saved, dict):
-        return ["it records no identity"]
-    out = []
-    keys = sorted(set(saved) | set(now))
-    differ = {k for k in keys if saved.get(k, "<missing>") != now.get(k, "<missing>")}
-    if differ & {"cameras", "camera_indices", "times", "capture_hash"}:
-        differ.discard("silhouettes_hash")     # other images, of course
-    if "cameras" in differ:
-        differ.discard("camera_indices")
-    for k in keys:
-        if k not in differ:
-            continue
-        a, b = saved.get(k, "<missing>"), now.get(k, "<missing>")
-        if isinstance(a, dict) and isinstance(b, dict):       # name the entries that differ
-            for sub in sorted(set(a) | set(b), key=str):
-                if a.get(sub, "<missing>") != b.get(sub, "<missing>"):
-                    out.append(f"{k}.{sub}: checkpoint {_short(a.get(sub, '<missing>'), 40)}, "
-                               f"now {_short(b.get(sub, '<missing>'), 40)}")
-        else:
-            out.append(f"{k}: checkpoint {_short(a, 40)}, now {_short(b, 40)}")
-    return out
-
-
-def _short(v, limit=80):
-    s = json.dumps(v, default=str) if not isinstance(v, str) else v
-    return s if len(s) <= limit else s[:limit - 3] + "..."
-
-
-def read_checkpoint(path) -> dict:
-    """A checkpoint's JSON, checked at the top level (the optimiser state is checked by the optimiser)."""
-    path = os.fspath(path)
-    try:
-        if os.path.isdir(path):
-            raise ClothFitError(f"checkpoint {path} is a directory")
-        with open(path, "rb") as f:
-            raw = f.read(MAX_CHECKPOINT_BYTES + 1)
-    except FileNotFoundError:
-        raise ClothFitError(f"checkpoint not found: {path}") from None
-    except OSError as e:
-        raise ClothFitError(f"checkpoint {path}: cannot read it ({e.strerror or e})") from None
-    if len(raw) > MAX_CHECKPOINT_BYTES:
-        raise ClothFitError(f"checkpoint {path} is larger than {MAX_CHECKPOINT_BYTES} bytes: not a checkpoint")
-    try:
-        ck = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
-        raise ClothFitError(f"checkpoint {path} is corrupt: {str(e).splitlines()[0]}") from None
-    if not isinstance(ck, dict):
-        raise ClothFitError(f"checkpoint {path} is corrupt: expected a JSON object")
-    if ck.get("format") != CHECKPOINT_FORMAT:
-        raise ClothFitError(f"checkpoint {path}: 'format' is {ck.get('format')!r}, expected {CHECKPOINT_FORMAT!r} "
-                            f"(a checkpoint of an older version cannot be resumed: start afresh with --force)")
-    if ck.get("version") != CHECKPOINT_VERSION:
-        raise ClothFitError(f"checkpoint {path}: version {ck.get('version')!r} is not supported "
-                            f"(this reader knows version {CHECKPOINT_VERSION})")
-    unknown = sorted(set(ck) - set(CHECKPOINT_KEYS))
-    missing = [k for k in CHECKPOINT_KEYS if k not in ck]
-    if unknown or missing:
-        raise ClothFitError(f"checkpoint {path}: " + ", ".join(
-            x for x in (f"unknown fields {unknown}" if unknown else "", f"missing fields {missing}" if missing else "")
-            if x))
-    for k in ("identity", "config", "optimizer_state"):
-        if not isinstance(ck[k], dict):
-            raise ClothFitError(f"checkpoint {path}: '{k}' must be an object")
-    if not isinstance(ck["capture"], str) or not ck["capture"]:
-        raise ClothFitError(f"checkpoint {path}: 'capture' must be a path")
-    e = ck["elapsed"]
-    if isinstance(e, bool) or not isinstance(e, (int, float)) or not math.isfinite(e) or e < 0:
-        raise ClothFitError(f"checkpoint {path}: 'elapsed' must be a number >= 0")
-    x = ck["exploded"]
-    if isinstance(x, bool) or not isinstance(x, int) or x < 0:
-        raise ClothFitError(f"checkpoint {path}: 'exploded' must be an integer >= 0")
-    for k in ("finished", "cancelled"):
-        if not isinstance(ck[k], bool):
-            raise ClothFitError(f"checkpoint {path}: '{k}' must be true or false")
-    if ck["stop_reason"] is not None and ck["stop_reason"] not in STOP_REASONS:
-        raise ClothFitError(f"checkpoint {path}: 'stop_reason' {ck['stop_reason']!r} is not one of {STOP_REASONS}")
-    ck["elapsed"] = float(e)
-    return ck
-
-
-def _finite(x):
-    return float(x) if math.isfinite(x) else None
-
-
 def atomic_json(path, obj):
-    """Checkpoints and results: strict JSON (no NaN), written by ``safeio.atomic_json``."""
-    safe_atomic_json(path, obj, strict=True, default=_default)
+    """Results: strict JSON (no NaN), written atomically (``jsonio.write_json``)."""
+    write_json(path, obj, strict=True)
 
 
-_atomic_json = atomic_json
-
-
-def _default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o)}")
+_atomic_json = atomic_json      # the CLI's name for it

@@ -25,11 +25,11 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..jsonio import read_json
 from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
 from ..physics.scenario import Offsets, Uncertainty, fitted_scenario  # noqa: F401 (the fitted manipulation)
+from .result import FitResult
 from .space import SearchSpace
 
 if TYPE_CHECKING:
@@ -285,12 +285,9 @@ def make_parameters(capture: Capture, cfg: FitConfig) -> PaperParameters | Blend
     return PaperParameters(capture, cfg) if model.name == "paper" else BlenderParameters(capture, cfg, model)
 
 
-def load_init(path: str | os.PathLike) -> dict[str, Any]:
-    """A result JSON to warm-start from."""
-    res = read_json(path, "warm-start result")
-    if not (res.get("blender_cloth") or res.get("params")):
-        raise ClothFitError(f"warm-start result {path}: no 'blender_cloth' or 'params' in it (not a fit result)")
-    return res
+def load_init(path: str | os.PathLike) -> FitResult:
+    """A result JSON to warm-start from (checked: ``FitResult.from_json``)."""
+    return FitResult.from_json(path, "warm-start result")
 
 
 def _rescale(settings: dict, mass: float, bending_model: str) -> dict:

@@ -18,7 +18,6 @@ solver bit for bit (tests/test_blender_user_scenes.py).
 """
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 
@@ -26,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import ClothFitError
+from ..jsonio import loads
 from . import blender as B
 from .scenario import ClothGrid
 
@@ -124,7 +124,8 @@ class SceneCloth:
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the scene cloth as one ``.npz`` (arrays, and the rest as JSON text)."""
-        from ..safeio import atomic_write, json_text
+        from ..jsonio import dumps
+        from ..safeio import atomic_write
         import io
         meta = {"format": FORMAT, "version": 1, "faces": [list(map(int, f)) for f in self.faces],
                 "settings": self.settings, "gravity": np.asarray(self.gravity, dtype=np.float64).tolist(),
@@ -132,7 +133,7 @@ class SceneCloth:
         buf = io.BytesIO()
         np.savez(buf, rest=self.rest, edges=self.edges, triangles=self.triangles,
                  handle_vertices=self.handle_vertices, weights=self.weights, targets=self.targets,
-                 meta=np.array(json_text(meta)))
+                 meta=np.array(dumps(meta)))
         atomic_write(path, buf.getvalue())
 
     @classmethod
@@ -141,7 +142,7 @@ class SceneCloth:
             raise ClothFitError(f"scene cloth {path}: file not found")
         try:
             with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
+                meta = loads(str(z["meta"]), f"scene cloth {path}: its meta", expect=dict)
                 arr = {k: z[k] for k in ("rest", "edges", "triangles", "handle_vertices", "weights", "targets")}
         except (OSError, ValueError, KeyError) as e:
             raise ClothFitError(f"scene cloth {path}: not a scene-cloth file ({e})") from None

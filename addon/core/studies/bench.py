@@ -8,7 +8,6 @@
 """
 from __future__ import annotations
 
-import json
 import os
 import platform
 import tempfile
@@ -19,6 +18,7 @@ import numpy as np
 from .. import defaults as D
 from ..fitting.job import FitConfig, FitJob
 from ..fitting.objective import SilhouetteObjective
+from ..jsonio import read_json, write_json
 from ..observation.camera import select_training
 from ..observation.capture import load_capture
 from ..observation.raster import silhouette
@@ -106,12 +106,10 @@ def bench_default_fit(tmp, echo=print, max_evaluations=None):
     synth_capture(root, truth, model={"name": "blender", "fps": 24}, rig="lab18", resolution=(480, 640),
                   scenario=sc, seed=0)
     path = os.path.join(root, "capture.json")
-    with open(path) as f:
-        d = json.load(f)
+    d = read_json(path, "capture")
     d["model"] = {"name": "blender", "fps": 24}          # (a loaded model names a quality: auto below)
     d["uncertain"] = {"time_offset": 0.05, "handles": 0.005}
-    from ..safeio import atomic_json
-    atomic_json(path, d)
+    write_json(path, d)
     cap = load_capture(root)
     train, _ = select_training(cap.cameras, 4)
     load = os.getloadavg()[0]
@@ -141,13 +139,11 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
             return {"skipped": "Blender workers are measured by the CLI's bench (farm layer)"}
     if only_default_fit:
         out = {"default_fit": bench_default_fit(tempfile.mkdtemp(prefix="clothfit_bench_"))}
-        from ..safeio import atomic_json
-        atomic_json(json_path, out)
+        write_json(json_path, out)
         return out
     if only_blender_workers:
         out = {"blender_workers": blender_workers(tempfile.mkdtemp(prefix="clothfit_bench_"))}
-        from ..safeio import atomic_json
-        atomic_json(json_path, out)
+        write_json(json_path, out)
         return out
     S = QUICK if quick else FULL
     tmp = tempfile.mkdtemp(prefix="clothfit_bench_")
@@ -228,6 +224,5 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
     if jit.available():
         out["blender_model"] = _bench_blender_model(tmp, quick, out.get("numba", {}).get("evals_per_s"))
     out["blender_workers"] = blender_workers(tmp)
-    from ..safeio import atomic_json
-    atomic_json(json_path, out)
+    write_json(json_path, out)
     return out

@@ -1,0 +1,240 @@
+"""A fit's result: ``FitResult``, the JSON object a fit writes and every reader reads back.
+
+A fit (``fitting.job.FitJob.result``, here ``job_result``) makes one; ``to_json`` gives the
+object written to the result file (the same keys and values as the plain dict results always
+were: old files load, recorded figures stay); ``FitResult.from_json`` reads a dict or a file back
+and checks the keys its readers depend on (one-line ``ClothFitError`` naming the file and the
+key). ``FitResult`` is a ``dict`` underneath, so readers that index it (``res["blender_cloth"]``,
+``res.get("handles")``) and code that takes a plain result dict (``physics.scenario.fitted_scenario``,
+``physics.models.model_and_row``) keep working; new code uses its properties and methods.
+
+Keys (see README's fit result): ``format``/``version``; what was fitted (``capture``,
+``capture_hash``, ``silhouettes_hash``, ``train_cameras``, ``train_times``, ``resolution``,
+``model``); the search (``optimizer``, ``seed``, ``evaluations``, ``generations``, ``stop_reason``,
+``stages``, ``history``...); the answer (paper: ``params``, ``identifiable``; Blender:
+``blender_cloth``, ``blender_scene``); the errors (``best_E_sil_mean_pct``, ``floor``...); the
+fitted manipulation (``time_offset_s``, ``handles``, ``manipulation_profile``, ``manipulation_note``).
+"""
+from __future__ import annotations
+
+import math
+import os
+
+from ..errors import ClothFitError
+from ..jsonio import read_json, write_json
+from ..physics.paper import Params, identifiable
+
+RESULT_FORMAT = "silhouette-cloth-fit/result"
+RESULT_VERSION = 1
+
+
+def finite_or_none(x):
+    """A finite number as a float, else None (results are strict JSON)."""
+    return float(x) if math.isfinite(x) else None
+
+
+def _is_num(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+class FitResult(dict):
+    """A fit's result (a ``dict`` of the result file's keys; see the module's docstring).
+    ``source``: the file it was read from (or a description), named by its errors."""
+
+    source = "fit result"
+
+    # ------------------------------------------------------------------ JSON
+    def to_json(self) -> dict:
+        """The plain JSON object the result file holds (the keys and values of a fit's result)."""
+        return dict(self)
+
+    @classmethod
+    def from_json(cls, data, what: str = "fit result", need_parameters: bool = True) -> "FitResult":
+        """A result from a dict or a JSON file, checked: an object; ``format`` (when given) a fit
+        result's; ``blender_cloth`` or ``params`` an object (``need_parameters``: one of them must be
+        there: a result that found nothing cannot be applied, exported or warm-started from);
+        ``model``, ``blender_scene``, ``handles`` and ``time_offset_s`` of the right kinds. Errors: one
+        ``ClothFitError`` line naming ``what``, the file and the key."""
+        if isinstance(data, (str, os.PathLike)):
+            src = f"{what} {os.fspath(data)}"
+            d = read_json(data, what)
+        else:
+            src = what
+            d = data
+            if not isinstance(d, dict):
+                raise ClothFitError(f"{src}: expected a JSON object, got {type(d).__name__}")
+        res = cls(d)
+        res.source = src
+        res.check(need_parameters)
+        return res
+
+    def check(self, need_parameters: bool = True) -> "FitResult":
+        """The checks of ``from_json`` (see there)."""
+        src = self.source
+
+        def bad(key, why):
+            return ClothFitError(f"{src}: '{key}' {why}")
+
+        fmt = self.get("format")
+        if fmt is not None and fmt != RESULT_FORMAT:
+            raise bad("format", f"is {fmt!r}, not a fit result's {RESULT_FORMAT!r}"
+                      + (" (a checkpoint: give the fit's --out file)" if "checkpoint" in str(fmt) else ""))
+        if fmt is not None and self.get("version", RESULT_VERSION) != RESULT_VERSION:
+            raise bad("version", f"{self.get('version')!r} is not supported (this reader knows {RESULT_VERSION})")
+        for key in ("blender_cloth", "params", "blender_scene"):
+            if self.get(key) is not None and not isinstance(self[key], dict):
+                raise bad(key, f"must be an object, got {type(self[key]).__name__}")
+        if need_parameters and not (self.get("blender_cloth") or self.get("params")):
+            raise ClothFitError(f"{src}: no 'blender_cloth' or 'params' in it (not a fit result, or a fit that "
+                                f"found no parameters)")
+        m = self.get("model")
+        if m is not None and not isinstance(m, (str, dict)):
+            raise bad("model", f"must be a name or an object, got {type(m).__name__}")
+        fps = (self.get("blender_scene") or {}).get("fps")
+        if fps is not None and not (_is_num(fps) and fps > 0):
+            raise bad("blender_scene.fps", f"must be a positive number, got {fps!r}")
+        h = self.get("handles")
+        if h is not None and not (isinstance(h, list) and all(isinstance(x, dict) for x in h)):
+            raise bad("handles", "must be a list of objects")
+        t = self.get("time_offset_s")
+        if t is not None and not _is_num(t):
+            raise bad("time_offset_s", f"must be a number, got {t!r}")
+        return self
+
+    def save(self, path):
+        """Write the result file: strict JSON (no NaN), atomically (``jsonio.write_json``)."""
+        write_json(path, self.to_json(), strict=True)
+
+    # ------------------------------------------------------------ its parts
+    @property
+    def is_blender(self) -> bool:
+        """A Blender-cloth fit (``blender_cloth`` settings), not the paper's sheet (m, k, l, d)."""
+        return isinstance(self.get("blender_cloth"), dict)
+
+    @property
+    def blender_cloth(self) -> dict | None:
+        return self.get("blender_cloth")
+
+    @property
+    def params(self) -> dict | None:
+        return self.get("params")
+
+    @property
+    def paper_params(self) -> Params:
+        """The paper model's fitted m, k, l, d (checked)."""
+        if not isinstance(self.get("params"), dict):
+            raise ClothFitError(f"{self.source}: no 'params' (m, k, l, d) in it"
+                                + (" (a Blender-cloth fit)" if self.is_blender else ""))
+        return Params.from_dict(self["params"], self.source)
+
+    @property
+    def manipulation(self) -> dict:
+        """The manipulation the fit estimated: ``time_offset_s`` and ``handles`` where given."""
+        return {k: self[k] for k in ("time_offset_s", "handles") if self.get(k) is not None}
+
+    def replay(self, default_model=None):
+        """(model, parameter row) that replays the fit (``physics.models.model_and_row``)."""
+        from ..physics.models import model_and_row
+        return model_and_row(self, default_model)
+
+    def blender_settings(self):
+        """(BlenderModel, ClothSettings values) of a Blender-cloth fit; a paper-model fit is an error."""
+        from ..physics.models import BlenderModel
+        model, row = self.replay()
+        if not isinstance(model, BlenderModel):
+            raise ClothFitError(f"{self.source}: a {model.name}-model fit has no Blender cloth settings "
+                                "(fit with --model blender, or warm-start one from it with --init)")
+        return model, model.settings(row)
+
+    def blender_export(self) -> dict:
+        """What ``export-blender-cloth`` prints: ``blender_cloth`` (checked ClothSettings values),
+        ``blender_scene`` (the frame rate they belong to) and, when the fit estimated it,
+        ``manipulation`` (where the pins go, when the cloth is let go)."""
+        model, s = self.blender_settings()
+        out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
+        if self.manipulation:
+            out["manipulation"] = self.manipulation
+        return out
+
+    def blender_python(self) -> str:
+        """``export-blender-cloth --python``: Python lines that set a Cloth modifier's settings."""
+        from ..physics import blender as B
+        model, s = self.blender_settings()
+        manip = self.manipulation
+        lines = [f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
+                 "cloth = bpy.context.object.modifiers['Cloth'].settings"]
+        lines += [f"cloth.{k} = {s[k]!r}" for k in ("quality", "bending_model") + B.FLOAT_SETTINGS]
+        if manip.get("time_offset_s") is not None:
+            lines.append(f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
+                         f"happened at capture time + time_offset_s")
+        for h in manip.get("handles") or []:
+            if any(h.get("offset_m") or []):
+                lines.append(f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
+                             f"from the capture's measurement")
+        return "\n".join(lines)
+
+
+def job_result(job, paper: bool) -> "FitResult":
+    """The result of ``job`` (a ``fitting.job.FitJob``) so far: what a fit writes. ``paper``: a fit of
+    the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``)."""
+    bp = job.best_params
+    n_img = job.objective.n_images
+    history = job.history_prev + ([[a + job.done_evals, b] for a, b in job._opt_history()]
+                                  if job.stage in ("search", "rung") else [])
+    res = {
+        "format": RESULT_FORMAT, "version": RESULT_VERSION,
+        "capture": os.path.abspath(job.capture.root),
+        "capture_hash": job.capture_hash, "silhouettes_hash": job.silhouettes_hash,
+        "optimizer": job.config.optimizer, "seed": job.config.seed,
+        "train_cameras": [job.capture.cameras[c].name for c in job.train_cameras],
+        "train_camera_indices": job.train_cameras,
+        "train_times": job.train_times,
+        "resolution": job.config.resolution,
+        "evaluations": job.evaluations, "generations": job.generation,
+        "max_evaluations": job.config.max_evaluations,
+        "stop_reason": job.stop_reason,
+        "converged_by": list(getattr(job.opt, "run_stops", None) or
+                             ([job.opt.stop_reason] if getattr(job.opt, "stop_reason", None) else [])),
+        "exploded_candidates": job.exploded,
+        "best_E_all": finite_or_none(job.best_error),
+        "best_E_sil_mean_pct": finite_or_none(100.0 * job.best_error / n_img),
+        "n_train_images": n_img,
+        "model": job._model_at(job.chosen_quality()).to_dict(),
+        "params": bp if paper else None,
+        "identifiable": identifiable(bp) if bp and paper else None,
+        "mass_source": job.m_source,
+        "note": job.par.note,
+        "finished": job.finished, "cancelled": job.cancelled, "error": job.error,
+        "elapsed_s": job.elapsed, "backend": job.objective.backend,
+        "stages": job.records,
+        "start_E_sil_mean_pct": None if job.start_f is None else finite_or_none(100.0 * job.start_f / n_img),
+        "history": history,
+    }
+    if bp and not paper:
+        with job._at_quality(job.chosen_quality()):
+            res.update(job.par.describe(job.best_x[:job.npar]))
+    if job.ladder is not None and job.ladder.tried:
+        res["quality_choice"] = job.ladder.describe(n_img)
+        if isinstance(res.get("blender_cloth"), dict):
+            res["blender_cloth"]["quality"] = job.chosen_quality()
+    res.update(job.manipulation())
+    if job.final is not None:
+        res["floor"] = job.final
+    if job.evaluator is not None:
+        res["raster_backend"] = res["backend"]
+        res.update(job.evaluator.describe())
+        res["seconds"] = job.elapsed
+    gt = (job.capture.meta or {}).get("true_params")
+    if gt and bp and paper:
+        # the capture's own record of its truth: free-form metadata, never a reason to lose the result
+        try:
+            truth = Params.from_dict(gt, "capture meta.true_params").as_dict()
+        except ClothFitError as e:
+            res["true_params_ignored"] = str(e)
+        else:
+            res["true_params"] = truth
+            res["true_identifiable"] = identifiable(truth)
+            est, tru = identifiable(bp), identifiable(truth)
+            res["identifiable_error_pct"] = {k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None)
+                                             for k in est}
+    return FitResult(res)
