@@ -30,17 +30,17 @@ $(STAMP): requirements.txt requirements-dev.txt pyproject.toml
 
 demo: venv
 	$(PY) demo_blend/build_demo.py --out out/demo --blend out/demo/demo.blend
-	$(PY) -m addon paper --quick --json out/paper_quick.json --out out/paper_quick --only table1 >/dev/null
+	$(PY) -m clothfit paper --quick --json out/paper_quick.json --out out/paper_quick --only table1 >/dev/null
 	@echo "demo done: pictures in out/demo/pictures/ (first guess vs fit, error curve, parameters), figures in out/demo/summary.json, capture/fit/overlays in out/demo/capture, Table 1 in out/paper_quick.json"
 
 test: venv
 	$(PY) -m pytest -q tests
 
 bench: venv
-	$(PY) -m addon bench --json out/bench.json >/dev/null
+	$(PY) -m clothfit bench --json out/bench.json >/dev/null
 
 paper: venv
-	$(PY) -m addon paper --json out/paper.json --out out/paper >/dev/null
+	$(PY) -m clothfit paper --json out/paper.json --out out/paper >/dev/null
 
 extension: venv
 	$(PY) tools/build_extension.py

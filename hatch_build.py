@@ -5,6 +5,7 @@ Hatchling's editable installs cannot rename a package, so this hook adds to the 
 ``.pth`` file and a small import finder that maps the name ``clothfit`` onto the checkout's ``addon/``
 (the way the ``editables`` package does). Nothing of this goes into a normal wheel.
 """
+
 import os
 import tempfile
 

@@ -1,4 +1,5 @@
-"""``python -m addon ...``: the headless CLI, the same program as the ``clothfit`` console script."""
+"""``python -m clothfit ...``: the headless CLI, the same program as the ``clothfit`` console script."""
+
 import sys
 
 from .cli import main

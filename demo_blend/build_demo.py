@@ -21,6 +21,7 @@ masks, ``--no-post`` removes it), the fit result and overlays there, saves ``dem
 and every figure of the run to ``<out>/summary.json`` (what ``tools/figures.py record demo`` records
 for the docs; ``make docs-images`` copies the pictures to docs/img).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,7 +32,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-SHOW_TIME = 0.45                 # s: a test time (not among the training times 0.1, 0.2, ...)
+SHOW_TIME = 0.45  # s: a test time (not among the training times 0.1, 0.2, ...)
 SHOW_CAMERAS = ("cam00", "cam05", "cam14")
 
 
@@ -39,21 +40,30 @@ def main(argv=None):
     for d in (ROOT, HERE):
         if d not in sys.path:
             sys.path.insert(0, d)
-    from addon.blender import pipeline
-    ap = pipeline.add_arguments(argparse.ArgumentParser(description="Build the Silhouette Cloth Fit demo scene"),
-                                blend_default=os.path.join(HERE, "demo.blend"))
+    from clothfit.blender import pipeline
+
+    ap = pipeline.add_arguments(
+        argparse.ArgumentParser(description="Build the Silhouette Cloth Fit demo scene"),
+        blend_default=os.path.join(HERE, "demo.blend"),
+    )
     ap.add_argument("--pictures", default=None, help="where the pictures go (default <out>/pictures)")
     ap.add_argument("--no-pictures", action="store_true", help="skip the pictures")
-    ap.set_defaults(post=True)     # the demo has a post in front of the cloth (an occluder: ignore masks)
+    ap.set_defaults(post=True)  # the demo has a post in front of the cloth (an occluder: ignore masks)
     a = ap.parse_args(pipeline.script_argv(argv))
     out = os.path.abspath(a.out)
     pics = None if a.no_pictures else os.path.abspath(a.pictures or os.path.join(out, "pictures"))
-    print("note: Blender's first render may print 'EGL Error (0x3009)' lines: its headless OpenGL start-up asking "
-          "for a newer OpenGL than the driver offers (harmless; README, 'The demo').", flush=True)
+    print(
+        "note: Blender's first render may print 'EGL Error (0x3009)' lines: its headless OpenGL start-up asking "
+        "for a newer OpenGL than the driver offers (harmless; README, 'The demo').",
+        flush=True,
+    )
     t0 = time.perf_counter()
     state = {}
-    summary = pipeline.run(a, after_capture=(lambda scene: capture_pictures(scene, pics, state)) if pics else None,
-                           after_overlays=(lambda scene: overlay_pictures(scene, pics)) if pics else None)
+    summary = pipeline.run(
+        a,
+        after_capture=(lambda scene: capture_pictures(scene, pics, state)) if pics else None,
+        after_overlays=(lambda scene: overlay_pictures(scene, pics)) if pics else None,
+    )
     if pics and not a.no_fit:
         summary.update(story_pictures(summary, pics, state))
     summary["seconds"] = time.perf_counter() - t0
@@ -62,11 +72,19 @@ def main(argv=None):
 
 
 def write_summary(path, summary, a):
-    from addon.core.safeio import atomic_json
+    from clothfit.core.safeio import atomic_json
+
     keep = {k: v for k, v in summary.items() if k not in ("capture", "result", "blend")}
-    keep["settings"] = {"rig": a.rig, "train_cameras": a.train_cameras, "budget": a.budget,
-                        "resolution": a.resolution, "noise": a.noise, "seed": a.seed, "post": a.post,
-                        "blender_budget": a.blender_budget}
+    keep["settings"] = {
+        "rig": a.rig,
+        "train_cameras": a.train_cameras,
+        "budget": a.budget,
+        "resolution": a.resolution,
+        "noise": a.noise,
+        "seed": a.seed,
+        "post": a.post,
+        "blender_budget": a.blender_budget,
+    }
     if "blender_model" in keep:
         keep["blender_model"] = {k: v for k, v in keep["blender_model"].items() if k not in ("result", "overlays")}
     atomic_json(path, keep)
@@ -75,12 +93,14 @@ def write_summary(path, summary, a):
 
 # ======================================================= the story: first guess, fit, error curve, parameters
 
+
 def shown(scene):
     """(time, camera names) the pictures show: SHOW_TIME and SHOW_CAMERAS on the demo's rig and
     times; otherwise the middle capture time, the first training camera and two held-out ones."""
-    from addon.blender import api
-    from addon.core.observation.camera import select_training
-    from addon.core.observation.capture import load_capture
+    from clothfit.blender import api
+    from clothfit.core.observation.camera import select_training
+    from clothfit.core.observation.capture import load_capture
+
     cap = load_capture(api.capture_dir(scene))
     times = [float(t) for t in cap.frame_times]
     t = SHOW_TIME if any(abs(x - SHOW_TIME) < 1e-9 for x in times) else times[len(times) // 2]
@@ -94,8 +114,9 @@ def shown(scene):
 def capture_pictures(scene, pics, state):
     """Right after the capture (the true cloth is baked): camera images of the shown cameras, the rig
     picture and the silhouettes sheet, and the first guess's overlay sheet."""
-    from addon.blender import api
-    from addon.blender import render as R
+    from clothfit.blender import api
+    from clothfit.blender import render as R
+
     os.makedirs(pics, exist_ok=True)
     t, names = state["time"], state["cameras"] = shown(scene)
     scene.frame_set(api.S.frame_of_time(scene, t))
@@ -117,12 +138,12 @@ def story_pictures(summary, pics, state):
     and the figures they show (returned for summary.json)."""
     import cv2
     import pictures as P
+    from clothfit.core.fitting.evaluate import evaluate
+    from clothfit.core.jsonio import read_json
+    from clothfit.core.observation.camera import select_training
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.physics.paper import identifiable
 
-    from addon.core.fitting.evaluate import evaluate
-    from addon.core.jsonio import read_json
-    from addon.core.observation.camera import select_training
-    from addon.core.observation.capture import load_capture
-    from addon.core.physics.paper import identifiable
     cap = load_capture(summary["capture"])
     res = read_json(summary["result"], "fit result")
     truth = dict(summary["true_params"])
@@ -139,51 +160,105 @@ def story_pictures(summary, pics, state):
     paths = {"fit_on_images": P.write(os.path.join(pics, "fit_on_images.png"), img)}
     # the figures: training error at the fit's resolution, held-out cameras at the test times (full size)
     test_times = [float(t) for t in cap.frame_times if not any(abs(t - u) < 1e-9 for u in res["train_times"])]
-    test_times = test_times or [float(t) for t in cap.frame_times]   # every time trained on: score them all
-    fig = {"first_guess": first, "fitted": res["params"], "true": truth,
-           "identifiable": {k: identifiable(v) for k, v in sets.items()},
-           "identifiable_error_pct": {}, "train_E_sil_pct": {}, "heldout_E_sil_pct": {}, "shape_error_mm": {},
-           "shown": {"time": t_show, "cameras": list(state["cameras"]), "roles": roles,
-                     "E_sil_pct": {"first_guess": errs[rows[0][0]], "fitted": errs[rows[1][0]]}},
-           "evaluations": res["evaluations"], "stop_reason": res["stop_reason"],
-           "fit_seconds": res["elapsed_s"], "train_cameras": res["train_cameras"],
-           "train_times": res["train_times"], "fit_resolution": res["resolution"],
-           "heldout_cameras": [names[c] for c in held], "test_times": test_times,
-           "image_size": [cap.cameras[0].height, cap.cameras[0].width]}
+    test_times = test_times or [float(t) for t in cap.frame_times]  # every time trained on: score them all
+    fig = {
+        "first_guess": first,
+        "fitted": res["params"],
+        "true": truth,
+        "identifiable": {k: identifiable(v) for k, v in sets.items()},
+        "identifiable_error_pct": {},
+        "train_E_sil_pct": {},
+        "heldout_E_sil_pct": {},
+        "shape_error_mm": {},
+        "shown": {
+            "time": t_show,
+            "cameras": list(state["cameras"]),
+            "roles": roles,
+            "E_sil_pct": {"first_guess": errs[rows[0][0]], "fitted": errs[rows[1][0]]},
+        },
+        "evaluations": res["evaluations"],
+        "stop_reason": res["stop_reason"],
+        "fit_seconds": res["elapsed_s"],
+        "train_cameras": res["train_cameras"],
+        "train_times": res["train_times"],
+        "fit_resolution": res["resolution"],
+        "heldout_cameras": [names[c] for c in held],
+        "test_times": test_times,
+        "image_size": [cap.cameras[0].height, cap.cameras[0].width],
+    }
     for key, p in sets.items():
         k = key
-        tr = evaluate(cap, p, cameras=res["train_camera_indices"], times=res["train_times"],
-                      resolution=res["resolution"])
+        tr = evaluate(
+            cap, p, cameras=res["train_camera_indices"], times=res["train_times"], resolution=res["resolution"]
+        )
         ho = evaluate(cap, p, cameras=held, times=test_times)
         fig["train_E_sil_pct"][k] = tr["silhouette_error_pct"]
         fig["heldout_E_sil_pct"][k] = ho["silhouette_error_pct"]
         fig["shape_error_mm"][k] = ho.get("shape_error_mm")
         if key != "truth":
-            fig["identifiable_error_pct"][k] = {q: 100 * abs(v / fig["identifiable"]["truth"][q] - 1)
-                                                for q, v in fig["identifiable"][k].items()}
+            fig["identifiable_error_pct"][k] = {
+                q: 100 * abs(v / fig["identifiable"]["truth"][q] - 1) for q, v in fig["identifiable"][k].items()
+            }
     curve = [[0, fig["train_E_sil_pct"]["first_guess"] * res["n_train_images"] / 100]] + res["history"]
-    paths["error_curve"] = P.write(os.path.join(pics, "error_curve.png"), P.error_curve(
-        curve, res["n_train_images"], floor_pct=fig["train_E_sil_pct"]["truth"],
-        title=f"training E_sil ({len(res['train_cameras'])} cameras x {len(res['train_times'])} times, "
-              f"{res['resolution'][0]} x {res['resolution'][1]})"))
+    paths["error_curve"] = P.write(
+        os.path.join(pics, "error_curve.png"),
+        P.error_curve(
+            curve,
+            res["n_train_images"],
+            floor_pct=fig["train_E_sil_pct"]["truth"],
+            title=f"training E_sil ({len(res['train_cameras'])} cameras x {len(res['train_times'])} times, "
+            f"{res['resolution'][0]} x {res['resolution'][1]})",
+        ),
+    )
     idt, idf, idg = (fig["identifiable"][k] for k in ("truth", "fitted", "first_guess"))
     ef = fig["identifiable_error_pct"]["fitted"]
-    table = [["k/m [1/s^2]", f"{idt['k_over_m']:,.0f}", f"{idg['k_over_m']:,.0f}", f"{idf['k_over_m']:,.0f}",
-              f"{ef['k_over_m']:.2f} %"],
-             ["d/m [1/s]", f"{idt['d_over_m']:.4g}", f"{idg['d_over_m']:.4g}", f"{idf['d_over_m']:.5g}",
-              f"{ef['d_over_m']:.2f} %"],
-             ["l [mm]", f"{1000 * idt['l']:.4f}", f"{1000 * idg['l']:.4f}", f"{1000 * idf['l']:.4f}",
-              f"{ef['l']:.2f} %"],
-             ["training E_sil", f"{fig['train_E_sil_pct']['truth']:.2f} %",
-              f"{fig['train_E_sil_pct']['first_guess']:.1f} %", f"{fig['train_E_sil_pct']['fitted']:.2f} %", ""],
-             ["held-out E_sil", f"{fig['heldout_E_sil_pct']['truth']:.2f} %",
-              f"{fig['heldout_E_sil_pct']['first_guess']:.1f} %", f"{fig['heldout_E_sil_pct']['fitted']:.2f} %", ""],
-             ["shape error [mm]", "0", f"{fig['shape_error_mm']['first_guess']:.2f}",
-              f"{fig['shape_error_mm']['fitted']:.3f}", ""]]
-    paths["parameters"] = P.write(os.path.join(pics, "parameters.png"), P.parameter_table(
-        table, ["", "truth", "first guess", "fitted", "error"],
-        note=f"m fixed at {1e6 * truth['m']:.0f} mg per point (the cloth's weighed mass): silhouettes identify "
-             f"k/m, d/m and l; {res['evaluations']} evaluations"))
+    table = [
+        [
+            "k/m [1/s^2]",
+            f"{idt['k_over_m']:,.0f}",
+            f"{idg['k_over_m']:,.0f}",
+            f"{idf['k_over_m']:,.0f}",
+            f"{ef['k_over_m']:.2f} %",
+        ],
+        [
+            "d/m [1/s]",
+            f"{idt['d_over_m']:.4g}",
+            f"{idg['d_over_m']:.4g}",
+            f"{idf['d_over_m']:.5g}",
+            f"{ef['d_over_m']:.2f} %",
+        ],
+        ["l [mm]", f"{1000 * idt['l']:.4f}", f"{1000 * idg['l']:.4f}", f"{1000 * idf['l']:.4f}", f"{ef['l']:.2f} %"],
+        [
+            "training E_sil",
+            f"{fig['train_E_sil_pct']['truth']:.2f} %",
+            f"{fig['train_E_sil_pct']['first_guess']:.1f} %",
+            f"{fig['train_E_sil_pct']['fitted']:.2f} %",
+            "",
+        ],
+        [
+            "held-out E_sil",
+            f"{fig['heldout_E_sil_pct']['truth']:.2f} %",
+            f"{fig['heldout_E_sil_pct']['first_guess']:.1f} %",
+            f"{fig['heldout_E_sil_pct']['fitted']:.2f} %",
+            "",
+        ],
+        [
+            "shape error [mm]",
+            "0",
+            f"{fig['shape_error_mm']['first_guess']:.2f}",
+            f"{fig['shape_error_mm']['fitted']:.3f}",
+            "",
+        ],
+    ]
+    paths["parameters"] = P.write(
+        os.path.join(pics, "parameters.png"),
+        P.parameter_table(
+            table,
+            ["", "truth", "first guess", "fitted", "error"],
+            note=f"m fixed at {1e6 * truth['m']:.0f} mg per point (the cloth's weighed mass): silhouettes identify "
+            f"k/m, d/m and l; {res['evaluations']} evaluations",
+        ),
+    )
     fig["pictures"] = picture_hashes(pics)
     if state.get("first_guess_sheet"):
         fig["first_guess_sheet_mean_E_sil_pct"] = state["first_guess_sheet"]
@@ -195,6 +270,7 @@ def story_pictures(summary, pics, state):
 def picture_hashes(pics):
     """sha256 of every picture in ``pics`` (not the camera renders): docs/img copies must match."""
     import hashlib
+
     out = {}
     for f in sorted(os.listdir(pics)):
         if f.endswith(".png"):
@@ -211,6 +287,7 @@ class studio_look:
 
     def __enter__(self):
         import bpy
+
         sc = self.scene
         sh = sc.display.shading
         self.saved = (sh.light, sh.color_type, sc.world, self.cloth.color[:])
@@ -229,10 +306,12 @@ class studio_look:
 
 # ======================================================= walkthrough images
 
+
 def _camera_proxies(scene, cam_objs, size=0.03):
     """Small pyramids where the rig's cameras are (cameras themselves do not render)."""
     import bpy
     import numpy as np
+
     coll = bpy.data.collections.new("ClothFit Docs")
     scene.collection.children.link(coll)
     verts = np.array([[0, 0, 0], [-1, -0.75, -1.6], [1, -0.75, -1.6], [1, 0.75, -1.6], [-1, 0.75, -1.6]]) * size
@@ -253,9 +332,9 @@ def first_guess_overlays(scene, pics, t_show):
     """Overlays of the first guess (where the optimiser starts) for every camera at ``t_show``, core
     rasteriser: what the fit has to correct. Returns their mean E_sil [%]."""
     import pictures as P
+    from clothfit.blender import api
+    from clothfit.core.observation.capture import load_capture
 
-    from addon.blender import api
-    from addon.core.observation.capture import load_capture
     p = scene.clothfit
     saved = api.params_from_scene(scene).as_dict()
     try:
@@ -274,6 +353,7 @@ def first_guess_overlays(scene, pics, t_show):
 
 def _shrink(path, width):
     import cv2
+
     img = cv2.imread(path)
     if img.shape[1] > width:
         img = cv2.resize(img, (width, int(img.shape[0] * width / img.shape[1])), interpolation=cv2.INTER_AREA)
@@ -286,10 +366,10 @@ def write_rig_image(scene, pics, t_show):
     import bpy
     import cv2
     import numpy as np
+    from clothfit.blender import api
+    from clothfit.blender import render as R
+    from clothfit.core.observation.camera import Camera, look_at
 
-    from addon.blender import api
-    from addon.blender import render as R
-    from addon.core.observation.camera import Camera, look_at
     cams = api.S.rig_objects(scene)
     coll, proxies = _camera_proxies(scene, cams)
     cloth = api.cloth_object(scene)
@@ -315,12 +395,20 @@ def write_rig_image(scene, pics, t_show):
     half = int(0.65 * max(xs.max() - xs.min(), ys.max() - ys.min())) + 4
     cy, cx = (ys.max() + ys.min()) // 2, (xs.max() + xs.min()) // 2
     close = cv2.copyMakeBorder(cv2.imread(close_png), half, half, half, half, cv2.BORDER_REPLICATE)
-    inset = close[cy:cy + 2 * half, cx:cx + 2 * half]
+    inset = close[cy : cy + 2 * half, cx : cx + 2 * half]
     inset = cv2.resize(inset, (240, 240), interpolation=cv2.INTER_AREA)
     big[12:252, 548:788] = inset
     cv2.rectangle(big, (547, 11), (788, 252), (255, 255, 255), 1)
-    cv2.putText(big, f"{cams[0].name}, t = {t_show:.2f} s", (552, 246), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
-                (255, 255, 255), 1, cv2.LINE_AA)
+    cv2.putText(
+        big,
+        f"{cams[0].name}, t = {t_show:.2f} s",
+        (552, 246),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        0.45,
+        (255, 255, 255),
+        1,
+        cv2.LINE_AA,
+    )
     cv2.imwrite(rig_png, big, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     os.remove(close_png)
     for o in proxies:
@@ -335,10 +423,10 @@ def write_silhouettes_sheet(scene, pics, t_show):
     """Silhouettes as Render Silhouettes wrote them (noisy observations), 6 cameras at ``t_show``."""
     import cv2
     import numpy as np
+    from clothfit.blender import api
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.observation.overlay import contact_sheet, label
 
-    from addon.blender import api
-    from addon.core.observation.capture import load_capture
-    from addon.core.observation.overlay import contact_sheet, label
     cap = load_capture(api.capture_dir(scene))
     fi = cap.frame_index(t_show)
     tiles = []
@@ -354,7 +442,8 @@ def write_silhouettes_sheet(scene, pics, t_show):
 
 def overlay_pictures(scene, pics):
     """The overlay contact sheet after the fit (every camera, Blender-rendered model silhouettes)."""
-    from addon.blender import api
+    from clothfit.blender import api
+
     sheet = os.path.join(api.abspath(scene.clothfit.overlay_dir, "overlays"), "contact_sheet.png")
     ov_png = os.path.join(pics, "blender_overlays.png")
     shutil.copyfile(sheet, ov_png)
@@ -367,7 +456,8 @@ if __name__ == "__main__":
     try:
         code = main()
     except Exception as e:
-        from addon.core.errors import ClothFitError
+        from clothfit.core.errors import ClothFitError
+
         if isinstance(e, ClothFitError):
             print(f"error: {e}", file=sys.stderr)
             sys.exit(2)

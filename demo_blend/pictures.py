@@ -6,6 +6,7 @@
 * ``parameter_table``: true, first-guess and fitted parameters with their errors;
 * ``first_guess_params``: where the fit starts (the centre of the search box, as CMA-ES starts).
 """
+
 from __future__ import annotations
 
 import math
@@ -22,16 +23,18 @@ ACCENT = (255, 200, 60)
 
 def first_guess_params(capture):
     """The paper model's parameters at the centre of the default search box: CMA-ES's first mean."""
-    from addon.core.fitting.job import FitConfig
-    from addon.core.fitting.parameters import make_parameters
+    from clothfit.core.fitting.job import FitConfig
+    from clothfit.core.fitting.parameters import make_parameters
+
     par = make_parameters(capture, FitConfig())
     return par.params(par.space.decode(np.full(par.space.n, 0.5)))
 
 
 def model_silhouettes(capture, params, cams, t):
     """Core-rasterised silhouettes of ``params`` at capture time ``t`` for camera indices ``cams``."""
-    from addon.core.observation.raster import silhouette
-    from addon.core.physics.models import model_and_row
+    from clothfit.core.observation.raster import silhouette
+    from clothfit.core.physics.models import model_and_row
+
     model, row = model_and_row(params, getattr(capture, "model", None))
     fi = capture.frame_index(t)
     sc = capture.scenario.with_frames([float(capture.frame_times[fi])])
@@ -60,12 +63,12 @@ def fit_on_images(capture, images, rows, cams, t, roles, tile=300):
     (``cams`` indices, ``images`` their RGB pictures at time ``t``, ``roles`` e.g. "training");
     each tile the camera image cropped around the cloth with ``overlay_on_image``. Returns
     (RGB image, {row title: [E_sil % per camera]})."""
-    from addon.core.observation.overlay import overlay_on_image, silhouette_box
+    from clothfit.core.observation.overlay import overlay_on_image, silhouette_box
+
     fi = capture.frame_index(t)
     obs = [capture.load_observation(c, fi) for c in cams]
     mods = {title: model_silhouettes(capture, p, cams, t) for title, p in rows}
-    boxes = [silhouette_box([o] + [mods[title][j] for title, _ in rows], margin=0.12)
-             for j, (o, _) in enumerate(obs)]
+    boxes = [silhouette_box([o] + [mods[title][j] for title, _ in rows], margin=0.12) for j, (o, _) in enumerate(obs)]
     head, gap, tit = 34, 6, 28
     W = len(cams) * (tile + gap) + gap
     H = head + len(rows) * (tile + tit + gap) + 44
@@ -86,11 +89,14 @@ def fit_on_images(capture, images, rows, cams, t, roles, tile=300):
             errors[title].append(e)
             im = overlay_on_image(images[j], o, m, ign, box=boxes[j], size=tile)
             x = gap + j * (tile + gap)
-            out[y:y + im.shape[0], x:x + im.shape[1]] = im
+            out[y : y + im.shape[0], x : x + im.shape[1]] = im
             _text(out, f"E_sil {e:.1f} %", (x + 6, y + tile - 8), 0.5, (255, 255, 255))
         y += tile + gap
-    legend = [("observed only (missing)", (255, 40, 40)), ("model only (extra)", (40, 150, 255)),
-              ("model outline", (255, 230, 0))]
+    legend = [
+        ("observed only (missing)", (255, 40, 40)),
+        ("model only (extra)", (40, 150, 255)),
+        ("model outline", (255, 230, 0)),
+    ]
     x = gap + 2
     for s, rgb in legend:
         cv2.rectangle(out, (x, H - 30), (x + 14, H - 16), rgb, -1)
@@ -117,11 +123,12 @@ def error_curve(history, n_images, floor_pct=None, width=760, height=380, title=
         return round(L + (width - L - R) * v / xmax)
 
     def Y(v):
-        return round(T + (height - T - B) * (d1 - math.log10(max(v, 10.0 ** d0))) / (d1 - d0))
+        return round(T + (height - T - B) * (d1 - math.log10(max(v, 10.0**d0))) / (d1 - d0))
+
     for d in range(d0, d1 + 1):
         for k in (1, 2, 5):
-            v = k * 10.0 ** d
-            if 10.0 ** d0 <= v <= 10.0 ** d1:
+            v = k * 10.0**d
+            if 10.0**d0 <= v <= 10.0**d1:
                 cv2.line(img, (L, Y(v)), (width - R, Y(v)), (58, 60, 66) if k > 1 else (80, 82, 90), 1)
                 if k in (1, 5) or d1 - d0 <= 2:
                     _text(img, f"{v:g}", (L - 8 - _text_width(f"{v:g}", 0.42), Y(v) + 5), 0.42, DIM)
@@ -144,8 +151,16 @@ def error_curve(history, n_images, floor_pct=None, width=760, height=380, title=
     cv2.polylines(img, [np.array(pts, np.int32)], False, ACCENT, 2, cv2.LINE_AA)
     _text(img, f"first guess: {e[0]:.1f} %", (X(ev[0]) + 8, Y(e[0]) - 10), 0.45, ACCENT)
     s = f"{e[-1]:.2f} % after {int(ev[-1])} evaluations"
-    _text(img, s, (width - R - _text_width(s, 0.45) - 6, Y(e[-1]) - 8 if not floor_pct or
-                   abs(Y(e[-1]) - Y(floor_pct)) > 18 else Y(e[-1]) + 20), 0.45, ACCENT)
+    _text(
+        img,
+        s,
+        (
+            width - R - _text_width(s, 0.45) - 6,
+            Y(e[-1]) - 8 if not floor_pct or abs(Y(e[-1]) - Y(floor_pct)) > 18 else Y(e[-1]) + 20,
+        ),
+        0.45,
+        ACCENT,
+    )
     _text(img, title + " [%], best so far (log scale)", (L, 22), 0.5)
     _text(img, "model evaluations", (width // 2 - 60, height - 10), 0.45, DIM)
     return img
@@ -162,6 +177,7 @@ def parameter_table(rows, header, width=760, row_h=30, note=None):
 
     def xcell(i):
         return 10 if i == 0 else first + (i - 1) * cw
+
     for i, h in enumerate(header):
         _text(img, h, (xcell(i), y), 0.5, ACCENT)
     cv2.line(img, (10, y + 10), (width - 10, y + 10), (100, 100, 100), 1)
@@ -175,6 +191,7 @@ def parameter_table(rows, header, width=760, row_h=30, note=None):
 
 
 def write(path, rgb):
-    from addon.core.observation.overlay import write_rgb
+    from clothfit.core.observation.overlay import write_rgb
+
     write_rgb(path, rgb)
     return path

@@ -4,19 +4,20 @@
 each test; the add-on is registered once per session. ``small_capture`` is a capture rendered by
 Blender once per session: a 4-camera ring at 160 x 120, three capture times.
 """
+
 import os
 
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import addon  # noqa: E402
-from addon.blender import registration  # noqa: E402
+import clothfit  # noqa: E402
+from clothfit.blender import registration  # noqa: E402
 
 
 def ensure_registered():
     if not registration.is_registered():
-        addon.register()
+        clothfit.register()
 
 
 @pytest.fixture()
@@ -66,7 +67,8 @@ def addon_preferences():
     """The add-on's preferences in this session. From a checkout the add-on is not enabled through
     Blender's add-on list, so its entry is added (as enabling does) under the module name the
     preferences class is registered for; a factory reset removes it again."""
-    from addon.blender import prefs
+    from clothfit.blender import prefs
+
     addons = bpy.context.preferences.addons
     if addons.get(prefs.ADDON_NAME) is None:
         addons.new().module = prefs.ADDON_NAME

@@ -1,4 +1,5 @@
-"""Test setup: make the repository root importable (``import addon``)."""
+"""Test setup: make the repository root importable (``import clothfit``)."""
+
 import os
 import sys
 

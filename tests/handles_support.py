@@ -4,14 +4,14 @@ Each clip is drawn as a round marker (dark rim, bright centre: its intensity an 
 the distance to the projected point, so its position is exact to any sub-pixel) of a fixed physical
 size over a static textured background; frames are 8-bit with a little sensor noise.
 """
+
 from __future__ import annotations
 
 import math
 import os
 
 import numpy as np
-
-from addon.core.observation.camera import Camera, intrinsics, look_at
+from clothfit.core.observation.camera import Camera, intrinsics, look_at
 
 CLOTH_W, CLOTH_H = 0.30, 0.24
 TOP_Z = 0.55
@@ -41,7 +41,7 @@ def clip_tracks(times, release_time=0.21, moving=True):
     s = np.maximum(t - release_time, 0.0)[:, None]
     a = np.array([-2.0, 0.5, -11.0])
     j = np.array([15.0, 0.0, 30.0])
-    right = pin + 0.5 * a * s ** 2 + j * s ** 3 / 6.0
+    right = pin + 0.5 * a * s**2 + j * s**3 / 6.0
     mid = np.tile([0.0, 0.0, TOP_Z], (t.size, 1))
     if moving:
         mid = mid + np.stack([0.03 * np.sin(2.0 * t), 0.01 * t, 0.02 * (1 - np.cos(3.0 * t))], 1)
@@ -50,6 +50,7 @@ def clip_tracks(times, release_time=0.21, moving=True):
 
 def background(cam, seed):
     import cv2
+
     rng = np.random.default_rng(seed)
     small = rng.uniform(60, 200, (cam.height // 8 + 1, cam.width // 8 + 1)).astype(np.float32)
     big = cv2.resize(small, (cam.width, cam.height), interpolation=cv2.INTER_CUBIC)
@@ -71,9 +72,9 @@ def render(cam, bg, points, rng, noise=1.5):
             continue
         yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
         r = np.hypot(xx - uv[0], yy - uv[1])
-        cover = np.clip(R + 0.5 - r, 0.0, 1.0)                      # 1 px soft edge
+        cover = np.clip(R + 0.5 - r, 0.0, 1.0)  # 1 px soft edge
         ang = np.arctan2(yy - uv[1], xx - uv[0])
-        val = 25.0 + 200.0 * np.exp(-(r / (0.3 * R)) ** 2) + 40.0 * (np.cos(2 * ang) > 0) * (r > 0.5 * R)
+        val = 25.0 + 200.0 * np.exp(-((r / (0.3 * R)) ** 2)) + 40.0 * (np.cos(2 * ang) > 0) * (r > 0.5 * R)
         img[y0:y1, x0:x1] = img[y0:y1, x0:x1] * (1 - cover) + val * cover
     return np.clip(np.round(img + rng.normal(0, noise, img.shape)), 0, 255).astype(np.uint8)
 
@@ -81,6 +82,7 @@ def render(cam, bg, points, rng, noise=1.5):
 def write_footage(folder, cams, times, tracks, seed=0, noise=1.5):
     """footage/<camera>/000.png ... with the markers of ``tracks`` (name -> (F, 3))."""
     import cv2
+
     rng = np.random.default_rng(seed)
     for ci, cam in enumerate(cams):
         d = os.path.join(folder, cam.name)

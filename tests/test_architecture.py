@@ -4,6 +4,7 @@ Layers, lowest first: ``core`` (never imports bpy) < ``farm`` < ``blender`` < ``
 imports from a higher layer, not even inside a function, and the modules import one another without
 circles (module-level imports; a function-level import is how a lower module defers a heavy one).
 """
+
 import ast
 import os
 
@@ -37,7 +38,7 @@ def _resolve(module, node, is_package):
     base = base[: len(base) - (node.level - 1)]
     target = ".".join(base + ([node.module] if node.module else []))
     out = []
-    for a in node.names:     # `from . import x`: x may be a module
+    for a in node.names:  # `from . import x`: x may be a module
         cand = f"{target}.{a.name}" if target else a.name
         out.append(cand if os.path.exists(_path_of(cand)) else target)
     return out
@@ -53,9 +54,15 @@ def _imports():
     for name, path in _modules():
         tree = ast.parse(open(path, encoding="utf-8").read())
         is_package = path.endswith("__init__.py")
-        top = {t for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom)) for t in _resolve(name, n, is_package)}
-        every = {t for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))
-                 for t in _resolve(name, n, is_package)}
+        top = {
+            t for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom)) for t in _resolve(name, n, is_package)
+        }
+        every = {
+            t
+            for n in ast.walk(tree)
+            if isinstance(n, (ast.Import, ast.ImportFrom))
+            for t in _resolve(name, n, is_package)
+        }
         graph[name], anywhere[name] = top, every
     return graph, anywhere
 
@@ -91,7 +98,7 @@ def test_no_import_circles():
         stack.append(m)
         for t in graph[m]:
             if seen.get(t) == 1 and not (m == "" or t == "" or t.startswith(m + ".") or m.startswith(t + ".")):
-                cycles.append(stack[stack.index(t):] + [t])
+                cycles.append(stack[stack.index(t) :] + [t])
             elif t not in seen:
                 visit(t)
         stack.pop()

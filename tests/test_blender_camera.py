@@ -1,15 +1,15 @@
 """Blender camera <-> OpenCV camera: exact round trips, and rendered pixels where OpenCV projects."""
+
 import numpy as np
 import pytest
-
 from blender_support import bpy, factory  # noqa: F401
 
 cv2 = pytest.importorskip("cv2")
 
-from addon.blender import render as R  # noqa: E402
-from addon.blender import scene as S  # noqa: E402
-from addon.core.observation.camera import Camera, look_at  # noqa: E402
-from addon.core.observation.raster import rasterize, silhouette  # noqa: E402
+from clothfit.blender import render as R  # noqa: E402
+from clothfit.blender import scene as S  # noqa: E402
+from clothfit.core.observation.camera import Camera, look_at  # noqa: E402
+from clothfit.core.observation.raster import rasterize, silhouette  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
@@ -18,8 +18,8 @@ CASES = [
     (50.0, 36.0, 24.0, "AUTO", 640, 480, 100, 1.0, 1.0, 0.0, 0.0),
     (35.0, 32.0, 24.0, "VERTICAL", 1000, 700, 50, 1.0, 1.2, 0.1, -0.05),
     (80.0, 36.0, 24.0, "HORIZONTAL", 480, 640, 100, 2.0, 1.0, -0.2, 0.15),
-    (28.0, 36.0, 20.0, "AUTO", 360, 640, 100, 1.0, 1.0, 0.07, 0.11),      # AUTO resolves vertical
-    (60.0, 23.5, 15.6, "AUTO", 517, 333, 75, 1.0, 1.5, -0.03, -0.12),     # AUTO, par makes it vertical
+    (28.0, 36.0, 20.0, "AUTO", 360, 640, 100, 1.0, 1.0, 0.07, 0.11),  # AUTO resolves vertical
+    (60.0, 23.5, 15.6, "AUTO", 517, 333, 75, 1.0, 1.5, -0.03, -0.12),  # AUTO, par makes it vertical
     (120.0, 30.0, 40.0, "VERTICAL", 333, 517, 100, 1.3, 1.0, 0.2, 0.0),
 ]
 
@@ -42,10 +42,16 @@ def make_camera(scene, case, name="cam"):
 
 def blender_settings(scene, obj):
     d, r = obj.data, scene.render
-    return dict(lens=d.lens, sensor_width=d.sensor_width, sensor_height=d.sensor_height, fit=d.sensor_fit,
-                shift=(d.shift_x, d.shift_y), size=S.render_size(scene),
-                par=r.pixel_aspect_y / r.pixel_aspect_x,
-                matrix=np.array(obj.matrix_world))
+    return dict(
+        lens=d.lens,
+        sensor_width=d.sensor_width,
+        sensor_height=d.sensor_height,
+        fit=d.sensor_fit,
+        shift=(d.shift_x, d.shift_y),
+        size=S.render_size(scene),
+        par=r.pixel_aspect_y / r.pixel_aspect_x,
+        matrix=np.array(obj.matrix_world),
+    )
 
 
 @pytest.mark.parametrize("case", CASES)

@@ -1,29 +1,30 @@
 """The core's ``blender`` cloth model against Blender's own Cloth modifier (real bpy module), and
 the Blender-model fit's inputs and outputs.
 
-Measured figures on the 21 x 21 sheet: ``python -m addon blender-agreement`` (README table).
+Measured figures on the 21 x 21 sheet: ``python -m clothfit blender-agreement`` (README table).
 """
+
 import json
 import os
 
 import numpy as np
 import pytest
-
 from blender_support import bpy, factory  # noqa: F401
-
-from addon import cli  # noqa: E402
-from addon.blender import agreement  # noqa: E402
-from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.physics import blender as B  # noqa: E402
-from addon.core.physics.models import BlenderModel, get_model, model_and_row  # noqa: E402
+from clothfit import cli  # noqa: E402
+from clothfit.blender import agreement  # noqa: E402
+from clothfit.core.errors import ClothFitError  # noqa: E402
+from clothfit.core.physics import blender as B  # noqa: E402
+from clothfit.core.physics.models import BlenderModel, get_model, model_and_row  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
-CASES = [("default", {}),
-         ("silk, linear bending", dict(agreement.PRESETS["silk"], bending_model="LINEAR")),
-         ("quality 2", {"quality": 2}),
-         ("denim, quality 12", agreement.PRESETS["denim"]),
-         ("soft pins", {"pin_stiffness": 5.0, agreement.PIN_WEIGHT: 0.95})]
+CASES = [
+    ("default", {}),
+    ("silk, linear bending", dict(agreement.PRESETS["silk"], bending_model="LINEAR")),
+    ("quality 2", {"quality": 2}),
+    ("denim, quality 12", agreement.PRESETS["denim"]),
+    ("soft pins", {"pin_stiffness": 5.0, agreement.PIN_WEIGHT: 0.95}),
+]
 
 
 @pytest.mark.parametrize("name,settings", CASES, ids=[c[0] for c in CASES])
@@ -44,8 +45,9 @@ def test_the_comparison_sees_a_wrong_setting():
     """Blender's cloth with a different stiffness than the core's is reported far away."""
     scene = bpy.context.scene
     sc = agreement.agreement_scenario(9, settle=0.5, after=0.75)
-    from addon.blender import cloth as BC
-    from addon.core.physics.blender_kernels import Prepared
+    from clothfit.blender import cloth as BC
+    from clothfit.core.physics.blender_kernels import Prepared
+
     s = B.check_settings({"time_scale": B.physical_time_scale(24)})
     model = BlenderModel(24)
     net, plan = model.plan(sc)
@@ -59,10 +61,19 @@ def test_the_comparison_sees_a_wrong_setting():
 def test_export_blender_cloth_applies_in_blender(tmp_path, capsys):
     """A blender-model result's settings, exported and set on a Cloth modifier, are ClothSettings
     Blender accepts (every key an attribute, every value kept)."""
-    res = {"model": {"name": "blender", "fps": 30.0, "quality": 7, "bending_model": "LINEAR"},
-           "blender_cloth": B.check_settings({"quality": 7, "bending_model": "LINEAR", "tension_stiffness": 33.0,
-                                              "air_damping": 0.2, "time_scale": B.physical_time_scale(30)}),
-           "blender_scene": {"fps": 30.0}}
+    res = {
+        "model": {"name": "blender", "fps": 30.0, "quality": 7, "bending_model": "LINEAR"},
+        "blender_cloth": B.check_settings(
+            {
+                "quality": 7,
+                "bending_model": "LINEAR",
+                "tension_stiffness": 33.0,
+                "air_damping": 0.2,
+                "time_scale": B.physical_time_scale(30),
+            }
+        ),
+        "blender_scene": {"fps": 30.0},
+    }
     p = tmp_path / "r.json"
     p.write_text(json.dumps(res))
     assert cli.main(["export-blender-cloth", str(p)]) == 0
@@ -87,25 +98,31 @@ def test_result_without_blender_settings_is_refused(tmp_path, capsys):
     assert "no Blender cloth settings" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("spec,msg", [
-    ("cloth3000", "unknown model"),
-    ({"name": "blender", "quality": 0}, "quality 0 must be >= 1"),
-    ({"name": "blender", "fps": -24}, "frame rate"),
-    ({"name": "blender", "bending_model": "CURVED"}, "bending_model"),
-    ({"name": "blender", "gravity": 2}, "unknown key"),
-])
+@pytest.mark.parametrize(
+    "spec,msg",
+    [
+        ("cloth3000", "unknown model"),
+        ({"name": "blender", "quality": 0}, "quality 0 must be >= 1"),
+        ({"name": "blender", "fps": -24}, "frame rate"),
+        ({"name": "blender", "bending_model": "CURVED"}, "bending_model"),
+        ({"name": "blender", "gravity": 2}, "unknown key"),
+    ],
+)
 def test_bad_models_are_one_line_errors(spec, msg):
     with pytest.raises(ClothFitError, match=msg):
         get_model(spec)
 
 
-@pytest.mark.parametrize("settings,msg", [
-    ({"tension_stiffness": -1.0}, "tension_stiffness"),
-    ({"mass": 0.0}, "mass"),
-    ({"air_damping": float("nan")}, "air_damping"),
-    ({"quality": 2.5}, "whole number"),
-    ({"stiffness": 5}, "unknown or unsupported"),
-])
+@pytest.mark.parametrize(
+    "settings,msg",
+    [
+        ({"tension_stiffness": -1.0}, "tension_stiffness"),
+        ({"mass": 0.0}, "mass"),
+        ({"air_damping": float("nan")}, "air_damping"),
+        ({"quality": 2.5}, "whole number"),
+        ({"stiffness": 5}, "unknown or unsupported"),
+    ],
+)
 def test_settings_outside_blenders_ranges_are_refused(settings, msg):
     with pytest.raises(ClothFitError, match=msg):
         model_and_row({"blender_cloth": settings})
@@ -113,10 +130,24 @@ def test_settings_outside_blenders_ranges_are_refused(settings, msg):
 
 def test_settings_that_explode_are_reported_not_raised():
     sc = agreement.agreement_scenario(7, settle=0.25, after=0.25)
-    tear = {"tension_stiffness": 0.0, "compression_stiffness": 0.0, "shear_stiffness": 0.0,
-            "bending_stiffness": 0.0, "time_scale": 10.0}
-    fly = {"quality": 1, "time_scale": 100.0, "tension_stiffness": 0.0, "compression_stiffness": 10000,
-           "mass": 0.001, "air_damping": 0, "tension_damping": 0, "compression_damping": 0, "shear_damping": 0}
+    tear = {
+        "tension_stiffness": 0.0,
+        "compression_stiffness": 0.0,
+        "shear_stiffness": 0.0,
+        "bending_stiffness": 0.0,
+        "time_scale": 10.0,
+    }
+    fly = {
+        "quality": 1,
+        "time_scale": 100.0,
+        "tension_stiffness": 0.0,
+        "compression_stiffness": 10000,
+        "mass": 0.001,
+        "air_damping": 0,
+        "tension_damping": 0,
+        "compression_damping": 0,
+        "shear_damping": 0,
+    }
     ok = {"time_scale": B.physical_time_scale(24)}
     rows = np.stack([B.settings_row(B.check_settings(s)) for s in (tear, ok, fly)])
     for backend in ("numba", "numpy"):
@@ -152,7 +183,7 @@ def test_vertex_mass_scales_out():
     sim = m.simulate(sc, np.stack([B.settings_row(s), B.settings_row(s2)]))
     d = np.linalg.norm(sim.positions[0] - sim.positions[1], axis=-1) * 1000
     assert d.max() < 0.05
-    s3 = dict(s, tension_stiffness=s["tension_stiffness"] * 3.0)          # one alone does change it
+    s3 = dict(s, tension_stiffness=s["tension_stiffness"] * 3.0)  # one alone does change it
     sim = m.simulate(sc, np.stack([B.settings_row(s), B.settings_row(s3)]))
     assert np.linalg.norm(sim.positions[0] - sim.positions[1], axis=-1).max() * 1000 > 0.5
 
@@ -162,17 +193,57 @@ def test_synth_fit_export_evaluate_round_trip(tmp_path, capsys):
     (the rest fixed at the truth), recovers them and replays through evaluate."""
     cap = str(tmp_path / "cap")
     truth = {"tension_stiffness": 40.0, "compression_stiffness": 40.0, "air_damping": 2.0}
-    assert cli.main(["synth", "--out", cap, "--model", "blender", "--params", json.dumps(truth),
-                     "--resolution", "120x160", "--noise", "0"]) == 0
+    assert (
+        cli.main(
+            [
+                "synth",
+                "--out",
+                cap,
+                "--model",
+                "blender",
+                "--params",
+                json.dumps(truth),
+                "--resolution",
+                "120x160",
+                "--noise",
+                "0",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     out = str(tmp_path / "fit.json")
-    fixed = {k: v for k, v in B.DEFAULTS.items() if k not in ("tension_stiffness", "air_damping",
-                                                              "quality", "bending_model", "time_scale")}
+    fixed = {
+        k: v
+        for k, v in B.DEFAULTS.items()
+        if k not in ("tension_stiffness", "air_damping", "quality", "bending_model", "time_scale")
+    }
     fixed["compression_stiffness"] = 40.0
     fixed.pop("mass")
-    assert cli.main(["fit", cap, "--model", "blender", "--cameras", "n:4", "--times", "0.1,0.3,0.5,0.7,0.9",
-                     "--free", "tension_stiffness,air_damping", "--fixed", json.dumps(fixed),
-                     "--max-evaluations", "400", "--out", out, "--quiet"]) == 0
+    assert (
+        cli.main(
+            [
+                "fit",
+                cap,
+                "--model",
+                "blender",
+                "--cameras",
+                "n:4",
+                "--times",
+                "0.1,0.3,0.5,0.7,0.9",
+                "--free",
+                "tension_stiffness,air_damping",
+                "--fixed",
+                json.dumps(fixed),
+                "--max-evaluations",
+                "400",
+                "--out",
+                out,
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     r = json.loads(open(out).read())
     bc = r["blender_cloth"]
     assert r["model"]["name"] == "blender" and r["blender_scene"] == {"fps": 24.0}
@@ -181,7 +252,7 @@ def test_synth_fit_export_evaluate_round_trip(tmp_path, capsys):
     assert bc["mass"] == pytest.approx(0.3) and "capture" in r["mass_source"]
     capsys.readouterr()
     assert cli.main(["evaluate", cap, "--params", out, "--times", "0.2,0.4"]) == 0
-    ev = json.loads(capsys.readouterr().out)            # stdout: the result as JSON
+    ev = json.loads(capsys.readouterr().out)  # stdout: the result as JSON
     err, mm = ev["silhouette_error_pct"], ev["shape_error_mm"]
     assert err < 1.0 and mm < 0.5, ev
     assert os.path.isfile(out)
@@ -189,11 +260,13 @@ def test_synth_fit_export_evaluate_round_trip(tmp_path, capsys):
 
 # ------------------------------------------------------------- the add-on: fit and apply Blender's cloth
 
+
 def _blender_fit_scene(tmp_path, budget=60):
     from blender_support import run_error, small_settings  # noqa: F401
+
     scene = bpy.context.scene
     p = small_settings(scene, tmp_path / "cap")
-    p.settle_time = 0.25                      # 6 frames at 24 fps: Blender's cloth steps whole frames
+    p.settle_time = 0.25  # 6 frames at 24 fps: Blender's cloth steps whole frames
     for op in ("build_rig", "build_cloth", "simulate", "render_silhouettes"):
         assert getattr(bpy.ops.clothfit, op)() == {"FINISHED"}
     p.fit_model = "BLENDER"
@@ -204,15 +277,17 @@ def _blender_fit_scene(tmp_path, budget=60):
 def test_addon_fits_blender_cloth_and_blender_replays_it(tmp_path):
     """Panel path: fit with the Blender Cloth model, Apply Blender Cloth builds a cloth with the
     fit's mesh, pins and release; Blender's own solver then moves it exactly as the core predicted."""
-    from addon.blender import api
-    from addon.blender import cloth as BC
-    from addon.core.observation.capture import load_capture
+    from clothfit.blender import api
+    from clothfit.blender import cloth as BC
+    from clothfit.core.observation.capture import load_capture
+
     scene, p = _blender_fit_scene(tmp_path)
     res, level, msg = api.run_fit(scene)
     assert level == "INFO" and "tension=" in msg
     assert res["model"]["name"] == "blender" and res["blender_scene"]["fps"] == BC.scene_fps(scene)
     assert json.loads(p.fit_best_blender)["tension_stiffness"] == pytest.approx(
-        res["blender_cloth"]["tension_stiffness"])
+        res["blender_cloth"]["tension_stiffness"]
+    )
     bpy.ops.object.select_all(action="DESELECT")
     bpy.context.view_layer.objects.active = None
     assert bpy.ops.clothfit.apply_blender_cloth() == {"FINISHED"}
@@ -237,10 +312,14 @@ def test_addon_fits_blender_cloth_and_blender_replays_it(tmp_path):
 
 def test_apply_blender_cloth_on_a_users_mesh_and_bad_cases(tmp_path):
     from blender_support import run_error
-    from addon.blender import api
+    from clothfit.blender import api
+
     scene = bpy.context.scene
-    res = {"model": {"name": "blender", "fps": 30.0}, "blender_scene": {"fps": 30.0},
-           "blender_cloth": B.check_settings({"tension_stiffness": 21.0, "time_scale": B.physical_time_scale(30)})}
+    res = {
+        "model": {"name": "blender", "fps": 30.0},
+        "blender_scene": {"fps": 30.0},
+        "blender_cloth": B.check_settings({"tension_stiffness": 21.0, "time_scale": B.physical_time_scale(30)}),
+    }
     me = bpy.data.meshes.new("user")
     me.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [], [(0, 1, 2, 3)])
     obj = bpy.data.objects.new("user cloth", me)
@@ -255,5 +334,5 @@ def test_apply_blender_cloth_on_a_users_mesh_and_bad_cases(tmp_path):
     with pytest.raises(ClothFitError, match="paper-model fit"):
         api.apply_blender_cloth(scene, obj, {"params": {"m": 1e-5, "k": 10, "l": 0.006, "d": 1e-4}})
     scene.clothfit.capture_dir = str(tmp_path / "nothing")
-    msg = run_error("apply_blender_cloth")               # no fit result in the scene
+    msg = run_error("apply_blender_cloth")  # no fit result in the scene
     assert "no fit result" in msg

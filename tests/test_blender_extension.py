@@ -6,6 +6,7 @@ config is untouched; there ``cv2``, ``numba`` and ``llvmlite`` are imported from
 extension's wheels only (the venv's copies are hidden), which proves that Blender installed the
 bundled wheels and that the numba kernels work from them.
 """
+
 import os
 import subprocess
 import sys
@@ -41,23 +42,35 @@ def test_zip_layout(ext_zips):
     for platform, path in ext_zips.items():
         names = set(zipfile.ZipFile(path).namelist())
         assert os.path.basename(path) == f"silhouette_cloth_fit-{manifest['version']}-{platform.replace('-', '_')}.zip"
-        for need in ("blender_manifest.toml", "__init__.py", "LICENSE", "addon/__init__.py", "addon/blender/ops.py",
-                     "addon/blender/registration.py", "addon/core/observation/camera.py",
-                     "addon/core/physics/paper.py", "rigs/lab18.json"):
+        for need in (
+            "blender_manifest.toml",
+            "__init__.py",
+            "LICENSE",
+            "addon/__init__.py",
+            "addon/blender/ops.py",
+            "addon/blender/registration.py",
+            "addon/core/observation/camera.py",
+            "addon/core/physics/paper.py",
+            "rigs/lab18.json",
+        ):
             assert need in names, need
         wheels = sorted(n for n in names if n.endswith(".whl"))
-        want = sorted(w[2:] for w in manifest["wheels"]
-                      if build_extension.wheel_platforms(w) & {"any", platform})
+        want = sorted(w[2:] for w in manifest["wheels"] if build_extension.wheel_platforms(w) & {"any", platform})
         assert wheels == want, (platform, wheels)
         assert not any("numpy" in n for n in names)
-        bad = [n for n in names if n.split("/")[0] in ("tests", "out", ".venv", ".ci", "docs", "tools", "demo_blend",
-                                                        "dist", ".git", "wheels.log") or "__pycache__" in n
-               or n.endswith(".pyc")]
+        bad = [
+            n
+            for n in names
+            if n.split("/")[0]
+            in ("tests", "out", ".venv", ".ci", "docs", "tools", "demo_blend", "dist", ".git", "wheels.log")
+            or "__pycache__" in n
+            or n.endswith(".pyc")
+        ]
         assert not bad, bad
         # the Python package's and the developers' files stay out of the extension
         dev = {"pyproject.toml", "requirements.txt", "requirements-dev.txt", "Makefile", ".gitignore"} & names
         assert not dev, dev
-        assert not any("cma" in n for n in names)   # the optimiser is our own code: no cma wheel
+        assert not any("cma" in n for n in names)  # the optimiser is our own code: no cma wheel
 
 
 def test_blender_validator_accepts_every_zip(ext_zips):
@@ -65,7 +78,7 @@ def test_blender_validator_accepts_every_zip(ext_zips):
         assert build_extension.validate(path)
 
 
-INSTALL = textwrap.dedent('''
+INSTALL = textwrap.dedent("""
     import importlib.machinery, os, sys
     import bpy, addon_utils
     zip_path, site = sys.argv[1], sys.argv[2]
@@ -110,22 +123,30 @@ INSTALL = textwrap.dedent('''
     assert not hasattr(bpy.types.Scene, "clothfit")
     assert menus.menu_import not in bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize()
     print("INSTALL-OK", cv2.__version__, numba.__version__)
-''')
+""")
 
 
 def test_installs_and_enables_in_bpy(ext_zip, tmp_path):
     res = tmp_path / "user_resources"
     res.mkdir()
-    site = res / "extensions" / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+    site = (
+        res / "extensions" / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+    )
     script = tmp_path / "install.py"
     script.write_text(INSTALL)
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(res))
-    r = subprocess.run([sys.executable, str(script), ext_zip, str(site)], cwd=str(tmp_path), env=env,
-                       capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, str(script), ext_zip, str(site)],
+        cwd=str(tmp_path),
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0 and "INSTALL-OK 4.10.0 0.68.1" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
 
 
-HIDE_PACKAGES = textwrap.dedent('''
+HIDE_PACKAGES = textwrap.dedent("""
     import importlib.machinery, os, sys
     sys.path.insert(0, sys.argv[1])
     BUNDLED = ("cv2", "numba", "llvmlite")
@@ -141,21 +162,22 @@ HIDE_PACKAGES = textwrap.dedent('''
                 return spec
             return None
     sys.meta_path.insert(0, Missing())
-    from addon.blender import pipeline
+    from clothfit.blender import pipeline
     added = pipeline.ensure_wheels()
     import cv2, numba
     for m in (cv2, numba):
         assert ".blender_site" in m.__file__, m.__file__
-    from addon.core.physics import jit
+    from clothfit.core.physics import jit
     assert jit.available()
     print("FROM-WHEELS", len(added), cv2.__version__, numba.__version__)
-''')
+""")
 
 
 def test_checkout_under_blender_binary_uses_the_wheels(ext_zip, tmp_path):  # ext_zip: the wheels are there
     """Under a Blender binary (no cv2, numba), the pipeline unpacks the wheels of wheels/."""
     script = tmp_path / "nopkgs.py"
     script.write_text(HIDE_PACKAGES)
-    r = subprocess.run([sys.executable, str(script), ROOT], cwd=str(tmp_path), capture_output=True, text=True,
-                       timeout=300)
+    r = subprocess.run(
+        [sys.executable, str(script), ROOT], cwd=str(tmp_path), capture_output=True, text=True, timeout=300
+    )
     assert r.returncode == 0 and "FROM-WHEELS 3 4.10.0 0.68.1" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]

@@ -1,12 +1,11 @@
 """The fit operator's step path: the modal handler functions driven with TIMER / ESC events."""
+
 import json
 import time
 
 import pytest
-
 from blender_support import bpy, factory, small_capture, small_settings  # noqa: F401
-
-from addon.blender import api, ops  # noqa: E402
+from clothfit.blender import api, ops  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
@@ -33,7 +32,7 @@ def test_modal_steps_to_completion(small_capture, threaded):
     sess = _start(scene, small_capture, budget=120, threaded=threaded)  # initial population + a few generations
     p = scene.clothfit
     assert p.fit_running
-    seen = []   # (generation, best error shown in the panel) after each tick
+    seen = []  # (generation, best error shown in the panel) after each tick
     for _ in range(20000):
         assert ops.modal_tick(bpy.context, sess, "MOUSEMOVE")[0] == "RUNNING"  # other events pass through
         state, level, msg = ops.modal_tick(bpy.context, sess, "TIMER")
@@ -46,9 +45,9 @@ def test_modal_steps_to_completion(small_capture, threaded):
     gens = sorted({g for g, _ in seen})
     assert gens[-1] == sess.job.generation >= 2
     if not threaded:
-        assert len(seen) == sess.job.generation       # exactly one generation per TIMER event
+        assert len(seen) == sess.job.generation  # exactly one generation per TIMER event
     else:
-        assert len(seen) > sess.job.generation        # ticks while the worker computes
+        assert len(seen) > sess.job.generation  # ticks while the worker computes
     # the panel's live fields followed the generations; the best never got worse
     errs = [e for g, e in seen if g > 0]
     assert all(b <= a + 1e-12 for a, b in zip(errs, errs[1:]))
@@ -109,9 +108,9 @@ def test_run_fit_callback_cancel(small_capture):
 def test_escape_while_worker_runs_waits_and_keeps_its_generation(small_capture):
     sess = _start(bpy.context.scene, small_capture, budget=10_000, threaded=True)
     _tick_until_generation(sess, 1)
-    assert ops.modal_tick(bpy.context, sess, "TIMER")[0] == "RUNNING"   # starts generation 2 in the worker
+    assert ops.modal_tick(bpy.context, sess, "TIMER")[0] == "RUNNING"  # starts generation 2 in the worker
     state, level, msg = ops.modal_tick(bpy.context, sess, "ESC")
     assert state == "CANCELLED" and level == "WARNING"
-    assert sess.worker is None and not sess.job.step()        # the job is finished (cancelled)
+    assert sess.worker is None and not sess.job.step()  # the job is finished (cancelled)
     p = bpy.context.scene.clothfit
     assert p.fit_generation == sess.job.generation and p.fit_best_error == pytest.approx(sess.job.best_error)

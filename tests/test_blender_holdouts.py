@@ -1,16 +1,17 @@
 """Occluders in the Blender render path: objects of the collection 'Occluders' hide the cloth
 (Eevee holdouts, Workbench black) and are written as the capture's ignore masks."""
+
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 
 from blender_support import factory, small_settings  # noqa: E402,F401
-from addon.blender import api  # noqa: E402
-from addon.blender import render as R  # noqa: E402
-from addon.blender import scene as S  # noqa: E402
-from addon.core.observation.capture import load_capture  # noqa: E402
-from addon.core.observation.raster import silhouette  # noqa: E402
+from clothfit.blender import api  # noqa: E402
+from clothfit.blender import render as R  # noqa: E402
+from clothfit.blender import scene as S  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
+from clothfit.core.observation.raster import silhouette  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
@@ -49,10 +50,10 @@ def check_masks(plain, pairs):
     hidden_any = 0
     for m0, (m, g) in zip(plain, pairs):
         assert not np.any(m & g)
-        assert not np.any(m & ~m0)                    # occluders never add cloth
-        assert not np.any(m0 & ~m & ~g)               # every cloth pixel lost is under an occluder
+        assert not np.any(m & ~m0)  # occluders never add cloth
+        assert not np.any(m0 & ~m & ~g)  # every cloth pixel lost is under an occluder
         hidden_any += int(np.count_nonzero(m0 & g))
-    assert hidden_any > 50                            # the occluders do hide cloth somewhere
+    assert hidden_any > 50  # the occluders do hide cloth somewhere
 
 
 def test_workbench_occluders_written_as_ignore_masks(occluded_scene):
@@ -73,7 +74,8 @@ def test_workbench_occluders_written_as_ignore_masks(occluded_scene):
     scene.frame_set(S.frame_of_time(scene, 0.2))
     want_m, want_g = R.render_masks(scene, cloth, objs[:1], occluders=occ)[0]
     assert np.array_equal(m, want_m) and np.array_equal(g, want_g)
-    from addon.core.fitting.evaluate import evaluate
+    from clothfit.core.fitting.evaluate import evaluate
+
     r = evaluate(cap, api.params_from_scene(scene).as_dict())
     assert r["silhouette_error_pct"] < 1.0
 
@@ -96,4 +98,4 @@ def test_eevee_holdouts_match_workbench_and_the_core(occluded_scene):
     for (em, eg), (wm, wg) in zip(ev, wb):
         assert np.count_nonzero(em ^ wm) <= 0.01 * wm.sum() + 2
         assert np.count_nonzero(eg ^ wg) <= 0.01 * wg.sum() + 2
-    assert not any(o.is_holdout for o in occ + [cloth])      # restored
+    assert not any(o.is_holdout for o in occ + [cloth])  # restored

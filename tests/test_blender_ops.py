@@ -1,33 +1,44 @@
 """Registration, every operator on a fresh factory scene, bad input reported, save/reload."""
+
 import json
 import os
 import shutil
 
+import clothfit  # noqa: E402
 import numpy as np
 import pytest
-
 from blender_support import bpy, factory, run_error, small_capture, small_settings  # noqa: F401
-
-import addon  # noqa: E402
-from addon.blender import registration  # noqa: E402
-from addon.blender import scene as S  # noqa: E402
+from clothfit.blender import registration  # noqa: E402
+from clothfit.blender import scene as S  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
-OPERATORS = ["build_rig", "build_cloth", "simulate", "render_silhouettes", "load_capture", "fit", "apply_fit",
-             "overlays", "extract_silhouettes", "import_cameras", "export_cameras", "add_handle_empty",
-             "remove_handle"]
+OPERATORS = [
+    "build_rig",
+    "build_cloth",
+    "simulate",
+    "render_silhouettes",
+    "load_capture",
+    "fit",
+    "apply_fit",
+    "overlays",
+    "extract_silhouettes",
+    "import_cameras",
+    "export_cameras",
+    "add_handle_empty",
+    "remove_handle",
+]
 
 
 def test_register_unregister_twice():
     assert registration.is_registered()
     for _ in range(2):
-        addon.unregister()
+        clothfit.unregister()
         assert not hasattr(bpy.types.Scene, "clothfit")
         assert not hasattr(bpy.types, "CLOTHFIT_PT_main")
         with pytest.raises(KeyError):
             bpy.ops.clothfit.build_rig.get_rna_type()
-        addon.register()
+        clothfit.register()
         assert hasattr(bpy.context.scene, "clothfit")
         assert bpy.ops.clothfit.build_rig.get_rna_type().identifier == "CLOTHFIT_OT_build_rig"
     for op in OPERATORS:
@@ -91,7 +102,7 @@ def test_overlays_core_source_and_ground_truth_agree(small_capture):
     assert bpy.ops.clothfit.load_capture() == {"FINISHED"}
     scene.clothfit.overlay_source = "CORE"
     assert bpy.ops.clothfit.overlays() == {"FINISHED"}
-    assert scene.clothfit.overlay_error < 1.0   # core rasteriser vs Blender renders, same shapes
+    assert scene.clothfit.overlay_error < 1.0  # core rasteriser vs Blender renders, same shapes
 
 
 def test_loaded_capture_drives_the_simulation(small_capture):
@@ -101,7 +112,7 @@ def test_loaded_capture_drives_the_simulation(small_capture):
     p = small_settings(scene, small_capture)
     assert bpy.ops.clothfit.load_capture() == {"FINISHED"}
     assert p.scenario_source == "CAPTURE"
-    p.released_corner, p.settle_time, p.cloth_side = 2, 0.05, 0.2   # ignored: the capture's scenario wins
+    p.released_corner, p.settle_time, p.cloth_side = 2, 0.05, 0.2  # ignored: the capture's scenario wins
     assert bpy.ops.clothfit.build_cloth() == {"FINISHED"}
     assert bpy.ops.clothfit.simulate() == {"FINISHED"}
     p.overlay_source = "BLENDER"
@@ -171,6 +182,7 @@ def test_baked_cloth_survives_save_reload(tmp_path):
 
 # ================================================================ bad input
 
+
 def test_no_camera_in_rig(tmp_path):
     small_settings(bpy.context.scene, tmp_path / "c")
     bpy.ops.clothfit.build_cloth()
@@ -191,6 +203,7 @@ def test_cloth_missing_or_edited(tmp_path):
     bpy.ops.clothfit.build_cloth()
     obj = scene.clothfit.cloth_object
     import bmesh
+
     bm = bmesh.new()
     bm.from_mesh(obj.data)
     bm.verts.ensure_lookup_table()
@@ -213,7 +226,7 @@ def test_cloth_missing_or_edited(tmp_path):
 def test_capture_dir_missing_files(tmp_path, small_capture):
     bad = tmp_path / "bad"
     shutil.copytree(small_capture, bad)
-    victim = bad / "sil" / "cam00" / "001.png"   # camera 0 is always a training camera
+    victim = bad / "sil" / "cam00" / "001.png"  # camera 0 is always a training camera
     victim.unlink()
     p = small_settings(bpy.context.scene, bad)
     msg = run_error("load_capture")
@@ -228,6 +241,7 @@ def test_capture_dir_missing_files(tmp_path, small_capture):
 
 def test_image_size_mismatch(tmp_path, small_capture):
     import cv2
+
     bad = tmp_path / "bad"
     shutil.copytree(small_capture, bad)
     victim = sorted((bad / "sil").rglob("*.png"))[2]
@@ -290,7 +304,7 @@ class FakeLayout:
         assert propname in data.bl_rna.properties and active_propname in active_data.bl_rna.properties
         params = [q.identifier for q in ul.bl_rna.functions["draw_item"].parameters]
         assert params[-2:] == ["index", "flt_flag"]
-        for i, item in enumerate(getattr(data, propname)):   # draw the rows as Blender does: every argument
+        for i, item in enumerate(getattr(data, propname)):  # draw the rows as Blender does: every argument
             ul.draw_item(None, bpy.context, self, data, item, 0, active_data, active_propname, i, 0)
         self.log.append(("list", listtype))
 
@@ -302,7 +316,8 @@ class FakeLayout:
 
 @pytest.mark.parametrize("state", ["empty", "running", "result", "empties"])
 def test_panel_sections_draw(state, tmp_path):
-    from addon.blender import panel
+    from clothfit.blender import panel
+
     scene = bpy.context.scene
     p = small_settings(scene, tmp_path)
     if state == "empties":
@@ -326,7 +341,7 @@ def test_panel_sections_draw(state, tmp_path):
         expected.discard("clothfit.fit")
     if state != "result":
         expected.discard("clothfit.apply_fit")
-    if state != "empties":   # the handle list shows with the Empties manipulation (or when links exist)
+    if state != "empties":  # the handle list shows with the Empties manipulation (or when links exist)
         expected -= {"clothfit.add_handle_empty", "clothfit.remove_handle"}
     assert expected <= ops_drawn
     if state == "result":
@@ -339,11 +354,29 @@ def test_panel_sections_draw(state, tmp_path):
 
 def test_headless_pipeline_main(tmp_path):
     """The one-call pipeline of demo_blend/build_demo.py and the CLI, on a small setting."""
-    from addon.blender import pipeline
+    from clothfit.blender import pipeline
+
     blend = tmp_path / "p.blend"
-    code = pipeline.main(["--out", str(tmp_path / "out"), "--blend", str(blend), "--rig", "ring8",
-                          "--times", "0.1:0.2:0.1", "--budget", "20", "--resolution", "60x80",
-                          "--train-cameras", "2", "--noise", "0"])
+    code = pipeline.main(
+        [
+            "--out",
+            str(tmp_path / "out"),
+            "--blend",
+            str(blend),
+            "--rig",
+            "ring8",
+            "--times",
+            "0.1:0.2:0.1",
+            "--budget",
+            "20",
+            "--resolution",
+            "60x80",
+            "--train-cameras",
+            "2",
+            "--noise",
+            "0",
+        ]
+    )
     assert code == 0
     assert (tmp_path / "out" / "capture" / "fit_result.json").is_file()
     assert (tmp_path / "out" / "capture" / "overlays" / "contact_sheet.png").is_file()
@@ -366,11 +399,13 @@ def test_show_frame_swaps_camera_backgrounds(small_capture):
 
 
 def test_render_never_overwrites_a_foreign_capture(tmp_path):
-    from addon.core.observation.synth import synth_capture
-    from addon.core.physics.scenario import paper_scenario
-    from addon.core.observation.camera import ring_rig
-    cams = ring_rig(n_per_ring=(2,), elevations_deg=(30.0,), distance=0.5, target=(0, 0, 0.06), width=80,
-                    height=60, fx=120.0)
+    from clothfit.core.observation.camera import ring_rig
+    from clothfit.core.observation.synth import synth_capture
+    from clothfit.core.physics.scenario import paper_scenario
+
+    cams = ring_rig(
+        n_per_ring=(2,), elevations_deg=(30.0,), distance=0.5, target=(0, 0, 0.06), width=80, height=60, fx=120.0
+    )
     synth_capture(tmp_path / "real", scenario=paper_scenario(frame_times=[0.1]), cameras=cams, noise=0.0)
     scene = bpy.context.scene
     small_settings(scene, tmp_path / "real")
@@ -382,8 +417,9 @@ def test_render_never_overwrites_a_foreign_capture(tmp_path):
 
 def test_render_failing_midway_leaves_no_capture_json(tmp_path, monkeypatch):
     """Render Silhouettes writes capture.json only after the last PNG: a failed render is not a capture."""
-    from addon.blender import render as R
-    from addon.core.errors import ClothFitError
+    from clothfit.blender import render as R
+    from clothfit.core.errors import ClothFitError
+
     scene = bpy.context.scene
     small_settings(scene, tmp_path / "cap")
     for op in ("build_rig", "build_cloth", "simulate"):
@@ -395,6 +431,7 @@ def test_render_failing_midway_leaves_no_capture_json(tmp_path, monkeypatch):
         if len(calls) == 2:
             raise ClothFitError("simulated render failure")
         return real(*a, **k)
+
     monkeypatch.setattr(R, "render_masks", flaky)
     assert "simulated render failure" in run_error("render_silhouettes")
     assert (tmp_path / "cap" / "sil" / "cam00" / "000.png").is_file()
@@ -407,6 +444,7 @@ def test_render_failing_midway_leaves_no_capture_json(tmp_path, monkeypatch):
 
 # ---------------------------------------------------------------- issue 12: no lost or overwritten data
 
+
 def test_export_cameras_never_replaces_a_captures_cameras(tmp_path, small_capture):
     cap = tmp_path / "cap"
     shutil.copytree(small_capture, cap)
@@ -414,21 +452,25 @@ def test_export_cameras_never_replaces_a_captures_cameras(tmp_path, small_captur
     scene = bpy.context.scene
     small_settings(scene, cap)
     assert bpy.ops.clothfit.build_rig() == {"FINISHED"}
-    for kw in ({"filepath": str(cap / "cameras.json"), "file_format": "JSON"},
-               {"filepath": str(cap), "file_format": "JSON"}):
+    for kw in (
+        {"filepath": str(cap / "cameras.json"), "file_format": "JSON"},
+        {"filepath": str(cap), "file_format": "JSON"},
+    ):
         assert "camera file of the capture" in run_error("export_cameras", **kw)
     assert (cap / "cameras.json").read_bytes() == before
     # beside it, under another name, or elsewhere: fine
     assert bpy.ops.clothfit.export_cameras(filepath=str(cap / "calibration.yml"), file_format="OPENCV") == {"FINISHED"}
-    assert bpy.ops.clothfit.export_cameras(filepath=str(tmp_path / "out" / "cameras.json"),
-                                           file_format="JSON") == {"FINISHED"}
+    assert bpy.ops.clothfit.export_cameras(filepath=str(tmp_path / "out" / "cameras.json"), file_format="JSON") == {
+        "FINISHED"
+    }
 
 
 def test_operators_report_unexpected_failures(monkeypatch, tmp_path):
-    from addon.blender import api
+    from clothfit.blender import api
 
     def broken(*a, **k):
         raise KeyError("no such thing")
+
     monkeypatch.setattr(api, "import_cameras", broken)
     msg = run_error("import_cameras")
     assert "KeyError" in msg and "no such thing" in msg

@@ -1,21 +1,21 @@
 """Real-footage features of the Blender layer (issue 4): calibrated cameras in and out, silhouette
 extraction from footage, handles driven by (animated) empties. Real ``bpy`` module, factory scene."""
+
 import json
 import os
 
 import numpy as np
 import pytest
-
 from blender_support import bpy, factory, run_error, small_settings  # noqa: F401
 
 cv2 = pytest.importorskip("cv2")
 
-from addon.blender import api  # noqa: E402
-from addon.blender import scene as S  # noqa: E402
-from addon.core.footage import calib_io  # noqa: E402
-from addon.core.observation.camera import Camera, load_rig  # noqa: E402
-from addon.core.observation.capture import load_capture  # noqa: E402
-from addon.core.physics.scenario import Handle  # noqa: E402
+from clothfit.blender import api  # noqa: E402
+from clothfit.blender import scene as S  # noqa: E402
+from clothfit.core.footage import calib_io  # noqa: E402
+from clothfit.core.observation.camera import Camera, load_rig  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
+from clothfit.core.physics.scenario import Handle  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
@@ -38,6 +38,7 @@ def blender_cameras(scene):
 
 # ====================================================================== cameras
 
+
 @pytest.mark.parametrize("fmt", ["OPENCV", "COLMAP"])
 def test_lab18_round_trip_through_blender(tmp_path, fmt):
     """lab18 -> OpenCV YAML / COLMAP -> Import Cameras -> Blender cameras -> Export Cameras (both
@@ -50,7 +51,7 @@ def test_lab18_round_trip_through_blender(tmp_path, fmt):
     assert scene.clothfit.cameras_file == src
     assert [o.name for o in S.rig_objects(scene)] == [c.name for c in lab]
     assert S.render_size(scene) == (640, 480)
-    for b, c in zip(blender_cameras(scene), lab):   # Blender's float32 settings show the same camera
+    for b, c in zip(blender_cameras(scene), lab):  # Blender's float32 settings show the same camera
         np.testing.assert_allclose(b.K, c.K, rtol=1e-6, atol=1e-4)
         np.testing.assert_allclose(b.R, c.R, atol=1e-6)
         np.testing.assert_allclose(b.t, c.t, atol=1e-6)
@@ -67,9 +68,11 @@ def test_lab18_round_trip_through_blender(tmp_path, fmt):
 
 
 def _ring(n=4, w=160, h=120, dist=None, fy_scale=None):
-    from addon.core.observation.camera import ring_rig
-    cams = ring_rig(n_per_ring=(n,), elevations_deg=(30.0,), distance=0.5, target=(0, 0, 0.06), width=w,
-                    height=h, fx=250.0)
+    from clothfit.core.observation.camera import ring_rig
+
+    cams = ring_rig(
+        n_per_ring=(n,), elevations_deg=(30.0,), distance=0.5, target=(0, 0, 0.06), width=w, height=h, fx=250.0
+    )
     for i, c in enumerate(cams):
         if dist is not None:
             c.dist = np.array(dist) * (1 + 0.1 * i)
@@ -91,7 +94,7 @@ def test_distortion_and_per_camera_fx_fy_kept_exactly(tmp_path):
     par = scene.render.pixel_aspect_y / scene.render.pixel_aspect_x
     shown = blender_cameras(scene)
     for b, c in zip(shown, cams):
-        assert b.K[0, 0] == pytest.approx(c.K[0, 0], rel=1e-6)      # fx kept, fy from the common aspect
+        assert b.K[0, 0] == pytest.approx(c.K[0, 0], rel=1e-6)  # fx kept, fy from the common aspect
         assert b.K[0, 0] / b.K[1, 1] == pytest.approx(par, rel=1e-6)
         np.testing.assert_allclose(b.K[:2, 2], c.K[:2, 2], atol=1e-4)
     out = str(tmp_path / "exp.yml")
@@ -161,7 +164,7 @@ def test_import_cameras_bad_input(tmp_path):
     calib_io.export_cameras(_ring(fy_scale=[1.0, 1.0, 1.05, 1.0]), str(tmp_path / "par.yml"))
     msg = run_error("import_cameras", filepath=str(tmp_path / "par.yml"))
     assert "camera 'cam02'" in msg and "pixel aspect" in msg
-    assert not bpy.data.collections.get(S.RIG_COLLECTION)      # nothing was built
+    assert not bpy.data.collections.get(S.RIG_COLLECTION)  # nothing was built
     # export without a rig, to a bad place
     p.cameras_export_path = str(tmp_path / "x.yml")
     assert "no camera in the rig" in run_error("export_cameras")
@@ -176,8 +179,10 @@ def test_import_cameras_bad_input(tmp_path):
 
 # =================================================================== extraction
 
+
 def _footage(root, **kw):
     from test_extract import write_footage
+
     return write_footage(str(root), **kw)
 
 
@@ -198,7 +203,7 @@ def test_extract_silhouettes_operator(tmp_path, capfd):
     capfd.readouterr()
     assert bpy.ops.clothfit.extract_silhouettes() == {"FINISHED"}
     out = capfd.readouterr().out
-    assert "Warning: Extraction: no scenario given" in out           # the extraction's warnings, reported
+    assert "Warning: Extraction: no scenario given" in out  # the extraction's warnings, reported
     assert "Warning: Extraction: folders with images that are not calibrated cameras" in out
     cap = load_capture(tmp_path / "cap", validate=True)
     assert cap.camera_names == ["cam00", "cam01"] and cap.cloth_mass == 0.0025
@@ -226,7 +231,7 @@ def test_extract_progress_and_many_warnings(tmp_path, capfd):
     scene = bpy.context.scene
     p = scene.clothfit
     _footage(tmp_path / "f", n_cams=3)
-    for d in ("a", "b", "c", "d"):      # noise the extractor warns about
+    for d in ("a", "b", "c", "d"):  # noise the extractor warns about
         os.makedirs(tmp_path / "f" / d)
         cv2.imwrite(str(tmp_path / "f" / d / "x.png"), np.zeros((4, 4), np.uint8))
     p.footage_dir, p.capture_dir = str(tmp_path / "f"), str(tmp_path / "cap")
@@ -261,8 +266,9 @@ def test_extract_bad_input(tmp_path):
     # the output may not be the footage folder, nor a capture another tool wrote
     p.extract_capture_dir = str(tmp_path / "f")
     assert "is the footage folder" in run_error("extract_silhouettes")
-    from addon.core.observation.synth import synth_capture
-    from addon.core.physics.scenario import paper_scenario
+    from clothfit.core.observation.synth import synth_capture
+    from clothfit.core.physics.scenario import paper_scenario
+
     synth_capture(tmp_path / "synth", scenario=paper_scenario(frame_times=[0.1]), cameras=_ring(2), noise=0.0)
     p.extract_capture_dir = str(tmp_path / "synth")
     assert "only overwrites its own extractions" in run_error("extract_silhouettes")
@@ -288,6 +294,7 @@ def test_extract_uses_the_imported_cameras(tmp_path):
 
 
 # ====================================================================== empties
+
 
 def _key_linear(obj, frames_locs):
     for f, loc in frames_locs:
@@ -322,7 +329,7 @@ def _empties_scene(tmp_path, fps=20, release=None):
     _key_linear(moving, [(f0, rest), (f0 + round(0.3 * fps), rest + DELTA)])
     if release is not None:
         p.handles[0].use_release, p.handles[0].release_time = True, release
-    assert bpy.ops.clothfit.build_cloth() == {"FINISHED"}   # vertex groups of the linked vertices
+    assert bpy.ops.clothfit.build_cloth() == {"FINISHED"}  # vertex groups of the linked vertices
     return scene, p, moving, rest
 
 
@@ -354,7 +361,8 @@ def test_empty_moves_a_corner(tmp_path):
     want = rest + DELTA * np.clip(t / 0.3, 0, 1)[:, None]
     np.testing.assert_allclose(hs[0].position(t), want, atol=1e-6)
     # the fitter replays it: the capture's scenario reproduces the bake
-    from addon.core.physics.models import simulate as core_simulate
+    from clothfit.core.physics.models import simulate as core_simulate
+
     cap = load_capture(tmp_path / "cap")
     res = core_simulate(cap.scenario, [api.params_from_scene(scene)])
     np.testing.assert_allclose(res.positions[0], cap.shapes, atol=1e-6)
@@ -370,8 +378,8 @@ def test_empty_release_and_frame_rate(tmp_path):
     scene, p, moving, rest = _empties_scene(tmp_path, fps=20, release=0.1)
     api.simulate(scene)
     baked = S.baked_positions(p.cloth_object, [0.1, 0.3])
-    np.testing.assert_allclose(baked[0, 0], rest + DELTA / 3, atol=1e-6)       # held up to 0.1 s
-    assert np.linalg.norm(baked[1, 0] - (rest + DELTA)) > 1e-3                   # then free
+    np.testing.assert_allclose(baked[0, 0], rest + DELTA / 3, atol=1e-6)  # held up to 0.1 s
+    assert np.linalg.norm(baked[1, 0] - (rest + DELTA)) > 1e-3  # then free
     scene.render.fps = 24
     r = api.simulate(scene)
     assert scene.render.fps == 20 and any("frame rate changed from 24 to 20" in n for n in r["notes"])
@@ -386,10 +394,10 @@ def test_empty_links_bad_input(tmp_path):
     p.handles[1].column = 0
     assert "already linked by handle #1" in run_error("simulate")
     p.handles[1].column = 15
-    bpy.data.objects.remove(moving, do_unlink=True)                    # a deleted empty
+    bpy.data.objects.remove(moving, do_unlink=True)  # a deleted empty
     assert "handle #1" in run_error("simulate") and "has no empty" in run_error("simulate")
     other = p.handles[1].empty
-    scene.collection.children[api.HANDLE_COLLECTION].objects.unlink(other)   # still in bpy.data, not in the scene
+    scene.collection.children[api.HANDLE_COLLECTION].objects.unlink(other)  # still in bpy.data, not in the scene
     p.handles[0].empty = other
     assert "not in the scene" in run_error("simulate")
     assert "outside the 16x16" in run_error("add_handle_empty", row=3, column=40)
@@ -426,7 +434,7 @@ def test_extract_with_empties_writes_their_handles(tmp_path):
     scene, p, moving, rest = _empties_scene(tmp_path)
     _footage(tmp_path / "f")
     p.footage_dir, p.extract_capture_dir = str(tmp_path / "f"), str(tmp_path / "ext")
-    scene.render.fps = 24    # capture times 0.1, 0.2, 0.3 are not whole frames at 24 fps
+    scene.render.fps = 24  # capture times 0.1, 0.2, 0.3 are not whole frames at 24 fps
     cap, rep = api.extract_silhouettes(scene)
     assert not any("paper's manipulation" in w for w in rep["warnings"])
     assert any("frame rate changed from 24 to 20" in n for n in rep["notes"])

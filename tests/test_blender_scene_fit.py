@@ -5,6 +5,7 @@ The scene and its capture are made here with the bpy module; the fits run in *su
 without bpy (a process that imported bpy cannot start bpy workers: tested), on a local 2-worker
 Ray instance bound to 127.0.0.1, or the spawned process pool when Ray is absent.
 """
+
 import json
 import os
 import shutil
@@ -14,16 +15,14 @@ import tempfile
 
 import numpy as np
 import pytest
-
 from blender_support import addon_preferences, bpy, ensure_registered, factory  # noqa: F401
-
-from addon.blender import collider_scene as CS  # noqa: E402
-from addon.blender.scene_worker import BlendScene  # noqa: E402
-from addon.core.errors import ClothFitError  # noqa: E402
-from addon.farm import executors  # noqa: E402
+from clothfit.blender import collider_scene as CS  # noqa: E402
+from clothfit.blender.scene_worker import BlendScene  # noqa: E402
+from clothfit.core.errors import ClothFitError  # noqa: E402
+from clothfit.farm import executors  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SEED, POP, BUDGET = 3, 6, 12          # two generations of six candidates
+SEED, POP, BUDGET = 3, 6, 12  # two generations of six candidates
 
 
 @pytest.fixture(scope="module")
@@ -45,15 +44,39 @@ def _env(**extra):
 
 
 def _cli(args, **env):
-    return subprocess.run([sys.executable, "-m", "addon"] + args, cwd=ROOT, env=_env(**env), capture_output=True,
-                          text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "clothfit"] + args,
+        cwd=ROOT,
+        env=_env(**env),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def _fit_args(scene, out, *extra):
     blend, cap, f0 = scene
-    return ["fit", cap, "--backend", "blender", "--blend", blend, "--frame-zero", str(f0), "--workers", "2",
-            "--max-evaluations", str(BUDGET), "--population", str(POP), "--seed", str(SEED), "--quiet",
-            "--out", str(out)] + list(extra)
+    return [
+        "fit",
+        cap,
+        "--backend",
+        "blender",
+        "--blend",
+        blend,
+        "--frame-zero",
+        str(f0),
+        "--workers",
+        "2",
+        "--max-evaluations",
+        str(BUDGET),
+        "--population",
+        str(POP),
+        "--seed",
+        str(SEED),
+        "--quiet",
+        "--out",
+        str(out),
+    ] + list(extra)
 
 
 def _procs_with(text):
@@ -71,6 +94,7 @@ def _procs_with(text):
 
 
 # ---------------------------------------------------------------- the worker, in this process
+
 
 def test_worker_replays_the_observation_and_resets_between_candidates(scene):
     """The worker's Blender at the true settings gives the capture's vertices exactly; another
@@ -93,9 +117,10 @@ def test_worker_replays_the_observation_and_resets_between_candidates(scene):
     two = bs.simulate(truth, [f0 + 2, f0 + 3])["positions"]
     assert np.allclose(half, 0.5 * (two[0] + two[1]), atol=1e-12)
     # the box holds the cloth up: the core model (no colliders) lets it fall through
-    from addon.core.physics.models import BlenderModel
-    from addon.core.physics import blender as B
-    from addon.core.observation.capture import load_capture
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.physics import blender as B
+    from clothfit.core.physics.models import BlenderModel
+
     c = load_capture(cap)
     core = BlenderModel(24).simulate(c.scenario, B.settings_row(B.check_settings(truth)))
     assert np.abs(core.positions[0] - obs).max() > 0.01
@@ -109,7 +134,8 @@ def test_bad_objects_are_one_line_errors(scene, name, msg):
 
 def test_driver_with_bpy_refuses_to_start_workers(scene):
     """This process has imported bpy: spawned workers would fail with "No module named '_bpy'"."""
-    from addon.farm.scene import BlendSceneEvaluator
+    from clothfit.farm.scene import BlendSceneEvaluator
+
     for kind in ("process", "ray"):
         with pytest.raises(ClothFitError, match="imported bpy"):
             BlendSceneEvaluator(scene[0], workers=1, executor=kind)
@@ -117,6 +143,7 @@ def test_driver_with_bpy_refuses_to_start_workers(scene):
 
 
 # ---------------------------------------------------------------- fits, in processes without bpy
+
 
 @pytest.fixture(scope="module")
 def ray_fit(scene, tmp_path_factory):
@@ -138,8 +165,8 @@ def test_fit_on_local_ray_writes_the_result_and_leaves_no_process(ray_fit):
     assert res["scene"]["colliders"] == ["Table"] and res["scene"]["object"] == "Cloth"
     assert set(res["blender_cloth"]) >= {"tension_stiffness", "mass", "time_scale", "quality"}
     assert res["best_E_all"] is not None
-    assert _procs_with(tmp) == []          # Ray's processes of that session are gone
-    summary = json.loads(r.stdout)         # stdout is the summary alone: Ray's and Blender's output went to stderr
+    assert _procs_with(tmp) == []  # Ray's processes of that session are gone
+    summary = json.loads(r.stdout)  # stdout is the summary alone: Ray's and Blender's output went to stderr
     assert summary["blender_cloth"] == res["blender_cloth"] and summary["out"] == str(out)
 
 
@@ -156,6 +183,7 @@ def test_no_ray_fallback_gives_the_same_fit(scene, ray_fit, tmp_path):
 
 def _free_port():
     import socket
+
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -164,6 +192,7 @@ def _free_port():
 def _kill_procs_with(text):
     import signal
     import time
+
     for sig in (signal.SIGTERM, signal.SIGKILL):
         for p in _procs_with(text):
             try:
@@ -186,33 +215,79 @@ def test_fit_and_fit_many_on_a_running_cluster_by_address(scene, ray_fit, tmp_pa
     tmp = tempfile.mkdtemp(prefix="cfrc", dir="/tmp")
     port = _free_port()
     ray_cli = os.path.join(os.path.dirname(sys.executable), "ray")
-    env = {k: v for k, v in _env(RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0", RAY_AUTH_MODE="disabled").items()
-           if k != "PYTHONPATH"}
+    env = {
+        k: v
+        for k, v in _env(RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0", RAY_AUTH_MODE="disabled").items()
+        if k != "PYTHONPATH"
+    }
     try:
-        r = subprocess.run([ray_cli, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}",
-                            "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats",
-                            f"--temp-dir={tmp}"], cwd=tmp, env=env, capture_output=True, text=True, timeout=180)
+        r = subprocess.run(
+            [
+                ray_cli,
+                "start",
+                "--head",
+                "--node-ip-address=127.0.0.1",
+                f"--port={port}",
+                "--num-cpus=2",
+                "--include-dashboard=false",
+                "--disable-usage-stats",
+                f"--temp-dir={tmp}",
+            ],
+            cwd=tmp,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=180,
+        )
         assert r.returncode == 0, (r.stdout + r.stderr)[-2000:]
         out = tmp_path / "fit.json"
         blend, cap, f0 = scene
         args = _fit_args(scene, out, "--address", f"127.0.0.1:{port}")
-        fit = subprocess.run([sys.executable, "-m", "addon"] + args, cwd=tmp, env=dict(env, PYTHONPATH=ROOT),
-                             capture_output=True, text=True, timeout=600)
+        fit = subprocess.run(
+            [sys.executable, "-m", "clothfit"] + args,
+            cwd=tmp,
+            env=dict(env, PYTHONPATH=ROOT),
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert fit.returncode == 0, fit.stderr[-2000:]
         res = json.load(open(out))
-        assert res["executor"] == "ray" and res["evaluations"] == BUDGET + 1      # + the scene's own settings
+        assert res["executor"] == "ray" and res["evaluations"] == BUDGET + 1  # + the scene's own settings
         ray_res = json.load(open(ray_fit[1]))
         assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
         assert _procs_with(tmp), "the fit must leave the user's cluster running"
         # fit-many on the same cluster: core-model fits as Ray tasks, each the local fit of that capture
         many = tmp_path / "many"
-        fm = subprocess.run([sys.executable, "-m", "addon", "fit-many", cap, "--address", f"127.0.0.1:{port}",
-                             "--workers", "2", "--max-evaluations", "14", "--seed", "5", "--out-dir", str(many)],
-                            cwd=tmp, env=dict(env, PYTHONPATH=ROOT), capture_output=True, text=True, timeout=600)
+        fm = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "clothfit",
+                "fit-many",
+                cap,
+                "--address",
+                f"127.0.0.1:{port}",
+                "--workers",
+                "2",
+                "--max-evaluations",
+                "14",
+                "--seed",
+                "5",
+                "--out-dir",
+                str(many),
+            ],
+            cwd=tmp,
+            env=dict(env, PYTHONPATH=ROOT),
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert fm.returncode == 0, fm.stderr[-2000:]
         assert json.loads(fm.stdout)["executor"] == "ray"
-        from addon.core.fitting.job import FitConfig, FitJob
-        from addon.core.observation.capture import load_capture
+        from clothfit.core.fitting.job import FitConfig, FitJob
+        from clothfit.core.observation.capture import load_capture
+
         with open(many / f"000_{os.path.basename(cap)}.json") as f:
             got = json.load(f)
         local = FitJob(load_capture(cap), FitConfig(max_evaluations=14, seed=5)).run()
@@ -225,9 +300,9 @@ def test_fit_and_fit_many_on_a_running_cluster_by_address(scene, ray_fit, tmp_pa
 
 KILL = r"""
 import json, os, signal, sys
-from addon.core.fitting.job import FitConfig, FitJob
-from addon.core.observation.capture import load_capture
-from addon.farm.scene import BlendSceneEvaluator
+from clothfit.core.fitting.job import FitConfig, FitJob
+from clothfit.core.observation.capture import load_capture
+from clothfit.farm.scene import BlendSceneEvaluator
 blend, cap, f0, seed, pop, budget = sys.argv[1], sys.argv[2], float(sys.argv[3]), *map(int, sys.argv[4:7])
 kind = sys.argv[7]
 ev = BlendSceneEvaluator(blend, frame_zero=f0, workers=2, executor=kind)
@@ -255,33 +330,41 @@ def test_worker_killed_mid_fit_is_restarted_and_its_candidates_evaluated_again(s
     pytest.importorskip("ray")
     blend, cap, f0 = scene
     tmp = tempfile.mkdtemp(prefix="cfray", dir="/tmp")
-    r = subprocess.run([sys.executable, "-c", KILL, blend, cap, str(f0), str(SEED), str(POP), str(BUDGET), kind],
-                       cwd=ROOT, env=_env(CLOTHFIT_RAY_TMPDIR=tmp, PYTHONPATH=ROOT), capture_output=True, text=True,
-                       timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-c", KILL, blend, cap, str(f0), str(SEED), str(POP), str(BUDGET), kind],
+        cwd=ROOT,
+        env=_env(CLOTHFIT_RAY_TMPDIR=tmp, PYTHONPATH=ROOT),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     shutil.rmtree(tmp, ignore_errors=True)
     assert r.returncode == 0, r.stderr[-2000:]
     d = json.loads(r.stdout.strip().splitlines()[-1])
     if kind == "ray":
-        assert d["ips"] == ["127.0.0.1"] * 3               # Ray's local instance stays on the loopback address
-        assert d["after"][0] == d["pids"][0] and d["after"][1] != d["pids"][1]     # worker 1 was replaced
+        assert d["ips"] == ["127.0.0.1"] * 3  # Ray's local instance stays on the loopback address
+        assert d["after"][0] == d["pids"][0] and d["after"][1] != d["pids"][1]  # worker 1 was replaced
     else:
-        assert d["pids"][1] not in d["after"]              # a new pool
+        assert d["pids"][1] not in d["after"]  # a new pool
     res = d["res"]
-    assert res["evaluations"] == BUDGET + 1 and res["blender_evaluations"] == BUDGET + 1   # + the scene's own
+    assert res["evaluations"] == BUDGET + 1 and res["blender_evaluations"] == BUDGET + 1  # + the scene's own
     ray_res = json.load(open(ray_fit[1]))
     assert res["blender_cloth"] == ray_res["blender_cloth"] and res["best_E_all"] == ray_res["best_E_all"]
     assert _procs_with(tmp) == []
 
 
-@pytest.mark.parametrize("extra,msg", [
-    (["--blend", "/nonexistent/x.blend"], "file not found"),
-    (["--object", "Table", "--executor", "process", "--workers", "1"], "has no Cloth modifier"),
-    (["--frame-zero", "100", "--executor", "process", "--workers", "1"], "outside the cloth cache"),
-])
+@pytest.mark.parametrize(
+    "extra,msg",
+    [
+        (["--blend", "/nonexistent/x.blend"], "file not found"),
+        (["--object", "Table", "--executor", "process", "--workers", "1"], "has no Cloth modifier"),
+        (["--frame-zero", "100", "--executor", "process", "--workers", "1"], "outside the cloth cache"),
+    ],
+)
 def test_bad_scene_input_is_one_line(scene, tmp_path, extra, msg):
     args = _fit_args(scene, tmp_path / "f.json")
-    for k in range(0, len(extra), 2):               # later options win in argparse
-        args += extra[k:k + 2]
+    for k in range(0, len(extra), 2):  # later options win in argparse
+        args += extra[k : k + 2]
     r = _cli(args, CLOTHFIT_NO_RAY="1")
     assert r.returncode == 2, r.stderr[-2000:]
     err = r.stderr.strip().splitlines()
@@ -294,6 +377,7 @@ def test_executor_refuses_address_without_ray():
 
 
 # ---------------------------------------------------------------- the add-on's operators
+
 
 def _open(scene):
     blend, cap, f0 = scene
@@ -309,7 +393,7 @@ def _open(scene):
 def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_settings(scene, monkeypatch, tmp_path):
     monkeypatch.setenv("CLOTHFIT_NO_RAY", "1")
     sc, obj = _open(scene)
-    prefs = addon_preferences()          # the operator's defaults: workers and working folder
+    prefs = addon_preferences()  # the operator's defaults: workers and working folder
     prefs.workers, prefs.cache_dir = 2, str(tmp_path / "cache")
     sc.clothfit.max_evaluations = 6
     assert bpy.ops.clothfit.fit_scene_cloth(frame_zero=scene[2]) == {"FINISHED"}
@@ -329,12 +413,21 @@ def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_se
 
 
 def test_esc_stops_the_fit_and_keeps_the_best(scene, monkeypatch, tmp_path):
-    from addon.blender.scene_fit import SceneFitSession
+    from clothfit.blender.scene_fit import SceneFitSession
+
     monkeypatch.setenv("CLOTHFIT_NO_RAY", "1")
     sc, obj = _open(scene)
     # restarts keep the fit running until Esc (a converged fit would stop on its own first on a busy machine)
-    s = SceneFitSession(sc, obj, scene[1], 3000, workers=2, frame_zero=scene[2],
-                        extra=["--population", "6", "--restarts", "20"], out_dir=str(tmp_path / "fit"))
+    s = SceneFitSession(
+        sc,
+        obj,
+        scene[1],
+        3000,
+        workers=2,
+        frame_zero=scene[2],
+        extra=["--population", "6", "--restarts", "20"],
+        out_dir=str(tmp_path / "fit"),
+    )
     res = s.wait(sc, poll=lambda sess: sess.progress()[0] >= 12)
     assert s.cancelled and res["cancelled"] and 12 <= res["evaluations"] < 3000
     assert res["blender_cloth"]["tension_stiffness"] > 0
@@ -345,7 +438,8 @@ def test_unreachable_ray_address_of_the_preferences_is_a_one_line_error(scene, t
     """The preferences' Ray address is only connected to (never started), checked before anything is
     written: a closed port on the loopback address is one line, and the cache folder stays empty."""
     import socket
-    with socket.socket() as s:          # a loopback port that nobody listens on
+
+    with socket.socket() as s:  # a loopback port that nobody listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     sc, obj = _open(scene)

@@ -2,18 +2,17 @@
 Export entries, file browsers on path properties, tooltips, undo, and the long operators (Render
 Silhouettes, Simulate, Extract Silhouettes) modal with a progress bar and Esc, driven headless
 through the same functions the operators' modal handlers call (as tests/test_blender_fit.py does)."""
+
 import os
 import types
 
+import clothfit  # noqa: E402
 import numpy as np
 import pytest
-
 from blender_support import addon_preferences, bpy, factory, run_error, small_capture, small_settings  # noqa: F401
-
-import addon  # noqa: E402
-from addon.blender import api, menus, ops, prefs, registration  # noqa: E402
-from addon.blender import scene as S  # noqa: E402
-from addon.core.observation.capture import load_capture  # noqa: E402
+from clothfit.blender import api, menus, ops, prefs, registration  # noqa: E402
+from clothfit.blender import scene as S  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
@@ -24,23 +23,26 @@ def _menu_draws(menu):
 
 # ================================================================= registration
 
+
 def test_register_unregister_preferences_and_menus():
     imp, exp = bpy.types.TOPBAR_MT_file_import, bpy.types.TOPBAR_MT_file_export
     for _ in range(2):
         assert _menu_draws(imp).count(menus.menu_import) == 1
         assert _menu_draws(exp).count(menus.menu_export) == 1
         assert prefs.ClothFitPreferences.is_registered
-        addon.unregister()
+        clothfit.unregister()
         assert menus.menu_import not in _menu_draws(imp) and menus.menu_export not in _menu_draws(exp)
         assert not prefs.ClothFitPreferences.is_registered
-        addon.register()
-    assert _menu_draws(imp).count(menus.menu_import) == 1      # registered again: once, not twice
+        clothfit.register()
+    assert _menu_draws(imp).count(menus.menu_import) == 1  # registered again: once, not twice
 
 
 def test_preferences_idname_is_the_add_on_module():
-    assert prefs.addon_name("bl_ext.user_default.silhouette_cloth_fit.addon.blender") == \
-        "bl_ext.user_default.silhouette_cloth_fit"
-    assert prefs.addon_name("addon.blender") == "addon"
+    assert (
+        prefs.addon_name("bl_ext.user_default.silhouette_cloth_fit.addon.blender")
+        == "bl_ext.user_default.silhouette_cloth_fit"
+    )
+    assert prefs.addon_name("clothfit.blender") == "addon"
     assert prefs.ClothFitPreferences.bl_idname == prefs.ADDON_NAME == "addon"
     # not enabled under that name (a checkout): the operators get the defaults
     assert bpy.context.preferences.addons.get("addon") is None
@@ -57,15 +59,17 @@ class _Layout:
 
     def operator(self, idname, text="", **kw):
         mod, name = idname.split(".")
-        getattr(getattr(bpy.ops, mod), name).get_rna_type()     # exists
+        getattr(getattr(bpy.ops, mod), name).get_rna_type()  # exists
         props = types.SimpleNamespace()
         self.ops.append((idname, text, props))
         return props
 
 
 def test_file_menu_entries_open_the_file_browser():
-    for draw, want in ((menus.menu_import, ["clothfit.load_capture", "clothfit.import_cameras"]),
-                       (menus.menu_export, ["clothfit.export_cameras"])):
+    for draw, want in (
+        (menus.menu_import, ["clothfit.load_capture", "clothfit.import_cameras"]),
+        (menus.menu_export, ["clothfit.export_cameras"]),
+    ):
         me = types.SimpleNamespace(layout=_Layout())
         draw(me, bpy.context)
         assert [i for i, _, _ in me.layout.ops] == want
@@ -91,8 +95,16 @@ def test_import_capture_by_its_capture_json(small_capture):
 
 # ============================================================ properties, undo
 
-PLAIN_TEXT = {"name", "frame_times", "extract_times", "extract_camera_thresholds", "extract_status", "rig_cameras_json",
-              "fit_best_blender", "fit_status"}
+PLAIN_TEXT = {
+    "name",
+    "frame_times",
+    "extract_times",
+    "extract_camera_thresholds",
+    "extract_status",
+    "rig_cameras_json",
+    "fit_best_blender",
+    "fit_status",
+}
 
 
 def test_every_path_property_has_a_file_browser():
@@ -109,15 +121,16 @@ def test_every_path_property_has_a_file_browser():
 
 
 def test_every_property_and_operator_has_a_tooltip():
-    base = {q.identifier for q in bpy.types.PropertyGroup.bl_rna.properties} | \
-        {q.identifier for q in bpy.types.AddonPreferences.bl_rna.properties}
+    base = {q.identifier for q in bpy.types.PropertyGroup.bl_rna.properties} | {
+        q.identifier for q in bpy.types.AddonPreferences.bl_rna.properties
+    }
     missing = []
     for cls in registration.CLASSES:
         if issubclass(cls, bpy.types.Operator):
             mod, name = cls.bl_idname.split(".")
             rna = getattr(getattr(bpy.ops, mod), name).get_rna_type()
             qs = [q for q in rna.properties if q.identifier != "rna_type"]
-            if not rna.description:          # the operator's tooltip: its docstring
+            if not rna.description:  # the operator's tooltip: its docstring
                 missing.append(cls.__name__)
         elif issubclass(cls, (bpy.types.PropertyGroup, bpy.types.AddonPreferences)):
             rna = cls.bl_rna
@@ -136,6 +149,7 @@ def test_operators_that_change_the_scene_support_undo():
 
 # ======================================================== modal long operators
 
+
 def _scene_ready(tmp_path):
     scene = bpy.context.scene
     small_settings(scene, tmp_path / "cap")
@@ -147,7 +161,7 @@ def _scene_ready(tmp_path):
 def _tick_to_end(run, limit=100000):
     states = []
     for _ in range(limit):
-        assert ops.steps_tick(bpy.context, run, "MOUSEMOVE")[0] == "RUNNING"     # other events pass
+        assert ops.steps_tick(bpy.context, run, "MOUSEMOVE")[0] == "RUNNING"  # other events pass
         state, level, msg = ops.steps_tick(bpy.context, run, "TIMER")
         states.append(run.steps.fraction)
         if state != "RUNNING":
@@ -158,10 +172,10 @@ def _tick_to_end(run, limit=100000):
 def test_modal_render_runs_to_completion(tmp_path):
     scene = _scene_ready(tmp_path)
     run = ops.begin_steps(bpy.context, api.render_steps(scene), "Render Silhouettes", ops._render_done)
-    assert not (tmp_path / "cap" / "sil").exists()         # the first step only read and checked
+    assert not (tmp_path / "cap" / "sil").exists()  # the first step only read and checked
     state, level, msg, fractions = _tick_to_end(run)
     assert (state, level) == ("FINISHED", "INFO") and msg.startswith("Rendered 4 x 3 silhouettes")
-    assert fractions == pytest.approx([1 / 3, 2 / 3, 1.0])          # one capture time per TIMER event
+    assert fractions == pytest.approx([1 / 3, 2 / 3, 1.0])  # one capture time per TIMER event
     cap = load_capture(str(tmp_path / "cap"), validate=True)
     assert cap.n_cameras == 4 and cap.n_frames == 3
     assert run.timer is None and not (tmp_path / "cap" / ".render_tmp").exists()
@@ -171,7 +185,7 @@ def test_esc_keeps_the_rendered_silhouettes(tmp_path):
     scene = _scene_ready(tmp_path)
     frame0 = scene.frame_current
     run = ops.begin_steps(bpy.context, api.render_steps(scene), "Render Silhouettes", ops._render_done)
-    assert ops.steps_tick(bpy.context, run, "TIMER")[0] == "RUNNING"        # capture time 1 of 3 rendered
+    assert ops.steps_tick(bpy.context, run, "TIMER")[0] == "RUNNING"  # capture time 1 of 3 rendered
     state, level, msg = ops.steps_tick(bpy.context, run, "ESC")
     assert (state, level) == ("CANCELLED", "WARNING")
     assert "Render Silhouettes stopped: kept the silhouettes of 1 of 3 capture times (4 files)" in msg
@@ -209,11 +223,12 @@ def test_modal_simulate_and_esc_leaves_the_previous_bake(tmp_path):
     state, level, msg, _ = _tick_to_end(run)
     assert (state, level) == ("FINISHED", "INFO") and msg.startswith("Simulated and baked 4 shapes")
     after = S.baked_positions(cloth, [0.1, 0.2, 0.3])
-    assert not np.allclose(after, before, atol=1e-5)                # the stiffer cloth moved otherwise
+    assert not np.allclose(after, before, atol=1e-5)  # the stiffer cloth moved otherwise
 
 
 def _footage(root, **kw):
     from test_extract import write_footage
+
     return write_footage(str(root), **kw)
 
 
@@ -241,7 +256,7 @@ def test_modal_extract_to_completion_and_esc_keeps_the_cameras_done(tmp_path):
     if cap.n_cameras < 3:
         assert f"capture of the {cap.n_cameras} of 3 cameras" in msg
         assert cap.meta["extraction"]["stopped"] == {"cameras_done": cap.n_cameras, "cameras": 3}
-    else:                                     # the worker finished the last camera before the stop
+    else:  # the worker finished the last camera before the stop
         assert "the whole capture" in msg
 
 
@@ -249,5 +264,5 @@ def test_extract_operator_runs_to_completion_from_a_script(tmp_path):
     p = bpy.context.scene.clothfit
     _footage(tmp_path / "f", n_cams=2)
     p.footage_dir, p.capture_dir = str(tmp_path / "f"), str(tmp_path / "cap")
-    assert bpy.ops.clothfit.extract_silhouettes("INVOKE_DEFAULT") == {"FINISHED"}   # -b: no modal, to the end
+    assert bpy.ops.clothfit.extract_silhouettes("INVOKE_DEFAULT") == {"FINISHED"}  # -b: no modal, to the end
     assert os.path.isfile(tmp_path / "cap" / "capture.json")

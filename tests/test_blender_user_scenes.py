@@ -6,6 +6,7 @@ follows Blender's solver bit for bit; every difference between that and the mode
 from a declared grid moves it off Blender's path, and each has a test here. Measured on the full
 scenes: ``python tools/user_scenes.py all`` (docs/user_scenes.md).
 """
+
 import json
 import os
 import subprocess
@@ -13,22 +14,20 @@ import sys
 
 import numpy as np
 import pytest
-
 from blender_support import bpy, factory  # noqa: F401
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
 
 import user_scenes as US  # noqa: E402
-
-from addon.blender.cloth import cloth_modifier, simulate_frames  # noqa: E402
-from addon.blender.user_cloth import read_scene_cloth  # noqa: E402
-from addon.core.physics import blender as B  # noqa: E402
-from addon.core.physics.models import BlenderModel  # noqa: E402
+from clothfit.blender.cloth import cloth_modifier, simulate_frames  # noqa: E402
+from clothfit.blender.user_cloth import read_scene_cloth  # noqa: E402
+from clothfit.core.physics import blender as B  # noqa: E402
+from clothfit.core.physics.models import BlenderModel  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
-CUTS, RELEASE, AFTER = 8, 8, 16          # a 9 x 9 cloth held for 7 frames, 16 frames after the release
+CUTS, RELEASE, AFTER = 8, 8, 16  # a 9 x 9 cloth held for 7 frames, 16 frames after the release
 
 
 @pytest.fixture(autouse=True)
@@ -63,20 +62,21 @@ def max_mm(A, T):
 
 # ------------------------------------------------------------------------ the scenes and their reading
 
+
 def test_a_user_scene_is_read_as_the_cloth_receives_it():
     sc, X, obj = blender_run("cotton")
     nv = CUTS + 1
     corners = [0, CUTS, CUTS * nv, nv * nv - 1]
     assert sc.handle_vertices.tolist() == corners
     r = US.release_index("cotton")
-    assert np.all(sc.weights[:r + 1] == 1.0)                          # all four held through the release frame
-    assert sc.weights[r + 1:, 0].max() == 0.0 and np.all(sc.weights[r + 1:, 1:] == 1.0)
+    assert np.all(sc.weights[: r + 1] == 1.0)  # all four held through the release frame
+    assert sc.weights[r + 1 :, 0].max() == 0.0 and np.all(sc.weights[r + 1 :, 1:] == 1.0)
     assert np.array_equal(sc.targets[0], sc.rest[corners])
     assert [m.type for m in obj.modifiers] == ["VERTEX_WEIGHT_MIX", "CLOTH"]
     s = sc.settings
-    assert s["quality"] == 15 and s["time_scale"] == 1.0 and s["shear_stiffness"] == 15.0   # the Cotton preset
+    assert s["quality"] == 15 and s["time_scale"] == 1.0 and s["shear_stiffness"] == 15.0  # the Cotton preset
     assert sc.fps == 20.0 and sc.frame_start == 1 and sc.info["not_modelled"] == []
-    assert cloth_modifier(obj).collision_settings.use_collision        # a new cloth collides: no collider, no effect
+    assert cloth_modifier(obj).collision_settings.use_collision  # a new cloth collides: no collider, no effect
     # the transform is not applied: the rest is the float32 world transform of the mesh
     assert obj.scale[0] == pytest.approx(US.SCALE) and abs(sc.rest[:, 2] - US.HEIGHT).max() < 1e-6
     # the Grid primitive numbers vertices and faces as the core's grid, but not its edges
@@ -119,8 +119,8 @@ def test_declared_variant_is_the_model_a_user_gets_from_a_capture():
 
 # ------------------------------------------------------------------ each cause of drift, alone
 
-@pytest.mark.parametrize("name,part", [("cotton", "edges"), ("silk", "labels"), ("silk", "faces"),
-                                       ("cotton", "rest")])
+
+@pytest.mark.parametrize("name,part", [("cotton", "edges"), ("silk", "labels"), ("silk", "faces"), ("cotton", "rest")])
 def test_each_rounding_cause_moves_the_cloth_off_blenders_path(name, part):
     """The mesh's edge order (Blender's structural spring order), its vertex numbering, its face
     list and its first-frame float32 positions: each, replaced by the declared grid's, changes
@@ -140,7 +140,8 @@ def test_a_turned_grid_draws_other_diagonals():
     """A Grid turned 90 degrees splits its quads along the other diagonal than the declared grid:
     the same positions give other silhouettes (in the full scene, 0.79 % held-out E_sil instead of
     0.29 %)."""
-    from addon.core.observation.raster import silhouette
+    from clothfit.core.observation.raster import silhouette
+
     sc, X, _ = blender_run("denim")
     v = US.Variant(sc, "denim")
     declared_tris = v.p[v.grid.triangles]
@@ -152,16 +153,19 @@ def test_a_turned_grid_draws_other_diagonals():
     assert np.count_nonzero(a ^ b) > 0
 
 
-@pytest.mark.parametrize("slip", ["release_declared_one_frame_late", "settles_one_frame_longer",
-                                  "time_scale_real_time", "quality_5"])
+@pytest.mark.parametrize(
+    "slip", ["release_declared_one_frame_late", "settles_one_frame_longer", "time_scale_real_time", "quality_5"]
+)
 def test_a_users_declaration_slip_costs_millimetres(slip):
     sc, X, _ = blender_run("cotton")
     v = US.Variant(sc, "cotton")
     cf = US.capture_frames("cotton")
-    kw = {"release_declared_one_frame_late": {"weights_shift": 1},
-          "settles_one_frame_longer": {"weights_shift": 1, "frames_shift": 1},
-          "time_scale_real_time": {"rows": sc.settings_row(time_scale=B.physical_time_scale(US.FPS))[None]},
-          "quality_5": {"quality": 5}}[slip]
+    kw = {
+        "release_declared_one_frame_late": {"weights_shift": 1},
+        "settles_one_frame_longer": {"weights_shift": 1, "frames_shift": 1},
+        "time_scale_real_time": {"rows": sc.settings_row(time_scale=B.physical_time_scale(US.FPS))[None]},
+        "quality_5": {"quality": 5},
+    }[slip]
     Xc, _, _ = v.run(**kw)
     d = np.linalg.norm(Xc[0] - X[cf], axis=-1) * 1000
     assert d.mean() > 0.5 and d.max() > 3.0, (d.mean(), d.max())
@@ -170,7 +174,7 @@ def test_a_users_declaration_slip_costs_millimetres(slip):
 def test_capture_times_read_at_the_models_default_24_fps(monkeypatch):
     """The core model's default frame rate (24) on a 20 fps scene: every capture time lands on
     another frame of Blender's (the cloth advances per frame, not per second)."""
-    monkeypatch.setattr(US, "RELEASE", 6)                # 0.25 s of settling: whole frames at 20 and 24 fps
+    monkeypatch.setattr(US, "RELEASE", 6)  # 0.25 s of settling: whole frames at 20 and 24 fps
     sc, X, _ = blender_run("cotton")
     v = US.Variant(sc, "cotton")
     scen = US.declared_scenario("cotton", v.grid, sc)
@@ -206,7 +210,7 @@ def test_release_keyed_over_frames_is_soft_goals_followed_exactly():
     base, Xb, _ = blender_run("cotton")
     sc, X, _ = blender_run("cotton", release_keys=(0, 4))
     r = US.release_index("cotton")
-    ramp = sc.weights[r + 1:r + 4, 0]
+    ramp = sc.weights[r + 1 : r + 4, 0]
     assert np.all((ramp > 0) & (ramp < 1)), ramp
     core, _ = sc.simulate()
     assert follows(core[0], X)
@@ -223,7 +227,7 @@ def test_pins_painted_below_one_are_soft_goal_springs():
     core, _ = sc.simulate()
     assert follows(core[0], X)
     held = sc.handle_vertices[1]
-    assert np.linalg.norm(X[-1, held] - X[0, held]) > 1e-3         # a "held" corner moved
+    assert np.linalg.norm(X[-1, held] - X[0, held]) > 1e-3  # a "held" corner moved
     assert max_mm(Xb, X) > 3.0
 
 
@@ -235,7 +239,7 @@ def test_a_weight_modifier_below_the_cloth_releases_nothing():
     assert np.all(sc.weights == 1.0)
     core, _ = sc.simulate()
     assert follows(core[0], X)
-    assert follows(X[-1, sc.handle_vertices], X[0, sc.handle_vertices])   # the corner never fell
+    assert follows(X[-1, sc.handle_vertices], X[0, sc.handle_vertices])  # the corner never fell
 
 
 def test_collider_scene_core_exact_until_contact_then_blender_alone():
@@ -247,29 +251,50 @@ def test_collider_scene_core_exact_until_contact_then_blender_alone():
     core, _ = sc.simulate()
     d = np.abs(core[0] - X).max(axis=(1, 2))
     off = np.nonzero(d > one_step(X))[0]
-    assert off.size and off[0] > 3                                       # free fall first: exact
-    assert follows(core[0, :off[0]], X[:off[0]])
-    assert max_mm(core[0, -1:], X[-1:]) > 10.0                           # then the block holds Blender's cloth
+    assert off.size and off[0] > 3  # free fall first: exact
+    assert follows(core[0, : off[0]], X[: off[0]])
+    assert max_mm(core[0, -1:], X[-1:]) > 10.0  # then the block holds Blender's cloth
 
 
 # ------------------------------------------------------------------------ the tool, end to end
 
+
 def test_user_scenes_tool_builds_observes_and_measures(tmp_path):
     """``all`` on one small scene: .blend, Blender's truth and the scene reading, a capture in our
     format (shapes in the declared grid's order), and the drift figures."""
-    from addon.core.observation.capture import load_capture
+    from clothfit.core.observation.capture import load_capture
+
     out = tmp_path / "us"
     js = tmp_path / "d.json"
-    r = subprocess.run([sys.executable, os.path.join(ROOT, "tools", "user_scenes.py"), "all", "--out", str(out),
-                        "--scenes", "silk", "--cuts", "6", "--release", "5", "--after", "6", "--json", str(js)],
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [
+            sys.executable,
+            os.path.join(ROOT, "tools", "user_scenes.py"),
+            "all",
+            "--out",
+            str(out),
+            "--scenes",
+            "silk",
+            "--cuts",
+            "6",
+            "--release",
+            "5",
+            "--after",
+            "6",
+            "--json",
+            str(js),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     cap = load_capture(str(out / "captures" / "silk"))
     assert len(cap.cameras) == 10 and cap.cameras[0].width == 640 and cap.cameras[0].height == 480
     assert cap.meta["true_blender_cloth"]["quality"] == 15 and cap.meta["blend"].endswith("silk.blend")
     assert [h.release_time for h in cap.scenario.handles].count(0.0) == 1
     p = np.array(cap.meta["mesh_vertex_of_grid_vertex"])
-    assert not np.array_equal(p, np.arange(p.size))                      # a subdivided plane: its own order
+    assert not np.array_equal(p, np.arange(p.size))  # a subdivided plane: its own order
     assert np.allclose(cap.shapes[0][:, :2], cap.scenario.grid.rest[:, :2], atol=0.05)
     d = json.loads(js.read_text())["scenes"]["silk"]
     assert d["scene_vs_blender_every_frame"]["bitwise_equal"]

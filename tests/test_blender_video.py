@@ -1,4 +1,5 @@
 """Extract Silhouettes from videos inside Blender (OpenCV's video backend, as in Blender without PyAV)."""
+
 import os
 import sys
 
@@ -10,7 +11,7 @@ bpy = pytest.importorskip("bpy")
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
 
 from blender_support import factory, run_error  # noqa: E402,F401
-from addon.core.observation.capture import load_capture  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
 from video_footage import FLASH_BEFORE, iou, make_video_footage  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")

@@ -1,16 +1,15 @@
 """Camera import/export (addon/core/footage/calib_io.py): OpenCV FileStorage, COLMAP, distortion."""
+
 import json
-import os
 
 import cv2
 import numpy as np
 import pytest
-
-from addon.core.footage import calib_io as CI
-from addon.core.footage import colmap as CM
-from addon.core.observation.camera import Camera, intrinsics, load_rig, look_at
-from addon.core.errors import ClothFitError
-from addon.core.observation.raster import rasterize
+from clothfit.core.errors import ClothFitError
+from clothfit.core.footage import calib_io as CI
+from clothfit.core.footage import colmap as CM
+from clothfit.core.observation.camera import Camera, intrinsics, load_rig, look_at
+from clothfit.core.observation.raster import rasterize
 
 
 def rig(n=3, dist=None, skewless=True):
@@ -30,8 +29,8 @@ def same(a, b, tol=1e-9):
         assert np.allclose(x.K, y.K, atol=tol) and np.allclose(x.R, y.R, atol=tol) and np.allclose(x.t, y.t, atol=tol)
         dx = np.zeros(8)
         dy = np.zeros(8)
-        dx[:min(8, x.dist.size)] = x.dist[:8]
-        dy[:min(8, y.dist.size)] = y.dist[:8]
+        dx[: min(8, x.dist.size)] = x.dist[:8]
+        dy[: min(8, y.dist.size)] = y.dist[:8]
         assert np.allclose(dx, dy, atol=tol)
 
 
@@ -39,6 +38,7 @@ DISTS = [[-0.21, 0.05, 0.001, -0.002, 0.01], [0.1, -0.02, 0.0, 0.0, 0.0], []]
 
 
 # --------------------------------------------------------------------- OpenCV
+
 
 @pytest.mark.parametrize("ext", [".yml", ".yaml", ".json", ".xml"])
 def test_opencv_multi_file_round_trip(tmp_path, ext):
@@ -69,51 +69,92 @@ def test_handwritten_opencv_files(tmp_path):
     rvec = cv2.Rodrigues(R)[0].ravel()
     # plain YAML (no %YAML header), rvec/tvec, image_size [w, h], camelCase
     y = tmp_path / "plain.yaml"
-    y.write_text("cameraMatrix: [[800, 0, 319.5], [0, 800, 239.5], [0, 0, 1]]\n"
-                 "distCoeffs: [-0.1, 0.01, 0, 0]\n"
-                 f"rvec: [{rvec[0]!r}, {rvec[1]!r}, {rvec[2]!r}]\n"
-                 f"tvec: [{t[0]!r}, {t[1]!r}, {t[2]!r}]\n"
-                 "imageSize: [640, 480]\n")
+    y.write_text(
+        "cameraMatrix: [[800, 0, 319.5], [0, 800, 239.5], [0, 0, 1]]\n"
+        "distCoeffs: [-0.1, 0.01, 0, 0]\n"
+        f"rvec: [{rvec[0]!r}, {rvec[1]!r}, {rvec[2]!r}]\n"
+        f"tvec: [{t[0]!r}, {t[1]!r}, {t[2]!r}]\n"
+        "imageSize: [640, 480]\n"
+    )
     c = CI.import_cameras(str(y))[0]
     assert c.name == "plain" and (c.width, c.height) == (640, 480)
     assert np.allclose(c.R, R, atol=1e-12) and np.allclose(c.dist, [-0.1, 0.01, 0, 0])
     # OpenCV JSON with opencv-matrix nodes, two cameras as top-level maps, K and R/T
     j = tmp_path / "stereo.json"
-    mat = lambda a: {"type_id": "opencv-matrix", "rows": a.shape[0], "cols": a.shape[1], "dt": "d",
-                     "data": a.ravel().tolist()}
+    mat = lambda a: {
+        "type_id": "opencv-matrix",
+        "rows": a.shape[0],
+        "cols": a.shape[1],
+        "dt": "d",
+        "data": a.ravel().tolist(),
+    }
     import json
-    j.write_text(json.dumps({
-        "left": {"K": mat(np.array([[700.0, 0, 300], [0, 700, 200], [0, 0, 1]])), "R": mat(np.eye(3)),
-                 "T": mat(np.zeros((3, 1))), "width": 600, "height": 400},
-        "right": {"K": mat(np.array([[700.0, 0, 300], [0, 700, 200], [0, 0, 1]])), "R": mat(R),
-                  "T": mat(t.reshape(3, 1)), "width": 600, "height": 400},
-        "baseline_note": "not a camera"}))
+
+    j.write_text(
+        json.dumps(
+            {
+                "left": {
+                    "K": mat(np.array([[700.0, 0, 300], [0, 700, 200], [0, 0, 1]])),
+                    "R": mat(np.eye(3)),
+                    "T": mat(np.zeros((3, 1))),
+                    "width": 600,
+                    "height": 400,
+                },
+                "right": {
+                    "K": mat(np.array([[700.0, 0, 300], [0, 700, 200], [0, 0, 1]])),
+                    "R": mat(R),
+                    "T": mat(t.reshape(3, 1)),
+                    "width": 600,
+                    "height": 400,
+                },
+                "baseline_note": "not a camera",
+            }
+        )
+    )
     cams = CI.import_cameras(str(j))
     assert [c.name for c in cams] == ["left", "right"] and np.allclose(cams[1].t, t)
     # no image size in the file: taken from the caller
     n = tmp_path / "nosize.yml"
-    n.write_text("%YAML:1.0\n---\nK: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nt: [0, 0, 1]\n")
+    n.write_text(
+        "%YAML:1.0\n---\nK: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nt: [0, 0, 1]\n"
+    )
     with pytest.raises(ClothFitError, match="no image size"):
         CI.import_cameras(str(n))
     assert CI.import_cameras(str(n), width=640, height=480)[0].width == 640
 
 
-@pytest.mark.parametrize("content, needle", [
-    ("", "empty"),
-    ("K: [[1, 0, 0], [0, 1, 0]\n  oops: [", "could not be parsed"),
-    ("foo: 1\nbar: [1, 2]\n", "no camera found"),
-    ("K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nt: [0, 0, 1]\nimage_width: 64\nimage_height: 48\n", "no extrinsics"),
-    ("K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nimage_width: 64\nimage_height: 48\n",
-     "no translation"),
-    ("K: [800, 0, 320, 0, 800]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nt: [0, 0, 1]\nimage_width: 64\nimage_height: 48\n",
-     "must have 9 values"),
-    ("K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nrvec: [0.5, 0, 0]\nt: [0, 0, 1]\n"
-     "image_width: 64\nimage_height: 48\n", "disagree"),
-    ("K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, -1]\nt: [0, 0, 1]\n"
-     "image_width: 64\nimage_height: 48\n", "not a rotation"),
-    ("K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nt: [0, 0, 1]\nD: [0.1, 0.2, 0.3]\n"
-     "image_width: 64\nimage_height: 48\n", "4 or 5"),
-])
+@pytest.mark.parametrize(
+    "content, needle",
+    [
+        ("", "empty"),
+        ("K: [[1, 0, 0], [0, 1, 0]\n  oops: [", "could not be parsed"),
+        ("foo: 1\nbar: [1, 2]\n", "no camera found"),
+        ("K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nt: [0, 0, 1]\nimage_width: 64\nimage_height: 48\n", "no extrinsics"),
+        (
+            "K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nimage_width: 64\nimage_height: 48\n",
+            "no translation",
+        ),
+        (
+            "K: [800, 0, 320, 0, 800]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nt: [0, 0, 1]\nimage_width: 64\nimage_height: 48\n",
+            "must have 9 values",
+        ),
+        (
+            "K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nrvec: [0.5, 0, 0]\nt: [0, 0, 1]\n"
+            "image_width: 64\nimage_height: 48\n",
+            "disagree",
+        ),
+        (
+            "K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, -1]\nt: [0, 0, 1]\n"
+            "image_width: 64\nimage_height: 48\n",
+            "not a rotation",
+        ),
+        (
+            "K: [800, 0, 320, 0, 800, 240, 0, 0, 1]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nt: [0, 0, 1]\nD: [0.1, 0.2, 0.3]\n"
+            "image_width: 64\nimage_height: 48\n",
+            "4 or 5",
+        ),
+    ],
+)
 def test_opencv_bad_files(tmp_path, content, needle):
     p = tmp_path / "bad.yml"
     p.write_text(content)
@@ -147,6 +188,7 @@ def test_duplicate_names_refused(tmp_path):
 
 # ---------------------------------------------------------------------- COLMAP
 
+
 def colmap_project(model, params, qvec, tvec, X):
     """COLMAP's own projection, written from its documentation (pixel centres at +0.5)."""
     R = CM._quat_to_R(np.asarray(qvec, float))
@@ -172,11 +214,13 @@ def colmap_project(model, params, qvec, tvec, X):
     return np.stack([fx * (u + du) + cx, fy * (v + dv) + cy], -1)
 
 
-MODELS = [("SIMPLE_PINHOLE", [850.0, 320.0, 240.0]),
-          ("PINHOLE", [850.0, 860.0, 321.0, 239.0]),
-          ("SIMPLE_RADIAL", [850.0, 320.0, 240.0, -0.08]),
-          ("RADIAL", [850.0, 320.0, 240.0, -0.08, 0.02]),
-          ("OPENCV", [850.0, 860.0, 321.0, 239.0, -0.1, 0.03, 0.001, -0.0015])]
+MODELS = [
+    ("SIMPLE_PINHOLE", [850.0, 320.0, 240.0]),
+    ("PINHOLE", [850.0, 860.0, 321.0, 239.0]),
+    ("SIMPLE_RADIAL", [850.0, 320.0, 240.0, -0.08]),
+    ("RADIAL", [850.0, 320.0, 240.0, -0.08, 0.02]),
+    ("OPENCV", [850.0, 860.0, 321.0, 239.0, -0.1, 0.03, 0.001, -0.0015]),
+]
 
 
 @pytest.mark.parametrize("model, params", MODELS)
@@ -188,13 +232,14 @@ def test_colmap_models_and_half_pixel_convention(tmp_path, model, params):
     (tmp_path / "images.txt").write_text(
         "# Image list\n"
         f"3 {' '.join(map(str, q))} {' '.join(map(str, tv))} 7 frames/cam05.jpg\n"
-        "100.0 200.0 -1 101.5 20.25 4\n")
+        "100.0 200.0 -1 101.5 20.25 4\n"
+    )
     cam = CI.import_cameras(str(tmp_path))[0]
     assert cam.name == "cam05" and (cam.width, cam.height) == (640, 480)
     X = np.random.default_rng(0).uniform(-0.05, 0.05, (50, 3))
     ours = cam.project(X)
     theirs = colmap_project(model, params, q, tv, X)
-    assert np.allclose(ours, theirs - 0.5, atol=1e-9)       # our pixel centres at integers
+    assert np.allclose(ours, theirs - 0.5, atol=1e-9)  # our pixel centres at integers
     # and back out: the same COLMAP parameters (model may be generalised to OPENCV)
     CI.export_cameras([cam], str(tmp_path / "out"), "colmap")
     again = CI.import_cameras(str(tmp_path / "out"))[0]
@@ -208,7 +253,9 @@ def test_colmap_models_and_half_pixel_convention(tmp_path, model, params):
 def test_colmap_export_models_and_round_trip(tmp_path):
     cams = rig(3, [[-0.2, 0.05, 0.001, -0.002], [0.1, -0.02, 0, 0, 0.003], []])
     CI.export_cameras(cams, str(tmp_path / "m"), "colmap")
-    models = [ln.split()[1] for ln in (tmp_path / "m" / "cameras.txt").read_text().splitlines() if not ln.startswith("#")]
+    models = [
+        ln.split()[1] for ln in (tmp_path / "m" / "cameras.txt").read_text().splitlines() if not ln.startswith("#")
+    ]
     assert models == ["OPENCV", "FULL_OPENCV", "PINHOLE"]
     same(cams, CI.import_cameras(str(tmp_path / "m" / "images.txt")))
 
@@ -223,17 +270,20 @@ def test_colmap_name_collisions_and_sparse_folder(tmp_path):
     assert cams[0].K[0, 2] == 31.5
 
 
-@pytest.mark.parametrize("cams_txt, imgs_txt, needle", [
-    ("1 FISHEYE 64 48 50 32 24 0.1\n", "1 1 0 0 0 0 0 1 1 a.png\n", "not supported"),
-    ("1 PINHOLE 64 48 50 32 24\n", "1 1 0 0 0 0 0 1 1 a.png\n", "needs 4 parameters"),
-    ("1 PINHOLE 64 48 50 50 32 24\n", "1 1 0 0 0 0 0 1 2 a.png\n", "camera id 2"),
-    ("1 PINHOLE 64 48 50 50 32 24\n", "1 0 0 0 0 0 0 1 1 a.png\n", "quaternion"),
-    ("1 PINHOLE 64 48 50 50 32 24\n", "1 1 0 0 x 0 0 1 1 a.png\n", "non-numeric"),
-    ("1 PINHOLE 64 48 50 50 32 24\n", "1 1 0 0 0 0 0 1\n", "expected"),
-    ("# nothing\n", "1 1 0 0 0 0 0 1 1 a.png\n", "no cameras"),
-    ("1 PINHOLE 64 48 50 50 32 24\n", "# none\n", "no images"),
-    ("1 PINHOLE 64 48 -50 50 32 24\n", "1 1 0 0 0 0 0 1 1 a.png\n", "focal"),
-])
+@pytest.mark.parametrize(
+    "cams_txt, imgs_txt, needle",
+    [
+        ("1 FISHEYE 64 48 50 32 24 0.1\n", "1 1 0 0 0 0 0 1 1 a.png\n", "not supported"),
+        ("1 PINHOLE 64 48 50 32 24\n", "1 1 0 0 0 0 0 1 1 a.png\n", "needs 4 parameters"),
+        ("1 PINHOLE 64 48 50 50 32 24\n", "1 1 0 0 0 0 0 1 2 a.png\n", "camera id 2"),
+        ("1 PINHOLE 64 48 50 50 32 24\n", "1 0 0 0 0 0 0 1 1 a.png\n", "quaternion"),
+        ("1 PINHOLE 64 48 50 50 32 24\n", "1 1 0 0 x 0 0 1 1 a.png\n", "non-numeric"),
+        ("1 PINHOLE 64 48 50 50 32 24\n", "1 1 0 0 0 0 0 1\n", "expected"),
+        ("# nothing\n", "1 1 0 0 0 0 0 1 1 a.png\n", "no cameras"),
+        ("1 PINHOLE 64 48 50 50 32 24\n", "# none\n", "no images"),
+        ("1 PINHOLE 64 48 -50 50 32 24\n", "1 1 0 0 0 0 0 1 1 a.png\n", "focal"),
+    ],
+)
 def test_colmap_bad_files(tmp_path, cams_txt, imgs_txt, needle):
     (tmp_path / "cameras.txt").write_text(cams_txt)
     (tmp_path / "images.txt").write_text(imgs_txt)
@@ -270,6 +320,7 @@ def test_colmap_refuses_what_it_cannot_hold():
 
 # ------------------------------------------------------------------- distortion
 
+
 @pytest.mark.parametrize("dist", DISTS[:2] + [[-0.2, 0.05, 0.001, -0.002, 0.01, 0.02, -0.01, 0.003]])
 def test_project_with_distortion_matches_cv2(dist):
     cam = rig(1, [dist])[0]
@@ -301,38 +352,45 @@ def test_undistort_silhouette_matches_undistorted_projection():
     assert got.dtype == bool and got.shape == distorted.shape
     k = np.ones((3, 3), np.uint8)
     e8 = expect.astype(np.uint8)
-    band = (cv2.dilate(e8, k) > 0) & ~(cv2.erode(e8, k) > 0)   # within 1 px of the true boundary
-    assert ((distorted ^ expect) & ~band).sum() > 100            # distortion moves the boundary further
-    assert ((got ^ expect) & ~band).sum() == 0                   # undistorted: only boundary pixels differ
+    band = (cv2.dilate(e8, k) > 0) & ~(cv2.erode(e8, k) > 0)  # within 1 px of the true boundary
+    assert ((distorted ^ expect) & ~band).sum() > 100  # distortion moves the boundary further
+    assert ((got ^ expect) & ~band).sum() == 0  # undistorted: only boundary pixels differ
     assert (got ^ expect).sum() < 0.4 * (distorted ^ expect).sum()
     with pytest.raises(ClothFitError, match="camera"):
         CI.undistort_silhouette(distorted[:-1], cam)
     plain = rig(1)[0]
     m = np.zeros((480, 640), np.uint8)
     m[100:200, 100:300] = 1
-    assert np.array_equal(CI.undistort_silhouette(m, plain), m > 0)   # no distortion: unchanged
+    assert np.array_equal(CI.undistort_silhouette(m, plain), m > 0)  # no distortion: unchanged
 
 
 # ------------------------------------------------------------------------- CLI
 
+
 def test_cli_import_and_export_cameras(tmp_path, capsys):
-    from addon.cli import main as cli
+    from clothfit.cli import main as cli
+
     cams = rig(3, DISTS)
     CI.export_cameras(cams, str(tmp_path / "colmap"), "colmap")
     assert cli(["import-cameras", str(tmp_path / "colmap"), "-o", str(tmp_path / "cams.json")]) == 0
     same(cams, CI.import_cameras(str(tmp_path / "cams.json")))
     io = capsys.readouterr()
-    assert "imported 3 cameras" in io.err and "cam01" in io.err          # for people: stderr
-    assert json.loads(io.out) == {"command": "import-cameras", "out": str(tmp_path / "cams.json"),
-                                  "cameras": ["cam00", "cam01", "cam02"]}
+    assert "imported 3 cameras" in io.err and "cam01" in io.err  # for people: stderr
+    assert json.loads(io.out) == {
+        "command": "import-cameras",
+        "out": str(tmp_path / "cams.json"),
+        "cameras": ["cam00", "cam01", "cam02"],
+    }
     assert cli(["export-cameras", str(tmp_path / "cams.json"), "-o", str(tmp_path / "o.yml")]) == 0
     same(cams, CI.import_cameras(str(tmp_path / "o.yml")))
-    assert cli(["export-cameras", str(tmp_path / "cams.json"), "-o", str(tmp_path / "per"), "--format",
-                "opencv-dir"]) == 0
+    assert (
+        cli(["export-cameras", str(tmp_path / "cams.json"), "-o", str(tmp_path / "per"), "--format", "opencv-dir"]) == 0
+    )
     same(cams, CI.import_cameras(str(tmp_path / "per")))
     # a capture as the source
-    from addon.core.observation.capture import write_capture
-    from addon.core.physics.scenario import paper_scenario
+    from clothfit.core.observation.capture import write_capture
+    from clothfit.core.physics.scenario import paper_scenario
+
     cap = write_capture(str(tmp_path / "cap"), cams, paper_scenario(frame_times=[0.1]), None)
     assert cli(["export-cameras", cap.root, "-o", str(tmp_path / "fromcap")]) == 0
     same(cams, CI.import_cameras(str(tmp_path / "fromcap")))

@@ -5,6 +5,7 @@ OpenCV cameras (tests/calib_synth.py: every pixel's ray meets the board plane, 3
 sensor noise), small images so the test runs in seconds. The photoreal measurement against the
 issue's goals is ``tools/phone_rig.py calibrate`` (docs/figures/phone_rig_calib.json).
 """
+
 import json
 import os
 import shutil
@@ -15,10 +16,9 @@ import pytest
 
 sys.path.insert(0, os.path.dirname(__file__))
 import calib_synth as S  # noqa: E402
-
-from addon.cli import main as cli  # noqa: E402
-from addon.core.footage import calibrate as CB  # noqa: E402
-from addon.core.observation.camera import load_cameras  # noqa: E402
+from clothfit.cli import main as cli  # noqa: E402
+from clothfit.core.footage import calibrate as CB  # noqa: E402
+from clothfit.core.observation.camera import load_cameras  # noqa: E402
 
 BOARD = "9,7,0.04,0.03,DICT_5X5_100"
 
@@ -81,13 +81,15 @@ def test_make_board(tmp_path, capsys):
     r = json.loads(capsys.readouterr().out)
     assert os.path.getsize(r["png"]) > 1000 and os.path.getsize(r["pdf"]) > 500
     import cv2
+
     img = cv2.imread(r["png"], cv2.IMREAD_GRAYSCALE)
     ids, pts, _, _ = CB.Detector(CB.parse_board(BOARD)).detect(img)
-    assert ids.size == CB.parse_board(BOARD).n_corners          # the printed board is found whole
+    assert ids.size == CB.parse_board(BOARD).n_corners  # the printed board is found whole
 
 
 def test_bad_inputs(dataset, tmp_path, capsys):
     import cv2
+
     out = str(tmp_path / "cams.json")
 
     def args(folder, *extra):
@@ -110,10 +112,15 @@ def test_bad_inputs(dataset, tmp_path, capsys):
             cv2.imwrite(str(blank / c / f"m{k:03d}.png"), np.full((400, 300), 120, np.uint8))
     _one_line_error(capsys, args(str(blank)), "found in none of the 6 frames")
     # a board definition that does not match the print: another dictionary, another layout
-    _one_line_error(capsys, ["calibrate", dataset["root"], "--board", "9,7,0.04,0.03,DICT_4X4_50", "--out", out],
-                    "DICT_5X5", "does not match")
-    _one_line_error(capsys, ["calibrate", dataset["root"], "--board", "5,4,0.04,0.03,DICT_5X5_100", "--out", out],
-                    "does not match")
+    _one_line_error(
+        capsys,
+        ["calibrate", dataset["root"], "--board", "9,7,0.04,0.03,DICT_4X4_50", "--out", out],
+        "DICT_5X5",
+        "does not match",
+    )
+    _one_line_error(
+        capsys, ["calibrate", dataset["root"], "--board", "5,4,0.04,0.03,DICT_5X5_100", "--out", out], "does not match"
+    )
     # a camera that sees the board too rarely
     root = _copy(dataset, tmp_path / "b")
     files = sorted(os.listdir(os.path.join(root, "phone2")))

@@ -1,15 +1,26 @@
-import sys, os; sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import json
 
 import numpy as np
 import pytest
-
-from addon.core.observation import camera as camera_mod
-from addon.core.observation.capture import (DEFAULT_PATTERN, FORMAT, Capture, PendingCapture, finalize_capture, load_capture, read_shapes, write_capture)
-from addon.core.observation.silhouette_files import read_silhouette, save_silhouette
-from addon.core.errors import ClothFitError
-from addon.core.physics.scenario import ClothGrid, paper_scenario
+from clothfit.core.errors import ClothFitError
+from clothfit.core.observation import camera as camera_mod
+from clothfit.core.observation.capture import (
+    DEFAULT_PATTERN,
+    FORMAT,
+    Capture,
+    PendingCapture,
+    finalize_capture,
+    load_capture,
+    read_shapes,
+    write_capture,
+)
+from clothfit.core.observation.silhouette_files import read_silhouette, save_silhouette
+from clothfit.core.physics.scenario import ClothGrid, paper_scenario
 
 H, W = 48, 64
 TIMES = [0.05, 0.10, 0.15]
@@ -31,7 +42,7 @@ def _masks(n_cams, n_frames, seed=0):
         for f in range(n_frames):
             m = np.zeros((H, W), bool)
             r0, c0 = rng.integers(5, 20), rng.integers(5, 30)
-            m[r0:r0 + 15 + f, c0:c0 + 20 + c] = True
+            m[r0 : r0 + 15 + f, c0 : c0 + 20 + c] = True
             m[rng.integers(0, H), rng.integers(0, W)] = True
             row.append(m)
         out.append(row)
@@ -43,8 +54,12 @@ def _shapes(scen, seed=1):
     return rng.normal(size=(len(scen.frame_times), scen.grid.n_vertices, 3)) * 0.05
 
 
-META = {"gt_params": {"m": 1e-5, "k": 10.0, "l": 0.0333, "d": 2e-5}, "noise": {"fraction": 0.05},
-        "generator": "test", "seed": 7}
+META = {
+    "gt_params": {"m": 1e-5, "k": 10.0, "l": 0.0333, "d": 2e-5},
+    "noise": {"fraction": 0.05},
+    "generator": "test",
+    "seed": 7,
+}
 
 
 @pytest.fixture
@@ -63,6 +78,7 @@ def _err(fn, *a, **k):
 
 
 # ------------------------------------------------------------------- round trip
+
 
 def test_round_trip(cap_dir):
     root, cams, scen, masks = cap_dir
@@ -101,6 +117,7 @@ def test_files_on_disk(cap_dir):
     assert (root / "sil" / "cam00" / "000.png").is_file()
     assert (root / "sil" / "cam02" / "002.png").is_file()
     import cv2
+
     img = cv2.imread(str(root / "sil" / "cam01" / "001.png"), cv2.IMREAD_UNCHANGED)
     assert img.dtype == np.uint8 and img.ndim == 2 and set(np.unique(img)) == {0, 255}
     z = np.load(root / "shapes.npz")
@@ -126,8 +143,9 @@ def test_pending_capture_then_finalize(tmp_path):
     """Two-step writing for renderers: no capture.json until finalize, which writes it last."""
     root = tmp_path / "c"
     cams, scen = _rig(), _scenario()
-    pending = write_capture(str(root), cams, scen, None, shapes=_shapes(scen), cloth_mass=0.002, meta=META,
-                            finalize=False)
+    pending = write_capture(
+        str(root), cams, scen, None, shapes=_shapes(scen), cloth_mass=0.002, meta=META, finalize=False
+    )
     assert isinstance(pending, PendingCapture) and not pending.finalized
     assert (root / "cameras.json").is_file() and (root / "shapes.npz").is_file()
     assert not (root / "capture.json").exists()
@@ -195,7 +213,7 @@ def test_subset_allows_missing_files_of_other_cameras(cap_dir):
     sub = cap.subset([1, 2], [0, 1])
     sub.validate(full=True)
     assert len(sub.load_silhouettes()) == 2
-    cap.load_silhouettes([0], [0, 2])           # the missing one not asked for: fine
+    cap.load_silhouettes([0], [0, 2])  # the missing one not asked for: fine
     msg = _err(cap.validate, full=True)
     assert "001.png" in msg and "not found" in msg
 
@@ -211,24 +229,27 @@ def test_subset_shapes_and_frame_mapping(cap_dir):
 
 # -------------------------------------------------------------- silhouette reader
 
+
 def test_read_silhouette_variants(tmp_path):
     import cv2
+
     m = np.zeros((H, W), bool)
     m[10:20, 5:40] = True
     p = str(tmp_path / "a.png")
-    cv2.imwrite(p, m.astype(np.uint8))                               # 0/1
+    cv2.imwrite(p, m.astype(np.uint8))  # 0/1
     assert np.array_equal(read_silhouette(p, (H, W)), m)
     cv2.imwrite(p, np.repeat((m * 255).astype(np.uint8)[..., None], 3, 2))  # equal BGR
     assert np.array_equal(read_silhouette(p, (H, W)), m)
     bgra = np.dstack([np.repeat((m * 255).astype(np.uint8)[..., None], 3, 2), np.full((H, W), 255, np.uint8)])
-    cv2.imwrite(p, bgra)                                              # opaque RGBA
+    cv2.imwrite(p, bgra)  # opaque RGBA
     assert np.array_equal(read_silhouette(p, (H, W)), m)
-    cv2.imwrite(p, (m * 65535).astype(np.uint16))                     # 16-bit 0/65535
+    cv2.imwrite(p, (m * 65535).astype(np.uint16))  # 16-bit 0/65535
     assert np.array_equal(read_silhouette(p, (H, W)), m)
 
 
 def test_colour_image_with_differing_channels(tmp_path):
     import cv2
+
     img = np.zeros((H, W, 3), np.uint8)
     img[10:20, 10:20] = (0, 0, 255)
     p = str(tmp_path / "col.png")
@@ -240,6 +261,7 @@ def test_colour_image_with_differing_channels(tmp_path):
 
 def test_transparent_alpha_rejected(tmp_path):
     import cv2
+
     img = np.full((H, W, 4), 255, np.uint8)
     img[..., 3] = 0
     p = str(tmp_path / "alpha.png")
@@ -255,6 +277,7 @@ def test_save_silhouette_rejects_bad_masks(tmp_path):
 
 
 # -------------------------------------------------------------- bad inputs: files
+
 
 def test_missing_capture_json(tmp_path):
     (tmp_path / "empty").mkdir()
@@ -309,8 +332,12 @@ def test_bad_scenario_names_file(cap_dir):
 def test_bad_pattern(cap_dir):
     root, *_ = cap_dir
     d = json.loads((root / "capture.json").read_text())
-    for pat, word in (("sil/{frame}.png", "{camera}"), ("sil/{camera}/{idx}.png", "{idx}"),
-                      ("../{camera}/{frame}.png", ".."), ("sil/{camera}.png", "{frame}")):
+    for pat, word in (
+        ("sil/{frame}.png", "{camera}"),
+        ("sil/{camera}/{idx}.png", "{idx}"),
+        ("../{camera}/{frame}.png", ".."),
+        ("sil/{camera}.png", "{frame}"),
+    ):
         (root / "capture.json").write_text(json.dumps(dict(d, silhouettes=pat)))
         msg = _err(load_capture, str(root))
         assert word in msg and "capture.json" in msg
@@ -349,7 +376,7 @@ def test_corrupt_png(cap_dir):
     msg = _err(cap.load_silhouette, 0, 1)
     assert "001.png" in msg and "corrupt" in msg
     good = (root / "sil" / "cam00" / "000.png").read_bytes()
-    p.write_bytes(good[: len(good) // 2])                              # truncated PNG
+    p.write_bytes(good[: len(good) // 2])  # truncated PNG
     msg = _err(cap.load_silhouette, 0, 1)
     assert "001.png" in msg
     p.write_bytes(b"")
@@ -369,6 +396,7 @@ def test_wrong_size_png(cap_dir):
 
 def test_non_binary_png_and_binarize_threshold(cap_dir):
     import cv2
+
     root, *_ = cap_dir
     img = np.zeros((H, W), np.uint8)
     img[10:30, 10:40] = 200
@@ -440,6 +468,7 @@ def test_camera_count_mismatch_fewer_cameras_in_json(cap_dir):
 
 def test_camera_count_mismatch_camera_without_silhouettes(cap_dir):
     import shutil
+
     root, *_ = cap_dir
     shutil.rmtree(root / "sil" / "cam02")
     cap = load_capture(str(root))

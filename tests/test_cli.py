@@ -1,6 +1,9 @@
-import sys, os; sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import os
+import sys
 
-"""The headless CLI ``python -m addon`` (the ``clothfit`` console script) in a subprocess: synth, fit,
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+"""The headless CLI ``python -m clothfit`` (the ``clothfit`` console script) in a subprocess: synth, fit,
 evaluate, overlay with their JSON on stdout, and one-line errors (exit code 2, no traceback) for bad input.
 The CLI's habits (help on every option, --version, exit codes 64 and 130, the console script) are in
 test_cli_habits.py."""
@@ -18,8 +21,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 def run(*args, timeout=300):
     env = dict(os.environ)
     env.pop("CLOTHFIT_PROGRESS", None)
-    p = subprocess.run([sys.executable, "-m", "addon", *[str(a) for a in args]], cwd=ROOT, env=env,
-                       capture_output=True, text=True, timeout=timeout)
+    p = subprocess.run(
+        [sys.executable, "-m", "clothfit", *[str(a) for a in args]],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
     return p.returncode, p.stdout, p.stderr
 
 
@@ -45,8 +54,9 @@ def cap(tmp_path_factory):
 
 
 def test_synth_writes_a_capture(cap):
-    from addon.core.observation.capture import load_capture
-    c = load_capture(str(cap), validate=True)       # every silhouette file readable, sizes right
+    from clothfit.core.observation.capture import load_capture
+
+    c = load_capture(str(cap), validate=True)  # every silhouette file readable, sizes right
     assert c.n_cameras == 18 and c.n_frames == 30
     assert all((k.height, k.width) == (60, 80) for k in c.cameras)
     assert c.shapes is not None and c.shapes.shape == (30, 256, 3)
@@ -56,12 +66,25 @@ def test_synth_writes_a_capture(cap):
 @pytest.fixture(scope="module")
 def fit_json(cap):
     out = cap.parent / "fit.json"
-    rc, so, err = run("fit", cap, "--out", out, "--max-evaluations", 60, "--cameras", "n:2",
-                      "--times", "0.1,0.2,0.3", "--optimizer", "cma-es", "--quiet")
+    rc, so, err = run(
+        "fit",
+        cap,
+        "--out",
+        out,
+        "--max-evaluations",
+        60,
+        "--cameras",
+        "n:2",
+        "--times",
+        "0.1,0.2,0.3",
+        "--optimizer",
+        "cma-es",
+        "--quiet",
+    )
     assert rc == 0, err
     assert "Traceback" not in err
     assert f"wrote {out}" in err
-    summary = json.loads(so)                       # stdout: only the summary, as JSON
+    summary = json.loads(so)  # stdout: only the summary, as JSON
     assert summary["out"] == str(out) and summary["cancelled"] is False
     assert summary["evaluations"] >= 60 and set(summary["params"]) == {"m", "k", "l", "d"}
     with open(out) as f:
@@ -86,19 +109,30 @@ def test_fit_writes_a_result_with_params(fit_json, cap):
 
 def test_evaluate_prints_a_silhouette_error(fit_json, cap, tmp_path):
     js = tmp_path / "ev.json"
-    rc, out, err = run("evaluate", cap, "--params", fit_json, "--cameras", "heldout:2", "--times", "0.15,0.25",
-                       "--json", js)
+    rc, out, err = run(
+        "evaluate", cap, "--params", fit_json, "--cameras", "heldout:2", "--times", "0.15,0.25", "--json", js
+    )
     assert rc == 0, err
     assert "silhouette error" in err and "16 cameras x 2 frames" in err and "shape error" in err
     with open(js) as f:
         r = json.load(f)
-    assert json.loads(out) == r                    # stdout: the same result as --json
+    assert json.loads(out) == r  # stdout: the same result as --json
     assert len(r["cameras"]) == 16 and r["times"] == [0.15, 0.25]
     assert r["silhouette_error_pct"] > 0
     # the ground truth (default --params) scores better than a wrong k
     rc, out_gt, _ = run("evaluate", cap, "--cameras", "0,5", "--times", "0.5", "--json", tmp_path / "gt.json")
-    rc2, _, _ = run("evaluate", cap, "--cameras", "0,5", "--times", "0.5",
-                    "--params", '{"m": 1e-5, "k": 14.0, "l": 0.0066667, "d": 5e-5}', "--json", tmp_path / "bad.json")
+    rc2, _, _ = run(
+        "evaluate",
+        cap,
+        "--cameras",
+        "0,5",
+        "--times",
+        "0.5",
+        "--params",
+        '{"m": 1e-5, "k": 14.0, "l": 0.0066667, "d": 5e-5}',
+        "--json",
+        tmp_path / "bad.json",
+    )
     assert rc == rc2 == 0
     with open(tmp_path / "gt.json") as f, open(tmp_path / "bad.json") as g:
         assert json.load(f)["silhouette_error_pct"] < json.load(g)["silhouette_error_pct"]
@@ -106,8 +140,7 @@ def test_evaluate_prints_a_silhouette_error(fit_json, cap, tmp_path):
 
 def test_overlay_writes_images(fit_json, cap, tmp_path):
     out = tmp_path / "ov"
-    rc, so, err = run("overlay", cap, "--params", fit_json, "--out", out, "--cameras", "cam00,3",
-                      "--times", "0.1,0.2")
+    rc, so, err = run("overlay", cap, "--params", fit_json, "--out", out, "--cameras", "cam00,3", "--times", "0.1,0.2")
     assert rc == 0, err
     assert "wrote 5 images" in err
     r = json.loads(so)
@@ -120,6 +153,7 @@ def test_overlay_writes_images(fit_json, cap, tmp_path):
 
 
 # ------------------------------------------------------------------ bad input
+
 
 def test_missing_capture_dir(tmp_path):
     missing = tmp_path / "no_such_capture"
@@ -148,8 +182,20 @@ def test_bad_resolution(cap, tmp_path):
 
 
 def test_unknown_optimizer(cap, tmp_path):
-    rc, out, err = run("fit", cap, "--out", tmp_path / "f.json", "--optimizer", "simplex", "--max-evaluations", 5,
-                       "--cameras", "0", "--times", "0.1")
+    rc, out, err = run(
+        "fit",
+        cap,
+        "--out",
+        tmp_path / "f.json",
+        "--optimizer",
+        "simplex",
+        "--max-evaluations",
+        5,
+        "--cameras",
+        "0",
+        "--times",
+        "0.1",
+    )
     assert_one_line_error(rc, out, err, "simplex")
 
 
@@ -186,8 +232,10 @@ def test_max_evaluations_zero_is_refused_by_fit_and_fit_many(cap, tmp_path):
     """``fit`` and ``fit-many`` build their FitConfig with one function (cli/fitting.fit_config): a budget
     given is the budget, so ``--max-evaluations 0`` is bad data in both (fit-many used to read 0 as
     the default budget), refused before any work starts and before anything is written."""
-    for args in (("fit", cap, "--out", tmp_path / "f.json"),
-                 ("fit-many", cap, "--out-dir", tmp_path / "many", "--executor", "process")):
+    for args in (
+        ("fit", cap, "--out", tmp_path / "f.json"),
+        ("fit-many", cap, "--out-dir", tmp_path / "many", "--executor", "process"),
+    ):
         rc, out, err = run(*args, "--max-evaluations", 0)
         assert_one_line_error(rc, out, err, "max_evaluations", "got 0")
     assert not (tmp_path / "f.json").exists() and not (tmp_path / "many").exists()
@@ -196,30 +244,49 @@ def test_max_evaluations_zero_is_refused_by_fit_and_fit_many(cap, tmp_path):
 def test_fit_config_is_shared_and_reads_only_what_the_command_declares(cap):
     from argparse import Namespace
 
-    from addon.cli.fitting import fit_config
-    from addon.core import defaults as D
-    from addon.core.observation.capture import load_capture
+    from clothfit.cli.fitting import fit_config
+    from clothfit.core import defaults as D
+    from clothfit.core.observation.capture import load_capture
+
     c = load_capture(str(cap))
-    base = dict(cameras="0,1", times="0.1,0.2", optimizer="cma-es", seed=3, max_evaluations=None, resolution="30x40",
-                cloth_mass=None, population=None, quality=None, uncertain=None, model=None, fps=None,
-                bending_model=None)
-    many = fit_config(Namespace(**base), c).checked()            # fit-many's options only
+    base = dict(
+        cameras="0,1",
+        times="0.1,0.2",
+        optimizer="cma-es",
+        seed=3,
+        max_evaluations=None,
+        resolution="30x40",
+        cloth_mass=None,
+        population=None,
+        quality=None,
+        uncertain=None,
+        model=None,
+        fps=None,
+        bending_model=None,
+    )
+    many = fit_config(Namespace(**base), c).checked()  # fit-many's options only
     assert many.max_evaluations == D.FIT_EVALUATIONS and many.train_cameras == [0, 1]
     assert many.train_times == [0.1, 0.2] and many.resolution == [30, 40] and many.seed == 3
-    one = fit_config(Namespace(**base, backend="auto", children=4, target=0.01, free=None, fixed=None, init=None,
-                               bounds=None, restarts=2), c).checked()
+    one = fit_config(
+        Namespace(
+            **base, backend="auto", children=4, target=0.01, free=None, fixed=None, init=None, bounds=None, restarts=2
+        ),
+        c,
+    ).checked()
     assert (one.children, one.target_error, one.restarts) == (4, 0.01, 2)
-    assert {k: v for k, v in vars(one).items() if k not in ("children", "target_error", "restarts")} == \
-        {k: v for k, v in vars(many).items() if k not in ("children", "target_error", "restarts")}
+    assert {k: v for k, v in vars(one).items() if k not in ("children", "target_error", "restarts")} == {
+        k: v for k, v in vars(many).items() if k not in ("children", "target_error", "restarts")
+    }
 
 
 def test_search_options_reach_fitconfig():
     """``--search NAME=VALUE`` (fit, fit-many): an optimiser setting of FitConfig from the command line,
     e.g. active CMA, which our A/B found better; a bad name or value is a one-line error."""
-    from addon.cli import build_parser
-    from addon.cli.fitting import search_options
-    from addon.core.errors import ClothFitError
-    from addon.core.fitting.job import FitConfig
+    from clothfit.cli import build_parser
+    from clothfit.cli.fitting import search_options
+    from clothfit.core.errors import ClothFitError
+    from clothfit.core.fitting.job import FitConfig
+
     for cmd in (["fit", "cap", "--out", "f.json"], ["fit-many", "cap"]):
         a = build_parser().parse_args(cmd + ["--search", "cma_active=true", "--search", "sigma0=0.2"])
         assert a.search == ["cma_active=true", "sigma0=0.2"]

@@ -1,6 +1,7 @@
 """The CLI's habits (issue 13): help on every option, ``--version`` from the manifest, the ``clothfit``
 console script, stdout = one JSON document, exit codes 2 (bad data) / 64 (usage) / 130 (Ctrl-C, the
 fit's best result kept), and the runtime / development requirements split."""
+
 import argparse
 import contextlib
 import io
@@ -18,7 +19,7 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from addon import cli  # noqa: E402
+from clothfit import cli  # noqa: E402
 
 
 def _manifest_version():
@@ -28,8 +29,15 @@ def _manifest_version():
 
 def run(*args, cwd=ROOT, timeout=300, **popen):
     env = {k: v for k, v in os.environ.items() if k != "CLOTHFIT_PROGRESS"}
-    return subprocess.run([sys.executable, "-m", "addon", *map(str, args)], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=timeout, **popen)
+    return subprocess.run(
+        [sys.executable, "-m", "clothfit", *map(str, args)],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        **popen,
+    )
 
 
 def in_process(*args):
@@ -41,6 +49,7 @@ def in_process(*args):
 
 # ------------------------------------------------------------------ help
 
+
 def _subcommands(parser):
     (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     helps = {c.dest: c.help for c in sub._choices_actions}
@@ -50,8 +59,18 @@ def _subcommands(parser):
 def test_every_option_of_every_command_has_help_and_shows_its_default():
     parser = cli.build_parser()
     commands, helps = _subcommands(parser)
-    assert {"fit", "evaluate", "overlay", "synth", "bench", "extract", "import-cameras", "export-cameras",
-            "blender", "blender-agreement"} <= set(commands)
+    assert {
+        "fit",
+        "evaluate",
+        "overlay",
+        "synth",
+        "bench",
+        "extract",
+        "import-cameras",
+        "export-cameras",
+        "blender",
+        "blender-agreement",
+    } <= set(commands)
     missing = []
     for name, sub in commands.items():
         assert sub.prog == f"clothfit {name}", sub.prog
@@ -65,13 +84,15 @@ def test_every_option_of_every_command_has_help_and_shows_its_default():
             elif a.default not in (None, False, [], argparse.SUPPRESS) and "%(default)" not in a.help:
                 missing.append(f"{label}: default {a.default!r} not shown with %(default)s")
             else:
-                sub._get_formatter()._expand_help(a)          # the help text formats (no stray %)
+                sub._get_formatter()._expand_help(a)  # the help text formats (no stray %)
     assert not missing, "\n".join(missing)
     # one help per command: import-cameras and export-cameras say different things
     assert len(set(helps.values())) == len(helps), helps
     for cmd in ("import-cameras", "export-cameras"):
-        assert commands[cmd].format_help() != commands["export-cameras" if cmd == "import-cameras"
-                                                        else "import-cameras"].format_help()
+        assert (
+            commands[cmd].format_help()
+            != commands["export-cameras" if cmd == "import-cameras" else "import-cameras"].format_help()
+        )
 
 
 def test_help_names_the_program_and_documents_stdout_and_exit_codes():
@@ -81,17 +102,22 @@ def test_help_names_the_program_and_documents_stdout_and_exit_codes():
     r = run("--help")
     assert r.returncode == 0 and r.stdout.startswith("usage: clothfit")
     text = " ".join(r.stdout.split())
-    for needle in ("stdout carries one JSON document", "stderr", "2 bad data", "64 a command line the parser rejects",
-                   "130 interrupted by Ctrl-C"):
+    for needle in (
+        "stdout carries one JSON document",
+        "stderr",
+        "2 bad data",
+        "64 a command line the parser rejects",
+        "130 interrupted by Ctrl-C",
+    ):
         assert needle in text, needle
 
 
 # ------------------------------------------------------------------ version
 
+
 def test_version_comes_from_the_manifest():
-    import addon
     version = _manifest_version()
-    assert addon.version() == version
+    assert clothfit.version() == version
     r = run("--version")
     assert r.returncode == 0 and r.stdout.strip() == f"clothfit {version}"
     with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
@@ -105,35 +131,65 @@ def test_version_comes_from_the_manifest():
 
 # ------------------------------------------------------------------ the console script
 
+
 def test_console_script_from_a_wheel(tmp_path):
     """Build the wheel (pyproject.toml, hatchling), install it into a folder of its own and run the
     ``clothfit`` script it brings, away from the checkout: version from the package metadata, rig
     presets from the wheel."""
     pytest.importorskip("hatchling", reason="the build backend is in requirements-dev.txt")
-    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation",
-                        "-w", str(tmp_path / "dist"), ROOT], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--quiet",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(tmp_path / "dist"),
+            ROOT,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     (wheel,) = (tmp_path / "dist").glob("silhouette_cloth_fit-*.whl")
     import zipfile
+
     names = zipfile.ZipFile(wheel).namelist()
-    assert "clothfit/__main__.py" in names and "clothfit/cli/__init__.py" in names and "clothfit/rigs/lab18.json" in names
+    assert (
+        "clothfit/__main__.py" in names and "clothfit/cli/__init__.py" in names and "clothfit/rigs/lab18.json" in names
+    )
     tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
-    assert tops == {"clothfit"}, tops                 # the wheel's only top-level package
+    assert tops == {"clothfit"}, tops  # the wheel's only top-level package
     site = tmp_path / "site"
-    r = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site),
-                        str(wheel)], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site), str(wheel)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     script = site / "bin" / "clothfit"
     env = dict(os.environ, PYTHONPATH=str(site))
     r = subprocess.run([str(script), "--version"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.strip() == f"clothfit {_manifest_version()}", r.stderr
-    r = subprocess.run([str(script), "rig", "ring8"], cwd=tmp_path, env=env, capture_output=True, text=True,
-                       timeout=120)
+    r = subprocess.run(
+        [str(script), "rig", "ring8"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120
+    )
     assert r.returncode == 0, r.stderr
     assert len(json.loads(r.stdout)["cameras"]) == 8
-    r = subprocess.run([sys.executable, "-c", "import clothfit; print(clothfit.__file__)"], cwd=tmp_path, env=env,
-                       capture_output=True, text=True, timeout=120)
-    assert r.stdout.strip().startswith(str(site)), r.stdout       # the wheel's copy ran, not the checkout
+    r = subprocess.run(
+        [sys.executable, "-c", "import clothfit; print(clothfit.__file__)"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.stdout.strip().startswith(str(site)), r.stdout  # the wheel's copy ran, not the checkout
 
 
 def test_the_venvs_console_script_runs():
@@ -148,16 +204,20 @@ def test_the_venvs_console_script_runs():
 
 # ------------------------------------------------------------------ stdout and exit codes
 
+
 def test_usage_errors_exit_64_bad_data_exits_2(tmp_path):
-    for args, needle in ((["fit"], "required: capture"), (["no-such-command"], "invalid choice"),
-                         (["fit", tmp_path, "--max-evaluations", "many"], "invalid int value"),
-                         (["fit", tmp_path, "--resume", "--force"], "not allowed with"),
-                         (["synth"], "--out")):
+    for args, needle in (
+        (["fit"], "required: capture"),
+        (["no-such-command"], "invalid choice"),
+        (["fit", tmp_path, "--max-evaluations", "many"], "invalid int value"),
+        (["fit", tmp_path, "--resume", "--force"], "not allowed with"),
+        (["synth"], "--out"),
+    ):
         r = run(*args)
         assert r.returncode == cli.EXIT_USAGE == 64, (args, r.returncode, r.stderr)
         assert r.stderr.startswith("usage: clothfit") and needle in r.stderr, r.stderr
         assert r.stdout == ""
-    r = run("fit", tmp_path / "missing", "--quiet")           # well-formed command line, bad data
+    r = run("fit", tmp_path / "missing", "--quiet")  # well-formed command line, bad data
     assert r.returncode == cli.EXIT_BAD_DATA == 2
     assert r.stderr.strip().startswith("error: ") and len(r.stderr.strip().splitlines()) == 1 and r.stdout == ""
 
@@ -170,7 +230,7 @@ def test_messages_go_to_stderr_at_the_file_descriptor_level(capfd):
     cli.emit({"a": 1.0, "b": float("nan")})
     out, err = capfd.readouterr()
     assert "from python" in err and "from C" in err
-    assert json.loads(out) == {"a": 1.0, "b": None}           # strict JSON: NaN as null
+    assert json.loads(out) == {"a": 1.0, "b": None}  # strict JSON: NaN as null
 
 
 def test_rig_prints_only_json_and_tables_prints_text(tmp_path):
@@ -185,10 +245,11 @@ def test_rig_prints_only_json_and_tables_prints_text(tmp_path):
 
 
 def test_ctrl_c_in_any_command_is_130_and_one_line(monkeypatch):
-    from addon.core.observation import synth
+    from clothfit.core.observation import synth
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
+
     monkeypatch.setattr(synth, "synth_capture", interrupted)
     rc, out, err = in_process("synth", "--out", "/nonexistent/never")
     assert rc == cli.EXIT_INTERRUPTED == 130
@@ -210,17 +271,41 @@ def test_ctrl_c_stops_a_fit_with_130_and_keeps_its_best_result(cap, tmp_path):
     ck = tmp_path / "fit.json.checkpoint.json"
     env = {k: v for k, v in os.environ.items() if k != "CLOTHFIT_PROGRESS"}
     # a budget it cannot spend in the test's time (IPOP restarts go on after each convergence)
-    # ``python -m addon`` with Python's own Ctrl-C handling, also when this test runs in a background job
+    # ``python -m clothfit`` with Python's own Ctrl-C handling, also when this test runs in a background job
     # (whose SIGINT the shell ignores, and Python then leaves ignored)
-    main = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-            "from addon.cli import main; sys.exit(main())")
-    p = subprocess.Popen([sys.executable, "-c", main, "fit", str(cap), "--out", str(out), "--cameras", "n:2",
-                          "--times", "0.1,0.2,0.3", "--max-evaluations", "1000000", "--restarts", "20", "--quiet"],
-                         cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    main = (
+        "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+        "from clothfit.cli import main; sys.exit(main())"
+    )
+    p = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            main,
+            "fit",
+            str(cap),
+            "--out",
+            str(out),
+            "--cameras",
+            "n:2",
+            "--times",
+            "0.1,0.2,0.3",
+            "--max-evaluations",
+            "1000000",
+            "--restarts",
+            "20",
+            "--quiet",
+        ],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         t0 = time.monotonic()
         while not ck.exists() and p.poll() is None and time.monotonic() - t0 < 240:
-            time.sleep(0.1)                                   # the checkpoint: the first generation is done
+            time.sleep(0.1)  # the checkpoint: the first generation is done
         assert p.poll() is None, p.communicate()
         assert ck.exists()
         p.send_signal(signal.SIGINT)
@@ -238,11 +323,13 @@ def test_ctrl_c_stops_a_fit_with_130_and_keeps_its_best_result(cap, tmp_path):
     assert 0 < r["evaluations"] < 1000000
     summary = json.loads(so)
     assert summary["cancelled"] is True and summary["params"] == r["params"] and summary["out"] == str(out)
-    from addon.core.fitting.job import read_checkpoint
+    from clothfit.core.fitting.job import read_checkpoint
+
     assert read_checkpoint(str(ck))["cancelled"] is True
 
 
 # ------------------------------------------------------------------ requirements
+
 
 def _pins(path):
     pins = {}
@@ -271,6 +358,7 @@ def test_runtime_and_development_requirements_are_split():
                         assert not pattern.search(f.read()), (name, fn)
     # the package's dependency ranges hold the pinned versions
     from packaging.requirements import Requirement
+
     with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
         project = tomllib.load(f)["project"]
     reqs = [Requirement(r) for r in project["dependencies"]]
@@ -279,7 +367,7 @@ def test_runtime_and_development_requirements_are_split():
         name = req.name.lower()
         assert name in runtime, f"{name} is a dependency of pyproject.toml but not pinned in requirements.txt"
         assert req.specifier.contains(runtime[name]), (str(req), runtime[name])
-    assert project["scripts"] == {"clothfit": "addon.cli:main"}
+    assert project["scripts"] == {"clothfit": "clothfit.cli:main"}
 
 
 def test_makefile_installs_the_development_requirements_and_the_package():

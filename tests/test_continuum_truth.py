@@ -9,6 +9,7 @@
 3. The truth is not one of our models: the core blender model at Blender's defaults does not
    reproduce it to the floor.
 """
+
 from __future__ import annotations
 
 import math
@@ -16,7 +17,6 @@ import os
 import sys
 
 import numpy as np
-import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
@@ -29,12 +29,14 @@ def heavy_elastica(L, D, w, n=4000):
     """Tip of a clamped horizontal cantilever of length L [m], bending rigidity D [N m per m of
     width], weight w [N/m^2 = rho_A g]: D theta'' = -w (L - s) cos(theta), theta(0) = 0,
     theta'(L) = 0 (theta = downward slope). Shooting on theta'(0), RK4. Returns (x_tip, z_tip)."""
+
     def run(k0):
         h = L / n
         th, k, x, z = 0.0, k0, 0.0, 0.0
 
         def f(s, y):
             return np.array([y[1], -w * (L - s) * math.cos(y[0]) / D, math.cos(y[0]), -math.sin(y[0])])
+
         y = np.array([th, k, x, z])
         for i in range(n):
             s = i * h
@@ -44,7 +46,8 @@ def heavy_elastica(L, D, w, n=4000):
             d = f(s + h, y + h * c)
             y = y + h / 6 * (a + 2 * b + 2 * c + d)
         return y
-    lo, hi = 0.0, 10.0 * w * L * L / D        # theta'(L) as a function of theta'(0): bisect its root
+
+    lo, hi = 0.0, 10.0 * w * L * L / D  # theta'(L) as a function of theta'(0): bisect its root
     for _ in range(60):
         mid = 0.5 * (lo + hi)
         if run(mid)[1] > 0:
@@ -59,18 +62,27 @@ def test_elastica_solver_small_deflection():
     # small load: the linear cantilever under uniform load, tip deflection w L^4 / (8 D)
     L, D, w = 0.05, 1.0, 0.1
     x, z = heavy_elastica(L, D, w, n=500)
-    assert abs(-z - w * L ** 4 / (8 * D)) < 1e-3 * w * L ** 4 / (8 * D)
+    assert abs(-z - w * L**4 / (8 * D)) < 1e-3 * w * L**4 / (8 * D)
 
 
 def _cantilever(h, L=0.06, width=0.01):
     nx, ny = int(round(L / h)) + 2, int(round(width / h)) + 1
     V, tris = W.strip_mesh(nx, ny, L + h, width)
-    V[:, 0] -= h                                             # clamp columns at x = -h and x = 0
-    mat = W.Material("test", areal_density=0.13, stretch=200.0, poisson=0.3, bending=1e-5,
-                     membrane_damping=1e-5, bending_damping=0.0, drag_cd=0.0)
+    V[:, 0] -= h  # clamp columns at x = -h and x = 0
+    mat = W.Material(
+        "test",
+        areal_density=0.13,
+        stretch=200.0,
+        poisson=0.3,
+        bending=1e-5,
+        membrane_damping=1e-5,
+        bending_damping=0.0,
+        drag_cd=0.0,
+    )
     clamp = [i * nx + j for i in range(ny) for j in (0, 1)]
-    X, _ = W.simulate(V, tris, mat, [W.Pin(v, tuple(V[v])) for v in clamp], [1e-4], settle=1.0, ramp=0.01,
-                      settle_damping=15.0)
+    X, _ = W.simulate(
+        V, tris, mat, [W.Pin(v, tuple(V[v])) for v in clamp], [1e-4], settle=1.0, ramp=0.01, settle_damping=15.0
+    )
     return X[0].reshape(ny, nx, 3)[:, -1].mean(0), mat
 
 
@@ -81,11 +93,11 @@ def test_cantilever_droop_matches_the_heavy_elastica():
     tip, mat = _cantilever(0.0025, L)
     coarse, _ = _cantilever(0.005, L)
     x_e, z_e = heavy_elastica(L, mat.bending, mat.areal_density * W.GRAVITY)
-    assert -z_e > 0.03                                       # a large droop: the nonlinear regime
+    assert -z_e > 0.03  # a large droop: the nonlinear regime
     err = np.hypot(tip[0] - x_e, tip[2] - z_e)
     assert abs(tip[2] - z_e) < 0.05 * -z_e, (tip, x_e, z_e)
     assert err < 0.1 * -z_e, (tip, x_e, z_e)
-    assert err < 0.8 * np.hypot(coarse[0] - x_e, coarse[2] - z_e)       # refining the mesh closes in
+    assert err < 0.8 * np.hypot(coarse[0] - x_e, coarse[2] - z_e)  # refining the mesh closes in
 
 
 def test_hanging_strip_stretches_as_the_membrane_says():
@@ -93,39 +105,56 @@ def test_hanging_strip_stretches_as_the_membrane_says():
     L, width = 0.10, 0.01
     nx, ny = 41, 3
     V2, tris = W.strip_mesh(nx, ny, L, width)
-    V = np.stack([V2[:, 1], np.zeros(len(V2)), -V2[:, 0]], 1)          # hanging down along -z from z = 0
-    mat = W.Material("soft", areal_density=0.13, stretch=2.0, poisson=0.3, bending=1e-9,
-                     membrane_damping=1e-3, bending_damping=0.0, drag_cd=0.0)
+    V = np.stack([V2[:, 1], np.zeros(len(V2)), -V2[:, 0]], 1)  # hanging down along -z from z = 0
+    mat = W.Material(
+        "soft",
+        areal_density=0.13,
+        stretch=2.0,
+        poisson=0.3,
+        bending=1e-9,
+        membrane_damping=1e-3,
+        bending_damping=0.0,
+        drag_cd=0.0,
+    )
     top = [i * nx for i in range(ny)]
-    X, _ = W.simulate(V, tris, mat, [W.Pin(v, tuple(V[v])) for v in top], [1e-4], settle=0.6, ramp=0.01,
-                      settle_damping=30.0)
+    X, _ = W.simulate(
+        V, tris, mat, [W.Pin(v, tuple(V[v])) for v in top], [1e-4], settle=0.6, ramp=0.01, settle_damping=30.0
+    )
     bottom = X[0].reshape(ny, nx, 3)[:, -1, 2].mean()
-    expected = mat.areal_density * W.GRAVITY * L ** 2 / (2 * mat.stretch)
+    expected = mat.areal_density * W.GRAVITY * L**2 / (2 * mat.stretch)
     assert expected > 2e-3
     assert abs((-bottom - L) - expected) < 0.06 * expected, (-bottom - L, expected)
 
 
 def _swing(drag_cd, membrane_damping, bending_damping, dt=None):
     V, tris = W.sheet_mesh(9, 0.10)
-    mat = W.Material("e", areal_density=0.13, stretch=50.0, poisson=0.3, bending=1e-5, drag_cd=drag_cd,
-                     membrane_damping=membrane_damping, bending_damping=bending_damping)
-    pins = [W.Pin(v, tuple(V[v])) for v in (8, 80)]       # two corners held: the sheet swings down
+    mat = W.Material(
+        "e",
+        areal_density=0.13,
+        stretch=50.0,
+        poisson=0.3,
+        bending=1e-5,
+        drag_cd=drag_cd,
+        membrane_damping=membrane_damping,
+        bending_damping=bending_damping,
+    )
+    pins = [W.Pin(v, tuple(V[v])) for v in (8, 80)]  # two corners held: the sheet swings down
     times = np.linspace(0.02, 0.3, 15)
     X, facts = W.simulate(V, tris, mat, pins, times, settle=0.0, ramp=0.0, velocities=True, dt=dt)
     H = W.hinges(tris)
     E = np.array([W.energy(V, tris, H, mat, X[f], facts["velocities"][f], facts["masses"]) for f in range(len(times))])
     E0 = W.energy(V, tris, H, mat, V, np.zeros_like(V), facts["masses"])
-    drop = float(np.sum(facts["masses"]) * W.GRAVITY * (V[:, 2].mean() - X[:, :, 2].mean(1).min()))   # largest
+    drop = float(np.sum(facts["masses"]) * W.GRAVITY * (V[:, 2].mean() - X[:, :, 2].mean(1).min()))  # largest
     return E, E0, drop, X
 
 
 def test_energy_is_kept_without_dissipation_and_lost_with_air_drag():
     E, E0, drop, _ = _swing(0.0, 0.0, 0.0)
-    assert drop > 3e-4                                       # it swung down 5 cm and back: energy moved
+    assert drop > 3e-4  # it swung down 5 cm and back: energy moved
     assert np.max(np.abs(E - E0)) < 0.02 * drop, (E - E0, drop)
     Ed, E0d, dropd, _ = _swing(1.2, 1e-5, 0.01)
-    assert Ed[-1] < E0d - 0.02 * dropd                        # drag and damping took energy out
-    assert np.all(np.diff(Ed) < 0.01 * dropd)                # and never put any in
+    assert Ed[-1] < E0d - 0.02 * dropd  # drag and damping took energy out
+    assert np.all(np.diff(Ed) < 0.01 * dropd)  # and never put any in
 
 
 def test_halving_the_step_changes_nothing_visible():
@@ -134,7 +163,7 @@ def test_halving_the_step_changes_nothing_visible():
     dt = W.stable_dt(V, tris, mat, 0.5)
     _, _, _, X1 = _swing_full(V, tris, mat, dt)
     _, _, _, X2 = _swing_full(V, tris, mat, dt / 2)
-    assert np.abs(X1 - X2).max() < 2e-4                      # 0.2 mm
+    assert np.abs(X1 - X2).max() < 2e-4  # 0.2 mm
 
 
 def _swing_full(V, tris, mat, dt):
@@ -149,9 +178,10 @@ def test_mesh_and_sampler():
     V, tris = W.sheet_mesh(29, CT.SIDE)
     assert len(tris) == 2 * 28 * 28
     # alternating diagonals: not our grid's one-direction split
-    from addon.core.physics.scenario import ClothGrid
+    from clothfit.core.physics.scenario import ClothGrid
+
     assert not np.array_equal(tris, ClothGrid(29, 29, CT.SIDE).triangles)
-    assert np.allclose(W.tri_areas(V, tris).sum(), CT.SIDE ** 2)
+    assert np.allclose(W.tri_areas(V, tris).sum(), CT.SIDE**2)
     g = ClothGrid(21, 21, CT.SIDE, CT.HEIGHT)
     tri_of, w = CT.barycentric_sampler(V, tris, g.rest[:, :2])
     assert np.all(w > -1e-9) and np.allclose(w.sum(1), 1)
@@ -163,9 +193,10 @@ def test_mesh_and_sampler():
 
 
 def test_small_make_writes_a_valid_capture_that_our_model_does_not_reproduce(tmp_path):
-    from addon.core.fitting.evaluate import evaluate
-    from addon.core.observation.capture import load_capture
-    from addon.core.observation.metrics import e_sil
+    from clothfit.core.fitting.evaluate import evaluate
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.observation.metrics import e_sil
+
     cams = CT.rig()
     written = CT.make(str(tmp_path), ["cotton"], n_truth=13, grid_n=11, settle=0.4, after=0.3, cameras=cams)
     assert set(written) == {"cotton", "cotton_clean"}
@@ -177,18 +208,19 @@ def test_small_make_writes_a_valid_capture_that_our_model_does_not_reproduce(tmp
     clean = load_capture(written["cotton_clean"])
     for c in range(len(cams)):
         for f in range(len(cap.frame_times)):
-            assert cap.load_silhouette(c, f).sum() > 200          # every camera sees the cloth every frame
+            assert cap.load_silhouette(c, f).sum() > 200  # every camera sees the cloth every frame
     # the edge-on cameras see a thin cloth at t = 0+ and a hanging one at the end
     # the noise-free variant's floor is 0; the noisy one's a few per cent
     fl = CT.floor(cap, list(range(len(cams))), list(cap.frame_times))
-    assert 0.05 < fl < 5                                      # 5 % of the boundary pixels: a fraction of a per cent
+    assert 0.05 < fl < 5  # 5 % of the boundary pixels: a fraction of a per cent
     assert all(e_sil(clean.load_silhouette(c, 0), clean.load_silhouette(c, 0)) == 0 for c in range(3))
     # the shapes lie on the truth (corners where the hands hold them, the released one fell)
     corners = cap.scenario.grid.corners()
     assert np.allclose(cap.shapes[:, corners[1]], [0.9 * CT.SIDE / 2, -0.9 * CT.SIDE / 2, CT.HEIGHT], atol=1e-5)
-    assert cap.shapes[-1, corners[0], 2] < CT.HEIGHT - 0.1               # 0.3 s after its release
+    assert cap.shapes[-1, corners[0], 2] < CT.HEIGHT - 0.1  # 0.3 s after its release
     # our blender model at Blender's defaults (the capture's frame rate given) is far from it
-    from addon.core.physics import blender as B
+    from clothfit.core.physics import blender as B
+
     s = B.check_settings({"time_scale": B.physical_time_scale(30.0)})
     ev = evaluate(cap, {"model": {"name": "blender", "fps": 30.0}, "blender_cloth": s, "blender_scene": {"fps": 30.0}})
     assert ev["silhouette_error_pct"] > 2 * fl and ev["shape_error_mm"] > 5.0, ev

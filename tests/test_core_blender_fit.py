@@ -1,18 +1,18 @@
 """Fitting Blender's cloth in the core (no bpy): the search space, warm starts, bad input, the
 identifiability table."""
+
 import json
 
 import numpy as np
 import pytest
-
-from addon.core.errors import ClothFitError
-from addon.core.fitting.job import FitConfig, FitJob
-from addon.core.fitting.parameters import BLENDER_FREE, BlenderParameters, make_parameters
-from addon.core.observation.synth import synth_capture
-from addon.core.physics import blender as B
-from addon.core.physics.models import BlenderModel, model_and_row
-from addon.core.physics.scenario import ClothGrid, paper_scenario
-from addon.core.studies import identifiability
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.job import FitConfig, FitJob
+from clothfit.core.fitting.parameters import BLENDER_FREE, BlenderParameters, make_parameters
+from clothfit.core.observation.synth import synth_capture
+from clothfit.core.physics import blender as B
+from clothfit.core.physics.models import BlenderModel, model_and_row
+from clothfit.core.physics.scenario import ClothGrid, paper_scenario
+from clothfit.core.studies import identifiability
 
 pytest.importorskip("numba")
 
@@ -23,8 +23,15 @@ TRUTH = {"tension_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness":
 def cap(tmp_path_factory):
     root = tmp_path_factory.mktemp("bcap") / "cap"
     sc = paper_scenario(ClothGrid(9, 9, 0.1), frame_times=[0.1, 0.2, 0.4, 0.6, 0.8, 1.0])
-    return synth_capture(str(root), TRUTH, model={"name": "blender", "fps": 24}, rig="ring8", resolution=(90, 120),
-                         scenario=sc, noise=0.0)
+    return synth_capture(
+        str(root),
+        TRUTH,
+        model={"name": "blender", "fps": 24},
+        rig="ring8",
+        resolution=(90, 120),
+        scenario=sc,
+        noise=0.0,
+    )
 
 
 def test_capture_names_its_model_and_truth(cap):
@@ -37,10 +44,10 @@ def test_capture_names_its_model_and_truth(cap):
 
 
 def test_search_space_is_per_unit_mass_and_inside_blenders_limits(cap):
-    par = make_parameters(cap, FitConfig(cloth_mass=81 * 3.0))       # 3 kg per vertex: ten times the default
+    par = make_parameters(cap, FitConfig(cloth_mass=81 * 3.0))  # 3 kg per vertex: ten times the default
     assert par.m == pytest.approx(3.0)
     for n, (lo, hi) in zip(par.free, zip(par.space.lo, par.space.hi)):
-        if n in par.scaled:                          # coordinates per unit mass, Blender limit respected
+        if n in par.scaled:  # coordinates per unit mass, Blender limit respected
             assert hi * par.m <= B.RANGES[n][1] * (1 + 1e-9)
     x = np.array([(a * b) ** 0.5 for a, b in zip(par.space.lo, par.space.hi)])
     s = par.settings(x)
@@ -51,17 +58,20 @@ def test_search_space_is_per_unit_mass_and_inside_blenders_limits(cap):
     assert s["tension_stiffness"] == pytest.approx(x[k] * 3.0)
 
 
-@pytest.mark.parametrize("cfg,msg", [
-    (dict(free=["stiffness"]), "cannot search stiffness"),
-    (dict(free=["tension_stiffness", "tension_stiffness"]), "distinct"),
-    (dict(free=["tension_stiffness"], fixed={"tension_stiffness": 3}), "both free and fixed"),
-    (dict(fixed={"air_damping": -1}), "air_damping"),
-    (dict(bounds={"tension_stiffness": [5, 1]}), "search range of tension_stiffness is empty"),
-    (dict(cloth_mass=-1.0), "cloth mass"),
-    (dict(quality=0), "quality 0"),
-    (dict(fps=0), "frame rate"),
-    (dict(init="/nonexistent/r.json"), "file not found"),
-])
+@pytest.mark.parametrize(
+    "cfg,msg",
+    [
+        (dict(free=["stiffness"]), "cannot search stiffness"),
+        (dict(free=["tension_stiffness", "tension_stiffness"]), "distinct"),
+        (dict(free=["tension_stiffness"], fixed={"tension_stiffness": 3}), "both free and fixed"),
+        (dict(fixed={"air_damping": -1}), "air_damping"),
+        (dict(bounds={"tension_stiffness": [5, 1]}), "search range of tension_stiffness is empty"),
+        (dict(cloth_mass=-1.0), "cloth mass"),
+        (dict(quality=0), "quality 0"),
+        (dict(fps=0), "frame rate"),
+        (dict(init="/nonexistent/r.json"), "file not found"),
+    ],
+)
 def test_bad_blender_fit_settings_are_one_line_errors(cap, cfg, msg):
     with pytest.raises(ClothFitError, match=msg):
         make_parameters(cap, FitConfig(model="blender", **cfg))
@@ -70,10 +80,11 @@ def test_bad_blender_fit_settings_are_one_line_errors(cap, cfg, msg):
 def test_warm_start_from_a_blender_result_and_from_a_paper_result(cap, tmp_path):
     s = B.check_settings(dict(TRUTH, time_scale=B.physical_time_scale(30), quality=7))
     p = tmp_path / "b.json"
-    p.write_text(json.dumps({"model": {"name": "blender", "fps": 30}, "blender_cloth": s,
-                             "blender_scene": {"fps": 30}}))
+    p.write_text(
+        json.dumps({"model": {"name": "blender", "fps": 30}, "blender_cloth": s, "blender_scene": {"fps": 30}})
+    )
     par = make_parameters(cap, FitConfig(init=str(p)))
-    assert par.model.fps == 30 and par.model.quality == 7        # the result's scene and quality
+    assert par.model.fps == 30 and par.model.quality == 7  # the result's scene and quality
     got = par.settings(par.initial[0])
     for n in par.free:
         assert got[n] == pytest.approx(s[n], rel=1e-9), n
@@ -118,7 +129,7 @@ def test_identifiability_table_ranks_settings():
     assert set(rows) == set(identifiability.CANDIDATES)
     for r in t["rows"]:
         assert r["mm_per_10pct"] > 0 and np.isfinite(r["all_free_pct"])
-        assert r["all_free_pct"] >= r["alone_pct"] * (1 - 1e-9)     # freeing others never helps
+        assert r["all_free_pct"] >= r["alone_pct"] * (1 - 1e-9)  # freeing others never helps
     assert rows["compression_damping"]["default_set_pct"] is None
     assert rows["tension_stiffness"]["mm_per_10pct"] > 10 * rows["bending_damping"]["mm_per_10pct"]
 
@@ -131,11 +142,11 @@ def test_blender_model_rows_are_checked():
 def test_the_search_moves_alike_at_any_fixed_mass(cap):
     """The same search point means the same motion whatever mass is fixed: the fixed settings
     (Blender's defaults) move with the mass too (a 2.56 g cloth once fitted 44 % worse without)."""
-    a = make_parameters(cap, FitConfig())                       # the capture's 0.3 kg per vertex
-    b = make_parameters(cap, FitConfig(cloth_mass=81 * 1e-5))   # the paper's 10 mg per vertex
+    a = make_parameters(cap, FitConfig())  # the capture's 0.3 kg per vertex
+    b = make_parameters(cap, FitConfig(cloth_mass=81 * 1e-5))  # the paper's 10 mg per vertex
     x = np.array([(lo * hi) ** 0.5 for lo, hi in zip(a.space.lo, a.space.hi)])
     np.testing.assert_allclose(b.space.lo, a.space.lo, rtol=1e-12)
     sa = a.model.simulate(cap.scenario, a.rows(x)).positions[0]
     sb = b.model.simulate(cap.scenario, b.rows(x)).positions[0]
-    d = np.linalg.norm(sa - sb, axis=-1) * 1000      # float32 rounding differs between the two scales
+    d = np.linalg.norm(sa - sb, axis=-1) * 1000  # float32 rounding differs between the two scales
     assert d.mean() < 0.05 and d.max() < 2.0, (d.mean(), d.max())

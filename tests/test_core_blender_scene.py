@@ -1,13 +1,13 @@
 """``core/physics/blender_scene``: a scene's cloth as the core blender model runs it (no Blender).
 Its agreement with Blender's own solver: tests/test_blender_user_scenes.py."""
+
 import numpy as np
 import pytest
-
-from addon.core.errors import ClothFitError
-from addon.core.physics import blender as B
-from addon.core.physics.blender_scene import SceneCloth, grid_order, world_f32
-from addon.core.physics.models import BlenderModel
-from addon.core.physics.scenario import ClothGrid, Handle, Scenario
+from clothfit.core.errors import ClothFitError
+from clothfit.core.physics import blender as B
+from clothfit.core.physics.blender_scene import SceneCloth, grid_order, world_f32
+from clothfit.core.physics.models import BlenderModel
+from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario
 
 
 def test_world_f32_is_blenders_float32_transform():
@@ -19,21 +19,21 @@ def test_world_f32_is_blenders_float32_transform():
     r0 = ((x * f(0.0) + y * f(-0.3)) + f(0.0) * z) + f(0.1)
     assert W[1, 0] == float(r0) and W.dtype == np.float64
     assert np.allclose(W, X @ M[:3, :3].T + M[:3, 3], atol=1e-6)
-    assert np.array_equal(W.astype(np.float32).astype(np.float64), W)      # float32 values
+    assert np.array_equal(W.astype(np.float32).astype(np.float64), W)  # float32 values
 
 
 def test_grid_order_finds_a_users_numbering():
     grid = ClothGrid(5, 4, 0.4, height=1.0, side_y=0.3)
     rng = np.random.default_rng(0)
     perm = rng.permutation(grid.n_vertices)
-    mesh = grid.rest[perm]                       # mesh vertex k is grid vertex perm[k]
+    mesh = grid.rest[perm]  # mesh vertex k is grid vertex perm[k]
     p = grid_order(mesh + 1e-9, grid)
     assert np.array_equal(mesh[p], grid.rest)
-    assert grid_order(mesh[:-1], grid) is None                      # another vertex count
+    assert grid_order(mesh[:-1], grid) is None  # another vertex count
     off = mesh.copy()
-    off[3, 0] += 0.01                                               # a vertex between grid points
+    off[3, 0] += 0.01  # a vertex between grid points
     assert grid_order(off, grid) is None
-    assert grid_order(grid.rest + [0.5, 0, 0], grid) is None        # moved off the grid
+    assert grid_order(grid.rest + [0.5, 0, 0], grid) is None  # moved off the grid
 
 
 def _scene(grid, release_frame=4, n=10):
@@ -41,12 +41,24 @@ def _scene(grid, release_frame=4, n=10):
     faces = grid.quads.tolist()
     hv = np.array(grid.corners())
     W = np.ones((n + 1, 4))
-    W[release_frame + 1:, 0] = 0.0
+    W[release_frame + 1 :, 0] = 0.0
     T = np.repeat(grid.rest[hv][None], n + 1, 0)
     s = B.check_settings({"time_scale": B.physical_time_scale(24)})
     net = B.Network.from_mesh(grid.rest, faces)
-    return SceneCloth(grid.rest.astype(np.float32).astype(np.float64), faces, net.edges, net.triangles, hv, W, T, s,
-                      np.array([0, 0, -9.81]), 24.0, 1, {"object": "test"})
+    return SceneCloth(
+        grid.rest.astype(np.float32).astype(np.float64),
+        faces,
+        net.edges,
+        net.triangles,
+        hv,
+        W,
+        T,
+        s,
+        np.array([0, 0, -9.81]),
+        24.0,
+        1,
+        {"object": "test"},
+    )
 
 
 def test_scene_cloth_on_our_own_grid_is_the_blender_model():
@@ -97,8 +109,15 @@ def test_scene_cloth_file_round_trip_and_bad_files(tmp_path):
     with pytest.raises(ClothFitError, match="not a scene-cloth file"):
         SceneCloth.load(bad)
     other = tmp_path / "other.npz"
-    np.savez(other, rest=np.zeros((1, 3)), edges=np.zeros((0, 2)), triangles=np.zeros((0, 3)),
-             handle_vertices=np.zeros(0), weights=np.zeros((1, 0)), targets=np.zeros((1, 0, 3)),
-             meta=np.array('{"format": "something else", "version": 1}'))
+    np.savez(
+        other,
+        rest=np.zeros((1, 3)),
+        edges=np.zeros((0, 2)),
+        triangles=np.zeros((0, 3)),
+        handle_vertices=np.zeros(0),
+        weights=np.zeros((1, 0)),
+        targets=np.zeros((1, 0, 3)),
+        meta=np.array('{"format": "something else", "version": 1}'),
+    )
     with pytest.raises(ClothFitError, match="is not 'silhouette-cloth-fit/scene-cloth'"):
         SceneCloth.load(other)

@@ -1,22 +1,22 @@
-import sys, os; sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 """Cameras (OpenCV convention, resizing, look_at, files, the lab18 rig, the training-camera rule),
 the rasteriser (pixel-centre sampling) and the silhouette metrics / noise model."""
 
 import json
-import math
 
 import cv2
 import numpy as np
 import pytest
-
-from addon.core.observation import camera as C
-from addon.core import defaults as D
-from addon.core.observation import metrics
-from addon.core.observation import raster
-from addon.core.errors import ClothFitError
-from addon.core.physics.scenario import paper_scenario
-from addon.core.physics.models import simulate
+from clothfit.core import defaults as D
+from clothfit.core.errors import ClothFitError
+from clothfit.core.observation import camera as C
+from clothfit.core.observation import metrics, raster
+from clothfit.core.physics.models import simulate
+from clothfit.core.physics.scenario import paper_scenario
 
 
 def _random_rotation(rng):
@@ -30,23 +30,28 @@ def _random_rotation(rng):
 def _random_camera(rng, dist=None, w=640, h=480):
     R = _random_rotation(rng)
     t = rng.normal(scale=0.1, size=3) + [0, 0, 0.8]
-    K = np.array([[rng.uniform(400, 1200), 0, rng.uniform(250, 390)],
-                  [0, rng.uniform(400, 1200), rng.uniform(180, 300)],
-                  [0, 0, 1]])
+    K = np.array(
+        [
+            [rng.uniform(400, 1200), 0, rng.uniform(250, 390)],
+            [0, rng.uniform(400, 1200), rng.uniform(180, 300)],
+            [0, 0, 1],
+        ]
+    )
     return C.Camera(K, R, t, w, h, name="rnd", dist=np.zeros(0) if dist is None else dist)
 
 
 def _points_in_front(cam, rng, n=200):
     """World points whose camera-frame z is in 0.3..2 and which are within ~45 degrees of the axis."""
     xc = np.stack([rng.uniform(-0.6, 0.6, n), rng.uniform(-0.5, 0.5, n), np.ones(n)], 1) * rng.uniform(0.3, 2.0, (n, 1))
-    return (xc - cam.t) @ cam.R   # X = R^T (xc - t)
+    return (xc - cam.t) @ cam.R  # X = R^T (xc - t)
 
 
 # -------------------------------------------------------------------- projection
 
-@pytest.mark.parametrize("dist", [None,
-                                  np.array([-0.21, 0.07, 1.3e-3, -7e-4, 0.012]),
-                                  np.array([0.1, -0.05, -2e-3, 1e-3])])
+
+@pytest.mark.parametrize(
+    "dist", [None, np.array([-0.21, 0.07, 1.3e-3, -7e-4, 0.012]), np.array([0.1, -0.05, -2e-3, 1e-3])]
+)
 def test_project_equals_cv2_projectPoints(dist):
     rng = np.random.default_rng(11)
     for _ in range(5):
@@ -54,8 +59,7 @@ def test_project_equals_cv2_projectPoints(dist):
         X = _points_in_front(cam, rng)
         ours = cam.project(X)
         rvec, _ = cv2.Rodrigues(cam.R)
-        ref, _ = cv2.projectPoints(X.reshape(-1, 1, 3), rvec, cam.t, cam.K,
-                                   np.zeros(5) if dist is None else dist)
+        ref, _ = cv2.projectPoints(X.reshape(-1, 1, 3), rvec, cam.t, cam.K, np.zeros(5) if dist is None else dist)
         err = np.abs(ours - ref.reshape(-1, 2)).max()
         assert err < 1e-6, err
 
@@ -75,7 +79,7 @@ def test_project_points_behind_the_camera_are_nan_and_distort_flag():
     dist = np.array([-0.3, 0.1, 0, 0, 0])
     cam = _random_camera(rng, dist)
     X = _points_in_front(cam, rng, 10)
-    behind = cam.center - (X - cam.center)          # mirrored through the centre: z < 0
+    behind = cam.center - (X - cam.center)  # mirrored through the centre: z < 0
     uv = cam.project(np.concatenate([X, behind]))
     assert np.all(np.isfinite(uv[:10])) and np.all(np.isnan(uv[10:]))
     # distort=False is the pinhole projection K [R t] X
@@ -126,19 +130,20 @@ def test_look_at_puts_world_up_up_and_world_right_right():
     R, t = C.look_at([0.0, -1.0, 0.0], [0.0, 0.0, 0.0])
     cam = C.Camera(C.intrinsics(800, 640, 480), R, t, 640, 480)
     c = cam.project([0.0, 0.0, 0.0])
-    assert cam.project([0.0, 0.0, 0.05])[1] < c[1]      # above -> smaller row
-    assert cam.project([0.05, 0.0, 0.0])[0] > c[0]      # +x -> larger column
+    assert cam.project([0.0, 0.0, 0.05])[1] < c[1]  # above -> smaller row
+    assert cam.project([0.05, 0.0, 0.0])[0] > c[0]  # +x -> larger column
 
 
 def test_lab18_images_are_upright():
     target = np.array([0.0, 0.0, 0.06])
     for cam in C.load_rig("lab18"):
-        if abs(cam.forward[2]) > 0.9:     # the two top-down cameras have no "up"
+        if abs(cam.forward[2]) > 0.9:  # the two top-down cameras have no "up"
             continue
         assert cam.project(target + [0, 0, 0.02])[1] < cam.project(target)[1], cam.name
 
 
 # ------------------------------------------------------------------ camera files
+
 
 def _two_cameras():
     rng = np.random.default_rng(9)
@@ -180,20 +185,23 @@ def _mutate(fn):
     return d
 
 
-@pytest.mark.parametrize("name,content,needle", [
-    ("bad_json.json", '{"cameras": [', "not valid JSON"),
-    ("not_rotation.json", _mutate(lambda c: c.update(R=(2 * np.eye(3)).tolist())), "not a rotation"),
-    ("reflection.json", _mutate(lambda c: c.update(R=np.diag([1.0, 1.0, -1.0]).tolist())), "not a rotation"),
-    ("neg_focal.json", _mutate(lambda c: c["K"][0].__setitem__(0, -500.0)), "focal"),
-    ("bad_K_shape.json", _mutate(lambda c: c.update(K=[[1, 0, 0], [0, 1, 0]])), "3x3"),
-    ("bad_t_shape.json", _mutate(lambda c: c.update(t=[0, 0])), "t 3"),
-    ("missing_R.json", _mutate(lambda c: c.pop("R")), "lacks R"),
-    ("non_numeric.json", _mutate(lambda c: c.update(t=["a", 0, 0])), "non-numeric"),
-    ("no_list.json", {"cams": []}, "'cameras' list"),
-    ("empty.json", {"cameras": []}, "empty"),
-    ("dup_names.json", {"cameras": [_cam_dicts()["cameras"][0]] * 2}, "not unique"),
-    ("zero_size.json", _mutate(lambda c: c.update(width=0)), "must be positive"),
-])
+@pytest.mark.parametrize(
+    "name,content,needle",
+    [
+        ("bad_json.json", '{"cameras": [', "not valid JSON"),
+        ("not_rotation.json", _mutate(lambda c: c.update(R=(2 * np.eye(3)).tolist())), "not a rotation"),
+        ("reflection.json", _mutate(lambda c: c.update(R=np.diag([1.0, 1.0, -1.0]).tolist())), "not a rotation"),
+        ("neg_focal.json", _mutate(lambda c: c["K"][0].__setitem__(0, -500.0)), "focal"),
+        ("bad_K_shape.json", _mutate(lambda c: c.update(K=[[1, 0, 0], [0, 1, 0]])), "3x3"),
+        ("bad_t_shape.json", _mutate(lambda c: c.update(t=[0, 0])), "t 3"),
+        ("missing_R.json", _mutate(lambda c: c.pop("R")), "lacks R"),
+        ("non_numeric.json", _mutate(lambda c: c.update(t=["a", 0, 0])), "non-numeric"),
+        ("no_list.json", {"cams": []}, "'cameras' list"),
+        ("empty.json", {"cameras": []}, "empty"),
+        ("dup_names.json", {"cameras": [_cam_dicts()["cameras"][0]] * 2}, "not unique"),
+        ("zero_size.json", _mutate(lambda c: c.update(width=0)), "must be positive"),
+    ],
+)
 def test_bad_camera_files_raise_naming_the_file(tmp_path, name, content, needle):
     p = _write(tmp_path, name, content)
     with pytest.raises(ClothFitError) as e:
@@ -213,6 +221,7 @@ def test_missing_camera_file(tmp_path):
 
 
 # ----------------------------------------------------------------- lab18 rig
+
 
 @pytest.fixture(scope="module")
 def rig():
@@ -289,17 +298,18 @@ def test_select_training_partitions_the_rig(rig):
 
 # ------------------------------------------------------------------ rasteriser
 
+
 def _random_mesh(rng, H, W, n_tris=25):
     n = int(rng.integers(6, 40))
     pts = rng.uniform(-0.3 * W, 1.3 * W, size=(n, 2))
     pts[:, 1] = rng.uniform(-0.3 * H, 1.3 * H, size=n)
     tris = np.array([rng.choice(n, 3, replace=False) for _ in range(n_tris)])
-    pts[0] = pts[1] + 0.37 * (pts[2] - pts[1])     # collinear (degenerate) triangles
-    pts[3] = pts[4]                                 # two coincident vertices (degenerate)
+    pts[0] = pts[1] + 0.37 * (pts[2] - pts[1])  # collinear (degenerate) triangles
+    pts[3] = pts[4]  # two coincident vertices (degenerate)
     tris[0] = [0, 1, 2]
     tris[1] = [3, 4, 5]
     if rng.random() < 0.5:
-        pts[int(rng.integers(6, n))] = np.nan       # NaN vertex: its triangles are skipped
+        pts[int(rng.integers(6, n))] = np.nan  # NaN vertex: its triangles are skipped
     # some small triangles and some large overlapping / folded ones
     tris = np.concatenate([tris, tris[:5, ::-1]])
     return pts, tris
@@ -330,7 +340,7 @@ def test_rasterize_window_agrees_with_rasterize():
         emb = np.zeros((H, W), bool)
         if win.size:
             assert win.any(axis=1)[0] and win.any(axis=1)[-1] and win.any(axis=0)[0] and win.any(axis=0)[-1]
-            emb[r0:r0 + win.shape[0], c0:c0 + win.shape[1]] = win
+            emb[r0 : r0 + win.shape[0], c0 : c0 + win.shape[1]] = win
         assert np.array_equal(emb, full), trial
     # nothing visible -> empty window
     r0, c0, win = raster.rasterize_window(np.array([[-10.0, -10], [-5, -10], [-5, -3]]), np.array([[0, 1, 2]]), H, W)
@@ -380,23 +390,24 @@ def test_rasterize_clips_to_the_image():
     H, W = 8, 10
     pts = np.array([[-20.0, -20.0], [40.0, -20.0], [-20.0, 40.0]])
     m = raster.rasterize(pts, np.array([[0, 1, 2]]), H, W)
-    assert m.all()          # a triangle containing the whole image covers all of it
+    assert m.all()  # a triangle containing the whole image covers all of it
     pts = np.array([[-5.0, -5.0], [-1.0, -5.0], [-1.0, -1.0]])
     assert not raster.rasterize(pts, np.array([[0, 1, 2]]), H, W).any()
 
 
 # -------------------------------------------------------------------- metrics
 
+
 def test_e_sil_on_hand_made_images():
     obs = np.zeros((10, 10), bool)
-    obs[2:6, 2:6] = True                 # 16 pixels
+    obs[2:6, 2:6] = True  # 16 pixels
     mod = np.zeros((10, 10), bool)
-    mod[2:6, 3:7] = True                 # shifted by one column: 4 missing + 4 extra
+    mod[2:6, 3:7] = True  # shifted by one column: 4 missing + 4 extra
     assert metrics.e_sil(obs, mod) == pytest.approx(8 / 16)
     assert metrics.e_sil(obs, obs) == 0.0
     assert metrics.e_sil(obs, np.zeros_like(obs)) == 1.0
     big = np.ones((10, 10), bool)
-    assert metrics.e_sil(obs, big) == pytest.approx(84 / 16)      # normalised by the OBSERVED area
+    assert metrics.e_sil(obs, big) == pytest.approx(84 / 16)  # normalised by the OBSERVED area
     assert metrics.e_sil(obs.astype(np.uint8) * 255, mod.astype(np.uint8)) == pytest.approx(0.5)
 
 
@@ -412,10 +423,10 @@ def test_e_sil_errors():
 
 def test_e_all_is_the_sum_over_cameras_and_frames():
     o = np.zeros((6, 6), bool)
-    o[1:3, 1:3] = True                   # 4 pixels
+    o[1:3, 1:3] = True  # 4 pixels
     m1 = o.copy()
-    m1[4, 4] = True                      # 1 extra -> 0.25
-    m2 = np.zeros_like(o)                # all missing -> 1.0
+    m1[4, 4] = True  # 1 extra -> 0.25
+    m2 = np.zeros_like(o)  # all missing -> 1.0
     obs = [[o, o], [o, o]]
     mod = [[o, m1], [m2, m1]]
     assert metrics.e_all(obs, mod) == pytest.approx(0 + 0.25 + 1.0 + 0.25)
@@ -425,8 +436,8 @@ def test_shape_error_mm():
     rng = np.random.default_rng(0)
     a = rng.normal(size=(3, 20, 3))
     b = a.copy()
-    b[0] += [0.003, 0, 0]                # 3 mm everywhere
-    b[1, :10] += [0, 0.004, 0]           # 4 mm on half the vertices -> mean 2 mm
+    b[0] += [0.003, 0, 0]  # 3 mm everywhere
+    b[1, :10] += [0, 0.004, 0]  # 4 mm on half the vertices -> mean 2 mm
     e = metrics.shape_error_mm(b, a)
     assert np.allclose(e, [3.0, 2.0, 0.0])
     c = b.copy()
@@ -452,17 +463,17 @@ def test_boundary_noise_model():
     a = metrics.add_boundary_noise(m, 0.05, np.random.default_rng(7))
     flipped = a ^ m
     assert int(flipped.sum()) == expect
-    assert np.all((inner | outer)[flipped])                     # only in the boundary band
-    assert np.array_equal(a[flipped & inner], np.zeros(int((flipped & inner).sum()), bool))   # missing
-    assert np.all(a[flipped & outer])                                                         # extra
+    assert np.all((inner | outer)[flipped])  # only in the boundary band
+    assert np.array_equal(a[flipped & inner], np.zeros(int((flipped & inner).sum()), bool))  # missing
+    assert np.all(a[flipped & outer])  # extra
     b = metrics.add_boundary_noise(m, 0.05, np.random.default_rng(7))
-    assert np.array_equal(a, b)                                 # reproducible
+    assert np.array_equal(a, b)  # reproducible
     c = metrics.add_boundary_noise(m, 0.05, np.random.default_rng(8))
-    assert not np.array_equal(a, c)                             # another seed, another pattern
+    assert not np.array_equal(a, c)  # another seed, another pattern
     assert int((c ^ m).sum()) == expect
     assert np.array_equal(metrics.add_boundary_noise(m, 0.0, np.random.default_rng(7)), m)
     big = metrics.add_boundary_noise(m, 0.5, np.random.default_rng(1))
     assert int((big ^ m).sum()) == int(round(0.5 * n_inner))
-    assert np.array_equal(m, _disc())                           # input untouched
+    assert np.array_equal(m, _disc())  # input untouched
     with pytest.raises(ClothFitError, match="1.5"):
         metrics.add_boundary_noise(m, 1.5, np.random.default_rng(0))

@@ -1,4 +1,7 @@
-import sys, os; sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 """The fitness (objective), an end-to-end fit on a small synthetic capture, checkpoint/resume,
 cancel, evaluation on held-out cameras and the overlays."""
@@ -8,19 +11,16 @@ import json
 import cv2
 import numpy as np
 import pytest
-
-from addon.core.physics import jit
-from addon.core.observation import camera as C
-from addon.core import defaults as D
-from addon.core.observation import overlay
-from addon.core.observation import raster
-from addon.core.observation import synth
-from addon.core.errors import ClothFitError
-from addon.core.fitting.evaluate import evaluate
-from addon.core.fitting.job import FitConfig, FitJob
-from addon.core.physics.scenario import paper_scenario
-from addon.core.fitting.objective import SilhouetteObjective
-from addon.core.physics.models import simulate
+from clothfit.core import defaults as D
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.evaluate import evaluate
+from clothfit.core.fitting.job import FitConfig, FitJob
+from clothfit.core.fitting.objective import SilhouetteObjective
+from clothfit.core.observation import camera as C
+from clothfit.core.observation import overlay, raster, synth
+from clothfit.core.physics import jit
+from clothfit.core.physics.models import simulate
+from clothfit.core.physics.scenario import paper_scenario
 
 GT = dict(D.GT_PARAMS)
 GT_ROW = [GT["m"], GT["k"], GT["l"], GT["d"]]
@@ -38,6 +38,7 @@ def rig():
 
 # ------------------------------------------------------------------ objective
 
+
 @pytest.fixture(scope="module")
 def small_problem(rig):
     """3 cameras of lab18 at 120x160, 5 frames, noise-free observations of the ground truth."""
@@ -54,7 +55,7 @@ def test_objective_backends_agree(small_problem):
     P = np.array([GT_ROW, K10_ROW])
     sim_a = simulate(sc, P, backend="numpy")
     sim_b = simulate(sc, P, backend="numba")
-    assert np.abs(sim_a.positions - sim_b.positions).max() < 1e-6     # the simulations agree
+    assert np.abs(sim_a.positions - sim_b.positions).max() < 1e-6  # the simulations agree
     ea, xa = SilhouetteObjective(sc, cams, obs, backend="numpy").per_image(P)
     eb, xb = SilhouetteObjective(sc, cams, obs, backend="numba").per_image(P)
     assert ea.shape == eb.shape == (2, 3, 5)
@@ -69,7 +70,8 @@ def test_objective_backends_agree(small_problem):
 
 def test_objective_per_image_is_e_sil_of_the_model_silhouette(small_problem):
     """The numpy objective's per-image value equals metrics.e_sil of a separately rasterised model."""
-    from addon.core.observation.metrics import e_sil
+    from clothfit.core.observation.metrics import e_sil
+
     sc, cams, obs = small_problem
     X = simulate(sc, [K10_ROW], backend="numpy").positions[0]
     esil, _ = SilhouetteObjective(sc, cams, obs, backend="numpy").per_image(np.array([K10_ROW]))
@@ -79,8 +81,11 @@ def test_objective_per_image_is_e_sil_of_the_model_silhouette(small_problem):
             assert esil[0, c, f] == pytest.approx(e_sil(obs[c][f], mod), rel=1e-12)
 
 
-BAD_ROWS = {"too_stiff": [1e-5, 1e9, GT["l"], 0.0], "negative_mass": [-1e-5, 10.0, GT["l"], 0.0],
-            "nan_k": [1e-5, float("nan"), GT["l"], 0.0]}
+BAD_ROWS = {
+    "too_stiff": [1e-5, 1e9, GT["l"], 0.0],
+    "negative_mass": [-1e-5, 10.0, GT["l"], 0.0],
+    "nan_k": [1e-5, float("nan"), GT["l"], 0.0],
+}
 
 
 _REF = {}
@@ -90,15 +95,15 @@ _REF = {}
 @pytest.mark.parametrize("kind", list(BAD_ROWS))
 def test_exploded_candidates_score_inf(small_problem, backend, kind):
     sc, cams, obs = small_problem
-    sc = sc.with_frames(sc.frame_times[:2])            # t = 0.1, 0.3: shorter simulations
+    sc = sc.with_frames(sc.frame_times[:2])  # t = 0.1, 0.3: shorter simulations
     obs = [o[:2] for o in obs]
     obj = SilhouetteObjective(sc, cams, obs, backend=backend)
     if backend not in _REF:
         _REF[backend] = obj.per_image(np.array([K10_ROW]))[0][0]
-    esil, exploded = obj.per_image(np.array([K10_ROW, BAD_ROWS[kind]]))    # never an exception
+    esil, exploded = obj.per_image(np.array([K10_ROW, BAD_ROWS[kind]]))  # never an exception
     assert exploded.tolist() == [False, True]
     assert np.all(esil[1] == np.inf)
-    assert np.allclose(esil[0], _REF[backend], rtol=1e-12, atol=0)          # the good one is unaffected
+    assert np.allclose(esil[0], _REF[backend], rtol=1e-12, atol=0)  # the good one is unaffected
     f = obj(np.array([BAD_ROWS[kind], K10_ROW]))
     assert f[0] == np.inf and f[1] == pytest.approx(_REF[backend].sum(), rel=1e-12)
 
@@ -145,8 +150,9 @@ FIT_BOUNDS = {"k_over_m": [2e5, 5e6], "d_over_m": [1.0, 25.0], "l_rel": [0.8, 1.
 
 def test_end_to_end_cma_es_recovers_the_identifiable_parameters(capture):
     # the default search space (two decades in k/m and d/m, l within -40..+40 %)
-    cfg = FitConfig(train_cameras=[0, 1, 2, 3], train_times=TRAIN_TIMES, optimizer="cma-es", seed=0,
-                    max_evaluations=500)
+    cfg = FitConfig(
+        train_cameras=[0, 1, 2, 3], train_times=TRAIN_TIMES, optimizer="cma-es", seed=0, max_evaluations=500
+    )
     job = FitJob(capture, cfg)
     assert job.m == pytest.approx(GT["m"]) and "cloth_mass" in job.m_source
     r = job.run()
@@ -157,22 +163,23 @@ def test_end_to_end_cma_es_recovers_the_identifiable_parameters(capture):
     assert err["d_over_m"] < 4.0, err
     assert err["l"] < 1.0, err
     assert r["params"]["m"] == pytest.approx(GT["m"])
-    assert r["best_E_sil_mean_pct"] < 4.0           # noise floor: 5 % of the boundary pixels flipped
+    assert r["best_E_sil_mean_pct"] < 4.0  # noise floor: 5 % of the boundary pixels flipped
     hist = [h[1] for h in r["history"] if h[1] is not None]
-    assert hist == sorted(hist, reverse=True)          # best-so-far never worsens
-    json.dumps(r)                                      # strict-JSON serialisable result
+    assert hist == sorted(hist, reverse=True)  # best-so-far never worsens
+    json.dumps(r)  # strict-JSON serialisable result
 
 
 def _small_cfg(**kw):
-    d = dict(train_cameras=[0, 2], train_times=[0.2, 0.6], optimizer="cma-es", seed=5, max_evaluations=42,
-             bounds=FIT_BOUNDS)
+    d = dict(
+        train_cameras=[0, 2], train_times=[0.2, 0.6], optimizer="cma-es", seed=5, max_evaluations=42, bounds=FIT_BOUNDS
+    )
     d.update(kw)
     return FitConfig(**d)
 
 
 def test_checkpoint_and_resume_continue_to_the_budget(capture, tmp_path):
     ref = FitJob(capture, _small_cfg()).run()
-    assert ref["evaluations"] == 42            # 6 generations of 7
+    assert ref["evaluations"] == 42  # 6 generations of 7
 
     ck = str(tmp_path / "fit.checkpoint.json")
     job = FitJob(capture, _small_cfg(), checkpoint=ck)
@@ -205,7 +212,7 @@ def test_cancel_keeps_the_best_so_far(capture, tmp_path):
     best = job.best_params
     assert best is not None
     job.cancel()
-    assert not job.step()                       # a cancelled job does no more work
+    assert not job.step()  # a cancelled job does no more work
     r = job.result()
     assert r["cancelled"] is True and r["finished"] is True
     assert r["params"] == best
@@ -245,6 +252,7 @@ def test_evaluate_prefers_the_truth_on_held_out_cameras(capture):
 
 
 # -------------------------------------------------------------------- overlays
+
 
 def test_overlay_colours_on_a_hand_made_pair():
     obs = np.array([[1, 1, 0, 0]], bool)

@@ -1,4 +1,7 @@
-import sys, os; sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 """The mass-spring model (docs/method.md#spec-2): topology, forces, integrator, backends, explosions, handles,
 parameter validation and identifiability."""
@@ -7,14 +10,13 @@ import math
 
 import numpy as np
 import pytest
-
-from addon.core.physics import jit
-from addon.core import defaults as D
-from addon.core.physics import paper as S
-from addon.core.physics.models import simulate
-from addon.core.errors import ClothFitError
-from addon.core.physics.scenario import ClothGrid, Handle, Scenario, paper_scenario
-from addon.core.physics.paper import Params, identifiable, identifiable_errors
+from clothfit.core import defaults as D
+from clothfit.core.errors import ClothFitError
+from clothfit.core.physics import jit
+from clothfit.core.physics import paper as S
+from clothfit.core.physics.models import simulate
+from clothfit.core.physics.paper import Params, identifiable, identifiable_errors
+from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, paper_scenario
 
 GT = dict(D.GT_PARAMS)
 GT_ROW = [GT["m"], GT["k"], GT["l"], GT["d"]]
@@ -23,6 +25,7 @@ needs_numba = pytest.mark.skipif(not jit.available(), reason="numba not importab
 
 
 # ------------------------------------------------------------------ topology
+
 
 def _edges_of_triangles(tris):
     e = set()
@@ -43,8 +46,8 @@ def test_grid_counts_16x16_match_the_paper():
     assert np.count_nonzero(np.isclose(g.rest_factor, math.sqrt(2.0))) == 225
     h = g.springs[:240]
     v = g.springs[240:480]
-    assert np.all(h[:, 1] - h[:, 0] == 1)          # same row, next column
-    assert np.all(v[:, 1] - v[:, 0] == 16)         # next row, same column
+    assert np.all(h[:, 1] - h[:, 0] == 1)  # same row, next column
+    assert np.all(v[:, 1] - v[:, 0] == 16)  # next row, same column
     assert np.all(g.springs[480:, 1] - g.springs[480:, 0] == 17)
     assert abs(g.spacing - 0.10 / 15) < 1e-15
     assert g.corners() == [0, 15, 240, 255]
@@ -64,8 +67,9 @@ def test_grid_counts_non_square(nx, ny):
     assert springs == _edges_of_triangles(g.triangles)
     # triangles counter-clockwise seen from +z, none degenerate
     P = g.rest[g.triangles]
-    area2 = ((P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1])
-             - (P[:, 2, 0] - P[:, 0, 0]) * (P[:, 1, 1] - P[:, 0, 1]))
+    area2 = (P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1]) - (P[:, 2, 0] - P[:, 0, 0]) * (
+        P[:, 1, 1] - P[:, 0, 1]
+    )
     assert np.all(area2 > 0)
     assert np.all(g.triangles.min() >= 0) and g.triangles.max() == nx * ny - 1
     # extent of the rest sheet
@@ -88,6 +92,7 @@ def test_grid_rejects_tiny_grid():
 
 # ------------------------------------------------------------------ forces
 
+
 @pytest.mark.parametrize("nx,ny", [(16, 16), (6, 4)])
 def test_spring_forces_are_minus_energy_gradient(nx, ny):
     g = ClothGrid(nx=nx, ny=ny)
@@ -96,7 +101,7 @@ def test_spring_forces_are_minus_energy_gradient(nx, ny):
     k, l = 7.5, 0.9 * g.spacing
     F = S.spring_forces(x, g, k, l)
     assert F.shape == x.shape
-    assert np.abs(F).max() > 1e-3   # not trivially zero
+    assert np.abs(F).max() > 1e-3  # not trivially zero
     h = 1e-7
     num = np.zeros_like(x)
     verts = rng.choice(g.n_vertices, size=min(40, g.n_vertices), replace=False)
@@ -121,7 +126,7 @@ def test_simulator_first_step_uses_the_model_forces(backend):
     rng = np.random.default_rng(3)
     g.rest = g.rest + rng.normal(scale=0.2 * g.spacing, size=g.rest.shape)
     m, k, l = 2e-5, 8.0, 1.1 * g.spacing
-    dt = 0.5 * D.DT_SAFETY * math.sqrt(m / k)       # one substep in the interval
+    dt = 0.5 * D.DT_SAFETY * math.sqrt(m / k)  # one substep in the interval
     grav = np.array([0.3, -0.2, -9.81])
     sc = Scenario(g, [], [dt], settle_time=0.0, gravity=grav)
     r = simulate(sc, [[m, k, l, 0.0]], backend=backend)
@@ -132,6 +137,7 @@ def test_simulator_first_step_uses_the_model_forces(backend):
 
 
 # --------------------------------------------------------------- integrator
+
 
 def _free_scenario(n_steps, m, k, nx=8, seed=0):
     """No gravity, no handles, no settling, a stretched and randomly perturbed start; one frame per
@@ -191,14 +197,18 @@ def test_damped_energy_decreases(backend):
 
 # ------------------------------------------------------------------ backends
 
+
 @needs_numba
 def test_numpy_and_numba_agree_on_the_paper_scenario():
     sc = paper_scenario()
     l = GT["l"]
-    pop = [GT_ROW, [GT["m"], GT["k"] * 1.1, l * 0.97, GT["d"] * 0.8],
-           [1e-5, 1e9, l, 0.0],            # k/m = 1e14: too many steps
-           [-1e-5, 10.0, l, 0.0],          # m <= 0: invalid
-           [1e-5, 10.0, l, 0.0]]           # undamped: chaotic but valid
+    pop = [
+        GT_ROW,
+        [GT["m"], GT["k"] * 1.1, l * 0.97, GT["d"] * 0.8],
+        [1e-5, 1e9, l, 0.0],  # k/m = 1e14: too many steps
+        [-1e-5, 10.0, l, 0.0],  # m <= 0: invalid
+        [1e-5, 10.0, l, 0.0],
+    ]  # undamped: chaotic but valid
     a = simulate(sc, pop, backend="numpy")
     b = simulate(sc, pop, backend="numba")
     assert a.positions.shape == b.positions.shape == (5, 30, 256, 3)
@@ -212,7 +222,7 @@ def test_numpy_and_numba_agree_on_the_paper_scenario():
 
 
 ABSURD = {
-    "too_stiff": [1e-5, 1e9, GT["l"], 0.0],          # k/m = 1e14 -> more than MAX_TOTAL_STEPS
+    "too_stiff": [1e-5, 1e9, GT["l"], 0.0],  # k/m = 1e14 -> more than MAX_TOTAL_STEPS
     "zero_mass": [0.0, 10.0, GT["l"], 0.0],
     "negative_mass": [-1e-5, 10.0, GT["l"], 0.0],
     "negative_damping": [1e-5, 10.0, GT["l"], -1e-5],
@@ -220,6 +230,8 @@ ABSURD = {
     "nan_k": [1e-5, float("nan"), GT["l"], 5e-5],
     "inf_k": [1e-5, float("inf"), GT["l"], 5e-5],
 }
+
+
 def _absurd_cases():
     out = []
     for b in BACKENDS:
@@ -243,7 +255,7 @@ def short_paper_gt(short_paper):
 @pytest.mark.parametrize("backend,kind", _absurd_cases())
 def test_absurd_candidate_is_flagged_not_raised(backend, kind, short_paper, short_paper_gt):
     pop = [GT_ROW, ABSURD[kind], GT_ROW]
-    r = simulate(short_paper, pop, backend=backend)     # never an exception
+    r = simulate(short_paper, pop, backend=backend)  # never an exception
     assert r.exploded.tolist() == [False, True, False]
     assert isinstance(r.reason[1], str) and r.reason[1]
     if kind == "too_stiff":
@@ -278,14 +290,18 @@ def test_unknown_backend_is_an_error(short_paper):
 
 # -------------------------------------------------------------------- handles
 
+
 def _handle_scenario():
     g = ClothGrid(nx=6)
     c = g.corners()
-    hs = [Handle(c[0], [0.0], g.rest[c[0]][None], release_time=0.3),
-          Handle(c[1], [0.0], g.rest[c[1]][None]),
-          Handle(c[2], [0.0], g.rest[c[2]][None]),
-          Handle(c[3], [0.0, 0.2, 0.4], [g.rest[c[3]], g.rest[c[3]] + [0.0, 0.0, 0.02],
-                                           g.rest[c[3]] + [0.01, -0.005, 0.0]])]
+    hs = [
+        Handle(c[0], [0.0], g.rest[c[0]][None], release_time=0.3),
+        Handle(c[1], [0.0], g.rest[c[1]][None]),
+        Handle(c[2], [0.0], g.rest[c[2]][None]),
+        Handle(
+            c[3], [0.0, 0.2, 0.4], [g.rest[c[3]], g.rest[c[3]] + [0.0, 0.0, 0.02], g.rest[c[3]] + [0.01, -0.005, 0.0]]
+        ),
+    ]
     times = [0.05, 0.1, 0.2, 0.25, 0.29, 0.3, 0.35, 0.4, 0.5]
     sc = Scenario(g, hs, times, settle_time=0.2)
     n = g.n_vertices
@@ -324,7 +340,7 @@ def test_released_corner_moves_after_release_and_not_before(backend):
     after = t > 0.3
     assert np.all(dist[before] == 0.0), dist
     assert np.all(dist[after] > 1e-3), dist
-    assert np.all(np.diff(dist[after]) > 0)    # it keeps falling away over the next 0.2 s
+    assert np.all(np.diff(dist[after]) > 0)  # it keeps falling away over the next 0.2 s
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -368,14 +384,18 @@ def test_handle_and_scenario_validation():
 
 # ------------------------------------------------------------------ params
 
-@pytest.mark.parametrize("kw,needle", [
-    (dict(m=float("nan")), "m = nan"),
-    (dict(k=float("inf")), "k = inf"),
-    (dict(m=-2e-5), "m=-2e-05"),
-    (dict(k=0.0), "k=0.0"),
-    (dict(l=-0.5), "l=-0.5"),
-    (dict(d=-0.25), "d = -0.25"),
-])
+
+@pytest.mark.parametrize(
+    "kw,needle",
+    [
+        (dict(m=float("nan")), "m = nan"),
+        (dict(k=float("inf")), "k = inf"),
+        (dict(m=-2e-5), "m=-2e-05"),
+        (dict(k=0.0), "k=0.0"),
+        (dict(l=-0.5), "l=-0.5"),
+        (dict(d=-0.25), "d = -0.25"),
+    ],
+)
 def test_params_validation_names_the_value(kw, needle):
     d = dict(GT, **kw)
     with pytest.raises(ClothFitError) as e:
@@ -397,7 +417,7 @@ def test_identifiable_combinations():
     ident = p.identifiable()
     assert ident == pytest.approx({"k_over_m": 1e6, "d_over_m": 5.0, "l": 0.007}, rel=1e-12)
     assert identifiable(p.as_dict()) == ident
-    q = {"m": 3e-5, "k": 33.0, "l": 0.007 * 1.02, "d": 1.5e-4}       # k/m +10 %, d/m same, l +2 %
+    q = {"m": 3e-5, "k": 33.0, "l": 0.007 * 1.02, "d": 1.5e-4}  # k/m +10 %, d/m same, l +2 %
     err = identifiable_errors(q, p.as_dict())
     assert err["k_over_m"] == pytest.approx(10.0, rel=1e-9)
     assert err["d_over_m"] == pytest.approx(0.0, abs=1e-9)
@@ -410,7 +430,7 @@ def test_scaling_m_k_d_together_gives_identical_motion(backend, factor):
     """docs/method.md#identifiability-what-silhouettes-can-tell: the motion depends on k/m, d/m and l only."""
     sc = paper_scenario(frame_times=[0.05, 0.3, 0.7, 1.2])
     scaled = [GT["m"] * factor, GT["k"] * factor, GT["l"], GT["d"] * factor]
-    other = [GT["m"], GT["k"] * 1.3, GT["l"], GT["d"] * 1.3]       # scaling k, d but not m does change it
+    other = [GT["m"], GT["k"] * 1.3, GT["l"], GT["d"] * 1.3]  # scaling k, d but not m does change it
     r = simulate(sc, [GT_ROW, scaled, other], backend=backend)
     assert not r.exploded.any()
     diff = np.abs(r.positions[0] - r.positions[1]).max()

@@ -1,5 +1,6 @@
 """make docs-check: every number in README.md and docs/**/*.md is generated from, or checked against,
 a recording in docs/figures/ (tools/docs_check.py); and the checker itself catches what it must."""
+
 import json
 import os
 import sys
@@ -34,10 +35,12 @@ def test_every_recording_names_its_command_and_commit():
 
 
 def test_cited_paper_numbers_are_the_ones_the_code_prints():
-    from addon.core import defaults as D
+    from clothfit.core import defaults as D
+
     d = DC.recording("cited_paper")["data"]
-    assert [D.PAPER_TABLE1[c] for c in d["table1"]["cameras"]] == list(zip(d["table1"]["silhouette_pct"],
-                                                                            d["table1"]["shape_mm"]))
+    assert [D.PAPER_TABLE1[c] for c in d["table1"]["cameras"]] == list(
+        zip(d["table1"]["silhouette_pct"], d["table1"]["shape_mm"])
+    )
     for res, row in D.PAPER_TABLE2.items():
         assert [row[c] for c in d["table2"]["cameras"]] == d["table2"][f"{res[0]}x{res[1]}"]
 
@@ -63,14 +66,28 @@ def test_readme_pictures_are_the_recorded_demo_runs():
 
 # ------------------------------------------------------------------ the checker catches what it must
 
+
 @pytest.fixture
 def fake(tmp_path, monkeypatch):
     figs = tmp_path / "figures"
     figs.mkdir()
-    rec = {"format": F.FORMAT, "version": 1, "name": "t", "command": "python x.py", "commit": "abc1234",
-           "dirty": False, "recorded_at": "2025-01-01T00:00:00Z",
-           "data": {"err_pct": 0.0812, "rows": [{"material": "silk (soft)", "mm": 1.234}, {"material": "denim", "mm": 2.5}],
-                    "s": 31.2, "a": 52.0, "b": 3.3, "xs": [1.0, 2.5, 0.3]}}
+    rec = {
+        "format": F.FORMAT,
+        "version": 1,
+        "name": "t",
+        "command": "python x.py",
+        "commit": "abc1234",
+        "dirty": False,
+        "recorded_at": "2025-01-01T00:00:00Z",
+        "data": {
+            "err_pct": 0.0812,
+            "rows": [{"material": "silk (soft)", "mm": 1.234}, {"material": "denim", "mm": 2.5}],
+            "s": 31.2,
+            "a": 52.0,
+            "b": 3.3,
+            "xs": [1.0, 2.5, 0.3],
+        },
+    }
     (figs / "t.json").write_text(json.dumps(rec))
     (figs / "cited_p.json").write_text(json.dumps({"citation": "a paper", "data": {"x": [6.243]}}))
     monkeypatch.setattr(DC, "FIG_DIR", str(figs))
@@ -81,6 +98,7 @@ def fake(tmp_path, monkeypatch):
         p.write_text(md)
         problems, stats = DC.check_file(str(p))
         return [x.msg for x in problems], stats
+
     return check
 
 
@@ -119,9 +137,11 @@ def test_a_tag_covers_only_its_own_numbers(fake):
 
 
 def test_references_versions_sizes_and_code_are_not_figures(fake):
-    md = ("Blender 4.5.15 and Python 3.11 (issue 12, Table 1, section 6.2, eq. 6) on a 2-core machine, "
-          "480 x 640 images of cam05 and lab18, `--budget 2500`, [link](docs/a1.md).\n\n"
-          "```\npython -m addon fit --max-evaluations 1500\n```\n")
+    md = (
+        "Blender 4.5.15 and Python 3.11 (issue 12, Table 1, section 6.2, eq. 6) on a 2-core machine, "
+        "480 x 640 images of cam05 and lab18, `--budget 2500`, [link](docs/a1.md).\n\n"
+        "```\npython -m clothfit fit --max-evaluations 1500\n```\n"
+    )
     msgs, _ = fake(md)
     assert msgs == []
 
@@ -139,7 +159,9 @@ def test_a_measurement_in_a_code_comment_fails(fake):
 
 
 def test_list_selection_and_skips(fake):
-    assert not fake("silk 1.23 mm, denim 2.5 mm at 3 mm<!--fig t rows[material^=silk].mm rows[material=denim].mm _-->\n")[0]
+    assert not fake(
+        "silk 1.23 mm, denim 2.5 mm at 3 mm<!--fig t rows[material^=silk].mm rows[material=denim].mm _-->\n"
+    )[0]
     msgs, _ = fake("silk 1.3 mm<!--fig t rows[material^=silk].mm-->\n")
     assert msgs and "differs" in msgs[0]
 
@@ -157,6 +179,7 @@ def test_citations_are_checked_and_kept_apart(fake):
 
 def test_generated_blocks_must_equal_their_rendering(fake, monkeypatch):
     import docs_views
+
     monkeypatch.setitem(docs_views.VIEWS, "t.err", lambda rec: f"| err | {rec('t')['data']['err_pct']:.2f} |")
     assert not fake("<!--gen t.err-->\n| err | 0.08 |\n<!--/gen-->\n")[0]
     msgs, _ = fake("<!--gen t.err-->\n| err | 0.07 |\n<!--/gen-->\n")
@@ -167,5 +190,6 @@ def test_rerun_comparison_ignores_timings_and_flags_figures():
     old = {"rows": [{"mean_mm": 0.5, "wall_s": 10.0}], "evals_per_s": 60.0, "n": 3}
     assert F.compare(old, {"rows": [{"mean_mm": 0.5, "wall_s": 99.0}], "evals_per_s": 20.0, "n": 3}) == []
     assert F.compare(old, {"rows": [{"mean_mm": 0.6, "wall_s": 10.0}], "evals_per_s": 60.0, "n": 3})
-    assert F.compare(old, {"rows": [{"mean_mm": 0.5000001, "wall_s": 10.0}], "evals_per_s": 60.0, "n": 3},
-                     rtol=1e-6) == []
+    assert (
+        F.compare(old, {"rows": [{"mean_mm": 0.5000001, "wall_s": 10.0}], "evals_per_s": 60.0, "n": 3}, rtol=1e-6) == []
+    )

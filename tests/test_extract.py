@@ -1,4 +1,5 @@
 """Silhouette extraction (addon/core/footage/extract.py) on tiny synthetic footage: no renders needed."""
+
 import argparse
 import json
 import os
@@ -7,11 +8,10 @@ import shutil
 import cv2
 import numpy as np
 import pytest
-
-from addon.core.footage import extract as X
-from addon.core.observation.camera import Camera, intrinsics, look_at
-from addon.core.observation.capture import load_capture
-from addon.core.errors import ClothFitError
+from clothfit.core.errors import ClothFitError
+from clothfit.core.footage import extract as X
+from clothfit.core.observation.camera import Camera, intrinsics, look_at
+from clothfit.core.observation.capture import load_capture
 
 H, W = 90, 120
 
@@ -43,6 +43,7 @@ def scene(seed=0, h=H, w=W, shadow=True, noise=3.0, cloth_bgr=(200, 120, 60), ce
 
     def noisy(img):
         return np.clip(img + rng.normal(0, noise, img.shape), 0, 255).astype(np.uint8)
+
     return noisy(bg), noisy(bg), noisy(fr), truth
 
 
@@ -51,6 +52,7 @@ def iou(a, b):
 
 
 # ----------------------------------------------------------------- the method
+
 
 def test_auto_threshold_finds_blob_and_ignores_shadow():
     bg, _, fr, truth = scene()
@@ -68,11 +70,13 @@ def test_chroma_weighting_and_shadow_model_against_shadows():
     at the noise threshold."""
     bg, _, fr, truth = scene()
     plain = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=1.0, shadow_min=1.0, threshold="otsu")).masks[0]
-    weighted = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=0.35, shadow_min=1.0,
-                                                             threshold="otsu")).masks[0]
+    weighted = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=0.35, shadow_min=1.0, threshold="otsu")).masks[
+        0
+    ]
     no_model = X.extract_camera([bg], [fr], X.ExtractOptions(shadow_min=1.0)).masks[0]
-    per_pixel = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=1.0, shadow_min=0.5,
-                                                              shadow_window=1)).masks[0]
+    per_pixel = X.extract_camera([bg], [fr], X.ExtractOptions(luma_weight=1.0, shadow_min=0.5, shadow_window=1)).masks[
+        0
+    ]
     assert iou(plain, truth) < 0.8
     assert iou(weighted, truth) > 0.97
     assert iou(no_model, truth) < 0.8
@@ -85,7 +89,7 @@ def test_windowed_shadow_model_sees_texture_under_a_uniform_object():
     rng = np.random.default_rng(5)
     h, w = 60, 80
     bg = np.repeat(_smooth(rng, h, w, 60, 220, 3, ch=1)[..., None], 3, -1)
-    bg[..., 2] *= 1.15   # a warm tint
+    bg[..., 2] *= 1.15  # a warm tint
     fr = bg.copy()
     truth = np.zeros((h, w), bool)
     truth[20:40, 25:55] = True
@@ -136,16 +140,15 @@ def test_otsu_threshold_on_two_modes():
 def test_cleanup_keeps_largest_fills_holes_and_removes_specks():
     raw = np.zeros((60, 80), bool)
     raw[10:40, 10:40] = True
-    raw[20:24, 20:24] = False          # a hole
-    raw[50:53, 60:63] = True           # a second, small object
-    raw[5, 70] = True                  # a speck
+    raw[20:24, 20:24] = False  # a hole
+    raw[50:53, 60:63] = True  # a second, small object
+    raw[5, 70] = True  # a speck
     final, steps, info = X.clean_mask(raw, X.ExtractOptions())
-    assert final[11:39, 11:39].all() and abs(int(final.sum()) - 900) <= 4   # the opening rounds corners
+    assert final[11:39, 11:39].all() and abs(int(final.sum()) - 900) <= 4  # the opening rounds corners
     assert not final[:10].any() and not final[40:].any()
     assert info["components"] == 2 and info["dropped_area"] > 0
     assert set(steps) == {"threshold", "open", "close", "largest", "refine", "final"}
-    keep_all, _, _ = X.clean_mask(raw, X.ExtractOptions(keep_largest=False, fill_holes=False,
-                                                            close_radius=0))
+    keep_all, _, _ = X.clean_mask(raw, X.ExtractOptions(keep_largest=False, fill_holes=False, close_radius=0))
     assert keep_all[51, 61] and not keep_all[21, 21]
 
 
@@ -187,6 +190,7 @@ def test_bad_options(bad):
 
 # ------------------------------------------------------------- footage folders
 
+
 def _cams(n=2):
     cams = []
     for i in range(n):
@@ -196,7 +200,8 @@ def _cams(n=2):
 
 
 def write_footage(root, n_cams=2, times=(0.1, 0.2, 0.3), plates=1, footage_json=True):
-    from addon.core.footage.calib_io import export_cameras
+    from clothfit.core.footage.calib_io import export_cameras
+
     os.makedirs(root, exist_ok=True)
     cams = _cams(n_cams)
     export_cameras(cams, os.path.join(root, "cameras.yml"))
@@ -239,8 +244,7 @@ def test_extract_capture_end_to_end(tmp_path):
     assert os.path.isfile(os.path.join(out, X.REPORT_JSON))
     assert cap.meta["extraction"]["thresholds"].keys() == {"cam00", "cam01"}
     names = sorted(os.listdir(os.path.join(dbg, "cam00")))
-    for step in ("1_difference", "2_threshold", "3_open", "4_close", "5_largest", "6_refine", "7_final",
-                 "8_overlay"):
+    for step in ("1_difference", "2_threshold", "3_open", "4_close", "5_largest", "6_refine", "7_final", "8_overlay"):
         assert f"000_{step}.png" in names
     assert "histogram.png" in names
     assert "threshold" in X.format_report(rep)
@@ -253,7 +257,8 @@ def test_extract_capture_stopped_keeps_the_cameras_done(tmp_path):
 
     def stop_after_one():
         asked.append(1)
-        return len(asked) > 1           # False before camera 0, True before camera 1
+        return len(asked) > 1  # False before camera 0, True before camera 1
+
     rep = X.extract_capture(str(tmp_path / "f"), str(tmp_path / "cap"), should_stop=stop_after_one)
     assert rep["stopped"] == {"cameras_done": 1, "cameras": 3} and len(asked) == 2
     assert any("stopped after 1 of 3 cameras" in w for w in rep["warnings"])
@@ -267,7 +272,8 @@ def test_extract_capture_stopped_keeps_the_cameras_done(tmp_path):
 def test_extract_capture_undistort(tmp_path):
     root, out = str(tmp_path / "f"), str(tmp_path / "c")
     write_footage(root, n_cams=1, times=(0.1,))
-    from addon.core.footage.calib_io import export_cameras, import_cameras
+    from clothfit.core.footage.calib_io import export_cameras, import_cameras
+
     cams = import_cameras(os.path.join(root, "cameras.yml"))
     cams[0].dist = np.array([-0.2, 0.05, 0.0, 0.0, 0.0])
     export_cameras(cams, os.path.join(root, "cameras.yml"))
@@ -315,6 +321,7 @@ def test_extract_capture_bad_inputs(tmp_path):
     assert "2 problems" in msg
     # missing camera folder, frame count mismatch
     import shutil
+
     shutil.rmtree(os.path.join(root, "cam01"))
     os.remove(os.path.join(root, "cam00", "002.png"))
     _expect(root, out, "cam01", "not found", "2 foreground images", "3 frame times")
@@ -336,12 +343,29 @@ def test_cli_glue(tmp_path, capsys):
     root, out = str(tmp_path / "f"), str(tmp_path / "c")
     write_footage(root, footage_json=False)
     scen = tmp_path / "scen.json"
-    from addon.core.physics.scenario import paper_scenario
+    from clothfit.core.physics.scenario import paper_scenario
+
     scen.write_text(json.dumps({"scenario": paper_scenario(frame_times=[9.0]).to_dict()}))
-    from addon.cli.footage import add_extract_arguments, cmd_extract
+    from clothfit.cli.footage import add_extract_arguments, cmd_extract
+
     p = add_extract_arguments(argparse.ArgumentParser())
-    args = p.parse_args([root, "-o", out, "--cameras", os.path.join(root, "cameras.yml"), "--times", "0.1,0.2,0.3",
-                         "--camera-threshold", "cam01=12", "--scenario", str(scen), "--cloth-mass", "0.003"])
+    args = p.parse_args(
+        [
+            root,
+            "-o",
+            out,
+            "--cameras",
+            os.path.join(root, "cameras.yml"),
+            "--times",
+            "0.1,0.2,0.3",
+            "--camera-threshold",
+            "cam01=12",
+            "--scenario",
+            str(scen),
+            "--cloth-mass",
+            "0.003",
+        ]
+    )
     rep = cmd_extract(args)
     assert rep["cameras"]["cam01"]["threshold"] == 12.0
     assert "wrote capture" in capsys.readouterr().out
@@ -354,10 +378,10 @@ def test_cli_glue(tmp_path, capsys):
 
 def test_boundary_refinement_moves_edge_to_half_contrast():
     yy, xx = np.mgrid[0:80, 0:80]
-    disk = (xx - 40.0) ** 2 + (yy - 38.0) ** 2 < 15.0 ** 2
+    disk = (xx - 40.0) ** 2 + (yy - 38.0) ** 2 < 15.0**2
     d = cv2.GaussianBlur(disk.astype(np.float32) * 60.0, (0, 0), 1.5)
-    fat = d > 4.0                                # a low (noise-level) threshold on a blurred edge
-    thin = d > 50.0                              # a high one
+    fat = d > 4.0  # a low (noise-level) threshold on a blurred edge
+    thin = d > 50.0  # a high one
     for m in (fat, thin):
         assert iou(m, disk) < 0.93
         r = X.refine_boundary(m, d, 2)
@@ -366,7 +390,8 @@ def test_boundary_refinement_moves_edge_to_half_contrast():
 
 
 def test_cli_extract(tmp_path, capsys):
-    from addon.cli import main as cli
+    from clothfit.cli import main as cli
+
     root, out = str(tmp_path / "f"), str(tmp_path / "c")
     write_footage(root)
     assert cli(["extract", root, "-o", out, "--threshold", "noise"]) == 0
@@ -380,8 +405,9 @@ def test_cli_extract(tmp_path, capsys):
 
 def test_overlays_on_the_footage_frames(tmp_path, capsys):
     """overlay --on-images draws the comparison on the camera images the silhouettes came from."""
-    from addon.cli import main as cli
-    from addon.core.observation.overlay import capture_overlays
+    from clothfit.cli import main as cli
+    from clothfit.core.observation.overlay import capture_overlays
+
     root, out = str(tmp_path / "f"), str(tmp_path / "c")
     write_footage(root, n_cams=1, times=(0.1, 0.2))
     X.extract_capture(root, out)
@@ -390,15 +416,26 @@ def test_overlays_on_the_footage_frames(tmp_path, capsys):
     frame = images(0, 1)
     assert frame.shape == (H, W, 3) and frame.dtype == np.uint8
     assert np.array_equal(frame, cv2.imread(os.path.join(root, "cam00", "001.png"))[..., ::-1])
-    paths = capture_overlays(cap, {"m": 1e-5, "k": 10.0, "l": 0.1 / 15, "d": 1e-4}, str(tmp_path / "ov"),
-                             images=images)
+    paths = capture_overlays(cap, {"m": 1e-5, "k": 10.0, "l": 0.1 / 15, "d": 1e-4}, str(tmp_path / "ov"), images=images)
     ov = cv2.imread(paths[0])[..., ::-1]
     far = np.ones((H, W), bool)
-    far[H // 4:3 * H // 4, W // 4:3 * W // 4] = False          # away from the cloth: the frame itself
+    far[H // 4 : 3 * H // 4, W // 4 : 3 * W // 4] = False  # away from the cloth: the frame itself
     same = np.all(ov == cv2.imread(os.path.join(root, "cam00", "000.png"))[..., ::-1], axis=2)
     assert same[far].mean() > 0.9
-    assert cli(["overlay", out, "--params", '{"m": 1e-5, "k": 10, "l": 0.00667, "d": 1e-4}', "--out",
-                str(tmp_path / "ov2"), "--on-images"]) == 0
+    assert (
+        cli(
+            [
+                "overlay",
+                out,
+                "--params",
+                '{"m": 1e-5, "k": 10, "l": 0.00667, "d": 1e-4}',
+                "--out",
+                str(tmp_path / "ov2"),
+                "--on-images",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     X.extract_capture(root, out + "u", undistort=True)
     with pytest.raises(ClothFitError, match="undistorted"):

@@ -1,34 +1,43 @@
 """FitResult: a fit's result written and read back (the same JSON as the plain dict results always
 were), the keys its readers depend on checked with one-line errors; its readers (warm start, the
 Blender export) and the checkpoint module it left job.py for."""
+
 import json
 
 import numpy as np
 import pytest
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting import checkpoint
+from clothfit.core.fitting.job import FitConfig, FitJob, read_checkpoint
+from clothfit.core.fitting.parameters import load_init
+from clothfit.core.fitting.result import RESULT_FORMAT, FitResult
+from clothfit.core.observation import camera as C
+from clothfit.core.observation import synth
+from clothfit.core.physics.scenario import fitted_scenario, paper_scenario
 
-from addon.core.errors import ClothFitError
-from addon.core.fitting import checkpoint
-from addon.core.fitting.job import FitConfig, FitJob, read_checkpoint
-from addon.core.fitting.parameters import load_init
-from addon.core.fitting.result import RESULT_FORMAT, FitResult
-from addon.core.observation import camera as C
-from addon.core.observation import synth
-from addon.core.physics.scenario import fitted_scenario, paper_scenario
-
-BLENDER = {"format": RESULT_FORMAT, "version": 1, "model": {"name": "blender", "fps": 30.0, "quality": 5},
-           "blender_cloth": {"quality": 5, "mass": 0.3, "tension_stiffness": 15.0, "air_damping": 1.0},
-           "blender_scene": {"fps": 30.0}, "params": None, "time_offset_s": 0.012,
-           "handles": [{"vertex": 0, "offset_m": [0.001, 0.0, -0.002]}], "best_E_sil_mean_pct": 1.5}
+BLENDER = {
+    "format": RESULT_FORMAT,
+    "version": 1,
+    "model": {"name": "blender", "fps": 30.0, "quality": 5},
+    "blender_cloth": {"quality": 5, "mass": 0.3, "tension_stiffness": 15.0, "air_damping": 1.0},
+    "blender_scene": {"fps": 30.0},
+    "params": None,
+    "time_offset_s": 0.012,
+    "handles": [{"vertex": 0, "offset_m": [0.001, 0.0, -0.002]}],
+    "best_E_sil_mean_pct": 1.5,
+}
 
 
 def _old_writer(path, obj):
     """How results were written before FitResult (safeio.atomic_json with job.py's own encoder)."""
+
     def default(o):
         if isinstance(o, np.generic):
             return o.item()
         if isinstance(o, np.ndarray):
             return o.tolist()
         raise TypeError(type(o))
+
     with open(path, "w", encoding="utf-8") as f:
         f.write(json.dumps(obj, indent=1, default=default, allow_nan=False) + "\n")
 
@@ -38,8 +47,12 @@ def fitted(tmp_path_factory):
     """A real (short) paper-model fit of a 3-camera synthetic capture: its result and checkpoint."""
     root = tmp_path_factory.mktemp("res")
     rig = C.load_rig("lab18")
-    cap = synth.synth_capture(str(root / "cap"), cameras=[rig[i].resized(60, 80) for i in (0, 9, 16)],
-                              scenario=paper_scenario(frame_times=[0.2, 0.6]), seed=3)
+    cap = synth.synth_capture(
+        str(root / "cap"),
+        cameras=[rig[i].resized(60, 80) for i in (0, 9, 16)],
+        scenario=paper_scenario(frame_times=[0.2, 0.6]),
+        seed=3,
+    )
     job = FitJob(cap, FitConfig(seed=5, max_evaluations=14), checkpoint=str(root / "ck.json"))
     res = job.run()
     return job, res, root
@@ -53,7 +66,7 @@ def test_a_fits_result_is_a_fitresult_written_as_the_plain_dict_always_was(fitte
     assert (root / "new.json").read_bytes() == (root / "old.json").read_bytes()
     back = FitResult.from_json(str(root / "new.json"))
     assert back.to_json() == json.loads((root / "new.json").read_text())
-    assert list(back) == list(res)                       # the same keys in the same order
+    assert list(back) == list(res)  # the same keys in the same order
     assert back.paper_params.as_dict() == res["params"] and not back.is_blender
     # the checkpoint holds the same result
     assert read_checkpoint(str(root / "ck.json"))["result"] == back.to_json()
@@ -70,22 +83,25 @@ def test_from_json_of_a_dict_keeps_old_dict_access_and_the_physics_layer_takes_i
     hs = [{"vertex": h.vertex, "offset_m": [0.0, 0.0, 0.01 * k]} for k, h in enumerate(sc.handles)]
     r2 = FitResult.from_json(dict(BLENDER, handles=hs))
     assert isinstance(r2, dict)
-    moved = fitted_scenario(sc, r2)                       # a plain-dict reader takes it as it is
+    moved = fitted_scenario(sc, r2)  # a plain-dict reader takes it as it is
     assert moved.frame_times == pytest.approx([0.2 - 0.012])
     for k, (a, b) in enumerate(zip(moved.handles, sc.handles)):
         assert np.allclose(a.positions - b.positions, [0.0, 0.0, 0.01 * k])
 
 
-@pytest.mark.parametrize("change, key", [
-    ({"blender_cloth": None, "params": None}, "'blender_cloth' or 'params'"),
-    ({"blender_cloth": [1, 2]}, "'blender_cloth'"),
-    ({"format": "silhouette-cloth-fit/checkpoint"}, "'format'"),
-    ({"version": 2}, "'version'"),
-    ({"model": 3}, "'model'"),
-    ({"blender_scene": {"fps": -1}}, "'blender_scene.fps'"),
-    ({"handles": "left"}, "'handles'"),
-    ({"time_offset_s": "soon"}, "'time_offset_s'"),
-])
+@pytest.mark.parametrize(
+    "change, key",
+    [
+        ({"blender_cloth": None, "params": None}, "'blender_cloth' or 'params'"),
+        ({"blender_cloth": [1, 2]}, "'blender_cloth'"),
+        ({"format": "silhouette-cloth-fit/checkpoint"}, "'format'"),
+        ({"version": 2}, "'version'"),
+        ({"model": 3}, "'model'"),
+        ({"blender_scene": {"fps": -1}}, "'blender_scene.fps'"),
+        ({"handles": "left"}, "'handles'"),
+        ({"time_offset_s": "soon"}, "'time_offset_s'"),
+    ],
+)
 def test_a_missing_or_bad_key_is_one_line_naming_the_file_and_the_key(tmp_path, change, key):
     path = tmp_path / "r.json"
     path.write_text(json.dumps(dict(BLENDER, **change)))

@@ -1,39 +1,39 @@
 """A fit's stages (issue 20): the quality ladder, the manipulation's unknowns estimated with the
 cloth and their profile, the errors beside the images' noise floor; checkpoints across stages."""
+
 import json
 
 import numpy as np
 import pytest
-
-from addon.core.errors import ClothFitError
-from addon.core.fitting.evaluate import evaluate
-from addon.core.fitting.job import FitConfig, FitJob
-from addon.core.fitting.quality import Ladder
-from addon.core.observation.capture import load_capture
-from addon.core.observation.synth import synth_capture
-from addon.core.physics.scenario import ClothGrid, Scenario, paper_scenario
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.evaluate import evaluate
+from clothfit.core.fitting.job import FitConfig, FitJob
+from clothfit.core.fitting.quality import Ladder
+from clothfit.core.observation.capture import load_capture
+from clothfit.core.observation.synth import synth_capture
+from clothfit.core.physics.scenario import ClothGrid, Scenario, paper_scenario
 
 pytest.importorskip("numba")
 
 TRUTH = {"tension_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness": 0.2, "air_damping": 2.0}
 FREE = ["tension_stiffness", "air_damping"]
-FIXED = {"shear_stiffness": 8.0, "bending_stiffness": 0.2}          # the truth's (vertex mass 0.3 kg = Blender's)
+FIXED = {"shear_stiffness": 8.0, "bending_stiffness": 0.2}  # the truth's (vertex mass 0.3 kg = Blender's)
 TIMES = [0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6]
-SHIFT = 0.02          # the true manipulation happens 20 ms later than the capture says
+SHIFT = 0.02  # the true manipulation happens 20 ms later than the capture says
 
 
 def test_ladder_climbs_while_clearly_better_then_tries_one_below_and_chooses_the_lowest_close_one():
     lad = Ladder(5)
-    assert lad.next() is None                       # nothing tried at the start yet
+    assert lad.next() is None  # nothing tried at the start yet
     lad.record(5, 10.0)
     assert lad.next() == 8
-    lad.record(8, 7.0)                              # clearly better: climb
+    lad.record(8, 7.0)  # clearly better: climb
     assert lad.next() == 12
-    lad.record(12, 6.9)                             # not clearly better than 8: stop climbing, one below the start
+    lad.record(12, 6.9)  # not clearly better than 8: stop climbing, one below the start
     assert lad.next() == 3
     lad.record(3, 20.0)
     assert lad.next() is None
-    assert lad.chosen() == 8                        # 8 within 5 % of the best (12)
+    assert lad.chosen() == 8  # 8 within 5 % of the best (12)
     back = Ladder.from_state(json.loads(json.dumps(lad.state_dict())))
     assert back.tried == lad.tried and back.chosen() == 8
     d = lad.describe(10)
@@ -58,8 +58,15 @@ def caps(tmp_path_factory):
     base = tmp_path_factory.mktemp("stages")
     sc = paper_scenario(ClothGrid(9, 9, 0.1), frame_times=TIMES)
     true_sc = Scenario(sc.grid, sc.handles, np.array(TIMES), sc.settle_time, sc.gravity)
-    shifted = synth_capture(str(base / "shifted"), TRUTH, model={"name": "blender", "fps": 24}, rig="ring8",
-                            resolution=(90, 120), scenario=true_sc.moved(SHIFT), noise=0.0)
+    shifted = synth_capture(
+        str(base / "shifted"),
+        TRUTH,
+        model={"name": "blender", "fps": 24},
+        rig="ring8",
+        resolution=(90, 120),
+        scenario=true_sc.moved(SHIFT),
+        noise=0.0,
+    )
     # the capture declares the frames at their capture times (the truth read them 20 ms earlier)
     path = base / "shifted" / "capture.json"
     d = json.loads(path.read_text())
@@ -71,15 +78,31 @@ def caps(tmp_path_factory):
         arrays = {k: z[k] for k in z.files}
     arrays["frame_times"] = np.array(TIMES)
     np.savez(npz, **arrays)
-    plain = synth_capture(str(base / "plain"), TRUTH, model={"name": "blender", "fps": 24, "quality": 8},
-                          rig="ring8", resolution=(90, 120), scenario=sc, noise=0.0)
+    plain = synth_capture(
+        str(base / "plain"),
+        TRUTH,
+        model={"name": "blender", "fps": 24, "quality": 8},
+        rig="ring8",
+        resolution=(90, 120),
+        scenario=sc,
+        noise=0.0,
+    )
     return load_capture(str(base / "shifted")), plain
 
 
 def test_the_time_offset_is_estimated_with_the_cloth(caps):
     cap, _ = caps
-    job = FitJob(cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=500, seed=1, train_cameras=[0, 2, 4, 6],
-                                uncertain="time_offset=0.05"))
+    job = FitJob(
+        cap,
+        FitConfig(
+            free=FREE,
+            fixed=FIXED,
+            max_evaluations=500,
+            seed=1,
+            train_cameras=[0, 2, 4, 6],
+            uncertain="time_offset=0.05",
+        ),
+    )
     assert job.space.names == FREE + ["time_offset_s"]
     r = job.run()
     assert [s["stage"] for s in r["stages"]] == ["search"] and r["evaluations"] <= 500 + job.opt.popsize
@@ -98,7 +121,9 @@ def test_the_time_offset_is_estimated_with_the_cloth(caps):
 
 def test_one_frame_cannot_separate_a_time_offset(caps):
     cap, _ = caps
-    job = FitJob(cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=30, train_times=[0.3], uncertain="time_offset=0.05"))
+    job = FitJob(
+        cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=30, train_times=[0.3], uncertain="time_offset=0.05")
+    )
     assert job.manip is None and "cannot separate" in job.manip_note
     r = job.run()
     assert "time_offset_s" not in r and "cannot separate" in r["manipulation_note"]
@@ -106,8 +131,11 @@ def test_one_frame_cannot_separate_a_time_offset(caps):
 
 def test_bad_uncertain_is_one_line_naming_the_key(caps):
     cap, _ = caps
-    for text, msg in (("time_offset=2", "absurd"), ("pins=0.1", "unknown key 'pins'"),
-                      ("time_offset=-1", "must be a bound >= 0")):
+    for text, msg in (
+        ("time_offset=2", "absurd"),
+        ("pins=0.1", "unknown key 'pins'"),
+        ("time_offset=-1", "must be a bound >= 0"),
+    ):
         with pytest.raises(ClothFitError, match=msg):
             FitJob(cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=10, uncertain=text))
 
@@ -117,7 +145,7 @@ def test_quality_ladder_runs_its_rungs_and_resumes_exactly_across_stages(caps, t
     cfg = dict(free=FREE, fixed=FIXED, max_evaluations=400, seed=2, quality="auto")
     ref = FitJob(cap, FitConfig(**cfg)).run()
     qc = ref["quality_choice"]
-    assert qc["start"] == 8 and {t["quality"] for t in qc["tried"]} >= {5, 8, 12}   # from the capture's 8
+    assert qc["start"] == 8 and {t["quality"] for t in qc["tried"]} >= {5, 8, 12}  # from the capture's 8
     assert ref["blender_cloth"]["quality"] == qc["chosen"] == ref["model"]["quality"]
     assert [s["stage"] for s in ref["stages"]][0] == "search" and ref["evaluations"] <= 400 + 10
     best = min(t["train_E_sil_pct"] for t in qc["tried"])
@@ -139,14 +167,15 @@ def test_quality_ladder_runs_its_rungs_and_resumes_exactly_across_stages(caps, t
 def test_a_declared_quality_is_kept(caps):
     _, cap = caps
     job = FitJob(cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=20, model="blender"))
-    assert job.ladder is None and job.par.model.quality == 8     # the capture's, under --model blender
+    assert job.ladder is None and job.par.model.quality == 8  # the capture's, under --model blender
 
 
 def test_a_fit_never_answers_worse_than_the_settings_it_was_given(caps, tmp_path):
     """A warm start (or a scene's own Cloth settings with --backend blender) is evaluated first and
     kept: a short search that finds nothing better answers with it."""
     _, cap = caps
-    from addon.core.physics import blender as B
+    from clothfit.core.physics import blender as B
+
     init = tmp_path / "init.json"
     s = dict(B.DEFAULTS, quality=8, time_scale=B.physical_time_scale(24))
     s.update(TRUTH)
@@ -154,7 +183,7 @@ def test_a_fit_never_answers_worse_than_the_settings_it_was_given(caps, tmp_path
     job = FitJob(cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=12, init=str(init), seed=3))
     r = job.run()
     assert r["start_E_sil_mean_pct"] is not None and r["best_E_sil_mean_pct"] <= r["start_E_sil_mean_pct"]
-    assert r["start_E_sil_mean_pct"] < 0.5           # the truth itself, noise-free
+    assert r["start_E_sil_mean_pct"] < 0.5  # the truth itself, noise-free
 
 
 def test_the_portfolio_runs_as_a_fit_and_a_polish_is_refused_as_one(caps, tmp_path):

@@ -7,16 +7,16 @@ Tolerance of the floor tests: +-25 %, the goal of issue 20. The calibration
 on captures at 120 x 160 and above with 1-10 % noise; a capture of 12 such polygons averages the
 per-image spread (10th-90th percentile 0.75-1.17 at 5 %) down to a few per cent.
 """
+
 import json
 import os
 
 import numpy as np
 import pytest
-
-from addon.core.errors import ClothFitError
-from addon.core.observation import floor as FL
-from addon.core.observation.metrics import add_boundary_noise
-from addon.core.observation.raster import rasterize
+from clothfit.core.errors import ClothFitError
+from clothfit.core.observation import floor as FL
+from clothfit.core.observation.metrics import add_boundary_noise
+from clothfit.core.observation.raster import rasterize
 
 
 def star(rng, H, W, n=9, r0=0.3):
@@ -39,6 +39,7 @@ def mean_floor(images):
 
 # ---------------------------------------------------------------- quantisation is not noise
 
+
 def test_a_clean_digitised_straight_edge_gets_no_votes_at_any_slope():
     H = W = 64
     yy, xx = np.mgrid[0:H, 0:W]
@@ -56,7 +57,7 @@ def test_clean_polygons_have_a_floor_near_zero_and_a_flip_is_one_vote():
         clean = [s for s, _, _ in stars(H, W)]
         images, rate, basis = FL.pooled_floors([[c] for c in clean])
         assert basis == "straight outline"
-        assert mean_floor(images) < 0.0002           # 0.02 %: a tenth of a 1 % noise floor at 240 x 320
+        assert mean_floor(images) < 0.0002  # 0.02 %: a tenth of a 1 % noise floor at 240 x 320
     # an isolated flipped pixel on a straight edge is one vote, missing or extra
     m = np.zeros((200, 260), bool)
     m[50:150, 60:200] = True
@@ -69,6 +70,7 @@ def test_clean_polygons_have_a_floor_near_zero_and_a_flip_is_one_vote():
 
 # ---------------------------------------------------------------- the estimate against known noise
 
+
 @pytest.mark.parametrize("H,W", [(240, 320), (480, 640)])
 @pytest.mark.parametrize("noise", [0.05, 0.10])
 def test_floor_of_noisy_polygons_within_25_percent(H, W, noise):
@@ -77,7 +79,7 @@ def test_floor_of_noisy_polygons_within_25_percent(H, W, noise):
     true = np.mean([np.count_nonzero(o ^ c) / np.count_nonzero(o) for o, c in zip(obs, clean)])
     images, rate, _ = FL.pooled_floors([[o] for o in obs])
     assert mean_floor(images) == pytest.approx(true, rel=0.25)
-    assert rate == pytest.approx(noise, rel=0.25)    # votes per straight boundary pixel = the flip fraction
+    assert rate == pytest.approx(noise, rel=0.25)  # votes per straight boundary pixel = the flip fraction
     e = images[0][0]
     assert e.resampling == 0 and e.floor == e.noise and e.fit_area == e.area
 
@@ -90,17 +92,18 @@ def test_floor_at_a_lower_fit_resolution_counts_the_resampling():
     for i, (s, pts, tris) in enumerate(stars(H, W)):
         o = add_boundary_noise(s, 0.05, np.random.default_rng(i))
         r = FL.resample_silhouette(o, h, w)
-        low = rasterize((pts + 0.5) * [w / W, h / H] - 0.5, tris, h, w)    # pixel centres at integers
+        low = rasterize((pts + 0.5) * [w / W, h / H] - 0.5, tris, h, w)  # pixel centres at integers
         true.append(np.count_nonzero(r ^ low) / np.count_nonzero(r))
         e = FL.estimate_floor(o, fit_shape=(h, w))
         assert e.fit_shape == (h, w) and e.resampling > 0
         est.append(e.floor)
-    assert np.mean(true) > 0.003                   # the resampling is most of it (noise alone: ~0.2 %)
+    assert np.mean(true) > 0.003  # the resampling is most of it (noise alone: ~0.2 %)
     assert np.mean(est) == pytest.approx(np.mean(true), rel=0.25)
 
 
 def test_the_resampling_copy_matches_the_fitters():
-    from addon.core.fitting import job
+    from clothfit.core.fitting import job
+
     rng = np.random.default_rng(3)
     for _ in range(5):
         m = rng.random((96, 128)) < 0.4
@@ -118,7 +121,7 @@ def test_an_ignore_mask_hides_the_edge_it_cuts():
     ragged = s.copy()
     band = np.zeros_like(s)
     rows = np.nonzero(s[:, 158:162].any(1))[0]
-    band[rows.min():rows.max() + 1, 158:160] = True          # 2 px of the cloth's cut along the occluder
+    band[rows.min() : rows.max() + 1, 158:160] = True  # 2 px of the cloth's cut along the occluder
     ragged[band & (rng.random(s.shape) < 0.5)] ^= True
     clean_half = FL.estimate_floor(s, ign)
     ragged_half = FL.estimate_floor(ragged, ign)
@@ -129,15 +132,19 @@ def test_an_ignore_mask_hides_the_edge_it_cuts():
 
 # ---------------------------------------------------------------- bad input: one line
 
-@pytest.mark.parametrize("obs,ign,fs,msg", [
-    (np.zeros((20, 30), bool), None, None, "empty"),
-    (np.ones((20, 30), bool), np.ones((20, 30), bool), None, "empty outside the ignore mask"),
-    (np.ones((20, 30), bool), np.zeros((10, 30), bool), None, "ignore mask is 10x30"),
-    (np.full((20, 30), 7, np.uint8), None, None, "not binary"),
-    (np.ones((2, 20, 30), bool), None, None, "2D"),
-    (np.ones((20, 30), bool), None, (0, 15), "fit resolution"),
-    (np.ones((20, 30), bool), None, "10x15", "fit resolution"),
-])
+
+@pytest.mark.parametrize(
+    "obs,ign,fs,msg",
+    [
+        (np.zeros((20, 30), bool), None, None, "empty"),
+        (np.ones((20, 30), bool), np.ones((20, 30), bool), None, "empty outside the ignore mask"),
+        (np.ones((20, 30), bool), np.zeros((10, 30), bool), None, "ignore mask is 10x30"),
+        (np.full((20, 30), 7, np.uint8), None, None, "not binary"),
+        (np.ones((2, 20, 30), bool), None, None, "2D"),
+        (np.ones((20, 30), bool), None, (0, 15), "fit resolution"),
+        (np.ones((20, 30), bool), None, "10x15", "fit resolution"),
+    ],
+)
 def test_bad_input_is_one_line(obs, ign, fs, msg):
     with pytest.raises(ClothFitError) as e:
         FL.estimate_floor(obs, ign, fs, name="camera 'c1' frame 2")
@@ -168,12 +175,13 @@ def test_a_tiny_shape_falls_back_to_the_whole_outline():
 
 # ---------------------------------------------------------------- where a residual lies
 
+
 def test_residual_profile_tells_a_rim_from_a_shift():
     s, _, _ = stars(240, 320, k=1)[0]
-    eroded = s & ~FL.inner_boundary(s)               # a segmenter that lost a 1-px rim all round
+    eroded = s & ~FL.inner_boundary(s)  # a segmenter that lost a 1-px rim all round
     p = FL.residual_profile(eroded, s)
     assert p["rim_share"] > 0.98 and p["balance"] == 1.0 and p["bias_px"] == pytest.approx(1.0, rel=0.15)
-    shifted = np.roll(s, 12, axis=1)                 # the shape in the wrong place
+    shifted = np.roll(s, 12, axis=1)  # the shape in the wrong place
     q = FL.residual_profile(s, shifted)
     assert q["rim_share"] < 0.5 and abs(q["balance"]) < 0.05
     assert np.isnan(FL.residual_profile(s, s)["rim_share"])
@@ -181,12 +189,14 @@ def test_residual_profile_tells_a_rim_from_a_shift():
 
 # ---------------------------------------------------------------- a capture, the overlays, the CLI
 
+
 @pytest.fixture(scope="module")
 def small_cap(tmp_path_factory):
-    from addon.core.observation.camera import load_rig
-    from addon.core.observation.capture import load_capture
-    from addon.core.observation.synth import synth_capture
-    from addon.core.physics.scenario import paper_scenario
+    from clothfit.core.observation.camera import load_rig
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.observation.synth import synth_capture
+    from clothfit.core.physics.scenario import paper_scenario
+
     root = str(tmp_path_factory.mktemp("floorcap") / "cap")
     cams = [c.resized(240, 320) for c in load_rig("lab18")][:3]
     synth_capture(root, None, noise=0.05, cameras=cams, scenario=paper_scenario(frame_times=[0.3, 0.6, 0.9]))
@@ -207,7 +217,8 @@ def test_capture_floor_pools_and_reports(small_cap):
 
 
 def test_mark_floor_and_floor_sheet_colours():
-    from addon.core.observation import overlay as OV
+    from clothfit.core.observation import overlay as OV
+
     img = np.zeros((60, 80, 3), np.uint8)
     assert tuple(OV.mark_floor(img, 0.012, 0.01)[0, 40]) == OV.FLOOR_AT_RGB
     assert tuple(OV.mark_floor(img, 0.02, 0.01)[0, 40]) == OV.FLOOR_ABOVE_RGB
@@ -217,7 +228,7 @@ def test_mark_floor_and_floor_sheet_colours():
     f = np.full((2, 2), 0.01)
     sheet = OV.floor_sheet(e, f, ["a", "b"], [0.1, 0.2], cell=64)
     lw, hh = max(60, 64 // 2 + 20), 22
-    colour = lambda i, j: tuple(sheet[hh + i * 64 + 2, lw + j * 64 + 2])   # noqa: E731
+    colour = lambda i, j: tuple(sheet[hh + i * 64 + 2, lw + j * 64 + 2])  # noqa: E731
     assert colour(0, 0) == OV.FLOOR_AT_RGB and colour(0, 1) == OV.FLOOR_FAR_RGB
     assert colour(1, 0) == OV.FLOOR_ABOVE_RGB and colour(1, 1) == OV.FLOOR_AT_RGB
     with pytest.raises(ClothFitError, match="2 x 2 errors but 1 cameras"):
@@ -226,13 +237,14 @@ def test_mark_floor_and_floor_sheet_colours():
 
 def test_capture_overlays_with_floors_adds_the_sheet_and_keeps_the_rest(small_cap, tmp_path):
     import cv2
-    from addon.core import defaults as D
-    from addon.core.observation.overlay import capture_overlays
+    from clothfit.core import defaults as D
+    from clothfit.core.observation.overlay import capture_overlays
+
     plain = capture_overlays(small_cap, D.GT_PARAMS, str(tmp_path / "plain"))
     floors = FL.capture_floor(small_cap).per_image()
     marked = capture_overlays(small_cap, D.GT_PARAMS, str(tmp_path / "marked"), floors=floors)
     assert os.path.basename(marked[-2]) == "floor_sheet.png" and len(marked) == len(plain) + 1
-    for a, b in zip(plain[:-1], marked[:-2]):                   # the per-image overlays are unchanged
+    for a, b in zip(plain[:-1], marked[:-2]):  # the per-image overlays are unchanged
         assert os.path.relpath(a, tmp_path / "plain") == os.path.relpath(b, tmp_path / "marked")
         assert np.array_equal(cv2.imread(a), cv2.imread(b))
     with pytest.raises(ClothFitError, match="floors are"):
@@ -240,9 +252,11 @@ def test_capture_overlays_with_floors_adds_the_sheet_and_keeps_the_rest(small_ca
 
 
 def test_cli_floor_and_overlay_floor(small_cap, tmp_path, capsys):
-    from addon.cli import main
-    assert main(["floor", small_cap.root, "--cameras", "0,1", "--times", "0.3", "--json",
-                 str(tmp_path / "f.json")]) == 0
+    from clothfit.cli import main
+
+    assert (
+        main(["floor", small_cap.root, "--cameras", "0,1", "--times", "0.3", "--json", str(tmp_path / "f.json")]) == 0
+    )
     d = json.loads(capsys.readouterr().out)
     assert d["n_images"] == 2 and d == json.loads((tmp_path / "f.json").read_text())
     assert main(["overlay", small_cap.root, "--floor", "--out", str(tmp_path / "ov"), "--cameras", "0"]) == 0

@@ -5,6 +5,7 @@ The truths are made here, not by the code under test: clip trajectories chosen i
 a clip that lets go and falls with a jerk, a clip moved by hand), drawn by handles_support as markers
 whose image position is exact to any sub-pixel, and marks = their true projections plus click noise.
 """
+
 import json
 import os
 import sys
@@ -14,25 +15,27 @@ import pytest
 
 sys.path.insert(0, os.path.dirname(__file__))
 import handles_support as S  # noqa: E402
-
-from addon.cli import main as cli  # noqa: E402
-from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.footage import handles as HM  # noqa: E402
-from addon.core.observation.camera import Camera, intrinsics, look_at, save_cameras  # noqa: E402
-from addon.core.physics.scenario import (ClothGrid, Handle, Scenario, Uncertainty, rotation_matrix,  # noqa: E402
-                                         rotation_vector)
+from clothfit.cli import main as cli  # noqa: E402
+from clothfit.core.errors import ClothFitError  # noqa: E402
+from clothfit.core.footage import handles as HM  # noqa: E402
+from clothfit.core.observation.camera import Camera, intrinsics, look_at, save_cameras  # noqa: E402
+from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, Uncertainty, rotation_matrix, rotation_vector  # noqa: E402
 
 FPS = 30.0
 TIMES = np.arange(20) / FPS
-AT = {"left": {"at": "top-left"}, "right": {"at": "top-right", "released": True},
-      "middle": {"motion": "moving", "at": [0.15, 0.0]}}
+AT = {
+    "left": {"at": "top-left"},
+    "right": {"at": "top-right", "released": True},
+    "middle": {"motion": "moving", "at": [0.15, 0.0]},
+}
 
 
 # ------------------------------------------------------------------ the placed grid
 
+
 def test_grid_placement_is_backward_compatible():
     g = ClothGrid(7, 5, 0.12, side_y=0.08)
-    assert g.to_dict() == {"nx": 7, "ny": 5, "side": 0.12, "side_y": 0.08, "height": 0.1}   # no new keys
+    assert g.to_dict() == {"nx": 7, "ny": 5, "side": 0.12, "side_y": 0.08, "height": 0.1}  # no new keys
     old = ClothGrid.from_dict({"nx": 7, "ny": 5, "side": 0.12, "side_y": 0.08, "height": 0.1})
     assert np.array_equal(old.rest, g.rest) and not old.placed
     assert np.array_equal(ClothGrid.from_dict({"nx": 4}).rest, ClothGrid(4).rest)
@@ -49,8 +52,9 @@ def test_grid_placement_rest_and_round_trip():
     h = ClothGrid.from_dict(json.loads(json.dumps(g.to_dict())))
     assert np.allclose(h.rest, g.rest) and h.placed
     # distances within the sheet are those of the flat grid: the rest lengths do not change
-    assert np.allclose(np.linalg.norm(g.rest[1:] - g.rest[:-1], axis=1),
-                       np.linalg.norm(g.local[1:] - g.local[:-1], axis=1))
+    assert np.allclose(
+        np.linalg.norm(g.rest[1:] - g.rest[:-1], axis=1), np.linalg.norm(g.local[1:] - g.local[:-1], axis=1)
+    )
     with pytest.raises(ClothFitError, match="differs from the z of its origin"):
         ClothGrid.from_dict({"nx": 3, "height": 0.1, "origin": [0, 0, 0.5]})
     with pytest.raises(ClothFitError, match="origin must be 3"):
@@ -63,16 +67,20 @@ def test_grid_placement_rest_and_round_trip():
 def test_both_models_simulate_a_placed_grid_as_the_same_cloth_moved(model):
     """A placed sheet (turned about the vertical, moved) under the same gravity moves exactly as the paper's
     sheet moved rigidly: both models build from grid.rest."""
-    from addon.core.physics import blender as B
-    from addon.core.physics.models import get_model
-    from addon.core.physics.scenario import paper_scenario
+    from clothfit.core.physics import blender as B
+    from clothfit.core.physics.models import get_model
+    from clothfit.core.physics.scenario import paper_scenario
+
     base = paper_scenario(ClothGrid(6, 6, 0.1), frame_times=[0.05, 0.1, 0.2])
     r = np.array([0.0, 0.0, 0.9])
     o = np.array([0.3, -0.1, 0.4])
     R = rotation_matrix(r)
     g = ClothGrid(6, 6, 0.1, origin=o, rotation=r)
-    moved = Scenario(g, [Handle(h.vertex, h.times, o + (h.positions - [0, 0, 0.1]) @ R.T, h.release_time)
-                         for h in base.handles], base.frame_times)
+    moved = Scenario(
+        g,
+        [Handle(h.vertex, h.times, o + (h.positions - [0, 0, 0.1]) @ R.T, h.release_time) for h in base.handles],
+        base.frame_times,
+    )
     m = get_model({"name": model})
     row = [1e-5, 10.0, g.spacing, 1e-4] if model == "paper" else B.settings_row(B.DEFAULTS)
     a = m.simulate(base, [row]).positions[0]
@@ -84,6 +92,7 @@ def test_both_models_simulate_a_placed_grid_as_the_same_cloth_moved(model):
 
 # ------------------------------------------------------------------ triangulation
 
+
 def phone_rig(n=3):
     """Phones around a hung cloth: 1920 x 1080, 65 degree field of view, about 1 m away."""
     cams = []
@@ -91,8 +100,9 @@ def phone_rig(n=3):
         a = np.radians(az - 90)
         eye = np.array([np.cos(a), np.sin(a), 0.5]) * [1.0, 1.0, 1.0] + [0, 0, 0.3]
         R, t = look_at(eye, [0, 0, 0.45])
-        cams.append(Camera(intrinsics(1500.0, 1920, 1080), R, t, 1920, 1080, f"phone{i}",
-                           np.array([0.1, -0.2, 0.0, 0.0, 0.05])))
+        cams.append(
+            Camera(intrinsics(1500.0, 1920, 1080), R, t, 1920, 1080, f"phone{i}", np.array([0.1, -0.2, 0.0, 0.0, 0.05]))
+        )
     return cams
 
 
@@ -101,14 +111,14 @@ def test_triangulation_exact_and_within_a_millimetre_at_click_noise():
     rng = np.random.default_rng(1)
     X = np.array([0.12, 0.03, 0.52])
     t = HM.triangulate(cams, [c.project(X) for c in cams])
-    assert np.linalg.norm(t.X - X) < 1e-7 and t.rms < 1e-4          # distortion undone exactly
+    assert np.linalg.norm(t.X - X) < 1e-7 and t.rms < 1e-4  # distortion undone exactly
     errs, inside = [], 0
-    for _ in range(200):                                             # a person's click: 0.5 px
+    for _ in range(200):  # a person's click: 0.5 px
         t = HM.triangulate(cams, [c.project(X) + rng.normal(0, 0.5, 2) for c in cams], 0.5)
         errs.append(np.linalg.norm(t.X - X))
         inside += np.all(np.abs(t.X - X) <= 3 * np.sqrt(np.diag(t.cov)))
     assert np.percentile(errs, 95) < 1e-3, np.percentile(errs, 95)
-    assert inside >= 190                                             # the covariance is honest (3 sigma)
+    assert inside >= 190  # the covariance is honest (3 sigma)
     # the residual: a mark moved by 5 px in one camera shows in it
     pts = [c.project(X) for c in cams]
     pts[1] = pts[1] + [5.0, 0.0]
@@ -116,6 +126,7 @@ def test_triangulation_exact_and_within_a_millimetre_at_click_noise():
 
 
 # ------------------------------------------------------------------ synthetic footage
+
 
 def _setup(tmp, release_time=0.21, seed=0, sigma=0.3, extra=AT, moving=True, fps=FPS):
     times = np.arange(20) / fps
@@ -134,8 +145,21 @@ def _setup(tmp, release_time=0.21, seed=0, sigma=0.3, extra=AT, moving=True, fps
 
 
 def _run(root, mpath, out, *extra):
-    return cli(["handles", root, "--marks", mpath, "--size", f"{S.CLOTH_W}x{S.CLOTH_H}", "-o", out,
-                "--clip-size", "0.016", *extra])
+    return cli(
+        [
+            "handles",
+            root,
+            "--marks",
+            mpath,
+            "--size",
+            f"{S.CLOTH_W}x{S.CLOTH_H}",
+            "-o",
+            out,
+            "--clip-size",
+            "0.016",
+            *extra,
+        ]
+    )
 
 
 def test_handles_end_to_end(tmp_path, capsys):
@@ -147,7 +171,7 @@ def test_handles_end_to_end(tmp_path, capsys):
     assert doc["format"] == HM.FORMAT
     sc = Scenario.from_dict(doc["scenario"])
     nx = sc.grid.nx
-    assert (sc.grid.nx, sc.grid.ny) == (15, 12)      # about 16, odd: the middle clip falls on a vertex
+    assert (sc.grid.nx, sc.grid.ny) == (15, 12)  # about 16, odd: the middle clip falls on a vertex
     by = {h["name"]: h for h in rep["handles"]}
     assert [by[n]["vertex"] for n in ("left", "right", "middle")] == [0, nx - 1, (nx - 1) // 2]
     left, right, middle = sc.handles
@@ -162,7 +186,7 @@ def test_handles_end_to_end(tmp_path, capsys):
     assert abs(right.release_time - 0.21) < 0.2 / FPS
     assert left.release_time is None and middle.release_time is None
     # the placed cloth hangs in the vertical plane of the clips, its top row through them
-    assert abs(sc.grid.R[:, 2] @ [0, 0, 1]) < 0.01                     # normal horizontal
+    assert abs(sc.grid.R[:, 2] @ [0, 0, 1]) < 0.01  # normal horizontal
     assert np.linalg.norm(sc.grid.rest[0] - tr["left"][0]) < 2e-3
     assert rep["cloth"]["placement_rms_mm"] < 1.5
     # the uncertain block: per handle >= 1 mm and covering the actual error; time within a frame
@@ -177,8 +201,9 @@ def test_handles_end_to_end(tmp_path, capsys):
 
 def test_extract_takes_the_scenario_and_its_uncertain_block(tmp_path, capsys):
     """`extract --scenario` reads the handles file: its scenario and its uncertain block land in the capture."""
-    from addon.core.footage import extract as X
-    from addon.core.observation.capture import load_capture
+    from clothfit.core.footage import extract as X
+    from clothfit.core.observation.capture import load_capture
+
     root, mpath, cams, tr, times = _setup(tmp_path)
     out = str(tmp_path / "scenario.json")
     assert _run(root, mpath, out) == 0
@@ -187,7 +212,8 @@ def test_extract_takes_the_scenario_and_its_uncertain_block(tmp_path, capsys):
     assert unc == doc["uncertain"] and scen.grid.placed
     assert Scenario.from_dict(doc["scenario"]).to_dict() == scen.to_dict()
     # a capture written with it keeps both (silhouettes: anything non-empty)
-    from addon.core.observation.capture import write_capture
+    from clothfit.core.observation.capture import write_capture
+
     masks = [[_blob(c) for _ in times] for c in cams]
     u, src = X._uncertain_for(scen, None, unc, None)
     assert src == "the scenario file"
@@ -231,12 +257,12 @@ def test_without_at_the_cloth_hangs_by_its_top_edge(tmp_path, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert "top edge" in rep["cloth"]["placement"]
     cols = sorted(h["column"] for h in rep["handles"])
-    assert cols == [0, 7, 15] or cols == [0, 8, 15]       # the middle clip: half way, the grid has no centre column
+    assert cols == [0, 7, 15] or cols == [0, 8, 15]  # the middle clip: half way, the grid has no centre column
     assert all(h["row"] == 0 for h in rep["handles"])
 
 
 def test_fixed_handle_that_moves_is_flagged(tmp_path, capsys):
-    extra = dict(AT, middle={"at": [0.15, 0.0]})             # the hand-moved clip declared fixed
+    extra = dict(AT, middle={"at": [0.15, 0.0]})  # the hand-moved clip declared fixed
     root, mpath, cams, tr, times = _setup(tmp_path, extra=extra)
     assert _run(root, mpath, str(tmp_path / "s.json")) == 0
     rep = json.loads(capsys.readouterr().out)
@@ -247,24 +273,57 @@ def test_videos_and_sync(tmp_path, capsys):
     """The same footage as H.264 videos started at different moments, read at capture time + sync."""
     pytest.importorskip("av")
     import cv2
+
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "tools"))
     from video_footage import encode
+
     root, mpath, cams, tr, times = _setup(tmp_path)
     vids = tmp_path / "videos"
     vids.mkdir()
     sync = {}
     for i, c in enumerate(cams):
         sync[c.name] = 0.5 + 0.1 * i
-        frames = [cv2.cvtColor(cv2.imread(os.path.join(root, c.name, f"{f:03d}.png"), cv2.IMREAD_GRAYSCALE),
-                               cv2.COLOR_GRAY2BGR) for f in range(len(times))]
-        encode(str(vids / f"{c.name}.mp4"), frames[:1] * 3 + frames,
-               [sync[c.name] + t for t in (-0.3, -0.2, -0.1)] + [sync[c.name] + t for t in times], crf=12)
+        frames = [
+            cv2.cvtColor(
+                cv2.imread(os.path.join(root, c.name, f"{f:03d}.png"), cv2.IMREAD_GRAYSCALE), cv2.COLOR_GRAY2BGR
+            )
+            for f in range(len(times))
+        ]
+        encode(
+            str(vids / f"{c.name}.mp4"),
+            frames[:1] * 3 + frames,
+            [sync[c.name] + t for t in (-0.3, -0.2, -0.1)] + [sync[c.name] + t for t in times],
+            crf=12,
+        )
     with open(tmp_path / "sync.json", "w") as f:
         json.dump(sync, f)
     out = str(tmp_path / "s.json")
-    assert cli(["handles", "--videos", str(vids), "--sync", str(tmp_path / "sync.json"), "--cameras",
-                os.path.join(root, "cameras.json"), "--fps", "30", "--frames", "20", "--marks", mpath, "--size",
-                f"{S.CLOTH_W}x{S.CLOTH_H}", "--clip-size", "0.016", "-o", out]) == 0
+    assert (
+        cli(
+            [
+                "handles",
+                "--videos",
+                str(vids),
+                "--sync",
+                str(tmp_path / "sync.json"),
+                "--cameras",
+                os.path.join(root, "cameras.json"),
+                "--fps",
+                "30",
+                "--frames",
+                "20",
+                "--marks",
+                mpath,
+                "--size",
+                f"{S.CLOTH_W}x{S.CLOTH_H}",
+                "--clip-size",
+                "0.016",
+                "-o",
+                out,
+            ]
+        )
+        == 0
+    )
     doc = json.load(open(out))
     h = {x["name"]: x for x in doc["report"]["handles"]}
     assert h["right"]["release_frame"] == 7
@@ -273,6 +332,7 @@ def test_videos_and_sync(tmp_path, capsys):
 
 
 # ------------------------------------------------------------------ bad input: one line, nothing written
+
 
 def _one_line_error(capsys, args, *needles):
     code = cli(args)
@@ -286,6 +346,7 @@ def _one_line_error(capsys, args, *needles):
 
 def test_bad_inputs(tmp_path, capsys):
     import cv2
+
     root, mpath, cams, tr, times = _setup(tmp_path, extra=AT)
     marks = json.load(open(mpath))
     out = str(tmp_path / "s.json")
@@ -347,12 +408,15 @@ def test_marks_parsing(tmp_path):
     ok = {"handles": [{"name": "a", "at": "bottom-right", "marks": {"cam0": [1, 2], "cam1": [3, 4]}, "size": 0.02}]}
     h = HM.parse_marks(ok, cams, 5, (0.3, 0.2))[0]
     assert h.at == (0.3, 0.2) and h.size == 0.02 and h.frame == 0 and h.motion == "fixed"
-    for bad, needle in ((dict(ok, frame=5), "frame 5"), ({"handles": []}, "non-empty"),
-                        ({"handles": [dict(ok["handles"][0], at="middle")]}, "corner"),
-                        ({"handles": [dict(ok["handles"][0], at=[0.4, 0])]}, "off the 0.3 x 0.2 m cloth"),
-                        ({"handles": [dict(ok["handles"][0], motion="wobbly")]}, "motion"),
-                        ({"handles": ok["handles"] * 2}, "two handles have this name"),
-                        ({"handles": [dict(ok["handles"][0], marks={"cam0": [1], "cam1": [3, 4]})]}, "[x, y]")):
+    for bad, needle in (
+        (dict(ok, frame=5), "frame 5"),
+        ({"handles": []}, "non-empty"),
+        ({"handles": [dict(ok["handles"][0], at="middle")]}, "corner"),
+        ({"handles": [dict(ok["handles"][0], at=[0.4, 0])]}, "off the 0.3 x 0.2 m cloth"),
+        ({"handles": [dict(ok["handles"][0], motion="wobbly")]}, "motion"),
+        ({"handles": ok["handles"] * 2}, "two handles have this name"),
+        ({"handles": [dict(ok["handles"][0], marks={"cam0": [1], "cam1": [3, 4]})]}, "[x, y]"),
+    ):
         with pytest.raises(ClothFitError, match=None) as e:
             HM.parse_marks(bad, cams, 5, (0.3, 0.2))
         assert needle in str(e.value) and "\n" not in str(e.value)
@@ -373,17 +437,18 @@ def test_release_of_a_corner_that_snaps_away():
     (the synthetic clip) is recovered one frame before its departure when it started under the threshold."""
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "tools"))
     import phone_handles as P
+
     rng = np.random.default_rng(0)
     for seed in range(6):
         tr = P.truth(seed)
         X = tr["positions"][:, tr["vertices"]["right"]] + rng.normal(0, 3e-5, (len(tr["times"]), 3))
         r = HM.detect_release(tr["times"], X, 0, HM.HandleOptions())
         assert r.release_frame == int(np.searchsorted(tr["times"], tr["release_time"], side="right"))
-        assert r.extrapolated_time is None                   # no parabola from rest fits a snap
+        assert r.extrapolated_time is None  # no parabola from rest fits a snap
         lo, hi = tr["times"][r.release_frame - 1], tr["times"][r.release_frame]
         assert lo <= r.release_time < hi
     t = np.arange(20) / FPS
-    t_r = 0.2 + 0.9 / FPS                                    # 3 ms before frame 7: 0.05 mm of fall there
+    t_r = 0.2 + 0.9 / FPS  # 3 ms before frame 7: 0.05 mm of fall there
     X = S.clip_tracks(t, t_r)["right"] + rng.normal(0, 1e-5, (20, 3))
     r = HM.detect_release(t, X, 0, HM.HandleOptions())
     assert r.departure_frame == 8 and r.back and r.release_frame == 7

@@ -1,6 +1,7 @@
 """tools/issue20_goals.py's pure parts: the declared (shifted) capture of the offsets goal really is
 20 ms and 2 mm off the truth, in the sign the fit's time offset is defined by; the rows and the
 Markdown table. No fits here."""
+
 import json
 import os
 import sys
@@ -12,12 +13,12 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
 
 import issue20_goals as G  # noqa: E402
-from addon.core import defaults as D  # noqa: E402
-from addon.core.observation.capture import load_capture  # noqa: E402
-from addon.core.observation.synth import synth_capture  # noqa: E402
-from addon.core.physics.models import simulate  # noqa: E402
-from addon.core.physics.paper import Params  # noqa: E402
-from addon.core.physics.scenario import ClothGrid, Scenario, paper_scenario  # noqa: E402
+from clothfit.core import defaults as D  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
+from clothfit.core.observation.synth import synth_capture  # noqa: E402
+from clothfit.core.physics.models import simulate  # noqa: E402
+from clothfit.core.physics.paper import Params  # noqa: E402
+from clothfit.core.physics.scenario import ClothGrid, Scenario, paper_scenario  # noqa: E402
 
 EARLY, OFF = 0.020, 0.002
 
@@ -31,7 +32,7 @@ def test_unit_directions_are_unit_random_and_repeatable():
     assert np.allclose(np.linalg.norm(u, axis=1), 1.0)
     assert np.array_equal(u, G.unit_directions(4, 20))
     assert not np.allclose(u, G.unit_directions(4, 21))
-    assert np.linalg.matrix_rank(u) == 3          # not all along one axis
+    assert np.linalg.matrix_rank(u) == 3  # not all along one axis
 
 
 def test_shifted_scenario_is_20_ms_early_and_each_pin_2_mm_off():
@@ -74,34 +75,44 @@ def test_shift_capture_copies_the_capture_with_the_declared_scenario_and_the_unc
     assert np.array_equal(t.load_silhouette(3, 2), d.load_silhouette(3, 2))
     assert np.allclose(d.frame_times - t.frame_times, EARLY, atol=1e-9, rtol=0)
     assert np.allclose(np.load(tmp_path / "declared" / "shapes.npz")["frame_times"], d.frame_times)
-    assert np.array_equal(np.load(tmp_path / "declared" / "shapes.npz")["positions"],
-                          np.load(tmp_path / "true" / "shapes.npz")["positions"])
+    assert np.array_equal(
+        np.load(tmp_path / "declared" / "shapes.npz")["positions"],
+        np.load(tmp_path / "true" / "shapes.npz")["positions"],
+    )
     exp = np.array(shift["expected_handle_offset_m"])
     for h, g, e in zip(t.scenario.handles, d.scenario.handles, exp):
-        assert np.allclose(g.positions + e, h.positions, atol=1e-15)      # declared + expected offset = true
+        assert np.allclose(g.positions + e, h.positions, atol=1e-15)  # declared + expected offset = true
     assert shift["expected_time_offset_s"] == EARLY
     with open(tmp_path / "declared" / "capture.json") as f:
         assert json.load(f)["meta"]["issue20_shift"]["direction_seed"] == 20
 
 
 def test_rows_pass_fail_and_not_measured():
-    run = {"command": "python -m addon fit a|b", "wall_s": 12.34, "cpu_s": 20.0, "load": "load 1.00, 2.00, 3.00"}
-    ok = G.row("exact", "exact", "heldout_ratio", 1.1, run, details={"heldout_E_sil_pct": 0.4125, "floor_E_sil_pct": 0.375})
+    run = {"command": "python -m clothfit fit a|b", "wall_s": 12.34, "cpu_s": 20.0, "load": "load 1.00, 2.00, 3.00"}
+    ok = G.row(
+        "exact", "exact", "heldout_ratio", 1.1, run, details={"heldout_E_sil_pct": 0.4125, "floor_E_sil_pct": 0.375}
+    )
     bad = G.row("time", "time", "wall_s", 200.0, run)
-    none = G.row("offsets", "offsets", "time_offset_error_ms", None, run, "not estimated: needs the lead's fit --uncertain")
+    none = G.row(
+        "offsets", "offsets", "time_offset_error_ms", None, run, "not estimated: needs the lead's fit --uncertain"
+    )
     assert (ok["pass"], bad["pass"], none["pass"]) == (True, False, None)
     assert ok["target"] == 1.2 and bad["target"] == 180.0
     for r in (ok, bad, none):
         r["label"] = "before"
-    table = G.format_table({"rows": [ok, bad, none], "runs": {"exact (before)": {
-        "commit": "abc1234", "main_commit": "def5678", "dirty": False}}})
+    table = G.format_table(
+        {
+            "rows": [ok, bad, none],
+            "runs": {"exact (before)": {"commit": "abc1234", "main_commit": "def5678", "dirty": False}},
+        }
+    )
     lines = table.splitlines()
     assert lines[0].startswith("| capture | goal | figure | target | pass | command | wall s | load |")
     body = lines[2:5]
     assert "1.10x (0.41 % / 0.375 %)" in body[0] and "<= 1.20x" in body[0] and "| pass |" in body[0]
     assert "200 s (CPU 20 s)" in body[1] and "FAIL" in body[1]
     assert "not measured (not estimated: needs the lead's fit --uncertain)" in body[2] and "| - |" in body[2]
-    assert all(r.count("|") - r.count("\\|") == 9 for r in body)        # the pipe in the command escaped
+    assert all(r.count("|") - r.count("\\|") == 9 for r in body)  # the pipe in the command escaped
     assert "exact (before): held-out E_sil / floor" in body[0]
     assert "exact (before) at abc1234 (main def5678)" in table
 
@@ -114,6 +125,9 @@ def test_merge_keeps_the_other_goals_rows(tmp_path):
     G.merge_rows(path, "time", [G.row("time", "t", "wall_s", 90.0, run)], label="after")
     doc = G.merge_rows(path, "time", [G.row("time", "t", "wall_s", 120.0, run)], label="before")
     assert [(r["goal"], r["label"], r["value"]) for r in doc["rows"]] == [
-        ("exact", "before", 2.0), ("time", "before", 120.0), ("time", "after", 90.0)]
+        ("exact", "before", 2.0),
+        ("time", "before", 120.0),
+        ("time", "after", 90.0),
+    ]
     assert set(doc["runs"]) == {"exact (before)", "time (before)", "time (after)"}
     assert doc["runs"]["time (before)"]["commit"]

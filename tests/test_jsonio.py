@@ -1,12 +1,12 @@
 """jsonio: the one JSON reader, encoder, text form and writer of the project."""
+
 import json
 import os
 
 import numpy as np
 import pytest
-
-from addon.core import jsonio, safeio
-from addon.core.errors import ClothFitError
+from clothfit.core import jsonio, safeio
+from clothfit.core.errors import ClothFitError
 
 DATA = {"a": np.float64(0.1), "b": np.arange(3), "c": [np.int64(7), {"d": np.array([[1.5]])}], "e": None}
 
@@ -32,8 +32,8 @@ def test_write_json_is_atomic_and_strict_when_asked(tmp_path):
     assert open(p).read() == jsonio.dumps(DATA) + "\n"
     with pytest.raises(ClothFitError, match=r"cannot write .*x.json: the data is not strict JSON"):
         jsonio.write_json(p, {"x": float("inf")}, strict=True)
-    assert json.load(open(p))["e"] is None                     # the old file, whole
-    assert [n for n in os.listdir(tmp_path)] == ["x.json"]     # no temporary left behind
+    assert json.load(open(p))["e"] is None  # the old file, whole
+    assert [n for n in os.listdir(tmp_path)] == ["x.json"]  # no temporary left behind
     safeio.atomic_json(p, {"y": np.float32(2.0)})
     assert jsonio.read_json(p) == {"y": 2.0}
 
@@ -41,10 +41,12 @@ def test_write_json_is_atomic_and_strict_when_asked(tmp_path):
 def test_read_json_and_loads_are_one_line_errors(tmp_path):
     p = tmp_path / "bad.json"
     p.write_text("[1, 2")
-    for call, what in ((lambda: jsonio.read_json(str(p), "result"), "result"),
-                       (lambda: jsonio.read_json(str(tmp_path / "none.json"), "result"), "file not found"),
-                       (lambda: jsonio.loads("{", "scene property"), "scene property: not valid JSON"),
-                       (lambda: jsonio.loads("[1]", "meta", expect=dict), "meta: expected a JSON object")):
+    for call, what in (
+        (lambda: jsonio.read_json(str(p), "result"), "result"),
+        (lambda: jsonio.read_json(str(tmp_path / "none.json"), "result"), "file not found"),
+        (lambda: jsonio.loads("{", "scene property"), "scene property: not valid JSON"),
+        (lambda: jsonio.loads("[1]", "meta", expect=dict), "meta: expected a JSON object"),
+    ):
         with pytest.raises(ClothFitError) as e:
             call()
         assert what in str(e.value) and "\n" not in str(e.value)

@@ -1,14 +1,14 @@
 """The manipulation's unknowns inside the models: a population whose candidates each read the
 manipulation with their own time offset and handle offsets runs, candidate by candidate, exactly as
 the moved scenario (``Scenario.moved``) runs alone, in both models and both back ends."""
+
 import numpy as np
 import pytest
-
-from addon.core.errors import ClothFitError
-from addon.core.fitting.parameters import ManipulationParameters, fitted_scenario
-from addon.core.physics import blender as B
-from addon.core.physics.models import BlenderModel, PaperModel
-from addon.core.physics.scenario import ClothGrid, Offsets, Scenario, Uncertainty, paper_scenario
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.parameters import ManipulationParameters, fitted_scenario
+from clothfit.core.physics import blender as B
+from clothfit.core.physics.models import BlenderModel, PaperModel
+from clothfit.core.physics.scenario import ClothGrid, Offsets, Scenario, Uncertainty, paper_scenario
 
 
 def _scenario():
@@ -30,10 +30,12 @@ def test_moved_scenario_shifts_frames_and_handles():
     h[1] = [0.001, -0.002, 0.003]
     m = sc.moved(0.01, h)
     np.testing.assert_allclose(m.frame_times, sc.frame_times - 0.01)
-    np.testing.assert_allclose(np.asarray(m.handles[1].positions) - np.asarray(sc.handles[1].positions),
-                               [[0.001, -0.002, 0.003]] * len(sc.handles[1].positions))
+    np.testing.assert_allclose(
+        np.asarray(m.handles[1].positions) - np.asarray(sc.handles[1].positions),
+        [[0.001, -0.002, 0.003]] * len(sc.handles[1].positions),
+    )
     assert m.handles[0].release_time == sc.handles[0].release_time
-    early = sc.moved(-10.0)                          # before the settle's start: read at its start
+    early = sc.moved(-10.0)  # before the settle's start: read at its start
     assert early.frame_times.min() >= -sc.settle_time - 1e-12
 
 
@@ -46,10 +48,10 @@ def test_blender_kernel_with_offsets_is_the_moved_scenario_exactly():
     a = m.simulate(sc, rows, "numba", offsets=off)
     assert np.array_equal(a.positions[0], m.simulate(sc, rows[:1], "numba").positions[0])
     for p in range(1, n):
-        ref = m.simulate(sc.moved(off.time[p], off.handles[p]), rows[p:p + 1], "numba")
+        ref = m.simulate(sc.moved(off.time[p], off.handles[p]), rows[p : p + 1], "numba")
         assert np.array_equal(a.positions[p], ref.positions[0]), p
     r = m.simulate(sc, rows[1:3], "numpy", offsets=off.take([1, 2]))
-    assert np.abs(r.positions - a.positions[1:3]).mean() < 1e-4      # float64 reference against float32 (measured 1.6e-5 m)
+    assert np.abs(r.positions - a.positions[1:3]).mean() < 1e-4  # float64 reference against float32 (measured 1.6e-5 m)
 
 
 def test_paper_model_with_offsets_is_the_moved_scenario():
@@ -60,7 +62,7 @@ def test_paper_model_with_offsets_is_the_moved_scenario():
     P = np.repeat(np.array([[1e-5, 10.0, 0.0125, 1e-4]]), n, 0)
     a = pm.simulate(sc, P, "numba", offsets=off)
     b = pm.simulate(sc, P, "numpy", offsets=off)
-    assert np.abs(a.positions - b.positions).max() < 1e-7       # measured 3.9e-9 m
+    assert np.abs(a.positions - b.positions).max() < 1e-7  # measured 3.9e-9 m
     for p in range(n):
         one = pm.simulate(sc.moved(off.time[p], off.handles[p]), P[:1], "numba")
         assert np.array_equal(one.positions[0], a.positions[p]), p

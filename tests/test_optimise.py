@@ -1,4 +1,5 @@
 """Tests of the optimisers (addon/core/fitting/optimise.py and its modules): encoding, SPX, MGG, CMA-ES, non-finite fitness, checkpoints."""
+
 import os
 import sys
 
@@ -9,14 +10,13 @@ import math
 
 import numpy as np
 import pytest
-
-from addon.core import defaults as D
-from addon.core.errors import ClothFitError
-from addon.core.fitting.evolution_strategy import CMAES
-from addon.core.fitting.ga import SPXMGG, spx_children
-from addon.core.fitting.optimise import make_optimizer, optimizer_from_state
-from addon.core.fitting.space import SearchSpace, reflect_unit, sanitize_fitness
-from addon.core.fitting.steppable import Optimizer
+from clothfit.core import defaults as D
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.evolution_strategy import CMAES
+from clothfit.core.fitting.ga import SPXMGG, spx_children
+from clothfit.core.fitting.optimise import make_optimizer, optimizer_from_state
+from clothfit.core.fitting.space import SearchSpace, reflect_unit, sanitize_fitness
+from clothfit.core.fitting.steppable import Optimizer
 
 SHIFT = np.array([1.2, -0.7, 2.3, 0.4])
 # a physical-looking space, independent of the project's current defaults
@@ -31,7 +31,7 @@ def box(n, lo=-3.0, hi=4.0):
 
 def sphere(X):
     X = np.atleast_2d(X)
-    return ((X - SHIFT[:X.shape[1]]) ** 2).sum(axis=1)
+    return ((X - SHIFT[: X.shape[1]]) ** 2).sum(axis=1)
 
 
 def rosenbrock(X):
@@ -40,6 +40,7 @@ def rosenbrock(X):
 
 
 # --------------------------------------------------------------------------- SearchSpace
+
 
 def test_space_round_trip_linear_and_log():
     sp = SearchSpace(["k", "l", "d"], PHYS_BOUNDS, PHYS_LOG)
@@ -55,8 +56,9 @@ def test_space_round_trip_linear_and_log():
     np.testing.assert_allclose(sp.encode(lo), 0.0, atol=1e-15)
     np.testing.assert_allclose(sp.encode(hi), 1.0, atol=1e-15)
     # log scale: the centre of the cube is the geometric mean of the bounds (linear: arithmetic)
-    np.testing.assert_allclose(sp.decode(np.full(3, 0.5)),
-                               [np.sqrt(0.5 * 50.0), 0.007, np.sqrt(2e-6 * 2e-4)], rtol=1e-12)
+    np.testing.assert_allclose(
+        sp.decode(np.full(3, 0.5)), [np.sqrt(0.5 * 50.0), 0.007, np.sqrt(2e-6 * 2e-4)], rtol=1e-12
+    )
     np.testing.assert_allclose(sp.encode([5.0, 0.0055, 2e-5]), [0.5, 0.25, 0.5], atol=1e-12)
     # the project's own defaults make a valid space
     SearchSpace(list(D.SEARCH_BOUNDS), D.SEARCH_BOUNDS, D.LOG_SCALED)
@@ -75,16 +77,19 @@ def test_space_decode_clips_and_clip():
     np.testing.assert_allclose(sp.from_dict({"b": 0.5, "a": 2.0}), [2.0, 0.5])
 
 
-@pytest.mark.parametrize("bounds, log, name", [
-    ({"a": (0.0, 1.0), "k": (2.0, 1.0)}, {}, "k"),            # lo > hi
-    ({"a": (0.0, 1.0), "k": (1.0, 1.0)}, {}, "k"),            # lo == hi
-    ({"a": (0.0, 1.0), "k": (0.0, math.inf)}, {}, "k"),       # not finite
-    ({"a": (0.0, 1.0), "k": (math.nan, 1.0)}, {}, "k"),       # nan
-    ({"a": (0.0, 1.0), "k": (0.0, 1.0)}, {"k": True}, "k"),   # log with lo = 0
-    ({"a": (-1.0, 1.0), "k": (1.0, 2.0)}, {"a": True}, "a"),  # log with lo < 0
-    ({"a": (0.0, 1.0)}, {}, "k"),                             # missing
-    ({"a": (0.0, 1.0), "k": "oops"}, {}, "k"),                # not a pair
-])
+@pytest.mark.parametrize(
+    "bounds, log, name",
+    [
+        ({"a": (0.0, 1.0), "k": (2.0, 1.0)}, {}, "k"),  # lo > hi
+        ({"a": (0.0, 1.0), "k": (1.0, 1.0)}, {}, "k"),  # lo == hi
+        ({"a": (0.0, 1.0), "k": (0.0, math.inf)}, {}, "k"),  # not finite
+        ({"a": (0.0, 1.0), "k": (math.nan, 1.0)}, {}, "k"),  # nan
+        ({"a": (0.0, 1.0), "k": (0.0, 1.0)}, {"k": True}, "k"),  # log with lo = 0
+        ({"a": (-1.0, 1.0), "k": (1.0, 2.0)}, {"a": True}, "a"),  # log with lo < 0
+        ({"a": (0.0, 1.0)}, {}, "k"),  # missing
+        ({"a": (0.0, 1.0), "k": "oops"}, {}, "k"),  # not a pair
+    ],
+)
 def test_space_bad_bounds_name_the_parameter(bounds, log, name):
     with pytest.raises(ClothFitError, match=f"'{name}'"):
         SearchSpace(["a", "k"], bounds, log)
@@ -100,11 +105,12 @@ def test_space_encode_rejects_non_positive_log_value():
 
 # --------------------------------------------------------------------------- SPX
 
+
 def _barycentric(Y, C):
     """Barycentric coordinates of the points C (N, n) in the simplex with vertices Y (n+1, n)."""
-    A = np.vstack([Y.T, np.ones(len(Y))])                  # (n+1, n+1)
+    A = np.vstack([Y.T, np.ones(len(Y))])  # (n+1, n+1)
     B = np.vstack([C.T, np.ones(len(C))])
-    return np.linalg.solve(A, B).T                         # (N, n+1)
+    return np.linalg.solve(A, B).T  # (N, n+1)
 
 
 @pytest.mark.parametrize("n", [2, 3, 4])
@@ -137,6 +143,7 @@ def test_reflect_unit():
 
 # --------------------------------------------------------------------------- MGG
 
+
 def test_mgg_population_constant_best_never_worsens():
     sp = box(3)
     opt = SPXMGG(sp, seed=3)
@@ -153,7 +160,7 @@ def test_mgg_population_constant_best_never_worsens():
         opt.tell(X, f)
         assert opt.pop_u.shape == (D.GA_POPULATION, 3) and opt.pop_f.shape == (D.GA_POPULATION,)
         changed = np.nonzero(np.any(opt.pop_u != old_u, axis=1))[0]
-        assert len(changed) <= 2                    # only the two chosen parents are replaced
+        assert len(changed) <= 2  # only the two chosen parents are replaced
         # the best of the family survives
         fam_best = min(f.min(), old_f[changed].min()) if len(changed) else f.min()
         assert opt.pop_f.min() <= min(old_f.min(), fam_best) + 0.0
@@ -177,11 +184,11 @@ def test_mgg_initial_guesses_in_first_population():
     X = opt.ask()
     np.testing.assert_allclose(X[0], gt, rtol=1e-12)
     np.testing.assert_allclose(X[1], [2.0, 0.005, 1e-5], rtol=1e-12)
-    np.testing.assert_allclose(X[2], [50.0, 0.004, 1e-5], rtol=1e-12)   # clipped to the bounds
+    np.testing.assert_allclose(X[2], [50.0, 0.004, 1e-5], rtol=1e-12)  # clipped to the bounds
     assert np.all(X >= sp.lo) and np.all(X <= sp.hi)
     assert SPXMGG(sp, seed=0).population == D.GA_POPULATION
     with pytest.raises(ClothFitError):
-        SPXMGG(sp, seed=0, population=3)           # < n + 1
+        SPXMGG(sp, seed=0, population=3)  # < n + 1
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -204,6 +211,7 @@ def test_spx_mgg_minimises_rosenbrock(seed, n):
 
 # --------------------------------------------------------------------------- CMA-ES
 
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("fn, xopt", [(sphere, SHIFT), (rosenbrock, np.ones(4))])
 @pytest.mark.parametrize("n", [3, 4])
@@ -223,7 +231,7 @@ def test_cma_minimises(seed, fn, xopt, n):
 def test_cma_stops_by_itself_and_ipop_restarts_double_the_population():
     opt = make_optimizer("cma", box(4), seed=0)
     x, f = opt.run(rosenbrock, 100_000)
-    assert opt.stopped and opt.evaluations < 5000           # converged (to the local minimum)
+    assert opt.stopped and opt.evaluations < 5000  # converged (to the local minimum)
     assert opt.run_stops == [opt.stop_reason] and opt.stop_reason in ("tolfun", "tolx")
     assert f == pytest.approx(3.7014, abs=1e-3)
     ipop = make_optimizer("cma", box(4), seed=0, restarts=3)
@@ -245,6 +253,7 @@ def test_cma_initial_guess_and_global_rng_untouched():
 
 
 # --------------------------------------------------------------------------- non-finite fitness
+
 
 def _nasty(X):
     """Sphere, but nan / inf / -inf wherever the first coordinate is above 1.5 (and always -inf
@@ -288,13 +297,13 @@ def test_all_non_finite_does_not_crash(name):
     assert opt.best_x is None and opt.best_f == math.inf
     assert opt.best_params is None
     if name == "spx-mgg":
-        assert np.all(opt.pop_f == np.inf)        # -inf and nan are stored as +inf (worst)
+        assert np.all(opt.pop_f == np.inf)  # -inf and nan are stored as +inf (worst)
     d = json.loads(json.dumps(opt.state_dict(), allow_nan=False))
     assert d["best_f"] is None
     again = optimizer_from_state(d)
     assert again.best_f == math.inf and again.best_x is None
     X = again.ask()
-    again.tell(X, sphere(X))                      # recovers as soon as values are finite
+    again.tell(X, sphere(X))  # recovers as soon as values are finite
     assert math.isfinite(again.best_f)
 
 
@@ -308,9 +317,9 @@ def test_sanitize_fitness():
 def test_tell_checks_its_input():
     opt = SPXMGG(box(3), seed=0)
     with pytest.raises(ClothFitError):
-        opt.tell(np.zeros((2, 3)), [1.0, 2.0])     # nothing asked
+        opt.tell(np.zeros((2, 3)), [1.0, 2.0])  # nothing asked
     X = opt.ask()
-    np.testing.assert_array_equal(opt.ask(), X)    # asking twice gives the same batch
+    np.testing.assert_array_equal(opt.ask(), X)  # asking twice gives the same batch
     with pytest.raises(ClothFitError, match="expected"):
         opt.tell(X, np.zeros(len(X) - 1))
     with pytest.raises(ClothFitError):
@@ -319,6 +328,7 @@ def test_tell_checks_its_input():
 
 
 # --------------------------------------------------------------------------- determinism, checkpoints
+
 
 def _trace(opt, fn, gens):
     out = []
@@ -344,8 +354,7 @@ def test_checkpoint_resume_is_exact(name, mid_ask):
     def fn(X):  # with some non-finite values, to exercise their storage too
         return np.where(X[:, 0] > 3.0, np.nan, rosenbrock(X))
 
-    sp = SearchSpace(["a", "b", "c"], {"a": (-3.0, 4.0), "b": (0.01, 10.0), "c": (-3.0, 4.0)},
-                     {"b": True})
+    sp = SearchSpace(["a", "b", "c"], {"a": (-3.0, 4.0), "b": (0.01, 10.0), "c": (-3.0, 4.0)}, {"b": True})
     full = make_optimizer(name, sp, seed=7, initial=[[0.5, 0.5, 0.5]])
     ref = _trace(full, fn, 60)
 
@@ -379,6 +388,7 @@ def test_from_state_rejects_wrong_algorithm():
 
 
 # --------------------------------------------------------------------------- driving, factory
+
 
 @pytest.mark.parametrize("name", ["spx-mgg", "cma-es"])
 def test_run_target_callback_and_budget(name):
@@ -416,8 +426,10 @@ def test_make_optimizer_names():
 
 # --------------------------------------------------------------------------- untrusted checkpoints
 
+
 class _Boom:
     """Unpickling this would create the file ``_Boom.path``."""
+
     path = None
 
     def __reduce__(self):
@@ -434,6 +446,7 @@ def _cma_state(gens=5):
 def test_a_pickle_payload_is_never_run(tmp_path):
     import base64
     import pickle
+
     marker = tmp_path / "pwned"
     _Boom.path = str(marker)
     d = _cma_state()
@@ -456,6 +469,7 @@ def _set(path, value):
         for k in path[:-1]:
             node = node[k]
         node[path[-1]] = value
+
     return f
 
 
@@ -485,7 +499,7 @@ CMA_MUTATIONS = {
     "history object": _set(["history"], {"x": 1}),
     "evaluations negative": _set(["evaluations"], -1),
     "best_u without best_f": _set(["best_f"], None),
-    "restarts huge": _set(["restarts"], 10 ** 9),
+    "restarts huge": _set(["restarts"], 10**9),
     "stop reason unknown": _set(["stop_reason"], "os.system"),
     "space not object": _set(["space"], [1, 2]),
     "space bounds": _set(["space", "bounds", "a"], [4.0, -3.0]),
@@ -513,7 +527,7 @@ GA_MUTATIONS = {
     "pop_u shape": _set(["pop_u"], [[0.5, 0.5, 0.5]]),
     "pop_u without pop_f": _set(["pop_f"], None),
     "replace same": _set(["replace"], [1, 1]),
-    "replace outside": _set(["replace"], [0, 10 ** 6]),
+    "replace outside": _set(["replace"], [0, 10**6]),
     "children zero": _set(["children"], 0),
     "population below n+1": _set(["population"], 2),
     "eps nan": _set(["eps"], float("nan")),
@@ -527,7 +541,7 @@ def test_corrupt_ga_state_is_one_line_error(case):
     _trace(opt, rosenbrock, 5)
     opt.ask()
     d = json.loads(json.dumps(opt.state_dict(), allow_nan=False))
-    optimizer_from_state(json.loads(json.dumps(d)))       # the unmodified state loads
+    optimizer_from_state(json.loads(json.dumps(d)))  # the unmodified state loads
     GA_MUTATIONS[case](d)
     with pytest.raises(ClothFitError) as err:
         optimizer_from_state(d)
@@ -536,14 +550,14 @@ def test_corrupt_ga_state_is_one_line_error(case):
 
 def test_ga_stops_on_stagnation_and_collapse():
     opt = make_optimizer("ga", box(3), seed=0, stall_evaluations=3000, tolfun=1e-9)
-    opt.run(sphere, 10 ** 6)
+    opt.run(sphere, 10**6)
     assert opt.stopped and opt.stop_reason == "stagnation" and opt.evaluations < 200_000
     assert opt.best_f < 1e-6
     off = make_optimizer("ga", box(3), seed=0)
     off.run(sphere, 5000)
     assert not off.stopped and off.evaluations >= 5000
     collapse = make_optimizer("ga", box(3), seed=0, tolx=1e-3)
-    collapse.run(sphere, 10 ** 6)
+    collapse.run(sphere, 10**6)
     assert collapse.stop_reason == "tolx" and np.all(np.ptp(collapse.pop_u, axis=0) < 1e-3)
 
 
@@ -551,8 +565,9 @@ def test_active_cma_minimises_an_ill_conditioned_ellipsoid_and_resumes_exactly()
     """Active CMA-ES (negative weights for the worse half; off by default) converges on an
     8-D ellipsoid, keeps C positive definite, and its state round-trips through JSON."""
     n = 8
-    space = SearchSpace([f"x{i}" for i in range(n)], {f"x{i}": (-1.0, 1.0) for i in range(n)},
-                        {f"x{i}": False for i in range(n)})
+    space = SearchSpace(
+        [f"x{i}" for i in range(n)], {f"x{i}": (-1.0, 1.0) for i in range(n)}, {f"x{i}": False for i in range(n)}
+    )
     scale = 10.0 ** (np.arange(n) / (n - 1) * 3)
 
     def f(X):

@@ -1,5 +1,6 @@
 """Tests of the CMA-ES portfolio (addon/core/fitting/portfolio.py CMAPortfolio): its schedule
 (successive halving, refine, polishes), exact JSON resume in every phase, bad checkpoints."""
+
 import os
 import sys
 
@@ -9,28 +10,28 @@ import json
 
 import numpy as np
 import pytest
-
-from addon.core.errors import ClothFitError
-from addon.core.fitting.evolution_strategy import CMAES
-from addon.core.fitting.optimise import make_optimizer, optimizer_from_state
-from addon.core.fitting.portfolio import CMAPortfolio
-from addon.core.fitting.space import SearchSpace
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.evolution_strategy import CMAES
+from clothfit.core.fitting.optimise import make_optimizer, optimizer_from_state
+from clothfit.core.fitting.portfolio import CMAPortfolio
+from clothfit.core.fitting.space import SearchSpace
 
 
 def space(n=4):
-    return SearchSpace([f"x{i}" for i in range(n)], {f"x{i}": (-5.0, 5.0) for i in range(n)},
-                       {f"x{i}": False for i in range(n)})
+    return SearchSpace(
+        [f"x{i}" for i in range(n)], {f"x{i}": (-5.0, 5.0) for i in range(n)}, {f"x{i}": False for i in range(n)}
+    )
 
 
 def rastrigin(X):
     X = np.atleast_2d(X) - 1.3
-    return 10 * X.shape[1] + np.sum(X ** 2 - 10 * np.cos(2 * np.pi * X), axis=1)
+    return 10 * X.shape[1] + np.sum(X**2 - 10 * np.cos(2 * np.pi * X), axis=1)
 
 
 def two_basins(X):
     """A wide basin (value 1 at its bottom) around the centre and a narrower one (value 0) off it."""
     X = np.atleast_2d(X)
-    wide = np.sum(X ** 2, axis=1) / 10 + 1.0
+    wide = np.sum(X**2, axis=1) / 10 + 1.0
     narrow = 0.3 * np.sum((X - 3.0) ** 2, axis=1)
     return np.minimum(wide, narrow)
 
@@ -96,8 +97,7 @@ def test_resume_is_exact_in_every_phase(mid_ask):
     def fn(X):  # some non-finite values too
         return np.where(X[:, 0] > 4.5, np.nan, rastrigin(X))
 
-    kw = dict(seed=3, runs=3, explore=0.5, budget=500, max_polishes=3, tolfun=1e-8,
-              initial=[[0.1, 0.2, 0.3, 0.4]])
+    kw = dict(seed=3, runs=3, explore=0.5, budget=500, max_polishes=3, tolfun=1e-8, initial=[[0.1, 0.2, 0.3, 0.4]])
     ref = CMAPortfolio(space(), **kw)
     opt = CMAPortfolio(space(), **kw)
     phases = set()
@@ -121,27 +121,38 @@ def test_initial_guess_is_the_first_candidate():
     np.testing.assert_allclose(opt.ask()[0], [1.0, -2.0, 3.0, 0.5])
 
 
-@pytest.mark.parametrize("kw, match", [
-    ({"runs": 0}, "runs"), ({"runs": 100}, "runs"), ({"explore": 1.5}, "explore"), ({"explore": "x"}, "explore"),
-    ({"polish_sigma": 0}, "polish_sigma"), ({"budget": -1}, "budget"), ({"active": "yes"}, "active"),
-    ({"popsize": 1}, "popsize"),
-])
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"runs": 0}, "runs"),
+        ({"runs": 100}, "runs"),
+        ({"explore": 1.5}, "explore"),
+        ({"explore": "x"}, "explore"),
+        ({"polish_sigma": 0}, "polish_sigma"),
+        ({"budget": -1}, "budget"),
+        ({"active": "yes"}, "active"),
+        ({"popsize": 1}, "popsize"),
+    ],
+)
 def test_bad_settings_are_one_line_errors(kw, match):
     with pytest.raises(ClothFitError, match=match) as e:
         CMAPortfolio(space(), seed=0, **kw)
     assert "\n" not in str(e.value)
 
 
-@pytest.mark.parametrize("change, match", [
-    (lambda d: d.update(phase="nowhere"), "phase"),
-    (lambda d: d.update(alive=[]), "alive"),
-    (lambda d: d.update(alive=[1]), "alive"),          # a dropped run
-    (lambda d: d.update(current=0), "current"),        # no pending batch
-    (lambda d: d.update(children="x"), "children"),
-    (lambda d: d["children"][0].update(popsize=99), "children|lam"),
-    (lambda d: d.update(extra=1), "unknown"),
-    (lambda d: d.update(round=7), "round"),
-])
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        (lambda d: d.update(phase="nowhere"), "phase"),
+        (lambda d: d.update(alive=[]), "alive"),
+        (lambda d: d.update(alive=[1]), "alive"),  # a dropped run
+        (lambda d: d.update(current=0), "current"),  # no pending batch
+        (lambda d: d.update(children="x"), "children"),
+        (lambda d: d["children"][0].update(popsize=99), "children|lam"),
+        (lambda d: d.update(extra=1), "unknown"),
+        (lambda d: d.update(round=7), "round"),
+    ],
+)
 def test_corrupt_state_is_one_line_error(change, match):
     opt = CMAPortfolio(space(), seed=2, runs=2, explore=0.5, budget=200)
     while opt.phase == "explore":
@@ -156,6 +167,7 @@ def test_corrupt_state_is_one_line_error(change, match):
 
 
 # --------------------------------------------------------------------------- coordinate polish
+
 
 def test_coordinate_polish_keeps_a_step_per_coordinate():
     """A knife edge in x0 (the value jumps past 0.2) and a flat, far optimum in x1: the edge
@@ -174,7 +186,7 @@ def test_coordinate_polish_keeps_a_step_per_coordinate():
         p.tell(X, f(X))
         steps_b.append(p.steps[1])
     assert abs(p.best_x[1] - 0.9) < 1e-3 and 0.2 - 1e-3 < p.best_x[0] <= 0.2
-    assert max(steps_b) >= 0.2                    # x1 took large steps while x0's shrank
+    assert max(steps_b) >= 0.2  # x1 took large steps while x0's shrank
     assert p.stopped and p.stop_reason == "tolx"
 
 
@@ -183,7 +195,7 @@ def test_coordinate_polish_with_f0_does_not_evaluate_its_start_and_resumes():
     p = make_optimizer("coord-polish", sp, initial=[[1.0, 1.0, 1.0]], f0=float(rastrigin([[1.0, 1.0, 1.0]])[0]))
     assert len(p.ask()) == 6
     q = make_optimizer("coord-polish", sp, initial=[[1.0, 1.0, 1.0]])
-    assert len(q.ask()) == 7                      # its start is evaluated too
+    assert len(q.ask()) == 7  # its start is evaluated too
     for _ in range(6):
         q.tell(q.ask(), rastrigin(q.ask()))
     r = optimizer_from_state(json.loads(json.dumps(q.state_dict(), allow_nan=False)))
@@ -196,8 +208,7 @@ def test_coordinate_polish_with_f0_does_not_evaluate_its_start_and_resumes():
 
 
 def test_portfolio_coordinate_polish_after_refine_cut_resumes_exactly():
-    kw = dict(seed=4, runs=2, explore=0.3, budget=600, refine_until=0.6, polish="coord", max_polishes=3,
-              tolx=1e-6)
+    kw = dict(seed=4, runs=2, explore=0.3, budget=600, refine_until=0.6, polish="coord", max_polishes=3, tolx=1e-6)
     ref = CMAPortfolio(space(), **kw)
     opt = CMAPortfolio(space(), **kw)
     phases = []
@@ -210,7 +221,7 @@ def test_portfolio_coordinate_polish_after_refine_cut_resumes_exactly():
         ref.tell(X, rastrigin(X))
         opt.tell(Y, rastrigin(Y))
     assert [p for p, _ in phases] == ["explore", "refine", "polish"]
-    assert 360 <= dict(phases)["polish"] <= 360 + 2 * ref.popsize     # the refine is cut at 0.6 x budget
+    assert 360 <= dict(phases)["polish"] <= 360 + 2 * ref.popsize  # the refine is cut at 0.6 x budget
     assert ref.stop_reason == "polishes" and type(ref.children[-1]).__name__ == "CoordinatePolish"
     assert opt.state_dict() == ref.state_dict()
     # the polish never loses the best point: the portfolio's best is the last polish's

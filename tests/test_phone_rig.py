@@ -7,6 +7,7 @@ and ``export-blender-cloth`` on those images, the clicks, the cloth's size and i
 fit given the true cameras and manipulation is the reference. The full run is the recorded
 ``docs/figures/phone_rig_e2e.json``.
 """
+
 import json
 import os
 import sys
@@ -30,18 +31,44 @@ RELEASE_FRAMES = 1
 bpy_missing = False
 try:
     import importlib.util
+
     bpy_missing = importlib.util.find_spec("bpy") is None
-except Exception:       # pragma: no cover
+except Exception:  # pragma: no cover
     bpy_missing = True
 
 
 @pytest.mark.skipif(bpy_missing, reason="needs the bpy module (pinned in requirements-dev.txt)")
 def test_phone_rig_end_to_end_small(tmp_path):
     import phone_rig as PR
+
     out = str(tmp_path / "e2e")
     js = str(tmp_path / "e2e.json")
-    assert PR.main(["e2e", "--out", out, "--seed", SEED, "--scale", SCALE, "--cameras", "3", "--poses", POSES,
-                    "--frames", FRAMES, "--samples", SAMPLES, "--evals", EVALS, "--json", js]) == 0
+    assert (
+        PR.main(
+            [
+                "e2e",
+                "--out",
+                out,
+                "--seed",
+                SEED,
+                "--scale",
+                SCALE,
+                "--cameras",
+                "3",
+                "--poses",
+                POSES,
+                "--frames",
+                FRAMES,
+                "--samples",
+                SAMPLES,
+                "--evals",
+                EVALS,
+                "--json",
+                js,
+            ]
+        )
+        == 0
+    )
     r = json.load(open(js))
     # every step of the user's pipeline wrote its file
     for f in ("cameras.json", "scenario.json", "capture/capture.json", "fit.json", "blender_cloth.json"):
@@ -54,7 +81,9 @@ def test_phone_rig_end_to_end_small(tmp_path):
     assert c["worst"]["focal_pct"] < FOCAL_PCT, c
     assert c["worst"]["centre_mm"] < CENTRE_MM, c
     assert r["handles_max_mm"] < HANDLES_MM, r["handles_mm"]
-    assert abs(r["release_frame"] - r["true_release_frame"]) <= RELEASE_FRAMES, (r["release_frame"],
-                                                                                  r["true_release_frame"])
+    assert abs(r["release_frame"] - r["true_release_frame"]) <= RELEASE_FRAMES, (
+        r["release_frame"],
+        r["true_release_frame"],
+    )
     assert r["fit"]["truth_given"]["replay"]["mean_mm"] < ORACLE_MM, r["fit"]
     assert r["shape_ratio"] < RATIO, r["fit"]

@@ -4,6 +4,7 @@ No downloads here: the manifest is checked offline (``build_extension.check_mani
 named file exists on the index is ``python tools/build_extension.py --check-only --remote`` (metadata
 only) and the builds themselves are in test_blender_extension.py.
 """
+
 import copy
 import importlib.util
 import os
@@ -24,23 +25,35 @@ def test_manifest_lists_every_platform_with_its_wheels():
     assert set(m["platforms"]) == PLATFORMS
     assert B.check_manifest(m) == []
     for p in PLATFORMS:
-        have = {B.WHEEL_RE.match(os.path.basename(w)).group("name").lower()
-                for w in m["wheels"] if B.wheel_platforms(w) & {"any", p}}
+        have = {
+            B.WHEEL_RE.match(os.path.basename(w)).group("name").lower()
+            for w in m["wheels"]
+            if B.wheel_platforms(w) & {"any", p}
+        }
         assert "opencv_python_headless" in have, p
-        assert "cma" not in have, p            # the CMA-ES optimiser is our own code: nothing to bundle
+        assert "cma" not in have, p  # the CMA-ES optimiser is our own code: nothing to bundle
         fast = {"numba", "llvmlite"} <= have
         assert fast == (p not in B.NO_FAST_PATH), p
 
 
-@pytest.mark.parametrize("change, text", [
-    (lambda m: m["wheels"].remove("./wheels/numba-0.68.1-cp311-cp311-win_amd64.whl"), "windows-x64: no numba"),
-    (lambda m: m["wheels"].append("./wheels/numba-0.68.1-cp312-cp312-win_amd64.whl"), "does not install on Python 3.11"),
-    (lambda m: m["wheels"].append("./wheels/numba-0.62.1-cp311-cp311-macosx_10_15_x86_64.whl"), "pins numba==0.68.1"),
-    (lambda m: m["platforms"].remove("macos-arm64"), "which 'platforms' does not list"),
-    (lambda m: m.pop("blender_version_max"), "blender_version_max"),
-    (lambda m: m.__setitem__("blender_version_max", "5.1.0"), "blender_version_max"),
-    (lambda m: m["platforms"].append("linux-arm64"), "linux-arm64: no opencv_python_headless"),
-])
+@pytest.mark.parametrize(
+    "change, text",
+    [
+        (lambda m: m["wheels"].remove("./wheels/numba-0.68.1-cp311-cp311-win_amd64.whl"), "windows-x64: no numba"),
+        (
+            lambda m: m["wheels"].append("./wheels/numba-0.68.1-cp312-cp312-win_amd64.whl"),
+            "does not install on Python 3.11",
+        ),
+        (
+            lambda m: m["wheels"].append("./wheels/numba-0.62.1-cp311-cp311-macosx_10_15_x86_64.whl"),
+            "pins numba==0.68.1",
+        ),
+        (lambda m: m["platforms"].remove("macos-arm64"), "which 'platforms' does not list"),
+        (lambda m: m.pop("blender_version_max"), "blender_version_max"),
+        (lambda m: m.__setitem__("blender_version_max", "5.1.0"), "blender_version_max"),
+        (lambda m: m["platforms"].append("linux-arm64"), "linux-arm64: no opencv_python_headless"),
+    ],
+)
 def test_check_manifest_finds_problems(change, text):
     m = copy.deepcopy(B.read_manifest())
     change(m)
@@ -55,7 +68,9 @@ def test_wheel_platforms_agree_with_blenders_builder():
     ext = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(ext)
     names = [os.path.basename(w) for w in B.read_manifest()["wheels"]] + [
-        "x-1-cp311-cp311-macosx_10_9_universal2.whl", "x-1-cp311-cp311-manylinux2014_aarch64.whl"]
+        "x-1-cp311-cp311-macosx_10_9_universal2.whl",
+        "x-1-cp311-cp311-manylinux2014_aarch64.whl",
+    ]
     for fn in names:
         for p in PLATFORMS | {"linux-arm64"}:
             theirs = ext.blender_platform_compatible_with_wheel_platform_from_filepath(p, fn)
@@ -73,8 +88,8 @@ def test_licence_matches_the_manifest():
 
 def test_docs_say_where_the_fast_path_runs():
     text = open(os.path.join(ROOT, "docs", "extension.md")).read()
-    sec = text[text.index("## Where the fast path runs"):]
-    end = sec.find("\n#", 1)             # the next section, if the page goes on
+    sec = text[text.index("## Where the fast path runs") :]
+    end = sec.find("\n#", 1)  # the next section, if the page goes on
     sec = sec if end < 0 else sec[:end]
     for p in PLATFORMS:
         assert p in sec, p

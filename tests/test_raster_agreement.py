@@ -4,20 +4,19 @@ lab18 rig at 480 x 640, the paper scenario simulated by the core, baked into the
 Workbench (AA off) and rasterised by ``core.observation.raster.silhouette``: XOR < 1 % of the silhouette area
 for every (camera, shape). Measured figures: ``python tools/raster_agreement.py`` (docs/blender.md).
 """
+
 import numpy as np
 import pytest
-
 from blender_support import bpy, factory  # noqa: F401
-
-from addon.blender import api  # noqa: E402
-from addon.blender import render as R  # noqa: E402
-from addon.blender import scene as S  # noqa: E402
-from addon.core.observation.raster import silhouette  # noqa: E402
+from clothfit.blender import api  # noqa: E402
+from clothfit.blender import render as R  # noqa: E402
+from clothfit.blender import scene as S  # noqa: E402
+from clothfit.core.observation.raster import silhouette  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("factory")
 
-CAMERAS = [0, 5, 9, 12, 16, 17]      # upper ring, lower ring, the two top cameras
-TIMES = [0.0, 0.3, 0.75, 1.2]        # settled, falling, swinging
+CAMERAS = [0, 5, 9, 12, 16, 17]  # upper ring, lower ring, the two top cameras
+TIMES = [0.0, 0.3, 0.75, 1.2]  # settled, falling, swinging
 
 
 def test_core_raster_matches_blender_render():

@@ -1,26 +1,28 @@
 """The search of a ``--backend blender`` fit (``SceneParameters``), with a stand-in evaluator: the
 scene's Cloth modifier values are the centre and the fixed values, the mass fixed and scaled out,
 a warm start replaces the free values only; a FitJob over a model-like evaluator needs no bpy."""
+
 import json
 
 import numpy as np
 import pytest
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.job import FitConfig, FitJob
+from clothfit.core.fitting.parameters import BLENDER_FREE, SCENE_BOUND_FACTOR, SceneParameters
+from clothfit.core.observation.synth import synth_capture
+from clothfit.core.physics import blender as B
+from clothfit.core.physics.models import BlenderModel
+from clothfit.core.physics.scenario import ClothGrid, paper_scenario
 
-from addon.core.errors import ClothFitError
-from addon.core.fitting.job import FitConfig, FitJob
-from addon.core.fitting.parameters import BLENDER_FREE, SCENE_BOUND_FACTOR, SceneParameters
-from addon.core.observation.synth import synth_capture
-from addon.core.physics import blender as B
-from addon.core.physics.models import BlenderModel
-from addon.core.physics.scenario import ClothGrid, paper_scenario
-
-SCENE = B.check_settings({"mass": 0.5, "tension_stiffness": 30.0, "shear_damping": 0.0, "quality": 7,
-                          "time_scale": 1.25})
+SCENE = B.check_settings(
+    {"mass": 0.5, "tension_stiffness": 30.0, "shear_damping": 0.0, "quality": 7, "time_scale": 1.25}
+)
 
 
 class CoreScene:
-    """A stand-in for addon.farm.scene.BlendSceneEvaluator: the core's blender model on the capture's
+    """A stand-in for clothfit.farm.scene.BlendSceneEvaluator: the core's blender model on the capture's
     scenario, with a "scene" holding SCENE's settings."""
+
     name = "blender"
     row_names = B.FLOAT_SETTINGS
 
@@ -53,8 +55,15 @@ class CoreScene:
 def cap(tmp_path_factory):
     root = tmp_path_factory.mktemp("scap") / "cap"
     sc = paper_scenario(ClothGrid(7, 7, 0.1), frame_times=[0.1, 0.2, 0.3])
-    c = synth_capture(str(root), {"tension_stiffness": 40.0}, model={"name": "blender", "fps": 24}, rig="ring8",
-                      resolution=(60, 80), scenario=sc, noise=0.0)
+    c = synth_capture(
+        str(root),
+        {"tension_stiffness": 40.0},
+        model={"name": "blender", "fps": 24},
+        rig="ring8",
+        resolution=(60, 80),
+        scenario=sc,
+        noise=0.0,
+    )
     c.cloth_mass = None
     return c
 
@@ -63,10 +72,10 @@ def test_scene_values_are_the_centre_and_the_fixed_values(cap):
     par = SceneParameters(cap, FitConfig(), CoreScene(cap))
     assert par.m == 0.5 and "scene's vertex mass" in par.m_source
     assert par.free == BLENDER_FREE["ANGULAR"]
-    assert par.fixed["quality"] == 7 and par.fixed["time_scale"] == 1.25     # the scene's, not the real-time one
+    assert par.fixed["quality"] == 7 and par.fixed["time_scale"] == 1.25  # the scene's, not the real-time one
     lo, hi = par.space.bounds["tension_stiffness"]
     assert lo == pytest.approx(30.0 / 0.5 / SCENE_BOUND_FACTOR) and hi == pytest.approx(30.0 / 0.5 * SCENE_BOUND_FACTOR)
-    lo, hi = par.space.bounds["shear_damping"]                 # zero in the scene: the presets' range
+    lo, hi = par.space.bounds["shear_damping"]  # zero in the scene: the presets' range
     assert 0 < lo < hi
     centre = np.sqrt(par.space.lo * par.space.hi)
     assert par.settings(centre)["tension_stiffness"] == pytest.approx(30.0)
@@ -74,7 +83,7 @@ def test_scene_values_are_the_centre_and_the_fixed_values(cap):
 
 
 def test_cloth_mass_moves_every_scaled_value(cap):
-    par = SceneParameters(cap, FitConfig(cloth_mass=49 * 1.0), CoreScene(cap))    # 1 kg per vertex
+    par = SceneParameters(cap, FitConfig(cloth_mass=49 * 1.0), CoreScene(cap))  # 1 kg per vertex
     assert par.m == pytest.approx(1.0)
     assert par.fixed["compression_damping"] == pytest.approx(SCENE["compression_damping"] * 2)
     s = par.settings(np.sqrt(par.space.lo * par.space.hi))
@@ -83,17 +92,20 @@ def test_cloth_mass_moves_every_scaled_value(cap):
 
 
 def test_warm_start_replaces_the_free_values_only(cap, tmp_path):
-    init = {"model": {"name": "blender", "fps": 24.0, "quality": 5, "bending_model": "ANGULAR"},
-            "blender_cloth": B.check_settings({"tension_stiffness": 45.0, "compression_damping": 9.0,
-                                               "time_scale": B.physical_time_scale(24)}),
-            "blender_scene": {"fps": 24.0}}
+    init = {
+        "model": {"name": "blender", "fps": 24.0, "quality": 5, "bending_model": "ANGULAR"},
+        "blender_cloth": B.check_settings(
+            {"tension_stiffness": 45.0, "compression_damping": 9.0, "time_scale": B.physical_time_scale(24)}
+        ),
+        "blender_scene": {"fps": 24.0},
+    }
     p = tmp_path / "init.json"
     p.write_text(json.dumps(init))
     par = SceneParameters(cap, FitConfig(init=str(p)), CoreScene(cap))
     x0 = par.initial[0]
     s = par.settings(x0)
-    assert s["tension_stiffness"] == pytest.approx(45.0 * 0.5 / 0.3)        # moved to the scene's mass
-    assert s["compression_damping"] == pytest.approx(SCENE["compression_damping"])   # not free: the scene's
+    assert s["tension_stiffness"] == pytest.approx(45.0 * 0.5 / 0.3)  # moved to the scene's mass
+    assert s["compression_damping"] == pytest.approx(SCENE["compression_damping"])  # not free: the scene's
     assert s["time_scale"] == 1.25 and "time_scale" in par.note
 
 

@@ -7,18 +7,17 @@ import os
 
 import numpy as np
 import pytest
-
-from addon.core import defaults as D
-from addon.core.errors import ClothFitError
-from addon.core.fitting.evaluate import evaluate
-from addon.core.fitting.objective import SilhouetteObjective
-from addon.core.observation import camera as C
-from addon.core.observation import overlay, raster
-from addon.core.observation.capture import load_capture, write_capture
-from addon.core.observation.png import decode_label_png, read_label_png
-from addon.core.physics import jit
-from addon.core.physics.models import simulate
-from addon.core.physics.scenario import paper_scenario
+from clothfit.core import defaults as D
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.evaluate import evaluate
+from clothfit.core.fitting.objective import SilhouetteObjective
+from clothfit.core.observation import camera as C
+from clothfit.core.observation import overlay, raster
+from clothfit.core.observation.capture import load_capture, write_capture
+from clothfit.core.observation.png import decode_label_png, read_label_png
+from clothfit.core.physics import jit
+from clothfit.core.physics.models import simulate
+from clothfit.core.physics.scenario import paper_scenario
 
 Image = pytest.importorskip("PIL.Image")
 
@@ -26,7 +25,7 @@ GT = dict(D.GT_PARAMS)
 GT_ROW = [GT["m"], GT["k"], GT["l"], GT["d"]]
 K10_ROW = [GT["m"], GT["k"] * 1.1, GT["l"], GT["d"]]
 H, W = 120, 160
-DAVIS_PALETTE = [0, 0, 0, 128, 0, 0, 0, 128, 0, 128, 128, 0, 0, 0, 128, 128, 0, 128]   # DAVIS' first colours
+DAVIS_PALETTE = [0, 0, 0, 128, 0, 0, 0, 128, 0, 128, 128, 0, 0, 0, 128, 128, 0, 128]  # DAVIS' first colours
 needs_numba = pytest.mark.skipif(not jit.available(), reason="numba not importable: no second backend")
 
 
@@ -39,6 +38,7 @@ def save_palette_png(path, idx, palette=DAVIS_PALETTE, **kw):
 
 
 # ------------------------------------------------------------------ the PNG reader
+
 
 @pytest.mark.parametrize("kw", [{}, {"bits": 4, "optimize": True}, {"transparency": 0}, {"interlace": 1}])
 def test_palette_png_gives_the_indices(tmp_path, kw):
@@ -72,6 +72,7 @@ def test_label_png_refuses_colour_and_junk(tmp_path):
 
 # ------------------------------------------------------------------ captures of label images
 
+
 @pytest.fixture(scope="module")
 def truth():
     rig = C.load_rig("lab18")
@@ -84,15 +85,15 @@ def truth():
 
 def occluder(cam_i, f, shape):
     """A post (vertical bar) and a hand (disc) per image."""
-    yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
+    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]]
     post = (xx >= 60 + 7 * cam_i) & (xx < 72 + 7 * cam_i)
-    hand = (yy - 40 - 5 * f) ** 2 + (xx - 100) ** 2 < 15 ** 2
+    hand = (yy - 40 - 5 * f) ** 2 + (xx - 100) ** 2 < 15**2
     return post, hand
 
 
 def write_label_capture(root, truth, extra=None, ids=(1,), post_id=2, hand_id=3):
     sc, cams, X, sils = truth
-    cap = write_capture(root, cams, sc, sils, shapes=X)     # cameras.json, capture.json (binary)
+    cap = write_capture(root, cams, sc, sils, shapes=X)  # cameras.json, capture.json (binary)
     for ci, cam in enumerate(cams):
         for fi in range(sc.frame_times.size):
             post, hand = occluder(ci, fi, (cam.height, cam.width))
@@ -142,10 +143,14 @@ def test_bad_mask_keys(tmp_path, truth):
     write_label_capture(root, truth)
     p = os.path.join(root, "capture.json")
     d0 = json.load(open(p))
-    for change, text in [({"silhouette_ids": []}, "silhouette_ids"), ({"silhouette_ids": ["1"]}, "silhouette_ids"),
-                         ({"ignore_ids": [1]}, "both"), ({"matte_threshold": 0.5}, "exclude"),
-                         ({"silhouette_ids": None}, "needs 'silhouette_ids'"),
-                         ({"ignore": "ign/{frame}.png"}, "{camera}")]:
+    for change, text in [
+        ({"silhouette_ids": []}, "silhouette_ids"),
+        ({"silhouette_ids": ["1"]}, "silhouette_ids"),
+        ({"ignore_ids": [1]}, "both"),
+        ({"matte_threshold": 0.5}, "exclude"),
+        ({"silhouette_ids": None}, "needs 'silhouette_ids'"),
+        ({"ignore": "ign/{frame}.png"}, "{camera}"),
+    ]:
         d = dict(d0)
         d.update(change)
         json.dump(d, open(p, "w"))
@@ -160,10 +165,10 @@ def test_alpha_matte_capture(tmp_path, truth):
     for ci, cam in enumerate(cams):
         for fi in range(4):
             rgba = np.zeros((H, W, 4), np.uint8)
-            rgba[..., :3] = 200                     # colour is not the matte
+            rgba[..., :3] = 200  # colour is not the matte
             soft = sils[ci][fi].astype(np.float32) * 230
             rgba[..., 3] = soft.astype(np.uint8)
-            rgba[0, 0, 3] = 100                     # a soft pixel below the threshold: background
+            rgba[0, 0, 3] = 100  # a soft pixel below the threshold: background
             Image.fromarray(rgba, mode="RGBA").save(os.path.join(root, "sil", cam.name, f"{fi:03d}.png"))
     d = json.load(open(os.path.join(root, "capture.json")))
     d["matte_threshold"] = 0.5
@@ -188,6 +193,7 @@ def test_write_capture_with_ignore_masks(tmp_path, truth):
 
 # ------------------------------------------------------------------ eq. 6 with pixels of unknown truth
 
+
 def brute_esil(obs, mod, ign):
     keep = ~ign
     return np.count_nonzero((obs ^ mod) & keep) / np.count_nonzero(obs & keep)
@@ -199,7 +205,7 @@ def test_objective_leaves_ignored_pixels_out(truth, backend):
     ign = [[(lambda p, h: p | h)(*occluder(ci, fi, (H, W))) for fi in range(4)] for ci in range(3)]
     ign[1][2] = None
     obs = [[s.copy() for s in row] for row in sils]
-    obs[0][1][ign[0][1]] = True                  # whatever the silhouette says under the occluder is ignored
+    obs[0][1][ign[0][1]] = True  # whatever the silhouette says under the occluder is ignored
     P = np.array([GT_ROW, K10_ROW])
     esil, _ = SilhouetteObjective(sc, cams, obs, backend=backend, ignore=ign).per_image(P)
     sim = simulate(sc, P, backend="numpy")
@@ -210,8 +216,12 @@ def test_objective_leaves_ignored_pixels_out(truth, backend):
                 g = ign[ci][fi] if ign[ci][fi] is not None else np.zeros((H, W), bool)
                 assert esil[p, ci, fi] == pytest.approx(brute_esil(obs[ci][fi], mod, g), abs=1e-12)
     # without the ignore masks the same images score differently (the occluders count)
-    plain, _ = SilhouetteObjective(sc, cams, [[o & ~(g if g is not None else False) for o, g in zip(oc, gc)]
-                                              for oc, gc in zip(obs, ign)], backend=backend).per_image(P)
+    plain, _ = SilhouetteObjective(
+        sc,
+        cams,
+        [[o & ~(g if g is not None else False) for o, g in zip(oc, gc)] for oc, gc in zip(obs, ign)],
+        backend=backend,
+    ).per_image(P)
     assert np.abs(plain - esil).max() > 0.01
 
 
@@ -221,12 +231,13 @@ def test_blender_model_path_uses_ignore(truth):
     ign = [[(lambda p, h: p | h)(*occluder(ci, fi, (H, W))) for fi in range(4)] for ci in range(3)]
     obj = SilhouetteObjective(sc, cams, sils, backend="numba" if jit.available() else "numpy", ignore=ign)
 
-    class Fixed:                                   # a "model" whose simulation is the truth's positions
+    class Fixed:  # a "model" whose simulation is the truth's positions
         row_names = ("a",)
 
         def simulate(self, scenario, rows, backend="auto"):
             class S:
                 pass
+
             s = S()
             s.positions = np.repeat(X[None], len(rows), 0)
             s.exploded = np.zeros(len(rows), bool)
@@ -242,9 +253,10 @@ def test_evaluate_and_overlay_grey(tmp_path, truth):
     write_label_capture(root, truth)
     cap = load_capture(root)
     r = evaluate(cap, GT)
-    assert r["silhouette_error_pct"] < 0.5         # the truth fits where it is seen
+    assert r["silhouette_error_pct"] < 0.5  # the truth fits where it is seen
     paths = overlay.capture_overlays(cap, GT, str(tmp_path / "ov"), cameras=[0], times=[0.1])
     import cv2
+
     img = cv2.imread(paths[0])[..., ::-1]
     post, hand = occluder(0, 0, (H, W))
     g = img[post | hand]
@@ -253,7 +265,8 @@ def test_evaluate_and_overlay_grey(tmp_path, truth):
 
 def test_study_occluders_hide_part_of_the_cloth_in_every_view():
     """The occlusion study's post and hand (studies/occlusion.py) hide some, never all, of the cloth."""
-    from addon.core.studies.occlusion import occluder_masks
+    from clothfit.core.studies.occlusion import occluder_masks
+
     rig = [c.resized(120, 160) for c in C.load_rig("lab18")]
     sc = paper_scenario(frame_times=[0.1, 0.5, 1.0, 1.5])
     X = simulate(sc, [GT], backend="numpy").positions[0]

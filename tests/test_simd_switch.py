@@ -8,6 +8,7 @@ different settings: angular and linear bending, soft and stiff, quality 2 and 5.
 the one the Blender-agreement tests hold the kernel to (every vertex of every frame within
 0.01 mm); the figure measured is 0 (the same float32 operations in the same order).
 """
+
 import json
 import os
 import subprocess
@@ -21,9 +22,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCRIPT = r"""
 import json, sys
 import numpy as np
-from addon.core.physics import blender as B, blender_kernels as K, simd
-from addon.core.physics.models import BlenderModel
-from addon.core.physics.scenario import ClothGrid, Scenario, paper_scenario
+from clothfit.core.physics import blender as B, blender_kernels as K, simd
+from clothfit.core.physics.models import BlenderModel
+from clothfit.core.physics.scenario import ClothGrid, Scenario, paper_scenario
 grid = ClothGrid(9, 9, 0.10)
 sc0 = paper_scenario(grid, frame_times=np.arange(1, 13) / 24.0)
 sc = Scenario(sc0.grid, sc0.handles, sc0.frame_times, 0.25, sc0.gravity)
@@ -46,8 +47,7 @@ def _run(no_simd: bool) -> dict:
     env.pop("CLOTHFIT_NO_SIMD", None)
     if no_simd:
         env["CLOTHFIT_NO_SIMD"] = "1"
-    r = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, env=env, capture_output=True, text=True,
-                       timeout=900)
+    r = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]
     return json.loads(r.stdout)
 

@@ -1,6 +1,7 @@
 """Issue 12, trustworthy fits: nothing executed from files, no silent wrong results, no lost or
 overwritten data, fits that stop when they have converged. The CLI is driven in-process
-(``cli.main``, the same code path as ``python -m addon``) except for the kill -9 test."""
+(``cli.main``, the same code path as ``python -m clothfit``) except for the kill -9 test."""
+
 import os
 import sys
 
@@ -17,16 +18,15 @@ import time
 
 import numpy as np
 import pytest
-
-from addon import cli
-from addon.core import defaults as D
-from addon.core import safeio
-from addon.core.errors import ClothFitError
-from addon.core.fitting import objective as O
-from addon.core.fitting.job import FitConfig, FitJob, read_checkpoint
-from addon.core.observation import camera as C
-from addon.core.observation import synth
-from addon.core.physics.scenario import paper_scenario
+from clothfit import cli
+from clothfit.core import defaults as D
+from clothfit.core import safeio
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting import objective as O
+from clothfit.core.fitting.job import FitConfig, FitJob, read_checkpoint
+from clothfit.core.observation import camera as C
+from clothfit.core.observation import synth
+from clothfit.core.physics.scenario import paper_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TIMES = [0.1, 0.2, 0.3, 0.4, 0.6, 0.8]
@@ -42,9 +42,10 @@ def cap(tmp_path_factory):
 
 
 def fit(*args):
-    """``python -m addon fit ...`` in-process -> (exit code, stdout, stderr) via capsys-free redirection."""
+    """``python -m clothfit fit ...`` in-process -> (exit code, stdout, stderr) via capsys-free redirection."""
     import contextlib
     import io
+
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = cli.main([str(a) for a in args])
@@ -66,6 +67,7 @@ FAST = ("--cameras", "0,2", "--times", "0.1,0.3", "--quiet")
 
 # ------------------------------------------------------------------ convergence
 
+
 def test_a_converged_fit_stops_long_before_a_huge_budget(cap):
     small = dict(train_cameras=[0, 3], train_times=[0.1, 0.3, 0.6], optimizer="cma-es", seed=0)
     job = FitJob(cap, FitConfig(max_evaluations=100_000, **small))
@@ -82,8 +84,9 @@ def test_the_ga_stops_when_it_stagnates(cap, monkeypatch):
     """Job-level wiring of the GA's stagnation stop, on a cheap stand-in objective (a bowl in the
     identifiable coordinates): the real objective is exercised by the CMA-ES test above."""
     monkeypatch.setattr(O.SilhouetteObjective, "__call__", _bowl)
-    r = FitJob(cap, FitConfig(train_cameras=[0], train_times=[0.1], optimizer="spx-mgg", seed=0,
-                              max_evaluations=1_000_000)).run()
+    r = FitJob(
+        cap, FitConfig(train_cameras=[0], train_times=[0.1], optimizer="spx-mgg", seed=0, max_evaluations=1_000_000)
+    ).run()
     assert r["stop_reason"] == "converged" and r["converged_by"] in (["stagnation"], ["tolx"])
     assert r["evaluations"] < 20_000
 
@@ -96,8 +99,9 @@ def _bowl(self, P, offsets=None):
 def test_ipop_restarts_continue_after_convergence(cap, monkeypatch):
     monkeypatch.setattr(O.SilhouetteObjective, "__call__", _bowl)
     one = FitJob(cap, FitConfig(train_cameras=[1], train_times=[0.2, 0.6], seed=1, max_evaluations=50_000)).run()
-    two = FitJob(cap, FitConfig(train_cameras=[1], train_times=[0.2, 0.6], seed=1, max_evaluations=50_000,
-                                restarts=1)).run()
+    two = FitJob(
+        cap, FitConfig(train_cameras=[1], train_times=[0.2, 0.6], seed=1, max_evaluations=50_000, restarts=1)
+    ).run()
     assert one["stop_reason"] == two["stop_reason"] == "converged"
     assert len(one["converged_by"]) == 1 and len(two["converged_by"]) == 2
     assert two["evaluations"] > one["evaluations"]
@@ -108,13 +112,14 @@ def test_every_candidate_exploding_is_an_error_not_a_result(cap, tmp_path, monke
     monkeypatch.setattr(O.SilhouetteObjective, "__call__", lambda self, P: np.full(len(P), np.inf))
     out = tmp_path / "fit.json"
     line = one_line_error(*fit("fit", cap.root, "--out", out, "--max-evaluations", 100_000, *FAST), "explode")
-    assert f"{D.FIT_EXPLODED_LIMIT // 7 * 7 + 7} candidates" in line      # stopped at the first generation past the limit
+    assert f"{D.FIT_EXPLODED_LIMIT // 7 * 7 + 7} candidates" in line  # stopped at the first generation past the limit
     r = json.loads(out.read_text())
     assert r["stop_reason"] == "error" and r["params"] is None and r["evaluations"] < 200
     assert read_checkpoint(str(out) + ".checkpoint.json")["stop_reason"] == "error"
 
 
 # ------------------------------------------------------------------ resume rules
+
 
 def test_resume_refuses_another_fit_and_may_grow_the_budget(cap, tmp_path):
     out = tmp_path / "fit.json"
@@ -123,12 +128,29 @@ def test_resume_refuses_another_fit_and_may_grow_the_budget(cap, tmp_path):
     # a rerun without --resume would overwrite it
     one_line_error(*fit("fit", cap.root, "--out", out, "--seed", 4, *FAST), "--resume", "--force", ck)
     # another request: refused naming the differing fields
-    line = one_line_error(*fit("fit", cap.root, "--out", out, "--resume", "--optimizer", "spx-mgg",
-                               "--cameras", "0,1,2", "--times", "0.1,0.3", "--quiet"),
-                          "optimizer", "cameras", "population")
-    assert "seed" in line                  # --seed 4 was not given again
-    one_line_error(*fit("fit", cap.root, "--out", out, "--resume", "--seed", 4, "--resolution", "30x40", *FAST),
-                   "resolution")
+    line = one_line_error(
+        *fit(
+            "fit",
+            cap.root,
+            "--out",
+            out,
+            "--resume",
+            "--optimizer",
+            "spx-mgg",
+            "--cameras",
+            "0,1,2",
+            "--times",
+            "0.1,0.3",
+            "--quiet",
+        ),
+        "optimizer",
+        "cameras",
+        "population",
+    )
+    assert "seed" in line  # --seed 4 was not given again
+    one_line_error(
+        *fit("fit", cap.root, "--out", out, "--resume", "--seed", 4, "--resolution", "30x40", *FAST), "resolution"
+    )
     # the same fit with a larger budget continues where it stopped, to the uninterrupted result
     rc, so, err = fit("fit", cap.root, "--out", out, "--resume", "--seed", 4, "--max-evaluations", 49, *FAST)
     assert rc == 0, err
@@ -151,6 +173,7 @@ def test_resume_with_a_changed_capture_is_refused(cap, tmp_path):
     assert fit("fit", copy, "--out", out, "--max-evaluations", 14, *FAST)[0] == 0
     sil = copy / "sil" / cap.cameras[0].name / "000.png"
     import cv2
+
     img = cv2.imread(str(sil), cv2.IMREAD_GRAYSCALE)
     img[0, 0] = 255 - img[0, 0]
     cv2.imwrite(str(sil), img)
@@ -162,8 +185,12 @@ def test_resume_without_a_checkpoint_and_bad_checkpoints(cap, tmp_path):
     ck = tmp_path / "fit.json.checkpoint.json"
     one_line_error(*fit("fit", cap.root, "--out", out, "--resume", *FAST), "no checkpoint")
     assert not out.exists()
-    for text, needle in (("{}", "format"), ("[1, 2]", "JSON object"), ("{not json", "corrupt"),
-                         ("\x00\xff", "corrupt")):
+    for text, needle in (
+        ("{}", "format"),
+        ("[1, 2]", "JSON object"),
+        ("{not json", "corrupt"),
+        ("\x00\xff", "corrupt"),
+    ):
         ck.write_bytes(text.encode("latin-1"))
         one_line_error(*fit("fit", cap.root, "--out", out, "--resume", *FAST), needle)
         # and a rerun without --resume does not replace it
@@ -180,11 +207,13 @@ def test_a_checkpoint_carrying_a_pickle_cannot_run_code(cap, tmp_path):
     class Boom:
         def __reduce__(self):
             return (open, (str(marker), "w"))
+
     d = json.load(open(ck))
     d["optimizer_state"]["pickle_b64"] = base64.b64encode(pickle.dumps(Boom())).decode()
     open(ck, "w").write(json.dumps(d))
-    one_line_error(*fit("fit", cap.root, "--out", out, "--resume", "--max-evaluations", 28, *FAST),
-                   "pickle_b64", "unknown fields")
+    one_line_error(
+        *fit("fit", cap.root, "--out", out, "--resume", "--max-evaluations", 28, *FAST), "pickle_b64", "unknown fields"
+    )
     d["optimizer_state"].pop("pickle_b64")
     d["exec"] = "os.system('x')"
     open(ck, "w").write(json.dumps(d))
@@ -192,16 +221,19 @@ def test_a_checkpoint_carrying_a_pickle_cannot_run_code(cap, tmp_path):
     assert not marker.exists()
 
 
-@pytest.mark.parametrize("mutate, needle", [
-    (lambda d: d["optimizer_state"].__setitem__("C", [[1, 0, 0], [0, -1, 0], [0, 0, 1]]), "positive-definite"),
-    (lambda d: d["optimizer_state"].__setitem__("mean", [float("nan")] * 3), "non-finite"),
-    (lambda d: d["optimizer_state"].__setitem__("evaluations", "lots"), "evaluations"),
-    (lambda d: d.__setitem__("elapsed", -1), "elapsed"),
-    (lambda d: d.__setitem__("stop_reason", "because"), "stop_reason"),
-    (lambda d: d.__setitem__("config", {"seed": "x"}), "seed"),
-    (lambda d: d.__setitem__("identity", None), "identity"),
-    (lambda d: d["optimizer_state"]["space"]["bounds"].__setitem__("k_over_m", [1.0, 2.0]), "does not match"),
-])
+@pytest.mark.parametrize(
+    "mutate, needle",
+    [
+        (lambda d: d["optimizer_state"].__setitem__("C", [[1, 0, 0], [0, -1, 0], [0, 0, 1]]), "positive-definite"),
+        (lambda d: d["optimizer_state"].__setitem__("mean", [float("nan")] * 3), "non-finite"),
+        (lambda d: d["optimizer_state"].__setitem__("evaluations", "lots"), "evaluations"),
+        (lambda d: d.__setitem__("elapsed", -1), "elapsed"),
+        (lambda d: d.__setitem__("stop_reason", "because"), "stop_reason"),
+        (lambda d: d.__setitem__("config", {"seed": "x"}), "seed"),
+        (lambda d: d.__setitem__("identity", None), "identity"),
+        (lambda d: d["optimizer_state"]["space"]["bounds"].__setitem__("k_over_m", [1.0, 2.0]), "does not match"),
+    ],
+)
 def test_tampered_checkpoints_are_one_line_errors(cap, tmp_path, mutate, needle):
     out = tmp_path / "fit.json"
     ck = str(out) + ".checkpoint.json"
@@ -216,16 +248,20 @@ def test_checkpoint_size_does_not_grow_with_generations(cap, tmp_path):
     sizes = []
     for n in (70, 700):
         ck = tmp_path / f"c{n}.json"
-        job = FitJob(cap, FitConfig(train_cameras=[0], train_times=[0.1], seed=0, max_evaluations=n,
-                                    restarts=0), checkpoint=str(ck))
-        job.opt.tolx = job.opt.tolfun = 0.0         # keep it running
+        job = FitJob(
+            cap,
+            FitConfig(train_cameras=[0], train_times=[0.1], seed=0, max_evaluations=n, restarts=0),
+            checkpoint=str(ck),
+        )
+        job.opt.tolx = job.opt.tolfun = 0.0  # keep it running
         job.run()
         assert job.evaluations >= n
         sizes.append(ck.stat().st_size)
-    assert sizes[1] < 2 * sizes[0], sizes        # 10x the generations, not 10x the bytes
+    assert sizes[1] < 2 * sizes[0], sizes  # 10x the generations, not 10x the bytes
 
 
 # ------------------------------------------------------------------ safe writers
+
 
 def test_writers_never_follow_planted_symlinks(cap, tmp_path):
     victim = tmp_path / "victim.txt"
@@ -285,6 +321,7 @@ def test_bad_true_params_do_not_lose_the_result(cap, tmp_path):
 
 # ------------------------------------------------------------------ bad inputs: one line each
 
+
 def _capture_with(cap, tmp_path, edit_capture=None, edit_cameras=None, raw_cameras=None):
     copy = tmp_path / "cap"
     shutil.copytree(cap.root, copy)
@@ -321,10 +358,12 @@ BAD_CAPTURES = {
     "height NaN": (_cloth(height=float("nan")), None, "height"),
     "side infinite": (_cloth(side=float("inf"), side_y=float("inf")), None, "side"),
     "grid 100000": (_cloth(nx=100000, ny=100000), None, "too large"),
-    "release NaN": (lambda d: d["scenario"]["handles"][0].__setitem__("release_time", float("nan")), None,
-                    "release_time"),
-    "pattern width": (lambda d: d.__setitem__("silhouettes", "sil/{camera}/{frame:0100000000d}.png"), None,
-                      "width"),
+    "release NaN": (
+        lambda d: d["scenario"]["handles"][0].__setitem__("release_time", float("nan")),
+        None,
+        "release_time",
+    ),
+    "pattern width": (lambda d: d.__setitem__("silhouettes", "sil/{camera}/{frame:0100000000d}.png"), None, "width"),
     "width abc": (None, _cam0("width", "abc"), "width"),
     "width null": (None, _cam0("width", None), "width"),
     "width 1e400": (None, _cam0("width", 987654321), "width"),
@@ -344,18 +383,21 @@ def test_bad_capture_values_are_one_line_errors(cap, tmp_path, case):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("args, needle", [
-    (("--max-evaluations", 0), "max_evaluations"),
-    (("--max-evaluations", -5), "max_evaluations"),
-    (("--children", 0, "--optimizer", "spx-mgg"), "children"),
-    (("--population", 0), "population"),
-    (("--population", 1), "population"),
-    (("--restarts", -1), "restarts"),
-    (("--resolution", "100000x100000"), "100000x100000"),
-    (("--resolution", "0x40"), "positive"),
-    (("--target", "nan"), "target_error"),
-    (("--cloth-mass", "inf"), "cloth_mass"),
-])                            # --resume with --force: a usage error, exit code 64 (test_cli_habits.py)
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (("--max-evaluations", 0), "max_evaluations"),
+        (("--max-evaluations", -5), "max_evaluations"),
+        (("--children", 0, "--optimizer", "spx-mgg"), "children"),
+        (("--population", 0), "population"),
+        (("--population", 1), "population"),
+        (("--restarts", -1), "restarts"),
+        (("--resolution", "100000x100000"), "100000x100000"),
+        (("--resolution", "0x40"), "positive"),
+        (("--target", "nan"), "target_error"),
+        (("--cloth-mass", "inf"), "cloth_mass"),
+    ],
+)  # --resume with --force: a usage error, exit code 64 (test_cli_habits.py)
 def test_bad_fit_options_are_one_line_errors(cap, tmp_path, args, needle):
     out = tmp_path / "fit.json"
     one_line_error(*fit("fit", cap.root, "--out", out, *FAST, *args), needle)
@@ -369,15 +411,16 @@ def test_synth_truth_dt_safety_zero(tmp_path):
 
 
 def test_unexpected_exceptions_are_one_line_too(monkeypatch, tmp_path):
-    import addon.cli as mod
-    import addon.cli.studies as studies
+    import clothfit.cli as mod
+    import clothfit.cli.studies as studies
 
     def boom(a):
         raise RuntimeError("disk on fire\nsecond line")
+
     monkeypatch.setattr(studies, "cmd_rig", boom)
     monkeypatch.delenv(mod.DEBUG_ENV, raising=False)
     line = one_line_error(*fit("rig"), "RuntimeError", "disk on fire", mod.DEBUG_ENV, code=1)
-    assert "second line" in line                  # folded onto the one line
+    assert "second line" in line  # folded onto the one line
     monkeypatch.setenv(mod.DEBUG_ENV, "1")
     with pytest.raises(RuntimeError):
         fit("rig")
@@ -385,11 +428,14 @@ def test_unexpected_exceptions_are_one_line_too(monkeypatch, tmp_path):
 
 # ------------------------------------------------------------------ extract, calibration names
 
+
 def _footage(tmp_path, names=("cam00", "cam01"), dist=None):
     from test_extract import write_footage
+
     root = str(tmp_path / "footage")
     write_footage(root, n_cams=len(names))
-    from addon.core.footage.calib_io import import_cameras
+    from clothfit.core.footage.calib_io import import_cameras
+
     cams = import_cameras(os.path.join(root, "cameras.yml"))
     for c, n in zip(cams, names):
         if n != c.name and os.path.isdir(os.path.join(root, c.name)):
@@ -401,8 +447,9 @@ def _footage(tmp_path, names=("cam00", "cam01"), dist=None):
 
 
 def test_extract_into_its_footage_keeps_the_calibration(tmp_path):
-    from addon.core.footage import extract as X
-    from addon.core.footage.calib_io import export_cameras
+    from clothfit.core.footage import extract as X
+    from clothfit.core.footage.calib_io import export_cameras
+
     root, cams = _footage(tmp_path, dist=[-0.2, 0.05, 0.0, 0.0, 0.0])
     export_cameras(cams, os.path.join(root, "cameras.json"))
     js = json.load(open(os.path.join(root, "footage.json")))
@@ -413,16 +460,17 @@ def test_extract_into_its_footage_keeps_the_calibration(tmp_path):
         X.extract_capture(root, root, undistort=True)
     assert open(os.path.join(root, "cameras.json")).read() == before
     assert not os.path.exists(os.path.join(root, "capture.json"))
-    X.extract_capture(root, str(tmp_path / "cap"), undistort=True)        # elsewhere: fine
+    X.extract_capture(root, str(tmp_path / "cap"), undistort=True)  # elsewhere: fine
 
 
 @pytest.mark.parametrize("bad", ["../esc", "a/b", "..", "x\\..\\y"])
 def test_calibration_camera_names_are_checked_before_anything_is_written(tmp_path, bad):
-    from addon.core.footage import extract as X
-    from addon.core.footage.calib_io import export_cameras, import_cameras
+    from clothfit.core.footage import extract as X
+    from clothfit.core.footage.calib_io import export_cameras, import_cameras
+
     root, cams = _footage(tmp_path)
     cams[1].name = bad
-    export_cameras(cams, os.path.join(root, "cameras.yml"))      # OpenCV YAML carries the name
+    export_cameras(cams, os.path.join(root, "cameras.yml"))  # OpenCV YAML carries the name
     with pytest.raises(ClothFitError) as e:
         import_cameras(os.path.join(root, "cameras.yml"))
     assert "\n" not in str(e.value)
@@ -430,23 +478,42 @@ def test_calibration_camera_names_are_checked_before_anything_is_written(tmp_pat
     with pytest.raises(ClothFitError):
         X.extract_capture(root, str(tmp_path / "cap"), debug_dir=str(dbg))
     assert not dbg.exists() and not (tmp_path / "esc").exists()
-    with pytest.raises(ClothFitError):           # a list of cameras given directly is checked as well
+    with pytest.raises(ClothFitError):  # a list of cameras given directly is checked as well
         X.extract_capture(root, str(tmp_path / "cap"), cameras=cams, debug_dir=str(dbg))
     assert not dbg.exists()
 
 
 # ------------------------------------------------------------------ kill -9
 
+
 def test_kill_9_at_random_moments_leaves_a_resumable_checkpoint(cap, tmp_path):
     """A fit killed (SIGKILL) at random moments, resumed each time: the checkpoint always loads and the
     resumed run ends with the uninterrupted run's result."""
-    args = ["fit", cap.root, "--cameras", "0,2,4", "--times", "0.1,0.3,0.6", "--max-evaluations", 1200,
-            "--optimizer", "spx-mgg", "--seed", 2, "--quiet"]
+    args = [
+        "fit",
+        cap.root,
+        "--cameras",
+        "0,2,4",
+        "--times",
+        "0.1,0.3,0.6",
+        "--max-evaluations",
+        1200,
+        "--optimizer",
+        "spx-mgg",
+        "--seed",
+        2,
+        "--quiet",
+    ]
     ref_out = tmp_path / "ref.json"
     env = dict(os.environ, PYTHONPATH=ROOT)
-    t0 = time.monotonic()                      # the whole run in a process of its own: start-up included
-    r0 = subprocess.run([sys.executable, "-m", "addon", *map(str, args), "--out", str(ref_out)], cwd=ROOT, env=env,
-                        capture_output=True, text=True)
+    t0 = time.monotonic()  # the whole run in a process of its own: start-up included
+    r0 = subprocess.run(
+        [sys.executable, "-m", "clothfit", *map(str, args), "--out", str(ref_out)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
     whole = time.monotonic() - t0
     assert r0.returncode == 0, r0.stderr
     ref = json.loads(ref_out.read_text())
@@ -457,9 +524,9 @@ def test_kill_9_at_random_moments_leaves_a_resumable_checkpoint(cap, tmp_path):
     for attempt in range(10):
         if attempt >= 4 and killed and resumed:
             break
-        cmd = [sys.executable, "-m", "addon", *map(str, args), "--out", str(out)]
+        cmd = [sys.executable, "-m", "clothfit", *map(str, args), "--out", str(out)]
         if os.path.exists(ck):
-            read_checkpoint(ck)                  # loadable whenever it exists
+            read_checkpoint(ck)  # loadable whenever it exists
             cmd.append("--resume")
             resumed += 1
         p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -469,7 +536,7 @@ def test_kill_9_at_random_moments_leaves_a_resumable_checkpoint(cap, tmp_path):
             p.send_signal(signal.SIGKILL)
             killed += 1
         p.wait()
-    cmd = [sys.executable, "-m", "addon", *map(str, args), "--out", str(out)]
+    cmd = [sys.executable, "-m", "clothfit", *map(str, args), "--out", str(out)]
     if os.path.exists(ck):
         cmd.append("--resume")
     done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
@@ -482,8 +549,26 @@ def test_kill_9_at_random_moments_leaves_a_resumable_checkpoint(cap, tmp_path):
 
 # ------------------------------------------------------------------ fuzz: every input loads or is one ClothFitError
 
-JUNK = [None, True, 0, -1, 1e400, float("nan"), -1e308, 2 ** 70, "", "abc", "../x", [], [1], [[1, 2], [3]], {},
-        {"a": 1}, 0.5, 100000]
+JUNK = [
+    None,
+    True,
+    0,
+    -1,
+    1e400,
+    float("nan"),
+    -1e308,
+    2**70,
+    "",
+    "abc",
+    "../x",
+    [],
+    [1],
+    [[1, 2], [3]],
+    {},
+    {"a": 1},
+    0.5,
+    100000,
+]
 
 
 def _paths(node, prefix=()):
@@ -511,7 +596,8 @@ def _mutated(doc, rnd):
 
 @pytest.mark.parametrize("which", ["capture.json", "cameras.json"])
 def test_fuzzed_capture_files_load_or_fail_in_one_line(cap, tmp_path, which):
-    from addon.core.observation.capture import load_capture
+    from clothfit.core.observation.capture import load_capture
+
     copy = tmp_path / "cap"
     shutil.copytree(cap.root, copy)
     doc = json.loads((copy / which).read_text())
@@ -532,8 +618,10 @@ def test_fuzzed_capture_files_load_or_fail_in_one_line(cap, tmp_path, which):
 def test_fuzzed_checkpoints_resume_or_fail_in_one_line(cap, tmp_path):
     out = tmp_path / "fit.json"
     ck = str(out) + ".checkpoint.json"
-    assert fit("fit", cap.root, "--out", out, "--max-evaluations", 14, "--cameras", "0", "--times", "0.1",
-               "--quiet")[0] == 0
+    assert (
+        fit("fit", cap.root, "--out", out, "--max-evaluations", 14, "--cameras", "0", "--times", "0.1", "--quiet")[0]
+        == 0
+    )
     doc = json.load(open(ck))
     rnd = random.Random(5)
     for _ in range(300):

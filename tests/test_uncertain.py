@@ -1,14 +1,14 @@
 """The manipulation's unknowns a capture declares (capture.json "uncertain", fit --uncertain)."""
+
 import json
 
 import numpy as np
 import pytest
-
-from addon.core.errors import ClothFitError
-from addon.core.observation.capture import load_capture
-from addon.core.observation.synth import synth_capture
-from addon.core.physics import blender as B
-from addon.core.physics.scenario import Uncertainty
+from clothfit.core.errors import ClothFitError
+from clothfit.core.observation.capture import load_capture
+from clothfit.core.observation.synth import synth_capture
+from clothfit.core.physics import blender as B
+from clothfit.core.physics.scenario import Uncertainty
 
 
 def test_text_and_object_forms_agree():
@@ -23,11 +23,20 @@ def test_text_and_object_forms_agree():
     assert not off.active
 
 
-@pytest.mark.parametrize("text, key", [
-    ("time_offset=-0.01", "time_offset"), ("time_offset=abc", "time_offset"), ("time_offset=1.5", "time_offset"),
-    ("handles=0.06", "handles"), ("handles=nan", "handles"), ("handels=0.001", "handels"), ("time_offset", "time_offset"),
-    ("time_offset=0.1,time_offset=0.2", "time_offset"), ("", "empty"),
-])
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("time_offset=-0.01", "time_offset"),
+        ("time_offset=abc", "time_offset"),
+        ("time_offset=1.5", "time_offset"),
+        ("handles=0.06", "handles"),
+        ("handles=nan", "handles"),
+        ("handels=0.001", "handels"),
+        ("time_offset", "time_offset"),
+        ("time_offset=0.1,time_offset=0.2", "time_offset"),
+        ("", "empty"),
+    ],
+)
 def test_bad_bounds_are_one_line_errors_naming_the_key(text, key):
     with pytest.raises(ClothFitError) as e:
         Uncertainty.from_text(text, 4)
@@ -35,8 +44,12 @@ def test_bad_bounds_are_one_line_errors_naming_the_key(text, key):
 
 
 def test_bad_object_forms():
-    for bad, key in (({"handles": [0.001, 0.002]}, "handles"), ({"handles": True}, "handles"),
-                     ([0.1], "expected an object"), ({"time_offset": "0.1"}, "time_offset")):
+    for bad, key in (
+        ({"handles": [0.001, 0.002]}, "handles"),
+        ({"handles": True}, "handles"),
+        ([0.1], "expected an object"),
+        ({"time_offset": "0.1"}, "time_offset"),
+    ):
         with pytest.raises(ClothFitError) as e:
             Uncertainty.parse(bad, 4, "capture x: uncertain")
         assert key in str(e.value) and "\n" not in str(e.value)
@@ -62,7 +75,8 @@ def test_settle_not_a_whole_number_of_frames_is_rounded_and_said():
     note = B.settle_note(2.95, 24)
     assert "70.80 frames" in note and "71 frames" in note
     assert B.settle_note(0.5, 24) is None
-    from addon.core.physics.scenario import paper_scenario
+    from clothfit.core.physics.scenario import paper_scenario
+
     sc = paper_scenario(frame_times=np.array([0.1, 0.2]))
     sc.settle_time = 0.51
     plan = B.FramePlan.from_scenario(sc, 24.0)

@@ -15,11 +15,11 @@ pytest.importorskip("av")
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
 
-from addon.cli import main as cli  # noqa: E402
-from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.footage import calib_io, colmap, video  # noqa: E402
-from addon.core.observation import camera as C  # noqa: E402
-from addon.core.observation.capture import load_capture  # noqa: E402
+from clothfit.cli import main as cli  # noqa: E402
+from clothfit.core.errors import ClothFitError  # noqa: E402
+from clothfit.core.footage import calib_io, colmap, video  # noqa: E402
+from clothfit.core.observation import camera as C  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
 from video_footage import FLASH_BEFORE, iou, make_video_footage  # noqa: E402
 
 RES = (180, 240)
@@ -33,9 +33,21 @@ def footage(tmp_path_factory):
 
 
 def extract_args(root, out, times, sync=None):
-    return ["extract", "--videos", os.path.join(root, "videos"), "--plates", os.path.join(root, "plates"),
-            "--cameras", root, "--times", ",".join(str(t) for t in times), "--out", out,
-            "--sync", sync or os.path.join(root, "sync.json")]
+    return [
+        "extract",
+        "--videos",
+        os.path.join(root, "videos"),
+        "--plates",
+        os.path.join(root, "plates"),
+        "--cameras",
+        root,
+        "--times",
+        ",".join(str(t) for t in times),
+        "--out",
+        out,
+        "--sync",
+        sync or os.path.join(root, "sync.json"),
+    ]
 
 
 def test_videos_extract_to_true_masks(footage, tmp_path):
@@ -47,11 +59,11 @@ def test_videos_extract_to_true_masks(footage, tmp_path):
     ious = [iou(cap.load_silhouette(c, f), truth["masks"][c][f]) for c in range(3) for f in range(cap.n_frames)]
     assert np.mean(ious) >= 0.95, ious
     rep = json.load(open(os.path.join(out, "extract_report.json")))
-    for name, r in rep["video"].items():     # every frame read at exactly sync + t (ms container timestamps)
+    for name, r in rep["video"].items():  # every frame read at exactly sync + t (ms container timestamps)
         want = [truth["sync"][name] + t for t in truth["times"]]
         assert np.allclose(r["frame_timestamps"], want, atol=5e-4)
         assert r["video"].endswith(".mkv" if name == "cam00" else ".mp4")
-    assert "median of" in rep["video"]["cam06"]["plate"]          # plate from a video of the empty scene
+    assert "median of" in rep["video"]["cam06"]["plate"]  # plate from a video of the empty scene
 
 
 def test_one_frame_late_is_visible(footage):
@@ -131,6 +143,7 @@ def test_bad_videos(footage, tmp_path, capsys):
 
 # ------------------------------------------------------------------ COLMAP binary models
 
+
 def write_colmap_bin(folder, cams, model="OPENCV"):
     """cameras.bin / images.bin in COLMAP's documented layout (independent of our reader)."""
     ids = {"PINHOLE": 1, "OPENCV": 4}
@@ -194,14 +207,17 @@ def test_opencv_backend_reads_the_same(footage, tmp_path, monkeypatch):
 
 def _mat(name, a):
     a = np.atleast_2d(np.asarray(a, dtype=float))
-    return (f"{name}: !!opencv-matrix\r\n  rows: {a.shape[0]}\r\n  cols: {a.shape[1]}\r\n  dt: d\r\n"
-            f"  data: [{', '.join(repr(float(v)) for v in a.ravel())}]\r\n")
+    return (
+        f"{name}: !!opencv-matrix\r\n  rows: {a.shape[0]}\r\n  cols: {a.shape[1]}\r\n  dt: d\r\n"
+        f"  data: [{', '.join(repr(float(v)) for v in a.ravel())}]\r\n"
+    )
 
 
 def test_easymocap_text_as_its_own_writer_makes_it(tmp_path):
     """intri.yml / extri.yml typed the way EasyMocap's text FileStorage writer lays them out (CRLF,
     quoted numeric names, Rodrigues R_ and 3x3 Rot_), plus EasyVolcap's H_/W_ image size."""
     import cv2
+
     cams = C.load_rig("ring8")[:2]
     names = ["01", "02"]
     intri = "%YAML:1.0\r\n---\r\nnames:\r\n" + "".join(f'  - "{n}"\r\n' for n in names)

@@ -28,7 +28,7 @@ The set-up, step by step:
    keyframed down to the experiment's value at the release frame).
 5. **Bake**: the frames are stepped in order (Blender's point cache holds the simulation), the
    evaluated vertex positions at the capture times go to ``shapes.npz``.
-6. **Silhouettes**: Workbench, flat, anti-aliasing off (``addon.blender.render.render_masks``)
+6. **Silhouettes**: Workbench, flat, anti-aliasing off (``clothfit.blender.render.render_masks``)
    through the ``lab18`` rig at the paper's 30 capture times: a capture in our format.
 7. **Fit**: ``FitJob`` with the paper's training times (0.10 ... 1.50) and the first 4, 8, 16
    cameras of the spread order; scored on the held-out cameras at the test times (0.05 ... 1.45)
@@ -42,6 +42,7 @@ Commands::
 
 Runs under ``python`` with the ``bpy`` module, or ``blender -b --factory-startup -P <this> -- ...``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -57,27 +58,27 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from addon.blender.pipeline import script_argv  # noqa: E402  (no bpy import)
-from addon.core import defaults as D  # noqa: E402
-from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.physics.scenario import ClothGrid, paper_scenario  # noqa: E402
+from clothfit.blender.pipeline import script_argv  # noqa: E402  (no bpy import)
+from clothfit.core import defaults as D  # noqa: E402
+from clothfit.core.errors import ClothFitError  # noqa: E402
+from clothfit.core.physics.scenario import ClothGrid, paper_scenario  # noqa: E402
 
-TAU = math.sqrt(0.001)   # s of physical time per Blender cloth time unit (gravity is scaled by 1/1000)
-FRAME_DT = 0.01          # s per frame
-SETTLE = 1.0             # s of settling with the four corners held
-SETTLE_AIR = 60.0        # Blender air damping while settling
+TAU = math.sqrt(0.001)  # s of physical time per Blender cloth time unit (gravity is scaled by 1/1000)
+FRAME_DT = 0.01  # s per frame
+SETTLE = 1.0  # s of settling with the four corners held
+SETTLE_AIR = 60.0  # Blender air damping while settling
 
 # The Blender cloth, in physical units (per vertex mass, spring stiffness per unit mass, damping
 # per unit mass). Chosen to be a soft, light fabric of the same scale as the paper's synthetic
 # cloth; converted into Blender's settings by ``blender_settings``.
 CLOTH = {
-    "mass": 0.3,                 # kg per vertex in Blender (only ratios matter: k/m, d/m)
-    "tension_k_over_m": 1.0e6,   # 1/s^2: structural springs (tension = compression)
-    "shear_k_over_m": 0.3e6,     # 1/s^2: shear springs (quad diagonals)
-    "bending": 0.005,            # Blender's angular bending stiffness (its own units)
-    "air_d_over_m": 4.0,         # 1/s: air drag per unit mass (viscous)
-    "spring_damping": 0.5,       # Blender's tension/shear/bending damping
-    "quality": 10,               # solver steps per frame
+    "mass": 0.3,  # kg per vertex in Blender (only ratios matter: k/m, d/m)
+    "tension_k_over_m": 1.0e6,  # 1/s^2: structural springs (tension = compression)
+    "shear_k_over_m": 0.3e6,  # 1/s^2: shear springs (quad diagonals)
+    "bending": 0.005,  # Blender's angular bending stiffness (its own units)
+    "air_d_over_m": 4.0,  # 1/s: air drag per unit mass (viscous)
+    "spring_damping": 0.5,  # Blender's tension/shear/bending damping
+    "quality": 10,  # solver steps per frame
 }
 
 
@@ -85,17 +86,26 @@ def blender_settings(grid: ClothGrid, cloth=None) -> dict:
     """Blender ClothSettings values for ``cloth`` (physical units) on ``grid``."""
     c = dict(CLOTH, **(cloth or {}))
     m = c["mass"]
-    L = grid.spacing   # Blender divides the stiffness by the average spring length
+    L = grid.spacing  # Blender divides the stiffness by the average spring length
     # Blender: spring k = stiffness / avg_spring_len in (N per frame-time-unit^2); k/m in 1/TAU^2
-    tension = c["tension_k_over_m"] * TAU ** 2 * m * L
-    shear = c["shear_k_over_m"] * TAU ** 2 * m * L
+    tension = c["tension_k_over_m"] * TAU**2 * m * L
+    shear = c["shear_k_over_m"] * TAU**2 * m * L
     # Blender's air drag force per vertex is 0.01 * air_damping * v (in its time unit)
     air = c["air_d_over_m"] * TAU * m / 0.01
-    return {"mass": m, "tension_stiffness": tension, "compression_stiffness": tension,
-            "shear_stiffness": shear, "bending_stiffness": c["bending"], "air_damping": air,
-            "tension_damping": c["spring_damping"], "compression_damping": c["spring_damping"],
-            "shear_damping": c["spring_damping"], "bending_damping": c["spring_damping"],
-            "quality": int(c["quality"]), "time_scale": FRAME_DT / TAU}
+    return {
+        "mass": m,
+        "tension_stiffness": tension,
+        "compression_stiffness": tension,
+        "shear_stiffness": shear,
+        "bending_stiffness": c["bending"],
+        "air_damping": air,
+        "tension_damping": c["spring_damping"],
+        "compression_damping": c["spring_damping"],
+        "shear_damping": c["spring_damping"],
+        "bending_damping": c["spring_damping"],
+        "quality": int(c["quality"]),
+        "time_scale": FRAME_DT / TAU,
+    }
 
 
 def frame_numbers(times):
@@ -110,11 +120,13 @@ def frame_numbers(times):
 def build(grid: ClothGrid, times, cloth=None, released_corner=D.RELEASED_CORNER):
     """A factory-empty scene with the pinned cloth; returns (scene, object, frame of each time)."""
     import bpy
+
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     n, ny = grid.nx, grid.ny
-    quads = [[i * n + j, i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j]
-             for i in range(ny - 1) for j in range(n - 1)]
+    quads = [
+        [i * n + j, i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j] for i in range(ny - 1) for j in range(n - 1)
+    ]
     me = bpy.data.meshes.new("Blender Cloth")
     me.from_pydata(grid.rest.tolist(), [], quads)
     me.update()
@@ -177,6 +189,7 @@ def _constant_keys(ob):
 
 def evaluated_positions(ob):
     import bpy
+
     dg = bpy.context.evaluated_depsgraph_get()
     ev = ob.evaluated_get(dg)
     m = ev.to_mesh()
@@ -193,6 +206,7 @@ def simulate_blender(grid: ClothGrid, times, cloth=None):
     """Step Blender's cloth through settling and the capture times. Returns (scene, object,
     positions (F, V, 3) at ``times``, positions at t = 0, seconds)."""
     import bpy
+
     scene, ob, frames, release_frame = build(grid, times, cloth)
     want = {f: i for i, f in enumerate(frames)}
     out = np.zeros((len(frames), grid.n_vertices, 3))
@@ -214,11 +228,10 @@ def simulate_blender(grid: ClothGrid, times, cloth=None):
 def observe(out_dir, rig=D.DEFAULT_RIG, times=None, cloth=None, resolution=None):
     """Simulate with Blender's cloth, render the rig's silhouettes with Workbench, write a capture."""
     import bpy
-
-    from addon.blender.render import render_masks
-    from addon.blender.scene import build_rig
-    from addon.core.observation.camera import load_rig
-    from addon.core.observation.capture import write_capture
+    from clothfit.blender.render import render_masks
+    from clothfit.blender.scene import build_rig
+    from clothfit.core.observation.camera import load_rig
+    from clothfit.core.observation.capture import write_capture
 
     times = list(D.FRAME_TIMES if times is None else times)
     grid = ClothGrid()
@@ -229,8 +242,9 @@ def observe(out_dir, rig=D.DEFAULT_RIG, times=None, cloth=None, resolution=None)
     drift = float(np.abs(X[:, held] - grid.rest[held]).max())
     fall = float(np.linalg.norm(X[-1, corners[D.RELEASED_CORNER]] - grid.rest[corners[D.RELEASED_CORNER]]))
     if drift > 1e-4 or fall < 0.01:
-        raise ClothFitError(f"Blender cloth: pinning failed (held corners drift {drift:.2e} m, released corner "
-                            f"moved {fall:.3f} m)")
+        raise ClothFitError(
+            f"Blender cloth: pinning failed (held corners drift {drift:.2e} m, released corner moved {fall:.3f} m)"
+        )
     cams = load_rig(rig)
     if resolution:
         cams = [c.resized(int(resolution[0]), int(resolution[1])) for c in cams]
@@ -247,14 +261,26 @@ def observe(out_dir, rig=D.DEFAULT_RIG, times=None, cloth=None, resolution=None)
             sils[ci][fi] = m
     render_secs = time.time() - t0
     bs = blender_settings(grid, cloth)
-    meta = {"generator": "tools/blender_cloth_experiment.py (Blender cloth solver, Workbench silhouettes)",
-            "blender": bpy.app.version_string, "cloth_physical": dict(CLOTH, **(cloth or {})),
-            "blender_settings": bs, "tau_s": TAU, "frame_dt_s": FRAME_DT, "settle_s": SETTLE,
-            "held_corner_drift_m": drift, "sim_seconds": sim_secs, "render_seconds": render_secs,
-            "rest_shape_t0": X0.tolist() if X0 is not None else None, "rig": rig}
+    meta = {
+        "generator": "tools/blender_cloth_experiment.py (Blender cloth solver, Workbench silhouettes)",
+        "blender": bpy.app.version_string,
+        "cloth_physical": dict(CLOTH, **(cloth or {})),
+        "blender_settings": bs,
+        "tau_s": TAU,
+        "frame_dt_s": FRAME_DT,
+        "settle_s": SETTLE,
+        "held_corner_drift_m": drift,
+        "sim_seconds": sim_secs,
+        "render_seconds": render_secs,
+        "rest_shape_t0": X0.tolist() if X0 is not None else None,
+        "rig": rig,
+    }
     cap = write_capture(out_dir, cams, scen, sils, shapes=X, cloth_mass=None, meta=meta)
-    print(f"[observe] Blender cloth: {sim_secs:.1f} s simulation, {render_secs:.1f} s for {len(cams) * len(times)} "
-          f"Workbench silhouettes; held corners drift {drift:.1e} m; wrote {out_dir}", flush=True)
+    print(
+        f"[observe] Blender cloth: {sim_secs:.1f} s simulation, {render_secs:.1f} s for {len(cams) * len(times)} "
+        f"Workbench silhouettes; held corners drift {drift:.1e} m; wrote {out_dir}",
+        flush=True,
+    )
     return cap
 
 
@@ -262,12 +288,13 @@ def check_units(frames=10):
     """Measure Blender's cloth time unit: a free (unpinned) sheet falls under our settings; returns
     the acceleration in m/s^2 with one frame = FRAME_DT (9.81 when the conversion is right)."""
     import bpy
+
     grid = ClothGrid()
     scene, ob, _, _ = build(grid, [FRAME_DT * frames])
     ob.vertex_groups.remove(ob.vertex_groups["pin"])
-    ob.vertex_groups.new(name="pin")               # nothing pinned
+    ob.vertex_groups.new(name="pin")  # nothing pinned
     cl = ob.modifiers["cloth"].settings
-    ob.animation_data_clear()                      # the keyed air damping and pin release
+    ob.animation_data_clear()  # the keyed air damping and pin release
     cl.air_damping = 0.0
     zs = []
     for f in range(1, frames + 2):
@@ -280,14 +307,15 @@ def check_units(frames=10):
 
 # =============================================================================== fit
 
+
 def shape_oracle(cap, times=None, evals=600, seed=0):
     """The best our model can do against the true shapes: CMA-ES on the mean vertex distance at
     ``times`` (default: the test times) over k/m, d/m, l (log scale). A reference for the shape
     error a silhouette fit could reach at best, not a method (it needs the 3D truth)."""
     import cma
+    from clothfit.core.observation.metrics import shape_error_mm
+    from clothfit.core.physics.models import simulate
 
-    from addon.core.observation.metrics import shape_error_mm
-    from addon.core.physics.models import simulate
     times = list(D.TEST_TIMES if times is None else times)
     fidx = [cap.frame_index(t) for t in times]
     sc = cap.scenario.with_frames([float(cap.frame_times[i]) for i in fidx])
@@ -304,64 +332,96 @@ def shape_oracle(cap, times=None, evals=600, seed=0):
     while not es.stop():
         X = es.ask()
         sim = simulate(sc, [params(x) for x in X])
-        f = [float(np.mean(shape_error_mm(sim.positions[i], true))) if not sim.exploded[i] else 1e9
-             for i in range(len(X))]
+        f = [
+            float(np.mean(shape_error_mm(sim.positions[i], true))) if not sim.exploded[i] else 1e9
+            for i in range(len(X))
+        ]
         es.tell(X, f)
     best = params(es.result.xbest)
-    return {"shape_error_mm": float(es.result.fbest), "params": dict(zip(("m", "k", "l", "d"), best)),
-            "evaluations": int(es.result.evaluations)}
+    return {
+        "shape_error_mm": float(es.result.fbest),
+        "params": dict(zip(("m", "k", "l", "d"), best)),
+        "evaluations": int(es.result.evaluations),
+    }
 
 
-def fit(capture_dir, n_cams=(4, 8, 16), evals=D.FIT_EVALUATIONS, seed=0, optimizer="spx-mgg",
-        overlays=None, resolution=None):
-    from addon.core.observation.camera import select_training
-    from addon.core.observation.capture import load_capture
-    from addon.core.fitting.evaluate import evaluate
-    from addon.core.fitting.job import FitConfig, FitJob
-    from addon.core.physics.paper import identifiable
-    from addon.core.observation.overlay import capture_overlays
+def fit(
+    capture_dir, n_cams=(4, 8, 16), evals=D.FIT_EVALUATIONS, seed=0, optimizer="spx-mgg", overlays=None, resolution=None
+):
+    from clothfit.core.fitting.evaluate import evaluate
+    from clothfit.core.fitting.job import FitConfig, FitJob
+    from clothfit.core.observation.camera import select_training
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.observation.overlay import capture_overlays
+    from clothfit.core.physics.paper import identifiable
 
     cap = load_capture(capture_dir)
     rows = []
     for n in n_cams:
         train, held = select_training(cap.cameras, n)
         t0 = time.time()
-        job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, optimizer=optimizer,
-                                    seed=seed, max_evaluations=evals, resolution=resolution))
+        job = FitJob(
+            cap,
+            FitConfig(
+                train_cameras=train,
+                train_times=D.TRAIN_TIMES,
+                optimizer=optimizer,
+                seed=seed,
+                max_evaluations=evals,
+                resolution=resolution,
+            ),
+        )
         res = job.run()
         ev = evaluate(cap, res["params"], cameras=held, times=D.TEST_TIMES)
         ev_train = evaluate(cap, res["params"], cameras=train, times=D.TEST_TIMES)
-        row = {"cameras": n, "heldout_sil_err_pct": ev["silhouette_error_pct"],
-               "shape_error_mm": ev["shape_error_mm"],
-               "shape_error_mm_per_time": ev["shape_error_mm_per_time"],
-               "train_cams_test_times_sil_err_pct": ev_train["silhouette_error_pct"],
-               "train_E_sil_pct": res["best_E_sil_mean_pct"], "params": res["params"],
-               "identifiable": identifiable(res["params"]), "mass_source": res["mass_source"],
-               "evaluations": res["evaluations"], "seconds": time.time() - t0,
-               "train": [cap.cameras[c].name for c in train], "heldout": [cap.cameras[c].name for c in held],
-               "heldout_sil_err_pct_per_time": ev["silhouette_error_pct_per_time"]}
+        row = {
+            "cameras": n,
+            "heldout_sil_err_pct": ev["silhouette_error_pct"],
+            "shape_error_mm": ev["shape_error_mm"],
+            "shape_error_mm_per_time": ev["shape_error_mm_per_time"],
+            "train_cams_test_times_sil_err_pct": ev_train["silhouette_error_pct"],
+            "train_E_sil_pct": res["best_E_sil_mean_pct"],
+            "params": res["params"],
+            "identifiable": identifiable(res["params"]),
+            "mass_source": res["mass_source"],
+            "evaluations": res["evaluations"],
+            "seconds": time.time() - t0,
+            "train": [cap.cameras[c].name for c in train],
+            "heldout": [cap.cameras[c].name for c in held],
+            "heldout_sil_err_pct_per_time": ev["silhouette_error_pct_per_time"],
+        }
         rows.append(row)
-        print(f"[fit] {n:2d} cameras: held-out E_sil {row['heldout_sil_err_pct']:.2f} %, shape error "
-              f"{row['shape_error_mm']:.2f} mm, train E_sil {row['train_E_sil_pct']:.2f} %, "
-              f"k/m {row['identifiable']['k_over_m']:.3g} 1/s^2, d/m {row['identifiable']['d_over_m']:.3g} 1/s, "
-              f"l {1000 * row['identifiable']['l']:.3f} mm ({row['seconds']:.0f} s)", flush=True)
+        print(
+            f"[fit] {n:2d} cameras: held-out E_sil {row['heldout_sil_err_pct']:.2f} %, shape error "
+            f"{row['shape_error_mm']:.2f} mm, train E_sil {row['train_E_sil_pct']:.2f} %, "
+            f"k/m {row['identifiable']['k_over_m']:.3g} 1/s^2, d/m {row['identifiable']['d_over_m']:.3g} 1/s, "
+            f"l {1000 * row['identifiable']['l']:.3f} mm ({row['seconds']:.0f} s)",
+            flush=True,
+        )
         if overlays:
-            capture_overlays(cap, res["params"], os.path.join(overlays, f"{n:02d}cams"), cameras=held[:6],
-                             times=D.TEST_TIMES[::3])
+            capture_overlays(
+                cap, res["params"], os.path.join(overlays, f"{n:02d}cams"), cameras=held[:6], times=D.TEST_TIMES[::3]
+            )
     return rows
 
 
 def format_rows(rows):
-    lines = ["| training cameras | held-out silhouette error [%] | shape error [mm] | train E_sil [%] | "
-             "k/m [1/s^2] | d/m [1/s] | l [mm] |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| training cameras | held-out silhouette error [%] | shape error [mm] | train E_sil [%] | "
+        "k/m [1/s^2] | d/m [1/s] | l [mm] |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         i = r["identifiable"]
-        lines.append(f"| {r['cameras']} | {r['heldout_sil_err_pct']:.2f} | {r['shape_error_mm']:.2f} | "
-                     f"{r['train_E_sil_pct']:.2f} | {i['k_over_m']:.3g} | {i['d_over_m']:.3g} | {1000 * i['l']:.3f} |")
+        lines.append(
+            f"| {r['cameras']} | {r['heldout_sil_err_pct']:.2f} | {r['shape_error_mm']:.2f} | "
+            f"{r['train_E_sil_pct']:.2f} | {i['k_over_m']:.3g} | {i['d_over_m']:.3g} | {1000 * i['l']:.3f} |"
+        )
     return "\n".join(lines)
 
 
 # ============================================================================== main
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -381,8 +441,11 @@ def main(argv=None):
     f.add_argument("--resolution", help="HxW to fit at (default: the capture's)")
     f.add_argument("--json")
     f.add_argument("--overlays", help="folder for overlays of the held-out cameras")
-    f.add_argument("--oracle", action="store_true",
-                   help="also report the best shape error our model can reach (fitted on the 3D truth)")
+    f.add_argument(
+        "--oracle",
+        action="store_true",
+        help="also report the best shape error our model can reach (fitted on the 3D truth)",
+    )
     a = ap.parse_args(script_argv(argv))
     try:
         if a.cmd == "check-units":
@@ -397,17 +460,19 @@ def main(argv=None):
             observe(a.out, a.rig, resolution=res)
         else:
             res = [int(v) for v in a.resolution.lower().split("x")] if a.resolution else None
-            rows = fit(a.capture, [int(v) for v in a.cameras.split(",")], a.evals, a.seed, a.optimizer,
-                       a.overlays, res)
+            rows = fit(a.capture, [int(v) for v in a.cameras.split(",")], a.evals, a.seed, a.optimizer, a.overlays, res)
             print(format_rows(rows))
             if a.oracle:
-                from addon.core.observation.capture import load_capture
-                from addon.core.fitting.evaluate import evaluate
+                from clothfit.core.fitting.evaluate import evaluate
+                from clothfit.core.observation.capture import load_capture
+
                 orc = shape_oracle(load_capture(a.capture))
                 ev = evaluate(load_capture(a.capture), orc["params"], times=D.TEST_TIMES)
                 orc["all_cameras_sil_err_pct"] = ev["silhouette_error_pct"]
-                print(f"oracle (our model fitted to the true 3D shapes at the test times): shape error "
-                      f"{orc['shape_error_mm']:.2f} mm, silhouette error on all cameras {ev['silhouette_error_pct']:.2f} %")
+                print(
+                    f"oracle (our model fitted to the true 3D shapes at the test times): shape error "
+                    f"{orc['shape_error_mm']:.2f} mm, silhouette error on all cameras {ev['silhouette_error_pct']:.2f} %"
+                )
                 rows.append({"oracle": orc})
             if a.json:
                 os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)

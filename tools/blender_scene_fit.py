@@ -7,7 +7,7 @@ the result within 1 mm of the observed motion.
    released at t = 0 onto a 6 cm box 3 cm below) and observes it with Blender at the true settings
    (``collider_scene.TRUTH``): a capture from the ``ring8`` rig (8 cameras), every other frame for
    0.5 s after the release, the true vertices in ``shapes.npz``.
-2. ``fit`` (no bpy): ``python -m addon fit CAPTURE --backend blender --blend SCENE --frame-zero N``
+2. ``fit`` (no bpy): ``python -m clothfit fit CAPTURE --backend blender --blend SCENE --frame-zero N``
    (Ray, ``--workers``), CMA-ES from the scene's values, ``--budget`` evaluations.
 3. ``replay`` (bpy, child process): the result's ``blender_cloth`` on the scene's Cloth modifier,
    simulated by Blender at every capture time; distance to the true vertices [mm]; and the floor:
@@ -27,6 +27,7 @@ the other three, as in the paper, and strikes the box later; ``--drop 0.05`` put
 
     python tools/blender_scene_fit.py all --out out/scene_warm --release corner --drop 0.05 --after 0.75 --warm
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,14 +41,19 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 
-BOX = 0.06          # the box collider's side [m]; centred under the cloth
-MARGIN = 0.005      # warm start: capture times while the predicted cloth stays this far above the box
+BOX = 0.06  # the box collider's side [m]; centred under the cloth
+MARGIN = 0.005  # warm start: capture times while the predicted cloth stays this far above the box
 
 
 def _paths(out):
-    return {"blend": os.path.join(out, "drop.blend"), "capture": os.path.join(out, "capture"),
-            "fit": os.path.join(out, "fit.json"), "replay": os.path.join(out, "replay.json"),
-            "meta": os.path.join(out, "scene.json"), "warm": os.path.join(out, "warm.json")}
+    return {
+        "blend": os.path.join(out, "drop.blend"),
+        "capture": os.path.join(out, "capture"),
+        "fit": os.path.join(out, "fit.json"),
+        "replay": os.path.join(out, "replay.json"),
+        "meta": os.path.join(out, "scene.json"),
+        "warm": os.path.join(out, "warm.json"),
+    }
 
 
 def free_times(cap, drop, box, fps=24.0):
@@ -55,12 +61,13 @@ def free_times(cap, drop, box, fps=24.0):
     cloth, ``box`` wide, centred), as the core blender model predicts at Blender's default settings
     with the real-time time scale (the scene's starting settings; no collider in the core model)."""
     import numpy as np
-    from addon.core.physics import blender as B
-    from addon.core.physics.models import BlenderModel
+    from clothfit.core.physics import blender as B
+    from clothfit.core.physics.models import BlenderModel
+
     model = BlenderModel(fps)
     s = dict(B.DEFAULTS, time_scale=B.physical_time_scale(fps))
     sc = cap.scenario
-    X = model.simulate(sc, B.settings_row(s)[None]).positions[0]          # (F, V, 3)
+    X = model.simulate(sc, B.settings_row(s)[None]).positions[0]  # (F, V, 3)
     top = sc.grid.height - drop
     inside = (np.abs(X[..., 0]) < box / 2 + MARGIN) & (np.abs(X[..., 1]) < box / 2 + MARGIN)
     near = (inside & (X[..., 2] < top + MARGIN)).any(axis=1)
@@ -69,49 +76,85 @@ def free_times(cap, drop, box, fps=24.0):
 
 
 def warm(a):
-    from addon.core.observation.capture import load_capture
+    from clothfit.core.observation.capture import load_capture
+
     P = _paths(a.out)
     with open(P["meta"]) as f:
         meta = json.load(f)
     cap = load_capture(P["capture"])
     times = free_times(cap, meta.get("drop", 0.03), meta.get("box", BOX))
     if len(times) < 2:
-        raise SystemExit(f"warm start: only {len(times)} capture time(s) before the cloth reaches the box; "
-                         f"use --release corner and a deeper --drop")
-    cmd = [sys.executable, "-m", "addon", "fit", P["capture"], "--model", "blender", "--fps", "24",
-           "--times", ",".join(f"{t:.9g}" for t in times), "--max-evaluations", str(a.warm_budget),
-           "--seed", str(a.seed), "--out", P["warm"], "--force", "--quiet"]
+        raise SystemExit(
+            f"warm start: only {len(times)} capture time(s) before the cloth reaches the box; "
+            f"use --release corner and a deeper --drop"
+        )
+    cmd = [
+        sys.executable,
+        "-m",
+        "clothfit",
+        "fit",
+        P["capture"],
+        "--model",
+        "blender",
+        "--fps",
+        "24",
+        "--times",
+        ",".join(f"{t:.9g}" for t in times),
+        "--max-evaluations",
+        str(a.warm_budget),
+        "--seed",
+        str(a.seed),
+        "--out",
+        P["warm"],
+        "--force",
+        "--quiet",
+    ]
     t0 = time.time()
     subprocess.run(cmd, check=True, cwd=ROOT)
     with open(P["warm"]) as f:
         res = json.load(f)
     with open(os.path.join(a.out, "warm_summary.json"), "w") as f:
-        json.dump({"times": len(times), "t_last": times[-1], "evaluations": res.get("evaluations"),
-                   "train_E_sil_pct": res.get("best_E_sil_mean_pct"), "seconds": time.time() - t0,
-                   "blender_cloth": res.get("blender_cloth")}, f, indent=1)
-    print(f"warm start: the core blender model on the {len(times)} capture times before contact "
-          f"(t <= {times[-1]:.3f} s), {res.get('evaluations')} evaluations in {time.time() - t0:.1f} s, "
-          f"training E_sil {res.get('best_E_sil_mean_pct'):.3f} % -> {P['warm']}")
+        json.dump(
+            {
+                "times": len(times),
+                "t_last": times[-1],
+                "evaluations": res.get("evaluations"),
+                "train_E_sil_pct": res.get("best_E_sil_mean_pct"),
+                "seconds": time.time() - t0,
+                "blender_cloth": res.get("blender_cloth"),
+            },
+            f,
+            indent=1,
+        )
+    print(
+        f"warm start: the core blender model on the {len(times)} capture times before contact "
+        f"(t <= {times[-1]:.3f} s), {res.get('evaluations')} evaluations in {time.time() - t0:.1f} s, "
+        f"training E_sil {res.get('best_E_sil_mean_pct'):.3f} % -> {P['warm']}"
+    )
     return P["warm"]
 
 
 def build(a):
-    from addon.blender import collider_scene as CS
+    from clothfit.blender import collider_scene as CS
+
     P = _paths(a.out)
     h, w = (int(x) for x in a.resolution.split("x"))
     sc = CS.collider_scenario(a.grid, settle=0.25, after=a.after, every=a.every, release=a.release)
     f0 = CS.build_scene(P["blend"], sc, drop=a.drop, box=BOX)
     CS.observe(P["blend"], sc, P["capture"], frame_zero=f0, resolution=(h, w))
     with open(P["meta"], "w") as f:
-        json.dump({"frame_zero": f0, "grid": a.grid, "resolution": [h, w], "release": a.release, "drop": a.drop,
-                   "box": BOX}, f)
+        json.dump(
+            {"frame_zero": f0, "grid": a.grid, "resolution": [h, w], "release": a.release, "drop": a.drop, "box": BOX},
+            f,
+        )
     print(f"wrote {P['blend']} (t = 0 at frame {f0}) and {P['capture']}")
 
 
 def replay(a):
     import numpy as np
-    from addon.blender.scene_worker import BlendScene
-    from addon.core.jsonio import read_json
+    from clothfit.blender.scene_worker import BlendScene
+    from clothfit.core.jsonio import read_json
+
     P = _paths(a.out)
     res = read_json(a.result or P["fit"], "fit result")
     meta = read_json(P["meta"], "scene meta")
@@ -124,31 +167,49 @@ def replay(a):
     fit = bs.simulate(res["blender_cloth"], frames)["positions"]
     d = np.linalg.norm(fit - obs, axis=-1) * 1000
     d0 = np.linalg.norm(start - obs, axis=-1) * 1000
-    out = {"mean_mm": float(d.mean()), "max_mm": float(d.max()), "per_frame_max_mm": d.max(1).tolist(),
-           "start_mean_mm": float(d0.mean()), "start_max_mm": float(d0.max()),
-           "evaluations": res.get("evaluations"), "best_E_sil_mean_pct": res.get("best_E_sil_mean_pct")}
-    if os.path.isfile(P["warm"]) and a.result is None:      # the warm start on its own, replayed by Blender
+    out = {
+        "mean_mm": float(d.mean()),
+        "max_mm": float(d.max()),
+        "per_frame_max_mm": d.max(1).tolist(),
+        "start_mean_mm": float(d0.mean()),
+        "start_max_mm": float(d0.max()),
+        "evaluations": res.get("evaluations"),
+        "best_E_sil_mean_pct": res.get("best_E_sil_mean_pct"),
+    }
+    if os.path.isfile(P["warm"]) and a.result is None:  # the warm start on its own, replayed by Blender
         wres = read_json(P["warm"], "warm-start result")
-        y = bs.simulate(dict(info["settings"], **{k: v for k, v in wres["blender_cloth"].items()
-                                                  if k in info["settings"]}), frames)["positions"]
+        y = bs.simulate(
+            dict(info["settings"], **{k: v for k, v in wres["blender_cloth"].items() if k in info["settings"]}), frames
+        )["positions"]
         dw = np.linalg.norm(y - obs, axis=-1) * 1000
         out["warm_start_mean_mm"], out["warm_start_max_mm"] = float(dw.mean()), float(dw.max())
         print(f"the core model's warm start replayed by Blender: mean {dw.mean():.2f} mm, max {dw.max():.2f} mm")
     # the floor: the true settings with one of them 1 % off, replayed by Blender (contact is chaotic)
     truth = cap["meta"]["true_blender_cloth"]
     floor = {}
-    for k in ("tension_stiffness", "compression_stiffness", "shear_stiffness", "bending_stiffness",
-              "tension_damping", "air_damping"):
+    for k in (
+        "tension_stiffness",
+        "compression_stiffness",
+        "shear_stiffness",
+        "bending_stiffness",
+        "tension_damping",
+        "air_damping",
+    ):
         y = bs.simulate(dict(truth, **{k: truth[k] * 1.01}), frames)["positions"]
         dd = np.linalg.norm(y - obs, axis=-1) * 1000
         floor[k] = [float(dd.mean()), float(dd.max())]
     out["one_setting_1pct_off_mm"] = floor
-    print("the truth with one setting 1 % off: " + ", ".join(f"{k} {v[0]:.2f} / {v[1]:.2f} mm" for k, v in floor.items())
-          + " (mean / max)")
+    print(
+        "the truth with one setting 1 % off: "
+        + ", ".join(f"{k} {v[0]:.2f} / {v[1]:.2f} mm" for k, v in floor.items())
+        + " (mean / max)"
+    )
     with open(P["replay"], "w") as f:
         json.dump(out, f, indent=1)
-    print(f"Blender replay of the fit vs the observed vertices: mean {out['mean_mm']:.4f} mm, max {out['max_mm']:.4f} mm "
-          f"(the scene's starting settings: mean {out['start_mean_mm']:.2f} mm, max {out['start_max_mm']:.2f} mm)")
+    print(
+        f"Blender replay of the fit vs the observed vertices: mean {out['mean_mm']:.4f} mm, max {out['max_mm']:.4f} mm "
+        f"(the scene's starting settings: mean {out['start_mean_mm']:.2f} mm, max {out['start_max_mm']:.2f} mm)"
+    )
 
 
 def _child(cmd, a, extra=()):
@@ -184,15 +245,53 @@ def main(argv=None):
         return warm(a)
     P = _paths(a.out)
     if a.cmd == "all":
-        _child("build", a, ["--grid", str(a.grid), "--resolution", a.resolution, "--release", a.release,
-                            "--drop", str(a.drop), "--after", str(a.after), "--every", str(a.every)])
+        _child(
+            "build",
+            a,
+            [
+                "--grid",
+                str(a.grid),
+                "--resolution",
+                a.resolution,
+                "--release",
+                a.release,
+                "--drop",
+                str(a.drop),
+                "--after",
+                str(a.after),
+                "--every",
+                str(a.every),
+            ],
+        )
         if a.warm:
             a.init = warm(a)
     with open(P["meta"]) as f:
         meta = json.load(f)
-    cmd = [sys.executable, "-m", "addon", "fit", P["capture"], "--backend", "blender", "--blend", P["blend"],
-           "--frame-zero", str(meta["frame_zero"]), "--workers", str(a.workers), "--max-evaluations", str(a.budget),
-           "--population", str(a.population), "--seed", str(a.seed), "--out", P["fit"], "--quiet", "--force"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "clothfit",
+        "fit",
+        P["capture"],
+        "--backend",
+        "blender",
+        "--blend",
+        P["blend"],
+        "--frame-zero",
+        str(meta["frame_zero"]),
+        "--workers",
+        str(a.workers),
+        "--max-evaluations",
+        str(a.budget),
+        "--population",
+        str(a.population),
+        "--seed",
+        str(a.seed),
+        "--out",
+        P["fit"],
+        "--quiet",
+        "--force",
+    ]
     if a.init:
         cmd += ["--init", a.init]
     t0 = time.time()
@@ -202,11 +301,20 @@ def main(argv=None):
     if a.cmd == "all":
         _child("replay", a)
         with open(P["replay"]) as f:
-            summary = {"fit_wall_s": wall, "workers": a.workers, "budget": a.budget, "population": a.population,
-                       "resolution": a.resolution, "grid": a.grid, "replay": json.load(f)}
+            summary = {
+                "fit_wall_s": wall,
+                "workers": a.workers,
+                "budget": a.budget,
+                "population": a.population,
+                "resolution": a.resolution,
+                "grid": a.grid,
+                "replay": json.load(f),
+            }
         floor = summary["replay"]["one_setting_1pct_off_mm"].values()
-        summary["one_setting_1pct_off_range_mm"] = {"mean": [min(v[0] for v in floor), max(v[0] for v in floor)],
-                                                    "max": [min(v[1] for v in floor), max(v[1] for v in floor)]}
+        summary["one_setting_1pct_off_range_mm"] = {
+            "mean": [min(v[0] for v in floor), max(v[0] for v in floor)],
+            "max": [min(v[1] for v in floor), max(v[1] for v in floor)],
+        }
         with open(P["fit"]) as f:
             summary["fit_blender_cloth"] = json.load(f)["blender_cloth"]
         with open(os.path.join(P["capture"], "capture.json")) as f:

@@ -24,6 +24,7 @@ it) with the platform tags of the file name, e.g.::
     pip download --no-deps --only-binary=:all: --platform win_amd64 --python-version 3.11 \
         numba==0.68.1 -d wheels/
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,8 +43,8 @@ WHEEL_RE = re.compile(r"^(?P<name>[A-Za-z0-9_]+)-(?P<version>[^-]+)-")
 REQUIRED = ("opencv_python_headless", "numba", "llvmlite")
 # numba 0.68 / llvmlite 0.50 publish no macOS x86-64 wheels: that platform runs the numpy path
 NO_FAST_PATH = {"macos-x64": ("numba", "llvmlite")}
-PYTHON = (3, 11)                    # Blender 4.2 .. 4.5
-PYTHON_CHANGES_AT = "5.0.0"         # the first Blender with another Python
+PYTHON = (3, 11)  # Blender 4.2 .. 4.5
+PYTHON_CHANGES_AT = "5.0.0"  # the first Blender with another Python
 
 
 def read_manifest(root=ROOT):
@@ -59,8 +60,18 @@ def download_wheel(rel: str, root=ROOT):
         raise SystemExit(f"cannot parse wheel file name {fn}")
     name = m.group("name").replace("_", "-")
     dest = os.path.join(root, os.path.dirname(rel))
-    cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", *_pip_platform_args(fn),
-           f"{name}=={m.group('version')}", "-d", dest]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pip",
+        "download",
+        "--no-deps",
+        "--only-binary=:all:",
+        *_pip_platform_args(fn),
+        f"{name}=={m.group('version')}",
+        "-d",
+        dest,
+    ]
     print("downloading:", " ".join(cmd))
     subprocess.run(cmd, check=True)
     if not os.path.isfile(os.path.join(root, rel)):
@@ -177,15 +188,18 @@ def check_manifest(manifest=None, pins=None) -> list:
     for p, have in per_platform.items():
         for need in REQUIRED:
             if need in have and need in NO_FAST_PATH.get(p, ()):
-                problems.append(f"{p}: has {have[need]} but NO_FAST_PATH says it has none (update NO_FAST_PATH "
-                                f"and the README)")
+                problems.append(
+                    f"{p}: has {have[need]} but NO_FAST_PATH says it has none (update NO_FAST_PATH and the README)"
+                )
             if need not in have and need not in NO_FAST_PATH.get(p, ()):
                 problems.append(f"{p}: no {need} wheel")
     vmax = manifest.get("blender_version_max")
     if cpython_specific and (not vmax or _version_tuple(vmax) > _version_tuple(PYTHON_CHANGES_AT)):
-        problems.append(f"wheels built for CPython {PYTHON[0]}.{PYTHON[1]} only, but blender_version_max is "
-                        f"{vmax!r}: set it to {PYTHON_CHANGES_AT!r} or lower (Blender {PYTHON_CHANGES_AT} has "
-                        f"another Python)")
+        problems.append(
+            f"wheels built for CPython {PYTHON[0]}.{PYTHON[1]} only, but blender_version_max is "
+            f"{vmax!r}: set it to {PYTHON_CHANGES_AT!r} or lower (Blender {PYTHON_CHANGES_AT} has "
+            f"another Python)"
+        )
     return problems
 
 
@@ -208,9 +222,23 @@ def remote_check(manifest=None) -> list:
             fn = os.path.basename(w)
             m = WHEEL_RE.match(fn)
             report = os.path.join(tmp, "report.json")
-            cmd = [sys.executable, "-m", "pip", "install", "--dry-run", "--quiet", "--ignore-installed", "--no-deps",
-                   "--only-binary=:all:", "--target", os.path.join(tmp, "t"), "--report", report,
-                   *_pip_platform_args(fn), f"{m.group('name').replace('_', '-')}=={m.group('version')}"]
+            cmd = [
+                sys.executable,
+                "-m",
+                "pip",
+                "install",
+                "--dry-run",
+                "--quiet",
+                "--ignore-installed",
+                "--no-deps",
+                "--only-binary=:all:",
+                "--target",
+                os.path.join(tmp, "t"),
+                "--report",
+                report,
+                *_pip_platform_args(fn),
+                f"{m.group('name').replace('_', '-')}=={m.group('version')}",
+            ]
             r = subprocess.run(cmd, capture_output=True, text=True)
             if r.returncode != 0:
                 problems.append(f"{fn}: the index has no such wheel ({r.stderr.strip().splitlines()[-1]})")
@@ -240,12 +268,17 @@ def build(out_dir="dist", root=ROOT, download=True, check=True) -> dict:
             download_wheel(rel, root)
     script = blender_ext_script()
     if script is None:
-        raise SystemExit("Blender's extension builder not found: install the bpy module (requirements.txt) or run "
-                         "`blender --command extension build --split-platforms --source-dir . --output-dir dist`")
+        raise SystemExit(
+            "Blender's extension builder not found: install the bpy module (requirements.txt) or run "
+            "`blender --command extension build --split-platforms --source-dir . --output-dir dist`"
+        )
     out_dir = os.path.join(root, out_dir) if not os.path.isabs(out_dir) else out_dir
     os.makedirs(out_dir, exist_ok=True)
-    r = subprocess.run([sys.executable, script, "build", "--source-dir", root, "--output-dir", out_dir,
-                        "--split-platforms"], capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, script, "build", "--source-dir", root, "--output-dir", out_dir, "--split-platforms"],
+        capture_output=True,
+        text=True,
+    )
     print((r.stdout + r.stderr).strip())
     if r.returncode != 0:
         raise SystemExit("Blender's builder failed")

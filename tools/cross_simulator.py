@@ -6,7 +6,7 @@ rig that is not ours (two rings and a top pair, 480 x 640, fx 700, 0.45 m); fitt
 8 cameras (spread rule) and the even frames, scored on the held-out cameras and the odd frames.
 
 1. ``observe`` (needs the bpy module): Blender's own Cloth modifier simulates each material
-   (``addon.blender.cloth.replay``); the true vertices go to ``shapes.npz``; silhouettes are the
+   (``clothfit.blender.cloth.replay``); the true vertices go to ``shapes.npz``; silhouettes are the
    core rasteriser's (which agrees with Workbench to < 1 % XOR, ``tools/raster_agreement.py``)
    with the usual boundary noise: one capture per material.
 2. ``fit`` (no bpy): for every material, model and training-camera count a ``FitJob``; scores:
@@ -19,6 +19,7 @@ rig that is not ours (two rings and a top pair, 480 x 640, fx 700, 0.45 m); fitt
 
     python tools/cross_simulator.py all --out out/cross [--cameras 1,2,4,8] [--budget 3000] [--quick]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,18 +35,19 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from addon.core.physics import blender as B  # noqa: E402
-from addon.core.physics.scenario import ClothGrid, Scenario, paper_scenario  # noqa: E402
+from clothfit.core.physics import blender as B  # noqa: E402
+from clothfit.core.physics.scenario import ClothGrid, Scenario, paper_scenario  # noqa: E402
 
 FPS = 24.0
 SETTLE = 1.0
 AFTER = 1.5
 GRID = 21
-MATERIALS = {                    # Blender ClothSettings; time_scale: real time at 24 fps
+MATERIALS = {  # Blender ClothSettings; time_scale: real time at 24 fps
     "cotton (Blender's defaults)": {},
     "silk (soft, little bending)": B.PRESETS["silk"],
     "denim (stiff, quality 12)": B.PRESETS["denim"],
 }
+
 
 def slug(name):
     return name.split(" ")[0]
@@ -58,10 +60,18 @@ def scenario() -> Scenario:
 
 
 def rig():
-    from addon.core.observation.camera import ring_rig
-    return ring_rig(n_per_ring=(6, 4, 2), elevations_deg=(10.0, 40.0, 75.0), distance=0.45,
-                    target=(0.0, 0.0, 0.06), width=640, height=480, fx=700.0,
-                    azimuth_offsets_deg=(15.0, 60.0, 30.0))
+    from clothfit.core.observation.camera import ring_rig
+
+    return ring_rig(
+        n_per_ring=(6, 4, 2),
+        elevations_deg=(10.0, 40.0, 75.0),
+        distance=0.45,
+        target=(0.0, 0.0, 0.06),
+        width=640,
+        height=480,
+        fx=700.0,
+        azimuth_offsets_deg=(15.0, 60.0, 30.0),
+    )
 
 
 def material_settings(name):
@@ -70,15 +80,16 @@ def material_settings(name):
 
 # ------------------------------------------------------------------------- observe (bpy)
 
+
 def observe(out):
     import bpy
+    from clothfit.blender import cloth as BC
+    from clothfit.core import defaults as D
+    from clothfit.core.observation.capture import write_capture
+    from clothfit.core.observation.metrics import add_boundary_noise
+    from clothfit.core.observation.raster import silhouette
+    from clothfit.core.observation.synth import noise_rng
 
-    from addon.blender import cloth as BC
-    from addon.core.observation.capture import write_capture
-    from addon.core.observation.metrics import add_boundary_noise
-    from addon.core.observation.raster import silhouette
-    from addon.core.observation.synth import noise_rng
-    from addon.core import defaults as D
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     sc = scenario()
@@ -94,9 +105,13 @@ def observe(out):
                 m = silhouette(cam, X[fi], sc.grid.triangles)
                 row.append(add_boundary_noise(m, D.NOISE_FRACTION, noise_rng(0, ci, fi)))
             sils.append(row)
-        meta = {"generator": f"Blender {bpy.app.version_string} Cloth modifier (tools/cross_simulator.py), "
-                             f"core rasteriser", "true_blender_cloth": s, "true_model": {"name": "blender", "fps": FPS},
-                "material": name, "noise_fraction": D.NOISE_FRACTION}
+        meta = {
+            "generator": f"Blender {bpy.app.version_string} Cloth modifier (tools/cross_simulator.py), core rasteriser",
+            "true_blender_cloth": s,
+            "true_model": {"name": "blender", "fps": FPS},
+            "material": name,
+            "noise_fraction": D.NOISE_FRACTION,
+        }
         root = os.path.join(out, "captures", slug(name))
         write_capture(root, cams, sc, sils, shapes=X, cloth_mass=s["mass"] * sc.grid.n_vertices, meta=meta)
         print(f"observed {name}: {X.shape[0]} frames in {time.perf_counter() - t0:.1f} s -> {root}", flush=True)
@@ -104,14 +119,16 @@ def observe(out):
 
 # ------------------------------------------------------------------------------ fit (no bpy)
 
+
 def fit(out, cameras, budget, paper_cameras, materials=None):
-    from addon.core.fitting.evaluate import evaluate
-    from addon.core.fitting.job import FitConfig, FitJob
-    from addon.core.observation.camera import select_training
-    from addon.core.observation.capture import load_capture
+    from clothfit.core.fitting.evaluate import evaluate
+    from clothfit.core.fitting.job import FitConfig, FitJob
+    from clothfit.core.observation.camera import select_training
+    from clothfit.core.observation.capture import load_capture
+
     path_json = os.path.join(out, "cross_simulator.json")
     rows = []
-    if materials and os.path.isfile(path_json):      # a partial rerun keeps the other materials' rows
+    if materials and os.path.isfile(path_json):  # a partial rerun keeps the other materials' rows
         with open(path_json) as f:
             rows = [r for r in json.load(f) if slug(r["material"]) not in materials]
     for name in MATERIALS:
@@ -119,21 +136,34 @@ def fit(out, cameras, budget, paper_cameras, materials=None):
             continue
         cap = load_capture(os.path.join(out, "captures", slug(name)))
         times = cap.frame_times
-        even, odd = list(times[1::2]), list(times[0::2])      # frames 2, 4, ... train; 1, 3, ... test
-        truth = {"model": {"name": "blender", "fps": FPS}, "blender_cloth": cap.meta["true_blender_cloth"],
-                 "blender_scene": {"fps": FPS}}
-        quality = cap.meta["true_blender_cloth"]["quality"]     # the scene's quality is the user's choice
+        even, odd = list(times[1::2]), list(times[0::2])  # frames 2, 4, ... train; 1, 3, ... test
+        truth = {
+            "model": {"name": "blender", "fps": FPS},
+            "blender_cloth": cap.meta["true_blender_cloth"],
+            "blender_scene": {"fps": FPS},
+        }
+        quality = cap.meta["true_blender_cloth"]["quality"]  # the scene's quality is the user's choice
         if quality != B.DEFAULTS["quality"]:
-            q5 = evaluate(cap, dict(truth, blender_cloth=dict(truth["blender_cloth"], quality=B.DEFAULTS["quality"])),
-                          times=odd)
-            print(f"{name}: the true settings at quality {B.DEFAULTS['quality']} instead of {quality}: E_sil "
-                  f"{q5['silhouette_error_pct']:.2f} %, shape {q5['shape_error_mm']:.3f} mm (so the fit uses "
-                  f"--quality {quality})", flush=True)
+            q5 = evaluate(
+                cap, dict(truth, blender_cloth=dict(truth["blender_cloth"], quality=B.DEFAULTS["quality"])), times=odd
+            )
+            print(
+                f"{name}: the true settings at quality {B.DEFAULTS['quality']} instead of {quality}: E_sil "
+                f"{q5['silhouette_error_pct']:.2f} %, shape {q5['shape_error_mm']:.3f} mm (so the fit uses "
+                f"--quality {quality})",
+                flush=True,
+            )
         runs = [("blender", n) for n in cameras] + [("paper", n) for n in paper_cameras]
         for model, n in runs:
             train, held = select_training(cap.cameras, n)
-            cfg = FitConfig(train_cameras=train, train_times=even, model=model, max_evaluations=budget, seed=0,
-                            quality=quality if model == "blender" else None)
+            cfg = FitConfig(
+                train_cameras=train,
+                train_times=even,
+                model=model,
+                max_evaluations=budget,
+                seed=0,
+                quality=quality if model == "blender" else None,
+            )
             t0 = time.perf_counter()
             job = FitJob(cap, cfg)
             job.run()
@@ -143,14 +173,25 @@ def fit(out, cameras, budget, paper_cameras, materials=None):
             job.save_result(path)
             ev = evaluate(cap, res, cameras=held, times=odd)
             floor = evaluate(cap, truth, cameras=held, times=odd)
-            r = {"material": name, "model": model, "train_cameras": n, "evaluations": job.evaluations,
-                 "wall_s": wall, "train_E_sil_pct": res["best_E_sil_mean_pct"],
-                 "heldout_E_sil_pct": ev["silhouette_error_pct"], "shape_error_mm": ev["shape_error_mm"],
-                 "floor_heldout_E_sil_pct": floor["silhouette_error_pct"], "result": path}
+            r = {
+                "material": name,
+                "model": model,
+                "train_cameras": n,
+                "evaluations": job.evaluations,
+                "wall_s": wall,
+                "train_E_sil_pct": res["best_E_sil_mean_pct"],
+                "heldout_E_sil_pct": ev["silhouette_error_pct"],
+                "shape_error_mm": ev["shape_error_mm"],
+                "floor_heldout_E_sil_pct": floor["silhouette_error_pct"],
+                "result": path,
+            }
             rows.append(r)
-            print(f"{name:30s} {model:7s} {n:2d} cams: held-out E_sil {r['heldout_E_sil_pct']:6.2f} % "
-                  f"(floor {r['floor_heldout_E_sil_pct']:.2f} %), shape {r['shape_error_mm']:7.3f} mm, "
-                  f"{job.evaluations} evals, {wall:.0f} s", flush=True)
+            print(
+                f"{name:30s} {model:7s} {n:2d} cams: held-out E_sil {r['heldout_E_sil_pct']:6.2f} % "
+                f"(floor {r['floor_heldout_E_sil_pct']:.2f} %), shape {r['shape_error_mm']:7.3f} mm, "
+                f"{job.evaluations} evals, {wall:.0f} s",
+                flush=True,
+            )
             with open(path_json, "w") as f:
                 json.dump(rows, f, indent=1)
     return rows
@@ -158,13 +199,14 @@ def fit(out, cameras, budget, paper_cameras, materials=None):
 
 # --------------------------------------------------------------------------- replay (bpy)
 
+
 def replay(out):
     import bpy
+    from clothfit.blender import cloth as BC
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.observation.metrics import shape_error_mm
+    from clothfit.core.physics.models import model_and_row
 
-    from addon.blender import cloth as BC
-    from addon.core.observation.capture import load_capture
-    from addon.core.observation.metrics import shape_error_mm
-    from addon.core.physics.models import model_and_row
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     path = os.path.join(out, "cross_simulator.json")
@@ -182,22 +224,29 @@ def replay(out):
         odd = np.arange(0, cap.frame_times.size, 2)
         r["blender_replay_shape_error_mm"] = float(shape_error_mm(X[odd], cap.shapes[odd]).mean())
         r["blender_replay_vs_core_max_mm"] = float(np.linalg.norm(X - core, axis=-1).max() * 1000)
-        print(f"{r['material']:30s} {r['train_cameras']:2d} cams: Blender's replay of the exported settings: "
-              f"shape error {r['blender_replay_shape_error_mm']:.3f} mm (core {r['shape_error_mm']:.3f} mm; "
-              f"Blender vs core max {r['blender_replay_vs_core_max_mm']:.4f} mm)", flush=True)
+        print(
+            f"{r['material']:30s} {r['train_cameras']:2d} cams: Blender's replay of the exported settings: "
+            f"shape error {r['blender_replay_shape_error_mm']:.3f} mm (core {r['shape_error_mm']:.3f} mm; "
+            f"Blender vs core max {r['blender_replay_vs_core_max_mm']:.4f} mm)",
+            flush=True,
+        )
     with open(path, "w") as f:
         json.dump(rows, f, indent=1)
 
 
 def format_table(rows) -> str:
     """The README's Markdown table of the rows of cross_simulator.json."""
-    out = ["| material | model | train cams | held-out E_sil % (floor) | shape error mm | Blender replay mm | evals | s |",
-           "|---|---|---|---|---|---|---|---|"]
+    out = [
+        "| material | model | train cams | held-out E_sil % (floor) | shape error mm | Blender replay mm | evals | s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         rep = r.get("blender_replay_shape_error_mm")
-        out.append(f"| {r['material']} | {r['model']} | {r['train_cameras']} | {r['heldout_E_sil_pct']:.2f} "
-                   f"({r['floor_heldout_E_sil_pct']:.2f}) | {r['shape_error_mm']:.3f} | "
-                   f"{'-' if rep is None else f'{rep:.3f}'} | {r['evaluations']} | {r['wall_s']:.0f} |")
+        out.append(
+            f"| {r['material']} | {r['model']} | {r['train_cameras']} | {r['heldout_E_sil_pct']:.2f} "
+            f"({r['floor_heldout_E_sil_pct']:.2f}) | {r['shape_error_mm']:.3f} | "
+            f"{'-' if rep is None else f'{rep:.3f}'} | {r['evaluations']} | {r['wall_s']:.0f} |"
+        )
     return "\n".join(out)
 
 
@@ -230,7 +279,7 @@ def main(argv=None):
         replay(a.out)
     elif a.step == "table":
         table(a.out)
-    else:   # bpy only in the children
+    else:  # bpy only in the children
         for step in ("observe",):
             subprocess.run([sys.executable, me, step, "--out", a.out], check=True)
         fit(a.out, cams, a.budget, pcams, _mats(a.materials))

@@ -39,6 +39,7 @@ Every other number without a tag is an error, as is a tagged number that differs
 recording beyond the tolerance, a key or recording that does not exist, a generated block that
 differs from its rendering, and a measured figure in a code block's comment.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -59,18 +60,24 @@ TAG_RE = re.compile(r"<!--\s*(fig|cite|in|gen|/gen)\b(.*?)-->", re.DOTALL)
 COMMENT_RE = re.compile(r"<!--.*?-->", re.DOTALL)
 CODE_RE = re.compile(r"(`+)(.+?)\1", re.DOTALL)
 LINK_RE = re.compile(r"\]\(([^)]*)\)")
-NUM_RE = re.compile(r"(?<![\w.\-+/])(?<!\d,)[-−]?\d{1,3}(?:,\d{3})+(?:\.\d+)?(?![\d,]\d)|(?<![\w.\-+/])[-−]?\d+(?:\.\d+)?"
-                    r"(?:e[-+]?\d+)?(?![\d])")
+NUM_RE = re.compile(
+    r"(?<![\w.\-+/])(?<!\d,)[-−]?\d{1,3}(?:,\d{3})+(?:\.\d+)?(?![\d,]\d)|(?<![\w.\-+/])[-−]?\d+(?:\.\d+)?"
+    r"(?:e[-+]?\d+)?(?![\d])"
+)
 # not numbers of the docs (see the module docstring); each match is blanked before numbers are read
 NOT_FIGURES = [
     r"\bx86-64\b",
-    (r"\b(?:Python|Blender|bpy|numpy|OpenCV|opencv|numba|llvmlite|cma|Ray|ray|Mesa|PyAV|av|pillow|Eevee|Cycles|"
-     r"COLMAP|Debian|Ubuntu|macOS|Windows|LTS|EGL|OpenGL|GL|CUDA|SAM|H\.)\s*v?\d+(?:\.\d+)*\+?"
-     r"(?:\s*(?:to|-|and|or)\s*\d+\.\d+(?:\.\d+)*\+?)?"),
+    (
+        r"\b(?:Python|Blender|bpy|numpy|OpenCV|opencv|numba|llvmlite|cma|Ray|ray|Mesa|PyAV|av|pillow|Eevee|Cycles|"
+        r"COLMAP|Debian|Ubuntu|macOS|Windows|LTS|EGL|OpenGL|GL|CUDA|SAM|H\.)\s*v?\d+(?:\.\d+)*\+?"
+        r"(?:\s*(?:to|-|and|or)\s*\d+\.\d+(?:\.\d+)*\+?)?"
+    ),
     r"\b\d+\.\d+\.\d+(?:\.\d+)?\b",
-    (r"\b(?:[Ii]ssues?|[Ss]ections?|SPEC section|Tables?|Fig\.|Figs\.|Figure|[Ee]q\.|[Ee]qs\.|[Ee]quation|[Ss]tep|"
-     r"[Pp]art|[Cc]ommit|[Ss]eeds?|[Ll]evel|[Cc]hapter|[Vv]ersion|format|[Pp]ass|[Cc]olumn|[Rr]ow)\s+\d+(?:\.\d+)?"
-     r"(?:\s*(?:,|and|or|to|-|/)\s*\d+(?:\.\d+)?)*"),
+    (
+        r"\b(?:[Ii]ssues?|[Ss]ections?|SPEC section|Tables?|Fig\.|Figs\.|Figure|[Ee]q\.|[Ee]qs\.|[Ee]quation|[Ss]tep|"
+        r"[Pp]art|[Cc]ommit|[Ss]eeds?|[Ll]evel|[Cc]hapter|[Vv]ersion|format|[Pp]ass|[Cc]olumn|[Rr]ow)\s+\d+(?:\.\d+)?"
+        r"(?:\s*(?:,|and|or|to|-|/)\s*\d+(?:\.\d+)?)*"
+    ),
     r"\b\d+(?:\.\d+)?\s*[x×]\s*\d+(?:\.\d+)?(?:\s*[x×]\s*\d+(?:\.\d+)?)?\b(?!\s*(?:faster|slower|fewer|more|the))",
     r"\b\d+(?:\.\d+)?-(?=[A-Za-z])",
     r"^\s*\d+\.\s",
@@ -113,7 +120,11 @@ def check_recording(name, rec):
     if rec is None:
         return f"no recording docs/figures/{name}.json"
     if name.startswith("cited_"):
-        return None if rec.get("citation") and "data" in rec else f"docs/figures/{name}.json: a citation needs 'citation' and 'data'"
+        return (
+            None
+            if rec.get("citation") and "data" in rec
+            else f"docs/figures/{name}.json: a citation needs 'citation' and 'data'"
+        )
     for k in ("command", "commit", "recorded_at", "data"):
         if k not in rec:
             return f"docs/figures/{name}.json: no '{k}' (record it with tools/figures.py)"
@@ -144,13 +155,13 @@ def lookup(data, path):
     i = 0
     while i < len(parts):
         part = parts[i]
-        if part.startswith("*"):                # every item of a list (those that have the rest)
+        if part.startswith("*"):  # every item of a list (those that have the rest)
             items = cur if isinstance(cur, list) else list(cur.values()) if isinstance(cur, dict) else None
             if items is None:
                 raise KeyError(f"{path}: '*' of a {type(cur).__name__}")
-            if part != "*":                     # *[k=v]: the items whose fields match
+            if part != "*":  # *[k=v]: the items whose fields match
                 items = [x for x in items if _match(x, part[2:-1])]
-            rest = ".".join(parts[i + 1:])
+            rest = ".".join(parts[i + 1 :])
             out = []
             for x in items:
                 try:
@@ -192,15 +203,17 @@ def lookup(data, path):
 def evaluate(rec, key):
     """A key's value: a path into the recorded output, ``@field`` a field of the recording itself,
     or an arithmetic expression of such paths in braces."""
+
     def value(path):
         m = re.fullmatch(r"(min|max|mean)\((.+)\)", path)
-        if m:                                   # min / max / mean of a list (or a dict's values)
+        if m:  # min / max / mean of a list (or a dict's values)
             xs = value(m.group(2))
             xs = list(xs.values()) if isinstance(xs, dict) else list(xs)
             if not xs:
                 raise ValueError(f"{path}: empty")
             return min(xs) if m.group(1) == "min" else max(xs) if m.group(1) == "max" else sum(xs) / len(xs)
         return lookup(rec, path[1:]) if path.startswith("@") else lookup(rec["data"], path)
+
     if "{" not in key:
         return value(key)
     expr = re.sub(r"\{([^}]+)\}", lambda m: repr(float(value(m.group(1)))), key)
@@ -247,6 +260,7 @@ def check_value(quoted, key, rec):
 
 # ----------------------------------------------------------------------------- Markdown
 
+
 def blank(s, start, end):
     return s[:start] + " " * (end - start) + s[end:]
 
@@ -268,6 +282,7 @@ def split_blocks(lines):
         if cur:
             blocks.append((cur_start, "\n".join(cur), "text"))
         cur = []
+
     for i, line in enumerate(lines, 1):
         s = line.strip()
         if s.startswith("```"):
@@ -277,7 +292,7 @@ def split_blocks(lines):
         if in_code:
             blocks.append((i, line, "code"))
             continue
-        if re.fullmatch(r"<!--\s*/?(?:inputs|gen)\b.*-->", s):   # region markers stand alone
+        if re.fullmatch(r"<!--\s*/?(?:inputs|gen)\b.*-->", s):  # region markers stand alone
             flush()
             continue
         if not s or s.startswith("#") and not s.startswith("#!"):
@@ -305,7 +320,7 @@ def check_block(path, start, text, problems, stats, inputs_region=False):
     # blank inline code and link targets; keep comments (tags) in place
     t = CODE_RE.sub(lambda m: " " * len(m.group(0)), text)
     t = LINK_RE.sub(lambda m: "](" + " " * len(m.group(1)) + ")", t)
-    pending = []      # unclaimed numbers since the previous tag: (pos, text)
+    pending = []  # unclaimed numbers since the previous tag: (pos, text)
     pos = 0
     for m in list(COMMENT_RE.finditer(t)) + [None]:
         seg_end = m.start() if m else len(t)
@@ -332,18 +347,21 @@ def check_block(path, start, text, problems, stats, inputs_region=False):
         rec = recording(name)
         bad = check_recording(name, rec)
         if bad is None and (kind == "cite") != name.startswith("cited_"):
-            bad = (f"{name}: 'cite' is for citations (cited_*.json), 'fig' for our recordings")
+            bad = f"{name}: 'cite' is for citations (cited_*.json), 'fig' for our recordings"
         if bad:
             problems.append(Problem(path, ln, bad))
             pending = []
             continue
         if len(keys) > len(pending):
-            problems.append(Problem(path, ln, f"<!--{kind} {name}--> has {len(keys)} keys but only "
-                                              f"{len(pending)} numbers precede it"))
+            problems.append(
+                Problem(
+                    path, ln, f"<!--{kind} {name}--> has {len(keys)} keys but only {len(pending)} numbers precede it"
+                )
+            )
             pending = []
             continue
-        claimed = pending[len(pending) - len(keys):]
-        for p0, n0 in pending[:len(pending) - len(keys)]:
+        claimed = pending[len(pending) - len(keys) :]
+        for p0, n0 in pending[: len(pending) - len(keys)]:
             if inputs_region:
                 stats["inputs"] += 1
             else:
@@ -365,7 +383,7 @@ def check_block(path, start, text, problems, stats, inputs_region=False):
 
 
 def _context(text, p, w=38):
-    s = COMMENT_RE.sub("", text[max(0, p - w):p + w]).replace("\n", " ")
+    s = COMMENT_RE.sub("", text[max(0, p - w) : p + w]).replace("\n", " ")
     return "..." + s.strip() + "..."
 
 
@@ -380,14 +398,22 @@ def check_code_line(path, ln, line, problems):
     comment = CODE_RE.sub(" ", comment)
     m = MEASURE_IN_COMMENT.search(NOT_RE.sub(lambda x: " " * len(x.group(0)), comment))
     if m:
-        problems.append(Problem(path, ln, f"a measured figure in a code comment ({m.group(0).strip()!r}): "
-                                          f"quote it in the text with a tag, or generate the block"))
+        problems.append(
+            Problem(
+                path,
+                ln,
+                f"a measured figure in a code comment ({m.group(0).strip()!r}): "
+                f"quote it in the text with a tag, or generate the block",
+            )
+        )
 
 
 # ----------------------------------------------------------------------------- generated blocks
 
+
 def render(view):
     from docs_views import VIEWS
+
     if view not in VIEWS:
         raise KeyError(f"unknown view {view!r}")
     return VIEWS[view](recording).rstrip("\n")
@@ -437,8 +463,13 @@ def check_file(path, write=False, stats=None):
                 new_lines[a:b] = want
             else:
                 diff = next((k for k, (x, y) in enumerate(zip(lines[a:b], want)) if x != y), min(b - a, len(want)))
-                problems.append(Problem(path, a + 1 + diff, f"generated block {view} differs from its rendering "
-                                                            f"(run `python tools/docs_check.py --write`)"))
+                problems.append(
+                    Problem(
+                        path,
+                        a + 1 + diff,
+                        f"generated block {view} differs from its rendering (run `python tools/docs_check.py --write`)",
+                    )
+                )
     if write and new_lines != lines:
         with open(path, "w", encoding="utf-8") as f:
             f.write("\n".join(new_lines))
@@ -470,7 +501,9 @@ def check_file(path, write=False, stats=None):
 
 def default_files():
     """README.md and every page of the docs site (docs/, subfolders included)."""
-    return [os.path.join(ROOT, "README.md")] + sorted(glob.glob(os.path.join(ROOT, "docs", "**", "*.md"), recursive=True))
+    return [os.path.join(ROOT, "README.md")] + sorted(
+        glob.glob(os.path.join(ROOT, "docs", "**", "*.md"), recursive=True)
+    )
 
 
 def main(argv=None):
@@ -492,9 +525,12 @@ def main(argv=None):
     shown = [p for p in problems if not a.untagged or "has no tag" in p.msg]
     for p in shown:
         print(p)
-    print(f"docs-check: {stats['figures']} figures checked against recordings, {stats['cited']} citations, "
-          f"{stats['generated']} generated blocks, {stats['inputs']} numbers marked as inputs; "
-          f"{len(problems)} problems", file=sys.stderr)
+    print(
+        f"docs-check: {stats['figures']} figures checked against recordings, {stats['cited']} citations, "
+        f"{stats['generated']} generated blocks, {stats['inputs']} numbers marked as inputs; "
+        f"{len(problems)} problems",
+        file=sys.stderr,
+    )
     return 1 if problems else 0
 
 

@@ -15,6 +15,7 @@ within each source's tolerance (timings are not compared: they depend on the mac
 Expensive sources (a full paper run, the 45-minute cross-simulator experiment) are recorded once
 and only checked against their recording.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,8 +36,21 @@ RUN_DIR = os.path.join(ROOT, "out", "figures")
 FORMAT = "silhouette-cloth-fit/figures"
 
 # Keys whose values are wall-clock or CPU times (or depend on them): never compared by ``rerun``.
-TIMING = ("*seconds*", "*_s", "*wall*", "*per_s*", "*_ms*", "*time*", "*load*", "*speed*", "*evals_per_s*",
-          "*elapsed*", "*memory*", "*ready*", "*init*")
+TIMING = (
+    "*seconds*",
+    "*_s",
+    "*wall*",
+    "*per_s*",
+    "*_ms*",
+    "*time*",
+    "*load*",
+    "*speed*",
+    "*evals_per_s*",
+    "*elapsed*",
+    "*memory*",
+    "*ready*",
+    "*init*",
+)
 
 # name -> source. ``argv``: the command ({out} = the JSON it writes, {py} = this Python);
 # ``output``: the file the command writes (default {out}); ``cost``: "cheap" (seconds to a few
@@ -45,200 +59,601 @@ TIMING = ("*seconds*", "*_s", "*wall*", "*per_s*", "*_ms*", "*time*", "*load*", 
 SOURCES = {
     "demo": {
         "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
-        "output": "out/demo/summary.json", "cost": "cheap", "rtol": 1e-6,
-        "what": "make demo, first part: the Blender pipeline on lab18 (render, fit, overlays, pictures)"},
+        "output": "out/demo/summary.json",
+        "cost": "cheap",
+        "rtol": 1e-6,
+        "what": "make demo, first part: the Blender pipeline on lab18 (render, fit, overlays, pictures)",
+    },
     "paper_quick": {
-        "argv": ["{py}", "-m", "addon", "paper", "--quick", "--json", "{out}", "--out", "out/paper_quick",
-                 "--only", "table1"],
-        "cost": "cheap", "rtol": 1e-6, "what": "make demo, second part: Table 1 at 240 x 320"},
+        "argv": [
+            "{py}",
+            "-m",
+            "clothfit",
+            "paper",
+            "--quick",
+            "--json",
+            "{out}",
+            "--out",
+            "out/paper_quick",
+            "--only",
+            "table1",
+        ],
+        "cost": "cheap",
+        "rtol": 1e-6,
+        "what": "make demo, second part: Table 1 at 240 x 320",
+    },
     "identifiability": {
-        "argv": ["{py}", "-m", "addon", "identifiability", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
-        "what": "sensitivity and Cramer-Rao bounds of Blender's cloth settings"},
+        "argv": ["{py}", "-m", "clothfit", "identifiability", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 1e-6,
+        "what": "sensitivity and Cramer-Rao bounds of Blender's cloth settings",
+    },
     "simd": {
-        "argv": ["{py}", "tools/simd_bench.py", "--json", "{out}"], "cost": "cheap", "rtol": 0, "atol": 0,
-        "what": "the hand-written LLVM IR kernels against their plain numba twins (CLOTHFIT_NO_SIMD=1)"},
+        "argv": ["{py}", "tools/simd_bench.py", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 0,
+        "atol": 0,
+        "what": "the hand-written LLVM IR kernels against their plain numba twins (CLOTHFIT_NO_SIMD=1)",
+    },
     "blender_agreement": {
-        "argv": ["{py}", "-m", "addon", "blender-agreement", "--json", "{out}"], "cost": "cheap", "rtol": 0,
-        "atol": 1e-9, "what": "the core's blender model against Blender's own cloth, 12 cases"},
+        "argv": ["{py}", "-m", "clothfit", "blender-agreement", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 0,
+        "atol": 1e-9,
+        "what": "the core's blender model against Blender's own cloth, 12 cases",
+    },
     "sensitivity": {
-        "argv": ["{py}", "tools/sensitivity.py", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
-        "what": "how far a relative change of k moves the paper sheet (chaos below d/m = 8 /s)"},
+        "argv": ["{py}", "tools/sensitivity.py", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 1e-6,
+        "what": "how far a relative change of k moves the paper sheet (chaos below d/m = 8 /s)",
+    },
     "raster_agreement": {
-        "argv": ["{py}", "tools/raster_agreement.py", "--json", "{out}"], "cost": "cheap", "rtol": 0,
-        "what": "core rasteriser against Blender's Workbench renders, 540 images"},
+        "argv": ["{py}", "tools/raster_agreement.py", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "core rasteriser against Blender's Workbench renders, 540 images",
+    },
     "raster_agreement_eevee": {
-        "argv": ["{py}", "tools/raster_agreement.py", "--engine", "eevee", "--times", "0.1:1.5:0.2",
-                 "--json", "{out}"], "cost": "expensive",
-        "what": "core rasteriser against Blender's Eevee renders, 144 images (software GL: minutes)"},
+        "argv": ["{py}", "tools/raster_agreement.py", "--engine", "eevee", "--times", "0.1:1.5:0.2", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "core rasteriser against Blender's Eevee renders, 144 images (software GL: minutes)",
+    },
     "bench": {
-        "argv": ["{py}", "-m", "addon", "bench", "--json", "{out}"], "cost": "expensive",
-        "what": "speed figures (make bench)"},
+        "argv": ["{py}", "-m", "clothfit", "bench", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "speed figures (make bench)",
+    },
     "optimiser_ab": {
-        "argv": ["{py}", "tools/optimiser_ab.py", "all", "0-5", "--json", "{out}"], "cost": "expensive",
+        "argv": ["{py}", "tools/optimiser_ab.py", "all", "0-5", "--json", "{out}"],
+        "cost": "expensive",
         "what": "our CMA-ES plain / active against the cma package, cotton capture of the cross-simulator, seeds 0-5 "
-                "(needs tools/cross_simulator.py observe --out out/cross2)"},
+        "(needs tools/cross_simulator.py observe --out out/cross2)",
+    },
     "search_landscape": {
         "argv": ["{py}", "tools/search_ab.py", "synth:default", "--landscape", "{out}", "--local", "0.05"],
         "cost": "expensive",
         "what": "issue 20 item 3: the exact-model capture's truth perturbed group by group (train and held-out "
-                "error), and a CMA-ES run started 5 % from the truth (about 2 CPU min)"},
+        "error), and a CMA-ES run started 5 % from the truth (about 2 CPU min)",
+    },
     "search_tune": {
-        "argv": ["{py}", "tools/search_ab.py", "--summary", "docs/figures/search_tune_rows.jsonl", "--json-summary",
-                 "{out}"], "cost": "cheap", "rtol": 0,
-        "what": "issue 20 item 3: the strategies tried on the tuning capture (rows written by tools/search_ab.py)"},
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            "--summary",
+            "docs/figures/search_tune_rows.jsonl",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: the strategies tried on the tuning capture (rows written by tools/search_ab.py)",
+    },
     "search_ab": {
-        "argv": ["{py}", "tools/search_ab.py", "synth:fresh", "--strategies", "baseline,active32", "--seeds", "0-9",
-                 "--reuse", "docs/figures/search_ab_rows.jsonl", "--only-reused", "--json-summary", "{out}"],
-        "cost": "cheap", "rtol": 0,
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            "synth:fresh",
+            "--strategies",
+            "baseline,active32",
+            "--seeds",
+            "0-9",
+            "--reuse",
+            "docs/figures/search_ab_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
         "what": "issue 20 item 3: search strategies on a fresh exact-model capture (blender model, lab18, 240 x 320, "
-                "5 % noise, tension 25 shear 8), held-out error over the floor, seeds 0-9 where run: the fits are those of "
-                "the rows file (written by this tool; drop --only-reused to run the missing ones, about 2 CPU min each)"},
+        "5 % noise, tension 25 shear 8), held-out error over the floor, seeds 0-9 where run: the fits are those of "
+        "the rows file (written by this tool; drop --only-reused to run the missing ones, about 2 CPU min each)",
+    },
     "blender_scene_warm": {
-        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_warm", "--release", "corner",
-                 "--drop", "0.07", "--after", "0.75", "--every", "1", "--warm"],
-        "output": "out/scene_warm/summary.json", "cost": "expensive",
-        "what": "one-corner release onto a box: Blender fit from the core model's warm start"},
+        "argv": [
+            "{py}",
+            "tools/blender_scene_fit.py",
+            "all",
+            "--out",
+            "out/scene_warm",
+            "--release",
+            "corner",
+            "--drop",
+            "0.07",
+            "--after",
+            "0.75",
+            "--every",
+            "1",
+            "--warm",
+        ],
+        "output": "out/scene_warm/summary.json",
+        "cost": "expensive",
+        "what": "one-corner release onto a box: Blender fit from the core model's warm start",
+    },
     "blender_scene_cold": {
-        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_cold", "--release", "corner",
-                 "--drop", "0.07", "--after", "0.75", "--every", "1"],
-        "output": "out/scene_cold/summary.json", "cost": "expensive",
-        "what": "one-corner release onto a box: Blender fit from the scene's starting settings"},
+        "argv": [
+            "{py}",
+            "tools/blender_scene_fit.py",
+            "all",
+            "--out",
+            "out/scene_cold",
+            "--release",
+            "corner",
+            "--drop",
+            "0.07",
+            "--after",
+            "0.75",
+            "--every",
+            "1",
+        ],
+        "output": "out/scene_cold/summary.json",
+        "cost": "expensive",
+        "what": "one-corner release onto a box: Blender fit from the scene's starting settings",
+    },
     "bench_blender_workers": {
-        "argv": ["{py}", "-m", "addon", "bench", "--blender-workers", "--json", "{out}"], "cost": "expensive",
-        "what": "Blender's solver as the evaluator with 1 and 2 Ray workers"},
+        "argv": ["{py}", "-m", "clothfit", "bench", "--blender-workers", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "Blender's solver as the evaluator with 1 and 2 Ray workers",
+    },
     "paper": {
-        "argv": ["{py}", "-m", "addon", "paper", "--json", "{out}", "--out", "out/paper"], "cost": "expensive",
-        "what": "the paper protocol: Table 1, Fig. 8, Table 2, optimisers (make paper)"},
+        "argv": ["{py}", "-m", "clothfit", "paper", "--json", "{out}", "--out", "out/paper"],
+        "cost": "expensive",
+        "what": "the paper protocol: Table 1, Fig. 8, Table 2, optimisers (make paper)",
+    },
     "occlusion": {
-        "argv": ["{py}", "-m", "addon", "occlusion", "--json", "{out}"], "cost": "expensive",
-        "what": "the occluder study: ignore masks vs occluders counted as background"},
+        "argv": ["{py}", "-m", "clothfit", "occlusion", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the occluder study: ignore masks vs occluders counted as background",
+    },
     "user_scenes": {
         "argv": ["{py}", "tools/user_scenes.py", "all", "--out", "out/user_scenes", "--json", "{out}"],
-        "cost": "cheap", "rtol": 1e-9, "atol": 1e-12,
+        "cost": "cheap",
+        "rtol": 1e-9,
+        "atol": 1e-12,
         "what": "issue 20: Blender scenes built as a user builds them; the core blender model's drift from them, "
-                "cause by cause"},
+        "cause by cause",
+    },
     "issue20_goals": {
-        "argv": ["{py}", "tools/issue20_goals.py", "all", "--json", "{out}"], "cost": "expensive",
+        "argv": ["{py}", "tools/issue20_goals.py", "all", "--json", "{out}"],
+        "cost": "expensive",
         "what": "issue 20's goals measured through the CLI on fresh captures (exact model, offsets, continuum, "
-                "collider, time); each goal also alone: tools/issue20_goals.py GOAL --json FILE"},
+        "collider, time); each goal also alone: tools/issue20_goals.py GOAL --json FILE",
+    },
     "cross_simulator": {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
-        "output": "out/cross2/cross_simulator.json", "cost": "expensive",
-        "what": "Blender's cloth as the truth, fitted by both core models (about 45 min)"},
+        "output": "out/cross2/cross_simulator.json",
+        "cost": "expensive",
+        "what": "Blender's cloth as the truth, fitted by both core models (about 45 min)",
+    },
     "continuum_baseline": {
         "argv": ["{py}", "tools/continuum_truth.py", "baseline", "--make", "--out", "out/continuum", "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 20's baseline: a Warp continuum cloth (cotton, silk; 30 fps, a rig not ours) fitted by "
-                "today's CLI as a new user would, and with --fps 30 (about 40 min on a loaded machine)"},
+        "today's CLI as a new user would, and with --fps 30 (about 40 min on a loaded machine)",
+    },
     "paper_mismatch": {
-        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--truth-dt-safety", "0.125", "--json", "{out}",
-                 "--out", "out/paper_mismatch"], "cost": "expensive",
-        "what": "Table 1 with a model mismatch: the truth simulated with a 4x finer time step"},
+        "argv": [
+            "{py}",
+            "-m",
+            "clothfit",
+            "paper",
+            "--only",
+            "table1",
+            "--truth-dt-safety",
+            "0.125",
+            "--json",
+            "{out}",
+            "--out",
+            "out/paper_mismatch",
+        ],
+        "cost": "expensive",
+        "what": "Table 1 with a model mismatch: the truth simulated with a 4x finer time step",
+    },
     "paper_far": {
-        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--rig", "lab18_far", "--json", "{out}",
-                 "--out", "out/paper_far"], "cost": "expensive",
-        "what": "Table 1 on a room-sized rig (the cameras at 1.25 m)"},
+        "argv": [
+            "{py}",
+            "-m",
+            "clothfit",
+            "paper",
+            "--only",
+            "table1",
+            "--rig",
+            "lab18_far",
+            "--json",
+            "{out}",
+            "--out",
+            "out/paper_far",
+        ],
+        "cost": "expensive",
+        "what": "Table 1 on a room-sized rig (the cameras at 1.25 m)",
+    },
     "paper_ga": {
-        "argv": ["{py}", "-m", "addon", "paper", "--only", "table1", "--optimizer", "spx-mgg", "--population", "60",
-                 "--children", "30", "--json", "{out}", "--out", "out/paper_ga"], "cost": "expensive",
-        "what": "Table 1 with the paper's GA at its textbook sizes"},
+        "argv": [
+            "{py}",
+            "-m",
+            "clothfit",
+            "paper",
+            "--only",
+            "table1",
+            "--optimizer",
+            "spx-mgg",
+            "--population",
+            "60",
+            "--children",
+            "30",
+            "--json",
+            "{out}",
+            "--out",
+            "out/paper_ga",
+        ],
+        "cost": "expensive",
+        "what": "Table 1 with the paper's GA at its textbook sizes",
+    },
     "occlusion_mismatch": {
-        "argv": ["{py}", "-m", "addon", "occlusion", "--truth-dt-safety", "0.125", "--json", "{out}",
-                 "--out", "out/occlusion_mismatch"], "cost": "expensive",
-        "what": "the occluder study with a model mismatch"},
+        "argv": [
+            "{py}",
+            "-m",
+            "clothfit",
+            "occlusion",
+            "--truth-dt-safety",
+            "0.125",
+            "--json",
+            "{out}",
+            "--out",
+            "out/occlusion_mismatch",
+        ],
+        "cost": "expensive",
+        "what": "the occluder study with a model mismatch",
+    },
     "occlusion_quick_1cam": {
-        "argv": ["{py}", "-m", "addon", "occlusion", "--quick", "--train-cameras", "1", "--json", "{out}",
-                 "--out", "out/occlusion_q1"], "cost": "expensive",
-        "what": "the occluder study, 1 training camera, 240 x 320, 700 evaluations"},
+        "argv": [
+            "{py}",
+            "-m",
+            "clothfit",
+            "occlusion",
+            "--quick",
+            "--train-cameras",
+            "1",
+            "--json",
+            "{out}",
+            "--out",
+            "out/occlusion_q1",
+        ],
+        "cost": "expensive",
+        "what": "the occluder study, 1 training camera, 240 x 320, 700 evaluations",
+    },
     "occlusion_quick_2cam": {
-        "argv": ["{py}", "-m", "addon", "occlusion", "--quick", "--train-cameras", "2", "--json", "{out}",
-                 "--out", "out/occlusion_q2"], "cost": "expensive",
-        "what": "the occluder study, 2 training cameras, 240 x 320, 700 evaluations"},
+        "argv": [
+            "{py}",
+            "-m",
+            "clothfit",
+            "occlusion",
+            "--quick",
+            "--train-cameras",
+            "2",
+            "--json",
+            "{out}",
+            "--out",
+            "out/occlusion_q2",
+        ],
+        "cost": "expensive",
+        "what": "the occluder study, 2 training cameras, 240 x 320, 700 evaluations",
+    },
     "video_footage": {
         "argv": ["{py}", "tools/video_footage.py", "--out", "out/video_footage", "--json", "{out}"],
-        "cost": "expensive", "what": "videos as phones record them, synced by a flash, extracted: IoU"},
+        "cost": "expensive",
+        "what": "videos as phones record them, synced by a flash, extracted: IoU",
+    },
     "footage": {
-        "steps": [["{py}", "tools/render_footage.py", "render", "--out", "out/real/footage"],
-                  ["{py}", "-m", "addon", "extract", "out/real/footage", "-o", "out/real/capture"],
-                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
-                   "out/real/capture", "--json", "out/real/score_auto.json"],
-                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
-                   "out/real/capture_single", "--single-plate", "--json", "out/real/score_single.json"],
-                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
-                   "out/real/capture_sw1", "--shadow-window", "1", "--json", "out/real/score_sw1.json"],
-                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
-                   "out/real/capture_norefine", "--refine", "0", "--json", "out/real/score_norefine.json"],
-                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
-                   "out/real/capture_otsu", "--threshold", "otsu", "--json", "out/real/score_otsu.json"],
-                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
-                   "out/real/capture_noshadow", "--shadow-min", "1", "--json", "out/real/score_noshadow.json"],
-                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
-                   "out/real/capture_noblur", "--blur", "0", "--json", "out/real/score_noblur.json"],
-                  ["{py}", "tools/render_footage.py", "score", "--footage", "out/real/footage", "--capture",
-                   "out/real/capture_paper", "--threshold", "otsu", "--luma-weight", "1", "--shadow-min", "1",
-                   "--blur", "0", "--refine", "0", "--json", "out/real/score_paper.json"]],
-        "outputs": {"footage": "out/real/footage/footage.json", "auto": "out/real/score_auto.json",
-                    "single_plate": "out/real/score_single.json", "shadow_window_1": "out/real/score_sw1.json",
-                    "no_refine": "out/real/score_norefine.json", "otsu": "out/real/score_otsu.json",
-                    "no_shadow": "out/real/score_noshadow.json", "no_blur": "out/real/score_noblur.json",
-                    "paper_recipe": "out/real/score_paper.json"},
-        "cost": "expensive", "what": "photoreal footage rendered by Cycles, extracted: IoU per variant (about 20 min)"},
+        "steps": [
+            ["{py}", "tools/render_footage.py", "render", "--out", "out/real/footage"],
+            ["{py}", "-m", "clothfit", "extract", "out/real/footage", "-o", "out/real/capture"],
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "score",
+                "--footage",
+                "out/real/footage",
+                "--capture",
+                "out/real/capture",
+                "--json",
+                "out/real/score_auto.json",
+            ],
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "score",
+                "--footage",
+                "out/real/footage",
+                "--capture",
+                "out/real/capture_single",
+                "--single-plate",
+                "--json",
+                "out/real/score_single.json",
+            ],
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "score",
+                "--footage",
+                "out/real/footage",
+                "--capture",
+                "out/real/capture_sw1",
+                "--shadow-window",
+                "1",
+                "--json",
+                "out/real/score_sw1.json",
+            ],
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "score",
+                "--footage",
+                "out/real/footage",
+                "--capture",
+                "out/real/capture_norefine",
+                "--refine",
+                "0",
+                "--json",
+                "out/real/score_norefine.json",
+            ],
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "score",
+                "--footage",
+                "out/real/footage",
+                "--capture",
+                "out/real/capture_otsu",
+                "--threshold",
+                "otsu",
+                "--json",
+                "out/real/score_otsu.json",
+            ],
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "score",
+                "--footage",
+                "out/real/footage",
+                "--capture",
+                "out/real/capture_noshadow",
+                "--shadow-min",
+                "1",
+                "--json",
+                "out/real/score_noshadow.json",
+            ],
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "score",
+                "--footage",
+                "out/real/footage",
+                "--capture",
+                "out/real/capture_noblur",
+                "--blur",
+                "0",
+                "--json",
+                "out/real/score_noblur.json",
+            ],
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "score",
+                "--footage",
+                "out/real/footage",
+                "--capture",
+                "out/real/capture_paper",
+                "--threshold",
+                "otsu",
+                "--luma-weight",
+                "1",
+                "--shadow-min",
+                "1",
+                "--blur",
+                "0",
+                "--refine",
+                "0",
+                "--json",
+                "out/real/score_paper.json",
+            ],
+        ],
+        "outputs": {
+            "footage": "out/real/footage/footage.json",
+            "auto": "out/real/score_auto.json",
+            "single_plate": "out/real/score_single.json",
+            "shadow_window_1": "out/real/score_sw1.json",
+            "no_refine": "out/real/score_norefine.json",
+            "otsu": "out/real/score_otsu.json",
+            "no_shadow": "out/real/score_noshadow.json",
+            "no_blur": "out/real/score_noblur.json",
+            "paper_recipe": "out/real/score_paper.json",
+        },
+        "cost": "expensive",
+        "what": "photoreal footage rendered by Cycles, extracted: IoU per variant (about 20 min)",
+    },
     "footage_fit": {
-        "steps": [["{py}", "tools/render_footage.py", "fit", "--capture", "out/real/capture", "--footage",
-                   "out/real/footage", "--cameras", "2,4,8,16", "--evals", "3000", "--seed", str(s),
-                   "--json", f"out/real/fit_auto_s{s}.json"] for s in (0, 1, 2)]
-        + [["{py}", "tools/render_footage.py", "fit", "--capture", "out/real/capture_paper", "--footage",
-            "out/real/footage", "--cameras", "4,16", "--evals", "3000", "--seed", "0", "--json",
-            "out/real/fit_paper_s0.json"]],
-        "outputs": {"s0": "out/real/fit_auto_s0.json", "s1": "out/real/fit_auto_s1.json",
-                    "s2": "out/real/fit_auto_s2.json", "paper_recipe": "out/real/fit_paper_s0.json"},
-        "cost": "expensive", "what": "fits on the extracted footage silhouettes (needs the footage recording's files)"},
+        "steps": [
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "fit",
+                "--capture",
+                "out/real/capture",
+                "--footage",
+                "out/real/footage",
+                "--cameras",
+                "2,4,8,16",
+                "--evals",
+                "3000",
+                "--seed",
+                str(s),
+                "--json",
+                f"out/real/fit_auto_s{s}.json",
+            ]
+            for s in (0, 1, 2)
+        ]
+        + [
+            [
+                "{py}",
+                "tools/render_footage.py",
+                "fit",
+                "--capture",
+                "out/real/capture_paper",
+                "--footage",
+                "out/real/footage",
+                "--cameras",
+                "4,16",
+                "--evals",
+                "3000",
+                "--seed",
+                "0",
+                "--json",
+                "out/real/fit_paper_s0.json",
+            ]
+        ],
+        "outputs": {
+            "s0": "out/real/fit_auto_s0.json",
+            "s1": "out/real/fit_auto_s1.json",
+            "s2": "out/real/fit_auto_s2.json",
+            "paper_recipe": "out/real/fit_paper_s0.json",
+        },
+        "cost": "expensive",
+        "what": "fits on the extracted footage silhouettes (needs the footage recording's files)",
+    },
     "floor_calibration": {
-        "steps": [["{py}", "tools/floor_calibration.py", "--out", "out/floor_cal", "--json",
-                   "out/floor_cal/calibration.json"]],
+        "steps": [
+            ["{py}", "tools/floor_calibration.py", "--out", "out/floor_cal", "--json", "out/floor_cal/calibration.json"]
+        ],
         "outputs": {"calibration": "out/floor_cal/calibration.json"},
         "cost": "expensive",
         "what": "the noise-floor estimate against true floors on synthetic captures (both models, 4 resolutions, "
-                "5 noise levels, resampled fits); the photoreal part (--footage, --capture) is not recorded yet"},
+        "5 noise levels, resampled fits); the photoreal part (--footage, --capture) is not recorded yet",
+    },
     "blender_cloth": {
-        "steps": [["{py}", "tools/blender_cloth_experiment.py", "check-units", "--json", "out/blendercloth/units.json"],
-                  ["{py}", "tools/blender_cloth_experiment.py", "observe", "--out", "out/blendercloth/capture"],
-                  ["{py}", "tools/blender_cloth_experiment.py", "fit", "--capture", "out/blendercloth/capture",
-                   "--cameras", "4,8,16", "--oracle", "--json", "out/blendercloth/fit.json", "--overlays",
-                   "out/blendercloth/overlays"]],
+        "steps": [
+            ["{py}", "tools/blender_cloth_experiment.py", "check-units", "--json", "out/blendercloth/units.json"],
+            ["{py}", "tools/blender_cloth_experiment.py", "observe", "--out", "out/blendercloth/capture"],
+            [
+                "{py}",
+                "tools/blender_cloth_experiment.py",
+                "fit",
+                "--capture",
+                "out/blendercloth/capture",
+                "--cameras",
+                "4,8,16",
+                "--oracle",
+                "--json",
+                "out/blendercloth/fit.json",
+                "--overlays",
+                "out/blendercloth/overlays",
+            ],
+        ],
         "outputs": {"units": "out/blendercloth/units.json", "fit": "out/blendercloth/fit.json"},
-        "cost": "expensive", "what": "Blender's cloth simulator as the truth, fitted by the paper's sheet"},
+        "cost": "expensive",
+        "what": "Blender's cloth simulator as the truth, fitted by the paper's sheet",
+    },
     "blender_scene_fit_pop12": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_pop12", "--population", "12"],
-        "output": "out/scene_fit_pop12/summary.json", "cost": "expensive",
-        "what": "the same, population 12"},
+        "output": "out/scene_fit_pop12/summary.json",
+        "cost": "expensive",
+        "what": "the same, population 12",
+    },
     "blender_scene_fit_2400": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_2400", "--budget", "2400"],
-        "output": "out/scene_fit_2400/summary.json", "cost": "expensive",
-        "what": "the same, 2400 evaluations"},
+        "output": "out/scene_fit_2400/summary.json",
+        "cost": "expensive",
+        "what": "the same, 2400 evaluations",
+    },
     "blender_scene_fit_480x640": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_480", "--resolution", "480x640"],
-        "output": "out/scene_fit_480/summary.json", "cost": "expensive",
-        "what": "the same, silhouettes at 480 x 640"},
+        "output": "out/scene_fit_480/summary.json",
+        "cost": "expensive",
+        "what": "the same, silhouettes at 480 x 640",
+    },
     "stopping": {
-        "argv": ["{py}", "tools/stopping.py", "--json", "{out}"], "cost": "cheap", "rtol": 1e-6,
-        "what": "fits that stop by themselves: CMA-ES and SPX + MGG on a small capture, budget 100,000"},
+        "argv": ["{py}", "tools/stopping.py", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 1e-6,
+        "what": "fits that stop by themselves: CMA-ES and SPX + MGG on a small capture, budget 100,000",
+    },
     "phone_rig_calib_s101": {
-        "argv": ["{py}", "tools/phone_rig.py", "calibrate", "--out", "out/phone_rig/calib_s101", "--seed", "101",
-                 "--scale", "0.375", "--poses", "14", "--samples", "4", "--json", "{out}"], "cost": "expensive",
+        "argv": [
+            "{py}",
+            "tools/phone_rig.py",
+            "calibrate",
+            "--out",
+            "out/phone_rig/calib_s101",
+            "--seed",
+            "101",
+            "--scale",
+            "0.375",
+            "--poses",
+            "14",
+            "--samples",
+            "4",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
         "what": "issue 18: clothfit calibrate on Cycles renders of a ChArUco board before 4 phones (seed 101), against "
-                "the true cameras"},
+        "the true cameras",
+    },
     "phone_rig_e2e": {
-        "argv": ["{py}", "tools/phone_rig.py", "e2e", "--out", "out/phone_rig/e2e_s7", "--seed", "7", "--scale", "0.3",
-                 "--poses", "10", "--frames", "15", "--samples", "4", "--evals", "300", "--uncertain-evals", "600",
-                 "--json", "{out}"],
+        "argv": [
+            "{py}",
+            "tools/phone_rig.py",
+            "e2e",
+            "--out",
+            "out/phone_rig/e2e_s7",
+            "--seed",
+            "7",
+            "--scale",
+            "0.3",
+            "--poses",
+            "10",
+            "--frames",
+            "15",
+            "--samples",
+            "4",
+            "--evals",
+            "300",
+            "--uncertain-evals",
+            "600",
+            "--json",
+            "{out}",
+        ],
         "cost": "expensive",
         "what": "issue 18 end to end: phones -> calibrate, handles, extract, fit, export-blender-cloth on Cycles "
-                "renders, against the same fit given the true cameras and manipulation"},
+        "renders, against the same fit given the true cameras and manipulation",
+    },
     "blender_scene_fit": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
-        "output": "out/scene_fit/summary.json", "cost": "expensive",
-        "what": "issue 10: a cloth dropped onto a box, fitted with Blender's own solver on Ray"},
+        "output": "out/scene_fit/summary.json",
+        "cost": "expensive",
+        "what": "issue 10: a cloth dropped onto a box, fitted with Blender's own solver on Ray",
+    },
 }
 
 
@@ -265,11 +680,28 @@ def git_state():
     """(short commit, dirty) of the repository: dirty when the code (addon/, tools/, demo_blend/, rigs/;
     not the docs tools) has uncommitted changes."""
     try:
-        commit = subprocess.run(["git", "rev-parse", "--short=7", "HEAD"], cwd=ROOT, capture_output=True,
-                                text=True, check=True).stdout.strip()
-        st = subprocess.run(["git", "status", "--porcelain", "--", "addon", "tools", "demo_blend", "rigs",
-                             ":!tools/figures.py", ":!tools/docs_check.py", ":!tools/docs_views.py"],
-                            cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short=7", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        st = subprocess.run(
+            [
+                "git",
+                "status",
+                "--porcelain",
+                "--",
+                "addon",
+                "tools",
+                "demo_blend",
+                "rigs",
+                ":!tools/figures.py",
+                ":!tools/docs_check.py",
+                ":!tools/docs_views.py",
+            ],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown", True
     return commit, bool(st)
@@ -289,19 +721,34 @@ def figures_path(name):
 def load_recording(name):
     path = figures_path(name)
     if not os.path.isfile(path):
-        raise SystemExit(f"error: no recording {os.path.relpath(path, ROOT)}: run `python tools/figures.py record {name}`")
+        raise SystemExit(
+            f"error: no recording {os.path.relpath(path, ROOT)}: run `python tools/figures.py record {name}`"
+        )
     with open(path) as f:
         rec = json.load(f)
     if rec.get("format") != FORMAT:
-        raise SystemExit(f"error: {os.path.relpath(path, ROOT)} is not a figures recording (format {rec.get('format')!r})")
+        raise SystemExit(
+            f"error: {os.path.relpath(path, ROOT)} is not a figures recording (format {rec.get('format')!r})"
+        )
     return rec
 
 
 def write_recording(name, data, argv_display, commit, dirty, seconds, load_before, load_after, started):
-    rec = {"format": FORMAT, "version": 1, "name": name, "what": SOURCES[name]["what"],
-           "command": argv_display, "commit": commit, "dirty": dirty, "recorded_at": started,
-           "seconds": None if seconds is None else round(seconds, 1), "cpus": os.cpu_count(),
-           "load_1min_before": load_before, "load_1min_after": load_after, "data": data}
+    rec = {
+        "format": FORMAT,
+        "version": 1,
+        "name": name,
+        "what": SOURCES[name]["what"],
+        "command": argv_display,
+        "commit": commit,
+        "dirty": dirty,
+        "recorded_at": started,
+        "seconds": None if seconds is None else round(seconds, 1),
+        "cpus": os.cpu_count(),
+        "load_1min_before": load_before,
+        "load_1min_after": load_after,
+        "data": data,
+    }
     os.makedirs(FIG_DIR, exist_ok=True)
     path = figures_path(name)
     tmp = path + ".tmp"
@@ -363,13 +810,20 @@ def record(name, from_file=None):
         argv = source_argv(name, os.path.relpath(out_path, ROOT))
         seconds = l0 = l1 = None
         started = datetime.datetime.fromtimestamp(os.path.getmtime(out_path), datetime.UTC).strftime(
-            "%Y-%m-%dT%H:%M:%SZ")
-        meta = out_path + ".run.json"       # written by `tools/figures.py run`: the run's own commit
+            "%Y-%m-%dT%H:%M:%SZ"
+        )
+        meta = out_path + ".run.json"  # written by `tools/figures.py run`: the run's own commit
         if os.path.isfile(meta):
             with open(meta) as f:
                 m = json.load(f)
-            commit, dirty, seconds, l0, l1, started = (m["commit"], m["dirty"], m["seconds"], m["load_1min_before"],
-                                                       m["load_1min_after"], m["started"])
+            commit, dirty, seconds, l0, l1, started = (
+                m["commit"],
+                m["dirty"],
+                m["seconds"],
+                m["load_1min_before"],
+                m["load_1min_after"],
+                m["started"],
+            )
     else:
         os.makedirs(RUN_DIR, exist_ok=True)
         argv, seconds, l0, l1, started, out_path = run_source(name)
@@ -386,12 +840,24 @@ def run_only(name):
     commit, dirty = git_state()
     argv, seconds, l0, l1, started, out_path = run_source(name)
     with open(out_path + ".run.json", "w") as f:
-        json.dump({"commit": commit, "dirty": dirty, "seconds": round(seconds, 1), "load_1min_before": l0,
-                   "load_1min_after": l1, "started": started, "argv": _fmt_argv(argv)}, f, indent=1)
+        json.dump(
+            {
+                "commit": commit,
+                "dirty": dirty,
+                "seconds": round(seconds, 1),
+                "load_1min_before": l0,
+                "load_1min_after": l1,
+                "started": started,
+                "argv": _fmt_argv(argv),
+            },
+            f,
+            indent=1,
+        )
     return out_path
 
 
 # ------------------------------------------------------------------ rerun: is the recording still true?
+
 
 def _timing_key(path):
     leaf = path.lower()
@@ -417,10 +883,14 @@ def compare(old, new, rtol=0.0, atol=0.0, path=""):
         for i, (a, b) in enumerate(zip(old, new)):
             out += compare(a, b, rtol, atol, f"{path}.{i}")
         return out
-    if isinstance(old, bool) or isinstance(new, bool) or not isinstance(old, (int, float)) \
-            or not isinstance(new, (int, float)):
+    if (
+        isinstance(old, bool)
+        or isinstance(new, bool)
+        or not isinstance(old, (int, float))
+        or not isinstance(new, (int, float))
+    ):
         if isinstance(old, str) and isinstance(new, str) and (os.sep in old or old.startswith("/")):
-            return []                          # paths differ between runs (temporary folders)
+            return []  # paths differ between runs (temporary folders)
         return [] if old == new else [f"{path}: recorded {old!r}, now {new!r}"]
     if old is None or new is None:
         return [] if old == new else [f"{path}: recorded {old!r}, now {new!r}"]
@@ -461,6 +931,7 @@ DOCS_IMG = os.path.join(ROOT, "docs", "img")
 
 def _sha256(path):
     import hashlib
+
     with open(path, "rb") as f:
         return hashlib.sha256(f.read()).hexdigest()
 
@@ -469,12 +940,15 @@ def copy_pictures():
     """Copy the pictures of the recorded demo run (docs/figures/demo.json) from out/demo/pictures to
     docs/img, refusing any picture that is not the one that run made."""
     import shutil
+
     pics = load_recording("demo")["data"]["story"]["pictures"]
     for name, sha in pics.items():
         src = os.path.join(DEMO_PICTURES, name)
         if not os.path.isfile(src) or _sha256(src) != sha:
-            raise SystemExit(f"error: {os.path.relpath(src, ROOT)} is not the picture of the recorded demo run "
-                             f"(docs/figures/demo.json): run `make docs-images` (demo + record + copy)")
+            raise SystemExit(
+                f"error: {os.path.relpath(src, ROOT)} is not the picture of the recorded demo run "
+                f"(docs/figures/demo.json): run `make docs-images` (demo + record + copy)"
+            )
         shutil.copyfile(src, os.path.join(DOCS_IMG, name))
         print(f"[figures] docs/img/{name}")
 
@@ -485,7 +959,9 @@ def main(argv=None):
     sub.add_parser("list", help="every source and its recording")
     r = sub.add_parser("record", help="run a source's command and record its output in docs/figures/")
     r.add_argument("names", nargs="+", help="source names (see list), or 'cheap'")
-    r.add_argument("--from", dest="from_file", help="record this file (written by the source's command) instead of running it")
+    r.add_argument(
+        "--from", dest="from_file", help="record this file (written by the source's command) instead of running it"
+    )
     r = sub.add_parser("run", help="run a source's command, keep its output for `record --from` (long runs)")
     r.add_argument("names", nargs="+")
     sub.add_parser("pictures", help="copy the recorded demo run's pictures to docs/img")
@@ -500,8 +976,11 @@ def main(argv=None):
                 state = f"recorded {rec['recorded_at']} at {rec['commit']}{' (dirty)' if rec['dirty'] else ''}"
             else:
                 state = "not recorded"
-            cmd = (" && ".join(_fmt_argv(a) for a in source_steps(name)) if "steps" in s
-                   else _fmt_argv(source_argv(name, "out/figures/" + name + ".json")))
+            cmd = (
+                " && ".join(_fmt_argv(a) for a in source_steps(name))
+                if "steps" in s
+                else _fmt_argv(source_argv(name, "out/figures/" + name + ".json"))
+            )
             print(f"{name:24s} {s['cost']:9s} {state}\n    {cmd}")
         return 0
     if a.cmd == "pictures":

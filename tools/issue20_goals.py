@@ -1,7 +1,7 @@
 """Issue 20's goals measured on captures nobody tuned on, through the CLI exactly as a user runs it.
 
 Each goal has its own subcommand (a few minutes each on a 2-core machine) that makes its capture
-if it is missing (``--remake`` makes it again), runs ``python -m addon ...`` in subprocesses (this
+if it is missing (``--remake`` makes it again), runs ``python -m clothfit ...`` in subprocesses (this
 driver never imports bpy), and merges its rows into one JSON (``--json``; rows of other goals are
 kept). A row: the capture, the goal, the figure reached, the target, pass/fail, the commands, wall
 and CPU seconds, the machine's load (``uptime``) and the commits it ran at.
@@ -43,6 +43,7 @@ and CPU seconds, the machine's load (``uptime``) and the commits it ran at.
     python tools/issue20_goals.py all --json out/issue20/goals.json
     python tools/issue20_goals.py table out/issue20/goals.json       # the Markdown table
 """
+
 from __future__ import annotations
 
 import argparse
@@ -66,21 +67,54 @@ GOALS = ("exact", "offsets", "continuum", "collider", "time")
 
 # the captures' inputs, chosen once and recorded here (near Blender's defaults: tension 15, compression 15,
 # shear 5, bending 0.5, air 1; not equal to them, and not the issue's table's)
-EXACT = {"settings": {"tension_stiffness": 12.0, "compression_stiffness": 12.0, "shear_stiffness": 6.0,
-                      "bending_stiffness": 0.7, "air_damping": 1.3},
-         "seed": 7, "rig": "lab18", "resolution": "240x320", "noise": 0.05}
-OFFSETS = {"settings": {"tension_stiffness": 18.0, "compression_stiffness": 18.0, "shear_stiffness": 4.0,
-                        "bending_stiffness": 0.35, "air_damping": 0.8},
-           "seed": 11, "rig": "lab18", "resolution": "240x320", "noise": 0.05,
-           "release_early_s": 0.020, "pin_off_m": 0.002, "direction_seed": 20,
-           "uncertain": {"time_offset": 0.05, "handles": 0.005}}
-TIME = {"settings": {"tension_stiffness": 13.0, "compression_stiffness": 13.0, "shear_stiffness": 5.5,
-                     "bending_stiffness": 0.6, "air_damping": 1.2},
-        "seed": 5, "rig": "lab18", "grid": 21, "resolution": "480x640", "noise": 0.05}
+EXACT = {
+    "settings": {
+        "tension_stiffness": 12.0,
+        "compression_stiffness": 12.0,
+        "shear_stiffness": 6.0,
+        "bending_stiffness": 0.7,
+        "air_damping": 1.3,
+    },
+    "seed": 7,
+    "rig": "lab18",
+    "resolution": "240x320",
+    "noise": 0.05,
+}
+OFFSETS = {
+    "settings": {
+        "tension_stiffness": 18.0,
+        "compression_stiffness": 18.0,
+        "shear_stiffness": 4.0,
+        "bending_stiffness": 0.35,
+        "air_damping": 0.8,
+    },
+    "seed": 11,
+    "rig": "lab18",
+    "resolution": "240x320",
+    "noise": 0.05,
+    "release_early_s": 0.020,
+    "pin_off_m": 0.002,
+    "direction_seed": 20,
+    "uncertain": {"time_offset": 0.05, "handles": 0.005},
+}
+TIME = {
+    "settings": {
+        "tension_stiffness": 13.0,
+        "compression_stiffness": 13.0,
+        "shear_stiffness": 5.5,
+        "bending_stiffness": 0.6,
+        "air_damping": 1.2,
+    },
+    "seed": 5,
+    "rig": "lab18",
+    "grid": 21,
+    "resolution": "480x640",
+    "noise": 0.05,
+}
 SOFT = {"tension_stiffness": 5.0, "compression_stiffness": 5.0, "shear_stiffness": 2.0, "bending_stiffness": 0.05}
 COLLIDER = {"scene": "drop", "truth_settings": SOFT, "budget": 600, "workers": 2, "train_cameras": 4}
 TRAIN_CAMERAS = 4
-TODAY_PCT = {"cotton": 31.0, "silk": 50.0}     # issue 20's baseline held-out E_sil (8 held-out cameras, odd frames)
+TODAY_PCT = {"cotton": 31.0, "silk": 50.0}  # issue 20's baseline held-out E_sil (8 held-out cameras, odd frames)
 
 TARGETS = {  # goal key -> (target value, unit, what)
     "exact.heldout_ratio": (1.2, "x floor", "held-out E_sil / floor"),
@@ -96,6 +130,7 @@ TARGETS = {  # goal key -> (target value, unit, what)
 
 # ================================================================================ bookkeeping
 
+
 def git(*args):
     try:
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
@@ -107,12 +142,27 @@ def commits() -> dict:
     """The commit the goals ran at, the main commit it contains (main itself when merged, else the
     merge base) and whether addon/ or tools/ had uncommitted changes."""
     head = git("rev-parse", "--short=7", "HEAD")
-    merged = subprocess.run(["git", "merge-base", "--is-ancestor", "main", "HEAD"], cwd=ROOT,
-                            capture_output=True).returncode == 0
+    merged = (
+        subprocess.run(["git", "merge-base", "--is-ancestor", "main", "HEAD"], cwd=ROOT, capture_output=True).returncode
+        == 0
+    )
     base = git("rev-parse", "--short=7", "main") if merged else git("merge-base", "HEAD", "main")
-    return {"commit": head, "main_commit": (base or "")[:7] or None,
-            "dirty": bool(git("status", "--porcelain", "--", "addon", "tools", ":!tools/figures.py", ":!tools/docs_check.py",
-                              ":!tools/docs_views.py"))}
+    return {
+        "commit": head,
+        "main_commit": (base or "")[:7] or None,
+        "dirty": bool(
+            git(
+                "status",
+                "--porcelain",
+                "--",
+                "addon",
+                "tools",
+                ":!tools/figures.py",
+                ":!tools/docs_check.py",
+                ":!tools/docs_views.py",
+            )
+        ),
+    }
 
 
 def load_text() -> str:
@@ -133,7 +183,7 @@ def fmt_cmd(argv) -> str:
 
 
 class Runner:
-    """Runs ``python -m addon ...`` (or a tool) in a subprocess, logs it, times it (wall, CPU of the
+    """Runs ``python -m clothfit ...`` (or a tool) in a subprocess, logs it, times it (wall, CPU of the
     child and its waited children) and returns its stdout JSON."""
 
     def __init__(self, log):
@@ -141,7 +191,7 @@ class Runner:
         os.makedirs(os.path.dirname(os.path.abspath(log)), exist_ok=True)
 
     def __call__(self, argv, parse=True):
-        argv = [sys.executable, "-m", "addon", *argv] if argv[0] != sys.executable else list(argv)
+        argv = [sys.executable, "-m", "clothfit", *argv] if argv[0] != sys.executable else list(argv)
         load = load_text()
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
@@ -150,27 +200,36 @@ class Runner:
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
         with open(self.log, "a") as f:
-            f.write(f"$ {fmt_cmd(argv)}\n[exit {p.returncode}, {wall:.1f} s wall, {cpu:.1f} s CPU, {load}]\n"
-                    f"{p.stderr}\n{p.stdout if not parse else p.stdout[:4000]}\n")
+            f.write(
+                f"$ {fmt_cmd(argv)}\n[exit {p.returncode}, {wall:.1f} s wall, {cpu:.1f} s CPU, {load}]\n"
+                f"{p.stderr}\n{p.stdout if not parse else p.stdout[:4000]}\n"
+            )
         if p.returncode != 0:
             tail = (p.stderr.strip().splitlines() or ["(no message)"])[-1]
             raise SystemExit(f"error: `{fmt_cmd(argv)}` exited with {p.returncode}: {tail}")
         doc = json.loads(p.stdout) if parse else None
-        return doc, {"command": fmt_cmd(argv), "wall_s": round(wall, 1), "cpu_s": round(cpu, 1), "load": load,
-                     "load_after": load_text()}
+        return doc, {
+            "command": fmt_cmd(argv),
+            "wall_s": round(wall, 1),
+            "cpu_s": round(cpu, 1),
+            "load": load,
+            "load_after": load_text(),
+        }
 
 
 def fit_says(path) -> dict:
     """What a fit result states beyond its settings: the floor block (its errors beside the images'
     noise floor), the quality it chose, its manipulation note, the model it ended with."""
-    from addon.core.jsonio import read_json
+    from clothfit.core.jsonio import read_json
+
     r = read_json(path, "fit result")
-    return {k: r.get(k) for k in ("floor", "quality_choice", "manipulation_note", "model", "stages")
-            if r.get(k) is not None}
+    return {
+        k: r.get(k) for k in ("floor", "quality_choice", "manipulation_note", "model", "stages") if r.get(k) is not None
+    }
 
 
 def has_uncertain_option() -> bool:
-    p = subprocess.run([sys.executable, "-m", "addon", "fit", "--help"], cwd=ROOT, capture_output=True, text=True)
+    p = subprocess.run([sys.executable, "-m", "clothfit", "fit", "--help"], cwd=ROOT, capture_output=True, text=True)
     return "--uncertain" in p.stdout
 
 
@@ -179,35 +238,59 @@ def row(goal, capture, key, value, run, status="measured", details=None, target_
     tk = target_key or f"{goal}.{key}"
     target, unit, what = TARGETS[tk]
     ok = None if value is None or (isinstance(value, float) and math.isnan(value)) else bool(value <= target)
-    return {"goal": goal, "capture": capture, "key": key, "what": what, "value": value, "unit": unit,
-            "target": target, "pass": ok, "status": status, "command": run.get("command"), "wall_s": run.get("wall_s"),
-            "cpu_s": run.get("cpu_s"), "load": run.get("load"), "load_after": run.get("load_after"),
-            "details": details or {}}
+    return {
+        "goal": goal,
+        "capture": capture,
+        "key": key,
+        "what": what,
+        "value": value,
+        "unit": unit,
+        "target": target,
+        "pass": ok,
+        "status": status,
+        "command": run.get("command"),
+        "wall_s": run.get("wall_s"),
+        "cpu_s": run.get("cpu_s"),
+        "load": run.get("load"),
+        "load_after": run.get("load_after"),
+        "details": details or {},
+    }
 
 
 def merge_rows(path, goal, rows, extra=None, label="after") -> dict:
     """Replace the rows of ``goal`` measured as ``label`` ("before": the fit without the lead's issue-20
     features; "after": with them) in the JSON at ``path``, others kept; returns the document."""
-    from addon.core.jsonio import read_json
-    from addon.core.safeio import atomic_json
+    from clothfit.core.jsonio import read_json
+    from clothfit.core.safeio import atomic_json
+
     doc = read_json(path, "goals JSON") if os.path.isfile(path) else {}
     for r in rows:
         r["label"] = label
-    new = {(r["goal"], r["label"], r["capture"]) for r in rows}      # a goal run for some captures keeps the others'
+    new = {(r["goal"], r["label"], r["capture"]) for r in rows}  # a goal run for some captures keeps the others'
     kept = [r for r in doc.get("rows", []) if (r["goal"], r.get("label", "before"), r["capture"]) not in new]
     order = {g: i for i, g in enumerate(GOALS)}
-    doc = {"what": "issue 20's goals measured on captures nobody tuned on, through the CLI (tools/issue20_goals.py)",
-           "inputs": {"exact": EXACT, "offsets": OFFSETS, "time": TIME, "collider": COLLIDER,
-                      "today_heldout_pct": TODAY_PCT, "train_cameras": TRAIN_CAMERAS},
-           "runs": dict(doc.get("runs", {})),
-           "rows": sorted(kept + rows, key=lambda r: (order.get(r["goal"], 99), r.get("label") != "before"))}
-    doc["runs"][f"{goal} ({label})"] = dict(commits(), finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-                                            **(extra or {}))
+    doc = {
+        "what": "issue 20's goals measured on captures nobody tuned on, through the CLI (tools/issue20_goals.py)",
+        "inputs": {
+            "exact": EXACT,
+            "offsets": OFFSETS,
+            "time": TIME,
+            "collider": COLLIDER,
+            "today_heldout_pct": TODAY_PCT,
+            "train_cameras": TRAIN_CAMERAS,
+        },
+        "runs": dict(doc.get("runs", {})),
+        "rows": sorted(kept + rows, key=lambda r: (order.get(r["goal"], 99), r.get("label") != "before")),
+    }
+    doc["runs"][f"{goal} ({label})"] = dict(
+        commits(), finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **(extra or {})
+    )
     atomic_json(path, doc)
     return doc
 
 
 # ============================================================================ formatting
+
 
 def _fmt_value(v, unit):
     if v is None:
@@ -233,8 +316,7 @@ def _basis(r) -> str:
 
 def format_table(doc) -> str:
     """The rows as a Markdown table (one line per row), then the commits each goal ran at."""
-    out = ["| capture | goal | figure | target | pass | command | wall s | load |",
-           "|---|---|---|---|---|---|---|---|"]
+    out = ["| capture | goal | figure | target | pass | command | wall s | load |", "|---|---|---|---|---|---|---|---|"]
     for r in doc.get("rows", []):
         unit = r["unit"]
         tgt = f"<= {r['target']:.2f}{unit.split(' ')[0]}" if unit.startswith("x") else f"<= {r['target']:g} {unit}"
@@ -245,22 +327,53 @@ def format_table(doc) -> str:
             fig += f" ({r['status']})"
         ok = "-" if r["pass"] is None else ("pass" if r["pass"] else "FAIL")
         wall = "-" if r.get("wall_s") is None else f"{r['wall_s']:.0f}"
-        cells = [r["capture"], f"{r['goal']} ({r.get('label', 'before')}): {r['what']}", fig, tgt, ok, f"`{r.get('command') or '-'}`", wall,
-                 r.get("load") or "-"]
+        cells = [
+            r["capture"],
+            f"{r['goal']} ({r.get('label', 'before')}): {r['what']}",
+            fig,
+            tgt,
+            ok,
+            f"`{r.get('command') or '-'}`",
+            wall,
+            r.get("load") or "-",
+        ]
         out.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
     runs = doc.get("runs", {})
     if runs:
-        out += ["", "Commits: " + "; ".join(
-            f"{g} at {v.get('commit')}{' (dirty)' if v.get('dirty') else ''} (main {v.get('main_commit')})"
-            for g, v in runs.items())]
+        out += [
+            "",
+            "Commits: "
+            + "; ".join(
+                f"{g} at {v.get('commit')}{' (dirty)' if v.get('dirty') else ''} (main {v.get('main_commit')})"
+                for g, v in runs.items()
+            ),
+        ]
     return "\n".join(out)
 
 
 # ============================================================================ captures
 
+
 def synth_cli(run, out, spec):
-    return run(["synth", "--out", out, "--model", "blender", "--rig", spec["rig"], "--resolution", spec["resolution"],
-                "--noise", str(spec["noise"]), "--seed", str(spec["seed"]), "--params", json.dumps(spec["settings"])])
+    return run(
+        [
+            "synth",
+            "--out",
+            out,
+            "--model",
+            "blender",
+            "--rig",
+            spec["rig"],
+            "--resolution",
+            spec["resolution"],
+            "--noise",
+            str(spec["noise"]),
+            "--seed",
+            str(spec["seed"]),
+            "--params",
+            json.dumps(spec["settings"]),
+        ]
+    )
 
 
 def unit_directions(n, seed):
@@ -293,9 +406,10 @@ def shift_capture(true_root, out_root, early_s, pin_off_m, direction_seed, uncer
     """Copy the capture ``true_root`` to ``out_root`` with the shifted scenario and frame times (also
     in shapes.npz) and the ``uncertain`` block; returns the shift (recorded in the capture's meta:
     ``issue20_shift``)."""
-    from addon.core.jsonio import read_json
-    from addon.core.observation.capture import load_capture
-    from addon.core.safeio import atomic_json
+    from clothfit.core.jsonio import read_json
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.safeio import atomic_json
+
     if os.path.isdir(out_root):
         shutil.rmtree(out_root)
     shutil.copytree(true_root, out_root, ignore=shutil.ignore_patterns("capture.json", "shapes.npz"))
@@ -310,29 +424,44 @@ def shift_capture(true_root, out_root, early_s, pin_off_m, direction_seed, uncer
             arrays = {k: z[k] for k in z.files}
         arrays["frame_times"] = np.array(doc["frame_times"])
         np.savez(os.path.join(out_root, doc["shapes"]), **arrays)
-    shift = {"release_marked_early_s": early_s, "declared_pin_minus_true_m": offs.tolist(),
-             "expected_time_offset_s": early_s, "expected_handle_offset_m": (-offs).tolist(),
-             "direction_seed": direction_seed, "true_capture": os.path.relpath(true_root, ROOT),
-             "sign": "capture time = time since the true release + early_s; true time = capture time - "
-                     "time_offset_s, so time_offset_s = +early_s; a pin declared at true + d needs the offset -d"}
+    shift = {
+        "release_marked_early_s": early_s,
+        "declared_pin_minus_true_m": offs.tolist(),
+        "expected_time_offset_s": early_s,
+        "expected_handle_offset_m": (-offs).tolist(),
+        "direction_seed": direction_seed,
+        "true_capture": os.path.relpath(true_root, ROOT),
+        "sign": "capture time = time since the true release + early_s; true time = capture time - "
+        "time_offset_s, so time_offset_s = +early_s; a pin declared at true + d needs the offset -d",
+    }
     doc.setdefault("meta", {})["issue20_shift"] = shift
     atomic_json(os.path.join(out_root, "capture.json"), doc)
-    load_capture(out_root)                     # the copy reads as a capture
+    load_capture(out_root)  # the copy reads as a capture
     return shift
 
 
 def make_time_capture(out):
     """21 x 21 cloth, lab18 at 480 x 640, TIME settings (synth_capture: the CLI's synth has no grid option)."""
-    from addon.core import defaults as D
-    from addon.core.observation.synth import synth_capture
-    from addon.core.physics.scenario import ClothGrid, paper_scenario
+    from clothfit.core import defaults as D
+    from clothfit.core.observation.synth import synth_capture
+    from clothfit.core.physics.scenario import ClothGrid, paper_scenario
+
     h, w = (int(x) for x in TIME["resolution"].split("x"))
     sc = paper_scenario(ClothGrid(TIME["grid"], TIME["grid"], D.CLOTH_SIDE))
-    synth_capture(out, TIME["settings"], rig=TIME["rig"], noise=TIME["noise"], resolution=(h, w), seed=TIME["seed"],
-                  scenario=sc, model="blender")
+    synth_capture(
+        out,
+        TIME["settings"],
+        rig=TIME["rig"],
+        noise=TIME["noise"],
+        resolution=(h, w),
+        seed=TIME["seed"],
+        scenario=sc,
+        model="blender",
+    )
 
 
 # ============================================================================ goals
+
 
 def _p(a, *parts):
     return os.path.join(a.out, *parts)
@@ -348,22 +477,34 @@ def goal_exact(a, run):
     if a.remake or not os.path.isfile(os.path.join(cap, "capture.json")):
         synth_cli(run, cap, EXACT)
     res = _p(a, "fits", "exact.json")
-    fit, frun = run(["fit", cap, "--cameras", f"n:{TRAIN_CAMERAS}", "--times", "train", "--out", res, "--force",
-                     "--quiet"])
+    fit, frun = run(
+        ["fit", cap, "--cameras", f"n:{TRAIN_CAMERAS}", "--times", "train", "--out", res, "--force", "--quiet"]
+    )
     ev, _ = _heldout(run, cap, res)
     fl, _ = _heldout(run, cap)
     est, _ = run(["floor", cap, "--cameras", f"heldout:{TRAIN_CAMERAS}", "--times", "test"])
     ratio = ev["silhouette_error_pct"] / fl["silhouette_error_pct"]
-    det = {"heldout_E_sil_pct": ev["silhouette_error_pct"], "floor_E_sil_pct": fl["silhouette_error_pct"],
-           "floor_estimated_pct": 100 * est["floor"], "shape_error_mm": ev.get("shape_error_mm"),
-           "train_E_sil_pct": fit.get("best_E_sil_mean_pct"), "evaluations": fit.get("evaluations"),
-           "stop_reason": fit.get("stop_reason"), "fit_floor_block": fit.get("floor"),
-           "blender_cloth": fit.get("blender_cloth"), "true_settings": EXACT["settings"], "noise_seed": EXACT["seed"],
-           "heldout": f"evaluate --cameras heldout:{TRAIN_CAMERAS} --times test (14 cameras x 15 frames)",
-           "fit_says": fit_says(res)}
-    print(f"exact: held-out {ev['silhouette_error_pct']:.3f} % / floor {fl['silhouette_error_pct']:.3f} % = "
-          f"{ratio:.2f}x; shape {ev.get('shape_error_mm', float('nan')):.2f} mm; fit {frun['wall_s']:.0f} s "
-          f"({frun['load']})", flush=True)
+    det = {
+        "heldout_E_sil_pct": ev["silhouette_error_pct"],
+        "floor_E_sil_pct": fl["silhouette_error_pct"],
+        "floor_estimated_pct": 100 * est["floor"],
+        "shape_error_mm": ev.get("shape_error_mm"),
+        "train_E_sil_pct": fit.get("best_E_sil_mean_pct"),
+        "evaluations": fit.get("evaluations"),
+        "stop_reason": fit.get("stop_reason"),
+        "fit_floor_block": fit.get("floor"),
+        "blender_cloth": fit.get("blender_cloth"),
+        "true_settings": EXACT["settings"],
+        "noise_seed": EXACT["seed"],
+        "heldout": f"evaluate --cameras heldout:{TRAIN_CAMERAS} --times test (14 cameras x 15 frames)",
+        "fit_says": fit_says(res),
+    }
+    print(
+        f"exact: held-out {ev['silhouette_error_pct']:.3f} % / floor {fl['silhouette_error_pct']:.3f} % = "
+        f"{ratio:.2f}x; shape {ev.get('shape_error_mm', float('nan')):.2f} mm; fit {frun['wall_s']:.0f} s "
+        f"({frun['load']})",
+        flush=True,
+    )
     return [row("exact", "exact (synth blender, lab18 240 x 320)", "heldout_ratio", ratio, frun, details=det)], {}
 
 
@@ -372,65 +513,122 @@ def goal_offsets(a, run):
     if a.remake or not os.path.isfile(os.path.join(true_cap, "capture.json")):
         synth_cli(run, true_cap, OFFSETS)
     if a.remake or not os.path.isfile(os.path.join(cap, "capture.json")):
-        shift_capture(true_cap, cap, OFFSETS["release_early_s"], OFFSETS["pin_off_m"], OFFSETS["direction_seed"],
-                      OFFSETS["uncertain"])
-    from addon.core.jsonio import read_json
+        shift_capture(
+            true_cap,
+            cap,
+            OFFSETS["release_early_s"],
+            OFFSETS["pin_off_m"],
+            OFFSETS["direction_seed"],
+            OFFSETS["uncertain"],
+        )
+    from clothfit.core.jsonio import read_json
+
     shift = read_json(os.path.join(cap, "capture.json"), "capture")["meta"]["issue20_shift"]
     feature = has_uncertain_option()
     res = _p(a, "fits", "offsets.json")
-    from addon.core import defaults as D
+    from clothfit.core import defaults as D
+
     early = shift["release_marked_early_s"]
     train, test = (",".join(f"{t:.9g}" for t in shifted_times(ts, early)) for ts in (D.TRAIN_TIMES, D.TEST_TIMES))
-    fit, frun = run(["fit", cap, "--cameras", f"n:{TRAIN_CAMERAS}", "--times", train, "--out", res, "--force",
-                     "--quiet"])
+    fit, frun = run(
+        ["fit", cap, "--cameras", f"n:{TRAIN_CAMERAS}", "--times", train, "--out", res, "--force", "--quiet"]
+    )
     ev, _ = _heldout(run, cap, res, times=test)
     fl, _ = _heldout(run, true_cap)
-    declared, _ = _heldout(run, cap, times=test)          # the true settings on the declared (shifted) set-up
+    declared, _ = _heldout(run, cap, times=test)  # the true settings on the declared (shifted) set-up
     ratio = ev["silhouette_error_pct"] / fl["silhouette_error_pct"]
     full = read_json(res, "fit result")
     status = "measured" if feature else "before: today's fit ignores the uncertain block"
-    det = {"heldout_E_sil_pct": ev["silhouette_error_pct"], "floor_E_sil_pct": fl["silhouette_error_pct"],
-           "shape_error_mm": ev.get("shape_error_mm"), "train_E_sil_pct": fit.get("best_E_sil_mean_pct"),
-           "evaluations": fit.get("evaluations"), "shift": shift, "fit_has_uncertain_option": feature,
-           "time_offset_s": full.get("time_offset_s"), "time_offset_uncertainty_s": full.get("time_offset_uncertainty_s"),
-           "handles": full.get("handles"),
-           "true_settings_on_declared_setup_pct": declared["silhouette_error_pct"],
-           "floor": "the true settings on the unshifted capture (the true set-up), scored the same way",
-           "times": "train / test: the paper's times plus the 20 ms the release was marked early",
-           "fit_says": fit_says(res)}
-    rows = [row("offsets", "offsets (release 20 ms early, pins 2 mm off)", "heldout_ratio", ratio, frun, status,
-                det)]
+    det = {
+        "heldout_E_sil_pct": ev["silhouette_error_pct"],
+        "floor_E_sil_pct": fl["silhouette_error_pct"],
+        "shape_error_mm": ev.get("shape_error_mm"),
+        "train_E_sil_pct": fit.get("best_E_sil_mean_pct"),
+        "evaluations": fit.get("evaluations"),
+        "shift": shift,
+        "fit_has_uncertain_option": feature,
+        "time_offset_s": full.get("time_offset_s"),
+        "time_offset_uncertainty_s": full.get("time_offset_uncertainty_s"),
+        "handles": full.get("handles"),
+        "true_settings_on_declared_setup_pct": declared["silhouette_error_pct"],
+        "floor": "the true settings on the unshifted capture (the true set-up), scored the same way",
+        "times": "train / test: the paper's times plus the 20 ms the release was marked early",
+        "fit_says": fit_says(res),
+    }
+    rows = [row("offsets", "offsets (release 20 ms early, pins 2 mm off)", "heldout_ratio", ratio, frun, status, det)]
     t = full.get("time_offset_s")
     terr = None if t is None else abs(float(t) - shift["expected_time_offset_s"]) * 1000
-    why = ("not estimated: needs the lead's fit --uncertain" if not feature else
-           f"not reported by the fit: {full.get('manipulation_note') or 'no time_offset_s'}")
-    rows.append(row("offsets", "offsets", "time_offset_error_ms", terr, frun, "measured" if t is not None else why,
-                    {"time_offset_s": t, "expected_s": shift["expected_time_offset_s"]}))
+    why = (
+        "not estimated: needs the lead's fit --uncertain"
+        if not feature
+        else f"not reported by the fit: {full.get('manipulation_note') or 'no time_offset_s'}"
+    )
+    rows.append(
+        row(
+            "offsets",
+            "offsets",
+            "time_offset_error_ms",
+            terr,
+            frun,
+            "measured" if t is not None else why,
+            {"time_offset_s": t, "expected_s": shift["expected_time_offset_s"]},
+        )
+    )
     hs = full.get("handles") or []
     exp = np.asarray(shift["expected_handle_offset_m"])
     for k in range(len(exp)):
         h = hs[k] if k < len(hs) else None
-        err = None if not h or h.get("offset_m") is None else float(
-            np.linalg.norm(np.asarray(h["offset_m"]) - exp[k]) * 1000)
-        rows.append(row("offsets", f"offsets pin {k}" + (f" (vertex {h['vertex']})" if h else ""), "pin_error_mm",
-                        err, frun, "measured" if err is not None else why,
-                        {"offset_m": None if not h else h.get("offset_m"), "expected_m": exp[k].tolist()}))
-    print(f"offsets: held-out {ev['silhouette_error_pct']:.3f} % / floor {fl['silhouette_error_pct']:.3f} % = "
-          f"{ratio:.2f}x; time offset {t}; fit {frun['wall_s']:.0f} s ({frun['load']})", flush=True)
+        err = (
+            None
+            if not h or h.get("offset_m") is None
+            else float(np.linalg.norm(np.asarray(h["offset_m"]) - exp[k]) * 1000)
+        )
+        rows.append(
+            row(
+                "offsets",
+                f"offsets pin {k}" + (f" (vertex {h['vertex']})" if h else ""),
+                "pin_error_mm",
+                err,
+                frun,
+                "measured" if err is not None else why,
+                {"offset_m": None if not h else h.get("offset_m"), "expected_m": exp[k].tolist()},
+            )
+        )
+    print(
+        f"offsets: held-out {ev['silhouette_error_pct']:.3f} % / floor {fl['silhouette_error_pct']:.3f} % = "
+        f"{ratio:.2f}x; time offset {t}; fit {frun['wall_s']:.0f} s ({frun['load']})",
+        flush=True,
+    )
     return rows, {}
 
 
 def goal_continuum(a, run):
     import continuum_truth as CT
-    from addon.core.observation.camera import select_training
-    from addon.core.observation.capture import load_capture
+    from clothfit.core.observation.camera import select_training
+    from clothfit.core.observation.capture import load_capture
+
     cdir = _p(a, "continuum")
     chosen = [m for m in (a.materials or ",".join(CT.BASELINE_MATERIALS)).split(",") if m]
-    mats = [m for m in chosen if a.remake or not os.path.isfile(os.path.join(cdir, m, "capture.json"))
-            or not os.path.isfile(os.path.join(cdir, m + "_clean", "capture.json"))]
+    mats = [
+        m
+        for m in chosen
+        if a.remake
+        or not os.path.isfile(os.path.join(cdir, m, "capture.json"))
+        or not os.path.isfile(os.path.join(cdir, m + "_clean", "capture.json"))
+    ]
     if mats:
-        run([sys.executable, os.path.join(ROOT, "tools", "continuum_truth.py"), "make", "--out", cdir,
-             "--materials", ",".join(mats)], parse=False)
+        run(
+            [
+                sys.executable,
+                os.path.join(ROOT, "tools", "continuum_truth.py"),
+                "make",
+                "--out",
+                cdir,
+                "--materials",
+                ",".join(mats),
+            ],
+            parse=False,
+        )
     rows = []
     for m in chosen:
         cap = os.path.join(cdir, m)
@@ -438,43 +636,74 @@ def goal_continuum(a, run):
         even, odd = CT.even_odd(c)
         _, held = select_training(c.cameras, TRAIN_CAMERAS)
         res = _p(a, "fits", f"continuum_{m}.json")
-        fit, frun = run(["fit", cap, "--model", "blender", "--cameras", f"n:{TRAIN_CAMERAS}", "--out", res,
-                         "--force", "--quiet"])
-        ev, _ = run(["evaluate", cap, "--params", res, "--cameras", f"heldout:{TRAIN_CAMERAS}", "--times",
-                     CT.times_arg(odd)])
+        fit, frun = run(
+            ["fit", cap, "--model", "blender", "--cameras", f"n:{TRAIN_CAMERAS}", "--out", res, "--force", "--quiet"]
+        )
+        ev, _ = run(
+            ["evaluate", cap, "--params", res, "--cameras", f"heldout:{TRAIN_CAMERAS}", "--times", CT.times_arg(odd)]
+        )
         ev_all, _ = run(["evaluate", cap, "--params", res, "--cameras", f"heldout:{TRAIN_CAMERAS}"])
         fl = CT.floor(c, held, odd)
-        from addon.core.jsonio import read_json
+        from clothfit.core.jsonio import read_json
+
         full = read_json(res, "fit result")
-        det = {"heldout_E_sil_pct": ev["silhouette_error_pct"], "heldout_all_frames_E_sil_pct":
-               ev_all["silhouette_error_pct"], "today_heldout_pct": TODAY_PCT[m], "truth_floor_pct": fl,
-               "shape_error_mm": ev.get("shape_error_mm"), "shape_error_all_frames_mm": ev_all.get("shape_error_mm"),
-               "train_E_sil_pct": fit.get("best_E_sil_mean_pct"), "evaluations": fit.get("evaluations"),
-               "stop_reason": fit.get("stop_reason"), "blender_cloth": fit.get("blender_cloth"),
-               "blender_scene": fit.get("blender_scene"), "result_floor_block": full.get("floor"),
-               "heldout": f"{len(held)} held-out cameras x the {len(odd)} odd frames (continuum_truth's split)",
-               "fit_says": fit_says(res)}
-        rows.append(row("continuum", f"continuum {m} (Warp)", "heldout_vs_today",
-                        ev["silhouette_error_pct"] / TODAY_PCT[m], frun, details=det))
-        rows.append(row("continuum", f"continuum {m} (Warp)", "shape_mm", ev.get("shape_error_mm"), frun,
-                        details={"result_floor_block": full.get("floor")}))
-        print(f"continuum {m}: held-out {ev['silhouette_error_pct']:.2f} % (today {TODAY_PCT[m]:g} %, truth floor "
-              f"{fl:.2f} %), shape {ev.get('shape_error_mm', float('nan')):.2f} mm; floor block "
-              f"{'present' if full.get('floor') else 'absent'}; fit {frun['wall_s']:.0f} s ({frun['load']})", flush=True)
+        det = {
+            "heldout_E_sil_pct": ev["silhouette_error_pct"],
+            "heldout_all_frames_E_sil_pct": ev_all["silhouette_error_pct"],
+            "today_heldout_pct": TODAY_PCT[m],
+            "truth_floor_pct": fl,
+            "shape_error_mm": ev.get("shape_error_mm"),
+            "shape_error_all_frames_mm": ev_all.get("shape_error_mm"),
+            "train_E_sil_pct": fit.get("best_E_sil_mean_pct"),
+            "evaluations": fit.get("evaluations"),
+            "stop_reason": fit.get("stop_reason"),
+            "blender_cloth": fit.get("blender_cloth"),
+            "blender_scene": fit.get("blender_scene"),
+            "result_floor_block": full.get("floor"),
+            "heldout": f"{len(held)} held-out cameras x the {len(odd)} odd frames (continuum_truth's split)",
+            "fit_says": fit_says(res),
+        }
+        rows.append(
+            row(
+                "continuum",
+                f"continuum {m} (Warp)",
+                "heldout_vs_today",
+                ev["silhouette_error_pct"] / TODAY_PCT[m],
+                frun,
+                details=det,
+            )
+        )
+        rows.append(
+            row(
+                "continuum",
+                f"continuum {m} (Warp)",
+                "shape_mm",
+                ev.get("shape_error_mm"),
+                frun,
+                details={"result_floor_block": full.get("floor")},
+            )
+        )
+        print(
+            f"continuum {m}: held-out {ev['silhouette_error_pct']:.2f} % (today {TODAY_PCT[m]:g} %, truth floor "
+            f"{fl:.2f} %), shape {ev.get('shape_error_mm', float('nan')):.2f} mm; floor block "
+            f"{'present' if full.get('floor') else 'absent'}; fit {frun['wall_s']:.0f} s ({frun['load']})",
+            flush=True,
+        )
     return rows, {}
 
 
 # ----------------------------------------------------------------------- collider (bpy in a child)
 
+
 def _collider_child(a):
     """bpy: build the user's .blend (tools/user_scenes.py's drop scene, Blender's defaults), simulate it
     with the SOFT truth (``build``) or replay settings (``replay``); writes npz/json files."""
     import user_scenes as US
+    from clothfit.blender.scene_worker import BlendScene
+    from clothfit.core.safeio import atomic_json
 
-    from addon.blender.scene_worker import BlendScene
-    from addon.core.safeio import atomic_json
     blend = _p(a, "collider", "user.blend")
-    frames = US.FRAME_START + np.arange(0, US.AFTER + 1)          # scene frames: t = 0 and the capture frames
+    frames = US.FRAME_START + np.arange(0, US.AFTER + 1)  # scene frames: t = 0 and the capture frames
     if a.child == "build":
         US.build_scene(COLLIDER["scene"], blend)
         bs = BlendScene(blend)
@@ -484,10 +713,17 @@ def _collider_child(a):
         if r["exploded"]:
             raise SystemExit(f"the soft truth explodes: {r['reason']}")
         np.savez(_p(a, "collider", "truth.npz"), positions=r["positions"], triangles=np.array(info["triangles"]))
-        atomic_json(_p(a, "collider", "scene.json"), {"info": {k: v for k, v in info.items() if k != "triangles"},
-                                                       "truth_settings": truth, "frames": frames.tolist()})
+        atomic_json(
+            _p(a, "collider", "scene.json"),
+            {
+                "info": {k: v for k, v in info.items() if k != "triangles"},
+                "truth_settings": truth,
+                "frames": frames.tolist(),
+            },
+        )
         return
-    from addon.core.jsonio import read_json
+    from clothfit.core.jsonio import read_json
+
     bs = BlendScene(blend)
     res = read_json(a.result, "fit result")
     start = bs.info()["settings"]
@@ -502,13 +738,13 @@ def _collider_capture(a):
     """The capture (no bpy): the truth rasterised by the core on the scene's own triangles for
     user_scenes' 10-camera rig, 5 % boundary noise; shapes in the declared grid's order."""
     import user_scenes as US
+    from clothfit.core.observation.capture import write_capture
+    from clothfit.core.observation.metrics import add_boundary_noise
+    from clothfit.core.observation.raster import silhouette
+    from clothfit.core.observation.synth import noise_rng
+    from clothfit.core.physics.blender_scene import grid_order
+    from clothfit.core.physics.scenario import ClothGrid
 
-    from addon.core.observation.capture import write_capture
-    from addon.core.observation.metrics import add_boundary_noise
-    from addon.core.observation.raster import silhouette
-    from addon.core.observation.synth import noise_rng
-    from addon.core.physics.blender_scene import grid_order
-    from addon.core.physics.scenario import ClothGrid
     z = np.load(_p(a, "collider", "truth.npz"))
     X, tris = z["positions"], z["triangles"]
     grid = ClothGrid(US.CUTS + 1, US.CUTS + 1, US.side(), height=US.HEIGHT)
@@ -518,16 +754,29 @@ def _collider_capture(a):
     scen = US.declared_scenario(COLLIDER["scene"], grid)
     Xc = X[1:]
     cams = US.rig()
-    sils = [[add_boundary_noise(silhouette(cam, Xc[f], tris), US.NOISE, noise_rng(US.SEED, ci, f))
-             for f in range(len(Xc))] for ci, cam in enumerate(cams)]
+    sils = [
+        [add_boundary_noise(silhouette(cam, Xc[f], tris), US.NOISE, noise_rng(US.SEED, ci, f)) for f in range(len(Xc))]
+        for ci, cam in enumerate(cams)
+    ]
     with open(_p(a, "collider", "scene.json")) as f:
         meta = json.load(f)
-    write_capture(_p(a, "collider", "capture"), cams, scen, sils, shapes=Xc[:, p],
-                  cloth_mass=meta["truth_settings"]["mass"] * Xc.shape[1],
-                  meta={"generator": "Blender's own Cloth modifier on tools/user_scenes.py's drop scene with a soft "
-                                     "cloth (tools/issue20_goals.py collider)", "true_blender_cloth":
-                        meta["truth_settings"], "mesh_vertex_of_grid_vertex": p.tolist(), "fps": float(US.FPS),
-                        "noise_fraction": US.NOISE, "seed": US.SEED})
+    write_capture(
+        _p(a, "collider", "capture"),
+        cams,
+        scen,
+        sils,
+        shapes=Xc[:, p],
+        cloth_mass=meta["truth_settings"]["mass"] * Xc.shape[1],
+        meta={
+            "generator": "Blender's own Cloth modifier on tools/user_scenes.py's drop scene with a soft "
+            "cloth (tools/issue20_goals.py collider)",
+            "true_blender_cloth": meta["truth_settings"],
+            "mesh_vertex_of_grid_vertex": p.tolist(),
+            "fps": float(US.FPS),
+            "noise_fraction": US.NOISE,
+            "seed": US.SEED,
+        },
+    )
     np.save(_p(a, "collider", "grid_order.npy"), p)
 
 
@@ -541,9 +790,26 @@ def goal_collider(a, run):
         _collider_capture(a)
     blend = os.path.join(cdir, "user.blend")
     res = _p(a, "fits", "collider.json")
-    fit, frun = run(["fit", cap, "--backend", "blender", "--blend", blend, "--cameras", f"n:{COLLIDER['train_cameras']}",
-                     "--max-evaluations", str(COLLIDER["budget"]), "--workers", str(COLLIDER["workers"]), "--out", res,
-                     "--force", "--quiet"])
+    fit, frun = run(
+        [
+            "fit",
+            cap,
+            "--backend",
+            "blender",
+            "--blend",
+            blend,
+            "--cameras",
+            f"n:{COLLIDER['train_cameras']}",
+            "--max-evaluations",
+            str(COLLIDER["budget"]),
+            "--workers",
+            str(COLLIDER["workers"]),
+            "--out",
+            res,
+            "--force",
+            "--quiet",
+        ]
+    )
     run([sys.executable, me, "_collider", "replay", "--out", a.out, "--result", res], parse=False)
     z = np.load(os.path.join(cdir, "replay.npz"))
     p = np.load(os.path.join(cdir, "grid_order.npy"))
@@ -552,16 +818,27 @@ def goal_collider(a, run):
     d = {k: np.linalg.norm(z[k][:, p] - truth, axis=-1) * 1000 for k in z.files}
     start, got = d.get("start"), d.get("fit")
     ratio = None if start is None or got is None else float(got.mean() / start.mean())
-    det = {"replay_fit_mean_mm": None if got is None else float(got.mean()),
-           "replay_fit_max_mm": None if got is None else float(got.max()),
-           "replay_start_mean_mm": None if start is None else float(start.mean()),
-           "replay_start_max_mm": None if start is None else float(start.max()),
-           "train_E_sil_pct": fit.get("best_E_sil_mean_pct"), "evaluations": fit.get("evaluations"),
-           "blender_cloth": fit.get("blender_cloth"), "truth_settings": SOFT, "fit_says": fit_says(res)}
-    print(f"collider: Blender replay of the fit {det['replay_fit_mean_mm']} mm mean vs the start "
-          f"{det['replay_start_mean_mm']} mm; fit {frun['wall_s']:.0f} s ({frun['load']})", flush=True)
-    return [row("collider", "collider (user's .blend, soft cloth onto a block)", "replay_vs_start", ratio, frun,
-                details=det)], {}
+    det = {
+        "replay_fit_mean_mm": None if got is None else float(got.mean()),
+        "replay_fit_max_mm": None if got is None else float(got.max()),
+        "replay_start_mean_mm": None if start is None else float(start.mean()),
+        "replay_start_max_mm": None if start is None else float(start.max()),
+        "train_E_sil_pct": fit.get("best_E_sil_mean_pct"),
+        "evaluations": fit.get("evaluations"),
+        "blender_cloth": fit.get("blender_cloth"),
+        "truth_settings": SOFT,
+        "fit_says": fit_says(res),
+    }
+    print(
+        f"collider: Blender replay of the fit {det['replay_fit_mean_mm']} mm mean vs the start "
+        f"{det['replay_start_mean_mm']} mm; fit {frun['wall_s']:.0f} s ({frun['load']})",
+        flush=True,
+    )
+    return [
+        row(
+            "collider", "collider (user's .blend, soft cloth onto a block)", "replay_vs_start", ratio, frun, details=det
+        )
+    ], {}
 
 
 def goal_time(a, run):
@@ -569,19 +846,36 @@ def goal_time(a, run):
     if a.remake or not os.path.isfile(os.path.join(cap, "capture.json")):
         make_time_capture(cap)
     res = _p(a, "fits", "time21.json")
-    fit, frun = run(["fit", cap, "--cameras", f"n:{TRAIN_CAMERAS}", "--times", "train", "--out", res, "--force",
-                     "--quiet"])
-    det = {"cpu_s": frun["cpu_s"], "evaluations": fit.get("evaluations"), "stop_reason": fit.get("stop_reason"),
-           "train_E_sil_pct": fit.get("best_E_sil_mean_pct"), "elapsed_s_in_result": fit.get("elapsed_s"),
-           "grid": TIME["grid"], "resolution": TIME["resolution"], "fit_says": fit_says(res)}
-    print(f"time: {frun['wall_s']:.0f} s wall, {frun['cpu_s']:.0f} s CPU ({frun['load']}), "
-          f"{fit.get('evaluations')} evaluations", flush=True)
-    return [row("time", "time (21 x 21, 4 cameras, 15 frames, 480 x 640)", "wall_s", frun["wall_s"], frun,
-                details=det)], {}
+    fit, frun = run(
+        ["fit", cap, "--cameras", f"n:{TRAIN_CAMERAS}", "--times", "train", "--out", res, "--force", "--quiet"]
+    )
+    det = {
+        "cpu_s": frun["cpu_s"],
+        "evaluations": fit.get("evaluations"),
+        "stop_reason": fit.get("stop_reason"),
+        "train_E_sil_pct": fit.get("best_E_sil_mean_pct"),
+        "elapsed_s_in_result": fit.get("elapsed_s"),
+        "grid": TIME["grid"],
+        "resolution": TIME["resolution"],
+        "fit_says": fit_says(res),
+    }
+    print(
+        f"time: {frun['wall_s']:.0f} s wall, {frun['cpu_s']:.0f} s CPU ({frun['load']}), "
+        f"{fit.get('evaluations')} evaluations",
+        flush=True,
+    )
+    return [
+        row("time", "time (21 x 21, 4 cameras, 15 frames, 480 x 640)", "wall_s", frun["wall_s"], frun, details=det)
+    ], {}
 
 
-RUNNERS = {"exact": goal_exact, "offsets": goal_offsets, "continuum": goal_continuum, "collider": goal_collider,
-           "time": goal_time}
+RUNNERS = {
+    "exact": goal_exact,
+    "offsets": goal_offsets,
+    "continuum": goal_continuum,
+    "collider": goal_collider,
+    "time": goal_time,
+}
 
 
 def main(argv=None):
@@ -590,7 +884,9 @@ def main(argv=None):
     for g in GOALS + ("all",):
         s = sub.add_parser(g, help=f"measure goal {g}" if g != "all" else "every goal in turn")
         s.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
-        s.add_argument("--json", default="out/issue20/goals.json", help="rows merged into this JSON (default: %(default)s)")
+        s.add_argument(
+            "--json", default="out/issue20/goals.json", help="rows merged into this JSON (default: %(default)s)"
+        )
         s.add_argument("--remake", action="store_true", help="make the goal's capture again")
         if g in ("continuum", "all"):
             s.add_argument("--materials", default=None, help="continuum: comma list (default: cotton,silk)")
@@ -610,9 +906,9 @@ def main(argv=None):
         return 0
     os.makedirs(os.path.join(a.out, "fits"), exist_ok=True)
     run = Runner(os.path.join(a.out, "goals.log"))
-    before = not has_uncertain_option()        # the lead's issue-20 features (fit --uncertain, ...) not in yet
-    for g in (GOALS if a.cmd == "all" else (a.cmd,)):
-        at = commits()                         # the code the goal runs (taken before it runs)
+    before = not has_uncertain_option()  # the lead's issue-20 features (fit --uncertain, ...) not in yet
+    for g in GOALS if a.cmd == "all" else (a.cmd,):
+        at = commits()  # the code the goal runs (taken before it runs)
         rows, extra = RUNNERS[g](a, run)
         merge_rows(a.json, g, rows, dict(at, **extra), "before" if before else "after")
     with open(a.json) as f:

@@ -6,6 +6,7 @@ observe --out out/cross2` first (or --capture DIR).
     python tools/optimiser_ab.py {own,own-active,cma} SEED [--evaluations 1000] [--capture DIR]
     python tools/optimiser_ab.py all 0-5 --json out/optimiser_ab.json    # the three on seeds 0..5
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,12 +20,11 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from addon.core import defaults as D  # noqa: E402
-from addon.core.fitting.job import FitConfig, FitJob  # noqa: E402
-from addon.core.fitting.optimise import make_optimizer  # noqa: E402
-from addon.core.observation.camera import select_training  # noqa: E402
-from addon.core.observation.capture import load_capture  # noqa: E402
-
+from clothfit.core import defaults as D  # noqa: E402
+from clothfit.core.fitting.job import FitConfig, FitJob  # noqa: E402
+from clothfit.core.fitting.optimise import make_optimizer  # noqa: E402
+from clothfit.core.observation.camera import select_training  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
 
 WHICH = ("own", "own-active", "cma")
 
@@ -47,8 +47,11 @@ def main(argv=None):
     if a.json:
         med = {w: float(np.median(list(v.values()))) for w, v in out.items()}
         with open(a.json, "w") as f:
-            json.dump({"capture": a.capture, "evaluations": a.evaluations, "best_train_E_sil_pct": out,
-                       "median_pct": med}, f, indent=1)
+            json.dump(
+                {"capture": a.capture, "evaluations": a.evaluations, "best_train_E_sil_pct": out, "median_pct": med},
+                f,
+                indent=1,
+            )
 
 
 def run_one(which, seed, evaluations, capture):
@@ -56,13 +59,24 @@ def run_one(which, seed, evaluations, capture):
     a = argparse.Namespace(which=which, seed=seed, evaluations=evaluations, capture=capture)
     cap = load_capture(a.capture)
     train, _ = select_training(cap.cameras, 4)
-    job = FitJob(cap, FitConfig(train_cameras=train, train_times=list(cap.frame_times[1::2]), model="blender",
-                                max_evaluations=a.evaluations, seed=a.seed, restarts=0))
+    job = FitJob(
+        cap,
+        FitConfig(
+            train_cameras=train,
+            train_times=list(cap.frame_times[1::2]),
+            model="blender",
+            max_evaluations=a.evaluations,
+            seed=a.seed,
+            restarts=0,
+        ),
+    )
     n_img = job.objective.n_images
-    if a.which == "cma":          # the `cma` package, active CMA (its default), same cube, sigma and population
+    if a.which == "cma":  # the `cma` package, active CMA (its default), same cube, sigma and population
         import cma
-        es = cma.CMAEvolutionStrategy(np.full(job.space.n, 0.5), 0.3, {"bounds": [0, 1], "seed": a.seed + 1,
-                                                                       "popsize": 10, "verbose": -9})
+
+        es = cma.CMAEvolutionStrategy(
+            np.full(job.space.n, 0.5), 0.3, {"bounds": [0, 1], "seed": a.seed + 1, "popsize": 10, "verbose": -9}
+        )
         ev, best = 0, np.inf
         while ev < a.evaluations:
             U = np.array(es.ask())
@@ -74,12 +88,22 @@ def run_one(which, seed, evaluations, capture):
         print(f"cma seed {a.seed}: {ev} evaluations, best training E_sil {100 * best / n_img:.3f} %", flush=True)
         return 100 * best / n_img
     if a.which == "own-active":
-        job.opt = make_optimizer("cma-es", job.space, seed=a.seed, tolx=D.FIT_TOLX,
-                                 tolfun=D.FIT_TOLFUN_PER_IMAGE * n_img, restarts=0, popsize=job.opt.popsize,
-                                 active=True)
+        job.opt = make_optimizer(
+            "cma-es",
+            job.space,
+            seed=a.seed,
+            tolx=D.FIT_TOLX,
+            tolfun=D.FIT_TOLFUN_PER_IMAGE * n_img,
+            restarts=0,
+            popsize=job.opt.popsize,
+            active=True,
+        )
     job.run()
-    print(f"{a.which} seed {a.seed}: {job.evaluations} evaluations, best training E_sil "
-          f"{100 * job.best_error / n_img:.3f} %", flush=True)
+    print(
+        f"{a.which} seed {a.seed}: {job.evaluations} evaluations, best training E_sil "
+        f"{100 * job.best_error / n_img:.3f} %",
+        flush=True,
+    )
     return 100 * job.best_error / n_img
 
 

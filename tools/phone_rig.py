@@ -26,7 +26,7 @@ up in ``--poses`` poses round the middle, each turned towards a pair of neighbou
 view where the board faces a phone is rendered by Blender's Cycles on the CPU (the approach of
 ``tools/render_footage.py``: a pinhole render on a grown canvas, warped with the camera's OpenCV
 distortion, then sensor noise and a JPEG), in a child process: this driver never imports bpy. Then
-``python -m addon calibrate`` runs on the images as a user would run it, and its cameras are
+``python -m clothfit calibrate`` runs on the images as a user would run it, and its cameras are
 compared with the true ones, in the calibration's own world frame (the board at the first moment:
 origin at the chessboard's centre, Z out of its face): focal length error [%], camera centre error
 [mm], rotation error [deg], the reprojection RMS [px] and the gravity direction error [deg] (the
@@ -35,6 +35,7 @@ angle between each calibrated camera's world up and the scene's true up, seen fr
 Everything random comes from ``--seed``: a seed not run before is a rig, a lens set and a set of
 board poses nobody has seen. The table is level, so the flat board's normal is the true up.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,18 +55,19 @@ TOOLS = os.path.dirname(os.path.abspath(__file__))
 if TOOLS not in sys.path:
     sys.path.insert(0, TOOLS)
 
-from addon.core.footage import calibrate as CB  # noqa: E402
-from addon.core.observation.camera import Camera, intrinsics, look_at  # noqa: E402
+from clothfit.core.footage import calibrate as CB  # noqa: E402
+from clothfit.core.observation.camera import Camera, intrinsics, look_at  # noqa: E402
 
 BOARD = "9,7,0.04,0.03,DICT_5X5_100"
-PHONE_SIZE = (1080, 1920)          # portrait W x H of a phone's 1080p video
+PHONE_SIZE = (1080, 1920)  # portrait W x H of a phone's 1080p video
 GOALS = {"focal_pct": 0.5, "centre_mm": 2.0, "rotation_deg": 0.1, "rms_px": 0.5, "gravity_deg": 0.2}
 FLIP = np.diag([1.0, -1.0, -1.0])
-BOARD_THICKNESS = 0.005            # foam board under the print [m]
-TEXTURE_PX_PER_SQUARE = 96         # the print as Blender's texture
+BOARD_THICKNESS = 0.005  # foam board under the print [m]
+TEXTURE_PX_PER_SQUARE = 96  # the print as Blender's texture
 
 
 # ============================================================================ the rig
+
 
 def phone_cameras(seed: int, scale: float, n: int = 4) -> list:
     """``n`` portrait phones round the table: azimuths spread with jitter, 0.55-0.75 m from the middle,
@@ -83,16 +85,29 @@ def phone_cameras(seed: int, scale: float, n: int = 4) -> list:
         eye = np.array([r * math.cos(el) * math.cos(az), r * math.cos(el) * math.sin(az), r * math.sin(el)])
         target = np.array([rng.uniform(-0.04, 0.04), rng.uniform(-0.04, 0.04), 0.15])
         R, t = look_at(eye, target)
-        K = intrinsics(focal[i] * W, W, H, cx=(W - 1) / 2 + rng.uniform(-0.01, 0.01) * W,
-                       cy=(H - 1) / 2 + rng.uniform(-0.01, 0.01) * H)
-        dist = np.array([rng.uniform(-0.10, 0.02), rng.uniform(-0.02, 0.08), rng.uniform(-1e-3, 1e-3),
-                         rng.uniform(-1e-3, 1e-3), 0.0])
+        K = intrinsics(
+            focal[i] * W,
+            W,
+            H,
+            cx=(W - 1) / 2 + rng.uniform(-0.01, 0.01) * W,
+            cy=(H - 1) / 2 + rng.uniform(-0.01, 0.01) * H,
+        )
+        dist = np.array(
+            [
+                rng.uniform(-0.10, 0.02),
+                rng.uniform(-0.02, 0.08),
+                rng.uniform(-1e-3, 1e-3),
+                rng.uniform(-1e-3, 1e-3),
+                0.0,
+            ]
+        )
         cams.append(Camera(K, R, t, W, H, name=f"phone{i}", dist=dist))
     return cams
 
 
 def _rot(axis, deg):
     import cv2
+
     a = np.asarray(axis, float)
     return cv2.Rodrigues(a / np.linalg.norm(a) * math.radians(deg))[0]
 
@@ -102,7 +117,7 @@ def board_poses(board: CB.Board, cams: list, n: int, seed: int) -> list:
     held up, each turned towards a point between two neighbouring phones, tilted and rolled."""
     rng = np.random.default_rng([seed, 2])
     c = board.centre()
-    R0 = _rot([0, 0, 1], rng.uniform(-30, 30)) @ FLIP          # printed face up
+    R0 = _rot([0, 0, 1], rng.uniform(-30, 30)) @ FLIP  # printed face up
     # the print on the foam board on the table: its face BOARD_THICKNESS above the table top
     centre0 = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), BOARD_THICKNESS])
     poses = [(R0, centre0 - R0 @ c)]
@@ -112,9 +127,13 @@ def board_poses(board: CB.Board, cams: list, n: int, seed: int) -> list:
         a = rng.uniform(0.15, 0.85)
         towards = a * cams[i].center + (1 - a) * cams[j].center
         centre = np.array([rng.uniform(-0.08, 0.08), rng.uniform(-0.08, 0.08), rng.uniform(0.14, 0.30)])
-        Rc, _ = look_at(towards, centre)                          # rows: a camera at ``towards`` looking at centre
-        R = Rc.T @ _rot([1, 0, 0], rng.uniform(-30, 30)) @ _rot([0, 1, 0], rng.uniform(-20, 20)) \
+        Rc, _ = look_at(towards, centre)  # rows: a camera at ``towards`` looking at centre
+        R = (
+            Rc.T
+            @ _rot([1, 0, 0], rng.uniform(-30, 30))
+            @ _rot([0, 1, 0], rng.uniform(-20, 20))
             @ _rot([0, 0, 1], rng.uniform(-45, 45))
+        )
         poses.append((R, centre - R @ c))
     return poses
 
@@ -128,8 +147,13 @@ def visible(cam: Camera, board: CB.Board, pose, min_cos: float = 0.3, min_inside
     if face @ to_cam / np.linalg.norm(to_cam) < min_cos:
         return False
     uv = cam.project(board.corners() @ R.T + t)
-    inside = np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & \
-        (uv[:, 0] <= cam.width - 1) & (uv[:, 1] <= cam.height - 1)
+    inside = (
+        np.all(np.isfinite(uv), axis=1)
+        & (uv[:, 0] >= 0)
+        & (uv[:, 1] >= 0)
+        & (uv[:, 0] <= cam.width - 1)
+        & (uv[:, 1] <= cam.height - 1)
+    )
     return bool(inside.mean() >= min_inside)
 
 
@@ -138,16 +162,27 @@ def cameras_in_world(cams, board: CB.Board, pose0) -> list:
     Rb, tb = pose0
     out = []
     for cam in cams:
-        out.append(Camera(cam.K, cam.R @ Rb @ FLIP, cam.R @ (Rb @ board.centre() + tb) + cam.t, cam.width,
-                          cam.height, cam.name, cam.dist))
+        out.append(
+            Camera(
+                cam.K,
+                cam.R @ Rb @ FLIP,
+                cam.R @ (Rb @ board.centre() + tb) + cam.t,
+                cam.width,
+                cam.height,
+                cam.name,
+                cam.dist,
+            )
+        )
     return out
 
 
 # ======================================================================= rendering (bpy)
 
+
 def _board_object(board: CB.Board, texture_path: str, margin_m: float):
     """The printed board on foam board: the print on the face (-Z of the board frame), white edges and back."""
     import bpy
+
     W, H = board.size_m
     x0, y0, x1, y1 = -margin_m, -margin_m, W + margin_m, H + margin_m
     T = BOARD_THICKNESS
@@ -192,8 +227,8 @@ def _room(engine: str, samples: int, denoise: bool):
     """The scene of render_footage.py without the cloth: a wooden table top at z = 0, walls, a key spot
     and a fill area light."""
     import bpy
-
     import render_footage as RF
+
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
@@ -222,8 +257,9 @@ def _room(engine: str, samples: int, denoise: bool):
     bpy.ops.mesh.primitive_plane_add(size=1.8, location=(0, 0, 0))
     bpy.context.object.name = "Table"
     bpy.context.object.data.materials.append(RF._table_material())
-    bpy.ops.mesh.primitive_cylinder_add(vertices=48, radius=1.4, depth=2.6, location=(0, 0, 0.5),
-                                        end_fill_type="NOTHING")
+    bpy.ops.mesh.primitive_cylinder_add(
+        vertices=48, radius=1.4, depth=2.6, location=(0, 0, 0.5), end_fill_type="NOTHING"
+    )
     bpy.context.object.data.materials.append(RF._wall_material())
     spot = bpy.data.lights.new("Key", "SPOT")
     spot.energy = 60.0
@@ -245,11 +281,11 @@ def _room(engine: str, samples: int, denoise: bool):
 
 def render_views(spec_path: str):
     """Child process (imports bpy): render every (camera, moment) the spec lists."""
-    import cv2
     import bpy
+    import cv2
+    import render_footage as RF
     from mathutils import Matrix
 
-    import render_footage as RF
     with open(spec_path) as f:
         spec = json.load(f)
     board = CB.parse_board(spec["board"])
@@ -260,8 +296,9 @@ def render_views(spec_path: str):
     px = TEXTURE_PX_PER_SQUARE
     mpx = int(round(margin / board.square_m * px))
     margin = mpx * board.square_m / px
-    img = board.cv_board().generateImage((board.squares_x * px + 2 * mpx, board.squares_y * px + 2 * mpx),
-                                         marginSize=mpx, borderBits=1)
+    img = board.cv_board().generateImage(
+        (board.squares_x * px + 2 * mpx, board.squares_y * px + 2 * mpx), marginSize=mpx, borderBits=1
+    )
     cv2.imwrite(tex, img)
     scene = _room("CYCLES", spec["samples"], spec["denoise"])
     scene.cycles.seed = int(spec["seed"])
@@ -297,6 +334,7 @@ def render_views(spec_path: str):
 
 # ============================================================================ calibrate
 
+
 def _load1():
     try:
         return os.getloadavg()[0]
@@ -314,10 +352,19 @@ def run_calibrate(a) -> dict:
         print(f"note: the flat board is not in view of {', '.join(missing)}", file=sys.stderr)
     os.makedirs(a.out, exist_ok=True)
     images = os.path.join(a.out, "images")
-    spec = {"board": BOARD, "seed": a.seed, "samples": a.samples, "denoise": not a.no_denoise,
-            "read_noise": a.read_noise, "shot_noise": a.shot_noise, "print_margin_m": 0.01,
-            "images": images, "cameras": [c.to_dict() for c in cams], "views": views,
-            "poses": [[R.tolist(), t.tolist()] for R, t in poses]}
+    spec = {
+        "board": BOARD,
+        "seed": a.seed,
+        "samples": a.samples,
+        "denoise": not a.no_denoise,
+        "read_noise": a.read_noise,
+        "shot_noise": a.shot_noise,
+        "print_margin_m": 0.01,
+        "images": images,
+        "cameras": [c.to_dict() for c in cams],
+        "views": views,
+        "poses": [[R.tolist(), t.tolist()] for R, t in poses],
+    }
     spec_path = os.path.join(a.out, "spec.json")
     with open(spec_path, "w") as f:
         json.dump(spec, f, indent=1)
@@ -327,17 +374,35 @@ def run_calibrate(a) -> dict:
     if not a.skip_render:
         if os.path.isdir(images):
             import shutil
+
             shutil.rmtree(images)
-        subprocess.run([sys.executable, os.path.abspath(__file__), "_render", "--spec", spec_path], check=True,
-                       cwd=ROOT)
+        subprocess.run(
+            [sys.executable, os.path.abspath(__file__), "_render", "--spec", spec_path], check=True, cwd=ROOT
+        )
     render_s = time.time() - t0
     cpu1 = os.times()
     with open(os.path.join(a.out, "render_times.json")) as f:
         per_render = json.load(f)["seconds"]
     cams_json = os.path.join(a.out, "cameras.json")
     t1 = time.time()
-    r = subprocess.run([sys.executable, "-m", "addon", "calibrate", images, "--board", BOARD, "--out", cams_json,
-                        "--debug", os.path.join(a.out, "debug")], cwd=ROOT, capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "clothfit",
+            "calibrate",
+            images,
+            "--board",
+            BOARD,
+            "--out",
+            cams_json,
+            "--debug",
+            os.path.join(a.out, "debug"),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
     calib_s = time.time() - t1
     sys.stderr.write(r.stderr)
     if r.returncode != 0:
@@ -353,68 +418,100 @@ def run_calibrate(a) -> dict:
         true_scene = next(c for c in cams if c.name == t.name)
         up_true = true_scene.R @ np.array([0.0, 0.0, 1.0])
         up_est = e.R @ np.array([0.0, 0.0, 1.0])
-        rows.append({
-            "camera": t.name, "width": t.width, "height": t.height,
-            "fx_true": float(t.K[0, 0]), "fx": float(e.K[0, 0]),
-            "focal_pct": float(100 * abs(e.K[0, 0] / t.K[0, 0] - 1)),
-            "principal_point_px": float(np.linalg.norm(e.K[:2, 2] - t.K[:2, 2])),
-            "centre_mm": float(1000 * np.linalg.norm(e.center - t.center)),
-            "rotation_deg": CB.rotation_angle_deg(e.R @ t.R.T),
-            "gravity_deg": math.degrees(math.acos(max(-1.0, min(1.0, float(up_true @ up_est))))),
-            "rms_px": rep["rms_px"], "views_used": rep["views_used"], "views_rendered": len(views[t.name]),
-            "dist_true": t.dist.tolist(), "dist": e.dist.tolist()})
+        rows.append(
+            {
+                "camera": t.name,
+                "width": t.width,
+                "height": t.height,
+                "fx_true": float(t.K[0, 0]),
+                "fx": float(e.K[0, 0]),
+                "focal_pct": float(100 * abs(e.K[0, 0] / t.K[0, 0] - 1)),
+                "principal_point_px": float(np.linalg.norm(e.K[:2, 2] - t.K[:2, 2])),
+                "centre_mm": float(1000 * np.linalg.norm(e.center - t.center)),
+                "rotation_deg": CB.rotation_angle_deg(e.R @ t.R.T),
+                "gravity_deg": math.degrees(math.acos(max(-1.0, min(1.0, float(up_true @ up_est))))),
+                "rms_px": rep["rms_px"],
+                "views_used": rep["views_used"],
+                "views_rendered": len(views[t.name]),
+                "dist_true": t.dist.tolist(),
+                "dist": e.dist.tolist(),
+            }
+        )
     worst = {k: max(r_[k] for r_ in rows) for k in GOALS}
-    out = {"seed": a.seed, "board": BOARD, "resolution": [cams[0].width, cams[0].height], "scale": a.scale,
-           "poses": a.poses, "samples": a.samples, "denoise": not a.no_denoise,
-           "renders": sum(len(v) for v in views.values()), "cameras": rows, "worst": worst, "goals": GOALS,
-           "meets_goals": {k: bool(worst[k] <= GOALS[k]) for k in GOALS},
-           "calibration_rms_px": report["rms_px"], "rejected_corners": report["rejected_corners"],
-           "dropped_views": len(report["dropped_views"]),
-           "render_seconds": render_s, "render_cpu_seconds": (cpu1.children_user + cpu1.children_system)
-           - (cpu0.children_user + cpu0.children_system), "seconds_per_render": float(np.mean(per_render)),
-           "calibrate_seconds": calib_s, "load_1min_start": load0, "load_1min_end": _load1()}
+    out = {
+        "seed": a.seed,
+        "board": BOARD,
+        "resolution": [cams[0].width, cams[0].height],
+        "scale": a.scale,
+        "poses": a.poses,
+        "samples": a.samples,
+        "denoise": not a.no_denoise,
+        "renders": sum(len(v) for v in views.values()),
+        "cameras": rows,
+        "worst": worst,
+        "goals": GOALS,
+        "meets_goals": {k: bool(worst[k] <= GOALS[k]) for k in GOALS},
+        "calibration_rms_px": report["rms_px"],
+        "rejected_corners": report["rejected_corners"],
+        "dropped_views": len(report["dropped_views"]),
+        "render_seconds": render_s,
+        "render_cpu_seconds": (cpu1.children_user + cpu1.children_system) - (cpu0.children_user + cpu0.children_system),
+        "seconds_per_render": float(np.mean(per_render)),
+        "calibrate_seconds": calib_s,
+        "load_1min_start": load0,
+        "load_1min_end": _load1(),
+    }
     print(format_table(out), file=sys.stderr)
     if a.json:
-        from addon.core.safeio import atomic_json
+        from clothfit.core.safeio import atomic_json
+
         atomic_json(a.json, out)
     return out
 
 
 def CB_load(path):
-    from addon.core.observation.camera import load_cameras
+    from clothfit.core.observation.camera import load_cameras
+
     return load_cameras(path)
 
 
 def format_table(out: dict) -> str:
-    lines = [f"seed {out['seed']}, {out['resolution'][0]} x {out['resolution'][1]} px, {out['renders']} renders",
-             "| camera | fx | focal err % | centre err mm | rotation err deg | gravity err deg | RMS px | views |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"seed {out['seed']}, {out['resolution'][0]} x {out['resolution'][1]} px, {out['renders']} renders",
+        "| camera | fx | focal err % | centre err mm | rotation err deg | gravity err deg | RMS px | views |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in out["cameras"]:
-        lines.append(f"| {r['camera']} | {r['fx_true']:.1f} | {r['focal_pct']:.3f} | {r['centre_mm']:.2f} | "
-                     f"{r['rotation_deg']:.3f} | {r['gravity_deg']:.3f} | {r['rms_px']:.3f} | {r['views_used']} |")
+        lines.append(
+            f"| {r['camera']} | {r['fx_true']:.1f} | {r['focal_pct']:.3f} | {r['centre_mm']:.2f} | "
+            f"{r['rotation_deg']:.3f} | {r['gravity_deg']:.3f} | {r['rms_px']:.3f} | {r['views_used']} |"
+        )
     w = out["worst"]
-    lines.append(f"| worst | | {w['focal_pct']:.3f} | {w['centre_mm']:.2f} | {w['rotation_deg']:.3f} | "
-                 f"{w['gravity_deg']:.3f} | {w['rms_px']:.3f} | |")
-    lines.append("goals: " + ", ".join(f"{k} <= {v} {'met' if out['meets_goals'][k] else 'MISSED'}"
-                                        for k, v in GOALS.items()))
+    lines.append(
+        f"| worst | | {w['focal_pct']:.3f} | {w['centre_mm']:.2f} | {w['rotation_deg']:.3f} | "
+        f"{w['gravity_deg']:.3f} | {w['rms_px']:.3f} | |"
+    )
+    lines.append(
+        "goals: " + ", ".join(f"{k} <= {v} {'met' if out['meets_goals'][k] else 'MISSED'}" for k, v in GOALS.items())
+    )
     return "\n".join(lines)
 
 
 # ========================================================================== end to end
 
-CLOTH_W, CLOTH_H = 0.30, 0.24      # the user's cloth, measured [m]
-CLOTH_NX, CLOTH_NY = 16, 13        # 2 cm cells: the clips at u = 0, 0.1, 0.2, 0.3 sit on vertices
-CLOTH_GSM = 0.150                  # cotton, 150 g/m2: the cloth's weighed mass = GSM * area
-TOP = 0.40                         # the clips' height above the table [m]
-CLIPS = {"left": 0.0, "third": 0.10, "two-thirds": 0.20, "right": 0.30}   # u of each clip on the top edge
+CLOTH_W, CLOTH_H = 0.30, 0.24  # the user's cloth, measured [m]
+CLOTH_NX, CLOTH_NY = 16, 13  # 2 cm cells: the clips at u = 0, 0.1, 0.2, 0.3 sit on vertices
+CLOTH_GSM = 0.150  # cotton, 150 g/m2: the cloth's weighed mass = GSM * area
+TOP = 0.40  # the clips' height above the table [m]
+CLIPS = {"left": 0.0, "third": 0.10, "two-thirds": 0.20, "right": 0.30}  # u of each clip on the top edge
 RELEASED = "right"
 # clips on a rod are never in one line: their offsets across the cloth [m] (a flat sheet hung by clips in one
 # line cannot buckle: its corner would only sag in its plane)
 CLIP_Y = {"third": 0.010, "two-thirds": -0.010}
 FPS = 30.0
-TRUTH_FPS = 150.0                  # the truth's Blender frame rate (quality 1)
-BEFORE = 0.1                       # s filmed before the release
-CLICK_SIGMA = 0.5                  # px: a person's click on a zoomed frame
+TRUTH_FPS = 150.0  # the truth's Blender frame rate (quality 1)
+BEFORE = 0.1  # s filmed before the release
+CLICK_SIGMA = 0.5  # px: a person's click on a zoomed frame
 FREE = ("tension_stiffness", "bending_stiffness", "air_damping")
 # the truth: Blender's defaults (a new Cloth modifier) with the free settings changed, all at Blender's
 # default vertex mass of 0.3 kg, then moved to the cloth's own vertex mass (the motion is unchanged)
@@ -437,17 +534,30 @@ def front_cameras(seed: int, scale: float, n: int = 4) -> list:
         r = rng.uniform(0.55, 0.70)
         eye = np.array([r * math.cos(a), r * math.sin(a), rng.uniform(0.30, 0.45)])
         R, t = look_at(eye, [rng.uniform(-0.02, 0.02), 0.0, 0.22])
-        K = intrinsics(focal[i] * W, W, H, cx=(W - 1) / 2 + rng.uniform(-0.01, 0.01) * W,
-                       cy=(H - 1) / 2 + rng.uniform(-0.01, 0.01) * H)
-        dist = np.array([rng.uniform(-0.10, 0.02), rng.uniform(-0.02, 0.08), rng.uniform(-1e-3, 1e-3),
-                         rng.uniform(-1e-3, 1e-3), 0.0])
+        K = intrinsics(
+            focal[i] * W,
+            W,
+            H,
+            cx=(W - 1) / 2 + rng.uniform(-0.01, 0.01) * W,
+            cy=(H - 1) / 2 + rng.uniform(-0.01, 0.01) * H,
+        )
+        dist = np.array(
+            [
+                rng.uniform(-0.10, 0.02),
+                rng.uniform(-0.02, 0.08),
+                rng.uniform(-1e-3, 1e-3),
+                rng.uniform(-1e-3, 1e-3),
+                0.0,
+            ]
+        )
         cams.append(Camera(K, R, t, W, H, name=f"phone{i}", dist=dist))
     return cams
 
 
 def true_settings(vertex_mass: float) -> dict:
-    from addon.core.fitting.parameters import _rescale
-    from addon.core.physics import blender as B
+    from clothfit.core.fitting.parameters import _rescale
+    from clothfit.core.physics import blender as B
+
     s = dict(B.DEFAULTS, **TRUE_AT_DEFAULT_MASS, time_scale=B.physical_time_scale(FPS))
     return B.check_settings(_rescale(s, vertex_mass, s["bending_model"]), "true settings")
 
@@ -455,9 +565,10 @@ def true_settings(vertex_mass: float) -> dict:
 def cloth_truth(seed: int, frames: int):
     """The manipulation (4 clips on the top edge, the right one let go at a random phase within a frame),
     the cloth's motion by the core's Blender model (Blender's cloth, bit-exact) at the true settings."""
-    from addon.core.physics import blender as B
-    from addon.core.physics.models import BlenderModel
-    from addon.core.physics.scenario import ClothGrid, Handle, Scenario, rotation_vector
+    from clothfit.core.physics import blender as B
+    from clothfit.core.physics.models import BlenderModel
+    from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, rotation_vector
+
     rng = np.random.default_rng([seed, 12])
     # the truth runs Blender's cloth at TRUTH_FPS (quality 1: the time step of 30 fps at quality 5, the motion
     # the same within 0.01 mm), whose pins let go on its frames: the release falls 1/5, 2/5, 3/5 or 4/5 of a
@@ -466,9 +577,15 @@ def cloth_truth(seed: int, frames: int):
     phase = int(rng.integers(1, TRUTH_FPS // FPS)) / (TRUTH_FPS / FPS)
     t_release = BEFORE + phase / FPS
     times = np.arange(frames) / FPS
-    R = np.stack([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]], 1)     # the cloth in the plane y = 0
-    grid = ClothGrid(CLOTH_NX, CLOTH_NY, CLOTH_W, side_y=CLOTH_H, origin=np.array([0.0, 0.0, TOP - CLOTH_H / 2]),
-                     rotation=rotation_vector(R))
+    R = np.stack([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]], 1)  # the cloth in the plane y = 0
+    grid = ClothGrid(
+        CLOTH_NX,
+        CLOTH_NY,
+        CLOTH_W,
+        side_y=CLOTH_H,
+        origin=np.array([0.0, 0.0, TOP - CLOTH_H / 2]),
+        rotation=rotation_vector(R),
+    )
     handles, verts = [], {}
     for name, u in CLIPS.items():
         v = int(round(u / (CLOTH_W / (CLOTH_NX - 1))))
@@ -482,8 +599,16 @@ def cloth_truth(seed: int, frames: int):
     sim = BlenderModel(TRUTH_FPS, 1).simulate(scen, B.settings_row(fine)[None])
     if sim.exploded[0]:
         raise SystemExit(f"the true cloth exploded: {sim.reason[0]}")
-    return {"scenario": scen, "positions": sim.positions[0], "times": times, "release_time": t_release,
-            "phase": phase, "vertices": verts, "settings": settings, "cloth_mass": mass}
+    return {
+        "scenario": scen,
+        "positions": sim.positions[0],
+        "times": times,
+        "release_time": t_release,
+        "phase": phase,
+        "vertices": verts,
+        "settings": settings,
+        "cloth_mass": mass,
+    }
 
 
 def world_from_scene(board: CB.Board, pose0, X):
@@ -494,28 +619,30 @@ def world_from_scene(board: CB.Board, pose0, X):
 
 def render_e2e(spec_path: str):
     """Child process (imports bpy): the board views, then each phone's background plate and frames."""
-    import cv2
     import bpy
+    import cv2
+    import render_footage as RF
     from mathutils import Matrix
 
-    import render_footage as RF
     with open(spec_path) as f:
         spec = json.load(f)
     board = CB.parse_board(spec["board"])
     work = os.path.dirname(spec_path)
     X = np.load(os.path.join(work, "truth_positions.npy"))
-    from addon.core.physics.scenario import Scenario
+    from clothfit.core.physics.scenario import Scenario
+
     scen = Scenario.from_dict(spec["scenario"])
     tex = os.path.join(work, "board_texture.png")
     px = TEXTURE_PX_PER_SQUARE
     mpx = int(round(spec["print_margin_m"] / board.square_m * px))
     margin = mpx * board.square_m / px
-    img = board.cv_board().generateImage((board.squares_x * px + 2 * mpx, board.squares_y * px + 2 * mpx),
-                                         marginSize=mpx, borderBits=1)
+    img = board.cv_board().generateImage(
+        (board.squares_x * px + 2 * mpx, board.squares_y * px + 2 * mpx), marginSize=mpx, borderBits=1
+    )
     cv2.imwrite(tex, img)
     scene, cloth = RF.build_scene(scen.grid, "CYCLES", spec["samples"], spec["denoise"])
     scene.cycles.seed = int(spec["seed"])
-    bpy.data.objects["Table"].location.z = 0.0          # the table top is z = 0 here
+    bpy.data.objects["Table"].location.z = 0.0  # the table top is z = 0 here
     bobj = _board_object(board, tex, margin)
     # the printed cloth's texture from the flat sheet (as tools/phone_handles.py)
     me = cloth.data
@@ -525,6 +652,7 @@ def render_e2e(spec_path: str):
     loop_uv = np.stack([u, v], -1)[np.array([lp.vertex_index for lp in me.loops])]
     me.uv_layers["UVMap"].data.foreach_set("uv", loop_uv.astype(np.float32).ravel())
     import phone_handles as PH
+
     mat = PH._clip_material()
     clips = []
     for name, vtx in spec["vertices"].items():
@@ -534,8 +662,9 @@ def render_e2e(spec_path: str):
         ob.scale = (0.016, 0.010, 0.022)
         ob.data.materials.append(mat)
         clips.append((ob, vtx))
-    bpy.ops.mesh.primitive_cylinder_add(radius=0.004, depth=0.5, location=(0.0, 0.0, TOP + 0.03),
-                                        rotation=(0.0, math.pi / 2, 0.0))
+    bpy.ops.mesh.primitive_cylinder_add(
+        radius=0.004, depth=0.5, location=(0.0, 0.0, TOP + 0.03), rotation=(0.0, math.pi / 2, 0.0)
+    )
     cam_data = bpy.data.cameras.new("Phone")
     cam_data.sensor_fit = "HORIZONTAL"
     cam_data.sensor_width = 36.0
@@ -594,9 +723,9 @@ def render_e2e(spec_path: str):
 
 
 def _cli(args, log, what):
-    """``python -m addon ARGS`` as a user runs it: its JSON (stdout), its messages (stderr) into ``log``."""
+    """``python -m clothfit ARGS`` as a user runs it: its JSON (stdout), its messages (stderr) into ``log``."""
     t0 = time.time()
-    r = subprocess.run([sys.executable, "-m", "addon", *args], cwd=ROOT, capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "clothfit", *args], cwd=ROOT, capture_output=True, text=True)
     secs = time.time() - t0
     with open(log, "a") as f:
         f.write(f"$ clothfit {' '.join(args)}\n{r.stderr}\n[{secs:.1f} s, exit {r.returncode}]\n\n")
@@ -610,9 +739,26 @@ def _fit_args(capture, out, a, uncertain=False, evals=None):
     """Both fits alike: Blender's cloth at the footage's 30 fps and quality 5 (the truth's: the fits differ in
     what they were given, not in the solver), the same free settings, budget and seed. ``uncertain``: the
     capture's ``uncertain`` block (written by handles) is estimated with the cloth; else ``--uncertain none``."""
-    args = ["fit", capture, "--out", out, "--model", "blender", "--fps", f"{FPS:g}", "--quality", "5",
-            "--free", ",".join(FREE), "--max-evaluations", str(evals or a.evals), "--seed", str(a.fit_seed), "--quiet",
-            "--force"]
+    args = [
+        "fit",
+        capture,
+        "--out",
+        out,
+        "--model",
+        "blender",
+        "--fps",
+        f"{FPS:g}",
+        "--quality",
+        "5",
+        "--free",
+        ",".join(FREE),
+        "--max-evaluations",
+        str(evals or a.evals),
+        "--seed",
+        str(a.fit_seed),
+        "--quiet",
+        "--force",
+    ]
     if a.resolution:
         args += ["--resolution", a.resolution]
     if not uncertain:
@@ -623,31 +769,48 @@ def _fit_args(capture, out, a, uncertain=False, evals=None):
 def replay_error_mm(settings: dict, tr: dict) -> dict:
     """The recovered settings replayed under the TRUE manipulation (the core's Blender model): mean vertex
     distance to the true cloth [mm], over all frames and after the release."""
-    from addon.core.observation.metrics import shape_error_mm
-    from addon.core.physics import blender as B
-    from addon.core.physics.models import BlenderModel
+    from clothfit.core.observation.metrics import shape_error_mm
+    from clothfit.core.physics import blender as B
+    from clothfit.core.physics.models import BlenderModel
+
     s = B.check_settings({k: v for k, v in settings.items() if k in B.DEFAULTS}, "replay")
     model = BlenderModel(FPS, s["quality"], s["bending_model"])
     sim = model.simulate(tr["scenario"], B.settings_row(s)[None])
     se = shape_error_mm(sim.positions[0], tr["positions"])
     after = tr["times"] > tr["release_time"]
-    return {"mean_mm": float(se.mean()), "after_release_mm": float(se[after].mean()), "max_frame_mm": float(se.max()),
-            "per_frame_mm": se.tolist()}
+    return {
+        "mean_mm": float(se.mean()),
+        "after_release_mm": float(se[after].mean()),
+        "max_frame_mm": float(se.max()),
+        "per_frame_mm": se.tolist(),
+    }
 
 
 def run_e2e(a) -> dict:
-    from addon.core.observation.camera import save_cameras
-    from addon.core.physics.scenario import Scenario
+    from clothfit.core.observation.camera import save_cameras
+    from clothfit.core.physics.scenario import Scenario
+
     board = CB.parse_board(BOARD)
     cams = front_cameras(a.seed, a.scale, a.cameras)
     poses = board_poses(board, cams, a.poses, a.seed)
     views = {c.name: [k for k, p in enumerate(poses) if visible(c, board, p)] for c in cams}
     tr = cloth_truth(a.seed, a.frames)
     os.makedirs(a.out, exist_ok=True)
-    spec = {"board": BOARD, "seed": a.seed, "samples": a.samples, "denoise": not a.no_denoise,
-            "read_noise": a.read_noise, "shot_noise": a.shot_noise, "print_margin_m": 0.01,
-            "cameras": [c.to_dict() for c in cams], "views": views, "poses": [[R.tolist(), t.tolist()] for R, t in poses],
-            "scenario": tr["scenario"].to_dict(), "vertices": tr["vertices"], "keep": bool(a.keep_renders)}
+    spec = {
+        "board": BOARD,
+        "seed": a.seed,
+        "samples": a.samples,
+        "denoise": not a.no_denoise,
+        "read_noise": a.read_noise,
+        "shot_noise": a.shot_noise,
+        "print_margin_m": 0.01,
+        "cameras": [c.to_dict() for c in cams],
+        "views": views,
+        "poses": [[R.tolist(), t.tolist()] for R, t in poses],
+        "scenario": tr["scenario"].to_dict(),
+        "vertices": tr["vertices"],
+        "keep": bool(a.keep_renders),
+    }
     spec_path = os.path.join(a.out, "spec.json")
     with open(spec_path, "w") as f:
         json.dump(spec, f, indent=1)
@@ -656,11 +819,16 @@ def run_e2e(a) -> dict:
     t0 = time.time()
     if not a.skip_render:
         import shutil
+
         for d in ("calib_images", "footage"):
             if os.path.isdir(os.path.join(a.out, d)) and not a.keep_renders:
                 shutil.rmtree(os.path.join(a.out, d))
-        subprocess.run([sys.executable, os.path.abspath(__file__), "_render_e2e", "--spec", spec_path], check=True,
-                       cwd=ROOT, stdout=None if a.verbose else subprocess.DEVNULL)
+        subprocess.run(
+            [sys.executable, os.path.abspath(__file__), "_render_e2e", "--spec", spec_path],
+            check=True,
+            cwd=ROOT,
+            stdout=None if a.verbose else subprocess.DEVNULL,
+        )
     render_s = time.time() - t0
     with open(os.path.join(a.out, "render_times.json")) as f:
         rt = json.load(f)
@@ -673,8 +841,11 @@ def run_e2e(a) -> dict:
     X = tr["positions"]
     marks = {"frame": 0, "handles": []}
     for name, vtx in tr["vertices"].items():
-        h = {"name": name, "at": [CLIPS[name], 0.0],
-             "marks": {c.name: (c.project(X[0, vtx]) + rng.normal(0, CLICK_SIGMA, 2)).tolist() for c in cams}}
+        h = {
+            "name": name,
+            "at": [CLIPS[name], 0.0],
+            "marks": {c.name: (c.project(X[0, vtx]) + rng.normal(0, CLICK_SIGMA, 2)).tolist() for c in cams},
+        }
         if name == RELEASED:
             h["released"] = True
         marks["handles"].append(h)
@@ -684,18 +855,55 @@ def run_e2e(a) -> dict:
     log = os.path.join(a.out, "commands.log")
     if os.path.exists(log):
         os.remove(log)
-    P = {k: os.path.join(a.out, v) for k, v in {
-        "cams": "cameras.json", "scen": "scenario.json", "cap": "capture", "fit": "fit.json",
-        "cloth": "blender_cloth.json", "true_cams": "true_cameras.json", "true_scen": "true_scenario.json",
-        "true_cap": "capture_true", "true_fit": "fit_true.json"}.items()}
+    P = {
+        k: os.path.join(a.out, v)
+        for k, v in {
+            "cams": "cameras.json",
+            "scen": "scenario.json",
+            "cap": "capture",
+            "fit": "fit.json",
+            "cloth": "blender_cloth.json",
+            "true_cams": "true_cameras.json",
+            "true_scen": "true_scenario.json",
+            "true_cap": "capture_true",
+            "true_fit": "fit_true.json",
+        }.items()
+    }
     secs = {}
     # ---- the user's pipeline: nothing true in it but the images, the clicks, the size and the mass
-    calib, secs["calibrate"] = _cli(["calibrate", os.path.join(a.out, "calib_images"), "--board", BOARD, "--out",
-                                     P["cams"], "--debug", os.path.join(a.out, "calib_debug")], log, "calibrate")
-    hand, secs["handles"] = _cli(["handles", footage, "--marks", marks_path, "--size", f"{CLOTH_W}x{CLOTH_H}",
-                                  "--cameras", P["cams"], "-o", P["scen"]], log, "handles")
-    _, secs["extract"] = _cli(["extract", footage, "-o", P["cap"], "--cameras", P["cams"], "--scenario", P["scen"]],
-                              log, "extract")
+    calib, secs["calibrate"] = _cli(
+        [
+            "calibrate",
+            os.path.join(a.out, "calib_images"),
+            "--board",
+            BOARD,
+            "--out",
+            P["cams"],
+            "--debug",
+            os.path.join(a.out, "calib_debug"),
+        ],
+        log,
+        "calibrate",
+    )
+    hand, secs["handles"] = _cli(
+        [
+            "handles",
+            footage,
+            "--marks",
+            marks_path,
+            "--size",
+            f"{CLOTH_W}x{CLOTH_H}",
+            "--cameras",
+            P["cams"],
+            "-o",
+            P["scen"],
+        ],
+        log,
+        "handles",
+    )
+    _, secs["extract"] = _cli(
+        ["extract", footage, "-o", P["cap"], "--cameras", P["cams"], "--scenario", P["scen"]], log, "extract"
+    )
     # the fit as the issue compares it: the manipulation handles measured taken as it is (the same search as
     # the fit given the truth: 3 settings, the same budget); then, with --uncertain-evals, the fit that also
     # estimates the capture's uncertain block (time offset, clip offsets: 16 unknowns, a larger budget)
@@ -706,8 +914,9 @@ def run_e2e(a) -> dict:
     uncertain = a.uncertain_evals > 0
     if uncertain:
         P["fit_u"] = os.path.join(a.out, "fit_uncertain.json")
-        fit_u, secs["fit_uncertain"] = _cli(_fit_args(P["cap"], P["fit_u"], a, True, a.uncertain_evals), log,
-                                            "fit --uncertain")
+        fit_u, secs["fit_uncertain"] = _cli(
+            _fit_args(P["cap"], P["fit_u"], a, True, a.uncertain_evals), log, "fit --uncertain"
+        )
         cloth_u, _ = _cli(["export-blender-cloth", P["fit_u"]], log, "export-blender-cloth")
         with open(os.path.join(a.out, "blender_cloth_uncertain.json"), "w") as f:
             json.dump(cloth_u, f, indent=1)
@@ -715,8 +924,11 @@ def run_e2e(a) -> dict:
     save_cameras(P["true_cams"], cams)
     with open(P["true_scen"], "w") as f:
         json.dump({"scenario": tr["scenario"].to_dict()}, f, indent=1)
-    _, secs["extract_true"] = _cli(["extract", footage, "-o", P["true_cap"], "--cameras", P["true_cams"],
-                                    "--scenario", P["true_scen"]], log, "extract (true)")
+    _, secs["extract_true"] = _cli(
+        ["extract", footage, "-o", P["true_cap"], "--cameras", P["true_cams"], "--scenario", P["true_scen"]],
+        log,
+        "extract (true)",
+    )
     fit_true, secs["fit_true"] = _cli(_fit_args(P["true_cap"], P["true_fit"], a), log, "fit (true)")
     # ---- compare
     with open(P["fit"]) as f:
@@ -738,53 +950,89 @@ def run_e2e(a) -> dict:
     for h, r in zip(sc.handles, sdoc["report"]["handles"]):
         handle_mm[r["name"]] = 1000 * float(np.linalg.norm(h.positions[0] - truth_w[tr["vertices"][r["name"]]]))
     truth_cams = {c.name: c for c in cameras_in_world(cams, board, poses[0])}
-    from addon.core.observation.camera import load_cameras
+    from clothfit.core.observation.camera import load_cameras
+
     cal = []
     for e in load_cameras(P["cams"]):
         t = truth_cams[e.name]
-        cal.append({"camera": e.name, "focal_pct": float(100 * abs(e.K[0, 0] / t.K[0, 0] - 1)),
-                    "centre_mm": float(1000 * np.linalg.norm(e.center - t.center)),
-                    "rotation_deg": CB.rotation_angle_deg(e.R @ t.R.T)})
+        cal.append(
+            {
+                "camera": e.name,
+                "focal_pct": float(100 * abs(e.K[0, 0] / t.K[0, 0] - 1)),
+                "centre_mm": float(1000 * np.linalg.norm(e.center - t.center)),
+                "rotation_deg": CB.rotation_angle_deg(e.R @ t.R.T),
+            }
+        )
     out = {
-        "seed": a.seed, "resolution": [cams[0].width, cams[0].height], "cameras": len(cams), "frames": a.frames,
-        "samples": a.samples, "board_renders": sum(len(v) for v in views.values()),
-        "footage_renders": len(cams) * (a.frames + 1), "evaluations": a.evals, "free": list(FREE),
-        "true_settings": {k: tr["settings"][k] for k in FREE}, "release_phase": tr["phase"],
-        "calibration": {"rms_px": calib["rms_px"], "cameras": cal,
-                        "worst": {k: max(c[k] for c in cal) for k in ("focal_pct", "centre_mm", "rotation_deg")}},
-        "handles_mm": handle_mm, "handles_max_mm": max(handle_mm.values()),
-        "release_frame": rel_rep["release_frame"], "true_release_frame": true_frame,
+        "seed": a.seed,
+        "resolution": [cams[0].width, cams[0].height],
+        "cameras": len(cams),
+        "frames": a.frames,
+        "samples": a.samples,
+        "board_renders": sum(len(v) for v in views.values()),
+        "footage_renders": len(cams) * (a.frames + 1),
+        "evaluations": a.evals,
+        "free": list(FREE),
+        "true_settings": {k: tr["settings"][k] for k in FREE},
+        "release_phase": tr["phase"],
+        "calibration": {
+            "rms_px": calib["rms_px"],
+            "cameras": cal,
+            "worst": {k: max(c[k] for c in cal) for k in ("focal_pct", "centre_mm", "rotation_deg")},
+        },
+        "handles_mm": handle_mm,
+        "handles_max_mm": max(handle_mm.values()),
+        "release_frame": rel_rep["release_frame"],
+        "true_release_frame": true_frame,
         "release_frame_exact": rel_rep["release_frame"] == true_frame,
         "release_time_error_frames_handles": (rel_h.release_time - tr["release_time"]) / period,
-        "fit": {"e2e": {"settings": {k: res["blender_cloth"][k] for k in FREE}, "E_sil_pct": fit.get("best_E_sil_mean_pct"),
-                        "replay": e2e},
-                "truth_given": {"settings": {k: res_true["blender_cloth"][k] for k in FREE},
-                                "E_sil_pct": fit_true.get("best_E_sil_mean_pct"), "replay": oracle}},
+        "fit": {
+            "e2e": {
+                "settings": {k: res["blender_cloth"][k] for k in FREE},
+                "E_sil_pct": fit.get("best_E_sil_mean_pct"),
+                "replay": e2e,
+            },
+            "truth_given": {
+                "settings": {k: res_true["blender_cloth"][k] for k in FREE},
+                "E_sil_pct": fit_true.get("best_E_sil_mean_pct"),
+                "replay": oracle,
+            },
+        },
         "shape_ratio": e2e["mean_mm"] / oracle["mean_mm"],
         "uncertain_fit": bool(uncertain),
-        "seconds": dict(secs, render=render_s), "seconds_per_render": {k: float(np.mean(v)) for k, v in rt.items() if v},
-        "load_1min_start": load0, "load_1min_end": _load1()}
+        "seconds": dict(secs, render=render_s),
+        "seconds_per_render": {k: float(np.mean(v)) for k, v in rt.items() if v},
+        "load_1min_start": load0,
+        "load_1min_end": _load1(),
+    }
     if uncertain:
         with open(P["fit_u"]) as f:
             res_u = json.load(f)
         rep_u = replay_error_mm(cloth_u["blender_cloth"], tr)
         t_off = res_u.get("time_offset_s")
-        out["fit"]["uncertain"] = {"settings": {k: res_u["blender_cloth"][k] for k in FREE},
-                                   "E_sil_pct": fit_u.get("best_E_sil_mean_pct"), "replay": rep_u,
-                                   "evaluations": a.uncertain_evals, "time_offset_s": t_off,
-                                   "time_offset_uncertainty_s": res_u.get("time_offset_uncertainty_s"),
-                                   "uncertain_block": sdoc.get("uncertain")}
+        out["fit"]["uncertain"] = {
+            "settings": {k: res_u["blender_cloth"][k] for k in FREE},
+            "E_sil_pct": fit_u.get("best_E_sil_mean_pct"),
+            "replay": rep_u,
+            "evaluations": a.uncertain_evals,
+            "time_offset_s": t_off,
+            "time_offset_uncertainty_s": res_u.get("time_offset_uncertainty_s"),
+            "uncertain_block": sdoc.get("uncertain"),
+        }
         out["shape_ratio_uncertain"] = rep_u["mean_mm"] / oracle["mean_mm"]
-        if t_off is not None:      # true time = capture time - t_off: the release shows in the frames t_off later
+        if t_off is not None:  # true time = capture time - t_off: the release shows in the frames t_off later
             out["release_time_error_frames_fit"] = (rel_h.release_time + t_off - tr["release_time"]) / period
-    out["goals"] = {"shape_ratio_le_2": out["shape_ratio"] <= E2E_GOALS["shape_ratio"],
-                    "release_frame_exact": out["release_frame_exact"]}
+    out["goals"] = {
+        "shape_ratio_le_2": out["shape_ratio"] <= E2E_GOALS["shape_ratio"],
+        "release_frame_exact": out["release_frame_exact"],
+    }
     if "release_time_error_frames_fit" in out:
         out["goals"]["release_time_within_third_frame"] = abs(out["release_time_error_frames_fit"]) <= 1 / 3
     print(format_e2e(out), file=sys.stderr)
     out["pictures"] = make_pictures(a.out, os.path.join(a.out, "pictures"))
     if a.json:
-        from addon.core.safeio import atomic_json
+        from clothfit.core.safeio import atomic_json
+
         atomic_json(a.json, out)
     return out
 
@@ -792,6 +1040,7 @@ def run_e2e(a) -> dict:
 def _small_png(path, img):
     """A PNG of few colours (pictures for the docs: tens of kB, not hundreds)."""
     from PIL import Image
+
     Image.fromarray(img[:, :, ::-1]).quantize(96, dither=Image.Dither.NONE).save(path, optimize=True)
 
 
@@ -799,12 +1048,14 @@ def make_pictures(out: str, dest: str, cams=("phone0", "phone2"), frames=(0, -1)
     """Small PNGs of a run for the tutorial (docs/img): the board's detected corners (flat, held up), and two
     phones' frames with the clicks (frame 0) and the extracted silhouette's outline."""
     import cv2
+
     os.makedirs(dest, exist_ok=True)
     written = []
 
     def small(img):
         h, w = img.shape[:2]
         return cv2.resize(img, (width, int(round(h * width / w))), interpolation=cv2.INTER_AREA)
+
     dbg = os.path.join(out, "calib_debug", cams[0])
     shots = sorted(os.listdir(dbg))
     tiles = [small(cv2.imread(os.path.join(dbg, f))) for f in (shots[0], shots[len(shots) // 2])]
@@ -826,8 +1077,9 @@ def make_pictures(out: str, dest: str, cams=("phone0", "phone2"), frames=(0, -1)
             if k == 0:
                 for h in marks["handles"]:
                     u, v = h["marks"][cam]
-                    cv2.circle(img, (int(round(u)), int(round(v))), 6, (0, 0, 255) if h.get("released") else
-                               (255, 160, 0), 2)
+                    cv2.circle(
+                        img, (int(round(u)), int(round(v))), 6, (0, 0, 255) if h.get("released") else (255, 160, 0), 2
+                    )
             tiles.append(small(img))
     path = os.path.join(dest, "phone_rig_footage.png")
     _small_png(path, np.concatenate(tiles, 1))
@@ -838,20 +1090,29 @@ def make_pictures(out: str, dest: str, cams=("phone0", "phone2"), frames=(0, -1)
 def format_e2e(o: dict) -> str:
     c = o["calibration"]["worst"]
     f = o["fit"]
-    return "\n".join([
-        f"seed {o['seed']}, {o['resolution'][0]} x {o['resolution'][1]} px, {o['board_renders']} board + "
-        f"{o['footage_renders']} footage renders",
-        f"calibration: RMS {o['calibration']['rms_px']:.3f} px; worst focal {c['focal_pct']:.3f} %, centre "
-        f"{c['centre_mm']:.2f} mm, rotation {c['rotation_deg']:.3f} deg",
-        f"handles: worst {o['handles_max_mm']:.2f} mm; release frame {o['release_frame']} (true "
-        f"{o['true_release_frame']}), release time off by {o['release_time_error_frames_handles']:+.3f} frame",
-        f"fit (end to end):  {f['e2e']['settings']}  replay {f['e2e']['replay']['mean_mm']:.3f} mm",
-        f"fit (truth given): {f['truth_given']['settings']}  replay {f['truth_given']['replay']['mean_mm']:.3f} mm",
-        f"shape error ratio {o['shape_ratio']:.2f} (goal <= 2)"]
-        + ([f"fit --uncertain ({f['uncertain']['evaluations']} evaluations): {f['uncertain']['settings']}  replay "
-            f"{f['uncertain']['replay']['mean_mm']:.3f} mm, ratio {o['shape_ratio_uncertain']:.2f}; time offset "
-            f"{f['uncertain']['time_offset_s']}; release time off by {o.get('release_time_error_frames_fit', float('nan')):+.3f} "
-            f"frame (goal: within 1/3)"] if "uncertain" in f else []))
+    return "\n".join(
+        [
+            f"seed {o['seed']}, {o['resolution'][0]} x {o['resolution'][1]} px, {o['board_renders']} board + "
+            f"{o['footage_renders']} footage renders",
+            f"calibration: RMS {o['calibration']['rms_px']:.3f} px; worst focal {c['focal_pct']:.3f} %, centre "
+            f"{c['centre_mm']:.2f} mm, rotation {c['rotation_deg']:.3f} deg",
+            f"handles: worst {o['handles_max_mm']:.2f} mm; release frame {o['release_frame']} (true "
+            f"{o['true_release_frame']}), release time off by {o['release_time_error_frames_handles']:+.3f} frame",
+            f"fit (end to end):  {f['e2e']['settings']}  replay {f['e2e']['replay']['mean_mm']:.3f} mm",
+            f"fit (truth given): {f['truth_given']['settings']}  replay {f['truth_given']['replay']['mean_mm']:.3f} mm",
+            f"shape error ratio {o['shape_ratio']:.2f} (goal <= 2)",
+        ]
+        + (
+            [
+                f"fit --uncertain ({f['uncertain']['evaluations']} evaluations): {f['uncertain']['settings']}  replay "
+                f"{f['uncertain']['replay']['mean_mm']:.3f} mm, ratio {o['shape_ratio_uncertain']:.2f}; time offset "
+                f"{f['uncertain']['time_offset_s']}; release time off by {o.get('release_time_error_frames_fit', float('nan')):+.3f} "
+                f"frame (goal: within 1/3)"
+            ]
+            if "uncertain" in f
+            else []
+        )
+    )
 
 
 def main(argv=None):
@@ -860,39 +1121,70 @@ def main(argv=None):
     c = sub.add_parser("calibrate", help="render a ChArUco board in front of 4 phones, calibrate, compare")
     c.add_argument("--out", default="out/phone_rig/calib", help="working folder (default: %(default)s)")
     c.add_argument("--seed", type=int, default=0, help="the rig, the lenses, the board poses (default: %(default)s)")
-    c.add_argument("--scale", type=float, default=0.5,
-                   help="image size as a fraction of a phone's 1080 x 1920 (default: %(default)s)")
-    c.add_argument("--poses", type=int, default=24, help="board poses held up after the flat one (default: %(default)s)")
+    c.add_argument(
+        "--scale",
+        type=float,
+        default=0.5,
+        help="image size as a fraction of a phone's 1080 x 1920 (default: %(default)s)",
+    )
+    c.add_argument(
+        "--poses", type=int, default=24, help="board poses held up after the flat one (default: %(default)s)"
+    )
     c.add_argument("--samples", type=int, default=16, help="Cycles samples per pixel (default: %(default)s)")
     c.add_argument("--no-denoise", action="store_true", help="no OpenImageDenoise pass")
-    c.add_argument("--read-noise", type=float, default=2.0, help="sensor read noise [grey levels] (default: %(default)s)")
-    c.add_argument("--shot-noise", type=float, default=0.04, help="shot noise variance per grey level (default: %(default)s)")
+    c.add_argument(
+        "--read-noise", type=float, default=2.0, help="sensor read noise [grey levels] (default: %(default)s)"
+    )
+    c.add_argument(
+        "--shot-noise", type=float, default=0.04, help="shot noise variance per grey level (default: %(default)s)"
+    )
     c.add_argument("--skip-render", action="store_true", help="reuse the images of a previous run with the same seed")
     c.add_argument("--json", help="write the comparison here")
-    e = sub.add_parser("e2e", help="render a board, then a cloth hung by clips with one let go; run calibrate, "
-                                   "handles, extract, fit, export-blender-cloth as a user; compare with the same fit "
-                                   "given the truth")
+    e = sub.add_parser(
+        "e2e",
+        help="render a board, then a cloth hung by clips with one let go; run calibrate, "
+        "handles, extract, fit, export-blender-cloth as a user; compare with the same fit "
+        "given the truth",
+    )
     e.add_argument("--out", default="out/phone_rig/e2e", help="working folder (default: %(default)s)")
-    e.add_argument("--seed", type=int, default=0, help="the rig, lenses, board poses, release phase, clicks "
-                                                       "(default: %(default)s)")
-    e.add_argument("--scale", type=float, default=0.35,
-                   help="image size as a fraction of a phone's 1080 x 1920 (default: %(default)s)")
+    e.add_argument(
+        "--seed", type=int, default=0, help="the rig, lenses, board poses, release phase, clicks (default: %(default)s)"
+    )
+    e.add_argument(
+        "--scale",
+        type=float,
+        default=0.35,
+        help="image size as a fraction of a phone's 1080 x 1920 (default: %(default)s)",
+    )
     e.add_argument("--cameras", type=int, default=4, help="phones (default: %(default)s)")
-    e.add_argument("--poses", type=int, default=12, help="board poses held up after the flat one (default: %(default)s)")
+    e.add_argument(
+        "--poses", type=int, default=12, help="board poses held up after the flat one (default: %(default)s)"
+    )
     e.add_argument("--frames", type=int, default=18, help="frames filmed at 30 fps (default: %(default)s)")
     e.add_argument("--samples", type=int, default=4, help="Cycles samples per pixel (default: %(default)s)")
     e.add_argument("--no-denoise", action="store_true", help="no OpenImageDenoise pass")
-    e.add_argument("--read-noise", type=float, default=2.0, help="sensor read noise [grey levels] (default: %(default)s)")
-    e.add_argument("--shot-noise", type=float, default=0.04, help="shot noise variance per grey level (default: %(default)s)")
+    e.add_argument(
+        "--read-noise", type=float, default=2.0, help="sensor read noise [grey levels] (default: %(default)s)"
+    )
+    e.add_argument(
+        "--shot-noise", type=float, default=0.04, help="shot noise variance per grey level (default: %(default)s)"
+    )
     e.add_argument("--evals", type=int, default=300, help="fit budget, both fits (default: %(default)s)")
     e.add_argument("--fit-seed", type=int, default=0, help="the optimiser's seed, both fits (default: %(default)s)")
     e.add_argument("--resolution", help="fit at HxW [px] (default: the capture's)")
-    e.add_argument("--uncertain-evals", type=int, default=0,
-                   help="also fit with the capture's uncertain block (time offset and clip offsets estimated with the "
-                        "cloth) at this budget; 0 = not (default: %(default)s)")
+    e.add_argument(
+        "--uncertain-evals",
+        type=int,
+        default=0,
+        help="also fit with the capture's uncertain block (time offset and clip offsets estimated with the "
+        "cloth) at this budget; 0 = not (default: %(default)s)",
+    )
     e.add_argument("--skip-render", action="store_true", help="reuse the images of a previous run with the same seed")
-    e.add_argument("--keep-renders", action="store_true",
-                   help="render only the images a previous run with the same seed did not write (an interrupted run)")
+    e.add_argument(
+        "--keep-renders",
+        action="store_true",
+        help="render only the images a previous run with the same seed did not write (an interrupted run)",
+    )
     e.add_argument("--verbose", action="store_true", help="show Blender's output")
     e.add_argument("--json", help="write the comparison here")
     r = sub.add_parser("_render", help="(internal) the child process that renders with bpy")
@@ -911,7 +1203,7 @@ def main(argv=None):
         return 0
     if a.cmd == "calibrate":
         out = run_calibrate(a)
-        return 0                  # the goals met or missed are in the JSON; an error exits non-zero
+        return 0  # the goals met or missed are in the JSON; an error exits non-zero
     return 2
 
 

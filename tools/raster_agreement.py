@@ -9,6 +9,7 @@ and for every rig camera and capture time compares Blender's silhouette (Workben
 camera and per time, the overall figures, and the time per silhouette of each (the Blender figure
 includes writing and reading the PNG, as a capture render does).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,8 +28,12 @@ def parse_args(argv=None):
     ap.add_argument("--rig", default="lab18")
     ap.add_argument("--times", default=None, help="start:stop:step or a comma list (default: the paper's 30 times)")
     ap.add_argument("--per-image", action="store_true", help="print every (camera, time) row")
-    ap.add_argument("--engine", default="workbench", choices=["workbench", "eevee"],
-                    help="Blender renderer (eevee: one sample, zero pixel filter)")
+    ap.add_argument(
+        "--engine",
+        default="workbench",
+        choices=["workbench", "eevee"],
+        help="Blender renderer (eevee: one sample, zero pixel filter)",
+    )
     ap.add_argument("--json", default=None, help="write all figures to this JSON file")
     return ap.parse_args(argv)
 
@@ -36,18 +41,19 @@ def parse_args(argv=None):
 def main(argv=None):
     if ROOT not in sys.path:
         sys.path.insert(0, ROOT)
-    from addon.blender.pipeline import script_argv
+    from clothfit.blender.pipeline import script_argv
+
     a = parse_args(script_argv(argv))
     import bpy
+    import clothfit
     import numpy as np
+    from clothfit.blender import api, registration
+    from clothfit.blender import render as R
+    from clothfit.blender import scene as S
+    from clothfit.core.observation.raster import silhouette
 
-    import addon
-    from addon.blender import api, registration
-    from addon.blender import render as R
-    from addon.blender import scene as S
-    from addon.core.observation.raster import silhouette
     if not registration.is_registered():
-        addon.register()
+        clothfit.register()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     p = scene.clothfit
@@ -82,16 +88,26 @@ def main(argv=None):
         for c, m, k in zip(cams, masks, core):
             area = int(k.sum())
             xor = int(np.count_nonzero(m ^ k))
-            rows.append({"camera": c.name, "time": t, "area_px": area, "blender_area_px": int(m.sum()),
-                         "xor_px": xor, "xor_pct": 100.0 * xor / max(area, 1)})
+            rows.append(
+                {
+                    "camera": c.name,
+                    "time": t,
+                    "area_px": area,
+                    "blender_area_px": int(m.sum()),
+                    "xor_px": xor,
+                    "xor_pct": 100.0 * xor / max(area, 1),
+                }
+            )
             if a.per_image:
                 print(f"{c.name} t={t:.2f}  area {area:6d}  xor {xor:4d} px  {rows[-1]['xor_pct']:.4f} %")
     shutil.rmtree(tmp, ignore_errors=True)
     pct = np.array([r["xor_pct"] for r in rows])
     xor = np.array([r["xor_px"] for r in rows])
     area = np.array([r["area_px"] for r in rows])
-    print(f"rig {a.rig}: {len(cams)} cameras x {len(times)} times at {H} x {W} (H x W), "
-          f"Blender {bpy.app.version_string} {engine.title()} AA off")
+    print(
+        f"rig {a.rig}: {len(cams)} cameras x {len(times)} times at {H} x {W} (H x W), "
+        f"Blender {bpy.app.version_string} {engine.title()} AA off"
+    )
     print("per camera: mean / max XOR % of the silhouette area, mean area px")
     for c in cams:
         sel = [r for r in rows if r["camera"] == c.name]
@@ -102,22 +118,33 @@ def main(argv=None):
         v = np.array([r["xor_pct"] for r in rows if r["time"] == t])
         print(f"  t={t:.2f}: {v.mean():.4f} / {v.max():.4f} %")
     summary = {
-        "images": len(rows), "width": W, "height": H, "rig": a.rig, "blender": bpy.app.version_string,
+        "images": len(rows),
+        "width": W,
+        "height": H,
+        "rig": a.rig,
+        "blender": bpy.app.version_string,
         "engine": engine,
-        "xor_pct_mean": float(pct.mean()), "xor_pct_max": float(pct.max()),
-        "xor_px_total": int(xor.sum()), "area_px_total": int(area.sum()),
+        "xor_pct_mean": float(pct.mean()),
+        "xor_pct_max": float(pct.max()),
+        "xor_px_total": int(xor.sum()),
+        "area_px_total": int(area.sum()),
         "xor_pct_overall": float(100.0 * xor.sum() / area.sum()),
-        "images_with_zero_xor": int((xor == 0).sum()), "xor_px_max": int(xor.max()),
+        "images_with_zero_xor": int((xor == 0).sum()),
+        "xor_px_max": int(xor.max()),
         "blender_ms_per_silhouette": 1000 * t_blender / n_blender,
         "core_ms_per_silhouette": 1000 * t_core / n_core,
     }
-    print(f"overall: XOR {summary['xor_px_total']} px of {summary['area_px_total']} px = "
-          f"{summary['xor_pct_overall']:.4f} %; per image mean {summary['xor_pct_mean']:.4f} %, "
-          f"max {summary['xor_pct_max']:.4f} % (max {summary['xor_px_max']} px); "
-          f"{summary['images_with_zero_xor']}/{len(rows)} images identical")
-    print(f"time per silhouette: Blender {summary['blender_ms_per_silhouette']:.1f} ms (render + PNG write/read), "
-          f"core {summary['core_ms_per_silhouette']:.2f} ms "
-          f"({summary['blender_ms_per_silhouette'] / summary['core_ms_per_silhouette']:.0f}x)")
+    print(
+        f"overall: XOR {summary['xor_px_total']} px of {summary['area_px_total']} px = "
+        f"{summary['xor_pct_overall']:.4f} %; per image mean {summary['xor_pct_mean']:.4f} %, "
+        f"max {summary['xor_pct_max']:.4f} % (max {summary['xor_px_max']} px); "
+        f"{summary['images_with_zero_xor']}/{len(rows)} images identical"
+    )
+    print(
+        f"time per silhouette: Blender {summary['blender_ms_per_silhouette']:.1f} ms (render + PNG write/read), "
+        f"core {summary['core_ms_per_silhouette']:.2f} ms "
+        f"({summary['blender_ms_per_silhouette'] / summary['core_ms_per_silhouette']:.0f}x)"
+    )
     if a.json:
         os.makedirs(os.path.dirname(os.path.abspath(a.json)), exist_ok=True)
         with open(a.json, "w") as f:

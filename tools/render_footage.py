@@ -16,7 +16,7 @@ Rendered by every camera of a rig (default ``lab18``) at a reduced resolution, t
 * **true masks**: the cloth's triangles projected with the distorted camera and filled at pixel
   centres by the core rasteriser (``raster.silhouette``), and the true vertex positions.
 
-Output (``--out``, the input ``python -m addon extract`` reads)::
+Output (``--out``, the input ``python -m clothfit extract`` reads)::
 
     footage/footage.json          cameras file, frame times, scenario, cloth mass, render settings
     footage/calibration.yml       the distorted cameras (OpenCV FileStorage)
@@ -40,6 +40,7 @@ Engine: Cycles on the CPU with few samples and the OpenImageDenoise denoiser (me
 ``docs/real_footage.md``). Runs under ``python`` with the ``bpy`` module and under
 ``blender -b --factory-startup -P tools/render_footage.py -- render ...``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -55,21 +56,22 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from addon.core.footage import calib_io  # noqa: E402
-from addon.blender.pipeline import script_argv  # noqa: E402  (no bpy import)
-from addon.core import defaults as D  # noqa: E402
-from addon.core.observation.camera import Camera, load_rig  # noqa: E402
-from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.physics.paper import Params  # noqa: E402
-from addon.core.physics.scenario import paper_scenario
-from addon.core.observation.raster import silhouette  # noqa: E402
+from clothfit.blender.pipeline import script_argv  # noqa: E402  (no bpy import)
+from clothfit.core import defaults as D  # noqa: E402
+from clothfit.core.errors import ClothFitError  # noqa: E402
+from clothfit.core.footage import calib_io  # noqa: E402
+from clothfit.core.observation.camera import Camera, load_rig  # noqa: E402
+from clothfit.core.observation.raster import silhouette  # noqa: E402
+from clothfit.core.physics.paper import Params  # noqa: E402
+from clothfit.core.physics.scenario import paper_scenario
 
 DEFAULT_TIMES = [0.1, 0.2, 0.3, 0.4, 0.6, 0.8]
-DEFAULT_RES = (240, 320)          # H, W (half of the rig's 480 x 640)
-TABLE_Z = -0.09                   # table top under the cloth [m]
+DEFAULT_RES = (240, 320)  # H, W (half of the rig's 480 x 640)
+TABLE_Z = -0.09  # table top under the cloth [m]
 
 
 # ====================================================================== lens & sensor
+
 
 def lens_distortion(index: int, rng: np.random.Generator) -> np.ndarray:
     """Plausible OpenCV distortion of a small machine-vision lens: barrel k1, small tangential terms."""
@@ -83,6 +85,7 @@ def distortion_maps(cam: Camera, margin: int):
     """For every pixel of the distorted image, where to sample a pinhole render whose canvas is
     the camera's image grown by ``margin`` px on every side (float32 maps for cv2.remap)."""
     import cv2
+
     H, W = cam.height, cam.width
     yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
     pts = np.stack([xx.ravel(), yy.ravel()], -1).reshape(-1, 1, 2)
@@ -92,24 +95,28 @@ def distortion_maps(cam: Camera, margin: int):
 
 def needed_margin(cam: Camera) -> int:
     mx, my = distortion_maps(cam, 0)
-    over = max(float(-mx.min()), float(-my.min()), float(mx.max() - (cam.width - 1)),
-               float(my.max() - (cam.height - 1)), 0.0)
+    over = max(
+        float(-mx.min()), float(-my.min()), float(mx.max() - (cam.width - 1)), float(my.max() - (cam.height - 1)), 0.0
+    )
     return int(math.ceil(over)) + 2
 
 
-def add_sensor_noise(img: np.ndarray, rng: np.random.Generator, read_sigma: float = 2.0,
-                     shot: float = 0.04) -> np.ndarray:
+def add_sensor_noise(
+    img: np.ndarray, rng: np.random.Generator, read_sigma: float = 2.0, shot: float = 0.04
+) -> np.ndarray:
     """8-bit image with read noise (sigma ``read_sigma`` levels) and shot noise (variance
     ``shot * level``), quantised."""
     f = img.astype(np.float32)
-    sigma = np.sqrt(read_sigma ** 2 + shot * np.maximum(f, 0))
+    sigma = np.sqrt(read_sigma**2 + shot * np.maximum(f, 0))
     return np.clip(np.round(f + rng.normal(0, 1, f.shape).astype(np.float32) * sigma), 0, 255).astype(np.uint8)
 
 
 # ============================================================================ scene
 
+
 def _new_material(name):
     import bpy
+
     mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     return mat, mat.node_tree.nodes, mat.node_tree.links
@@ -127,8 +134,8 @@ def _fabric_material():
     links.new(tc.outputs["UV"], mapping.inputs["Vector"])
     chk = nodes.new("ShaderNodeTexChecker")
     chk.inputs["Scale"].default_value = 6.0
-    chk.inputs["Color1"].default_value = (0.10, 0.16, 0.35, 1)    # muted indigo
-    chk.inputs["Color2"].default_value = (0.70, 0.64, 0.50, 1)    # cream, close to the wall and table
+    chk.inputs["Color1"].default_value = (0.10, 0.16, 0.35, 1)  # muted indigo
+    chk.inputs["Color2"].default_value = (0.70, 0.64, 0.50, 1)  # cream, close to the wall and table
     links.new(mapping.outputs["Vector"], chk.inputs["Vector"])
     noise = nodes.new("ShaderNodeTexNoise")
     noise.inputs["Scale"].default_value = 60.0
@@ -198,6 +205,7 @@ def build_scene(grid, engine="CYCLES", samples=8, denoise=True):
     """A factory-empty scene with the room, the lights and the cloth mesh (rest shape). Returns
     (scene, cloth object)."""
     import bpy
+
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     if engine == "CYCLES":
@@ -237,7 +245,9 @@ def build_scene(grid, engine="CYCLES", samples=8, denoise=True):
     table = bpy.context.object
     table.name = "Table"
     table.data.materials.append(_table_material())
-    bpy.ops.mesh.primitive_cylinder_add(vertices=48, radius=1.1, depth=2.4, location=(0, 0, 0.3), end_fill_type="NOTHING")
+    bpy.ops.mesh.primitive_cylinder_add(
+        vertices=48, radius=1.1, depth=2.4, location=(0, 0, 0.3), end_fill_type="NOTHING"
+    )
     wall = bpy.context.object
     wall.name = "Walls"
     wall.data.materials.append(_wall_material())
@@ -281,6 +291,7 @@ def build_scene(grid, engine="CYCLES", samples=8, denoise=True):
 
 def _aim(obj, target):
     from mathutils import Vector
+
     d = Vector(target) - obj.location
     obj.rotation_euler = d.to_track_quat("-Z", "Y").to_euler()
 
@@ -293,8 +304,8 @@ def set_cloth_shape(cloth, positions):
 def render_pinhole(scene, cam_obj, cam: Camera, margin: int, path: str) -> np.ndarray:
     """Render ``cam`` (no distortion) on a canvas grown by ``margin`` px; returns uint8 BGR."""
     import cv2
+    from clothfit.blender.scene import camera_to_blender
 
-    from addon.blender.scene import camera_to_blender
     K = cam.K.copy()
     K[0, 2] += margin
     K[1, 2] += margin
@@ -303,6 +314,7 @@ def render_pinhole(scene, cam_obj, cam: Camera, margin: int, path: str) -> np.nd
     scene.camera = cam_obj
     scene.render.filepath = path
     import bpy
+
     bpy.ops.render.render(write_still=True)
     img = cv2.imread(path, cv2.IMREAD_COLOR)
     if img is None:
@@ -312,18 +324,32 @@ def render_pinhole(scene, cam_obj, cam: Camera, margin: int, path: str) -> np.nd
 
 def distort_image(pinhole: np.ndarray, maps) -> np.ndarray:
     import cv2
+
     return cv2.remap(pinhole, maps[0], maps[1], interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
 
 
 # ============================================================================ render
 
-def render_footage(out, rig=D.DEFAULT_RIG, times=None, resolution=DEFAULT_RES, engine="CYCLES", samples=8,
-                   denoise=True, seed=0, cameras=None, read_sigma=2.0, shot=0.04, plates=2, keep_pinhole=False):
-    import cv2
-    import bpy
 
-    from addon.core.observation.silhouette_files import save_silhouette
-    from addon.core.physics.models import simulate
+def render_footage(
+    out,
+    rig=D.DEFAULT_RIG,
+    times=None,
+    resolution=DEFAULT_RES,
+    engine="CYCLES",
+    samples=8,
+    denoise=True,
+    seed=0,
+    cameras=None,
+    read_sigma=2.0,
+    shot=0.04,
+    plates=2,
+    keep_pinhole=False,
+):
+    import bpy
+    import cv2
+    from clothfit.core.observation.silhouette_files import save_silhouette
+    from clothfit.core.physics.models import simulate
 
     times = list(DEFAULT_TIMES if times is None else times)
     rng = np.random.default_rng(seed)
@@ -372,8 +398,10 @@ def render_footage(out, rig=D.DEFAULT_RIG, times=None, resolution=DEFAULT_RES, e
             save_silhouette(os.path.join(out, "truth", "masks", cam.name, f"{fi:03d}.png"), mask)
             if not keep_pinhole:
                 os.remove(os.path.join(tmp, f"{cam.name}_{fi:03d}.png"))
-        print(f"[render] {cam.name}: {1 + len(times)} renders, mean {np.mean(timing[-(1 + len(times)):]):.2f} s",
-              flush=True)
+        print(
+            f"[render] {cam.name}: {1 + len(times)} renders, mean {np.mean(timing[-(1 + len(times)) :]):.2f} s",
+            flush=True,
+        )
     set_cloth_shape(cloth, scen.grid.rest)
     np.savez_compressed(os.path.join(out, "truth", "shapes.npz"), positions=X, frame_times=np.array(times))
     try:
@@ -382,19 +410,33 @@ def render_footage(out, rig=D.DEFAULT_RIG, times=None, resolution=DEFAULT_RES, e
             os.rmdir(tmp)
     except OSError:
         pass
-    info = {"cameras": "calibration.yml", "frame_times": times, "scenario": scen.to_dict(),
-            "cloth_mass": p.m * scen.grid.n_vertices,
-            "meta": {"generator": "tools/render_footage.py", "true_params": p.as_dict(), "rig": rig,
-                     "resolution": list(resolution), "engine": engine, "samples": samples, "denoise": denoise,
-                     "sensor_noise": {"read_sigma": read_sigma, "shot": shot}, "seed": seed,
-                     "background_plates": plates, "seconds_per_render": float(np.mean(timing)),
-                     "truth": {"masks": "truth/masks/{camera}/{frame:03d}.png", "shapes": "truth/shapes.npz"}}}
+    info = {
+        "cameras": "calibration.yml",
+        "frame_times": times,
+        "scenario": scen.to_dict(),
+        "cloth_mass": p.m * scen.grid.n_vertices,
+        "meta": {
+            "generator": "tools/render_footage.py",
+            "true_params": p.as_dict(),
+            "rig": rig,
+            "resolution": list(resolution),
+            "engine": engine,
+            "samples": samples,
+            "denoise": denoise,
+            "sensor_noise": {"read_sigma": read_sigma, "shot": shot},
+            "seed": seed,
+            "background_plates": plates,
+            "seconds_per_render": float(np.mean(timing)),
+            "truth": {"masks": "truth/masks/{camera}/{frame:03d}.png", "shapes": "truth/shapes.npz"},
+        },
+    }
     with open(os.path.join(out, "footage.json"), "w") as f:
         json.dump(info, f, indent=1)
     return info
 
 
 # ============================================================================= score
+
 
 def single_plate_view(footage, tmp):
     """A view of ``footage`` (symlinks) with only the first background plate per camera."""
@@ -418,9 +460,10 @@ def score(footage, capture_dir, single_plate=False, **extract_kw):
     """Extract ``footage`` into ``capture_dir`` and compare with the true masks: IoU per camera."""
     import tempfile
 
-    from addon.core.observation.capture import load_capture
-    from addon.core.observation.silhouette_files import read_silhouette
-    from addon.core.footage.extract import extract_capture
+    from clothfit.core.footage.extract import extract_capture
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.observation.silhouette_files import read_silhouette
+
     t0 = time.time()
     src = single_plate_view(footage, tempfile.mkdtemp(prefix="footage_1plate_")) if single_plate else footage
     rep = extract_capture(src, capture_dir, **extract_kw)
@@ -437,42 +480,67 @@ def score(footage, capture_dir, single_plate=False, **extract_kw):
             xor += int((m ^ t).sum())
             area += int(t.sum())
         r = rep["cameras"][cam.name]
-        rows.append({"camera": cam.name, "iou": inter / max(union, 1), "e_sil_pct": 100.0 * xor / max(area, 1),
-                     "threshold": r["threshold"], "otsu": r["otsu"], "noise": r["noise"]})
-    out = {"rows": rows, "mean_iou": float(np.mean([r["iou"] for r in rows])),
-           "min_iou": float(np.min([r["iou"] for r in rows])),
-           "mean_e_sil_pct": float(np.mean([r["e_sil_pct"] for r in rows])),
-           "extract_seconds": secs, "warnings": rep["warnings"], "options": rep["options"]}
+        rows.append(
+            {
+                "camera": cam.name,
+                "iou": inter / max(union, 1),
+                "e_sil_pct": 100.0 * xor / max(area, 1),
+                "threshold": r["threshold"],
+                "otsu": r["otsu"],
+                "noise": r["noise"],
+            }
+        )
+    out = {
+        "rows": rows,
+        "mean_iou": float(np.mean([r["iou"] for r in rows])),
+        "min_iou": float(np.min([r["iou"] for r in rows])),
+        "mean_e_sil_pct": float(np.mean([r["e_sil_pct"] for r in rows])),
+        "extract_seconds": secs,
+        "warnings": rep["warnings"],
+        "options": rep["options"],
+    }
     return out
 
 
 def format_score(s):
     lines = ["| camera | IoU | E_sil vs truth [%] | threshold | Otsu | noise |", "|---|---|---|---|---|---|"]
     for r in s["rows"]:
-        lines.append(f"| {r['camera']} | {r['iou']:.4f} | {r['e_sil_pct']:.2f} | {r['threshold']:.2f} | "
-                     f"{r['otsu']:.2f} | {r['noise']:.2f} |")
+        lines.append(
+            f"| {r['camera']} | {r['iou']:.4f} | {r['e_sil_pct']:.2f} | {r['threshold']:.2f} | "
+            f"{r['otsu']:.2f} | {r['noise']:.2f} |"
+        )
     lines.append(f"| **mean** | **{s['mean_iou']:.4f}** | **{s['mean_e_sil_pct']:.2f}** | | | |")
     return "\n".join(lines)
 
 
 # =============================================================================== fit
 
+
 def fit_footage(capture_dir, footage, n_train=(4,), evals=1500, seed=0, optimizer="spx-mgg", train_times=None):
     """Fit on ``n`` training cameras' extracted silhouettes; score on the held-out cameras."""
-    from addon.core.observation.camera import select_training
-    from addon.core.observation.capture import load_capture, read_shapes, write_capture
-    from addon.core.observation.silhouette_files import read_silhouette
-    from addon.core.fitting.evaluate import evaluate
-    from addon.core.fitting.job import FitConfig, FitJob
-    from addon.core.physics.paper import identifiable, identifiable_errors
+    from clothfit.core.fitting.evaluate import evaluate
+    from clothfit.core.fitting.job import FitConfig, FitJob
+    from clothfit.core.observation.camera import select_training
+    from clothfit.core.observation.capture import load_capture, read_shapes, write_capture
+    from clothfit.core.observation.silhouette_files import read_silhouette
+    from clothfit.core.physics.paper import identifiable, identifiable_errors
 
     cap = load_capture(capture_dir)
     truth_dir = os.path.join(os.path.dirname(os.path.abspath(capture_dir)), os.path.basename(capture_dir) + "_truth")
     shapes = read_shapes(os.path.join(footage, "truth", "shapes.npz"), cap.frame_times, cap.scenario.grid.n_vertices)
-    masks = [[read_silhouette(os.path.join(footage, "truth", "masks", c.name, f"{f:03d}.png"))
-              for f in range(cap.n_frames)] for c in cap.cameras]
-    truth = write_capture(truth_dir, cap.cameras, cap.scenario, masks, shapes=shapes, cloth_mass=cap.cloth_mass,
-                          meta={"generator": "true masks of " + os.path.abspath(footage)})
+    masks = [
+        [read_silhouette(os.path.join(footage, "truth", "masks", c.name, f"{f:03d}.png")) for f in range(cap.n_frames)]
+        for c in cap.cameras
+    ]
+    truth = write_capture(
+        truth_dir,
+        cap.cameras,
+        cap.scenario,
+        masks,
+        shapes=shapes,
+        cloth_mass=cap.cloth_mass,
+        meta={"generator": "true masks of " + os.path.abspath(footage)},
+    )
     with open(os.path.join(footage, "footage.json")) as f:
         gt = json.load(f)["meta"]["true_params"]
     times = list(cap.frame_times) if train_times is None else train_times
@@ -480,25 +548,35 @@ def fit_footage(capture_dir, footage, n_train=(4,), evals=1500, seed=0, optimize
     for n in n_train:
         train, held = select_training(cap.cameras, n)
         t0 = time.time()
-        job = FitJob(cap, FitConfig(train_cameras=train, train_times=times, optimizer=optimizer, seed=seed,
-                                    max_evaluations=evals))
+        job = FitJob(
+            cap,
+            FitConfig(train_cameras=train, train_times=times, optimizer=optimizer, seed=seed, max_evaluations=evals),
+        )
         res = job.run()
         ev_obs = evaluate(cap, res["params"], cameras=held)
         ev_true = evaluate(truth, res["params"], cameras=held)
         ev_gt = evaluate(cap, gt, cameras=held)
-        rows.append({"cameras": n, "heldout_sil_err_vs_extracted_pct": ev_obs["silhouette_error_pct"],
-                     "heldout_sil_err_vs_true_pct": ev_true["silhouette_error_pct"],
-                     "shape_error_mm": ev_true["shape_error_mm"],
-                     "gt_params_heldout_sil_err_vs_extracted_pct": ev_gt["silhouette_error_pct"],
-                     "params": res["params"], "identifiable": identifiable(res["params"]),
-                     "identifiable_error_pct": identifiable_errors(res["params"], gt),
-                     "evaluations": res["evaluations"], "seconds": time.time() - t0,
-                     "train": [cap.cameras[c].name for c in train]})
+        rows.append(
+            {
+                "cameras": n,
+                "heldout_sil_err_vs_extracted_pct": ev_obs["silhouette_error_pct"],
+                "heldout_sil_err_vs_true_pct": ev_true["silhouette_error_pct"],
+                "shape_error_mm": ev_true["shape_error_mm"],
+                "gt_params_heldout_sil_err_vs_extracted_pct": ev_gt["silhouette_error_pct"],
+                "params": res["params"],
+                "identifiable": identifiable(res["params"]),
+                "identifiable_error_pct": identifiable_errors(res["params"], gt),
+                "evaluations": res["evaluations"],
+                "seconds": time.time() - t0,
+                "train": [cap.cameras[c].name for c in train],
+            }
+        )
         print(json.dumps(rows[-1], indent=1), flush=True)
     return rows
 
 
 # ============================================================================== main
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -538,14 +616,35 @@ def main(argv=None):
         if a.cmd == "render":
             h, w = (int(v) for v in a.resolution.lower().split("x"))
             t0 = time.time()
-            info = render_footage(a.out, a.rig, [float(t) for t in a.times.split(",")], (h, w),
-                                  "CYCLES" if a.engine == "CYCLES" else "EEVEE", a.samples, not a.no_denoise,
-                                  a.seed, a.camera, a.read_noise, a.shot_noise)
-            print(f"rendered {a.out} in {time.time() - t0:.0f} s ({info['meta']['seconds_per_render']:.2f} s per render)")
+            info = render_footage(
+                a.out,
+                a.rig,
+                [float(t) for t in a.times.split(",")],
+                (h, w),
+                "CYCLES" if a.engine == "CYCLES" else "EEVEE",
+                a.samples,
+                not a.no_denoise,
+                a.seed,
+                a.camera,
+                a.read_noise,
+                a.shot_noise,
+            )
+            print(
+                f"rendered {a.out} in {time.time() - t0:.0f} s ({info['meta']['seconds_per_render']:.2f} s per render)"
+            )
         elif a.cmd == "score":
-            kw = {k: v for k, v in (("threshold", a.threshold), ("luma_weight", a.luma_weight),
-                                    ("shadow_min", a.shadow_min), ("blur", a.blur), ("refine_radius", a.refine),
-                                    ("shadow_window", a.shadow_window)) if v is not None}
+            kw = {
+                k: v
+                for k, v in (
+                    ("threshold", a.threshold),
+                    ("luma_weight", a.luma_weight),
+                    ("shadow_min", a.shadow_min),
+                    ("blur", a.blur),
+                    ("refine_radius", a.refine),
+                    ("shadow_window", a.shadow_window),
+                )
+                if v is not None
+            }
             sc = score(a.footage, a.capture, a.single_plate, **kw)
             print(format_score(sc))
             for wmsg in sc["warnings"]:

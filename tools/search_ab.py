@@ -20,6 +20,7 @@ the error jump that much: no search can be expected below it). ``ratio = heldout
 Strategies are presets of ``make_optimizer`` (STRATEGIES below); ``baseline`` is what
 ``FitJob`` builds today for the blender model (cma-es, popsize 4 + 3 ln n, IPOP restarts 4).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,11 +34,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from addon.core import defaults as D                      # noqa: E402
-from addon.core.fitting.job import FitConfig, FitJob       # noqa: E402
-from addon.core.fitting.optimise import make_optimizer     # noqa: E402
-from addon.core.observation.capture import load_capture    # noqa: E402
-from addon.core.observation.camera import select_training  # noqa: E402
+from clothfit.core import defaults as D  # noqa: E402
+from clothfit.core.fitting.job import FitConfig, FitJob  # noqa: E402
+from clothfit.core.fitting.optimise import make_optimizer  # noqa: E402
+from clothfit.core.observation.camera import select_training  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
 
 BUDGET = D.FIT_EVALUATIONS
 
@@ -52,8 +53,10 @@ STRATEGIES = {
     # one long active CMA-ES run with a large population (faster covariance learning per evaluation
     # in the narrow, curved valley of the damping settings), local active restarts from the best
     # point if it stops before the budget
-    "active32": ("cma-portfolio", {"runs": 1, "explore": 0.0, "popsize": 32, "active": True,
-                                   "polish": "cma", "polish_sigma": 0.05}),
+    "active32": (
+        "cma-portfolio",
+        {"runs": 1, "explore": 0.0, "popsize": 32, "active": True, "polish": "cma", "polish_sigma": 0.05},
+    ),
 }
 
 
@@ -62,9 +65,20 @@ STRATEGIES = {
 # capture), "fresh" another material and noise seed, kept apart for judging
 SYNTH = {
     "default": ["--seed", "0"],
-    "fresh": ["--seed", "7", "--params", json.dumps({"tension_stiffness": 25, "compression_stiffness": 25,
-                                                   "shear_stiffness": 8, "bending_stiffness": 1,
-                                                   "air_damping": 1.5})],
+    "fresh": [
+        "--seed",
+        "7",
+        "--params",
+        json.dumps(
+            {
+                "tension_stiffness": 25,
+                "compression_stiffness": 25,
+                "shear_stiffness": 8,
+                "bending_stiffness": 1,
+                "air_damping": 1.5,
+            }
+        ),
+    ],
 }
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -77,9 +91,29 @@ def capture_path(spec):
     out = os.path.join(ROOT, "out", "search_ab", name)
     if not os.path.isfile(os.path.join(out, "capture.json")):
         import subprocess
-        subprocess.run([sys.executable, "-m", "addon", "synth", "--out", out, "--model", "blender", "--rig", "lab18",
-                        "--resolution", "240x320", "--noise", "0.05"] + SYNTH[name],
-                       cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "clothfit",
+                "synth",
+                "--out",
+                out,
+                "--model",
+                "blender",
+                "--rig",
+                "lab18",
+                "--resolution",
+                "240x320",
+                "--noise",
+                "0.05",
+            ]
+            + SYNTH[name],
+            cwd=ROOT,
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
     return out
 
 
@@ -142,24 +176,43 @@ class Bench:
             f = obj(self.job.par.rows(X))
             opt.tell(X, f)
             if trace and opt.generation % 10 == 0:
-                print(f"  gen {opt.generation} evals {opt.evaluations} best {opt.best_f / obj.n_images * 100:.3f}"
-                      f" {getattr(opt, 'phase_info', lambda: '')()}", file=sys.stderr, flush=True)
+                print(
+                    f"  gen {opt.generation} evals {opt.evaluations} best {opt.best_f / obj.n_images * 100:.3f}"
+                    f" {getattr(opt, 'phase_info', lambda: '')()}",
+                    file=sys.stderr,
+                    flush=True,
+                )
         cpu, wall = time.process_time() - c0, time.time() - t0
         xb = opt.best_x
         h = self.held(xb)
         stop = opt.stop_reason if opt.stopped else "budget"
-        return {"capture": self.path, "strategy": strategy, "seed": seed, "budget": int(budget),
-                "evals": int(opt.evaluations),
-                "train_pct": opt.best_f / obj.n_images * 100, "heldout_pct": h, "floor_pct": self.floor,
-                "jitter_floor_pct": self.jitter, "train_floor_pct": self.train_floor, "ratio": h / self.floor,
-                "stop_reason": stop, "cpu_s": cpu, "wall_s": wall,
-                "best_x": [float(v) for v in xb], "truth_x": [float(v) for v in self.truth],
-                "load": os.getloadavg()[0]}
+        return {
+            "capture": self.path,
+            "strategy": strategy,
+            "seed": seed,
+            "budget": int(budget),
+            "evals": int(opt.evaluations),
+            "train_pct": opt.best_f / obj.n_images * 100,
+            "heldout_pct": h,
+            "floor_pct": self.floor,
+            "jitter_floor_pct": self.jitter,
+            "train_floor_pct": self.train_floor,
+            "ratio": h / self.floor,
+            "stop_reason": stop,
+            "cpu_s": cpu,
+            "wall_s": wall,
+            "best_x": [float(v) for v in xb],
+            "truth_x": [float(v) for v in self.truth],
+            "load": os.getloadavg()[0],
+        }
 
 
-GROUPS = {"all": None, "tension_shear": ("tension_stiffness", "shear_stiffness"),
-          "compression_bending": ("compression_stiffness", "bending_stiffness"),
-          "dampings_air": ("tension_damping", "shear_damping", "bending_damping", "air_damping")}
+GROUPS = {
+    "all": None,
+    "tension_shear": ("tension_stiffness", "shear_stiffness"),
+    "compression_bending": ("compression_stiffness", "bending_stiffness"),
+    "dampings_air": ("tension_damping", "shear_damping", "bending_damping", "air_damping"),
+}
 RELATIVE = (1e-7, 1e-3, 1e-2, 1e-1, 3e-1)
 
 
@@ -176,32 +229,66 @@ def landscape(b, samples=4, seed=1):
             X[:, idx] *= 1 + rel * rng.choice([-1.0, 1.0], size=(samples, len(idx)))
             tr = b.job.objective(b.job.par.rows(X)) / b.job.objective.n_images * 100
             he = b.hjob.objective(b.job.par.rows(X)) / b.hjob.objective.n_images * 100
-            out.append({"group": group, "relative": rel, "train_pct": [float(v) for v in tr],
-                        "heldout_pct": [float(v) for v in he], "median_ratio": float(np.median(he) / b.floor),
-                        "min_ratio": float(np.min(he) / b.floor), "max_ratio": float(np.max(he) / b.floor)})
-    return {"capture": b.path, "floor_pct": b.floor, "train_floor_pct": b.train_floor, "jitter_floor_pct": b.jitter,
-            "rows": out}
+            out.append(
+                {
+                    "group": group,
+                    "relative": rel,
+                    "train_pct": [float(v) for v in tr],
+                    "heldout_pct": [float(v) for v in he],
+                    "median_ratio": float(np.median(he) / b.floor),
+                    "min_ratio": float(np.min(he) / b.floor),
+                    "max_ratio": float(np.max(he) / b.floor),
+                }
+            )
+    return {
+        "capture": b.path,
+        "floor_pct": b.floor,
+        "train_floor_pct": b.train_floor,
+        "jitter_floor_pct": b.jitter,
+        "rows": out,
+    }
 
 
 def local_start(b, rel=0.05, sigma=0.02, budget=1000, seed=0):
     """A CMA-ES run (active, popsize 10) started in the truth's own basin: every setting off by
     +-rel, step ``sigma``: does the search converge to the truth once it is close?"""
-    from addon.core.fitting.evolution_strategy import CMAES
+    from clothfit.core.fitting.evolution_strategy import CMAES
+
     rng = np.random.default_rng(seed)
     x0 = b.truth * (1 + rel * rng.choice([-1.0, 1.0], size=len(b.truth)))
     obj, sp = b.job.objective, b.job.space
-    o = CMAES(sp, seed=seed, initial=[x0], sigma0=sigma, popsize=10, active=True, tolx=D.FIT_TOLX,
-              tolfun=D.FIT_TOLFUN_PER_IMAGE * obj.n_images)
-    trace = [{"evals": 0, "train_pct": b.train(x0), "ratio": b.held(x0) / b.floor,
-              "max_abs_du": float(np.abs(sp.encode(x0) - sp.encode(b.truth)).max())}]
+    o = CMAES(
+        sp,
+        seed=seed,
+        initial=[x0],
+        sigma0=sigma,
+        popsize=10,
+        active=True,
+        tolx=D.FIT_TOLX,
+        tolfun=D.FIT_TOLFUN_PER_IMAGE * obj.n_images,
+    )
+    trace = [
+        {
+            "evals": 0,
+            "train_pct": b.train(x0),
+            "ratio": b.held(x0) / b.floor,
+            "max_abs_du": float(np.abs(sp.encode(x0) - sp.encode(b.truth)).max()),
+        }
+    ]
     while o.evaluations < budget and not o.stopped:
         X = o.ask()
         o.tell(X, obj(b.job.par.rows(X)))
         if o.generation % 20 == 0 or o.evaluations >= budget or o.stopped:
             du = sp.encode(o.best_x) - sp.encode(b.truth)
-            trace.append({"evals": int(o.evaluations), "train_pct": o.best_f / obj.n_images * 100,
-                          "ratio": b.held(o.best_x) / b.floor, "max_abs_du": float(np.abs(du).max()),
-                          "du": {n: float(v) for n, v in zip(b.job.par.free, du)}})
+            trace.append(
+                {
+                    "evals": int(o.evaluations),
+                    "train_pct": o.best_f / obj.n_images * 100,
+                    "ratio": b.held(o.best_x) / b.floor,
+                    "max_abs_du": float(np.abs(du).max()),
+                    "du": {n: float(v) for n, v in zip(b.job.par.free, du)},
+                }
+            )
     return {"relative": rel, "sigma0": sigma, "budget": budget, "trace": trace}
 
 
@@ -213,27 +300,42 @@ def summary(rows):
     out = []
     for (cap, strat), rs in sorted(groups.items()):
         ratios = np.array([r["ratio"] for r in rs])
-        out.append({"capture": cap, "strategy": strat, "seeds": len(rs),
-                    "median_ratio": float(np.median(ratios)), "best_ratio": float(ratios.min()),
-                    "worst_ratio": float(ratios.max()), "within_1_2": int(np.sum(ratios <= 1.2)),
-                    "within_1_5": int(np.sum(ratios <= 1.5)),
-                    "median_heldout_pct": float(np.median([r["heldout_pct"] for r in rs])),
-                    "floor_pct": rs[0]["floor_pct"], "jitter_floor_pct": rs[0]["jitter_floor_pct"],
-                    "median_train_pct": float(np.median([r["train_pct"] for r in rs])),
-                    "mean_evals": float(np.mean([r["evals"] for r in rs])),
-                    "mean_cpu_s": float(np.mean([r["cpu_s"] for r in rs]))})
+        out.append(
+            {
+                "capture": cap,
+                "strategy": strat,
+                "seeds": len(rs),
+                "median_ratio": float(np.median(ratios)),
+                "best_ratio": float(ratios.min()),
+                "worst_ratio": float(ratios.max()),
+                "within_1_2": int(np.sum(ratios <= 1.2)),
+                "within_1_5": int(np.sum(ratios <= 1.5)),
+                "median_heldout_pct": float(np.median([r["heldout_pct"] for r in rs])),
+                "floor_pct": rs[0]["floor_pct"],
+                "jitter_floor_pct": rs[0]["jitter_floor_pct"],
+                "median_train_pct": float(np.median([r["train_pct"] for r in rs])),
+                "mean_evals": float(np.mean([r["evals"] for r in rs])),
+                "mean_cpu_s": float(np.mean([r["cpu_s"] for r in rs])),
+            }
+        )
     return out
 
 
 def print_table(summ, file=sys.stderr):
-    print("| capture | strategy | seeds | median ratio | best | worst | <= 1.2x | <= 1.5x | median held-out % "
-          "| floor % | jitter floor % | mean CPU s |", file=file)
+    print(
+        "| capture | strategy | seeds | median ratio | best | worst | <= 1.2x | <= 1.5x | median held-out % "
+        "| floor % | jitter floor % | mean CPU s |",
+        file=file,
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|", file=file)
     for s in summ:
-        print(f"| {os.path.basename(s['capture'].rstrip('/'))} | {s['strategy']} | {s['seeds']} | "
-              f"{s['median_ratio']:.2f} | {s['best_ratio']:.2f} | {s['worst_ratio']:.2f} | {s['within_1_2']} | "
-              f"{s['within_1_5']} | {s['median_heldout_pct']:.3f} | {s['floor_pct']:.3f} | "
-              f"{s['jitter_floor_pct']:.3f} | {s['mean_cpu_s']:.0f} |", file=file)
+        print(
+            f"| {os.path.basename(s['capture'].rstrip('/'))} | {s['strategy']} | {s['seeds']} | "
+            f"{s['median_ratio']:.2f} | {s['best_ratio']:.2f} | {s['worst_ratio']:.2f} | {s['within_1_2']} | "
+            f"{s['within_1_5']} | {s['median_heldout_pct']:.3f} | {s['floor_pct']:.3f} | "
+            f"{s['jitter_floor_pct']:.3f} | {s['mean_cpu_s']:.0f} |",
+            file=file,
+        )
 
 
 def main(argv=None):
@@ -246,18 +348,32 @@ def main(argv=None):
     ap.add_argument("--summary", nargs="*", help="only summarise these JSONL files")
     ap.add_argument("--json-summary", help="write the summary (and rows) as one JSON document here")
     ap.add_argument("--trace", action="store_true", help="progress of each fit on stderr")
-    ap.add_argument("--only-reused", action="store_true",
-                    help="with --reuse: take the fits found there and run none (a seed missing there is left out)")
-    ap.add_argument("--landscape", help="instead of fits: the errors of the truth perturbed group by group "
-                                        "(settings x relative size), written as JSON here")
-    ap.add_argument("--local", type=float, help="with --landscape: also a CMA-ES run started this far (relative) "
-                                                "from the truth, 1000 evaluations")
-    ap.add_argument("--reuse", nargs="*", default=[],
-                    help="JSONL files of earlier runs of this tool: a fit with the same capture name, strategy, "
-                         "seed and budget is taken from them instead of run again (the fits are deterministic)")
+    ap.add_argument(
+        "--only-reused",
+        action="store_true",
+        help="with --reuse: take the fits found there and run none (a seed missing there is left out)",
+    )
+    ap.add_argument(
+        "--landscape",
+        help="instead of fits: the errors of the truth perturbed group by group "
+        "(settings x relative size), written as JSON here",
+    )
+    ap.add_argument(
+        "--local",
+        type=float,
+        help="with --landscape: also a CMA-ES run started this far (relative) from the truth, 1000 evaluations",
+    )
+    ap.add_argument(
+        "--reuse",
+        nargs="*",
+        default=[],
+        help="JSONL files of earlier runs of this tool: a fit with the same capture name, strategy, "
+        "seed and budget is taken from them instead of run again (the fits are deterministic)",
+    )
     a = ap.parse_args(argv)
     if a.landscape:
-        from addon.core.safeio import atomic_json
+        from clothfit.core.safeio import atomic_json
+
         out = []
         for c in a.captures:
             b = Bench(capture_path(c))
@@ -276,7 +392,9 @@ def main(argv=None):
             for line in open(p):
                 if line.strip():
                     r = json.loads(line)
-                    old[(os.path.basename(r["capture"].rstrip("/")), r["strategy"], r["seed"], r.get("budget", BUDGET))] = r
+                    old[
+                        (os.path.basename(r["capture"].rstrip("/")), r["strategy"], r["seed"], r.get("budget", BUDGET))
+                    ] = r
         for spec in a.captures:
             if a.only_reused:
                 cap = spec.split(":", 1)[1] if spec.startswith("synth:") else spec
@@ -288,8 +406,11 @@ def main(argv=None):
                 continue
             cap = capture_path(spec)
             b = Bench(cap)
-            print(f"{cap}: floor {b.floor:.3f} %, jitter floor {b.jitter:.3f} %, train floor {b.train_floor:.3f} %",
-                  file=sys.stderr, flush=True)
+            print(
+                f"{cap}: floor {b.floor:.3f} %, jitter floor {b.jitter:.3f} %, train floor {b.train_floor:.3f} %",
+                file=sys.stderr,
+                flush=True,
+            )
             for strat in a.strategies.split(","):
                 for seed in parse_seeds(a.seeds):
                     key = (os.path.basename(cap.rstrip("/")), strat, seed, a.budget)
@@ -298,15 +419,19 @@ def main(argv=None):
                     else:
                         r = dict(b.fit(strat, seed, a.budget, a.trace), capture=spec)
                     rows.append(r)
-                    print(json.dumps({k: v for k, v in r.items() if k not in ("best_x", "truth_x")}),
-                          file=sys.stderr, flush=True)
+                    print(
+                        json.dumps({k: v for k, v in r.items() if k not in ("best_x", "truth_x")}),
+                        file=sys.stderr,
+                        flush=True,
+                    )
                     if a.out:
                         with open(a.out, "a") as fh:
                             fh.write(json.dumps(r) + "\n")
     summ = summary(rows)
     print_table(summ)
     if a.json_summary:
-        from addon.core.safeio import atomic_json
+        from clothfit.core.safeio import atomic_json
+
         atomic_json(a.json_summary, {"summary": summ, "rows": rows})
     print(json.dumps({"summary": summ}))
 

@@ -7,6 +7,7 @@ over the 30 frames (t = 0.05 ... 1.5 s). A smooth, damped motion moves by ~1e-9 
 amplifies the perturbation to tenths of a millimetre or more. It also prints the displacement for
 larger perturbations of the ground truth (continuity of the motion in k/m).
 """
+
 import argparse
 import json
 import os
@@ -15,10 +16,10 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from addon.core import defaults as D
-from addon.core.physics.models import simulate
-from addon.core.physics.paper import Params
-from addon.core.physics.scenario import paper_scenario
+from clothfit.core import defaults as D
+from clothfit.core.physics.models import simulate
+from clothfit.core.physics.paper import Params
+from clothfit.core.physics.scenario import paper_scenario
 
 
 def max_move(sc, base, rel):
@@ -27,8 +28,8 @@ def max_move(sc, base, rel):
     return float(np.abs(a - b).max())
 
 
-DAMPINGS = (5, 6, 7, 8, 10)       # d/m [1/s]
-STIFFNESSES = (9.0, 10.0, 11.0)   # k [N/m]
+DAMPINGS = (5, 6, 7, 8, 10)  # d/m [1/s]
+STIFFNESSES = (9.0, 10.0, 11.0)  # k [N/m]
 CHANGES = (1e-6, 1e-4, 1e-3, 1e-2)
 
 
@@ -38,8 +39,13 @@ def main(argv=None):
     a = ap.parse_args(argv)
     sc = paper_scenario()
     m, l = D.GT_PARAMS["m"], D.GT_PARAMS["l"]
-    out = {"perturbation": 1e-7, "d_over_m": list(DAMPINGS), "k": list(STIFFNESSES), "max_move_m": {},
-           "ground_truth_changes": []}
+    out = {
+        "perturbation": 1e-7,
+        "d_over_m": list(DAMPINGS),
+        "k": list(STIFFNESSES),
+        "max_move_m": {},
+        "ground_truth_changes": [],
+    }
     print("max vertex displacement [m] after perturbing k by a relative 1e-7")
     print("k [N/m] | " + " | ".join(f"d/m = {dm:g} /s" for dm in DAMPINGS))
     for k in STIFFNESSES:

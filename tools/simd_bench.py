@@ -2,7 +2,7 @@
 
     python tools/simd_bench.py --json out/simd.json [--min-time 3]
 
-Runs the Blender cloth model (``physics/blender_kernels.py``) on the workload of ``python -m addon
+Runs the Blender cloth model (``physics/blender_kernels.py``) on the workload of ``python -m clothfit
 bench``'s blender-model figures (the paper's 16 x 16 sheet, 0.5 s settling, then the training
 times, quality 5, a population of 16 = two batches of 8 lanes with varied settings) twice, each in
 its own process: once as shipped (``simd.py`` / ``blender_springs.py``'s LLVM vectors) and once with
@@ -10,6 +10,7 @@ its own process: once as shipped (``simd.py`` / ``blender_springs.py``'s LLVM ve
 simulated candidates per wall second and the CPU milliseconds per candidate, their ratio, and the
 largest distance between the two paths' vertex positions (mm; 0 = the same trajectory to the bit).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,11 +29,12 @@ def _child(npz, min_time):
     sys.path.insert(0, ROOT)
     import time
 
-    from addon.core import defaults as D
-    from addon.core.physics import blender as B
-    from addon.core.physics import simd
-    from addon.core.physics.models import BlenderModel
-    from addon.core.physics.scenario import ClothGrid, paper_scenario
+    from clothfit.core import defaults as D
+    from clothfit.core.physics import blender as B
+    from clothfit.core.physics import simd
+    from clothfit.core.physics.models import BlenderModel
+    from clothfit.core.physics.scenario import ClothGrid, paper_scenario
+
     sc = paper_scenario(ClothGrid(16, 16, D.CLOTH_SIDE)).with_frames(D.TRAIN_TIMES)
     truth = {"tension_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness": 0.2, "air_damping": 2.0}
     base = B.check_settings(dict(truth, time_scale=B.physical_time_scale(D.BLENDER_FPS)))
@@ -43,7 +45,7 @@ def _child(npz, min_time):
         P[:, B.FLOAT_SETTINGS.index(n)] *= rng.uniform(0.8, 1.25, pop)
     model = BlenderModel(D.BLENDER_FPS, base["quality"], base["bending_model"])
     t0 = time.perf_counter()
-    pos = model.simulate(sc, P, backend="numba").positions        # compiles on the first call
+    pos = model.simulate(sc, P, backend="numba").positions  # compiles on the first call
     compile_s = time.perf_counter() - t0
     t0, c0, reps = time.perf_counter(), time.process_time(), 0
     while True:
@@ -54,9 +56,14 @@ def _child(npz, min_time):
             break
     cpu = time.process_time() - c0
     np.savez(npz, positions=np.asarray(pos))
-    return {"simd": bool(simd.ENABLED), "candidates": pop, "timed_repeats": reps,
-            "candidates_per_s": reps * pop / wall, "cpu_ms_per_candidate": 1000.0 * cpu / (reps * pop),
-            "first_call_s": compile_s}
+    return {
+        "simd": bool(simd.ENABLED),
+        "candidates": pop,
+        "timed_repeats": reps,
+        "candidates_per_s": reps * pop / wall,
+        "cpu_ms_per_candidate": 1000.0 * cpu / (reps * pop),
+        "first_call_s": compile_s,
+    }
 
 
 def main(argv=None):
@@ -76,14 +83,31 @@ def main(argv=None):
             if off:
                 env["CLOTHFIT_NO_SIMD"] = "1"
             npz = os.path.join(tmp, name + ".npz")
-            r = subprocess.run([sys.executable, os.path.abspath(__file__), "--json", a.json, "--min-time",
-                                str(a.min_time), "--child", npz], env=env, capture_output=True, text=True, cwd=ROOT)
+            r = subprocess.run(
+                [
+                    sys.executable,
+                    os.path.abspath(__file__),
+                    "--json",
+                    a.json,
+                    "--min-time",
+                    str(a.min_time),
+                    "--child",
+                    npz,
+                ],
+                env=env,
+                capture_output=True,
+                text=True,
+                cwd=ROOT,
+            )
             if r.returncode != 0:
                 raise SystemExit(f"{name} run failed: {r.stderr.strip().splitlines()[-1:]}")
             out[name] = json.loads(r.stdout.strip().splitlines()[-1])
             pos[name] = np.load(npz)["positions"]
-            print(f"[{name}] {out[name]['candidates_per_s']:.1f} candidates/s, "
-                  f"{out[name]['cpu_ms_per_candidate']:.1f} ms CPU per candidate", file=sys.stderr)
+            print(
+                f"[{name}] {out[name]['candidates_per_s']:.1f} candidates/s, "
+                f"{out[name]['cpu_ms_per_candidate']:.1f} ms CPU per candidate",
+                file=sys.stderr,
+            )
     if not out["simd"]["simd"] or out["plain"]["simd"]:
         raise SystemExit("the CLOTHFIT_NO_SIMD switch did not take effect")
     out["speed_ratio_cpu"] = out["plain"]["cpu_ms_per_candidate"] / out["simd"]["cpu_ms_per_candidate"]

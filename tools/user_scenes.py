@@ -39,10 +39,10 @@ chaos (one setting one float32 step off). ``all``: the three in order.
 
     python tools/user_scenes.py all --out out/user_scenes --json out/user_scenes/user_scenes.json
 """
+
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import subprocess
@@ -55,19 +55,19 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from addon.core.errors import ClothFitError  # noqa: E402
-from addon.core.physics import blender as B  # noqa: E402
-from addon.core.physics.blender_scene import SceneCloth, grid_order  # noqa: E402
-from addon.core.physics.scenario import ClothGrid, Handle, Scenario  # noqa: E402
+from clothfit.core.errors import ClothFitError  # noqa: E402
+from clothfit.core.physics import blender as B  # noqa: E402
+from clothfit.core.physics.blender_scene import SceneCloth, grid_order  # noqa: E402
+from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario  # noqa: E402
 
-FPS = 20                 # the scenes' frame rate (Speed Multiplier 1: the cloth falls as under 0.4 g)
-CUTS = 16                # quads per side: 17 x 17 vertices
-SIZE = 2.0               # the primitives' default size
-SCALE = 0.3              # the user's scale: a 0.6 m cloth
-HEIGHT = 1.0             # lifted to 1 m
-RELEASE = 21             # scene frame: the corner is held through this frame, free from the next
-AFTER = 60               # frames captured after the release (3 s)
-FRAME_START = 1          # Blender's default first frame (the cloth's rest frame)
+FPS = 20  # the scenes' frame rate (Speed Multiplier 1: the cloth falls as under 0.4 g)
+CUTS = 16  # quads per side: 17 x 17 vertices
+SIZE = 2.0  # the primitives' default size
+SCALE = 0.3  # the user's scale: a 0.6 m cloth
+HEIGHT = 1.0  # lifted to 1 m
+RELEASE = 21  # scene frame: the corner is held through this frame, free from the next
+AFTER = 60  # frames captured after the release (3 s)
+FRAME_START = 1  # Blender's default first frame (the cloth's rest frame)
 NOISE = 0.05
 SEED = 0
 
@@ -77,7 +77,7 @@ SCENES = {
     "denim": {"mesh": "grid", "preset": "Denim", "quality": 15, "rotate_z": 90.0, "apply": False, "pins": True},
     "drop": {"mesh": "grid", "preset": None, "quality": 5, "rotate_z": 0.0, "apply": False, "pins": False},
 }
-BLOCK = {"size": 0.3, "top": 0.6}   # the drop scene's block: 0.3 m wide, its top 0.4 m below the cloth
+BLOCK = {"size": 0.3, "top": 0.6}  # the drop scene's block: 0.3 m wide, its top 0.4 m below the cloth
 
 
 def configure(cuts=None, release=None, after=None):
@@ -89,7 +89,9 @@ def configure(cuts=None, release=None, after=None):
         CUTS = int(cuts)
     if release is not None:
         if release < FRAME_START + 1:
-            raise ClothFitError(f"--release {release}: the corner must be held at least one frame after frame {FRAME_START}")
+            raise ClothFitError(
+                f"--release {release}: the corner must be held at least one frame after frame {FRAME_START}"
+            )
         RELEASE = int(release)
     if after is not None:
         if after < 2:
@@ -117,8 +119,10 @@ def release_index(name) -> int:
 
 # =============================================================================== build (bpy)
 
+
 def _preset(cl, name):
     import bpy
+
     path = os.path.join(bpy.utils.preset_paths("cloth")[0], f"{name}.py")
     with bpy.context.temp_override(cloth=cl):
         bpy.ops.script.execute_preset(filepath=path, menu_idname="CLOTH_PT_presets")
@@ -126,13 +130,15 @@ def _preset(cl, name):
 
 def _select_only(obj):
     import bpy
+
     bpy.ops.object.select_all(action="DESELECT")
     obj.select_set(True)
     bpy.context.view_layer.objects.active = obj
 
 
-def build_scene(name, path=None, cuts=None, release=None, end=None, pin_weight=1.0, mix_below_cloth=False,
-                release_keys=(0, 1)):
+def build_scene(
+    name, path=None, cuts=None, release=None, end=None, pin_weight=1.0, mix_below_cloth=False, release_keys=(0, 1)
+):
     """Build scene ``name`` of ``SCENES`` in the current (emptied) Blender session with bpy operators,
     as a user clicks it; save it to ``path`` when given. Returns the cloth object.
 
@@ -140,6 +146,7 @@ def build_scene(name, path=None, cuts=None, release=None, end=None, pin_weight=1
     left below the Cloth modifier, where a new modifier lands) and ``release_keys`` (the frames,
     relative to ``release``, of the influence keys 0 and 1) build a user's slips, for the tests."""
     import bpy
+
     spec = SCENES[name]
     cuts = CUTS if cuts is None else cuts
     release = RELEASE if release is None else release
@@ -217,17 +224,18 @@ def build(out, names=None):
 
 # ===================================================================== simulate (bpy, a child)
 
+
 def ulp_up(v: float) -> float:
     """The next float32 above ``v``: the smallest change Blender's settings can take."""
     return float(np.nextafter(np.float32(v), np.float32(np.inf)))
 
 
-SLIPS = {   # a user's slips built into a copy of a hanging scene: build_scene keyword arguments
+SLIPS = {  # a user's slips built into a copy of a hanging scene: build_scene keyword arguments
     "release_keyed_over_5_frames": {"release_keys": (0, 5)},
     "pins_painted_0.95": {"pin_weight": 0.95},
     "mix_left_below_cloth": {"mix_below_cloth": True},
 }
-FLOOR_SETTINGS = ("tension_stiffness", "mass", "air_damping")   # each one float32 step up: the solver's chaos
+FLOOR_SETTINGS = ("tension_stiffness", "mass", "air_damping")  # each one float32 step up: the solver's chaos
 
 
 def _blender_run(scene, obj, n, out, stem, info, floors=()):
@@ -235,9 +243,10 @@ def _blender_run(scene, obj, n, out, stem, info, floors=()):
     ``{stem}_blender.npz`` (frames, and frames with each setting of ``floors`` one float32 step up)."""
     import io
 
-    from addon.blender.cloth import cloth_modifier, simulate_frames
-    from addon.blender.user_cloth import read_scene_cloth
-    from addon.core.safeio import atomic_write
+    from clothfit.blender.cloth import cloth_modifier, simulate_frames
+    from clothfit.blender.user_cloth import read_scene_cloth
+    from clothfit.core.safeio import atomic_write
+
     sc = read_scene_cloth(scene, obj, n, info)
     sc.save(os.path.join(out, "truth", f"{stem}_scene.npz"))
     c0, t0 = time.process_time(), time.perf_counter()
@@ -260,9 +269,9 @@ def simulate(out, names=None):
     """Blender's solver on every scene (and on copies with a user's slips): the scene reading and
     Blender's frames, saved under ``out/truth``."""
     import bpy
+    from clothfit.blender.render import quiet_stdout
+    from clothfit.blender.scene_worker import find_cloth_object
 
-    from addon.blender.render import quiet_stdout
-    from addon.blender.scene_worker import find_cloth_object
     os.makedirs(os.path.join(out, "truth"), exist_ok=True)
     for name in names or SCENES:
         path = os.path.abspath(os.path.join(out, "blends", f"{name}.blend"))
@@ -273,8 +282,11 @@ def simulate(out, names=None):
         n = n_frames(name)
         floors = FLOOR_SETTINGS if not SCENES[name]["pins"] else FLOOR_SETTINGS[:1]
         sc, cpu = _blender_run(scene, obj, n, out, name, {"blend": path, "scene_name": name}, floors)
-        print(f"simulated {name}: {n + 1} frames, {sc.n_vertices} vertices, {cpu:.1f} s CPU; "
-              f"not modelled by the core: {sc.info['not_modelled'] or 'nothing'}", flush=True)
+        print(
+            f"simulated {name}: {n + 1} frames, {sc.n_vertices} vertices, {cpu:.1f} s CPU; "
+            f"not modelled by the core: {sc.info['not_modelled'] or 'nothing'}",
+            flush=True,
+        )
         if not SCENES[name]["pins"]:
             continue
         for slip, kw in SLIPS.items():
@@ -285,12 +297,24 @@ def simulate(out, names=None):
 
 # ===================================================================== observe (no bpy)
 
+
 def rig():
     """Ten cameras as someone sets up tripods and phones around a hanging cloth: irregular
     azimuths, distances and heights, 480 x 640, fx 520 (a 63 degree horizontal view)."""
-    from addon.core.observation.camera import Camera, intrinsics, look_at
-    spots = [(8, 1.9, 1.05), (47, 1.6, 0.45), (83, 2.2, 1.6), (121, 1.7, 0.8), (158, 2.0, 1.25),
-             (197, 1.55, 0.6), (236, 2.3, 1.9), (272, 1.8, 0.35), (311, 1.65, 1.15), (345, 2.1, 2.1)]
+    from clothfit.core.observation.camera import Camera, intrinsics, look_at
+
+    spots = [
+        (8, 1.9, 1.05),
+        (47, 1.6, 0.45),
+        (83, 2.2, 1.6),
+        (121, 1.7, 0.8),
+        (158, 2.0, 1.25),
+        (197, 1.55, 0.6),
+        (236, 2.3, 1.9),
+        (272, 1.8, 0.35),
+        (311, 1.65, 1.15),
+        (345, 2.1, 2.1),
+    ]
     cams = []
     for k, (az, dist, z) in enumerate(spots):
         a = math.radians(az)
@@ -316,7 +340,9 @@ def declared_scenario(name, grid=None, sc: SceneCloth | None = None) -> Scenario
         q = np.empty_like(p)
         q[p] = np.arange(p.size)
         r = release_index(name)
-        freed = [int(q[v]) for v, w0, w1 in zip(sc.handle_vertices, sc.weights[r], sc.weights[r + 1]) if w0 > 0 and w1 == 0]
+        freed = [
+            int(q[v]) for v, w0, w1 in zip(sc.handle_vertices, sc.weights[r], sc.weights[r + 1]) if w0 > 0 and w1 == 0
+        ]
         released = freed[0] if freed else None
     hs = [Handle(v, [0.0], grid.rest[v][None], 0.0 if v == released else None) for v in corners]
     return Scenario(grid, hs, times, (RELEASE - FRAME_START) / FPS, (0.0, 0.0, -9.81))
@@ -336,10 +362,11 @@ def capture_frames(name):
 
 def observe(out, names=None):
     """Blender simulates (a child process), then the captures are written (no bpy here)."""
-    from addon.core.observation.capture import write_capture
-    from addon.core.observation.metrics import add_boundary_noise
-    from addon.core.observation.raster import silhouette
-    from addon.core.observation.synth import noise_rng
+    from clothfit.core.observation.capture import write_capture
+    from clothfit.core.observation.metrics import add_boundary_noise
+    from clothfit.core.observation.raster import silhouette
+    from clothfit.core.observation.synth import noise_rng
+
     me = os.path.abspath(__file__)
     sel = (["--scenes", ",".join(names)] if names else []) + _size_args()
     subprocess.run([sys.executable, me, "simulate", "--out", out] + sel, check=True)
@@ -349,10 +376,12 @@ def observe(out, names=None):
         grid = ClothGrid(CUTS + 1, CUTS + 1, side(), height=HEIGHT)
         p = grid_order(sc.rest, grid)
         if p is None:
-            raise ClothFitError(f"scene {name}: its mesh is not the declared {grid.nx} x {grid.ny} grid of "
-                                f"{grid.side:g} m at {grid.height:g} m: the capture format needs a grid")
+            raise ClothFitError(
+                f"scene {name}: its mesh is not the declared {grid.nx} x {grid.ny} grid of "
+                f"{grid.side:g} m at {grid.height:g} m: the capture format needs a grid"
+            )
         scen = declared_scenario(name, grid, sc)
-        X = tr["frames"][capture_frames(name)]          # mesh order
+        X = tr["frames"][capture_frames(name)]  # mesh order
         sils = []
         for ci, cam in enumerate(cams):
             row = []
@@ -363,13 +392,20 @@ def observe(out, names=None):
                 row.append(add_boundary_noise(m, NOISE, noise_rng(SEED, ci, fi)))
             sils.append(row)
         s = sc.settings
-        meta = {"generator": "Blender's own Cloth modifier on a scene built as a user builds it "
-                             "(tools/user_scenes.py), core rasteriser on the scene's triangles",
-                "blend": sc.info.get("blend"), "object": sc.info.get("object"), "true_blender_cloth": s,
-                "true_model": {"name": "blender", "fps": float(FPS), "quality": s["quality"]},
-                "frame_zero": FRAME_START + release_index(name), "fps": float(FPS),
-                "mesh_vertex_of_grid_vertex": p.tolist(), "noise_fraction": NOISE, "seed": SEED,
-                "not_modelled": sc.info.get("not_modelled", [])}
+        meta = {
+            "generator": "Blender's own Cloth modifier on a scene built as a user builds it "
+            "(tools/user_scenes.py), core rasteriser on the scene's triangles",
+            "blend": sc.info.get("blend"),
+            "object": sc.info.get("object"),
+            "true_blender_cloth": s,
+            "true_model": {"name": "blender", "fps": float(FPS), "quality": s["quality"]},
+            "frame_zero": FRAME_START + release_index(name),
+            "fps": float(FPS),
+            "mesh_vertex_of_grid_vertex": p.tolist(),
+            "noise_fraction": NOISE,
+            "seed": SEED,
+            "not_modelled": sc.info.get("not_modelled", []),
+        }
         root = os.path.join(out, "captures", name)
         write_capture(root, cams, scen, sils, shapes=X[:, p], cloth_mass=s["mass"] * X.shape[1], meta=meta)
         print(f"observed {name}: {len(cams)} cameras x {X.shape[0]} frames -> {root}", flush=True)
@@ -377,28 +413,40 @@ def observe(out, names=None):
 
 # ======================================================================== drift (no bpy)
 
+
 class Variant:
     """The core blender model between the user's declaration and the scene: each of five parts
     taken from the declared grid (False) or from the scene (True)."""
+
     PARTS = ("labels", "faces", "edges", "rest", "plan")
 
     def __init__(self, sc: SceneCloth, name: str):
         self.sc, self.name = sc, name
         self.grid = ClothGrid(CUTS + 1, CUTS + 1, side(), height=HEIGHT)
-        self.p = grid_order(sc.rest, self.grid)            # grid vertex g is mesh vertex p[g]
+        self.p = grid_order(sc.rest, self.grid)  # grid vertex g is mesh vertex p[g]
         if self.p is None:
             raise ClothFitError(f"scene {name}: not the declared grid")
         self.q = np.empty_like(self.p)
-        self.q[self.p] = np.arange(self.p.size)          # mesh vertex v is grid vertex q[v]
+        self.q[self.p] = np.arange(self.p.size)  # mesh vertex v is grid vertex q[v]
         self.scenario = declared_scenario(name, self.grid, sc)
         self.dplan = B.FramePlan.from_scenario(self.scenario, FPS)
         first = self.grid.rest.copy()
         first[self.dplan.handle_vertices] = self.dplan.targets[0]
         self.drest = np.empty_like(first)
-        self.drest[self.p] = first                        # the declared first frame, mesh labels
+        self.drest[self.p] = first  # the declared first frame, mesh labels
 
-    def build(self, labels=True, faces=True, edges=True, rest=True, plan=True, weights_shift=0, frames_shift=0,
-              weight=None, release=True):
+    def build(
+        self,
+        labels=True,
+        faces=True,
+        edges=True,
+        rest=True,
+        plan=True,
+        weights_shift=0,
+        frames_shift=0,
+        weight=None,
+        release=True,
+    ):
         """(network, frame plan, vertex map to mesh labels or None) of one mix of the parts.
 
         Slips: ``weights_shift`` frames later pin weights (the release), ``frames_shift`` frames
@@ -406,7 +454,7 @@ class Variant:
         keeps every pin."""
         sc, p, q = self.sc, self.p, self.q
         fc = sc.faces if faces else [[int(p[g]) for g in quad] for quad in self.grid.quads]
-        ed = (sc.edges if edges else None)
+        ed = sc.edges if edges else None
         X0 = sc.rest if rest else self.drest
         nf = sc.n_frames
         frames = capture_frames(self.name) + frames_shift
@@ -416,31 +464,32 @@ class Variant:
         else:
             hv = p[self.dplan.handle_vertices]
             W = np.zeros((nf + 1, hv.size))
-            W[:self.dplan.weights.shape[0]] = self.dplan.weights
-            W[self.dplan.weights.shape[0]:] = self.dplan.weights[-1]
-            T = self.drest[hv][None].repeat(nf + 1, 0) if not rest else \
-                np.array([sc.rest[hv]] * (nf + 1))
+            W[: self.dplan.weights.shape[0]] = self.dplan.weights
+            W[self.dplan.weights.shape[0] :] = self.dplan.weights[-1]
+            T = self.drest[hv][None].repeat(nf + 1, 0) if not rest else np.array([sc.rest[hv]] * (nf + 1))
         if weights_shift > 0:
             W = np.concatenate([W[:1].repeat(weights_shift, 0), W[:-weights_shift]])
         if not release:
             W = np.where(W.max(0, keepdims=True) > 0, W.max(0, keepdims=True), 0.0).repeat(nf + 1, 0)
         if weight is not None:
             W = np.where(W >= 1.0, weight, W)
-        if not labels:                                     # renumber everything to the grid's numbering
+        if not labels:  # renumber everything to the grid's numbering
             X0 = X0[p]
             fc = [[int(q[v]) for v in f] for f in fc]
             ed = None if ed is None else q[ed]
             hv = q[hv]
         net = B.Network.from_mesh(X0, fc, sc.settings["bending_model"], edges=ed)
         lo = frames.astype(np.int64)
-        pl = B.FramePlan(float(FPS), release_index(self.name), nf, np.asarray(hv, dtype=np.int64), T, W, lo, lo,
-                         np.zeros(lo.size), 0)
+        pl = B.FramePlan(
+            float(FPS), release_index(self.name), nf, np.asarray(hv, dtype=np.int64), T, W, lo, lo, np.zeros(lo.size), 0
+        )
         return net, pl, (None if labels else p)
 
     def run(self, rows=None, quality=None, **parts):
         """Positions at the capture times in MESH labels (P, F, V, 3), and the triangles used."""
         net, pl, back = self.build(**parts)
-        from addon.core.physics.blender_kernels import Prepared
+        from clothfit.core.physics.blender_kernels import Prepared
+
         rows = np.atleast_2d(self.sc.settings_row() if rows is None else rows)
         ts = float(rows[0, B.FLOAT_SETTINGS.index("time_scale")])
         q = int(self.sc.settings["quality"] if quality is None else quality)
@@ -448,7 +497,7 @@ class Variant:
         out, codes, _ = prep.run(rows)
         X = prep.sample(out)
         tris = net.triangles
-        if back is not None:                               # grid labels -> mesh labels
+        if back is not None:  # grid labels -> mesh labels
             Y = np.empty_like(X)
             Y[:, :, back] = X
             X = Y
@@ -463,10 +512,11 @@ class Scorer:
     truth that has no capture)."""
 
     def __init__(self, cap, truth, tris, from_capture=True):
-        from addon.core.observation.camera import select_training
-        from addon.core.observation.metrics import add_boundary_noise
-        from addon.core.observation.raster import silhouette
-        from addon.core.observation.synth import noise_rng
+        from clothfit.core.observation.camera import select_training
+        from clothfit.core.observation.metrics import add_boundary_noise
+        from clothfit.core.observation.raster import silhouette
+        from clothfit.core.observation.synth import noise_rng
+
         self.cams = cap.cameras
         _, self.held = select_training(self.cams, 4)
         self.test = list(range(0, AFTER, 2))
@@ -474,14 +524,19 @@ class Scorer:
         self.obs = {}
         for c in self.held:
             for f in self.test:
-                self.obs[c, f] = (cap.load_silhouette(c, f) if from_capture else
-                                  add_boundary_noise(silhouette(self.cams[c], truth[f], tris), NOISE,
-                                                     noise_rng(SEED, c, f)))
+                self.obs[c, f] = (
+                    cap.load_silhouette(c, f)
+                    if from_capture
+                    else add_boundary_noise(silhouette(self.cams[c], truth[f], tris), NOISE, noise_rng(SEED, c, f))
+                )
 
     def esil(self, X, tris) -> float:
-        from addon.core.observation.metrics import e_sil
-        from addon.core.observation.raster import silhouette
-        return 100.0 * float(np.mean([e_sil(o, silhouette(self.cams[c], X[f], tris)) for (c, f), o in self.obs.items()]))
+        from clothfit.core.observation.metrics import e_sil
+        from clothfit.core.observation.raster import silhouette
+
+        return 100.0 * float(
+            np.mean([e_sil(o, silhouette(self.cams[c], X[f], tris)) for (c, f), o in self.obs.items()])
+        )
 
     def __call__(self, X, tris, frames=None) -> dict:
         """``X`` (F, V, 3) or (1, F, V, 3) in the truth's vertex order; ``frames``: only those
@@ -503,8 +558,12 @@ def _exact(X, T) -> dict:
     d = np.linalg.norm(X - T, axis=-1)
     ulp = float(np.spacing(np.float32(np.abs(T).max())))
     beyond = np.nonzero(d.max(-1) > ulp)[0]
-    return {"max_mm": float(d.max() * 1000), "one_float32_step_mm": ulp * 1000, "bitwise_equal": bool(np.array_equal(X, T)),
-            "first_frame_beyond_one_step": int(beyond[0]) if beyond.size else None}
+    return {
+        "max_mm": float(d.max() * 1000),
+        "one_float32_step_mm": ulp * 1000,
+        "bitwise_equal": bool(np.array_equal(X, T)),
+        "first_frame_beyond_one_step": int(beyond[0]) if beyond.size else None,
+    }
 
 
 def _fmt(r):
@@ -519,25 +578,33 @@ def _fmt(r):
 def drift_scene(out, name) -> dict:
     """One scene: the core blender model with the true settings against Blender, declared and
     built from the scene, and each cause of their difference alone."""
-    from addon.core.observation.capture import load_capture
-    from addon.core.physics.models import BlenderModel
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.physics.models import BlenderModel
+
     sc, tr = load_truth(out, name)
     cap = load_capture(os.path.join(out, "captures", name))
     cf = capture_frames(name)
     T = tr["frames"][cf]
     v = Variant(sc, name)
     score = Scorer(cap, T, sc.triangles)
-    res = {"vertices": sc.n_vertices, "settings": sc.settings, "not_modelled": sc.info.get("not_modelled", []),
-           "blend": sc.info.get("blend"), "modifiers": sc.info.get("modifiers"),
-           "vertex_order_is_grid_order": bool(np.all(v.p == np.arange(v.p.size))),
-           "faces_are_grid_quads": [list(f) for f in sc.faces] == v.p[v.grid.quads].tolist(),
-           "same_quads_other_order": sorted(map(tuple, sc.faces)) == sorted(map(tuple, v.p[v.grid.quads].tolist())),
-           "edges_are_face_side_order": bool(np.array_equal(np.sort(sc.edges, 1), sc.network(edges=None).edges)),
-           "blender_cpu_s": float(tr["cpu_s"]), "floor_heldout_E_sil_pct": score.esil(T, sc.triangles)}
+    res = {
+        "vertices": sc.n_vertices,
+        "settings": sc.settings,
+        "not_modelled": sc.info.get("not_modelled", []),
+        "blend": sc.info.get("blend"),
+        "modifiers": sc.info.get("modifiers"),
+        "vertex_order_is_grid_order": bool(np.all(v.p == np.arange(v.p.size))),
+        "faces_are_grid_quads": [list(f) for f in sc.faces] == v.p[v.grid.quads].tolist(),
+        "same_quads_other_order": sorted(map(tuple, sc.faces)) == sorted(map(tuple, v.p[v.grid.quads].tolist())),
+        "edges_are_face_side_order": bool(np.array_equal(np.sort(sc.edges, 1), sc.network(edges=None).edges)),
+        "blender_cpu_s": float(tr["cpu_s"]),
+        "floor_heldout_E_sil_pct": score.esil(T, sc.triangles),
+    }
     d32, s32 = v.drest.astype(np.float32), sc.rest.astype(np.float32)
     res["first_frame_declared_vs_scene"] = {
         "coordinates_differing_pct": 100.0 * float(np.mean(d32 != s32)),
-        "max_difference_um": float(np.abs(d32.astype(np.float64) - s32).max() * 1e6)}
+        "max_difference_um": float(np.abs(d32.astype(np.float64) - s32).max() * 1e6),
+    }
     row = B.settings_row(B.check_settings(cap.meta["true_blender_cloth"]))
     q = sc.settings["quality"]
 
@@ -567,7 +634,7 @@ def drift_scene(out, name) -> dict:
     up = sc.settings_row(tension_stiffness=ulp_up(sc.settings["tension_stiffness"]))
     fu, _ = sc.simulate(up[None])
     res["core_one_step_vs_blender_one_step"] = _exact(fu[0], tr["frames_ulp_tension_stiffness"])
-    if not SCENES[name]["pins"]:         # a collider: the core has no collisions; exact until contact
+    if not SCENES[name]["pins"]:  # a collider: the core has no collisions; exact until contact
         contact = res["scene_vs_blender_every_frame"]["first_frame_beyond_one_step"]
         res["contact_frame"] = contact
         return res
@@ -578,8 +645,12 @@ def drift_scene(out, name) -> dict:
         causes[part] = score(Xc, tc) | {"identical_to_scene": bool(np.array_equal(Xc, Xs))}
     Xh, th, _ = v.run(labels=False, faces=False, edges=False, rest=False, plan=False)
     res["declared_rebuilt_equal"] = bool(np.array_equal(Xh, Xd))
-    causes["triangulation_only"] = {"heldout_E_sil_pct": score.esil(Xs[0], td), "mean_mm": 0.0, "max_mm": 0.0,
-                                    "note": "the scene's positions drawn with the declared grid's triangles"}
+    causes["triangulation_only"] = {
+        "heldout_E_sil_pct": score.esil(Xs[0], td),
+        "mean_mm": 0.0,
+        "max_mm": 0.0,
+        "note": "the scene's positions drawn with the declared grid's triangles",
+    }
     res["rounding_causes"] = causes
     # the user's slips
     slips = {}
@@ -589,16 +660,16 @@ def drift_scene(out, name) -> dict:
     slips["settles_one_frame_longer"] = score(*v.run(weights_shift=1, frames_shift=1)[:2])
     slips["time_scale_real_time"] = score(*v.run(rows=sc.settings_row(time_scale=B.physical_time_scale(FPS))[None])[:2])
     slips["quality_5"] = score(*v.run(quality=5)[:2])
-    try:                                 # the model's default frame rate (24) instead of the scene's
+    try:  # the model's default frame rate (24) instead of the scene's
         X24, t24, _ = declared(24.0)
         slips["fps_24"] = score(X24, t24)
-    except ClothFitError as e:           # the declared settling is not whole frames at 24 fps
+    except ClothFitError as e:  # the declared settling is not whole frames at 24 fps
         slips["fps_24"] = {"mean_mm": None, "max_mm": None, "heldout_E_sil_pct": None, "skipped": str(e)}
-    for slip in SLIPS:                   # Blender ran a copy of the scene with the slip
+    for slip in SLIPS:  # Blender ran a copy of the scene with the slip
         ss, st = load_truth(out, f"{name}_{slip}")
         Tv = st["frames"][cf]
         sv = Scorer(cap, Tv, sc.triangles, from_capture=False)
-        r = sv(Xs, ts_)                  # the model as declared (= the scene's own) against that Blender
+        r = sv(Xs, ts_)  # the model as declared (= the scene's own) against that Blender
         full_v, _ = ss.simulate()
         r["scene_model_of_the_slip"] = _exact(full_v[0], st["frames"])
         slips[slip] = r
@@ -616,9 +687,13 @@ SLIP_NAMES = {
     "fps_24": "capture times read at 24 fps (the model's default)",
     "time_scale_real_time": "time_scale for real time (sqrt(1000)/fps) instead of 1",
 }
-PART_NAMES = {"labels": "vertex numbering", "faces": "face list (order, first corner)",
-              "edges": "edge order (structural springs)", "rest": "first-frame positions (float32)",
-              "plan": "pins and release as declared"}
+PART_NAMES = {
+    "labels": "vertex numbering",
+    "faces": "face list (order, first corner)",
+    "edges": "edge order (structural springs)",
+    "rest": "first-frame positions (float32)",
+    "plan": "pins and release as declared",
+}
 
 
 def summary(rows) -> dict:
@@ -629,37 +704,53 @@ def summary(rows) -> dict:
     def rng(vals):
         vals = [v for v in vals if v is not None]
         return [min(vals), max(vals)] if vals else None
+
     if hang:
         H = [rows[n] for n in hang]
         out["scene_vs_blender_max_mm"] = max(r["scene_vs_blender_every_frame"]["max_mm"] for r in H)
         out["one_float32_step_mm"] = max(r["scene_vs_blender_every_frame"]["one_float32_step_mm"] for r in H)
         out["bitwise_equal_scenes"] = [n for n in hang if rows[n]["scene_vs_blender_every_frame"]["bitwise_equal"]]
-        out["slip_scene_models_max_mm"] = max(c["scene_model_of_the_slip"]["max_mm"] for r in H
-                                              for c in r["slips"].values() if "scene_model_of_the_slip" in c)
-        out["core_one_step_vs_blender_one_step_max_mm"] = max(r["core_one_step_vs_blender_one_step"]["max_mm"] for r in H)
+        out["slip_scene_models_max_mm"] = max(
+            c["scene_model_of_the_slip"]["max_mm"]
+            for r in H
+            for c in r["slips"].values()
+            if "scene_model_of_the_slip" in c
+        )
+        out["core_one_step_vs_blender_one_step_max_mm"] = max(
+            r["core_one_step_vs_blender_one_step"]["max_mm"] for r in H
+        )
         out["declared_mean_mm"] = rng([r["declared"]["mean_mm"] for r in H])
         out["declared_max_mm"] = rng([r["declared"]["max_mm"] for r in H])
         out["declared_E_sil_pct"] = rng([r["declared"]["heldout_E_sil_pct"] for r in H])
         out["floor_E_sil_pct"] = rng([r["floor_heldout_E_sil_pct"] for r in H])
-        out["rounding_alone_mean_mm"] = rng([c["mean_mm"] for r in H for k, c in r["rounding_causes"].items()
-                                             if k in PART_NAMES])
-        out["rounding_alone_max_mm"] = rng([c["max_mm"] for r in H for k, c in r["rounding_causes"].items()
-                                            if k in PART_NAMES])
+        out["rounding_alone_mean_mm"] = rng(
+            [c["mean_mm"] for r in H for k, c in r["rounding_causes"].items() if k in PART_NAMES]
+        )
+        out["rounding_alone_max_mm"] = rng(
+            [c["max_mm"] for r in H for k, c in r["rounding_causes"].items() if k in PART_NAMES]
+        )
         out["blender_one_step_mean_mm"] = rng([r["blender_one_step"]["tension_stiffness"]["mean_mm"] for r in H])
         out["blender_one_step_max_mm"] = rng([r["blender_one_step"]["tension_stiffness"]["max_mm"] for r in H])
-        out["slips"] = {k: {"mean_mm": rng([r["slips"][k]["mean_mm"] for r in H]),
-                            "max_mm": rng([r["slips"][k]["max_mm"] for r in H]),
-                            "E_sil_pct": rng([r["slips"][k]["heldout_E_sil_pct"] for r in H])}
-                        for k in SLIP_NAMES if all(k in r["slips"] for r in H)}
+        out["slips"] = {
+            k: {
+                "mean_mm": rng([r["slips"][k]["mean_mm"] for r in H]),
+                "max_mm": rng([r["slips"][k]["max_mm"] for r in H]),
+                "E_sil_pct": rng([r["slips"][k]["heldout_E_sil_pct"] for r in H]),
+            }
+            for k in SLIP_NAMES
+            if all(k in r["slips"] for r in H)
+        }
     drop = [r for r in rows.values() if "contact_frame" in r]
     if drop:
         d = drop[0]
         f = d["blender_one_step"]
-        out["collider"] = {"contact_frame": d["contact_frame"],
-                           "blender_one_step_mean_mm": rng([c["mean_mm"] for c in f.values()]),
-                           "blender_one_step_max_mm": rng([c["max_mm"] for c in f.values()]),
-                           "blender_one_step_E_sil_pct": rng([c["heldout_E_sil_pct"] for c in f.values()]),
-                           "floor_E_sil_pct": d["floor_heldout_E_sil_pct"]}
+        out["collider"] = {
+            "contact_frame": d["contact_frame"],
+            "blender_one_step_mean_mm": rng([c["mean_mm"] for c in f.values()]),
+            "blender_one_step_max_mm": rng([c["max_mm"] for c in f.values()]),
+            "blender_one_step_E_sil_pct": rng([c["heldout_E_sil_pct"] for c in f.values()]),
+            "floor_E_sil_pct": d["floor_heldout_E_sil_pct"],
+        }
     return out
 
 
@@ -673,22 +764,36 @@ def _mm(c):
 def format_table(doc) -> str:
     """Per scene: the core model as declared and as built from the scene, against Blender."""
     rows = doc["scenes"]
-    out = ["| scene | mesh | core model as declared: mean / max mm (held-out E_sil) | "
-           "built from the scene | every frame, max mm | noise floor E_sil | Blender, one float32 step of "
-           "tension: mean / max mm (E_sil) |", "|---|---|---|---|---|---|---|"]
+    out = [
+        "| scene | mesh | core model as declared: mean / max mm (held-out E_sil) | "
+        "built from the scene | every frame, max mm | noise floor E_sil | Blender, one float32 step of "
+        "tension: mean / max mm (E_sil) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for n, r in rows.items():
         spec = SCENES.get(n, {})
-        mesh = ("Grid" if spec.get("mesh") == "grid" else "subdivided Plane") + \
-            (f" turned {spec['rotate_z']:g} deg" if spec.get("rotate_z") else "") + \
-            ("; transform applied" if spec.get("apply") else "; transform kept")
+        mesh = (
+            ("Grid" if spec.get("mesh") == "grid" else "subdivided Plane")
+            + (f" turned {spec['rotate_z']:g} deg" if spec.get("rotate_z") else "")
+            + ("; transform applied" if spec.get("apply") else "; transform kept")
+        )
         order = "numbered as our grid" if r["vertex_order_is_grid_order"] else "its own numbering"
-        dec = "exploded (no collisions: falls through the block)" if r["declared"].get("exploded") else _mm(r["declared"])
+        dec = (
+            "exploded (no collisions: falls through the block)" if r["declared"].get("exploded") else _mm(r["declared"])
+        )
         ex = r["scene_vs_blender_every_frame"]
-        every = ("0 (bitwise)" if ex["bitwise_equal"] else f"{ex['max_mm']:.1e}" if ex["first_frame_beyond_one_step"] is None
-                 else f"exact to frame {ex['first_frame_beyond_one_step'] - 1}, then no collisions")
+        every = (
+            "0 (bitwise)"
+            if ex["bitwise_equal"]
+            else f"{ex['max_mm']:.1e}"
+            if ex["first_frame_beyond_one_step"] is None
+            else f"exact to frame {ex['first_frame_beyond_one_step'] - 1}, then no collisions"
+        )
         sc = _mm(r["scene"]) if "slips" in r else "-"
-        out.append(f"| {n} (quality {r['settings']['quality']}) | {mesh}; {order} | {dec} | {sc} | {every} | "
-                   f"{r['floor_heldout_E_sil_pct']:.2f} % | {_mm(r['blender_one_step']['tension_stiffness'])} |")
+        out.append(
+            f"| {n} (quality {r['settings']['quality']}) | {mesh}; {order} | {dec} | {sc} | {every} | "
+            f"{r['floor_heldout_E_sil_pct']:.2f} % | {_mm(r['blender_one_step']['tension_stiffness'])} |"
+        )
     return "\n".join(out)
 
 
@@ -696,16 +801,21 @@ def format_causes(doc) -> str:
     """Each difference alone (the rest from the scene) against Blender, per hanging scene."""
     rows = {n: r for n, r in doc["scenes"].items() if "slips" in r}
     names = list(rows)
-    out = ["| difference from the scene, alone | " + " | ".join(f"{n}: mean / max mm (E_sil)" for n in names) + " |",
-           "|---|" + "---|" * len(names)]
+    out = [
+        "| difference from the scene, alone | " + " | ".join(f"{n}: mean / max mm (E_sil)" for n in names) + " |",
+        "|---|" + "---|" * len(names),
+    ]
     for k, label in PART_NAMES.items():
         cells = []
         for n in names:
             c = rows[n]["rounding_causes"][k]
             cells.append("no change" if c.get("identical_to_scene") else _mm(c))
         out.append(f"| {label} | " + " | ".join(cells) + " |")
-    out.append("| the declared grid's triangles (silhouettes only) | " + " | ".join(
-        f"({rows[n]['rounding_causes']['triangulation_only']['heldout_E_sil_pct']:.2f} %)" for n in names) + " |")
+    out.append(
+        "| the declared grid's triangles (silhouettes only) | "
+        + " | ".join(f"({rows[n]['rounding_causes']['triangulation_only']['heldout_E_sil_pct']:.2f} %)" for n in names)
+        + " |"
+    )
     for k, label in SLIP_NAMES.items():
         out.append(f"| {label} | " + " | ".join(_mm(rows[n]["slips"].get(k)) for n in names) + " |")
     return "\n".join(out)
@@ -718,28 +828,41 @@ def drift(out, names=None, json_path=None):
     for name in names or SCENES:
         r = rows[name] = drift_scene(out, name)
         ex = r["scene_vs_blender_every_frame"]
-        print(f"{name}: declared {_fmt(r['declared'])}; scene {_fmt(r['scene'])} (floor E_sil "
-              f"{r['floor_heldout_E_sil_pct']:.2f} %); scene vs Blender every frame max {ex['max_mm']:.2g} mm "
-              f"(one float32 step {ex['one_float32_step_mm']:.2g} mm, first beyond: {ex['first_frame_beyond_one_step']})",
-              flush=True)
+        print(
+            f"{name}: declared {_fmt(r['declared'])}; scene {_fmt(r['scene'])} (floor E_sil "
+            f"{r['floor_heldout_E_sil_pct']:.2f} %); scene vs Blender every frame max {ex['max_mm']:.2g} mm "
+            f"(one float32 step {ex['one_float32_step_mm']:.2g} mm, first beyond: {ex['first_frame_beyond_one_step']})",
+            flush=True,
+        )
         for k, c in r["blender_one_step"].items():
             print(f"    Blender, {k} one float32 step up: {_fmt(c)}", flush=True)
         for group in ("rounding_causes", "slips"):
             for k, c in r.get(group, {}).items():
                 extra = "  (no change)" if c.get("identical_to_scene") else ""
                 if "scene_model_of_the_slip" in c:
-                    extra = f"  (scene model of that Blender scene: max {c['scene_model_of_the_slip']['max_mm']:.2g} mm)"
+                    extra = (
+                        f"  (scene model of that Blender scene: max {c['scene_model_of_the_slip']['max_mm']:.2g} mm)"
+                    )
                 if c.get("mean_mm") is not None and c.get("note"):
                     print(f"    {k:34s} E_sil {c['heldout_E_sil_pct']:6.2f} %", flush=True)
                 else:
                     print(f"    {k:34s} {_fmt(c)}{extra}", flush=True)
-    doc = {"scenes": rows, "summary": summary(rows), "fps": FPS, "after_frames": AFTER, "release_frame": RELEASE,
-           "grid": CUTS + 1, "cameras": len(rig()), "drift_cpu_s": time.process_time() - c0,
-           "drift_wall_s": time.perf_counter() - t0}
+    doc = {
+        "scenes": rows,
+        "summary": summary(rows),
+        "fps": FPS,
+        "after_frames": AFTER,
+        "release_frame": RELEASE,
+        "grid": CUTS + 1,
+        "cameras": len(rig()),
+        "drift_cpu_s": time.process_time() - c0,
+        "drift_wall_s": time.perf_counter() - t0,
+    }
     print(format_table(doc), flush=True)
     print(format_causes(doc), flush=True)
     if json_path:
-        from addon.core.safeio import atomic_json
+        from clothfit.core.safeio import atomic_json
+
         os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
         atomic_json(json_path, doc)
     return doc
@@ -747,9 +870,12 @@ def drift(out, names=None, json_path=None):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("step", choices=["build", "simulate", "observe", "drift", "all"],
-                    help="build the .blend files (bpy), simulate them in Blender (bpy), observe (simulate in a "
-                         "child, then write captures), drift (core model vs Blender), or all of them")
+    ap.add_argument(
+        "step",
+        choices=["build", "simulate", "observe", "drift", "all"],
+        help="build the .blend files (bpy), simulate them in Blender (bpy), observe (simulate in a "
+        "child, then write captures), drift (core model vs Blender), or all of them",
+    )
     ap.add_argument("--out", default="out/user_scenes", help="output directory")
     ap.add_argument("--scenes", default=None, help=f"comma-separated subset of {', '.join(SCENES)}")
     ap.add_argument("--json", default=None, help="write the drift figures to this JSON file")

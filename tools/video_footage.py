@@ -6,11 +6,12 @@ times), of the paper's cloth (ground truth) over a textured background, with sen
 codec (H.264 via PyAV, yuv420p, CRF 23; one camera in Matroska, the rest MP4) and a flash 0.2 s
 before t = 0; background plates as images for some cameras and as short videos of the empty scene
 for the others; the calibration as EasyMocap intri.yml / extri.yml. Then runs
-``python -m addon extract --videos ... --find-sync flash`` (or with the true sync file) and prints the
+``python -m clothfit extract --videos ... --find-sync flash`` (or with the true sync file) and prints the
 IoU of every extracted silhouette against the truth's own rasterised silhouette.
 
     python tools/video_footage.py --out out/video_footage [--cameras 6] [--resolution 480x640] [--sync true|flash]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,20 +24,21 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from addon.core import defaults as D  # noqa: E402
-from addon.core.observation import camera as C  # noqa: E402
-from addon.core.observation.raster import rasterize  # noqa: E402
-from addon.core.physics.models import simulate  # noqa: E402
-from addon.core.physics.scenario import paper_scenario  # noqa: E402
+from clothfit.core import defaults as D  # noqa: E402
+from clothfit.core.observation import camera as C  # noqa: E402
+from clothfit.core.observation.raster import rasterize  # noqa: E402
+from clothfit.core.physics.models import simulate  # noqa: E402
+from clothfit.core.physics.scenario import paper_scenario  # noqa: E402
 
 CAPTURE_TIMES = [0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0]
-FLASH_BEFORE = 0.2          # s before t = 0
+FLASH_BEFORE = 0.2  # s before t = 0
 CLOTH_BGR = (60, 110, 215)  # an orange-ish cloth
 
 
 def background_texture(h, w, rng):
     """A textured background: smooth colour blotches at several scales plus a fine grain."""
     import cv2
+
     img = np.zeros((h, w, 3), np.float32)
     for scale, amp in ((64, 60), (16, 35), (4, 18)):
         small = rng.uniform(-1, 1, (max(2, h // scale), max(2, w // scale), 3)).astype(np.float32)
@@ -61,6 +63,7 @@ def render(bg, cam, X, tris, rng, noise_sigma, ss=3, flash=0.0):
 def encode(path, frames, times, crf=23):
     """Write ``frames`` (BGR uint8) at presentation times ``times`` [s] (variable frame rate)."""
     import av
+
     h, w = frames[0].shape[:2]
     with av.open(path, "w") as c:
         st = c.add_stream("libx264", rate=30)
@@ -81,6 +84,7 @@ def encode(path, frames, times, crf=23):
 def write_easymocap(folder, cams):
     """EasyMocap's intri.yml / extri.yml (cv2.FileStorage, as its camera_utils writes them)."""
     import cv2
+
     os.makedirs(folder, exist_ok=True)
     fi = cv2.FileStorage(os.path.join(folder, "intri.yml"), cv2.FILE_STORAGE_WRITE)
     fe = cv2.FileStorage(os.path.join(folder, "extri.yml"), cv2.FILE_STORAGE_WRITE)
@@ -101,8 +105,9 @@ def write_easymocap(folder, cams):
     fe.release()
 
 
-def make_video_footage(root, n_cameras=4, resolution=(240, 320), seed=0, noise_sigma=4.0, times=CAPTURE_TIMES,
-                       plate_videos=True):
+def make_video_footage(
+    root, n_cameras=4, resolution=(240, 320), seed=0, noise_sigma=4.0, times=CAPTURE_TIMES, plate_videos=True
+):
     """Write videos/, plates/, sync.json, intri.yml/extri.yml under ``root``; return the truth:
     ``{"cameras", "times", "sync", "masks"[c][f]}``."""
     rng = np.random.default_rng(seed)
@@ -115,7 +120,7 @@ def make_video_footage(root, n_cameras=4, resolution=(240, 320), seed=0, noise_s
     os.makedirs(plates, exist_ok=True)
     sync, plan = {}, []
     for ci, cam in enumerate(cams):
-        s = round(float(rng.uniform(0.3, 1.2)), 3)          # video time at t = 0 (ms grid: container precision)
+        s = round(float(rng.uniform(0.3, 1.2)), 3)  # video time at t = 0 (ms grid: container precision)
         sync[cam.name] = s
         vt = [0.0]
         while vt[-1] < s + times[-1] + 0.3:
@@ -144,6 +149,7 @@ def make_video_footage(root, n_cameras=4, resolution=(240, 320), seed=0, noise_s
             encode(os.path.join(plates, cam.name + ".mp4"), empty, [k / 30 for k in range(12)])
         else:
             import cv2
+
             plate = np.clip(bg + rng.normal(0, noise_sigma, bg.shape), 0, 255).astype(np.uint8)
             cv2.imwrite(os.path.join(plates, cam.name + ".png"), plate)
         masks.append([rasterize(cam.project(shape_at[round(t, 3)]), tris, cam.height, cam.width) for t in times])
@@ -167,26 +173,51 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", help="also write the IoU figures to this file")
     a = ap.parse_args(argv)
-    from addon.cli import main as cli
-    from addon.core.observation.capture import load_capture
+    from clothfit.cli import main as cli
+    from clothfit.core.observation.capture import load_capture
+
     res = [int(v) for v in a.resolution.split("x")]
     truth = make_video_footage(a.out, a.cameras, res, a.seed, a.noise)
     cap_dir = os.path.join(a.out, "capture")
-    args = ["extract", "--videos", os.path.join(a.out, "videos"), "--plates", os.path.join(a.out, "plates"),
-            "--cameras", a.out, "--times", ",".join(str(t) for t in truth["times"]), "--out", cap_dir]
+    args = [
+        "extract",
+        "--videos",
+        os.path.join(a.out, "videos"),
+        "--plates",
+        os.path.join(a.out, "plates"),
+        "--cameras",
+        a.out,
+        "--times",
+        ",".join(str(t) for t in truth["times"]),
+        "--out",
+        cap_dir,
+    ]
     if a.sync == "flash":
-        args += ["--find-sync", "flash", "--flash-time", str(-FLASH_BEFORE), "--sync", os.path.join(a.out, "sync_found.json")]
+        args += [
+            "--find-sync",
+            "flash",
+            "--flash-time",
+            str(-FLASH_BEFORE),
+            "--sync",
+            os.path.join(a.out, "sync_found.json"),
+        ]
     else:
         args += ["--sync", os.path.join(a.out, "sync.json")]
     if cli(args) != 0:
         sys.exit(2)
     cap = load_capture(cap_dir)
-    ious = np.array([[iou(cap.load_silhouette(ci, fi), truth["masks"][ci][fi]) for fi in range(cap.n_frames)]
-                     for ci in range(cap.n_cameras)])
+    ious = np.array(
+        [
+            [iou(cap.load_silhouette(ci, fi), truth["masks"][ci][fi]) for fi in range(cap.n_frames)]
+            for ci in range(cap.n_cameras)
+        ]
+    )
     for ci, cam in enumerate(cap.cameras):
         print(f"{cam.name}: IoU mean {ious[ci].mean():.4f}, worst {ious[ci].min():.4f}")
-    print(f"mean IoU {ious.mean():.4f} (worst frame {ious.min():.4f}) over {ious.size} silhouettes, "
-          f"{a.cameras} cameras at {a.resolution}, sync from {'the flash' if a.sync == 'flash' else 'sync.json'}")
+    print(
+        f"mean IoU {ious.mean():.4f} (worst frame {ious.min():.4f}) over {ious.size} silhouettes, "
+        f"{a.cameras} cameras at {a.resolution}, sync from {'the flash' if a.sync == 'flash' else 'sync.json'}"
+    )
     if a.json:
         found = {}
         if a.sync == "flash":
@@ -194,13 +225,21 @@ def main(argv=None):
                 found = json.load(f)
         with open(os.path.join(a.out, "sync.json")) as f:
             true_sync = json.load(f)
-        out = {"cameras": [c.name for c in cap.cameras], "resolution": res, "sync": a.sync,
-               "mean_iou": float(ious.mean()), "worst_iou": float(ious.min()),
-               "camera_mean_iou": [float(v) for v in ious.mean(1)], "iou": ious.tolist(),
-               "frame_times": [float(t) for t in cap.frame_times],
-               "sync_error_s": {k: abs(found[k] - true_sync[k]) for k in found if k in true_sync},
-               "worst_frame": {"camera": cap.cameras[int(np.argmin(ious.min(1)))].name,
-                               "time": float(cap.frame_times[int(np.argmin(ious.min(0)))])}}
+        out = {
+            "cameras": [c.name for c in cap.cameras],
+            "resolution": res,
+            "sync": a.sync,
+            "mean_iou": float(ious.mean()),
+            "worst_iou": float(ious.min()),
+            "camera_mean_iou": [float(v) for v in ious.mean(1)],
+            "iou": ious.tolist(),
+            "frame_times": [float(t) for t in cap.frame_times],
+            "sync_error_s": {k: abs(found[k] - true_sync[k]) for k in found if k in true_sync},
+            "worst_frame": {
+                "camera": cap.cameras[int(np.argmin(ious.min(1)))].name,
+                "time": float(cap.frame_times[int(np.argmin(ious.min(0)))]),
+            },
+        }
         out["max_sync_error_s"] = max(out["sync_error_s"].values(), default=None)
         with open(a.json, "w") as f:
             json.dump(out, f, indent=1)

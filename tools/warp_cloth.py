@@ -29,6 +29,7 @@ The physics (SI units, world Z up):
 The mesh is NOT our grid: ``n x n`` vertices with alternating ("criss-cross") diagonals.
 Warp runs in float32: positions are simulated relative to the cloth's centre to keep precision.
 """
+
 from __future__ import annotations
 
 import math
@@ -38,7 +39,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 GRAVITY = 9.81
-RHO_AIR = 1.2           # kg/m^3, air at 20 C
+RHO_AIR = 1.2  # kg/m^3, air at 20 C
 WARP_VERSION = "1.9.1"  # the last warp-lang with warp.sim (removed in 1.10)
 
 _wp = None
@@ -49,6 +50,7 @@ def warp():
     global _wp
     if _wp is None:
         import warnings
+
         os.environ.setdefault("WARP_CACHE_PATH", os.path.join(os.path.expanduser("~"), ".cache", "warp"))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -63,14 +65,15 @@ def warp():
 @dataclass(frozen=True)
 class Material:
     """A fabric in SI units (see the module doc for how each enters the physics)."""
+
     name: str
-    areal_density: float      # rho_A [kg/m^2]
-    stretch: float            # E h [N/m], in-plane stretch stiffness (initial tensile modulus x thickness)
-    poisson: float            # nu
-    bending: float            # D [N m], bending rigidity per width (Kawabata B)
-    drag_cd: float = 1.2      # C_d of a flat plate moving normal to itself
-    membrane_damping: float = 0.0    # beta [s]: k_damp = beta mu; 0: Warp's F-rate damping also resists rigid rotation
-    bending_damping: float = 0.02    # beta_b [s]: kd_e = beta_b ke_e
+    areal_density: float  # rho_A [kg/m^2]
+    stretch: float  # E h [N/m], in-plane stretch stiffness (initial tensile modulus x thickness)
+    poisson: float  # nu
+    bending: float  # D [N m], bending rigidity per width (Kawabata B)
+    drag_cd: float = 1.2  # C_d of a flat plate moving normal to itself
+    membrane_damping: float = 0.0  # beta [s]: k_damp = beta mu; 0: Warp's F-rate damping also resists rigid rotation
+    bending_damping: float = 0.02  # beta_b [s]: kd_e = beta_b ke_e
     source: str = ""
 
     def to_dict(self):
@@ -78,6 +81,7 @@ class Material:
 
 
 # ----------------------------------------------------------------------------------------- mesh
+
 
 def sheet_mesh(n: int, side: float, side_y: float | None = None):
     """A flat ``side x side_y`` sheet centred at the origin (z = 0): ``n x n`` vertices (index
@@ -133,7 +137,7 @@ def tri_areas(V, tris):
 def lame(mat: Material):
     """Warp's (k_mu, k_lambda) of the membrane: the plane-stress membrane (E h, nu) in the small-strain limit."""
     mu = mat.stretch / (2.0 * (1.0 + mat.poisson))
-    lam = mat.stretch * mat.poisson / (1.0 - mat.poisson ** 2)
+    lam = mat.stretch * mat.poisson / (1.0 - mat.poisson**2)
     return mu, mu + lam
 
 
@@ -158,10 +162,11 @@ def stable_dt(V, tris, mat: Material, safety: float = 0.7):
     rho_A)) the membrane's P-wave speed, h_min the smallest triangle height) and ``z = beta w / 2``
     the Kelvin-Voigt damping ratio at that frequency (symplectic Euler on a damped oscillator)."""
     A = tri_areas(V, tris)
-    longest = np.max(np.stack([np.linalg.norm(V[tris[:, a]] - V[tris[:, b]], axis=1)
-                               for a, b in ((0, 1), (1, 2), (2, 0))]), axis=0)
+    longest = np.max(
+        np.stack([np.linalg.norm(V[tris[:, a]] - V[tris[:, b]], axis=1) for a, b in ((0, 1), (1, 2), (2, 0))]), axis=0
+    )
     hmin = float(np.min(2 * A / longest))
-    c = math.sqrt(mat.stretch / ((1 - mat.poisson ** 2) * mat.areal_density))
+    c = math.sqrt(mat.stretch / ((1 - mat.poisson**2) * mat.areal_density))
     w = 2.0 * c / hmin
     z = mat.membrane_damping * w / 2.0
     return safety * 2.0 / (w * (z + math.sqrt(1.0 + z * z)))
@@ -169,11 +174,13 @@ def stable_dt(V, tris, mat: Material, safety: float = 0.7):
 
 # ------------------------------------------------------------------------------------ simulate
 
+
 @dataclass
 class Pin:
     """A vertex held by a hand: it moves in a straight line from its rest position to ``hold``
     during the first ``ramp`` seconds of the settling, stays there, and is released (free) at
     ``release`` [s] if given (t = 0 ends the settling)."""
+
     vertex: int
     hold: tuple
     release: float | None = None
@@ -193,13 +200,21 @@ def energy(V_rest, tris, H, mat, x, v, masses, gravity=GRAVITY, origin_z=0.0):
     Dm = np.linalg.inv(np.stack([np.stack([e1[:, 0], e2[:, 0]], -1), np.stack([e1[:, 1], e2[:, 1]], -1)], 1))
     x1 = x[tris[:, 1]] - x[tris[:, 0]]
     x2 = x[tris[:, 2]] - x[tris[:, 0]]
-    F = np.stack([x1, x2], -1) @ Dm                          # (T, 3, 2)
+    F = np.stack([x1, x2], -1) @ Dm  # (T, 3, 2)
     J = 0.5 * np.linalg.norm(np.cross(x1, x2), axis=1) / A0
-    mem = float(np.sum(A0 * (0.5 * mu * (np.sum(F * F, axis=(1, 2)) - 2.0) + 0.5 * lam * (J - alpha) ** 2
-                             - 0.5 * lam * (1 - alpha) ** 2)))
+    mem = float(
+        np.sum(
+            A0
+            * (
+                0.5 * mu * (np.sum(F * F, axis=(1, 2)) - 2.0)
+                + 0.5 * lam * (J - alpha) ** 2
+                - 0.5 * lam * (1 - alpha) ** 2
+            )
+        )
+    )
     theta = dihedral(x, H)
-    ecur = np.linalg.norm(x[H[:, 3]] - x[H[:, 2]], axis=1)      # Warp scales by the current edge length
-    bend = float(np.sum(0.5 * ke * ecur * theta ** 2))
+    ecur = np.linalg.norm(x[H[:, 3]] - x[H[:, 2]], axis=1)  # Warp scales by the current edge length
+    bend = float(np.sum(0.5 * ke * ecur * theta**2))
     return kin + pot + mem + bend
 
 
@@ -214,9 +229,22 @@ def dihedral(x, H):
     return np.arccos(np.clip(c, -1, 1)) * s
 
 
-def simulate(V, tris, mat: Material, pins, times, settle: float = 2.0, ramp: float = 0.5,
-             settle_damping: float = 20.0, dt: float | None = None, origin=(0.0, 0.0, 0.0),
-             gravity: float = GRAVITY, dt_safety: float = 0.7, progress=None, velocities: bool = False):
+def simulate(
+    V,
+    tris,
+    mat: Material,
+    pins,
+    times,
+    settle: float = 2.0,
+    ramp: float = 0.5,
+    settle_damping: float = 20.0,
+    dt: float | None = None,
+    origin=(0.0, 0.0, 0.0),
+    gravity: float = GRAVITY,
+    dt_safety: float = 0.7,
+    progress=None,
+    velocities: bool = False,
+):
     """Simulate the sheet ``V`` (rest positions, relative to ``origin``), ``tris`` in Warp.
 
     From t = -settle: the pins ramp to their hold positions (relative to ``origin``) over ``ramp`` s,
@@ -226,10 +254,12 @@ def simulate(V, tris, mat: Material, pins, times, settle: float = 2.0, ramp: flo
     facts (dt, steps, cpu seconds, masses; with ``velocities`` also the velocities (F, V, 3)).
     """
     import time as _time
+
     wp = warp()
     import warp.sim as wsim
     from warp.sim.integrator import integrate_particles
     from warp.sim.integrator_euler import eval_bending, eval_triangles
+
     times = np.asarray(times, dtype=np.float64)
     V = np.asarray(V, dtype=np.float64)
     H = hinges(tris)
@@ -245,11 +275,17 @@ def simulate(V, tris, mat: Material, pins, times, settle: float = 2.0, ramp: flo
     b = wsim.ModelBuilder(up_vector=(0.0, 0.0, 1.0), gravity=-gravity)
     for p, m in zip(V, masses):
         b.add_particle(wp.vec3(*p), wp.vec3(0.0, 0.0, 0.0), float(m), radius=0.0)
-    b.add_triangles(tris[:, 0], tris[:, 1], tris[:, 2],
-                    [mu] * len(tris), [lam] * len(tris), [mat.membrane_damping * mu] * len(tris),
-                    [0.5 * RHO_AIR * mat.drag_cd] * len(tris), [0.0] * len(tris))
-    b.add_edges(H[:, 0], H[:, 1], H[:, 2], H[:, 3],
-                edge_ke=ke.tolist(), edge_kd=(mat.bending_damping * ke).tolist())
+    b.add_triangles(
+        tris[:, 0],
+        tris[:, 1],
+        tris[:, 2],
+        [mu] * len(tris),
+        [lam] * len(tris),
+        [mat.membrane_damping * mu] * len(tris),
+        [0.5 * RHO_AIR * mat.drag_cd] * len(tris),
+        [0.0] * len(tris),
+    )
+    b.add_edges(H[:, 0], H[:, 1], H[:, 2], H[:, 3], edge_ke=ke.tolist(), edge_kd=(mat.bending_damping * ke).tolist())
     model = b.finalize(device="cpu")
     model.ground = False
     model.enable_tri_collisions = False
@@ -270,22 +306,64 @@ def simulate(V, tris, mat: Material, pins, times, settle: float = 2.0, ramp: flo
 
     def record(a, bb, settling):
         """The launches of one step from state a to state bb."""
-        L = [wp.launch(eval_triangles, dim=model.tri_count,
-                       inputs=[a.particle_q, a.particle_qd, model.tri_indices, model.tri_poses,
-                               ctl.tri_activations, model.tri_materials], outputs=[a.particle_f],
-                       device="cpu", record_cmd=True),
-             wp.launch(eval_bending, dim=model.edge_count,
-                       inputs=[a.particle_q, a.particle_qd, model.edge_indices, model.edge_rest_angle,
-                               model.edge_bending_properties], outputs=[a.particle_f],
-                       device="cpu", record_cmd=True),
-             wp.launch(integrate_particles, dim=model.particle_count,
-                       inputs=[a.particle_q, a.particle_qd, a.particle_f, model.particle_inv_mass,
-                               model.particle_flags, grav, dt, model.particle_max_velocity],
-                       outputs=[bb.particle_q, bb.particle_qd], device="cpu", record_cmd=True)]
+        L = [
+            wp.launch(
+                eval_triangles,
+                dim=model.tri_count,
+                inputs=[
+                    a.particle_q,
+                    a.particle_qd,
+                    model.tri_indices,
+                    model.tri_poses,
+                    ctl.tri_activations,
+                    model.tri_materials,
+                ],
+                outputs=[a.particle_f],
+                device="cpu",
+                record_cmd=True,
+            ),
+            wp.launch(
+                eval_bending,
+                dim=model.edge_count,
+                inputs=[
+                    a.particle_q,
+                    a.particle_qd,
+                    model.edge_indices,
+                    model.edge_rest_angle,
+                    model.edge_bending_properties,
+                ],
+                outputs=[a.particle_f],
+                device="cpu",
+                record_cmd=True,
+            ),
+            wp.launch(
+                integrate_particles,
+                dim=model.particle_count,
+                inputs=[
+                    a.particle_q,
+                    a.particle_qd,
+                    a.particle_f,
+                    model.particle_inv_mass,
+                    model.particle_flags,
+                    grav,
+                    dt,
+                    model.particle_max_velocity,
+                ],
+                outputs=[bb.particle_q, bb.particle_qd],
+                device="cpu",
+                record_cmd=True,
+            ),
+        ]
         if settling:
-            L.append(wp.launch(damp, dim=model.particle_count,
-                               inputs=[bb.particle_qd, model.particle_inv_mass, math.exp(-settle_damping * dt)],
-                               device="cpu", record_cmd=True))
+            L.append(
+                wp.launch(
+                    damp,
+                    dim=model.particle_count,
+                    inputs=[bb.particle_qd, model.particle_inv_mass, math.exp(-settle_damping * dt)],
+                    device="cpu",
+                    record_cmd=True,
+                )
+            )
         return L
 
     def step_fn(settling):
@@ -317,7 +395,7 @@ def simulate(V, tris, mat: Material, pins, times, settle: float = 2.0, ramp: flo
     set_pin_velocity(vel)
     run(min(n_ramp, n_settle), settle_cmds)
     set_pin_velocity(np.zeros_like(vel))
-    q = s[cur].particle_q.numpy()          # land exactly on the hold positions (float32 drift)
+    q = s[cur].particle_q.numpy()  # land exactly on the hold positions (float32 drift)
     q[pv] = hold
     s[cur].particle_q.assign(q)
     run(max(0, n_settle - n_ramp), settle_cmds)
@@ -344,8 +422,14 @@ def simulate(V, tris, mat: Material, pins, times, settle: float = 2.0, ramp: flo
         if progress:
             progress(fi, len(times))
     out += np.asarray(origin, dtype=np.float64)
-    facts = {"dt": dt, "steps": n_settle + k_step, "cpu_s": _time.process_time() - t_cpu,
-             "vertices": len(V), "triangles": len(tris), "hinges": len(H)}
+    facts = {
+        "dt": dt,
+        "steps": n_settle + k_step,
+        "cpu_s": _time.process_time() - t_cpu,
+        "vertices": len(V),
+        "triangles": len(tris),
+        "hinges": len(H),
+    }
     if velocities:
         facts["velocities"] = vout
         facts["masses"] = masses

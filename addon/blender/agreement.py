@@ -10,6 +10,7 @@ the mean and max distance [mm] over every vertex of every frame per case: Blende
 cloth, its presets (silk: soft, little bending; cotton; denim; leather; rubber), the linear
 bending model, and qualities from 2 to 15. Needs the bpy module.
 """
+
 from __future__ import annotations
 
 import time
@@ -24,7 +25,7 @@ from ..core.physics.scenario import ClothGrid, Scenario, paper_scenario
 
 PRESETS = B.PRESETS
 
-PIN_WEIGHT = "pin weight"      # a case key: the handles' pin weight (< 1: Blender's soft goal springs)
+PIN_WEIGHT = "pin weight"  # a case key: the handles' pin weight (< 1: Blender's soft goal springs)
 
 CASES = [
     ("default", {}),
@@ -54,6 +55,7 @@ def agreement_scenario(n: int = 21, settle: float = 1.0, after: float = 1.5, fps
 def compare(scene, scenario: Scenario, settings: dict, fps: float = 24.0, frame_start: int = 1) -> dict:
     """Simulate ``settings`` on ``scenario`` in the core and in Blender; distances over every frame."""
     from . import cloth as BC
+
     given = dict(settings)
     weight = given.pop(PIN_WEIGHT, None)
     if weight is not None:
@@ -78,33 +80,51 @@ def compare(scene, scenario: Scenario, settings: dict, fps: float = 24.0, frame_
     finally:
         me = obj.data
         import bpy
+
         bpy.data.objects.remove(obj, do_unlink=True)
         bpy.data.meshes.remove(me)
     d = np.linalg.norm(core[0].astype(np.float64) - blender, axis=-1) * 1000.0
-    after = d[plan.release_frame:]
-    return {"settings": s, "frames": int(plan.n_frames + 1), "vertices": int(net.n_vertices),
-            "mean_mm": float(d.mean()), "max_mm": float(d.max()),
-            "mean_mm_after_release": float(after.mean()), "max_mm_after_release": float(after.max()),
-            "exactly_equal_frames": int(np.sum(np.all(d == 0.0, axis=1))),
-            "core_s": t_core, "blender_s": t_blender, "blender_cg_iterations": iters}
+    after = d[plan.release_frame :]
+    return {
+        "settings": s,
+        "frames": int(plan.n_frames + 1),
+        "vertices": int(net.n_vertices),
+        "mean_mm": float(d.mean()),
+        "max_mm": float(d.max()),
+        "mean_mm_after_release": float(after.mean()),
+        "max_mm_after_release": float(after.max()),
+        "exactly_equal_frames": int(np.sum(np.all(d == 0.0, axis=1))),
+        "core_s": t_core,
+        "blender_s": t_blender,
+        "blender_cg_iterations": iters,
+    }
 
 
 def run(n=21, settle=1.0, after=1.5, fps=24.0, cases=None, echo=print) -> list:
     import bpy
+
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scenario = agreement_scenario(n, settle, after, fps)
     rows = []
-    echo(f"{n} x {n} sheet, 10 cm, hung by its corners, {settle:g} s settle, one corner released, {after:g} s "
-         f"after, {fps:g} fps: core blender model vs Blender {bpy.app.version_string}")
-    echo(f"{'case':40s} {'q':>3s} {'mean mm':>9s} {'max mm':>9s} {'equal frames':>13s} {'core s':>7s} {'Blender s':>9s}")
-    for name, settings in (cases or CASES):
+    echo(
+        f"{n} x {n} sheet, 10 cm, hung by its corners, {settle:g} s settle, one corner released, {after:g} s "
+        f"after, {fps:g} fps: core blender model vs Blender {bpy.app.version_string}"
+    )
+    echo(
+        f"{'case':40s} {'q':>3s} {'mean mm':>9s} {'max mm':>9s} {'equal frames':>13s} {'core s':>7s} {'Blender s':>9s}"
+    )
+    for name, settings in cases or CASES:
         r = compare(scene, scenario, settings, fps)
         r["case"] = name
         rows.append(r)
-        echo(f"{name:40s} {r['settings']['quality']:3d} {r['mean_mm']:9.6f} {r['max_mm']:9.6f} "
-             f"{r['exactly_equal_frames']:6d}/{r['frames']:<6d} {r['core_s']:7.2f} {r['blender_s']:9.2f}")
+        echo(
+            f"{name:40s} {r['settings']['quality']:3d} {r['mean_mm']:9.6f} {r['max_mm']:9.6f} "
+            f"{r['exactly_equal_frames']:6d}/{r['frames']:<6d} {r['core_s']:7.2f} {r['blender_s']:9.2f}"
+        )
     worst = max(r["max_mm"] for r in rows)
-    echo(f"worst case: mean {max(r['mean_mm'] for r in rows):.6f} mm, max {worst:.6f} mm "
-         f"(goal: mean < 0.1 mm, max < 1 mm)")
+    echo(
+        f"worst case: mean {max(r['mean_mm'] for r in rows):.6f} mm, max {worst:.6f} mm "
+        f"(goal: mean < 0.1 mm, max < 1 mm)"
+    )
     return rows

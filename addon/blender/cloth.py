@@ -10,6 +10,7 @@ whose influence is keyed (constant interpolation) to the plan's weights: Blender
 weights every frame, so a handle is free from the step into the first frame after its release.
 Handles that move follow a keyed empty through a *Hook* modifier. The Cloth modifier comes last.
 """
+
 from __future__ import annotations
 
 import time
@@ -64,7 +65,7 @@ def add_pins(scene, obj, plan: B.FramePlan, frame_start: int, name_prefix="cloth
     added = []
     if not hv:
         return added
-    W = plan.weights                       # (n_frames + 1, H)
+    W = plan.weights  # (n_frames + 1, H)
     static = [k for k in range(len(hv)) if np.all(W[:, k] == W[0, k])]
     pin.add(hv, 0.0, "REPLACE")
     for k in static:
@@ -115,8 +116,9 @@ def add_pins(scene, obj, plan: B.FramePlan, frame_start: int, name_prefix="cloth
     return added
 
 
-def build_cloth_object(scene, net: B.Network, plan: B.FramePlan, settings: dict, name="Blender Cloth",
-                       frame_start: int = 1, faces=None):
+def build_cloth_object(
+    scene, net: B.Network, plan: B.FramePlan, settings: dict, name="Blender Cloth", frame_start: int = 1, faces=None
+):
     """A mesh object with the network's first-frame positions and ``faces``, its pins and a Cloth
     modifier with ``settings`` (collisions off: the core model has none)."""
     faces = net.faces if faces is None else faces
@@ -161,8 +163,9 @@ def simulate_frames(scene, obj, n_frames: int, frame_start: int | None = None):
         raise ClothFitError(f"object '{obj.name}' has no Cloth modifier")
     f0 = cl.point_cache.frame_start if frame_start is None else frame_start
     if cl.point_cache.frame_end < f0 + n_frames:
-        raise ClothFitError(f"the cloth cache of '{obj.name}' ends at frame {cl.point_cache.frame_end}, before "
-                            f"frame {f0 + n_frames}")
+        raise ClothFitError(
+            f"the cloth cache of '{obj.name}' ends at frame {cl.point_cache.frame_end}, before frame {f0 + n_frames}"
+        )
     t0 = time.perf_counter()
     scene.frame_set(f0)
     out = [evaluated_positions(obj)]
@@ -188,6 +191,7 @@ def replay(scene, scenario, settings: dict, fps: float, frame_start: int = 1):
     and release) with ``settings``, step it and return its vertices at the scenario's capture
     times ``(F, V, 3)`` (read like the core model: linear between frames), then remove it."""
     from ..core.physics.models import BlenderModel
+
     given = dict(settings)
     given.setdefault("time_scale", B.physical_time_scale(fps))
     s = B.check_settings(given, "replay settings")

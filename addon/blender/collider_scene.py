@@ -8,6 +8,7 @@ narrower than the cloth (so it drapes over the box's edges), with cloth-object c
 on the capture with the .blend must find settings that make Blender replay the observed motion.
 Needs the bpy module.
 """
+
 from __future__ import annotations
 
 import os
@@ -26,8 +27,16 @@ from ..core.physics.scenario import ClothGrid, Handle, Scenario
 from .cloth import build_cloth_object, cloth_modifier
 
 # true settings of the observed cloth (a soft cotton at 24 fps, real-time time scale)
-TRUTH = {"tension_stiffness": 40.0, "compression_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness": 0.2,
-         "tension_damping": 5.0, "shear_damping": 5.0, "bending_damping": 0.5, "air_damping": 2.0}
+TRUTH = {
+    "tension_stiffness": 40.0,
+    "compression_stiffness": 40.0,
+    "shear_stiffness": 8.0,
+    "bending_stiffness": 0.2,
+    "tension_damping": 5.0,
+    "shear_damping": 5.0,
+    "bending_damping": 0.5,
+    "air_damping": 2.0,
+}
 
 
 def collider_scenario(n=9, side=0.10, settle=0.25, after=0.5, fps=24.0, every=1, release="all") -> Scenario:
@@ -39,8 +48,9 @@ def collider_scenario(n=9, side=0.10, settle=0.25, after=0.5, fps=24.0, every=1,
         raise ClothFitError(f"collider scene: release must be 'all' or 'corner', got {release!r}")
     grid = ClothGrid(n, n, side)
     corners = grid.corners()
-    handles = [Handle(v, [0.0], grid.rest[v][None], 0.0 if release == "all" or v == corners[0] else None)
-               for v in corners]
+    handles = [
+        Handle(v, [0.0], grid.rest[v][None], 0.0 if release == "all" or v == corners[0] else None) for v in corners
+    ]
     times = np.arange(every, int(round(after * fps)) + 1, every) / fps
     return Scenario(grid, handles, times, settle, D.GRAVITY)
 
@@ -86,12 +96,12 @@ def build_scene(path, scenario: Scenario, settings=None, fps=24.0, drop=0.03, bo
     return frame_start + plan.settle_frames
 
 
-def observe(path, scenario: Scenario, capture_dir, settings=None, frame_zero=None, rig="ring8",
-            resolution=(90, 120)):
+def observe(path, scenario: Scenario, capture_dir, settings=None, frame_zero=None, rig="ring8", resolution=(90, 120)):
     """Blender's own solver on the scene ``path`` at ``settings`` (default ``TRUTH`` on the scene's
     other values) at the scenario's capture times; silhouettes by the core rasteriser. Writes the
     capture (with the true vertices as its shapes) and returns ``(capture, true settings)``."""
     from .scene_worker import BlendScene
+
     bs = BlendScene(path)
     info = bs.info()
     truth = dict(info["settings"])
@@ -109,9 +119,16 @@ def observe(path, scenario: Scenario, capture_dir, settings=None, frame_zero=Non
     for c, row in enumerate(sils):
         for f, s in enumerate(row):
             if not s.any():
-                raise ClothFitError(f"camera '{cams[c].name}' does not see the cloth at t = {scenario.frame_times[f]:g} s")
-    meta = {"generator": "Blender's own cloth solver on a scene with a collider (addon/blender/collider_scene.py), "
-                         "core rasteriser", "true_blender_cloth": truth, "blend": os.path.abspath(path),
-            "frame_zero": float(f0), "rig": rig}
+                raise ClothFitError(
+                    f"camera '{cams[c].name}' does not see the cloth at t = {scenario.frame_times[f]:g} s"
+                )
+    meta = {
+        "generator": "Blender's own cloth solver on a scene with a collider (addon/blender/collider_scene.py), "
+        "core rasteriser",
+        "true_blender_cloth": truth,
+        "blend": os.path.abspath(path),
+        "frame_zero": float(f0),
+        "rig": rig,
+    }
     cap = write_capture(capture_dir, cams, scenario, sils, shapes=X, cloth_mass=truth["mass"] * X.shape[1], meta=meta)
     return cap, truth

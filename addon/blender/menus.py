@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """File > Import / Export entries: each opens Blender's file browser on one ``clothfit`` operator
 (``browse=True``), which then makes its one call into the scripting API."""
+
 from __future__ import annotations
 
 import bpy

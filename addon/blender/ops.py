@@ -13,6 +13,7 @@ runs the same steps synchronously to completion. The event handling lives in the
 functions ``begin_modal`` / ``modal_tick`` / ``end_modal`` so tests can drive it directly;
 ``end_modal`` is the one finish routine for finish, cancel and error.
 """
+
 from __future__ import annotations
 
 import os
@@ -31,12 +32,14 @@ def failure_text(e: BaseException) -> str:
     if isinstance(e, (ClothFitError, OSError)):
         return " ".join(str(e).split())
     import traceback
+
     traceback.print_exception(type(e), e, e.__traceback__)
     return f"unexpected {type(e).__name__}: {' '.join(str(e).split()) or 'no message'} (details in the system console)"
 
 
 class _ClothFitOperator:
     """Runs ``self.run(context)`` and turns bad input into an error report."""
+
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
@@ -62,6 +65,7 @@ def _redraw(context):
 
 class CLOTHFIT_OT_build_rig(_ClothFitOperator, bpy.types.Operator):
     """Create the rig's cameras (preset or ring) in the 'ClothFit Rig' collection"""
+
     bl_idname = "clothfit.build_rig"
     bl_label = "Build Rig"
 
@@ -73,6 +77,7 @@ class CLOTHFIT_OT_build_rig(_ClothFitOperator, bpy.types.Operator):
 
 class CLOTHFIT_OT_build_cloth(_ClothFitOperator, bpy.types.Operator):
     """Create the cloth grid mesh with one vertex group per handle"""
+
     bl_idname = "clothfit.build_cloth"
     bl_label = "Build Cloth"
 
@@ -83,8 +88,10 @@ class CLOTHFIT_OT_build_cloth(_ClothFitOperator, bpy.types.Operator):
 
 def _simulate_done(context, r):
     """(warnings, message) after Simulate."""
-    return list(r["notes"]), (f"Simulated and baked {len(r['frames'])} shapes (frames {r['frames'][0]}.."
-                              f"{r['frames'][-1]}) in {r['seconds']:.1f} s")
+    return list(r["notes"]), (
+        f"Simulated and baked {len(r['frames'])} shapes (frames {r['frames'][0]}.."
+        f"{r['frames'][-1]}) in {r['seconds']:.1f} s"
+    )
 
 
 def _render_done(context, cap):
@@ -92,9 +99,11 @@ def _render_done(context, cap):
     notes = []
     dropped = cap.meta.get("distortion_dropped")
     if dropped:
-        notes.append(f"{len(dropped)} camera(s) have lens distortion ({', '.join(dropped[:4])}"
-                     f"{', ...' if len(dropped) > 4 else ''}): Blender rendered pinhole images, so "
-                     f"the capture's cameras are written without distortion")
+        notes.append(
+            f"{len(dropped)} camera(s) have lens distortion ({', '.join(dropped[:4])}"
+            f"{', ...' if len(dropped) > 4 else ''}): Blender rendered pinhole images, so "
+            f"the capture's cameras are written without distortion"
+        )
     return notes, f"Rendered {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root}"
 
 
@@ -108,11 +117,15 @@ def _extract_done(context, result):
     warnings = rep.get("warnings", [])
     notes += [f"Extraction: {w}" for w in warnings[:MAX_LISTED_WARNINGS]]
     if len(warnings) > MAX_LISTED_WARNINGS:
-        notes.append(f"Extraction: {len(warnings) - MAX_LISTED_WARNINGS} more warnings ({len(warnings)} in all) in "
-                     f"{cap.root}/extract_report.json")
+        notes.append(
+            f"Extraction: {len(warnings) - MAX_LISTED_WARNINGS} more warnings ({len(warnings)} in all) in "
+            f"{cap.root}/extract_report.json"
+        )
     notes += api.blender_view_cameras(cap.cameras)[1]
-    return notes, (f"Extracted {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root} "
-                   f"({context.scene.clothfit.extract_status})")
+    return notes, (
+        f"Extracted {cap.n_cameras} x {cap.n_frames} silhouettes into {cap.root} "
+        f"({context.scene.clothfit.extract_status})"
+    )
 
 
 class _StepsOperator(_ClothFitOperator):
@@ -120,6 +133,7 @@ class _StepsOperator(_ClothFitOperator):
     event, progress bar, status text, Esc stops and keeps what is done: ``begin_steps`` /
     ``steps_tick`` / ``end_steps``); ``execute`` (scripts, ``blender -b``) runs every step at once.
     Subclasses give ``steps(context)`` (the one API call) and ``done`` (warnings, message)."""
+
     done = None
     _run = None
 
@@ -151,7 +165,7 @@ class _StepsOperator(_ClothFitOperator):
 
     def modal(self, context, event):
         if event.type == "Z" and (event.ctrl or event.oskey):
-            return {"RUNNING_MODAL"}   # no undo while the run holds the scene's data (undo reloads it)
+            return {"RUNNING_MODAL"}  # no undo while the run holds the scene's data (undo reloads it)
         state, level, msg = steps_tick(context, self._run, event.type)
         if state == "RUNNING":
             return {"RUNNING_MODAL"} if event.type in {"TIMER", "ESC"} else {"PASS_THROUGH"}
@@ -168,6 +182,7 @@ class _StepsOperator(_ClothFitOperator):
 class CLOTHFIT_OT_simulate(_StepsOperator, bpy.types.Operator):
     """Simulate the mass-spring cloth with the scene's parameters and bake it into shape keys (Esc stops
     before the bake and leaves the scene as it was)"""
+
     bl_idname = "clothfit.simulate"
     bl_label = "Simulate"
     done = _simulate_done
@@ -179,11 +194,17 @@ class CLOTHFIT_OT_simulate(_StepsOperator, bpy.types.Operator):
 class CLOTHFIT_OT_render_silhouettes(_StepsOperator, bpy.types.Operator):
     """Render the cloth's silhouette from every rig camera at every capture time into a capture directory
     (Esc stops and keeps the silhouettes rendered so far)"""
+
     bl_idname = "clothfit.render_silhouettes"
     bl_label = "Render Silhouettes"
     # UNDO restores the scene's settings; the files written to the capture directory stay on disk
-    directory: StringProperty(name="Directory", default="", subtype="DIR_PATH", options={"SKIP_SAVE"},
-                              description="Capture directory (default: the scene's)")
+    directory: StringProperty(
+        name="Directory",
+        default="",
+        subtype="DIR_PATH",
+        options={"SKIP_SAVE"},
+        description="Capture directory (default: the scene's)",
+    )
     done = _render_done
 
     def steps(self, context):
@@ -193,6 +214,7 @@ class CLOTHFIT_OT_render_silhouettes(_StepsOperator, bpy.types.Operator):
 class CLOTHFIT_OT_extract_silhouettes(_StepsOperator, bpy.types.Operator):
     """Silhouettes from camera footage (background plates + frames per camera) into a capture, then load it
     (Esc stops and writes the cameras extracted so far as a capture)"""
+
     bl_idname = "clothfit.extract_silhouettes"
     bl_label = "Extract Silhouettes"
     done = _extract_done
@@ -211,20 +233,34 @@ def _browse(op, context, path):
     return {"RUNNING_MODAL"}
 
 
-BROWSE = BoolProperty(name="File Browser", default=False, options={"HIDDEN", "SKIP_SAVE"},
-                      description="Pick the file in Blender's file browser first (the File menu's entries)")
+BROWSE = BoolProperty(
+    name="File Browser",
+    default=False,
+    options={"HIDDEN", "SKIP_SAVE"},
+    description="Pick the file in Blender's file browser first (the File menu's entries)",
+)
 
 
 class CLOTHFIT_OT_load_capture(_ClothFitOperator, bpy.types.Operator):
     """Read a capture: its cameras become the rig, observed silhouettes show as camera backgrounds"""
+
     bl_idname = "clothfit.load_capture"
     bl_label = "Load Capture"
-    directory: StringProperty(name="Directory", default="", subtype="DIR_PATH", options={"SKIP_SAVE"},
-                              description="Capture directory (default: the scene's)")
-    filepath: StringProperty(name="Capture File", default="", subtype="FILE_PATH", options={"SKIP_SAVE"},
-                             description="The capture's capture.json (or its folder); default: the scene's Capture")
-    filter_glob: StringProperty(default="*.json", options={"HIDDEN"},
-                                description="Files the file browser lists")
+    directory: StringProperty(
+        name="Directory",
+        default="",
+        subtype="DIR_PATH",
+        options={"SKIP_SAVE"},
+        description="Capture directory (default: the scene's)",
+    )
+    filepath: StringProperty(
+        name="Capture File",
+        default="",
+        subtype="FILE_PATH",
+        options={"SKIP_SAVE"},
+        description="The capture's capture.json (or its folder); default: the scene's Capture",
+    )
+    filter_glob: StringProperty(default="*.json", options={"HIDDEN"}, description="Files the file browser lists")
     browse: BROWSE
 
     def invoke(self, context, event):
@@ -243,13 +279,20 @@ class CLOTHFIT_OT_load_capture(_ClothFitOperator, bpy.types.Operator):
 
 class CLOTHFIT_OT_import_cameras(_ClothFitOperator, bpy.types.Operator):
     """Import calibrated cameras (OpenCV YAML/JSON/XML file or folder, COLMAP text model) as the rig"""
+
     bl_idname = "clothfit.import_cameras"
     bl_label = "Import Cameras"
-    filepath: StringProperty(name="File", default="", subtype="FILE_PATH", options={"SKIP_SAVE"},
-                             description="Calibration file or folder (default: the scene's Calibration); in the "
-                                         "file browser, a folder (OpenCV per camera, COLMAP) is picked by entering it")
-    filter_glob: StringProperty(default="*.yml;*.yaml;*.json;*.xml;*.txt", options={"HIDDEN"},
-                                description="Files the file browser lists")
+    filepath: StringProperty(
+        name="File",
+        default="",
+        subtype="FILE_PATH",
+        options={"SKIP_SAVE"},
+        description="Calibration file or folder (default: the scene's Calibration); in the "
+        "file browser, a folder (OpenCV per camera, COLMAP) is picked by entering it",
+    )
+    filter_glob: StringProperty(
+        default="*.yml;*.yaml;*.json;*.xml;*.txt", options={"HIDDEN"}, description="Files the file browser lists"
+    )
     browse: BROWSE
 
     def invoke(self, context, event):
@@ -267,42 +310,58 @@ class CLOTHFIT_OT_import_cameras(_ClothFitOperator, bpy.types.Operator):
 
 class CLOTHFIT_OT_export_cameras(_ClothFitOperator, bpy.types.Operator):
     """Write the rig's cameras as an OpenCV calibration file/folder, a COLMAP text model or Cloth Fit JSON"""
+
     bl_idname = "clothfit.export_cameras"
     bl_label = "Export Cameras"
-    filepath: StringProperty(name="File", default="", subtype="FILE_PATH", options={"SKIP_SAVE"},
-                             description="Destination (default: the scene's Export To)")
-    file_format: EnumProperty(name="Format", items=[("SCENE", "Scene Setting", "The scene's export format")]
-                              + CAMERA_FORMATS, default="SCENE", options={"SKIP_SAVE"},
-                              description="File format of the exported cameras")
-    check_existing: BoolProperty(default=True, options={"HIDDEN", "SKIP_SAVE"},
-                                 description="The file browser warns before replacing a file")
+    filepath: StringProperty(
+        name="File",
+        default="",
+        subtype="FILE_PATH",
+        options={"SKIP_SAVE"},
+        description="Destination (default: the scene's Export To)",
+    )
+    file_format: EnumProperty(
+        name="Format",
+        items=[("SCENE", "Scene Setting", "The scene's export format")] + CAMERA_FORMATS,
+        default="SCENE",
+        options={"SKIP_SAVE"},
+        description="File format of the exported cameras",
+    )
+    check_existing: BoolProperty(
+        default=True, options={"HIDDEN", "SKIP_SAVE"}, description="The file browser warns before replacing a file"
+    )
     browse: BROWSE
 
     def invoke(self, context, event):
         if not self.browse:
             return self.execute(context)
         p = context.scene.clothfit
-        return _browse(self, context, bpy.path.abspath(p.cameras_export_path) if p.cameras_export_path
-                       else "calibration.yml")
+        return _browse(
+            self, context, bpy.path.abspath(p.cameras_export_path) if p.cameras_export_path else "calibration.yml"
+        )
 
     def run(self, context):
         fmt = None if self.file_format == "SCENE" else self.file_format
         path, cams, from_blender = api.export_cameras(context.scene, self.filepath or None, fmt)
         if from_blender:
-            self.report({"WARNING"}, f"{len(from_blender)} camera(s) were moved or changed in Blender "
-                                     f"({', '.join(from_blender[:4])}{', ...' if len(from_blender) > 4 else ''}): "
-                                     f"written as Blender shows them (no lens distortion)")
+            self.report(
+                {"WARNING"},
+                f"{len(from_blender)} camera(s) were moved or changed in Blender "
+                f"({', '.join(from_blender[:4])}{', ...' if len(from_blender) > 4 else ''}): "
+                f"written as Blender shows them (no lens distortion)",
+            )
         return f"Exported {len(cams)} cameras to {path}"
 
 
 class CLOTHFIT_OT_add_handle_empty(_ClothFitOperator, bpy.types.Operator):
     """Add an empty at a grid vertex's rest position and link the vertex to it (manipulation: Empties)"""
+
     bl_idname = "clothfit.add_handle_empty"
     bl_label = "Add Handle Empty"
-    row: IntProperty(name="Row", default=-1, min=-1, options={"SKIP_SAVE"},
-                     description="Grid row (-1: the panel's)")
-    column: IntProperty(name="Column", default=-1, min=-1, options={"SKIP_SAVE"},
-                        description="Grid column (-1: the panel's)")
+    row: IntProperty(name="Row", default=-1, min=-1, options={"SKIP_SAVE"}, description="Grid row (-1: the panel's)")
+    column: IntProperty(
+        name="Column", default=-1, min=-1, options={"SKIP_SAVE"}, description="Grid column (-1: the panel's)"
+    )
 
     def run(self, context):
         link = api.add_handle_empty(context.scene, self.row, self.column)
@@ -311,12 +370,19 @@ class CLOTHFIT_OT_add_handle_empty(_ClothFitOperator, bpy.types.Operator):
 
 class CLOTHFIT_OT_remove_handle(_ClothFitOperator, bpy.types.Operator):
     """Remove a handle link (the empty stays unless asked)"""
+
     bl_idname = "clothfit.remove_handle"
     bl_label = "Remove Handle"
-    index: IntProperty(name="Index", default=-1, min=-1, options={"SKIP_SAVE"},
-                       description="Handle to remove (0-based; -1: the active one)")
-    delete_empty: BoolProperty(name="Delete Empty", default=False, options={"SKIP_SAVE"},
-                              description="Also delete the handle's empty")
+    index: IntProperty(
+        name="Index",
+        default=-1,
+        min=-1,
+        options={"SKIP_SAVE"},
+        description="Handle to remove (0-based; -1: the active one)",
+    )
+    delete_empty: BoolProperty(
+        name="Delete Empty", default=False, options={"SKIP_SAVE"}, description="Also delete the handle's empty"
+    )
 
     def run(self, context):
         api.remove_handle(context.scene, self.index, self.delete_empty)
@@ -325,6 +391,7 @@ class CLOTHFIT_OT_remove_handle(_ClothFitOperator, bpy.types.Operator):
 
 class CLOTHFIT_OT_apply_fit(_ClothFitOperator, bpy.types.Operator):
     """Write the fitted parameters into the scene and re-simulate"""
+
     bl_idname = "clothfit.apply_fit"
     bl_label = "Apply Fit"
 
@@ -337,12 +404,16 @@ class CLOTHFIT_OT_apply_fit(_ClothFitOperator, bpy.types.Operator):
 class CLOTHFIT_OT_apply_blender_cloth(_ClothFitOperator, bpy.types.Operator):
     """Put the fitted Blender cloth settings on a Cloth modifier: on the active mesh, or (scene's own cloth
     or no mesh active) on a new cloth with the fit's mesh, pins and release, so Blender replays the fit"""
+
     bl_idname = "clothfit.apply_blender_cloth"
     bl_label = "Apply Blender Cloth"
 
-    set_fps: bpy.props.BoolProperty(name="Set Frame Rate", default=True,
-                                    description="Set the scene's frame rate to the one the settings were fitted "
-                                                "for (Blender's cloth moves per frame)")
+    set_fps: bpy.props.BoolProperty(
+        name="Set Frame Rate",
+        default=True,
+        description="Set the scene's frame rate to the one the settings were fitted "
+        "for (Blender's cloth moves per frame)",
+    )
 
     def run(self, context):
         obj = context.active_object if context.active_object and context.active_object.type == "MESH" else None
@@ -352,16 +423,20 @@ class CLOTHFIT_OT_apply_blender_cloth(_ClothFitOperator, bpy.types.Operator):
 
 class CLOTHFIT_OT_overlays(_ClothFitOperator, bpy.types.Operator):
     """Observed vs. model silhouettes per camera and frame (white agree, red missing, blue extra)"""
+
     bl_idname = "clothfit.overlays"
     bl_label = "Overlays"
 
     def run(self, context):
         s = api.make_overlays(context.scene)
-        return (f"Overlays of {len(s['cameras'])} cameras x {len(s['frames'])} frames: mean E_sil "
-                f"{s['mean_E_sil_pct']:.3f} %, contact sheet {s['contact_sheet']}")
+        return (
+            f"Overlays of {len(s['cameras'])} cameras x {len(s['frames'])} frames: mean E_sil "
+            f"{s['mean_E_sil_pct']:.3f} %, contact sheet {s['contact_sheet']}"
+        )
 
 
 # ======================================================= modal long operators
+
 
 class StepsRun:
     """One long operator's run in the UI: the API's ``Steps``, its timer and what it reports."""
@@ -369,7 +444,7 @@ class StepsRun:
     def __init__(self, steps, label, done=None):
         self.steps, self.label, self.done = steps, label, done
         self.timer = None
-        self.notes = []          # warnings to report with the final message
+        self.notes = []  # warnings to report with the final message
 
     def status_text(self):
         pct = 100.0 * self.steps.fraction
@@ -441,6 +516,7 @@ def _ui_end(context, run):
 
 # ============================================================= the modal fit
 
+
 def begin_modal(context, threaded=True):
     """Start a fit for the UI: job, progress bar, status text, timer. Returns the session.
 
@@ -499,6 +575,7 @@ def _status(context, text):
 
 class CLOTHFIT_OT_fit(bpy.types.Operator):
     """Fit k, l, d to the capture's silhouettes (one generation per tick; Esc cancels and keeps the best)"""
+
     bl_idname = "clothfit.fit"
     bl_label = "Fit"
     # UNDO takes the scene back to before the fit (its live status and best parameters); the result

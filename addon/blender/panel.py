@@ -1,12 +1,12 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The "Cloth Fit" sidebar tab of the 3D viewport: one small draw function per section."""
+
 from __future__ import annotations
 
 import bpy
 
-from . import render as R
-
 from ..core.physics.paper import identifiable
+from . import render as R
 
 
 def draw_rig(layout, scene, p):
@@ -90,8 +90,10 @@ class CLOTHFIT_UL_handles(bpy.types.UIList):
         row.prop(item, "empty", text="", emboss=False, icon="EMPTY_AXIS")
         nx = data.cloth_nx
         row.label(text=f"r{item.row} c{item.column} (#{item.row * nx + item.column})")
-        row.label(text=f"free at {item.release_time:g} s" if item.use_release else "held",
-                  icon="UNLOCKED" if item.use_release else "LOCKED")
+        row.label(
+            text=f"free at {item.release_time:g} s" if item.use_release else "held",
+            icon="UNLOCKED" if item.use_release else "LOCKED",
+        )
 
 
 def draw_simulation(layout, scene, p):
@@ -216,6 +218,7 @@ def draw_results(layout, scene, p):
 def draw_blender_cloth(layout, p):
     from ..core.errors import ClothFitError
     from ..core.jsonio import loads
+
     try:
         s = loads(p.fit_best_blender, "fitted Blender cloth", expect=dict)
     except ClothFitError:
@@ -223,8 +226,18 @@ def draw_blender_cloth(layout, p):
         return
     col = layout.column(align=True)
     col.label(text=f"Blender cloth, quality {s.get('quality')}, {s.get('bending_model', '').lower()} bending")
-    for k in ("mass", "tension_stiffness", "compression_stiffness", "shear_stiffness", "bending_stiffness",
-              "tension_damping", "shear_damping", "bending_damping", "air_damping", "time_scale"):
+    for k in (
+        "mass",
+        "tension_stiffness",
+        "compression_stiffness",
+        "shear_stiffness",
+        "bending_stiffness",
+        "tension_damping",
+        "shear_damping",
+        "bending_damping",
+        "air_damping",
+        "time_scale",
+    ):
         if k in s:
             col.label(text=f"{k.replace('_', ' ').capitalize()} = {s[k]:.4g}")
     layout.operator("clothfit.apply_blender_cloth", icon="MOD_CLOTH")
@@ -264,10 +277,19 @@ def _section_panel(key, label, func):
     def draw(self, context):
         self.layout.use_property_split = False
         func(self.layout, context.scene, context.scene.clothfit)
-    return type(f"CLOTHFIT_PT_{key}", (_Base, bpy.types.Panel), {
-        "bl_label": label, "bl_idname": f"CLOTHFIT_PT_{key}", "bl_parent_id": "CLOTHFIT_PT_main",
-        "bl_options": set() if key in ("rig", "fitting", "results") else {"DEFAULT_CLOSED"},
-        "draw": draw, "__doc__": f"Cloth Fit: {label}"})
+
+    return type(
+        f"CLOTHFIT_PT_{key}",
+        (_Base, bpy.types.Panel),
+        {
+            "bl_label": label,
+            "bl_idname": f"CLOTHFIT_PT_{key}",
+            "bl_parent_id": "CLOTHFIT_PT_main",
+            "bl_options": set() if key in ("rig", "fitting", "results") else {"DEFAULT_CLOSED"},
+            "draw": draw,
+            "__doc__": f"Cloth Fit: {label}",
+        },
+    )
 
 
 CLASSES = (CLOTHFIT_UL_handles, CLOTHFIT_PT_main) + tuple(_section_panel(*s) for s in SECTIONS)

@@ -5,8 +5,9 @@ operators read, kept with Blender's user preferences rather than in each .blend.
 ``bl_idname`` is the add-on's module name as Blender knows it: for an installed extension the
 package the extension root is imported as (``bl_ext.<repo>.silhouette_cloth_fit``), i.e. this
 module's package without its ``.addon.blender`` tail. From a checkout (``import addon``, the tests,
-``python -m addon``) there is no enabled add-on of that name, and ``preferences`` gives the defaults.
+``python -m clothfit``) there is no enabled add-on of that name, and ``preferences`` gives the defaults.
 """
+
 from __future__ import annotations
 
 import os
@@ -22,7 +23,7 @@ _TAIL = ".addon.blender"
 
 def addon_name(package: str = __package__) -> str:
     """The module name Blender registers the add-on under (the extension root package)."""
-    return package[:-len(_TAIL)] if package.endswith(_TAIL) else package.split(".")[0]
+    return package[: -len(_TAIL)] if package.endswith(_TAIL) else package.split(".")[0]
 
 
 ADDON_NAME = addon_name()
@@ -30,21 +31,31 @@ ADDON_NAME = addon_name()
 
 class ClothFitPreferences(bpy.types.AddonPreferences):
     """Defaults of the Cloth Fit operators"""
+
     bl_idname = ADDON_NAME
 
     workers: IntProperty(
-        name="Workers", default=0, min=0, max=1024,
+        name="Workers",
+        default=0,
+        min=0,
+        max=1024,
         description="Worker processes of a Blender-solver fit (Fit This Cloth's Settings); 0 = one per core "
-                    "of the machine that runs the fit")
+        "of the machine that runs the fit",
+    )
     ray_address: StringProperty(
-        name="Ray Address", default="",
+        name="Ray Address",
+        default="",
         description="A running Ray cluster for Blender-solver fits: auto, host:port or ray://host:port (start it "
-                    "outside Blender with `ray start --head`). Empty: the fit starts its own local workers. "
-                    "The add-on only connects: it never starts a cluster from Blender's UI")
+        "outside Blender with `ray start --head`). Empty: the fit starts its own local workers. "
+        "The add-on only connects: it never starts a cluster from Blender's UI",
+    )
     cache_dir: StringProperty(
-        name="Cache Folder", default="", subtype="DIR_PATH",
+        name="Cache Folder",
+        default="",
+        subtype="DIR_PATH",
         description="Where Blender-solver fits keep their working files (a copy of the .blend, the result, "
-                    "the log). Empty: the system's temporary folder")
+        "the log). Empty: the system's temporary folder",
+    )
 
     def draw(self, context):
         layout = self.layout
@@ -57,6 +68,7 @@ class ClothFitPreferences(bpy.types.AddonPreferences):
 
 class _Defaults:
     """The preferences' defaults, when the add-on is not enabled under ``ADDON_NAME`` (a checkout)."""
+
     workers = 0
     ray_address = ""
     cache_dir = ""

@@ -5,6 +5,7 @@ preferences, scene properties, operators, panels, and the File > Import / Export
 With the ``bpy`` module (no Blender binary), a process that exits while Python operators are
 still registered hangs in bpy 4.5's teardown; so in that mode an ``atexit`` hook unregisters.
 """
+
 from __future__ import annotations
 
 import atexit

@@ -22,6 +22,7 @@ and are written as ignore masks (pixels of unknown truth, ``docs/capture_format.
   colours (``shading.color_type = 'OBJECT'``), the cloth white, the occluders black; visible cloth =
   opaque and white, visible occluder = opaque and black. Same result, half the renders.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -39,12 +40,12 @@ from ..core.errors import ClothFitError
 def _set(saved, owner, attr, value):
     old = getattr(owner, attr)
     if not isinstance(old, str) and hasattr(old, "__len__"):
-        old = tuple(old)          # a bpy_prop_array is a live view: keep the values, not the view
+        old = tuple(old)  # a bpy_prop_array is a live view: keep the values, not the view
     saved.append((owner, attr, old))
     setattr(owner, attr, value)
 
 
-OCCLUDERS = "Occluders"        # the collection whose objects are occluders
+OCCLUDERS = "Occluders"  # the collection whose objects are occluders
 ENGINES = ("WORKBENCH", "EEVEE")
 
 
@@ -56,8 +57,7 @@ def occluder_objects(scene):
     return [o for o in coll.all_objects if o.type in RENDERABLE and not o.hide_render]
 
 
-RENDERABLE = {"MESH", "CURVE", "SURFACE", "META", "FONT", "VOLUME", "GPENCIL", "GREASEPENCIL", "POINTCLOUD",
-              "CURVES"}
+RENDERABLE = {"MESH", "CURVE", "SURFACE", "META", "FONT", "VOLUME", "GPENCIL", "GREASEPENCIL", "POINTCLOUD", "CURVES"}
 
 
 def _eevee_engine():
@@ -83,8 +83,15 @@ def silhouette_render(scene, objects, engine="WORKBENCH", holdouts=()):
             _set(saved, r, "engine", _eevee_engine())
             ev = scene.eevee
             _set(saved, ev, "taa_render_samples", 1)
-            for attr in ("use_gtao", "use_bloom", "use_ssr", "use_motion_blur", "use_shadows", "use_volumetric_shadows",
-                         "use_raytracing"):
+            for attr in (
+                "use_gtao",
+                "use_bloom",
+                "use_ssr",
+                "use_motion_blur",
+                "use_shadows",
+                "use_volumetric_shadows",
+                "use_raytracing",
+            ):
                 if hasattr(ev, attr):
                     _set(saved, ev, attr, False)
             _set(saved, r, "filter_size", 0.0)
@@ -108,8 +115,15 @@ def silhouette_render(scene, objects, engine="WORKBENCH", holdouts=()):
         else:
             _set(saved, sh, "color_type", "SINGLE")
         _set(saved, sh, "single_color", (1.0, 1.0, 1.0))
-        for attr in ("show_shadows", "show_cavity", "show_object_outline", "show_specular_highlight",
-                     "show_xray", "use_dof", "show_backface_culling"):
+        for attr in (
+            "show_shadows",
+            "show_cavity",
+            "show_object_outline",
+            "show_specular_highlight",
+            "show_xray",
+            "use_dof",
+            "show_backface_culling",
+        ):
             if hasattr(sh, attr):
                 _set(saved, sh, attr, False)
         _set(saved, scene.display, "render_aa", "OFF")
@@ -197,6 +211,7 @@ def render_to_file(scene, camera_obj, path):
 
 def _read_rgba(path, shape=None):
     import cv2
+
     img = cv2.imread(path, cv2.IMREAD_UNCHANGED)
     if img is None or img.ndim != 3 or img.shape[2] != 4:
         raise ClothFitError(f"render {path}: expected an RGBA PNG, got {None if img is None else img.shape}")
@@ -213,7 +228,7 @@ def read_object_colour_masks(path, shape=None):
     """Workbench object-colour render: (white = cloth, black = occluder) among the opaque pixels."""
     img = _read_rgba(path, shape)
     opaque = img[..., 3] > 127
-    white = img[..., 2] > 127            # BGR(A): red channel
+    white = img[..., 2] > 127  # BGR(A): red channel
     return opaque & white, opaque & ~white
 
 
@@ -223,6 +238,7 @@ def render_masks(scene, cloth_obj, camera_objs, tmpdir=None, engine="WORKBENCH",
     With ``occluders`` (a list, e.g. ``occluder_objects(scene)``) the result is a list of ``(mask,
     ignore)``: the visible cloth and the visible occluders (the module text says how per engine)."""
     from .scene import render_size
+
     W, H = render_size(scene)
     own = tmpdir is None
     tmpdir = tmpdir or tempfile.mkdtemp(prefix="clothfit_render_")
@@ -237,6 +253,7 @@ def render_masks(scene, cloth_obj, camera_objs, tmpdir=None, engine="WORKBENCH",
     def done(p):
         if own:
             os.remove(p)
+
     try:
         if occluders is None or (engine == "WORKBENCH" and not occ):
             with silhouette_render(scene, [cloth_obj], engine):

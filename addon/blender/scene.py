@@ -20,6 +20,7 @@ image size and ``fx / fy``, otherwise it sets them (percentage 100). Skew cannot
 
 Blender has one render size per scene: every camera of a rig must share it.
 """
+
 from __future__ import annotations
 
 import bpy
@@ -38,6 +39,7 @@ FLIP = np.diag([1.0, -1.0, -1.0])
 
 
 # ====================================================================== cameras
+
 
 def render_size(scene):
     """(W, H) in pixels of the scene's render, as Blender computes it."""
@@ -151,6 +153,7 @@ def camera_to_blender(camera: Camera, obj, scene):
 
 # ========================================================================= rig
 
+
 def ensure_collection(scene, name, parent=None):
     coll = bpy.data.collections.get(name)
     if coll is None:
@@ -171,7 +174,7 @@ def _remove_object(obj):
             bpy.data.meshes.remove(data)
 
 
-PAR_RANGE = (1.0 / 200.0, 200.0)   # Blender's pixel aspect range (fx / fy)
+PAR_RANGE = (1.0 / 200.0, 200.0)  # Blender's pixel aspect range (fx / fy)
 
 
 def check_rig(cameras):
@@ -188,9 +191,11 @@ def check_rig(cameras):
             raise ClothFitError(f"two cameras are named '{c.name}': camera names must be unique")
         names.add(c.name)
         if (c.width, c.height) != (c0.width, c0.height):
-            raise ClothFitError(f"camera '{c.name}' images {c.width}x{c.height} (WxH) but camera '{c0.name}' "
-                                f"{c0.width}x{c0.height}: Blender renders one image size per scene, so every "
-                                f"camera of the rig must have the same size")
+            raise ClothFitError(
+                f"camera '{c.name}' images {c.width}x{c.height} (WxH) but camera '{c0.name}' "
+                f"{c0.width}x{c0.height}: Blender renders one image size per scene, so every "
+                f"camera of the rig must have the same size"
+            )
         if abs(c.K[0, 1]) > 1e-9 * c.K[0, 0]:
             raise ClothFitError(f"camera '{c.name}': skew K[0,1] = {c.K[0, 1]:g} cannot be represented in Blender")
         par = c.K[0, 0] / c.K[1, 1]
@@ -200,9 +205,11 @@ def check_rig(cameras):
     for c in cameras[1:]:
         par = c.K[0, 0] / c.K[1, 1]
         if round(par, 9) != round(par0, 9):
-            raise ClothFitError(f"camera '{c.name}' has fx/fy = {par:.9g} but camera '{c0.name}' {par0:.9g}: "
-                                f"Blender has one pixel aspect per scene, so every camera of the rig must have "
-                                f"the same fx/fy")
+            raise ClothFitError(
+                f"camera '{c.name}' has fx/fy = {par:.9g} but camera '{c0.name}' {par0:.9g}: "
+                f"Blender has one pixel aspect per scene, so every camera of the rig must have "
+                f"the same fx/fy"
+            )
     return cameras
 
 
@@ -235,8 +242,10 @@ def rig_objects(scene):
     coll = bpy.data.collections.get(RIG_COLLECTION)
     objs = [o for o in (coll.all_objects if coll else []) if o.type == "CAMERA"]
     if not objs:
-        raise ClothFitError(f"no camera in the rig: the collection '{RIG_COLLECTION}' is missing or holds no "
-                            f"camera (build the rig or load a capture first)")
+        raise ClothFitError(
+            f"no camera in the rig: the collection '{RIG_COLLECTION}' is missing or holds no "
+            f"camera (build the rig or load a capture first)"
+        )
     return sorted(objs, key=lambda o: (int(o.get(CAMERA_INDEX_KEY, 1 << 30)), o.name))
 
 
@@ -249,12 +258,14 @@ def rig_cameras(scene):
 
 # ======================================================================== cloth
 
+
 def grid_from_object(obj) -> ClothGrid:
     try:
         return ClothGrid.from_dict(dict(obj["clothfit_grid"].to_dict()), source=f"cloth object '{obj.name}'")
     except KeyError:
-        raise ClothFitError(f"object '{obj.name}' is not a Cloth Fit cloth (no grid description): "
-                            f"build the cloth with Cloth Fit") from None
+        raise ClothFitError(
+            f"object '{obj.name}' is not a Cloth Fit cloth (no grid description): build the cloth with Cloth Fit"
+        ) from None
 
 
 def build_cloth(scene, grid: ClothGrid, handles=(), name=CLOTH_NAME):
@@ -290,19 +301,23 @@ def check_cloth(obj, grid: ClothGrid | None = None) -> ClothGrid:
         raise ClothFitError(
             f"the cloth mesh '{obj.name}' has {nv} vertices and {nt} faces but the {grid.nx}x{grid.ny} grid needs "
             f"{grid.n_vertices} vertices and {len(grid.triangles)} triangles: its topology was edited "
-            f"(rebuild the cloth)")
+            f"(rebuild the cloth)"
+        )
     tri = np.zeros(nt * 3, dtype=np.int32)
     sizes = np.zeros(nt, dtype=np.int32)
     me.polygons.foreach_get("loop_total", sizes)
     if np.any(sizes != 3):
-        raise ClothFitError(f"the cloth mesh '{obj.name}' has non-triangle faces: its topology was edited "
-                            f"(rebuild the cloth)")
+        raise ClothFitError(
+            f"the cloth mesh '{obj.name}' has non-triangle faces: its topology was edited (rebuild the cloth)"
+        )
     me.polygons.foreach_get("vertices", tri)
     have = {tuple(sorted(t)) for t in tri.reshape(-1, 3).tolist()}
     want = {tuple(sorted(t)) for t in grid.triangles.tolist()}
     if have != want:
-        raise ClothFitError(f"the cloth mesh '{obj.name}' has different triangles from the grid: its topology "
-                            f"was edited (rebuild the cloth)")
+        raise ClothFitError(
+            f"the cloth mesh '{obj.name}' has different triangles from the grid: its topology "
+            f"was edited (rebuild the cloth)"
+        )
     return grid
 
 
@@ -340,8 +355,9 @@ def choose_fps(times, preferred=None):
     for fps in cands:
         if fps > 0 and np.all(np.abs(t * fps - np.round(t * fps)) < 1e-6 * fps):
             return fps
-    raise ClothFitError(f"frame times {t.tolist()[:6]}... are not whole frames at any of the frame rates "
-                        f"{list(FPS_CANDIDATES)}")
+    raise ClothFitError(
+        f"frame times {t.tolist()[:6]}... are not whole frames at any of the frame rates {list(FPS_CANDIDATES)}"
+    )
 
 
 def frame_of_time(scene, t: float) -> int:
@@ -410,6 +426,7 @@ def simplify_track(times, positions, tol=1e-7):
 
 # ======================================================================== bake
 
+
 def bake_shape_keys(scene, obj, times, positions):
     """Store ``positions`` (F, V, 3) as one shape key per time, keyed so the timeline scrubs.
 
@@ -420,8 +437,9 @@ def bake_shape_keys(scene, obj, times, positions):
     times = np.asarray(times, dtype=np.float64)
     positions = np.asarray(positions, dtype=np.float64)
     if positions.shape[0] != times.size or positions.shape[1] != len(obj.data.vertices):
-        raise ClothFitError(f"bake: {positions.shape} positions for {times.size} times and "
-                            f"{len(obj.data.vertices)} vertices")
+        raise ClothFitError(
+            f"bake: {positions.shape} positions for {times.size} times and {len(obj.data.vertices)} vertices"
+        )
     fps = choose_fps(times, scene.render.fps if scene.render.fps_base == 1.0 else None)
     scene.render.fps, scene.render.fps_base = fps, 1.0
     clear_bake(obj)

@@ -2,13 +2,14 @@
 Blender's own solver (``fit --backend blender``), from the UI.
 
 Blender's UI process has imported bpy, so it must not start the workers itself (their children
-could not import bpy): the operator saves a copy of the .blend and runs ``python -m addon fit ...
+could not import bpy): the operator saves a copy of the .blend and runs ``python -m clothfit fit ...
 --backend blender`` as a separate process (the Python of ``CLOTHFIT_PYTHON``, default this
 process's interpreter, which must have the ``bpy`` module: the repository's venv), which starts its
 own workers (Ray, or spawned processes). The modal operator polls the fit's checkpoint for progress;
 Esc interrupts it (Ctrl-C: the CLI keeps the best so far and writes the result). *Apply Fitted
 Cloth* writes the result's settings onto the modifier.
 """
+
 from __future__ import annotations
 
 import os
@@ -27,16 +28,27 @@ from ..core.location import IMPORT_NAME, PACKAGE_PARENT
 from .cloth import apply_settings, cloth_modifier
 from .ops import _status, _ui_begin, _ui_end
 
-RESULT_KEY = "clothfit_scene_fit_result"     # object custom property: the last fit's result JSON
+RESULT_KEY = "clothfit_scene_fit_result"  # object custom property: the last fit's result JSON
 
 
 class SceneFitSession:
     """A fit of ``obj``'s Cloth settings running in its own process."""
 
-    timer = None        # the operator's UI timer while it runs modal (ops._ui_begin / _ui_end)
+    timer = None  # the operator's UI timer while it runs modal (ops._ui_begin / _ui_end)
 
-    def __init__(self, scene, obj, capture_dir, budget, workers=2, frame_zero=None, out_dir=None, extra=(),
-                 address=None, cache_dir=None):
+    def __init__(
+        self,
+        scene,
+        obj,
+        capture_dir,
+        budget,
+        workers=2,
+        frame_zero=None,
+        out_dir=None,
+        extra=(),
+        address=None,
+        cache_dir=None,
+    ):
         """``workers``: None = the fit's default (the cores); ``address``: a running Ray cluster
         (checked here first: an unreachable one is a one-line error before anything is written);
         ``out_dir``: the working folder, default a new one in ``cache_dir`` (default: the system's
@@ -46,8 +58,9 @@ class SceneFitSession:
         capture_dir = bpy.path.abspath(capture_dir or "")
         if not os.path.isfile(os.path.join(capture_dir, "capture.json")):
             raise ClothFitError(f"capture {capture_dir}: no capture.json there (set the capture directory)")
-        if address:        # only connect (a socket): never start a cluster from Blender's process
+        if address:  # only connect (a socket): never start a cluster from Blender's process
             from ..farm.executors import check_address
+
             check_address(address)
         self.obj_name = obj.name
         self.out_dir = out_dir or tempfile.mkdtemp(prefix="clothfit_scene_fit_", dir=cache_dir)
@@ -59,9 +72,26 @@ class SceneFitSession:
         self.log_path = os.path.join(self.out_dir, "fit.log")
         self.budget = int(budget)
         f0 = scene.frame_start if frame_zero is None else frame_zero
-        cmd = [os.environ.get("CLOTHFIT_PYTHON") or sys.executable, "-m", IMPORT_NAME, "fit", capture_dir,
-               "--backend", "blender", "--blend", self.blend, "--object", obj.name, "--frame-zero", str(f0),
-               "--max-evaluations", str(self.budget), "--out", self.result_path, "--quiet"] + list(extra)
+        cmd = [
+            os.environ.get("CLOTHFIT_PYTHON") or sys.executable,
+            "-m",
+            IMPORT_NAME,
+            "fit",
+            capture_dir,
+            "--backend",
+            "blender",
+            "--blend",
+            self.blend,
+            "--object",
+            obj.name,
+            "--frame-zero",
+            str(f0),
+            "--max-evaluations",
+            str(self.budget),
+            "--out",
+            self.result_path,
+            "--quiet",
+        ] + list(extra)
         if workers:
             cmd += ["--workers", str(int(workers))]
         if address:
@@ -72,8 +102,14 @@ class SceneFitSession:
         self.log = open(self.log_path, "w")
         # Esc sends SIGINT: the child must not inherit an ignored SIGINT from Blender's process (an
         # ignored signal stays ignored across exec, and Python then installs no KeyboardInterrupt)
-        self.proc = subprocess.Popen(cmd, cwd=PACKAGE_PARENT, env=env, stdout=self.log, stderr=subprocess.STDOUT,
-                                     preexec_fn=_default_sigint if os.name == "posix" else None)
+        self.proc = subprocess.Popen(
+            cmd,
+            cwd=PACKAGE_PARENT,
+            env=env,
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
+            preexec_fn=_default_sigint if os.name == "posix" else None,
+        )
         self.cancelled = False
 
     def progress(self):
@@ -148,31 +184,45 @@ def apply_result(obj, result_path=None) -> dict:
 class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
     """Fit the active cloth's Cloth settings to the capture with Blender's own solver, in worker processes
     started outside Blender's UI (Esc stops and keeps the best)"""
+
     bl_idname = "clothfit.fit_scene_cloth"
     bl_label = "Fit This Cloth's Settings"
     # UNDO: what the fit changes in the .blend (the object's result path) is undone; the working files
     # it writes (the .blend copy, the result, the log in the cache folder) stay on disk
     bl_options = {"REGISTER", "UNDO"}
 
-    workers: IntProperty(name="Workers", default=0, min=0, max=256,
-                         description="Worker processes (0: the add-on preferences' Workers)")
-    frame_zero: FloatProperty(name="Frame of t = 0", default=-1.0,
-                              description="Scene frame of capture time 0 (-1: the scene's start frame)")
+    workers: IntProperty(
+        name="Workers", default=0, min=0, max=256, description="Worker processes (0: the add-on preferences' Workers)"
+    )
+    frame_zero: FloatProperty(
+        name="Frame of t = 0", default=-1.0, description="Scene frame of capture time 0 (-1: the scene's start frame)"
+    )
 
     _session = None
 
     def _start(self, context):
         from .prefs import cache_folder, preferences
+
         p = context.scene.clothfit
         prefs = preferences(context)
         fz = None if self.frame_zero < 0 else self.frame_zero
-        return SceneFitSession(context.scene, context.active_object, p.capture_dir, p.max_evaluations,
-                               self.workers or prefs.workers or None, fz, address=prefs.ray_address.strip() or None,
-                               cache_dir=cache_folder(context))
+        return SceneFitSession(
+            context.scene,
+            context.active_object,
+            p.capture_dir,
+            p.max_evaluations,
+            self.workers or prefs.workers or None,
+            fz,
+            address=prefs.ray_address.strip() or None,
+            cache_dir=cache_folder(context),
+        )
 
     def _report_result(self, res):
-        self.report({"INFO"}, f"Fitted {res.get('evaluations')} candidates: E_sil {res.get('best_E_sil_mean_pct') or 0:.3f} %"
-                              f"{' (stopped: best so far)' if res.get('cancelled') else ''}; Apply Fitted Cloth writes them")
+        self.report(
+            {"INFO"},
+            f"Fitted {res.get('evaluations')} candidates: E_sil {res.get('best_E_sil_mean_pct') or 0:.3f} %"
+            f"{' (stopped: best so far)' if res.get('cancelled') else ''}; Apply Fitted Cloth writes them",
+        )
 
     def execute(self, context):
         try:
@@ -218,8 +268,12 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
             return {"PASS_THROUGH"}
         n, e = s.progress()
         context.window_manager.progress_update(int(1000 * min(1.0, n / max(1, s.budget))))
-        _status(context, f"Fitting '{s.obj_name}' with Blender's solver: {n}/{s.budget} candidates"
-                + (f", E_sil {e:.3f} %" if e is not None else "") + " (Esc: stop, keep the best)")
+        _status(
+            context,
+            f"Fitting '{s.obj_name}' with Blender's solver: {n}/{s.budget} candidates"
+            + (f", E_sil {e:.3f} %" if e is not None else "")
+            + " (Esc: stop, keep the best)",
+        )
         if s.running():
             return {"RUNNING_MODAL"}
         return self._end(context)
@@ -227,6 +281,7 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
 
 class CLOTHFIT_OT_apply_scene_fit(bpy.types.Operator):
     """Write the last fitted settings onto the active object's Cloth modifier"""
+
     bl_idname = "clothfit.apply_scene_fit"
     bl_label = "Apply Fitted Cloth"
     bl_options = {"REGISTER", "UNDO"}
@@ -237,8 +292,11 @@ class CLOTHFIT_OT_apply_scene_fit(bpy.types.Operator):
         except ClothFitError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        self.report({"INFO"}, f"Cloth settings written (tension {s['tension_stiffness']:.4g}, "
-                              f"bending {s['bending_stiffness']:.4g}, air {s['air_damping']:.4g})")
+        self.report(
+            {"INFO"},
+            f"Cloth settings written (tension {s['tension_stiffness']:.4g}, "
+            f"bending {s['bending_stiffness']:.4g}, air {s['air_damping']:.4g})",
+        )
         return {"FINISHED"}
 
 

@@ -7,6 +7,7 @@ Runs only in worker processes (Ray actors or spawned pool processes, ``addon.far
 from the cloth cache's first frame, and the evaluated (world) vertices are read at the asked
 frames (linear between whole frames, as the core's blender model reads capture times).
 """
+
 from __future__ import annotations
 
 import os
@@ -20,7 +21,7 @@ from .cloth import apply_settings, cloth_modifier, read_settings, scene_fps
 from .render import quiet_stdout
 from .scene import evaluated_positions
 
-FLY_AWAY_M = 100.0        # a vertex this far from where it started = a failed (exploded) candidate
+FLY_AWAY_M = 100.0  # a vertex this far from where it started = a failed (exploded) candidate
 
 
 def cloth_objects(scene):
@@ -40,8 +41,10 @@ def find_cloth_object(scene, name=None, where="scene"):
     if not found:
         raise ClothFitError(f"{where}: no mesh object with a Cloth modifier in scene '{scene.name}'")
     if len(found) > 1:
-        raise ClothFitError(f"{where}: {len(found)} objects have a Cloth modifier "
-                            f"({', '.join(sorted(o.name for o in found))}): choose one with --object")
+        raise ClothFitError(
+            f"{where}: {len(found)} objects have a Cloth modifier "
+            f"({', '.join(sorted(o.name for o in found))}): choose one with --object"
+        )
     return found[0]
 
 
@@ -62,7 +65,7 @@ class BlendScene:
         if not os.path.isfile(path):
             raise ClothFitError(f"Blender scene {path}: file not found")
         try:
-            with quiet_stdout():          # Blender's 'Read blend: ...' line: noise in the driver's output
+            with quiet_stdout():  # Blender's 'Read blend: ...' line: noise in the driver's output
                 bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
         except RuntimeError as e:
             raise ClothFitError(f"Blender scene {path}: cannot open it ({str(e).strip().splitlines()[-1]})") from None
@@ -89,16 +92,32 @@ class BlendScene:
         finally:
             ev.to_mesh_clear()
         if n_ev != len(self.obj.data.vertices):
-            raise ClothFitError(f"object '{self.obj.name}': its modifiers change the vertex count "
-                                f"({len(self.obj.data.vertices)} -> {n_ev}); the cloth must be read as simulated")
-        colliders = sorted(o.name for o in sc.objects if o is not self.obj and o.type == "MESH"
-                           and any(m.type == "COLLISION" for m in o.modifiers))
-        return {"blend": self.path, "object": self.obj.name, "scene": sc.name, "n_vertices": int(n_ev),
-                "triangles": tris.reshape(-1, 3).tolist(), "settings": dict(self.initial),
-                "fps": float(scene_fps(sc)), "frame_start": int(sc.frame_start), "frame_end": int(sc.frame_end),
-                "cache_start": int(cache.frame_start), "cache_end": int(cache.frame_end),
-                "colliders": colliders, "self_collision": bool(cl.collision_settings.use_self_collision),
-                "blender": bpy.app.version_string, "pid": os.getpid()}
+            raise ClothFitError(
+                f"object '{self.obj.name}': its modifiers change the vertex count "
+                f"({len(self.obj.data.vertices)} -> {n_ev}); the cloth must be read as simulated"
+            )
+        colliders = sorted(
+            o.name
+            for o in sc.objects
+            if o is not self.obj and o.type == "MESH" and any(m.type == "COLLISION" for m in o.modifiers)
+        )
+        return {
+            "blend": self.path,
+            "object": self.obj.name,
+            "scene": sc.name,
+            "n_vertices": int(n_ev),
+            "triangles": tris.reshape(-1, 3).tolist(),
+            "settings": dict(self.initial),
+            "fps": float(scene_fps(sc)),
+            "frame_start": int(sc.frame_start),
+            "frame_end": int(sc.frame_end),
+            "cache_start": int(cache.frame_start),
+            "cache_end": int(cache.frame_end),
+            "colliders": colliders,
+            "self_collision": bool(cl.collision_settings.use_self_collision),
+            "blender": bpy.app.version_string,
+            "pid": os.getpid(),
+        }
 
     def simulate(self, settings: dict, frames) -> dict:
         """Blender's cloth with ``settings`` (ClothSettings values) read at the (fractional) scene
@@ -109,15 +128,17 @@ class BlendScene:
         frames = np.asarray(frames, dtype=np.float64)
         apply_settings(cl, settings)
         cache = cl.point_cache
-        cache.frame_end = cache.frame_end          # touching the cache settings frees it
+        cache.frame_end = cache.frame_end  # touching the cache settings frees it
         f0 = int(cache.frame_start)
         lo = np.floor(frames).astype(np.int64)
         w = frames - lo
         hi = np.where(w > 1e-9, lo + 1, lo)
         last = int(hi.max())
         if lo.min() < f0 or last > cache.frame_end:
-            raise ClothFitError(f"frames {frames.min():g}..{frames.max():g} outside the cloth cache "
-                                f"{f0}..{cache.frame_end} of '{self.obj.name}'")
+            raise ClothFitError(
+                f"frames {frames.min():g}..{frames.max():g} outside the cloth cache "
+                f"{f0}..{cache.frame_end} of '{self.obj.name}'"
+            )
         need = set(lo.tolist()) | set(hi.tolist())
         got = {}
         sc.frame_set(f0)
@@ -139,11 +160,17 @@ class BlendScene:
         if exploded:
             pos = None
         else:
-            pos = (1.0 - w)[:, None, None] * np.stack([got[int(f)] for f in lo]) + \
-                w[:, None, None] * np.stack([got[int(f)] for f in hi])
-        return {"positions": pos, "exploded": exploded, "reason": reason, "seconds": time.perf_counter() - t0,
-                "cpu_seconds": time.process_time() - c0, "frames": last - f0}
+            pos = (1.0 - w)[:, None, None] * np.stack([got[int(f)] for f in lo]) + w[:, None, None] * np.stack(
+                [got[int(f)] for f in hi]
+            )
+        return {
+            "positions": pos,
+            "exploded": exploded,
+            "reason": reason,
+            "seconds": time.perf_counter() - t0,
+            "cpu_seconds": time.process_time() - c0,
+            "frames": last - f0,
+        }
 
     def pid(self):
         return os.getpid()
-

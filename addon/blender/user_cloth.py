@@ -15,6 +15,7 @@ Not modelled by the core (listed in ``SceneCloth.info["not_modelled"]``, the cal
 collisions with collider objects and self-collision, pressure, internal springs, sewing,
 shrinking, Dynamic Mesh, per-vertex stiffness groups, force fields.
 """
+
 from __future__ import annotations
 
 import bpy
@@ -60,8 +61,11 @@ def not_modelled(scene, obj, cl) -> list:
     """The features of this cloth the core's blender model does not have."""
     cs, co = cl.settings, cl.collision_settings
     out = []
-    colliders = sorted(o.name for o in scene.objects if o is not obj and o.type == "MESH"
-                       and any(m.type == "COLLISION" for m in o.modifiers))
+    colliders = sorted(
+        o.name
+        for o in scene.objects
+        if o is not obj and o.type == "MESH" and any(m.type == "COLLISION" for m in o.modifiers)
+    )
     if co.use_collision and colliders:
         out.append(f"collisions with {', '.join(colliders)}")
     if co.use_self_collision:
@@ -76,15 +80,22 @@ def not_modelled(scene, obj, cl) -> list:
         out.append("shrinking")
     if cs.use_dynamic_mesh:
         out.append("dynamic mesh")
-    for n in ("vertex_group_structural_stiffness", "vertex_group_shear_stiffness", "vertex_group_bending",
-              "vertex_group_intern", "vertex_group_pressure"):
+    for n in (
+        "vertex_group_structural_stiffness",
+        "vertex_group_shear_stiffness",
+        "vertex_group_bending",
+        "vertex_group_intern",
+        "vertex_group_pressure",
+    ):
         if getattr(cs, n, ""):
             out.append(f"{n} '{getattr(cs, n)}'")
     fields = sorted(o.name for o in scene.objects if o.field is not None and o.field.type != "NONE")
     if fields:
         out.append(f"force fields {', '.join(fields)}")
     if cs.effector_weights.gravity != 1.0 or not scene.use_gravity:
-        out.append(f"gravity weight {cs.effector_weights.gravity:g} (scene gravity {'on' if scene.use_gravity else 'off'})")
+        out.append(
+            f"gravity weight {cs.effector_weights.gravity:g} (scene gravity {'on' if scene.use_gravity else 'off'})"
+        )
     return out
 
 
@@ -97,13 +108,14 @@ def read_scene_cloth(scene, obj, n_frames: int, info=None) -> SceneCloth:
         raise ClothFitError(f"object '{obj.name}' has no Cloth modifier")
     f0 = int(cl.point_cache.frame_start)
     if cl.point_cache.frame_end < f0 + n_frames:
-        raise ClothFitError(f"the cloth cache of '{obj.name}' ends at frame {cl.point_cache.frame_end}, before "
-                            f"frame {f0 + n_frames}")
+        raise ClothFitError(
+            f"the cloth cache of '{obj.name}' ends at frame {cl.point_cache.frame_end}, before frame {f0 + n_frames}"
+        )
     cs = cl.settings
     gname = cs.vertex_group_mass
     gi = obj.vertex_groups[gname].index if gname and gname in obj.vertex_groups else -1
     stack = list(obj.modifiers)
-    below = stack[stack.index(cl):]                      # the cloth and what comes after it
+    below = stack[stack.index(cl) :]  # the cloth and what comes after it
     was = [m.show_viewport for m in below]
     frames_co, frames_w, mats, topo = [], [], [], None
     try:
@@ -122,18 +134,37 @@ def read_scene_cloth(scene, obj, n_frames: int, info=None) -> SceneCloth:
         scene.frame_set(f0)
     V = frames_co[0].shape[0]
     if any(c.shape[0] != V for c in frames_co):
-        raise ClothFitError(f"object '{obj.name}': the cloth's input changes its vertex count over the frames "
-                            f"(Blender restarts such a cloth)")
+        raise ClothFitError(
+            f"object '{obj.name}': the cloth's input changes its vertex count over the frames "
+            f"(Blender restarts such a cloth)"
+        )
     W = np.array(frames_w)
     hv = np.nonzero((W > 0).any(0))[0]
     rest = world_f32(mats[0], frames_co[0])
     targets = np.array([world_f32(M, c[hv]) for M, c in zip(mats, frames_co)]).reshape(len(mats), hv.size, 3)
-    edges, faces, tris = topo          # the mesh the cloth receives (modifiers above it applied)
+    edges, faces, tris = topo  # the mesh the cloth receives (modifiers above it applied)
     g = np.array(scene.gravity, dtype=np.float64) * float(cs.effector_weights.gravity) * float(scene.use_gravity)
-    meta = {"object": obj.name, "scene": scene.name, "pin_group": gname,
-            "modifiers": [f"{m.name} ({m.type})" for m in stack],
-            "matrix_world": np.array(mats[0], dtype=np.float64).tolist(),
-            "not_modelled": not_modelled(scene, obj, cl), "blender": bpy.app.version_string}
+    meta = {
+        "object": obj.name,
+        "scene": scene.name,
+        "pin_group": gname,
+        "modifiers": [f"{m.name} ({m.type})" for m in stack],
+        "matrix_world": np.array(mats[0], dtype=np.float64).tolist(),
+        "not_modelled": not_modelled(scene, obj, cl),
+        "blender": bpy.app.version_string,
+    }
     meta.update(info or {})
-    return SceneCloth(rest, faces, edges, tris, hv.astype(np.int64),
-                      W[:, hv].astype(np.float64), targets, read_settings(cl), g, float(scene_fps(scene)), f0, meta)
+    return SceneCloth(
+        rest,
+        faces,
+        edges,
+        tris,
+        hv.astype(np.int64),
+        W[:, hv].astype(np.float64),
+        targets,
+        read_settings(cl),
+        g,
+        float(scene_fps(scene)),
+        f0,
+        meta,
+    )

@@ -1,4 +1,4 @@
-"""Command line: ``clothfit <command> ...`` (the console script; ``python -m addon`` is the same).
+"""Command line: ``clothfit <command> ...`` (the console script; ``python -m clothfit`` is the same).
 
 No Blender needed except for ``blender`` and ``blender-agreement`` (the bpy module). The habits of
 every command (``EPILOG``, also at the end of ``--help``): stdout carries one JSON document, the
@@ -11,6 +11,7 @@ The package: ``common.py`` (the habits above, the parser, shared options, the ru
 one module per command family that registers its commands (``fitting``, ``studies``, ``footage``,
 ``blender``), and here ``build_parser`` (the docs' CLI reference reads it) and ``main``.
 """
+
 from __future__ import annotations
 
 import os
@@ -18,21 +19,47 @@ import sys
 
 from ..core.errors import ClothFitError
 from . import blender, fitting, footage, studies
-from .common import (DEBUG_ENV, EPILOG, EXIT_BAD_DATA, EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE,  # noqa: F401
-                     PROG, ArgumentParser, HelpFormatter, Interrupted, Text, _one_line, emit, messages_to_stderr)
+from .common import (  # noqa: F401
+    DEBUG_ENV,
+    EPILOG,
+    EXIT_BAD_DATA,
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    EXIT_USAGE,
+    PROG,
+    ArgumentParser,
+    HelpFormatter,
+    Interrupted,
+    Text,
+    _one_line,
+    emit,
+    messages_to_stderr,
+)
 
-__all__ = ["build_parser", "main", "emit", "messages_to_stderr", "EXIT_FAILURE", "EXIT_BAD_DATA", "EXIT_USAGE",
-           "EXIT_INTERRUPTED", "DEBUG_ENV", "PROG"]
+__all__ = [
+    "build_parser",
+    "main",
+    "emit",
+    "messages_to_stderr",
+    "EXIT_FAILURE",
+    "EXIT_BAD_DATA",
+    "EXIT_USAGE",
+    "EXIT_INTERRUPTED",
+    "DEBUG_ENV",
+    "PROG",
+]
 
 
 def build_parser():
     """The whole command line: every family's commands, in the order ``--help`` lists them."""
     from .. import version
-    p = ArgumentParser(prog=PROG, description="Silhouette Cloth Fit: cloth parameters from multi-view silhouettes.",
-                       epilog=EPILOG)
+
+    p = ArgumentParser(
+        prog=PROG, description="Silhouette Cloth Fit: cloth parameters from multi-view silhouettes.", epilog=EPILOG
+    )
     p.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
-    for family in (fitting, studies, footage, blender):      # the order of the command list in --help
+    for family in (fitting, studies, footage, blender):  # the order of the command list in --help
         family.register(sub)
     return p
 
@@ -45,7 +72,7 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else [str(x) for x in argv]
     try:
         args = build_parser().parse_args(argv)
-    except SystemExit as e:                    # --help / --version (0) or a usage error (64)
+    except SystemExit as e:  # --help / --version (0) or a usage error (64)
         return e.code if isinstance(e.code, int) else EXIT_USAGE
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
@@ -66,11 +93,14 @@ def main(argv=None):
     except Exception as e:  # noqa: BLE001 - the last line of defence: never a traceback for the user
         if os.environ.get(DEBUG_ENV):
             raise
-        print(f"error: {args.cmd} failed: {type(e).__name__}: {_one_line(e) or 'no message'} "
-              f"(set {DEBUG_ENV}=1 for the traceback)", file=sys.stderr)
+        print(
+            f"error: {args.cmd} failed: {type(e).__name__}: {_one_line(e) or 'no message'} "
+            f"(set {DEBUG_ENV}=1 for the traceback)",
+            file=sys.stderr,
+        )
         return EXIT_FAILURE
     try:
         emit(result)
-    except BrokenPipeError:                    # the reader went away (| head): nothing more to say
+    except BrokenPipeError:  # the reader went away (| head): nothing more to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return code

@@ -1,4 +1,5 @@
 """The commands that need the bpy module: blender (the whole pipeline) and blender-agreement."""
+
 from __future__ import annotations
 
 from ..core.errors import ClothFitError
@@ -9,6 +10,7 @@ def cmd_blender(a):
     """The whole pipeline through Blender (build rig and cloth, simulate, render silhouettes, fit,
     overlays, save a .blend): needs the bpy module."""
     from ..blender import pipeline
+
     return pipeline.run(a)
 
 
@@ -18,10 +20,18 @@ def cmd_blender_agreement(a):
     import bpy
 
     from ..blender import agreement
-    out = {"grid": a.grid, "settle_s": a.settle, "after_s": a.after, "fps": a.fps,
-           "blender": bpy.app.version_string, "cases": agreement.run(a.grid, a.settle, a.after, a.fps)}
+
+    out = {
+        "grid": a.grid,
+        "settle_s": a.settle,
+        "after_s": a.after,
+        "fps": a.fps,
+        "blender": bpy.app.version_string,
+        "cases": agreement.run(a.grid, a.settle, a.after, a.fps),
+    }
     if a.json:
         from ..core.safeio import atomic_json
+
         atomic_json(a.json, out)
     return out
 
@@ -30,16 +40,35 @@ def register(sub):
     """The Blender family: ``blender`` (its options are the Blender layer's, ``blender/pipeline.py``) and
     ``blender-agreement``."""
     from ..blender import pipeline
-    pipeline.add_arguments(_command(sub, "blender", cmd_blender,
-                                    "the whole pipeline through Blender (bpy module): rig, cloth, simulate, render "
-                                    "silhouettes, fit, overlays, .blend", "a summary of the run as JSON"))
-    s = _command(sub, "blender-agreement", cmd_blender_agreement,
-                 "the core's blender cloth model vs Blender's own solver, vertex by vertex (bpy module)",
-                 "every case's distances as JSON")
-    s.add_argument("--grid", type=int, default=21,
-                   help="vertices per side of the 10 cm sheet, 2..200 (default: %(default)s)")
-    s.add_argument("--settle", type=float, default=1.0,
-                   help="seconds hung by four corners before the release (default: %(default)s)")
-    s.add_argument("--after", type=float, default=1.5, help="seconds simulated after the release (default: %(default)s)")
+
+    pipeline.add_arguments(
+        _command(
+            sub,
+            "blender",
+            cmd_blender,
+            "the whole pipeline through Blender (bpy module): rig, cloth, simulate, render "
+            "silhouettes, fit, overlays, .blend",
+            "a summary of the run as JSON",
+        )
+    )
+    s = _command(
+        sub,
+        "blender-agreement",
+        cmd_blender_agreement,
+        "the core's blender cloth model vs Blender's own solver, vertex by vertex (bpy module)",
+        "every case's distances as JSON",
+    )
+    s.add_argument(
+        "--grid", type=int, default=21, help="vertices per side of the 10 cm sheet, 2..200 (default: %(default)s)"
+    )
+    s.add_argument(
+        "--settle",
+        type=float,
+        default=1.0,
+        help="seconds hung by four corners before the release (default: %(default)s)",
+    )
+    s.add_argument(
+        "--after", type=float, default=1.5, help="seconds simulated after the release (default: %(default)s)"
+    )
     s.add_argument("--fps", type=float, default=24.0, help="scene frame rate [frames/s] (default: %(default)s)")
     s.add_argument("--json", help="also write every figure to this file")

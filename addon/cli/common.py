@@ -1,6 +1,7 @@
 """What every command shares: the exit codes and output habits (``EPILOG``), the parser, the options
 more than one command takes (model, cameras and times, search, farm), the converters of option text,
 and the run-and-report path (messages to stderr, one JSON document on stdout)."""
+
 from __future__ import annotations
 
 import argparse
@@ -15,12 +16,11 @@ import threading
 from ..core import defaults as D
 from ..core.errors import ClothFitError
 
-
 PROG = "clothfit"
-EXIT_FAILURE = 1          # an unexpected failure (a bug or the machine): one line, CLOTHFIT_DEBUG=1 for the traceback
-EXIT_BAD_DATA = 2         # a ClothFitError: a file or value the command cannot use
-EXIT_USAGE = 64           # the parser rejected the command line (sysexits.h EX_USAGE)
-EXIT_INTERRUPTED = 130    # Ctrl-C (128 + SIGINT, the shells' convention)
+EXIT_FAILURE = 1  # an unexpected failure (a bug or the machine): one line, CLOTHFIT_DEBUG=1 for the traceback
+EXIT_BAD_DATA = 2  # a ClothFitError: a file or value the command cannot use
+EXIT_USAGE = 64  # the parser rejected the command line (sysexits.h EX_USAGE)
+EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT, the shells' convention)
 
 EPILOG = f"""\
 output:
@@ -76,6 +76,7 @@ def _res(s):
     if not s:
         return None
     from ..core.fitting.job import check_resolution
+
     try:
         h, w = (int(x) for x in s.lower().split("x"))
     except ValueError:
@@ -117,14 +118,18 @@ def _capture_truth(cap):
     """The parameters a synthetic capture was made with (for evaluate/overlay without --params)."""
     meta = cap.meta or {}
     if meta.get("true_blender_cloth"):
-        return {"model": meta.get("true_model") or "blender", "blender_cloth": meta["true_blender_cloth"],
-                "blender_scene": {"fps": (meta.get("true_model") or {}).get("fps", D.BLENDER_FPS)}}
+        return {
+            "model": meta.get("true_model") or "blender",
+            "blender_cloth": meta["true_blender_cloth"],
+            "blender_scene": {"fps": (meta.get("true_model") or {}).get("fps", D.BLENDER_FPS)},
+        }
     return None
 
 
 def _cams(capture, spec):
     """Camera selection: None = all; "n:4" = 4 spread cameras; "0,3,5" indices; names allowed."""
     from ..core.observation.camera import select_training
+
     if not spec:
         return None
     if spec.startswith(("n:", "spread:", "heldout:")):
@@ -166,6 +171,7 @@ def _json_arg(text, what):
     if not text:
         return None
     from ..core.jsonio import read_json
+
     if os.path.isfile(text):
         d = read_json(text, what)
     else:
@@ -198,70 +204,126 @@ def _quality_arg(text):
 
 def _model_args(s, default_text="the capture's, else paper"):
     from ..core.physics import blender as B
-    s.add_argument("--model", choices=["paper", "blender"], default=None,
-                   help=f"cloth model: the paper's mass-spring sheet or Blender's cloth solver (default: {default_text})")
-    s.add_argument("--fps", type=float, default=None,
-                   help=f"blender model: scene frame rate [frames/s] the settings are for (default: {D.BLENDER_FPS})")
-    s.add_argument("--quality", type=_quality_arg, default=None,
-                   help="blender model: solver steps per frame, or 'auto' (default: the capture's, else the fit "
-                        f"chooses from {', '.join(map(str, D.QUALITY_LADDER))} starting at {B.DEFAULTS['quality']}, "
-                        "Blender's; --backend blender: the scene's, one rung above it tried)")
-    s.add_argument("--bending-model", choices=list(B.BENDING_MODELS), default=None,
-                   help=f"blender model: Blender's bending model (default: {B.DEFAULTS['bending_model']})")
+
+    s.add_argument(
+        "--model",
+        choices=["paper", "blender"],
+        default=None,
+        help=f"cloth model: the paper's mass-spring sheet or Blender's cloth solver (default: {default_text})",
+    )
+    s.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        help=f"blender model: scene frame rate [frames/s] the settings are for (default: {D.BLENDER_FPS})",
+    )
+    s.add_argument(
+        "--quality",
+        type=_quality_arg,
+        default=None,
+        help="blender model: solver steps per frame, or 'auto' (default: the capture's, else the fit "
+        f"chooses from {', '.join(map(str, D.QUALITY_LADDER))} starting at {B.DEFAULTS['quality']}, "
+        "Blender's; --backend blender: the scene's, one rung above it tried)",
+    )
+    s.add_argument(
+        "--bending-model",
+        choices=list(B.BENDING_MODELS),
+        default=None,
+        help=f"blender model: Blender's bending model (default: {B.DEFAULTS['bending_model']})",
+    )
 
 
 def _selection_args(s, what="fit"):
     """--cameras / --times: which cameras and frames a command uses."""
-    s.add_argument("--cameras", help=f"cameras to {what}: 'n:16' (16 spread round the cloth by the spread rule), "
-                                     "'heldout:16' (the others), indices or names, comma separated (default: all)")
-    s.add_argument("--times", help=f"frame times to {what}: 'train' (0.1, 0.2 ... 1.5 s), 'test' (0.05, 0.15 ... "
-                                   "1.45 s) or a comma list of times [s] (default: every frame of the capture)")
+    s.add_argument(
+        "--cameras",
+        help=f"cameras to {what}: 'n:16' (16 spread round the cloth by the spread rule), "
+        "'heldout:16' (the others), indices or names, comma separated (default: all)",
+    )
+    s.add_argument(
+        "--times",
+        help=f"frame times to {what}: 'train' (0.1, 0.2 ... 1.5 s), 'test' (0.05, 0.15 ... "
+        "1.45 s) or a comma list of times [s] (default: every frame of the capture)",
+    )
 
 
 def _search_args(s):
     """Options of fit and fit-many: the optimiser and the fit's budget and scale."""
-    s.add_argument("--optimizer", default=D.DEFAULT_OPTIMIZER,
-                   help="cma-es or spx-mgg, the paper's real-coded GA (default: %(default)s)")
+    s.add_argument(
+        "--optimizer",
+        default=D.DEFAULT_OPTIMIZER,
+        help="cma-es or spx-mgg, the paper's real-coded GA (default: %(default)s)",
+    )
     s.add_argument("--seed", type=int, default=0, help="random seed of the optimiser (default: %(default)s)")
-    s.add_argument("--max-evaluations", type=int, default=None,
-                   help=f"budget: at most this many simulated candidates (default: {D.FIT_EVALUATIONS}; with "
-                        f"--resume the checkpoint's)")
-    s.add_argument("--population", type=int, default=None,
-                   help="optimiser population (default: GA 7n = 21, CMA-ES 4 + 3 ln n = 7)")
-    s.add_argument("--search", action="append", default=[], metavar="NAME=VALUE",
-                   help="an optimiser setting, repeatable: sigma0, cma_active (true/false), tolx, tolfun_per_image, "
-                        "ga_eps, ga_stall, portfolio_runs, ... (FitConfig's search options; default: the optimiser's)")
-    s.add_argument("--uncertain", default=None,
-                   help="what the manipulation could not measure, estimated with the cloth: 'time_offset=S,handles=M' "
-                        "(bounds in seconds and metres; true time = capture time - time_offset_s), or 'none' "
-                        "(default: the capture's 'uncertain' block)")
-    s.add_argument("--resolution", help="fit at HxW [px], e.g. 120x160; silhouettes area-resampled "
-                                        "(default: the capture's)")
-    s.add_argument("--cloth-mass", type=float, default=None,
-                   help="total cloth mass [kg]: fixes m, which silhouettes cannot identify (default: the "
-                        "capture's cloth_mass, else a vertex mass flagged in the result: paper 1e-5 kg, blender "
-                        "Blender's 0.3 kg, --backend blender the scene's)")
+    s.add_argument(
+        "--max-evaluations",
+        type=int,
+        default=None,
+        help=f"budget: at most this many simulated candidates (default: {D.FIT_EVALUATIONS}; with "
+        f"--resume the checkpoint's)",
+    )
+    s.add_argument(
+        "--population", type=int, default=None, help="optimiser population (default: GA 7n = 21, CMA-ES 4 + 3 ln n = 7)"
+    )
+    s.add_argument(
+        "--search",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="an optimiser setting, repeatable: sigma0, cma_active (true/false), tolx, tolfun_per_image, "
+        "ga_eps, ga_stall, portfolio_runs, ... (FitConfig's search options; default: the optimiser's)",
+    )
+    s.add_argument(
+        "--uncertain",
+        default=None,
+        help="what the manipulation could not measure, estimated with the cloth: 'time_offset=S,handles=M' "
+        "(bounds in seconds and metres; true time = capture time - time_offset_s), or 'none' "
+        "(default: the capture's 'uncertain' block)",
+    )
+    s.add_argument(
+        "--resolution", help="fit at HxW [px], e.g. 120x160; silhouettes area-resampled (default: the capture's)"
+    )
+    s.add_argument(
+        "--cloth-mass",
+        type=float,
+        default=None,
+        help="total cloth mass [kg]: fixes m, which silhouettes cannot identify (default: the "
+        "capture's cloth_mass, else a vertex mass flagged in the result: paper 1e-5 kg, blender "
+        "Blender's 0.3 kg, --backend blender the scene's)",
+    )
 
 
 def _farm_args(s, what, workers_help=None, address_help=None, executor_help=None):
     """--workers / --address / --executor: where the work runs (fit --backend blender, fit-many, paper);
     a command may word the help its own way."""
-    s.add_argument("--workers", type=int, default=None,
-                   help=workers_help or f"{what}: worker processes (default: the cores)")
-    s.add_argument("--address", default=None, help=address_help or f"{what}: a running Ray cluster (auto, "
-                                                                   "ray://host:port); default: a local Ray "
-                                                                   "instance started for the run")
-    s.add_argument("--executor", default="auto", choices=["auto", "ray", "process"],
-                   help=executor_help or f"{what}: Ray actors or spawned processes; auto = Ray when installed "
-                                         f"(default: %(default)s)")
+    s.add_argument(
+        "--workers", type=int, default=None, help=workers_help or f"{what}: worker processes (default: the cores)"
+    )
+    s.add_argument(
+        "--address",
+        default=None,
+        help=address_help
+        or f"{what}: a running Ray cluster (auto, ray://host:port); default: a local Ray instance started for the run",
+    )
+    s.add_argument(
+        "--executor",
+        default="auto",
+        choices=["auto", "ray", "process"],
+        help=executor_help
+        or f"{what}: Ray actors or spawned processes; auto = Ray when installed (default: %(default)s)",
+    )
 
 
 def _command(sub, name, fn, help, output):
     """One subcommand: ``help`` in the command list and as its description, ``output`` in its epilog."""
-    s = sub.add_parser(name, help=help, description=help[0].upper() + help[1:] + ".",
-                       epilog=f"output: {output}; messages for people on stderr.\nexit codes: 0 done, "
-                              f"{EXIT_BAD_DATA} bad data, {EXIT_USAGE} usage, {EXIT_INTERRUPTED} Ctrl-C "
-                              f"(see {PROG} --help).")
+    s = sub.add_parser(
+        name,
+        help=help,
+        description=help[0].upper() + help[1:] + ".",
+        epilog=f"output: {output}; messages for people on stderr.\nexit codes: 0 done, "
+        f"{EXIT_BAD_DATA} bad data, {EXIT_USAGE} usage, {EXIT_INTERRUPTED} Ctrl-C "
+        f"(see {PROG} --help).",
+    )
     s.set_defaults(fn=fn)
     return s
 
@@ -271,7 +333,7 @@ DEBUG_ENV = "CLOTHFIT_DEBUG"
 
 def _one_line(text, limit=1500):
     text = " ".join(str(text).split())
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @contextlib.contextmanager
@@ -307,7 +369,7 @@ def messages_to_stderr():
     line_buffering = getattr(sys.stdout, "line_buffering", None)
     os.dup2(err_fd, out_fd)
     if line_buffering is False and hasattr(sys.stdout, "reconfigure"):
-        sys.stdout.reconfigure(line_buffering=True)      # in order with stderr's lines
+        sys.stdout.reconfigure(line_buffering=True)  # in order with stderr's lines
     try:
         yield
     finally:
@@ -335,8 +397,7 @@ def emit(result):
     if result is None:
         return
     from ..core.safeio import json_text
+
     text = result if isinstance(result, Text) else json_text(_finite(json.loads(json_text(result))), strict=True)
     sys.stdout.write(text.rstrip("\n") + "\n")
     sys.stdout.flush()
-
-

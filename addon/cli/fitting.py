@@ -1,4 +1,5 @@
 """The fitting commands: synth, fit, fit-many, export-blender-cloth, evaluate, overlay, floor."""
+
 from __future__ import annotations
 
 import os
@@ -7,8 +8,24 @@ import time
 
 from ..core import defaults as D
 from ..core.errors import ClothFitError
-from .common import (Interrupted, Text, _capture_truth, _cams, _command, _farm_args, _json_arg, _model_args,
-                     _model_spec, _names, _params, _res, _search_args, _selection_args, _sigint_deferred, _times)
+from .common import (
+    Interrupted,
+    Text,
+    _cams,
+    _capture_truth,
+    _command,
+    _farm_args,
+    _json_arg,
+    _model_args,
+    _model_spec,
+    _names,
+    _params,
+    _res,
+    _search_args,
+    _selection_args,
+    _sigint_deferred,
+    _times,
+)
 
 
 class Progress:
@@ -30,9 +47,11 @@ class Progress:
         n = int(self.width * job.progress)
         bp = job.best_params or {}
         err = job.best_error / job.objective.n_images * 100 if job.best_params else float("nan")
-        sys.stderr.write(f"\r[{'#' * n}{'.' * (self.width - n)}] gen {job.generation} evals {job.evaluations} "
-                         f"E_sil {err:.3f}% k {bp.get('k', 0):.4g} l {bp.get('l', 0):.4g} d {bp.get('d', 0):.4g} "
-                         f"{now - self.t0:.0f}s ")
+        sys.stderr.write(
+            f"\r[{'#' * n}{'.' * (self.width - n)}] gen {job.generation} evals {job.evaluations} "
+            f"E_sil {err:.3f}% k {bp.get('k', 0):.4g} l {bp.get('l', 0):.4g} d {bp.get('d', 0):.4g} "
+            f"{now - self.t0:.0f}s "
+        )
         sys.stderr.flush()
         return False
 
@@ -43,21 +62,28 @@ class Progress:
 
 def cmd_synth(a):
     from ..core.observation.synth import synth_capture
+
     kw = {} if a.truth_dt_safety is None else {"truth_dt_safety": a.truth_dt_safety}
     spec = _model_spec(a)
     params = _params(a, {} if spec and spec["name"] == "blender" else None)
     if spec and spec["name"] == "blender":
         params = params.get("blender_cloth", params)
-    cap = synth_capture(a.out, params, rig=a.rig, noise=a.noise, resolution=_res(a.resolution), seed=a.seed,
-                        model=spec, **kw)
+    cap = synth_capture(
+        a.out, params, rig=a.rig, noise=a.noise, resolution=_res(a.resolution), seed=a.seed, model=spec, **kw
+    )
     print(f"wrote capture {a.out}: {len(cap.cameras)} cameras x {len(cap.frame_times)} frames")
-    return {"capture": a.out, "cameras": [c.name for c in cap.cameras], "frame_times": list(cap.frame_times),
-            "resolution": [cap.cameras[0].height, cap.cameras[0].width]}
+    return {
+        "capture": a.out,
+        "cameras": [c.name for c in cap.cameras],
+        "frame_times": list(cap.frame_times),
+        "resolution": [cap.cameras[0].height, cap.cameras[0].width],
+    }
 
 
 def _scene_evaluator(cfg):
     """The workers of a ``--backend blender`` fit (Blender's own solver on ``cfg.blend``)."""
     from ..farm.scene import BlendSceneEvaluator
+
     return BlendSceneEvaluator(cfg.blend, cfg.blend_object, cfg.frame_zero, cfg.workers, cfg.address, cfg.executor)
 
 
@@ -71,14 +97,27 @@ def _backend_args(a):
         return {"backend": "auto" if a.backend == "core" else a.backend}
     if not a.blend:
         raise ClothFitError("--backend blender needs --blend SCENE.blend")
-    if any(getattr(a, k, None) is not None for k in ("fps", "bending_model")) or a.model == "paper" or \
-            getattr(a, "quality", None) not in (None, "auto"):
-        raise ClothFitError("with --backend blender the scene's Cloth modifier and frame rate define the model: "
-                            "drop --model/--fps/--quality N/--bending-model (--quality auto lets the fit choose)")
+    if (
+        any(getattr(a, k, None) is not None for k in ("fps", "bending_model"))
+        or a.model == "paper"
+        or getattr(a, "quality", None) not in (None, "auto")
+    ):
+        raise ClothFitError(
+            "with --backend blender the scene's Cloth modifier and frame rate define the model: "
+            "drop --model/--fps/--quality N/--bending-model (--quality auto lets the fit choose)"
+        )
     if a.workers is not None and a.workers < 1:
         raise ClothFitError(f"--workers {a.workers}: must be at least 1")
-    return {"backend": "auto", "evaluator": "blender", "blend": a.blend, "blend_object": a.object,
-            "frame_zero": a.frame_zero, "workers": a.workers, "address": a.address, "executor": a.executor}
+    return {
+        "backend": "auto",
+        "evaluator": "blender",
+        "blend": a.blend,
+        "blend_object": a.object,
+        "frame_zero": a.frame_zero,
+        "workers": a.workers,
+        "address": a.address,
+        "executor": a.executor,
+    }
 
 
 def _refuse_overwriting_inputs(out, capture, what):
@@ -87,11 +126,14 @@ def _refuse_overwriting_inputs(out, capture, what):
     root = os.path.realpath(capture.root)
     inputs = {os.path.realpath(os.path.join(root, n)) for n in ("capture.json", "cameras.json", "shapes.npz")}
     if real in inputs or real == root:
-        raise ClothFitError(f"{what} {out} would overwrite the capture's own {os.path.basename(real)}: choose another path")
+        raise ClothFitError(
+            f"{what} {out} would overwrite the capture's own {os.path.basename(real)}: choose another path"
+        )
 
 
 def _checkpoint_summary(ck):
     from ..core.fitting.job import read_checkpoint
+
     try:
         d = read_checkpoint(ck)
     except ClothFitError as e:
@@ -107,17 +149,31 @@ def fit_config(a, cap):
     default. ``--max-evaluations``: not given = D.FIT_EVALUATIONS; any number given is the budget as it
     is, so 0 is refused by ``FitConfig.checked`` (bad data, exit 2), in ``fit`` and ``fit-many`` alike."""
     from ..core.fitting.job import FitConfig
-    kw = dict(train_cameras=_cams(cap, a.cameras), train_times=_times(a.times), optimizer=a.optimizer, seed=a.seed,
-              max_evaluations=D.FIT_EVALUATIONS if a.max_evaluations is None else a.max_evaluations,
-              resolution=_res(a.resolution), cloth_mass=a.cloth_mass, population=a.population)
+
+    kw = dict(
+        train_cameras=_cams(cap, a.cameras),
+        train_times=_times(a.times),
+        optimizer=a.optimizer,
+        seed=a.seed,
+        max_evaluations=D.FIT_EVALUATIONS if a.max_evaluations is None else a.max_evaluations,
+        resolution=_res(a.resolution),
+        cloth_mass=a.cloth_mass,
+        population=a.population,
+    )
     backend = getattr(a, "backend", None)
     if backend is not None:
         kw["backend"] = backend
     kw["model"] = None if backend == "blender" else _model_spec(a)
-    if hasattr(a, "free"):                    # fit's own options (fit-many keeps FitConfig's defaults)
-        kw.update(children=a.children, target_error=a.target, free=_names(a.free),
-                  fixed=_json_arg(a.fixed, "--fixed"), init=a.init, bounds=_json_arg(a.bounds, "--bounds"),
-                  restarts=a.restarts)
+    if hasattr(a, "free"):  # fit's own options (fit-many keeps FitConfig's defaults)
+        kw.update(
+            children=a.children,
+            target_error=a.target,
+            free=_names(a.free),
+            fixed=_json_arg(a.fixed, "--fixed"),
+            init=a.init,
+            bounds=_json_arg(a.bounds, "--bounds"),
+            restarts=a.restarts,
+        )
     kw.update(quality="auto" if a.quality == "auto" else None, uncertain=a.uncertain)
     kw.update(search_options(getattr(a, "search", None) or []))
     return FitConfig(**kw)
@@ -127,6 +183,7 @@ def search_options(items):
     """``--search NAME=VALUE`` (repeatable) -> FitConfig's search options; values are numbers or
     true/false (checked with the config: ``FitConfig.checked``)."""
     from ..core.fitting.job import SEARCH_OPTIONS
+
     out = {}
     for item in items:
         name, sep, text = item.partition("=")
@@ -148,6 +205,7 @@ def search_options(items):
 def cmd_fit(a):
     from ..core.fitting.job import FitJob, exclusive_lock, read_checkpoint
     from ..core.observation.capture import load_capture
+
     ck = a.checkpoint or (a.out + ".checkpoint.json")
     if a.resume and a.force:
         raise ClothFitError("--resume continues the checkpoint and --force replaces it: give one of them")
@@ -169,22 +227,24 @@ def cmd_fit(a):
         if a.resume and not os.path.lexists(ck):
             raise ClothFitError(f"--resume: there is no checkpoint {ck} to continue (run without --resume to start)")
         if not a.resume and os.path.lexists(ck) and not a.force:
-            raise ClothFitError(f"{ck} holds {_checkpoint_summary(ck)}: continue it with --resume, replace it "
-                                f"with --force, or choose another --out")
+            raise ClothFitError(
+                f"{ck} holds {_checkpoint_summary(ck)}: continue it with --resume, replace it "
+                f"with --force, or choose another --out"
+            )
         if cfg.evaluator == "blender":
             evaluator = _scene_evaluator(cfg)
         try:
             if a.resume:
-                if a.max_evaluations is None:       # the budget the checkpointed fit was given
+                if a.max_evaluations is None:  # the budget the checkpointed fit was given
                     saved = read_checkpoint(ck)["config"].get("max_evaluations")
                     if isinstance(saved, int) and not isinstance(saved, bool) and saved >= 1:
                         cfg.max_evaluations = saved
-                job = FitJob.resume(ck, capture=cap, config=cfg, checkpoint_interval=D.CHECKPOINT_INTERVAL_S,
-                                    evaluator=evaluator)
+                job = FitJob.resume(
+                    ck, capture=cap, config=cfg, checkpoint_interval=D.CHECKPOINT_INTERVAL_S, evaluator=evaluator
+                )
                 print(f"resumed {ck} at {job.evaluations} evaluations", file=sys.stderr)
             else:
-                job = FitJob(cap, cfg, checkpoint=ck, checkpoint_interval=D.CHECKPOINT_INTERVAL_S,
-                             evaluator=evaluator)
+                job = FitJob(cap, cfg, checkpoint=ck, checkpoint_interval=D.CHECKPOINT_INTERVAL_S, evaluator=evaluator)
         except BaseException:
             if evaluator is not None:
                 evaluator.close()
@@ -194,9 +254,9 @@ def cmd_fit(a):
             job.run(callback=bar)
         except KeyboardInterrupt:
             interrupted = True
-            with _sigint_deferred():          # a second Ctrl-C must not lose the result being written
+            with _sigint_deferred():  # a second Ctrl-C must not lose the result being written
                 job.cancel()
-        except ClothFitError as e:            # e.g. a worker that died for good: the best so far is kept
+        except ClothFitError as e:  # e.g. a worker that died for good: the best so far is kept
             job.error = str(e)
             job.cancel()
         finally:
@@ -209,14 +269,29 @@ def cmd_fit(a):
     if job.error:
         raise ClothFitError(f"fit failed: {job.error} (the result so far is in {a.out})")
     keys = ("params", "identifiable") if r.get("params") else ("blender_cloth", "blender_scene")
-    summary = {k: r[k] for k in keys + ("identifiable_error_pct", "best_E_sil_mean_pct", "evaluations",
-                                        "stop_reason", "elapsed_s", "cancelled", "quality_choice", "time_offset_s",
-                                        "floor") if k in r}
+    summary = {
+        k: r[k]
+        for k in keys
+        + (
+            "identifiable_error_pct",
+            "best_E_sil_mean_pct",
+            "evaluations",
+            "stop_reason",
+            "elapsed_s",
+            "cancelled",
+            "quality_choice",
+            "time_offset_s",
+            "floor",
+        )
+        if k in r
+    }
     summary.update(out=a.out, checkpoint=ck)
     _fit_report(r)
     if "identifiable_error_pct" in r:
-        print("recovery error [%]: " + ", ".join(f"{k} {v:.3g}" for k, v in r["identifiable_error_pct"].items()
-                                                  if v is not None))
+        print(
+            "recovery error [%]: "
+            + ", ".join(f"{k} {v:.3g}" for k, v in r["identifiable_error_pct"].items() if v is not None)
+        )
     if "true_params_ignored" in r:
         print(f"note: {r['true_params_ignored']}")
     if interrupted:
@@ -240,8 +315,11 @@ def _fit_report(r):
             print(f"time offset {1000 * t:+.1f} ms" + (f" (+-{1000 * u:.1f} ms)" if u else ""), file=sys.stderr)
         for k, h in enumerate(r.get("handles") or []):
             if h.get("offset_bound_m"):
-                print(f"handle {k} (vertex {h['vertex']}) moved by "
-                      f"{', '.join(f'{1000 * v:+.2f}' for v in h['offset_m'])} mm", file=sys.stderr)
+                print(
+                    f"handle {k} (vertex {h['vertex']}) moved by "
+                    f"{', '.join(f'{1000 * v:+.2f}' for v in h['offset_m'])} mm",
+                    file=sys.stderr,
+                )
         if r.get("manipulation_note"):
             print(f"note: {r['manipulation_note']}", file=sys.stderr)
     fl = r.get("floor") or {}
@@ -256,27 +334,38 @@ def _fit_report(r):
 
 def cmd_fit_many(a):
     from dataclasses import asdict
+
     from ..core.observation.capture import load_capture
+
     if a.workers is not None and a.workers < 1:
         raise ClothFitError(f"--workers {a.workers}: must be at least 1")
     configs = []
     for c in a.captures:
-        cap = load_capture(c)                     # bad captures fail here, before any worker starts
-        cfg = fit_config(a, cap).checked()      # a bad option fails here too, before any worker
+        cap = load_capture(c)  # bad captures fail here, before any worker starts
+        cfg = fit_config(a, cap).checked()  # a bad option fails here too, before any worker
         configs.append(asdict(cfg))
     os.makedirs(a.out_dir, exist_ok=True)
     t0 = time.time()
     from ..farm.tasks import fit_many
+
     results, kind, workers = fit_many(a.captures, configs, a.workers, a.address, a.executor)
     wall = time.time() - t0
     from ..core.fitting.job import _atomic_json
+
     fits = []
     for i, (c, r) in enumerate(zip(a.captures, results)):
         path = os.path.join(a.out_dir, f"{i:03d}_{os.path.basename(os.path.normpath(c))}.json")
         _atomic_json(path, r)
         print(f"{c}: E_sil {r['best_E_sil_mean_pct']:.3f} % after {r['evaluations']} evaluations -> {path}")
-        fits.append({"capture": c, "out": path, "best_E_sil_mean_pct": r["best_E_sil_mean_pct"],
-                     "evaluations": r["evaluations"], "stop_reason": r.get("stop_reason")})
+        fits.append(
+            {
+                "capture": c,
+                "out": path,
+                "best_E_sil_mean_pct": r["best_E_sil_mean_pct"],
+                "evaluations": r["evaluations"],
+                "stop_reason": r.get("stop_reason"),
+            }
+        )
     print(f"{len(results)} fits on {workers} {kind} worker(s) in {wall:.1f} s")
     return {"fits": fits, "workers": workers, "executor": kind, "wall_s": wall}
 
@@ -285,27 +374,36 @@ def cmd_export_blender_cloth(a):
     from ..core.jsonio import read_json
     from ..core.physics import blender as B
     from ..core.physics.models import BlenderModel, model_and_row
+
     res = read_json(a.result, "result")
     model, row = model_and_row(res)
     if not isinstance(model, BlenderModel):
-        raise ClothFitError(f"result {a.result}: a {model.name}-model fit has no Blender cloth settings "
-                            "(fit with --model blender, or warm-start one from it with --init)")
+        raise ClothFitError(
+            f"result {a.result}: a {model.name}-model fit has no Blender cloth settings "
+            "(fit with --model blender, or warm-start one from it with --init)"
+        )
     s = model.settings(row)
     out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
     manip = {k: res[k] for k in ("time_offset_s", "handles") if res.get(k) is not None}
-    if manip:                                 # the manipulation the fit estimated: where the pins go, when it lets go
+    if manip:  # the manipulation the fit estimated: where the pins go, when it lets go
         out["manipulation"] = manip
-    if a.python:                              # the one command whose stdout is not JSON: Python, by request
-        lines = [f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
-                 "cloth = bpy.context.object.modifiers['Cloth'].settings"]
+    if a.python:  # the one command whose stdout is not JSON: Python, by request
+        lines = [
+            f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
+            "cloth = bpy.context.object.modifiers['Cloth'].settings",
+        ]
         lines += [f"cloth.{k} = {s[k]!r}" for k in ("quality", "bending_model") + B.FLOAT_SETTINGS]
         if manip.get("time_offset_s") is not None:
-            lines.append(f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
-                         f"happened at capture time + time_offset_s")
+            lines.append(
+                f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
+                f"happened at capture time + time_offset_s"
+            )
         for h in manip.get("handles") or []:
             if any(h.get("offset_m") or []):
-                lines.append(f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
-                             f"from the capture's measurement")
+                lines.append(
+                    f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
+                    f"from the capture's measurement"
+                )
         return Text("\n".join(lines))
     return out
 
@@ -313,6 +411,7 @@ def cmd_export_blender_cloth(a):
 def cmd_evaluate(a):
     from ..core.fitting.evaluate import evaluate
     from ..core.observation.capture import load_capture
+
     cap = load_capture(a.capture)
     params = _params(a, _capture_truth(cap))
     r = evaluate(cap, params, cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
@@ -324,26 +423,32 @@ def cmd_evaluate(a):
     print(s)
     if a.json:
         from ..core.safeio import atomic_json
+
         atomic_json(a.json, r)
     return r
 
 
 def _capture_floor(cap, cams, times, resolution):
     from ..core.observation.floor import capture_floor
+
     fidx = None if times is None else [cap.frame_index(t) for t in times]
     return capture_floor(cap, cams, fidx, resolution)
 
 
 def cmd_floor(a):
     from ..core.observation.capture import load_capture
+
     cap = load_capture(a.capture)
     cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times), _res(a.resolution))
     d = cf.to_dict()
-    print(f"noise floor {100 * d['floor']:.3f} % E_sil per image (median {100 * d['floor_median']:.3f} %; "
-          f"resampling {100 * d['resampling']:.3f} %) over {d['n_images']} images; a 1-pixel shift of the outline "
-          f"costs {100 * d['rim']:.2f} %; {cf.limits}")
+    print(
+        f"noise floor {100 * d['floor']:.3f} % E_sil per image (median {100 * d['floor_median']:.3f} %; "
+        f"resampling {100 * d['resampling']:.3f} %) over {d['n_images']} images; a 1-pixel shift of the outline "
+        f"costs {100 * d['rim']:.2f} %; {cf.limits}"
+    )
     if a.json:
         from ..core.safeio import atomic_json
+
         atomic_json(a.json, d)
     return d
 
@@ -351,17 +456,20 @@ def cmd_floor(a):
 def cmd_overlay(a):
     from ..core.observation.capture import load_capture
     from ..core.observation.overlay import capture_overlays
+
     cap = load_capture(a.capture)
     images = None
     if a.on_images:
         from ..core.footage.extract import footage_images
+
         images = footage_images(cap)
     cams, times = _cams(cap, a.cameras), _times(a.times)
     floors = None
     if a.floor:
         floors = _capture_floor(cap, cams, times, None).per_image()
-    paths = capture_overlays(cap, _params(a, _capture_truth(cap)), a.out, cameras=cams, times=times, images=images,
-                             floors=floors)
+    paths = capture_overlays(
+        cap, _params(a, _capture_truth(cap)), a.out, cameras=cams, times=times, images=images, floors=floors
+    )
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
     out = {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}
     if a.floor:
@@ -371,75 +479,139 @@ def cmd_overlay(a):
 
 def _add_synth(sub):
     """``synth``: a synthetic capture."""
-    s = _command(sub, "synth", cmd_synth, "make a synthetic capture from ground-truth parameters",
-                 "the capture's cameras, frame times and image size as JSON")
+    s = _command(
+        sub,
+        "synth",
+        cmd_synth,
+        "make a synthetic capture from ground-truth parameters",
+        "the capture's cameras, frame times and image size as JSON",
+    )
     s.add_argument("--out", required=True, help="capture folder to write")
-    s.add_argument("--rig", default=D.DEFAULT_RIG,
-                   help="camera rig: a preset of rigs/ (lab18, lab18_far, ring8) or a cameras JSON (default: %(default)s)")
-    s.add_argument("--params", help="JSON or a JSON file: the paper model's m [kg per point mass], k [N/m], l [m], "
-                                    "d [N s/m], or Blender cloth settings with --model blender (default: the built-in "
-                                    "ground truth)")
-    s.add_argument("--noise", type=float, default=D.NOISE_FRACTION,
-                   help="fraction of the silhouettes' boundary pixels flipped (default: %(default)s)")
+    s.add_argument(
+        "--rig",
+        default=D.DEFAULT_RIG,
+        help="camera rig: a preset of rigs/ (lab18, lab18_far, ring8) or a cameras JSON (default: %(default)s)",
+    )
+    s.add_argument(
+        "--params",
+        help="JSON or a JSON file: the paper model's m [kg per point mass], k [N/m], l [m], "
+        "d [N s/m], or Blender cloth settings with --model blender (default: the built-in "
+        "ground truth)",
+    )
+    s.add_argument(
+        "--noise",
+        type=float,
+        default=D.NOISE_FRACTION,
+        help="fraction of the silhouettes' boundary pixels flipped (default: %(default)s)",
+    )
     s.add_argument("--resolution", help="image size HxW [px], e.g. 120x160 (default: the rig's)")
     s.add_argument("--seed", type=int, default=0, help="random seed of the boundary noise (default: %(default)s)")
-    s.add_argument("--truth-dt-safety", type=float, default=None,
-                   help="time step of the truth as a factor of sqrt(m/k); 0.125 = 4x finer than the fitter's "
-                        "(default: the model's own)")
+    s.add_argument(
+        "--truth-dt-safety",
+        type=float,
+        default=None,
+        help="time step of the truth as a factor of sqrt(m/k); 0.125 = 4x finer than the fitter's "
+        "(default: the model's own)",
+    )
     _model_args(s, "paper")
 
 
 def _add_fit(sub):
     """``fit``: one capture, checkpointed, resumable."""
-    s = _command(sub, "fit", cmd_fit, "fit the model to a capture",
-                 "a summary of the fit as JSON (params, errors, evaluations, stop_reason, out); the whole "
-                 "result is in --out")
+    s = _command(
+        sub,
+        "fit",
+        cmd_fit,
+        "fit the model to a capture",
+        "a summary of the fit as JSON (params, errors, evaluations, stop_reason, out); the whole result is in --out",
+    )
     s.add_argument("capture", help="capture folder (capture.json, cameras.json, silhouettes)")
     s.add_argument("--out", default="out/fit.json", help="result JSON to write (default: %(default)s)")
     _selection_args(s, "fit")
     _search_args(s)
     s.add_argument("--children", type=int, default=None, help="GA: SPX children per family (default: 5n = 15)")
-    s.add_argument("--target", type=float, default=None,
-                   help="stop when the mean E_sil per training image falls below this fraction, e.g. 0.005 = "
-                        "0.5 %% (default: no target)")
-    s.add_argument("--restarts", type=int, default=None,
-                   help=f"cma-es: IPOP restarts after convergence, each with twice the population (default: paper "
-                        f"{D.FIT_RESTARTS}, blender {D.BLENDER_FIT_RESTARTS})")
-    s.add_argument("--checkpoint", help=f"checkpoint file, written every {D.CHECKPOINT_INTERVAL_S:g} s and at the end "
-                                        f"(default: OUT.checkpoint.json)")
+    s.add_argument(
+        "--target",
+        type=float,
+        default=None,
+        help="stop when the mean E_sil per training image falls below this fraction, e.g. 0.005 = "
+        "0.5 %% (default: no target)",
+    )
+    s.add_argument(
+        "--restarts",
+        type=int,
+        default=None,
+        help=f"cma-es: IPOP restarts after convergence, each with twice the population (default: paper "
+        f"{D.FIT_RESTARTS}, blender {D.BLENDER_FIT_RESTARTS})",
+    )
+    s.add_argument(
+        "--checkpoint",
+        help=f"checkpoint file, written every {D.CHECKPOINT_INTERVAL_S:g} s and at the end "
+        f"(default: OUT.checkpoint.json)",
+    )
     again = s.add_mutually_exclusive_group()
-    again.add_argument("--resume", action="store_true",
-                       help="continue the checkpoint; refused if it is of another fit (capture, cameras, times, "
-                            "resolution, optimiser, population, seed, bounds...); --max-evaluations may grow")
+    again.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the checkpoint; refused if it is of another fit (capture, cameras, times, "
+        "resolution, optimiser, population, seed, bounds...); --max-evaluations may grow",
+    )
     again.add_argument("--force", action="store_true", help="replace an existing checkpoint instead of refusing")
-    s.add_argument("--backend", default="auto", choices=["auto", "numba", "numpy", "core", "blender"],
-                   help="where candidates are simulated: the core (auto, numba, numpy; core = auto) or blender "
-                        "(Blender's own solver on --blend, in worker processes) (default: %(default)s)")
+    s.add_argument(
+        "--backend",
+        default="auto",
+        choices=["auto", "numba", "numpy", "core", "blender"],
+        help="where candidates are simulated: the core (auto, numba, numpy; core = auto) or blender "
+        "(Blender's own solver on --blend, in worker processes) (default: %(default)s)",
+    )
     s.add_argument("--blend", help="blender backend: the .blend holding the cloth object (colliders and all)")
-    s.add_argument("--object", help="blender backend: the cloth object (default: the scene's only mesh with a "
-                                    "Cloth modifier)")
-    s.add_argument("--frame-zero", type=float, default=None,
-                   help="blender backend: scene frame of capture time 0 (default: the scene's frame_start)")
+    s.add_argument(
+        "--object", help="blender backend: the cloth object (default: the scene's only mesh with a Cloth modifier)"
+    )
+    s.add_argument(
+        "--frame-zero",
+        type=float,
+        default=None,
+        help="blender backend: scene frame of capture time 0 (default: the scene's frame_start)",
+    )
     _farm_args(s, "blender backend")
-    s.add_argument("--quiet", action="store_true",
-                   help="no progress bar on stderr (shown on a terminal, or with CLOTHFIT_PROGRESS=1)")
+    s.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress bar on stderr (shown on a terminal, or with CLOTHFIT_PROGRESS=1)",
+    )
     _model_args(s)
-    s.add_argument("--free", help="blender model: comma list of ClothSettings to search (default: see README, "
-                                  "Identifiability)")
-    s.add_argument("--fixed", help="blender model: JSON (or file) of ClothSettings held fixed (default: Blender's "
-                                   "defaults for the settings not searched)")
-    s.add_argument("--bounds", help="JSON (or file) {name: [low, high]} search ranges; blender: Blender units at "
-                                    "the fixed vertex mass (default: the model's ranges)")
+    s.add_argument(
+        "--free", help="blender model: comma list of ClothSettings to search (default: see README, Identifiability)"
+    )
+    s.add_argument(
+        "--fixed",
+        help="blender model: JSON (or file) of ClothSettings held fixed (default: Blender's "
+        "defaults for the settings not searched)",
+    )
+    s.add_argument(
+        "--bounds",
+        help="JSON (or file) {name: [low, high]} search ranges; blender: Blender units at "
+        "the fixed vertex mass (default: the model's ranges)",
+    )
     s.add_argument("--init", help="warm start from this result JSON, a blender or paper fit (default: a cold start)")
 
 
 def _add_fit_many(sub):
     """``fit-many``: many captures on the farm."""
-    s = _command(sub, "fit-many", cmd_fit_many, "fit many captures in parallel (Ray actors, or processes without Ray)",
-                 "one summary per fit (capture, out, E_sil, evaluations) and the workers used, as JSON")
+    s = _command(
+        sub,
+        "fit-many",
+        cmd_fit_many,
+        "fit many captures in parallel (Ray actors, or processes without Ray)",
+        "one summary per fit (capture, out, E_sil, evaluations) and the workers used, as JSON",
+    )
     s.add_argument("captures", nargs="+", help="capture folders")
-    s.add_argument("--out-dir", default="out/fits",
-                   help="folder for one result JSON per capture, NNN_<capture>.json (default: %(default)s)")
+    s.add_argument(
+        "--out-dir",
+        default="out/fits",
+        help="folder for one result JSON per capture, NNN_<capture>.json (default: %(default)s)",
+    )
     _selection_args(s, "fit")
     _search_args(s)
     _farm_args(s, "the fits")
@@ -448,42 +620,78 @@ def _add_fit_many(sub):
 
 def _add_scoring(sub):
     """``export-blender-cloth``, ``evaluate``, ``overlay``, ``floor``: reading a fit back."""
-    s = _command(sub, "export-blender-cloth", cmd_export_blender_cloth,
-                 "the Cloth modifier settings of a blender-model fit result",
-                 "the settings as JSON (blender_cloth, blender_scene), or Python with --python")
+    s = _command(
+        sub,
+        "export-blender-cloth",
+        cmd_export_blender_cloth,
+        "the Cloth modifier settings of a blender-model fit result",
+        "the settings as JSON (blender_cloth, blender_scene), or Python with --python",
+    )
     s.add_argument("result", help="result JSON of a fit with --model blender")
     s.add_argument("--python", action="store_true", help="print bpy assignments (Python) instead of JSON")
 
-    s = _command(sub, "evaluate", cmd_evaluate, "silhouette and shape error of parameters on a capture",
-                 "the errors as JSON: mean, per camera and per time (silhouette [%], shape [mm] when the "
-                 "capture has its true shapes)")
+    s = _command(
+        sub,
+        "evaluate",
+        cmd_evaluate,
+        "silhouette and shape error of parameters on a capture",
+        "the errors as JSON: mean, per camera and per time (silhouette [%], shape [mm] when the "
+        "capture has its true shapes)",
+    )
     s.add_argument("capture", help="capture folder")
-    s.add_argument("--params", help="a result JSON file, or JSON with m, k, l, d (default: a synthetic capture's "
-                                    "truth, else the built-in ground truth)")
+    s.add_argument(
+        "--params",
+        help="a result JSON file, or JSON with m, k, l, d (default: a synthetic capture's "
+        "truth, else the built-in ground truth)",
+    )
     _selection_args(s, "score")
     s.add_argument("--resolution", help="score at HxW [px] (default: the capture's)")
     s.add_argument("--json", help="also write the result to this file")
 
-    s = _command(sub, "overlay", cmd_overlay, "observed vs model silhouette images and a contact sheet",
-                 "the image paths as JSON")
+    s = _command(
+        sub,
+        "overlay",
+        cmd_overlay,
+        "observed vs model silhouette images and a contact sheet",
+        "the image paths as JSON",
+    )
     s.add_argument("capture", help="capture folder")
-    s.add_argument("--params", help="a result JSON file, or JSON with m, k, l, d (default: a synthetic capture's "
-                                    "truth, else the built-in ground truth)")
-    s.add_argument("--out", default="out/overlays",
-                   help="folder for the images, <camera>/<frame>.png and contact_sheet.png (default: %(default)s)")
+    s.add_argument(
+        "--params",
+        help="a result JSON file, or JSON with m, k, l, d (default: a synthetic capture's "
+        "truth, else the built-in ground truth)",
+    )
+    s.add_argument(
+        "--out",
+        default="out/overlays",
+        help="folder for the images, <camera>/<frame>.png and contact_sheet.png (default: %(default)s)",
+    )
     _selection_args(s, "draw")
-    s.add_argument("--on-images", action="store_true",
-                   help="draw on the camera images the silhouettes were extracted from (image footage)")
-    s.add_argument("--floor", action="store_true",
-                   help="estimate each image's noise floor (see the floor command), frame the contact sheet's tiles "
-                        "by E_sil / floor (green at it, amber above, red more than 3x) and write floor_sheet.png")
+    s.add_argument(
+        "--on-images",
+        action="store_true",
+        help="draw on the camera images the silhouettes were extracted from (image footage)",
+    )
+    s.add_argument(
+        "--floor",
+        action="store_true",
+        help="estimate each image's noise floor (see the floor command), frame the contact sheet's tiles "
+        "by E_sil / floor (green at it, amber above, red more than 3x) and write floor_sheet.png",
+    )
 
-    s = _command(sub, "floor", cmd_floor, "estimate the noise floor of a capture's silhouettes from the silhouettes",
-                 "the capture's floor, its parts and the per-image floors as JSON")
+    s = _command(
+        sub,
+        "floor",
+        cmd_floor,
+        "estimate the noise floor of a capture's silhouettes from the silhouettes",
+        "the capture's floor, its parts and the per-image floors as JSON",
+    )
     s.add_argument("capture", help="capture folder")
     _selection_args(s, "estimate")
-    s.add_argument("--resolution", help="for a fit at HxW [px]: the silhouettes area-resampled as the fitter does "
-                                        "(default: the capture's)")
+    s.add_argument(
+        "--resolution",
+        help="for a fit at HxW [px]: the silhouettes area-resampled as the fitter does (default: the capture's)",
+    )
     s.add_argument("--json", help="also write the result to this file")
 
 

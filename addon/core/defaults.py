@@ -2,6 +2,7 @@
 
 Units: metres, kilograms, seconds. World Z is up (as in Blender).
 """
+
 import math
 
 GRAVITY = (0.0, 0.0, -9.81)
@@ -9,7 +10,7 @@ GRAVITY = (0.0, 0.0, -9.81)
 # --- the cloth (docs/method.md#spec-2): 10 cm square, 16 x 16 point masses, 450 triangles, 705 springs
 GRID_N = 16
 CLOTH_SIDE = 0.10
-CLOTH_HEIGHT = 0.10          # the held corners sit at z = 0.10 m, cloth centred on the z axis
+CLOTH_HEIGHT = 0.10  # the held corners sit at z = 0.10 m, cloth centred on the z axis
 
 # --- ground truth parameters of the synthetic experiment (per point mass / per spring)
 # m: 2.5 g cloth / 256 points; k chosen so the hanging cloth stretches ~10 % near the held corners;
@@ -20,26 +21,28 @@ CLOTH_HEIGHT = 0.10          # the held corners sit at z = 0.10 m, cloth centred
 GT_PARAMS = {"m": 1.0e-5, "k": 10.0, "l": CLOTH_SIDE / (GRID_N - 1), "d": 1.0e-4}
 
 # --- simulation (docs/method.md#spec-2): semi-implicit Euler, damping treated implicitly.
-DT_SAFETY = 0.5              # dt <= DT_SAFETY * sqrt(m / k); Gershgorin bound for a node with 6 springs: 2/sqrt(12) = 0.577
-TRUTH_DT_SAFETY = DT_SAFETY  # step of the synthetic ground truth: the same model as the fitter's (docs/method.md#spec-5: "our own
-                             # model with known parameters"); `synth --truth-dt-safety 0.125` makes a 4x finer truth
-SETTLE_TIME = 0.5            # seconds of settling under gravity with all handles held, before t = 0
-SETTLE_DAMPING_RATE = 40.0   # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
-EXPLODE_FACTOR = 10.0        # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded
-MAX_TOTAL_STEPS = 2_000_000     # a candidate needing more integration steps (far too stiff) = exploded
-MAX_STRAIN = 5.0             # a spring longer than (1 + MAX_STRAIN) * rest length = exploded
+DT_SAFETY = 0.5  # dt <= DT_SAFETY * sqrt(m / k); Gershgorin bound for a node with 6 springs: 2/sqrt(12) = 0.577
+TRUTH_DT_SAFETY = (
+    DT_SAFETY  # step of the synthetic ground truth: the same model as the fitter's (docs/method.md#spec-5: "our own
+)
+# model with known parameters"); `synth --truth-dt-safety 0.125` makes a 4x finer truth
+SETTLE_TIME = 0.5  # seconds of settling under gravity with all handles held, before t = 0
+SETTLE_DAMPING_RATE = 40.0  # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
+EXPLODE_FACTOR = 10.0  # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded
+MAX_TOTAL_STEPS = 2_000_000  # a candidate needing more integration steps (far too stiff) = exploded
+MAX_STRAIN = 5.0  # a spring longer than (1 + MAX_STRAIN) * rest length = exploded
 
 # --- Blender's cloth as a model (physics/blender.py): a fit targets a scene frame rate (Blender's cloth advances
 # per frame, not per second), 24 fps unless told
 BLENDER_FPS = 24
-WARM_START_SIGMA = 0.1      # CMA-ES step size (unit cube) when a fit starts from a given result (--init)
+WARM_START_SIGMA = 0.1  # CMA-ES step size (unit cube) when a fit starts from a given result (--init)
 
 # --- capture (docs/method.md#spec-5): 30 shapes every 0.05 s, train on even tenths, test on the odd twentieths
 FRAME_TIMES = [round(0.05 * i, 2) for i in range(1, 31)]
 TRAIN_TIMES = [round(0.10 * i, 2) for i in range(1, 16)]
 TEST_TIMES = [round(0.05 + 0.10 * i, 2) for i in range(15)]
-RELEASED_CORNER = 0          # vertex index of the corner released at t = 0
-NOISE_FRACTION = 0.05        # fraction of boundary pixels flipped
+RELEASED_CORNER = 0  # vertex index of the corner released at t = 0
+NOISE_FRACTION = 0.05  # fraction of boundary pixels flipped
 IMAGE_H, IMAGE_W = 480, 640
 DEFAULT_RIG = "lab18"
 TABLE1_CAMERAS = [1, 2, 4, 8, 16]
@@ -49,9 +52,11 @@ FIG8_SHAPES = [3, 5, 7, 9, 11, 13, 15]
 
 # --- the paper's numbers (docs/method.md#spec-5), printed beside ours
 PAPER_TABLE1 = {1: (6.243, 5.999), 2: (3.495, 4.328), 4: (3.051, 3.399), 8: (1.893, 2.740), 16: (0.767, 2.160)}
-PAPER_TABLE2 = {(60, 80): {2: 5.1243, 4: 3.1907, 8: 2.4966},
-                (120, 160): {2: 4.7966, 4: 3.1548, 8: 2.4185},
-                (240, 320): {2: 4.0927, 4: 2.9281, 8: 2.2197}}
+PAPER_TABLE2 = {
+    (60, 80): {2: 5.1243, 4: 3.1907, 8: 2.4966},
+    (120, 160): {2: 4.7966, 4: 3.1548, 8: 2.4185},
+    (240, 320): {2: 4.0927, 4: 2.9281, 8: 2.2197},
+}
 
 # --- search space. m is fixed from the (weighed) cloth mass: docs/method.md#identifiability-what-silhouettes-can-tell. The optimiser
 # searches the identifiable quantities, all in log scale: k/m [1/s^2], d/m [1/s], and l relative to the
@@ -70,96 +75,98 @@ GA_CHILDREN_TEXTBOOK = GA_CHILDREN = 10 * N_FREE
 FIT_GA_POPULATION = 7 * N_FREE
 FIT_GA_CHILDREN = 5 * N_FREE
 CMA_POPSIZE = 4 + int(3 * math.log(N_FREE))
-FIT_EVALUATIONS = 2500            # default evaluation budget of one fit
-DEFAULT_OPTIMIZER = "cma-es"      # measured faster than SPX+MGG on this problem (README, `paper --only optimizers`)
+FIT_EVALUATIONS = 2500  # default evaluation budget of one fit
+DEFAULT_OPTIMIZER = "cma-es"  # measured faster than SPX+MGG on this problem (README, `paper --only optimizers`)
 
 # --- when a fit has converged (README, "Fits: stopping"). Tolerances far below what silhouettes resolve: a step of
 # 1e-5 of the unit search cube is a 0.005 % change of k/m over its two decades; 1e-6 of E_sil per image is a
 # five-hundredth of one pixel of a 2000-pixel silhouette, far below the noise floor (about 0.2 % per image).
 # Measured on the paper protocol (Table 1): 623-714 evaluations per fit, every row on its noise floor; with
 # 1e-4 / 1e-5 the fits stopped after 469-595 evaluations but 0.002-0.008 points above the floor.
-FIT_TOLX = 1e-5                   # unit-cube step size at which CMA-ES has converged (GA: population spread)
-FIT_TOLFUN_PER_IMAGE = 1e-6       # spread of recent best E_all (per training image) below which it has converged
-FIT_GA_STALL = 3000               # GA: evaluations without an improvement of more than the tolfun = stagnated
-FIT_RESTARTS = 0                  # CMA-ES IPOP restarts (each with twice the population), paper model
-BLENDER_FIT_RESTARTS = 4          # the blender model's 8 free settings have local minima: restart until the budget
-FIT_EXPLODED_LIMIT = 100          # this many candidates, all exploded, and nothing finite: the fit is an error
-CHECKPOINT_INTERVAL_S = 2.0       # the CLI writes its checkpoint at most this often (and always at the end)
-FLOOR_FAR_ABOVE = 3.0             # issue 20: a fit error more than 3x its images' noise floor (observation/floor.py) is
-                                  # "far above" it; the estimate's calibration spread is +-25 % (docs/noise_floor.md),
-                                  # so 3x is well clear of it
-MAX_FIT_PIXELS = 16_000_000       # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
+FIT_TOLX = 1e-5  # unit-cube step size at which CMA-ES has converged (GA: population spread)
+FIT_TOLFUN_PER_IMAGE = 1e-6  # spread of recent best E_all (per training image) below which it has converged
+FIT_GA_STALL = 3000  # GA: evaluations without an improvement of more than the tolfun = stagnated
+FIT_RESTARTS = 0  # CMA-ES IPOP restarts (each with twice the population), paper model
+BLENDER_FIT_RESTARTS = 4  # the blender model's 8 free settings have local minima: restart until the budget
+FIT_EXPLODED_LIMIT = 100  # this many candidates, all exploded, and nothing finite: the fit is an error
+CHECKPOINT_INTERVAL_S = 2.0  # the CLI writes its checkpoint at most this often (and always at the end)
+FLOOR_FAR_ABOVE = 3.0  # issue 20: a fit error more than 3x its images' noise floor (observation/floor.py) is
+# "far above" it; the estimate's calibration spread is +-25 % (docs/noise_floor.md),
+# so 3x is well clear of it
+MAX_FIT_PIXELS = 16_000_000  # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
 MAX_IMAGE_SIDE = 16384
 
 # --- the manipulation measured from footage (footage/handles.py, `clothfit handles`, docs/phone_rig.md)
-HANDLE_MARK_SIGMA_PX = 1.0        # a person's click on a zoomed frame is good to about a pixel: the floor of the pixel
-                                  # noise behind each handle's uncertain bound (2 cameras leave 1 residual degree of freedom)
-HANDLE_MAX_RESIDUAL_PX = 4.0      # a camera missing its handle's triangulated point by more is a wrong mark or a drifted
-                                  # track, not noise: calibrations reproject to 0.2-1 px and clicks are good to ~1 px
-HANDLE_CLIP_SIZE_M = 0.015        # a clip's (fingertip's) size: the Lucas-Kanade window of a camera = its apparent size
-                                  # (a binder clip's jaw, a fingertip: 1-2.5 cm); a window much larger holds mostly
-                                  # still background that drags the track of a moving clip back
-HANDLE_LK_LEVELS = 3              # pyramid levels: follows motions up to ~2^3 x half a window (~80 px) per frame
-HANDLE_FB_MAX_PX = 1.0            # forward-backward disagreement beyond this = the track is lost (Kalal et al. 2010);
-                                  # on a textured clip LK's round trip agrees to ~0.05 px, a lost point by pixels
-HANDLE_REF_MAX_PX = 2.0           # a refinement against the marked frame's patch further than this from the frame-to-frame
-                                  # track is a false match (the patch changed): the frame-to-frame point is kept
-HANDLE_DEPARTURE_MIN_M = 0.0005   # a released corner has left its pin when it is this far from it and DEPARTURE_K times its
-HANDLE_DEPARTURE_K = 8.0          # held jitter: a tracked clip's triangulated jitter is 0.01-0.1 mm (measured: synthetic and
-                                  # Cycles footage), so noise never passes 8 sigma; a fall from rest passes 0.5 mm 10 ms
-                                  # after the release (0.5 g s^2), and the frame before is recovered by extrapolation
-HANDLE_RELEASE_FREE_FRAMES = 3    # free frames a parabola from rest is fitted to, to see whether the release came before
-                                  # the previous frame (three: one more than the fewest, so that the fit can fail)
-HANDLE_PARABOLA_TOL = 0.03        # ... and it must fit them to 3 % of the fall: measured, a fall from rest with a jerk
-                                  # fits to 0.3 %, a corner that snaps away (a stretched cloth) no better than 7 %
-HANDLE_BOUND_K = 3.0              # a handle's uncertain bound: 3 sigma of its triangulated position ...
-HANDLE_BOUND_FLOOR_M = 0.001      # ... and never below 1 mm: where a clip grips the cloth is not known better
-HANDLE_MAX_PIN_OFFSET_M = 0.02    # a clip further than this from its vertex of the placed cloth: a wrong cloth size, 'at'
-                                  # or mark (10x the 1 mm goal of the triangulation, a few x a cloth's measuring error)
-HANDLE_SMOOTH_FRAMES = 2          # a moving handle's track: local quadratic over +-2 frames (Savitzky-Golay 5/2, exact for
-                                  # a constant acceleration) against the triangulation noise
-HANDLE_GRID_N = 16                # vertices along the cloth's longer side when no resolution is given (the paper's 16)
+HANDLE_MARK_SIGMA_PX = 1.0  # a person's click on a zoomed frame is good to about a pixel: the floor of the pixel
+# noise behind each handle's uncertain bound (2 cameras leave 1 residual degree of freedom)
+HANDLE_MAX_RESIDUAL_PX = 4.0  # a camera missing its handle's triangulated point by more is a wrong mark or a drifted
+# track, not noise: calibrations reproject to 0.2-1 px and clicks are good to ~1 px
+HANDLE_CLIP_SIZE_M = 0.015  # a clip's (fingertip's) size: the Lucas-Kanade window of a camera = its apparent size
+# (a binder clip's jaw, a fingertip: 1-2.5 cm); a window much larger holds mostly
+# still background that drags the track of a moving clip back
+HANDLE_LK_LEVELS = 3  # pyramid levels: follows motions up to ~2^3 x half a window (~80 px) per frame
+HANDLE_FB_MAX_PX = 1.0  # forward-backward disagreement beyond this = the track is lost (Kalal et al. 2010);
+# on a textured clip LK's round trip agrees to ~0.05 px, a lost point by pixels
+HANDLE_REF_MAX_PX = 2.0  # a refinement against the marked frame's patch further than this from the frame-to-frame
+# track is a false match (the patch changed): the frame-to-frame point is kept
+HANDLE_DEPARTURE_MIN_M = (
+    0.0005  # a released corner has left its pin when it is this far from it and DEPARTURE_K times its
+)
+HANDLE_DEPARTURE_K = 8.0  # held jitter: a tracked clip's triangulated jitter is 0.01-0.1 mm (measured: synthetic and
+# Cycles footage), so noise never passes 8 sigma; a fall from rest passes 0.5 mm 10 ms
+# after the release (0.5 g s^2), and the frame before is recovered by extrapolation
+HANDLE_RELEASE_FREE_FRAMES = 3  # free frames a parabola from rest is fitted to, to see whether the release came before
+# the previous frame (three: one more than the fewest, so that the fit can fail)
+HANDLE_PARABOLA_TOL = 0.03  # ... and it must fit them to 3 % of the fall: measured, a fall from rest with a jerk
+# fits to 0.3 %, a corner that snaps away (a stretched cloth) no better than 7 %
+HANDLE_BOUND_K = 3.0  # a handle's uncertain bound: 3 sigma of its triangulated position ...
+HANDLE_BOUND_FLOOR_M = 0.001  # ... and never below 1 mm: where a clip grips the cloth is not known better
+HANDLE_MAX_PIN_OFFSET_M = 0.02  # a clip further than this from its vertex of the placed cloth: a wrong cloth size, 'at'
+# or mark (10x the 1 mm goal of the triangulation, a few x a cloth's measuring error)
+HANDLE_SMOOTH_FRAMES = 2  # a moving handle's track: local quadratic over +-2 frames (Savitzky-Golay 5/2, exact for
+# a constant acceleration) against the triangulation noise
+HANDLE_GRID_N = 16  # vertices along the cloth's longer side when no resolution is given (the paper's 16)
 
 # --- multi-camera calibration from a ChArUco board (clothfit calibrate, core/footage/calibrate.py)
-CALIB_MIN_VIEWS = 5          # usable views per camera whose intrinsics are estimated: f, cx, cy and the distortion
-                             # from a planar board need it seen at several tilts (Zhang's method: 3 views for f and
-                             # c alone; the distortion terms and a margin for dropped views make 5)
-CALIB_MIN_CORNERS = 8        # ChArUco corners a view needs: a board pose from fewer (4 is the minimum of a
-                             # homography) is at the mercy of one corner's error
-CALIB_BLUR_RATIO = 0.5       # a frame whose board sharpness (~1 / edge width) is below this fraction of its camera's
-                             # median is blurred and skipped: motion blur of a waved board doubles the edge width
-                             # at least; focus and exposure differences between sharp frames stay well above it
-CALIB_DISTORTION = "k1k2p1p2"    # phone lenses, corrected in software, leave small radial + tangential distortion;
-                                 # k3 over-fits unless the board reaches the image corners
-CALIB_LOSS = "soft_l1"       # robust loss of the bundle adjustment: a mis-detected corner does not pull the cameras
-CALIB_LOSS_SCALE_PX = 1.0    # where the loss turns robust: subpixel corners are far below it, bad ones far above
-CALIB_OUTLIER_PX = 2.0       # after the first adjustment, corners further than this (or CALIB_OUTLIER_SIGMAS
-CALIB_OUTLIER_SIGMAS = 5.0   # robust sigmas, whichever is larger) from the fit are dropped, then refined again
-CALIB_ROUNDS = 3             # adjust, drop outliers, adjust (again while something was dropped)
-CALIB_MAX_NFEV = 200         # least_squares evaluations per round: converged runs take tens
-CALIB_VIDEO_EVERY_S = 0.5    # videos: sample one moment every half second (a board waved slowly gives new poses;
-                             # more only adds near-duplicate views)
-CALIB_VIDEO_BATCH = 32       # frames decoded at once per video (memory: 32 x 1080 x 1920 x 3 bytes = 200 MB)
-CALIB_BOARD_DPI = 300        # --make-board PNG resolution: a 4 cm square is 472 px, far beyond any printer's grain
+CALIB_MIN_VIEWS = 5  # usable views per camera whose intrinsics are estimated: f, cx, cy and the distortion
+# from a planar board need it seen at several tilts (Zhang's method: 3 views for f and
+# c alone; the distortion terms and a margin for dropped views make 5)
+CALIB_MIN_CORNERS = 8  # ChArUco corners a view needs: a board pose from fewer (4 is the minimum of a
+# homography) is at the mercy of one corner's error
+CALIB_BLUR_RATIO = 0.5  # a frame whose board sharpness (~1 / edge width) is below this fraction of its camera's
+# median is blurred and skipped: motion blur of a waved board doubles the edge width
+# at least; focus and exposure differences between sharp frames stay well above it
+CALIB_DISTORTION = "k1k2p1p2"  # phone lenses, corrected in software, leave small radial + tangential distortion;
+# k3 over-fits unless the board reaches the image corners
+CALIB_LOSS = "soft_l1"  # robust loss of the bundle adjustment: a mis-detected corner does not pull the cameras
+CALIB_LOSS_SCALE_PX = 1.0  # where the loss turns robust: subpixel corners are far below it, bad ones far above
+CALIB_OUTLIER_PX = 2.0  # after the first adjustment, corners further than this (or CALIB_OUTLIER_SIGMAS
+CALIB_OUTLIER_SIGMAS = 5.0  # robust sigmas, whichever is larger) from the fit are dropped, then refined again
+CALIB_ROUNDS = 3  # adjust, drop outliers, adjust (again while something was dropped)
+CALIB_MAX_NFEV = 200  # least_squares evaluations per round: converged runs take tens
+CALIB_VIDEO_EVERY_S = 0.5  # videos: sample one moment every half second (a board waved slowly gives new poses;
+# more only adds near-duplicate views)
+CALIB_VIDEO_BATCH = 32  # frames decoded at once per video (memory: 32 x 1080 x 1920 x 3 bytes = 200 MB)
+CALIB_BOARD_DPI = 300  # --make-board PNG resolution: a 4 cm square is 472 px, far beyond any printer's grain
 CALIB_BOARD_MARGIN_M = 0.01  # white margin round the printed board: the outer markers need a quiet zone
 CALIB_CORNER_CHECK_PX = 1.0  # a ChArUco corner further than this from where its neighbours (a local homography over
-                             # two squares) put it is refined again from there, else dropped; lens distortion bends
-                             # a two-square neighbourhood by far less
-CALIB_MARKER_RATIO_TOL = 0.1 # markers measured more than 10 % larger or smaller than --board says = a board definition
-                             # that does not match the print (lens distortion changes a marker's size by far less)
+# two squares) put it is refined again from there, else dropped; lens distortion bends
+# a two-square neighbourhood by far less
+CALIB_MARKER_RATIO_TOL = 0.1  # markers measured more than 10 % larger or smaller than --board says = a board definition
+# that does not match the print (lens distortion changes a marker's size by far less)
 
 # --- a fit's stages after its main search (issue 20; fitting/quality.py, fitting/job.py)
-QUALITY_LADDER = (3, 5, 8, 12, 18, 27)   # the qualities a fit may choose from: steps ~1.5x apart (a quality-15
-                                         # cloth lies between two rungs; past 27 a 21 x 21 cloth costs > 5x quality 5)
-QUALITY_TOLERANCE = 0.05     # the lowest rung whose training error is within 5 % of the best rung's is chosen: a
-                             # cheaper solver for a difference of the size of one seed's luck (issue 20 A/B spreads)
-QUALITY_RUNG_FRACTION = 0.07 # each rung: a warm-started CMA-ES run of 7 % of the budget (175 of 2500 evaluations:
-                             # 17 generations of 10, enough to re-settle a converged fit at a neighbouring quality)
-QUALITY_RUNGS_RESERVED = 4   # the budget kept for rungs (4 x 7 % = 28 %): one down, up to three up (5 -> 8 -> 12 -> 18)
-QUALITY_CLEARLY_BETTER = 0.10   # climbing continues while a rung fits > 10 % better than every lower one
-SCENE_QUALITY_PROBE = 0.05   # --backend blender: the budget of the one rung above the scene's quality it tries
-PROFILE_STEP = 0.1           # the manipulation's uncertainty: the objective at +-10 % of each bound around the best
-PROFILE_RISE = 0.01          # uncertainty = the offset at which the training error rises by 1 % (a quadratic
-                             # through the three points); flat or concave = the fit cannot separate it
-MIN_FRAMES_FOR_TIME_OFFSET = 2   # a time offset needs >= 2 training frames after the release: one frame's shape is
-                                 # matched as well by a stiffer cloth read earlier as by a softer one read later
+QUALITY_LADDER = (3, 5, 8, 12, 18, 27)  # the qualities a fit may choose from: steps ~1.5x apart (a quality-15
+# cloth lies between two rungs; past 27 a 21 x 21 cloth costs > 5x quality 5)
+QUALITY_TOLERANCE = 0.05  # the lowest rung whose training error is within 5 % of the best rung's is chosen: a
+# cheaper solver for a difference of the size of one seed's luck (issue 20 A/B spreads)
+QUALITY_RUNG_FRACTION = 0.07  # each rung: a warm-started CMA-ES run of 7 % of the budget (175 of 2500 evaluations:
+# 17 generations of 10, enough to re-settle a converged fit at a neighbouring quality)
+QUALITY_RUNGS_RESERVED = 4  # the budget kept for rungs (4 x 7 % = 28 %): one down, up to three up (5 -> 8 -> 12 -> 18)
+QUALITY_CLEARLY_BETTER = 0.10  # climbing continues while a rung fits > 10 % better than every lower one
+SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
+PROFILE_STEP = 0.1  # the manipulation's uncertainty: the objective at +-10 % of each bound around the best
+PROFILE_RISE = 0.01  # uncertainty = the offset at which the training error rises by 1 % (a quadratic
+# through the three points); flat or concave = the fit cannot separate it
+MIN_FRAMES_FOR_TIME_OFFSET = 2  # a time offset needs >= 2 training frames after the release: one frame's shape is
+# matched as well by a stiffer cloth read earlier as by a softer one read later

@@ -1,6 +1,7 @@
 """The one place the project reads and writes JSON: one reader (one error style for every file a
 user hands over), one encoder (numpy scalars and arrays as numbers and lists), one text form
 (indent 1) and one safe writer."""
+
 from __future__ import annotations
 
 import json
@@ -28,8 +29,9 @@ def read_json(path: str | os.PathLike, what: str = "JSON file", expect: type | N
     except json.JSONDecodeError as e:
         raise ClothFitError(f"{what} {path}: not valid JSON ({e})") from None
     if expect is not None and not isinstance(d, expect):
-        raise ClothFitError(f"{what} {path}: expected a JSON {'object' if expect is dict else expect.__name__}, "
-                            f"got {type(d).__name__}")
+        raise ClothFitError(
+            f"{what} {path}: expected a JSON {'object' if expect is dict else expect.__name__}, got {type(d).__name__}"
+        )
     return d
 
 
@@ -72,6 +74,7 @@ def loads(text, what: str = "JSON text", expect=None):
     except (ValueError, RecursionError) as e:
         raise ClothFitError(f"{what}: not valid JSON ({e})") from None
     if expect is not None and not isinstance(d, expect):
-        raise ClothFitError(f"{what}: expected a JSON {'object' if expect is dict else expect.__name__}, "
-                            f"got {type(d).__name__}")
+        raise ClothFitError(
+            f"{what}: expected a JSON {'object' if expect is dict else expect.__name__}, got {type(d).__name__}"
+        )
     return d

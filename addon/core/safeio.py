@@ -3,6 +3,7 @@
 No writer here follows a symlink planted at the destination or at a temporary name, and none
 leaves a half-written file under the destination's name. Every failure is one ClothFitError line.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -18,14 +19,17 @@ def json_text(obj: Any, strict: bool = False, default: Callable[[Any], Any] | No
     """The JSON text the project writes: ``jsonio.dumps`` (indent 1, the one encoder). Kept for its
     callers; new code calls ``jsonio`` (this module knows bytes, not JSON)."""
     from .jsonio import dumps
+
     return dumps(obj, strict, default=default)
 
 
-def atomic_json(path: str | os.PathLike, obj: Any, strict: bool = False,
-                default: Callable[[Any], Any] | None = None) -> None:
+def atomic_json(
+    path: str | os.PathLike, obj: Any, strict: bool = False, default: Callable[[Any], Any] | None = None
+) -> None:
     """Write JSON safely: ``jsonio.write_json`` (see :func:`atomic_write`); ``strict``: no NaN / Infinity.
     Kept for its callers; new code calls ``jsonio.write_json``."""
     from .jsonio import write_json
+
     write_json(path, obj, strict, default)
 
 
@@ -71,7 +75,7 @@ def exclusive_lock(path: str | os.PathLike) -> Iterator[None]:
     lock_path = os.fspath(path) + ".lock"
     try:
         import fcntl
-    except ImportError:           # Windows: no advisory lock; the unique temp files still keep files whole
+    except ImportError:  # Windows: no advisory lock; the unique temp files still keep files whole
         yield
         return
     flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
@@ -84,9 +88,9 @@ def exclusive_lock(path: str | os.PathLike) -> Iterator[None]:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
-            raise ClothFitError(f"another fit is writing {path} (it holds {lock_path}): wait for it, or "
-                                f"choose another --out") from None
+            raise ClothFitError(
+                f"another fit is writing {path} (it holds {lock_path}): wait for it, or choose another --out"
+            ) from None
         yield
     finally:
         os.close(fd)
-

@@ -9,6 +9,7 @@ so ``check_driver`` refuses to start workers from such a process (e.g. Blender's
 A host is named by ``"module:Class"`` and its constructor arguments; its methods are called by name.
 A ``ClothFitError`` raised in a worker comes back as a ``ClothFitError`` in the driver, one line.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -17,9 +18,9 @@ import sys
 import time
 
 from ..core.errors import ClothFitError
-
 from ..core.location import IMPORT_NAME, PACKAGE_DIR, PACKAGE_PARENT
-MAX_RESTARTS = 3          # a Ray actor killed mid-job is restarted this many times (its task re-run)
+
+MAX_RESTARTS = 3  # a Ray actor killed mid-job is restarted this many times (its task re-run)
 
 
 def _package_for_upload() -> str:
@@ -30,6 +31,7 @@ def _package_for_upload() -> str:
         return PACKAGE_DIR
     import shutil
     import tempfile
+
     dst = os.path.join(tempfile.mkdtemp(prefix="clothfit_upload_"), IMPORT_NAME)
     shutil.copytree(PACKAGE_DIR, dst, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
     return dst
@@ -39,21 +41,25 @@ def ray_available() -> bool:
     if os.environ.get("CLOTHFIT_NO_RAY") == "1":
         return False
     import importlib.util
+
     return importlib.util.find_spec("ray") is not None
 
 
 def check_driver(what="Blender workers"):
     """Refuse to start ``what`` from a process that has imported bpy (one-line error)."""
     if "bpy" in sys.modules:
-        raise ClothFitError(f"this process has imported bpy, so the {what} it would start could not import it "
-                            f"(No module named '_bpy'): run the fit from a process without bpy "
-                            f"(python -m clothfit fit ...), or connect to a running Ray cluster started outside Blender")
+        raise ClothFitError(
+            f"this process has imported bpy, so the {what} it would start could not import it "
+            f"(No module named '_bpy'): run the fit from a process without bpy "
+            f"(python -m clothfit fit ...), or connect to a running Ray cluster started outside Blender"
+        )
 
 
 def check_address(address, timeout=3.0):
     """A cluster address (``auto``, ``host:port``, ``ray://host:port``) whose port answers; else a
     one-line error (Ray itself waits minutes on an unreachable address)."""
     import socket
+
     if address == "auto":
         return
     hostport = address.split("://", 1)[-1]
@@ -95,6 +101,7 @@ class _Host:
 
     def node_ip(self):
         import ray
+
         return ray.util.get_node_ip_address()
 
 
@@ -111,7 +118,7 @@ class Executor:
 
     kind = "none"
     workers = 0
-    after_submit = None       # test hook: called with the executor after a batch is submitted
+    after_submit = None  # test hook: called with the executor after a batch is submitted
 
     def map(self, method, arglist):
         raise NotImplementedError
@@ -148,6 +155,7 @@ class RayExecutor(Executor):
             # as a single-machine instance (its Windows/macOS mode): keep a local instance on loopback only
             os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
         import ray
+
         self.ray = ray
         self.address = address
         self.own = False
@@ -160,9 +168,13 @@ class RayExecutor(Executor):
         elif address:
             check_address(address)
             try:
-                ray.init(address=address, include_dashboard=False, log_to_driver=False,
-                         runtime_env={"py_modules": [_package_for_upload()]})
-            except Exception as e:   # ConnectionError, TimeoutError, ValueError... from Ray
+                ray.init(
+                    address=address,
+                    include_dashboard=False,
+                    log_to_driver=False,
+                    runtime_env={"py_modules": [_package_for_upload()]},
+                )
+            except Exception as e:  # ConnectionError, TimeoutError, ValueError... from Ray
                 msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
                 raise ClothFitError(f"cannot connect to the Ray cluster at {address}: {msg}") from None
         else:
@@ -171,8 +183,15 @@ class RayExecutor(Executor):
             os.environ.setdefault("RAY_AUTH_MODE", "disabled")
             kw = {"_temp_dir": os.environ["CLOTHFIT_RAY_TMPDIR"]} if os.environ.get("CLOTHFIT_RAY_TMPDIR") else {}
             try:
-                ray.init(num_cpus=self.workers, include_dashboard=False, _node_ip_address="127.0.0.1",
-                         log_to_driver=False, configure_logging=True, logging_level="ERROR", **kw)
+                ray.init(
+                    num_cpus=self.workers,
+                    include_dashboard=False,
+                    _node_ip_address="127.0.0.1",
+                    log_to_driver=False,
+                    configure_logging=True,
+                    logging_level="ERROR",
+                    **kw,
+                )
             finally:
                 if old is None:
                     os.environ.pop("PYTHONPATH", None)
@@ -190,8 +209,10 @@ class RayExecutor(Executor):
         try:
             out = self.ray.get(refs)
         except self.ray.exceptions.RayActorError as e:
-            raise ClothFitError(f"a Ray worker died {MAX_RESTARTS + 1} times ({type(e).__name__}): "
-                                f"the fit stops, the best result so far is kept") from None
+            raise ClothFitError(
+                f"a Ray worker died {MAX_RESTARTS + 1} times ({type(e).__name__}): "
+                f"the fit stops, the best result so far is kept"
+            ) from None
         return [_unwrap(r) for r in out]
 
     def pids(self):
@@ -230,7 +251,7 @@ def _pool_call(method, args):
 
 
 def _pool_pid(_=None):
-    time.sleep(0.2)        # so that each process of the pool answers once
+    time.sleep(0.2)  # so that each process of the pool answers once
     return os.getpid()
 
 
@@ -254,11 +275,16 @@ class ProcessExecutor(Executor):
     def _start(self):
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
+
         env_old = os.environ.get("PYTHONPATH")
         os.environ["PYTHONPATH"] = PACKAGE_PARENT + (os.pathsep + env_old if env_old else "")
         try:
-            self.pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
-                                            initializer=_pool_init, initargs=(self.factory, self.args))
+            self.pool = ProcessPoolExecutor(
+                self.workers,
+                mp_context=mp.get_context("spawn"),
+                initializer=_pool_init,
+                initargs=(self.factory, self.args),
+            )
             # start every process now (the scenes load in parallel, before the first batch)
             list(self.pool.map(_pool_pid, range(self.workers)))
         finally:
@@ -269,6 +295,7 @@ class ProcessExecutor(Executor):
 
     def map(self, method, arglist):
         from concurrent.futures.process import BrokenProcessPool
+
         for attempt in range(2):
             try:
                 futs = [self.pool.submit(_pool_call, method, tuple(a)) for a in arglist]

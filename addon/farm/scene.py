@@ -8,6 +8,7 @@ objective rasterises (the scene mesh's triangles, the capture times). Capture ti
 frame ``frame_zero + t * fps`` (``frame_zero`` defaults to the scene's ``frame_start``, ``fps`` is
 the scene's), read linearly between whole frames.
 """
+
 from __future__ import annotations
 
 import os
@@ -28,6 +29,7 @@ WORKER = qualified("blender.scene_worker:BlendScene")
 @dataclass
 class SceneMesh:
     """What the rasteriser needs of the scene's cloth."""
+
     triangles: np.ndarray
     n_vertices: int
 
@@ -71,9 +73,9 @@ class BlendSceneEvaluator:
         self.quality, self.bending_model = s["quality"], s["bending_model"]
         self.mesh = SceneMesh(np.asarray(info["triangles"], dtype=np.int64).reshape(-1, 3), int(info["n_vertices"]))
         self.evaluations = 0
-        self.seconds = 0.0          # wall time inside simulate() (workers + transfer)
-        self.worker_seconds = 0.0   # summed simulation time reported by the workers
-        self.worker_cpu_seconds = 0.0   # and their CPU time
+        self.seconds = 0.0  # wall time inside simulate() (workers + transfer)
+        self.worker_seconds = 0.0  # summed simulation time reported by the workers
+        self.worker_cpu_seconds = 0.0  # and their CPU time
 
     @property
     def workers(self):
@@ -93,10 +95,12 @@ class BlendSceneEvaluator:
         bad = (f < lo) | (np.ceil(f - 1e-9) > hi)
         if bad.any():
             k = int(np.nonzero(bad)[0][0])
-            raise ClothFitError(f"capture time {t[k]:g} s is frame {f[k]:g} of {os.path.basename(self.blend)} "
-                                f"(frame zero {self.frame_zero:g}, {self.fps:g} fps), outside the cloth cache of "
-                                f"'{self.object}' (frames {lo}..{hi}): the scene's frame range is shorter than the "
-                                f"capture, or --frame-zero is wrong")
+            raise ClothFitError(
+                f"capture time {t[k]:g} s is frame {f[k]:g} of {os.path.basename(self.blend)} "
+                f"(frame zero {self.frame_zero:g}, {self.fps:g} fps), outside the cloth cache of "
+                f"'{self.object}' (frames {lo}..{hi}): the scene's frame range is shorter than the "
+                f"capture, or --frame-zero is wrong"
+            )
         return f
 
     def scenario(self, times) -> SceneScenario:
@@ -138,13 +142,25 @@ class BlendSceneEvaluator:
     def describe(self) -> dict:
         """What the result JSON says about where the candidates ran."""
         i = self.info
-        return {"backend": "blender", "executor": self.executor.kind, "workers": self.workers,
-                "scene": {"blend": self.blend, "object": self.object, "frame_zero": self.frame_zero,
-                          "fps": self.fps, "cache_frames": [i["cache_start"], i["cache_end"]],
-                          "colliders": i["colliders"], "self_collision": i["self_collision"],
-                          "n_vertices": self.mesh.n_vertices, "blender": i["blender"]},
-                "blender_evaluations": self.evaluations, "blender_seconds": self.seconds,
-                "worker_startup_s": self.startup_s}
+        return {
+            "backend": "blender",
+            "executor": self.executor.kind,
+            "workers": self.workers,
+            "scene": {
+                "blend": self.blend,
+                "object": self.object,
+                "frame_zero": self.frame_zero,
+                "fps": self.fps,
+                "cache_frames": [i["cache_start"], i["cache_end"]],
+                "colliders": i["colliders"],
+                "self_collision": i["self_collision"],
+                "n_vertices": self.mesh.n_vertices,
+                "blender": i["blender"],
+            },
+            "blender_evaluations": self.evaluations,
+            "blender_seconds": self.seconds,
+            "worker_startup_s": self.startup_s,
+        }
 
     def close(self):
         self.executor.close()

@@ -1,7 +1,8 @@
-"""Many independent fits on the same workers (``python -m addon fit-many CAPTURE...``): Ray actors
+"""Many independent fits on the same workers (``python -m clothfit fit-many CAPTURE...``): Ray actors
 (a local instance or a cluster by ``--address``) or spawned processes without Ray. Each fit is the
-one ``python -m addon fit`` runs (``FitJob`` with the same config and seed), so the results are
+one ``python -m clothfit fit`` runs (``FitJob`` with the same config and seed), so the results are
 identical to local runs; the results come back to the driver, which writes them."""
+
 from __future__ import annotations
 
 import os
@@ -19,6 +20,7 @@ class FitRunner:
     def fit(self, capture_path, config: dict) -> dict:
         from ..core.fitting.job import FitConfig, FitJob
         from ..core.observation.capture import load_capture
+
         t0 = time.perf_counter()
         job = FitJob(load_capture(capture_path), FitConfig.from_dict(config))
         res = job.run()
@@ -37,8 +39,12 @@ def fit_many(captures, configs, workers=None, address=None, executor="auto"):
 
 PAPER_RUNNER = qualified("farm.tasks:PaperRunner")
 PAPER_PARTS = ("table1", "fig8", "table2", "optimizers")
-PART_KEYS = {"table1": ("table1", "identifiable"), "fig8": ("fig8",), "table2": ("table2",),
-             "optimizers": ("optimizers",)}
+PART_KEYS = {
+    "table1": ("table1", "identifiable"),
+    "fig8": ("fig8",),
+    "table2": ("table2",),
+    "optimizers": ("optimizers",),
+}
 
 
 class PaperRunner:
@@ -47,7 +53,9 @@ class PaperRunner:
     def part(self, part, out_dir, kwargs: dict) -> dict:
         import contextlib
         import io
+
         from ..core.studies.experiment import run_paper
+
         sub = os.path.join(out_dir, f"part_{part}")
         with contextlib.redirect_stdout(io.StringIO()):
             res = run_paper(os.path.join(sub, "paper.json"), out_dir=sub, only=part, **kwargs)
@@ -67,7 +75,9 @@ def paper_parts(parts, out_dir, kwargs, workers=None, address=None, executor="au
         for k in PART_KEYS[p]:
             if k in r:
                 out[k] = r[k]
-    out["parts"] = {p: {"seconds": r.get("total_seconds"), "worker_pid": r.get("worker_pid")} for p, r in zip(parts, res)}
+    out["parts"] = {
+        p: {"seconds": r.get("total_seconds"), "worker_pid": r.get("worker_pid")} for p, r in zip(parts, res)
+    }
     out["executor"], out["workers"] = kind, n
     out["total_seconds"] = time.perf_counter() - t0
     return out

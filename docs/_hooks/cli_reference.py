@@ -2,9 +2,10 @@
 
 ``docs/cli_reference.md`` holds the marker ``<!--cli-reference-->``; this hook replaces it with every
 command of ``build_parser()`` (its usage, description and options, as ``--help`` prints them).
-The parser is imported from ``clothfit.cli`` (the installed package), else from ``addon.cli`` (a
+The parser is imported from ``clothfit.cli`` (the installed package), else from ``clothfit.cli`` (a
 checkout).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,13 +20,13 @@ def _build_parser():
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     if root not in sys.path:
         sys.path.insert(0, root)
-    for name in ("clothfit.cli", "addon.cli"):
+    for name in ("clothfit.cli", "clothfit.cli"):
         try:
             mod = importlib.import_module(name)
         except ImportError:
             continue
         return mod.build_parser()
-    raise ImportError("neither clothfit.cli nor addon.cli can be imported")
+    raise ImportError("neither clothfit.cli nor clothfit.cli can be imported")
 
 
 def _subcommands(parser):

@@ -15,6 +15,7 @@ simulate), ``rendering`` (Render Silhouettes), ``footage`` (extract, load a capt
 backgrounds), ``fitting`` (fit session, run, apply), ``overlays``; ``steps`` cuts long calls into
 steps for the modal operators (``render_steps``, ``simulate_steps``, ``extract_steps``).
 """
+
 from ...core.errors import ClothFitError  # noqa: F401
 from ...core.fitting.result import FitResult  # noqa: F401 (what run_fit and load_result return)
 from .. import render as R  # noqa: F401

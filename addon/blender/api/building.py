@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Scene building: the cloth mesh, the handle empties of the Empties manipulation, and Simulate
 (the core simulation of the scene's parameters, baked into shape keys)."""
+
 from __future__ import annotations
 
 import threading
@@ -27,9 +28,11 @@ def build_cloth(scene):
     p = props(scene)
     grid = capture_scenario(scene).grid if p.scenario_source == "CAPTURE" else grid_from_props(scene)
     if p.scenario_source == "EMPTIES":  # vertex groups only: no need to sample (or validate) the empties yet
-        handles = [Handle(v, [0.0], grid.rest[v][None], link.release_time if link.use_release else None)
-                   for link, v in ((lk, lk.row * grid.nx + lk.column) for lk in p.handles)
-                   if link.row < grid.ny and link.column < grid.nx]
+        handles = [
+            Handle(v, [0.0], grid.rest[v][None], link.release_time if link.use_release else None)
+            for link, v in ((lk, lk.row * grid.nx + lk.column) for lk in p.handles)
+            if link.row < grid.ny and link.column < grid.nx
+        ]
     else:
         handles = scenario_for(scene, grid).handles
     obj = S.build_cloth(scene, grid, handles)
@@ -48,8 +51,10 @@ def add_handle_empty(scene, row=None, column=None):
     column = p.new_handle_column if column is None or column < 0 else int(column)
     grid = scene_grid(scene)
     if not (0 <= row < grid.ny and 0 <= column < grid.nx):
-        raise ClothFitError(f"vertex row {row}, column {column} is outside the {grid.nx}x{grid.ny} cloth grid "
-                            f"(rows 0..{grid.ny - 1}, columns 0..{grid.nx - 1})")
+        raise ClothFitError(
+            f"vertex row {row}, column {column} is outside the {grid.nx}x{grid.ny} cloth grid "
+            f"(rows 0..{grid.ny - 1}, columns 0..{grid.nx - 1})"
+        )
     v = row * grid.nx + column
     for i, link in enumerate(p.handles):
         if (link.row, link.column) == (row, column):
@@ -96,6 +101,7 @@ def simulate_steps(scene, threaded=True) -> Steps:
 
 def _simulate_work(steps, scene, threaded):
     from ...core.physics.models import simulate as core_simulate
+
     times = parse_times(props(scene).frame_times)
     bake_times = sorted(set([0.0] + times))
     inp = read_scene(scene, bake_times)
@@ -111,10 +117,11 @@ def _simulate_work(steps, scene, threaded):
                 box["res"] = core_simulate(sc, [par])
             except BaseException as e:  # noqa: BLE001 - handed to the main thread, raised there
                 box["err"] = e
+
         worker = threading.Thread(target=work, name="clothfit-simulate", daemon=True)
         worker.start()
         while worker.is_alive():
-            worker.join(0.01)       # a short wait per step: no busy loop, the UI stays responsive
+            worker.join(0.01)  # a short wait per step: no busy loop, the UI stays responsive
             yield 0.5, f"simulating ({time.time() - t0:.1f} s)"
         if "err" in box:
             raise box["err"]
@@ -122,10 +129,16 @@ def _simulate_work(steps, scene, threaded):
     else:
         res = core_simulate(sc, [par])
     if res.exploded[0]:
-        raise ClothFitError(f"the simulation with m={par.m:g}, k={par.k:g}, l={par.l:g}, d={par.d:g} is unstable: "
-                            f"{res.reason[0]}")
+        raise ClothFitError(
+            f"the simulation with m={par.m:g}, k={par.k:g}, l={par.l:g}, d={par.d:g} is unstable: {res.reason[0]}"
+        )
     yield 0.9, "baking shape keys"
     frames = S.bake_shape_keys(scene, inp.cloth, bake_times, res.positions[0])
     scene.frame_set(frames[0])
-    return {"frames": frames, "times": bake_times, "seconds": time.time() - t0, "notes": list(inp.notes),
-            "scenario": sc}
+    return {
+        "frames": frames,
+        "times": bake_times,
+        "seconds": time.time() - t0,
+        "notes": list(inp.notes),
+        "scenario": sc,
+    }

@@ -2,6 +2,7 @@
 """Cameras in and out of the scene: the rig from the settings or from core cameras, calibrated
 cameras imported (OpenCV, COLMAP, our JSON) and exported. Cameras that still show their imported
 camera are exported exactly (``reading.exact_rig_cameras``)."""
+
 from __future__ import annotations
 
 import os
@@ -38,6 +39,7 @@ def import_cameras(scene, path=None):
     """Calibrated cameras (OpenCV FileStorage YAML/JSON/XML file or folder, COLMAP text model,
     our cameras JSON) -> the rig. Returns (cameras, notes)."""
     from ...core.footage import calib_io
+
     p = props(scene)
     src = abspath(path if path else p.cameras_file, "camera file")
     cams = calib_io.import_cameras(src)
@@ -54,6 +56,7 @@ def _refuse_capture_files(dst, fmt):
     """A camera export must not replace a capture's own cameras.json / capture.json (the capture's
     silhouettes belong to those cameras)."""
     from ...core.observation.capture import CAMERAS_JSON, CAPTURE_JSON
+
     if fmt in ("OPENCV", "JSON"):
         folder, names = os.path.dirname(dst), [os.path.basename(dst)]
     else:
@@ -69,8 +72,10 @@ def _refuse_capture_files(dst, fmt):
         pass
     hit = [n for n in names if n in cap_files]
     if hit:
-        raise ClothFitError(f"camera export path {dst} is the camera file of the capture in {folder}: exporting "
-                            f"there would replace the cameras its silhouettes were taken with; choose another path")
+        raise ClothFitError(
+            f"camera export path {dst} is the camera file of the capture in {folder}: exporting "
+            f"there would replace the cameras its silhouettes were taken with; choose another path"
+        )
 
 
 def export_cameras(scene, path=None, fmt=None):
@@ -78,6 +83,7 @@ def export_cameras(scene, path=None, fmt=None):
     still show their imported/loaded camera are written exactly (float64, distortion); moved
     ones as Blender shows them. Returns (path, cameras, names of cameras written from Blender)."""
     from ...core.footage import calib_io
+
     p = props(scene)
     fmt = fmt or p.cameras_export_format
     if fmt not in EXPORT_FORMATS:

@@ -2,6 +2,7 @@
 """Fitting from the scene: the core ``FitJob`` in a ``FitSession`` that the modal operator steps
 (one optimiser generation per step, in a worker thread), the synchronous ``run_fit``, and the
 result back into the scene (``apply_fit``: m, k, l, d; ``apply_blender_cloth``: a Cloth modifier)."""
+
 from __future__ import annotations
 
 import contextlib
@@ -21,13 +22,14 @@ from .building import simulate
 from .reading import capture_dir, cloth_object, params_to_scene, props, scene_scenario
 
 RESULT_JSON = "fit_result.json"
-RESULT_JSON_BLENDER = "fit_result_blender.json"   # a Blender-cloth fit keeps the paper fit's result
+RESULT_JSON_BLENDER = "fit_result_blender.json"  # a Blender-cloth fit keeps the paper fit's result
 BLENDER_CLOTH_NAME = "Blender Cloth (fitted)"
 
 
 def fit_config(scene, capture):
     """The core ``FitConfig`` the scene's Fitting settings describe for ``capture``."""
     from ...core.fitting.job import FitConfig
+
     p = props(scene)
     ncam = len(capture.cameras)
     if p.train_cameras > ncam:
@@ -39,13 +41,25 @@ def fit_config(scene, capture):
         times = have or None
     res = None if p.fit_resolution == "FULL" else [int(x) for x in p.fit_resolution.split("x")]
     model = None
-    if p.fit_model == "BLENDER":      # Blender's cloth for this scene's frame rate
+    if p.fit_model == "BLENDER":  # Blender's cloth for this scene's frame rate
         from ..cloth import scene_fps
-        model = {"name": "blender", "fps": scene_fps(scene), "quality": int(p.fit_quality),
-                 "bending_model": p.fit_bending_model}
-    return FitConfig(train_cameras=train, train_times=times, optimizer=p.optimizer, seed=p.seed,
-                     max_evaluations=p.max_evaluations, resolution=res,
-                     cloth_mass=p.fit_cloth_mass if p.fit_cloth_mass > 0 else None, model=model)
+
+        model = {
+            "name": "blender",
+            "fps": scene_fps(scene),
+            "quality": int(p.fit_quality),
+            "bending_model": p.fit_bending_model,
+        }
+    return FitConfig(
+        train_cameras=train,
+        train_times=times,
+        optimizer=p.optimizer,
+        seed=p.seed,
+        max_evaluations=p.max_evaluations,
+        resolution=res,
+        cloth_mass=p.fit_cloth_mass if p.fit_cloth_mass > 0 else None,
+        model=model,
+    )
 
 
 class FitSession:
@@ -57,9 +71,9 @@ class FitSession:
         self.result_path = result_path
         self.timer = None
         self.started = time.time()
-        self.threaded = False       # the modal operator runs generations in a worker thread
-        self.worker = None          # threading.Thread running one job.step() (threaded mode)
-        self._outcome = None        # (more, exception) of the worker's step
+        self.threaded = False  # the modal operator runs generations in a worker thread
+        self.worker = None  # threading.Thread running one job.step() (threaded mode)
+        self._outcome = None  # (more, exception) of the worker's step
 
     def _work(self):
         try:
@@ -79,8 +93,10 @@ class FitSession:
     def status_text(self):
         j = self.job
         bp = j.best_params
-        s = (f"Cloth Fit: generation {j.generation}, {j.evaluations}/{j.config.max_evaluations} evaluations, "
-             f"best E_all {j.best_error:.4g}")
+        s = (
+            f"Cloth Fit: generation {j.generation}, {j.evaluations}/{j.config.max_evaluations} evaluations, "
+            f"best E_all {j.best_error:.4g}"
+        )
         if bp:
             s += " | " + _params_text(bp)
         return s + " | Esc cancels (keeps the best)"
@@ -90,14 +106,17 @@ def _params_text(bp) -> str:
     """One line of fitted parameters: paper m, k, l, d or the main Blender cloth settings."""
     if "k" in bp:
         return f"m={bp['m']:.3g} k={bp['k']:.4g} l={bp['l']:.4g} d={bp['d']:.3g}"
-    return (f"tension={bp['tension_stiffness']:.4g} shear={bp['shear_stiffness']:.4g} "
-            f"bending={bp['bending_stiffness']:.4g} air={bp['air_damping']:.4g}")
+    return (
+        f"tension={bp['tension_stiffness']:.4g} shear={bp['shear_stiffness']:.4g} "
+        f"bending={bp['bending_stiffness']:.4g} air={bp['air_damping']:.4g}"
+    )
 
 
 def start_fit(scene, capture=None):
     """Load the capture, build the core ``FitJob``; returns a ``FitSession``."""
     from ...core.fitting.job import FitJob
     from ...core.observation.capture import load_capture as core_load
+
     p = props(scene)
     if p.fit_running:
         raise ClothFitError("a fit is already running in this scene")
@@ -142,6 +161,7 @@ def fit_tick(session):
     True after a generation when there are more (the next one is started at once), False when the
     job is finished. Exceptions of the worker are re-raised here, on the main thread."""
     import threading
+
     if session.worker is not None:
         if session.worker.is_alive():
             return None
@@ -207,7 +227,7 @@ def run_fit(scene, callback=None):
                 break
     except BaseException as e:
         props(scene).fit_running = False
-        if isinstance(e, Exception):       # keep the best so far on disk before reporting the error
+        if isinstance(e, Exception):  # keep the best so far on disk before reporting the error
             sess.job.fail(str(e) if isinstance(e, ClothFitError) else f"{type(e).__name__}: {e}")
             with contextlib.suppress(ClothFitError, OSError):
                 sess.job.save_result(sess.result_path)
@@ -254,18 +274,22 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
     Returns (object, message)."""
     from ...core.physics.models import BlenderModel
     from .. import cloth as BC
+
     res = FitResult.from_json(result) if result is not None else load_result(scene)
     model, row = res.replay()
     if not isinstance(model, BlenderModel):
-        raise ClothFitError("the fit result is a paper-model fit: it has no Blender cloth settings "
-                            "(fit with the Blender Cloth model)")
+        raise ClothFitError(
+            "the fit result is a paper-model fit: it has no Blender cloth settings (fit with the Blender Cloth model)"
+        )
     settings = model.settings(row)
     fps = BC.scene_fps(scene)
     note = ""
     if abs(fps - model.fps) > 1e-6:
         if not set_fps:
-            raise ClothFitError(f"the settings are for {model.fps:g} fps but the scene runs at {fps:g} fps: "
-                                f"Blender's cloth moves per frame, so they would move it differently")
+            raise ClothFitError(
+                f"the settings are for {model.fps:g} fps but the scene runs at {fps:g} fps: "
+                f"Blender's cloth moves per frame, so they would move it differently"
+            )
         BC.set_scene_fps(scene, model.fps)
         note = f"; scene frame rate set from {fps:g} to {model.fps:g} fps"
     own = None
@@ -276,26 +300,33 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
     if obj is None or (own is not None and obj == own):
         sc, _ = scene_scenario(scene)
         from ...core.physics.scenario import fitted_scenario
-        sc = fitted_scenario(sc, {"handles": res.get("handles")})     # the pins where the fit put them
+
+        sc = fitted_scenario(sc, {"handles": res.get("handles")})  # the pins where the fit put them
         net, plan = model.plan(sc)
         t_off = res.get("time_offset_s")
         if t_off:
-            note += (f"; the fit read the footage {1000 * t_off:+.1f} ms off: the release is at capture time "
-                     f"{1000 * t_off:+.1f} ms")
+            note += (
+                f"; the fit read the footage {1000 * t_off:+.1f} ms off: the release is at capture time "
+                f"{1000 * t_off:+.1f} ms"
+            )
         old = bpy.data.objects.get(BLENDER_CLOTH_NAME)
         if old is not None:
             me = old.data
             bpy.data.objects.remove(old, do_unlink=True)
             if me is not None and me.users == 0:
                 bpy.data.meshes.remove(me)
-        new = BC.build_cloth_object(scene, net, plan, settings, name=BLENDER_CLOTH_NAME,
-                                    frame_start=scene.frame_start)
-        return new, (f"Built '{new.name}' with the fitted Cloth settings, pins and release of the scenario "
-                     f"(t = 0 at frame {scene.frame_start + plan.release_frame}){note}")
+        new = BC.build_cloth_object(scene, net, plan, settings, name=BLENDER_CLOTH_NAME, frame_start=scene.frame_start)
+        return new, (
+            f"Built '{new.name}' with the fitted Cloth settings, pins and release of the scenario "
+            f"(t = 0 at frame {scene.frame_start + plan.release_frame}){note}"
+        )
     if obj.type != "MESH":
         raise ClothFitError(f"the active object '{obj.name}' is a {obj.type.lower()}, not a mesh")
     cl = BC.cloth_modifier(obj) or obj.modifiers.new("Cloth", "CLOTH")
     BC.apply_settings(cl, settings)
     pins = cl.settings.vertex_group_mass
-    return obj, (f"Cloth settings applied to '{obj.name}'"
-                 + (f" (pins: vertex group '{pins}')" if pins else " (no pin group set)") + note)
+    return obj, (
+        f"Cloth settings applied to '{obj.name}'"
+        + (f" (pins: vertex group '{pins}')" if pins else " (no pin group set)")
+        + note
+    )

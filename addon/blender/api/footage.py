@@ -2,6 +2,7 @@
 """Footage and captures in the scene: silhouettes extracted from camera footage into a capture,
 a capture loaded (its cameras become the rig, its scenario the settings), and the observed
 silhouettes (or overlays) shown as camera background images."""
+
 from __future__ import annotations
 
 import math
@@ -28,7 +29,7 @@ from .steps import Steps
 
 EXTRACT_GENERATOR = "addon.core.extract"
 THRESHOLD_MODES = {"AUTO": "auto", "OTSU": "otsu", "NOISE": "noise"}
-OVERLAY_DIR = "overlays"   # <capture>/overlays/<camera>/<frame>.png (Overlays writes them)
+OVERLAY_DIR = "overlays"  # <capture>/overlays/<camera>/<frame>.png (Overlays writes them)
 
 
 def parse_camera_thresholds(spec: str, camera_names=None) -> dict:
@@ -50,8 +51,10 @@ def parse_camera_thresholds(spec: str, camera_names=None) -> dict:
         if name in out:
             raise ClothFitError(f"per-camera threshold: camera '{name}' is given twice")
         if camera_names is not None and name not in camera_names:
-            raise ClothFitError(f"per-camera threshold {item!r}: no camera '{name}' in the calibration (cameras: "
-                                f"{', '.join(list(camera_names)[:20])})")
+            raise ClothFitError(
+                f"per-camera threshold {item!r}: no camera '{name}' in the calibration (cameras: "
+                f"{', '.join(list(camera_names)[:20])})"
+            )
         out[name] = v
     return out
 
@@ -62,6 +65,7 @@ def _footage_cameras(scene, footage, sizes=None):
     (imported or loaded). Returns (cameras, where they came from)."""
     from ...core.footage import calib_io
     from ...core.footage import extract as X
+
     p = props(scene)
     if p.extract_calibration.strip():
         path = abspath(p.extract_calibration, "calibration")
@@ -75,8 +79,10 @@ def _footage_cameras(scene, footage, sizes=None):
         return calib_io.import_cameras(path, sizes=sizes), path
     if p.rig_cameras_json.strip():
         return cameras_from_json(p.rig_cameras_json), "the scene's imported cameras"
-    raise ClothFitError(f"footage {footage}: no calibration: set Calibration, put a cameras.yml (or footage.json, "
-                        f"or a COLMAP folder) in the footage folder, or import cameras into the rig first")
+    raise ClothFitError(
+        f"footage {footage}: no calibration: set Calibration, put a cameras.yml (or footage.json, "
+        f"or a COLMAP folder) in the footage folder, or import cameras into the rig first"
+    )
 
 
 def extract_silhouettes(scene, progress=None):
@@ -102,12 +108,16 @@ def extract_steps(scene) -> Steps:
 
 def _extract_work(steps, scene):
     from ...core.footage import extract as X
+
     p = props(scene)
     footage = abspath(p.footage_dir, "footage directory")
     if not os.path.isdir(footage):
         raise ClothFitError(f"footage folder not found: {footage}")
-    out = abspath(p.extract_capture_dir, "output capture directory") if p.extract_capture_dir.strip() \
+    out = (
+        abspath(p.extract_capture_dir, "output capture directory")
+        if p.extract_capture_dir.strip()
         else capture_dir(scene)
+    )
     if os.path.normpath(out) == os.path.normpath(footage):
         raise ClothFitError(f"the output capture directory is the footage folder {footage}: choose another one")
     refuse_foreign_capture(out, EXTRACT_GENERATOR, "Extract Silhouettes", "extractions")
@@ -115,6 +125,7 @@ def _extract_work(steps, scene):
     sizes = None
     if videos:
         from ...core.footage import video as V
+
         sizes = V.video_sizes(footage)
     cams, cam_source = _footage_cameras(scene, footage, sizes)
     times = parse_times(p.extract_times) if p.extract_times.strip() else None
@@ -124,8 +135,10 @@ def _extract_work(steps, scene):
     opts = X.ExtractOptions(
         threshold=THRESHOLD_MODES.get(mode, float(p.extract_threshold)),
         thresholds=parse_camera_thresholds(p.extract_camera_thresholds, [c.name for c in cams]),
-        luma_weight=float(p.extract_luma_weight), shadow_min=float(p.extract_shadow_min),
-        debug_dir=os.path.join(out, "debug") if p.extract_debug else None).check()
+        luma_weight=float(p.extract_luma_weight),
+        shadow_min=float(p.extract_shadow_min),
+        debug_dir=os.path.join(out, "debug") if p.extract_debug else None,
+    ).check()
     scenario, notes = None, []
     if p.scenario_source == "EMPTIES":
         ft = times
@@ -141,8 +154,11 @@ def _extract_work(steps, scene):
             raise ClothFitError("extraction from videos needs a Sync file (or Sync from Flash)")
         if not p.footage_plates.strip():
             raise ClothFitError("extraction from videos needs the Plates folder")
-        plates, find_sync, flash_time = abspath(p.footage_plates, "plates folder"), p.footage_find_sync, \
-            p.footage_flash_time
+        plates, find_sync, flash_time = (
+            abspath(p.footage_plates, "plates folder"),
+            p.footage_find_sync,
+            p.footage_flash_time,
+        )
 
     # from here on no bpy: the worker thread runs the core extraction
     events, stop, box = queue.Queue(), threading.Event(), {}
@@ -157,13 +173,32 @@ def _extract_work(steps, scene):
                 if find_sync:
                     sync = V.flash_sync(footage, names, flash_time, sync_path)
                     notes.append("sync from the flash: " + ", ".join(f"{k} {v:.4f} s" for k, v in sync.items()))
-                box["report"] = X.extract_videos(footage, plates, sync, out, cams, times, scenario=scenario,
-                                                 options=opts, progress=cb, should_stop=stop.is_set)
+                box["report"] = X.extract_videos(
+                    footage,
+                    plates,
+                    sync,
+                    out,
+                    cams,
+                    times,
+                    scenario=scenario,
+                    options=opts,
+                    progress=cb,
+                    should_stop=stop.is_set,
+                )
             else:
-                box["report"] = X.extract_capture(footage, out, cameras=cams, frame_times=times, scenario=scenario,
-                                                  options=opts, progress=cb, should_stop=stop.is_set)
+                box["report"] = X.extract_capture(
+                    footage,
+                    out,
+                    cameras=cams,
+                    frame_times=times,
+                    scenario=scenario,
+                    options=opts,
+                    progress=cb,
+                    should_stop=stop.is_set,
+                )
         except BaseException as e:  # noqa: BLE001 - handed to the main thread, raised there
             box["err"] = e
+
     worker = threading.Thread(target=work, name="clothfit-extract", daemon=True)
     worker.start()
     steps.kept = "nothing was written"
@@ -175,7 +210,7 @@ def _extract_work(steps, scene):
             except queue.Empty:
                 pass
             yield fraction, text
-    except GeneratorExit:           # cancelled: the cameras done so far become the capture
+    except GeneratorExit:  # cancelled: the cameras done so far become the capture
         stop.set()
         worker.join()
         steps.kept = _kept_after_stop(box, out, len(cams))
@@ -187,8 +222,10 @@ def _extract_work(steps, scene):
     cap = load_capture(scene, out)
     thr = [r["threshold"] for r in report["cameras"].values()]
     nw = len(report.get("warnings", []))
-    p.extract_status = (f"{cap.n_cameras} cameras x {cap.n_frames} frames, thresholds {min(thr):.2f}.."
-                        f"{max(thr):.2f}, {nw} warning{'s' if nw != 1 else ''}")
+    p.extract_status = (
+        f"{cap.n_cameras} cameras x {cap.n_frames} frames, thresholds {min(thr):.2f}.."
+        f"{max(thr):.2f}, {nw} warning{'s' if nw != 1 else ''}"
+    )
     report["calibration"] = cam_source
     report["notes"] = notes
     return cap, report
@@ -201,8 +238,10 @@ def _kept_after_stop(box, out, n):
         return "nothing was written" + ("" if "stopped before the first camera" in first else f" ({first})")
     done = box["report"].get("stopped", {}).get("cameras_done", n)
     if done < n:
-        return (f"kept a capture of the {done} of {n} cameras extracted so far in {out} (not loaded: Load "
-                f"Capture loads it; extract again for every camera)")
+        return (
+            f"kept a capture of the {done} of {n} cameras extracted so far in {out} (not loaded: Load "
+            f"Capture loads it; extract again for every camera)"
+        )
     return f"kept the whole capture in {out} (it finished before the stop; not loaded: Load Capture loads it)"
 
 
@@ -210,6 +249,7 @@ def load_capture(scene, path=None):
     """Read and fully validate a capture; its cameras become the rig, its scenario the settings,
     and each camera shows its observed silhouette (frame ``view_frame``) as background image."""
     from ...core.observation.capture import load_capture as core_load
+
     p = props(scene)
     root = abspath(path, "capture directory") if path else capture_dir(scene)
     cap = core_load(root)
@@ -222,7 +262,7 @@ def load_capture(scene, path=None):
     released = [h for h in cap.scenario.handles if h.release_time is not None]
     if released and released[0].vertex in g.corners():
         p.released_corner = g.corners().index(released[0].vertex)
-    p.capture_dir = cap.root          # the folder, also when ``path`` is its capture.json
+    p.capture_dir = cap.root  # the folder, also when ``path`` is its capture.json
     p.scenario_source = "CAPTURE"
     p["view_frame"] = min(p.view_frame, cap.n_frames - 1)
     show_observations(scene, p.view_frame, cap)
@@ -260,6 +300,7 @@ def overlay_path(cap, ci, fi):
 def show_observations(scene, frame_index, cap=None, kind="observed"):
     """Camera backgrounds: observed silhouettes (or overlays) of capture frame ``frame_index``."""
     from ...core.observation.capture import load_capture as core_load
+
     cap = cap or core_load(capture_dir(scene))
     fi = max(0, min(int(frame_index), cap.n_frames - 1))
     objs = {o.name: o for o in S.rig_objects(scene)}

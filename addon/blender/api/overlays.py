@@ -2,6 +2,7 @@
 """Overlays: observed against model silhouettes per camera and frame (the model's from the core
 rasteriser or from Blender renders of the baked cloth), E_sil per image, a contact sheet; the
 cameras then show their overlay as background."""
+
 from __future__ import annotations
 
 import os
@@ -19,6 +20,7 @@ def model_masks_core(scene, cap, frame_indices):
     """Model silhouettes [camera][frame] from the core simulation and rasteriser."""
     from ...core.observation.raster import silhouette
     from ...core.physics.models import simulate as core_simulate
+
     sc = cap.scenario.with_frames([float(cap.frame_times[i]) for i in frame_indices])
     res = core_simulate(sc, [params_from_scene(scene)])
     if res.exploded[0]:
@@ -32,9 +34,11 @@ def model_masks_blender(scene, cap, frame_indices):
     """Model silhouettes [camera][frame] rendered by Blender from the baked cloth."""
     distorted = [c.name for c in cap.cameras if c.dist.size and np.any(c.dist != 0)]
     if distorted:
-        raise ClothFitError(f"the capture's cameras have lens distortion ({', '.join(distorted[:4])}"
-                            f"{', ...' if len(distorted) > 4 else ''}) but Blender renders pinhole images: "
-                            f"choose the Core model source for these overlays")
+        raise ClothFitError(
+            f"the capture's cameras have lens distortion ({', '.join(distorted[:4])}"
+            f"{', ...' if len(distorted) > 4 else ''}) but Blender renders pinhole images: "
+            f"choose the Core model source for these overlays"
+        )
     cloth = cloth_object(scene)
     baked = {round(t, 3) for t in S.baked_times(cloth)}
     times = [float(cap.frame_times[i]) for i in frame_indices]
@@ -71,6 +75,7 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
         overlay_image,
         write_rgb,
     )
+
     p = props(scene)
     cap = core_load(capture_dir(scene))
     fidx = list(range(cap.n_frames)) if frame_indices is None else [int(i) for i in frame_indices]
@@ -87,8 +92,9 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
             obs, ign = cap.load_observation(ci, fi)
             mod = model[ci][k]
             if mod.shape != obs.shape:
-                raise ClothFitError(f"camera '{c.name}': model silhouette {mod.shape} and observed {obs.shape} differ "
-                                    f"in size")
+                raise ClothFitError(
+                    f"camera '{c.name}': model silhouette {mod.shape} and observed {obs.shape} differ in size"
+                )
             # pixels of unknown truth (occluders) leave eq. 6: the model is not judged there
             errs[ci, k] = e_sil(obs, mod if ign is None else mod & ~ign, name=cap.silhouette_path(ci, fi))
             img = overlay_image(obs, mod, ign)
@@ -103,12 +109,19 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
         write_rgb(sheet_path, sheet)
         img = _load_image("clothfit contact sheet", sheet_path)
         img.use_fake_user = False
-    summary = {"source": source, "params": params_from_scene(scene).as_dict(),
-               "frames": fidx, "times": [float(cap.frame_times[i]) for i in fidx],
-               "cameras": cap.camera_names, "E_sil_pct": (100 * errs).tolist(),
-               "mean_E_sil_pct": float(100 * errs.mean()), "contact_sheet": sheet_path,
-               "contact_sheet_frame": sheet_fi}
+    summary = {
+        "source": source,
+        "params": params_from_scene(scene).as_dict(),
+        "frames": fidx,
+        "times": [float(cap.frame_times[i]) for i in fidx],
+        "cameras": cap.camera_names,
+        "E_sil_pct": (100 * errs).tolist(),
+        "mean_E_sil_pct": float(100 * errs.mean()),
+        "contact_sheet": sheet_path,
+        "contact_sheet_frame": sheet_fi,
+    }
     from ...core.jsonio import write_json
+
     write_json(os.path.join(out_dir, "summary.json"), summary)
     p.overlay_dir = out_dir
     p.overlay_error = summary["mean_E_sil_pct"]

@@ -6,6 +6,7 @@ times, the rig's cameras, the cloth's grid, the manipulation (scenario) and the 
 steps then work on those core objects (and on the few Blender objects a render needs). The
 smaller readers below are what it is made of, and stay usable from scripts.
 """
+
 from __future__ import annotations
 
 import math
@@ -23,6 +24,7 @@ from ...core.physics.scenario import ClothGrid, Handle, Scenario, paper_scenario
 from .. import scene as S
 
 # ================================================================ settings
+
 
 def props(scene):
     p = getattr(scene, "clothfit", None)
@@ -62,8 +64,10 @@ def abspath(path: str, what: str) -> str:
     if not path:
         raise ClothFitError(f"no {what} given")
     if path.startswith("//") and not bpy.data.filepath:
-        raise ClothFitError(f"{what} {path!r} is relative to the .blend file, which is not saved yet: "
-                            f"save the file or give an absolute path")
+        raise ClothFitError(
+            f"{what} {path!r} is relative to the .blend file, which is not saved yet: "
+            f"save the file or give an absolute path"
+        )
     return os.path.normpath(bpy.path.abspath(path))
 
 
@@ -86,13 +90,21 @@ def params_to_scene(scene, params):
 
 # ===================================================================== rig
 
+
 def rig_from_props(scene):
     p = props(scene)
     if p.rig_source == "PRESET":
         return load_rig(bpy.path.abspath(p.rig_preset) if p.rig_preset.startswith("//") else p.rig_preset)
-    return ring_rig(n_per_ring=(p.ring_cameras,), elevations_deg=(p.ring_elevation,), distance=p.ring_distance,
-                    target=(0.0, 0.0, p.ring_target_z), width=p.ring_width, height=p.ring_height, fx=p.ring_fx,
-                    azimuth_offsets_deg=(0.0,))
+    return ring_rig(
+        n_per_ring=(p.ring_cameras,),
+        elevations_deg=(p.ring_elevation,),
+        distance=p.ring_distance,
+        target=(0.0, 0.0, p.ring_target_z),
+        width=p.ring_width,
+        height=p.ring_height,
+        fx=p.ring_fx,
+        azimuth_offsets_deg=(0.0,),
+    )
 
 
 def rig_cameras(scene):
@@ -100,10 +112,10 @@ def rig_cameras(scene):
     return S.rig_cameras(scene)
 
 
-PAR_APPROX_LIMIT = 0.01      # fx/fy ratios of one rig may differ this much (relative) and still be shown
+PAR_APPROX_LIMIT = 0.01  # fx/fy ratios of one rig may differ this much (relative) and still be shown
 
 
-EXACT_MATCH_TOL = {"K": 1e-3, "R": 1e-5, "C": 1e-5}   # px, -, m: a Blender camera still shows its exact one
+EXACT_MATCH_TOL = {"K": 1e-3, "R": 1e-5, "C": 1e-5}  # px, -, m: a Blender camera still shows its exact one
 
 
 def cameras_to_json(cameras) -> str:
@@ -145,31 +157,40 @@ def blender_view_cameras(cameras):
             raise ClothFitError(
                 f"camera '{cameras[worst].name}' has fx/fy = {pars[worst]:.6g}, {100 * off:.2f} % "
                 f"away from the rig's median {par:.6g}: Blender has one pixel aspect per scene, so the cameras of a "
-                f"rig must share fx/fy (within {100 * PAR_APPROX_LIMIT:g} % they are shown approximately)")
+                f"rig must share fx/fy (within {100 * PAR_APPROX_LIMIT:g} % they are shown approximately)"
+            )
         shown, off = [], 0.0
         for c in cameras:
             K = c.K.copy()
             K[1, 1] = K[0, 0] / par
             off = max(off, abs(K[1, 1] - c.K[1, 1]))
             shown.append(Camera(K, c.R, c.t, c.width, c.height, c.name))
-        notes.append(f"the cameras' fx/fy differ ({pars.min():.6g} to {pars.max():.6g}) but Blender has one pixel "
-                     f"aspect per scene: the Blender cameras use fx/fy = {par:.6g} (fy off by up to {off:.3g} px); "
-                     f"export keeps the exact cameras")
+        notes.append(
+            f"the cameras' fx/fy differ ({pars.min():.6g} to {pars.max():.6g}) but Blender has one pixel "
+            f"aspect per scene: the Blender cameras use fx/fy = {par:.6g} (fy off by up to {off:.3g} px); "
+            f"export keeps the exact cameras"
+        )
     else:
         shown = [Camera(c.K, c.R, c.t, c.width, c.height, c.name) for c in cameras]
     distorted = [c.name for c in cameras if c.dist.size and np.any(c.dist != 0)]
     if distorted:
-        notes.append(f"{len(distorted)} camera(s) have lens distortion ({', '.join(distorted[:4])}"
-                     f"{', ...' if len(distorted) > 4 else ''}): Blender shows the undistorted pinhole view; "
-                     f"the exact cameras (with distortion) are kept for export and fitting")
+        notes.append(
+            f"{len(distorted)} camera(s) have lens distortion ({', '.join(distorted[:4])}"
+            f"{', ...' if len(distorted) > 4 else ''}): Blender shows the undistorted pinhole view; "
+            f"the exact cameras (with distortion) are kept for export and fitting"
+        )
     S.check_rig(shown)
     return shown, notes
 
 
 def _same_view(a, b):
     tol = EXACT_MATCH_TOL
-    return ((a.width, a.height) == (b.width, b.height) and np.abs(a.K - b.K).max() <= tol["K"]
-            and np.abs(a.R - b.R).max() <= tol["R"] and np.abs(a.center - b.center).max() <= tol["C"])
+    return (
+        (a.width, a.height) == (b.width, b.height)
+        and np.abs(a.K - b.K).max() <= tol["K"]
+        and np.abs(a.R - b.R).max() <= tol["R"]
+        and np.abs(a.center - b.center).max() <= tol["C"]
+    )
 
 
 def exact_rig_cameras(scene, objs=None):
@@ -203,6 +224,7 @@ def exact_rig_cameras(scene, objs=None):
 
 # =================================================================== cloth
 
+
 def grid_from_props(scene) -> ClothGrid:
     p = props(scene)
     return ClothGrid(p.cloth_nx, side=p.cloth_side, height=p.cloth_height)
@@ -211,6 +233,7 @@ def grid_from_props(scene) -> ClothGrid:
 def capture_scenario(scene):
     """The loaded capture's scenario (handles, settling), for scenario source CAPTURE."""
     from ...core.observation.capture import load_capture as core_load
+
     return core_load(capture_dir(scene)).scenario
 
 
@@ -224,8 +247,10 @@ def scenario_for(scene, grid: ClothGrid, times=None, notes=None):
         sc = capture_scenario(scene)
         g = sc.grid
         if (g.nx, g.ny) != (grid.nx, grid.ny):
-            raise ClothFitError(f"the capture's cloth is a {g.nx}x{g.ny} grid but the scene's cloth is "
-                                f"{grid.nx}x{grid.ny}: rebuild the cloth")
+            raise ClothFitError(
+                f"the capture's cloth is a {g.nx}x{g.ny} grid but the scene's cloth is "
+                f"{grid.nx}x{grid.ny}: rebuild the cloth"
+            )
         return sc.with_frames(times)
     if p.scenario_source == "EMPTIES":
         return empties_scenario(scene, grid, times, notes)
@@ -267,32 +292,41 @@ def scene_grid(scene) -> ClothGrid:
 
 # ==================================================== handles from empties
 
+
 def handle_links(scene, grid: ClothGrid):
     """The Empties manipulation's links, checked: [(link, vertex index)]. Errors name the link."""
     p = props(scene)
     if not len(p.handles):
-        raise ClothFitError("the manipulation source is Empties but no handle is linked: add a handle empty "
-                            "(or link an empty to a grid vertex)")
+        raise ClothFitError(
+            "the manipulation source is Empties but no handle is linked: add a handle empty "
+            "(or link an empty to a grid vertex)"
+        )
     out, seen = [], {}
     for i, link in enumerate(p.handles):
         obj = link.empty
         name = f"handle #{i + 1}"
         if obj is None:
-            raise ClothFitError(f"{name} (row {link.row}, column {link.column}) has no empty: pick one or remove the "
-                                f"handle")
+            raise ClothFitError(
+                f"{name} (row {link.row}, column {link.column}) has no empty: pick one or remove the handle"
+            )
         name += f" ('{obj.name}')"
         if obj.name not in scene.objects:
-            raise ClothFitError(f"{name}: the empty is not in the scene (deleted?): link another one or remove "
-                                f"the handle")
+            raise ClothFitError(
+                f"{name}: the empty is not in the scene (deleted?): link another one or remove the handle"
+            )
         if obj.type != "EMPTY":
             raise ClothFitError(f"{name}: '{obj.name}' is a {obj.type}, not an empty")
         if not (0 <= link.row < grid.ny and 0 <= link.column < grid.nx):
-            raise ClothFitError(f"{name}: vertex row {link.row}, column {link.column} is outside the {grid.nx}x"
-                                f"{grid.ny} cloth grid (rows 0..{grid.ny - 1}, columns 0..{grid.nx - 1})")
+            raise ClothFitError(
+                f"{name}: vertex row {link.row}, column {link.column} is outside the {grid.nx}x"
+                f"{grid.ny} cloth grid (rows 0..{grid.ny - 1}, columns 0..{grid.nx - 1})"
+            )
         v = link.row * grid.nx + link.column
         if v in seen:
-            raise ClothFitError(f"{name}: vertex row {link.row}, column {link.column} is already linked by "
-                                f"{seen[v]}: one handle per vertex")
+            raise ClothFitError(
+                f"{name}: vertex row {link.row}, column {link.column} is already linked by "
+                f"{seen[v]}: one handle per vertex"
+            )
         seen[v] = name
         if link.use_release and not math.isfinite(link.release_time):
             raise ClothFitError(f"{name}: release time {link.release_time} is not finite")
@@ -313,10 +347,12 @@ def empties_scenario(scene, grid: ClothGrid, times, notes=None):
     settle = float(p.settle_time)
     old = S.ensure_fps(scene, sorted(set([0.0] + times)))
     if old is not None and notes is not None:
-        notes.append(f"frame rate changed from {old:g} to {scene.render.fps} fps so that every capture time is a "
-                     f"whole frame: the empties' keyframes are read at {scene.render.fps} fps")
+        notes.append(
+            f"frame rate changed from {old:g} to {scene.render.fps} fps so that every capture time is a "
+            f"whole frame: the empties' keyframes are read at {scene.render.fps} fps"
+        )
     rate = scene.render.fps / scene.render.fps_base
-    f0 = scene.frame_start - int(math.ceil(settle * rate - 1e-6))   # settle is float32
+    f0 = scene.frame_start - int(math.ceil(settle * rate - 1e-6))  # settle is float32
     f1 = S.frame_of_time(scene, times[-1])
     frames = np.arange(f0, f1 + 1)
     pos = S.sample_world_positions(scene, [link.empty for link, _ in links], frames)
@@ -330,6 +366,7 @@ def empties_scenario(scene, grid: ClothGrid, times, notes=None):
 
 # ======================================================= capture directory
 
+
 def refuse_foreign_capture(root, own_prefix, who, what):
     """Never overwrite a capture that this writer did not write (real footage, synthetic...): the
     capture.json in ``root`` must name a generator starting with ``own_prefix``."""
@@ -341,11 +378,14 @@ def refuse_foreign_capture(root, own_prefix, who, what):
     except (ClothFitError, AttributeError):
         gen = "?"
     if not gen.startswith(own_prefix):
-        raise ClothFitError(f"{root} already holds a capture written by {gen or 'another tool'!r}; {who} "
-                            f"only overwrites its own {what}: choose another capture directory")
+        raise ClothFitError(
+            f"{root} already holds a capture written by {gen or 'another tool'!r}; {who} "
+            f"only overwrites its own {what}: choose another capture directory"
+        )
 
 
 # ============================================================ read once
+
 
 @dataclass(frozen=True)
 class SceneInputs:
@@ -359,6 +399,7 @@ class SceneInputs:
     ``shapes`` (the baked positions (F, V, 3) at ``times``). The Blender objects a renderer
     needs: ``cloth`` and ``camera_objects`` (rig order). ``notes``: what reading changed in the
     scene (the Empties manipulation sets a frame rate at which every time is a whole frame)."""
+
     times: tuple
     grid: ClothGrid
     scenario: Scenario
@@ -398,14 +439,26 @@ def read_scene(scene, times=None, *, capture=False, out_dir=None, rig=False, bak
         have = {f"{t:.3f}" for t in S.baked_times(cloth)}
         missing = [t for t in times if f"{t:.3f}" not in have]
         if missing:
-            raise ClothFitError(f"the cloth is not baked at t = {missing[0]:.3f} s ({len(missing)} capture times "
-                                f"missing): simulate first")
+            raise ClothFitError(
+                f"the cloth is not baked at t = {missing[0]:.3f} s ({len(missing)} capture times "
+                f"missing): simulate first"
+            )
         shapes = S.baked_positions(cloth, times)
     cameras = exact = None
     if rig:
         rows = exact_rig_cameras(scene, objs)
         cameras = tuple(sh if sh is not None else b for b, _, sh in rows)
         exact = tuple(ex for _, ex, _ in rows)
-    return SceneInputs(times=tuple(times), grid=grid, scenario=scenario, params=params_from_scene(scene),
-                       capture_dir=root, cameras=cameras, exact=exact, shapes=shapes, cloth=cloth,
-                       camera_objects=tuple(objs), notes=tuple(notes))
+    return SceneInputs(
+        times=tuple(times),
+        grid=grid,
+        scenario=scenario,
+        params=params_from_scene(scene),
+        capture_dir=root,
+        cameras=cameras,
+        exact=exact,
+        shapes=shapes,
+        cloth=cloth,
+        camera_objects=tuple(objs),
+        notes=tuple(notes),
+    )

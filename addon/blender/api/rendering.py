@@ -6,6 +6,7 @@ The scene is read once up front (``read_scene``: times, cloth, manipulation, bak
 parameters) into core objects; then each step renders one capture time (every camera) through
 ``render.py``. Occluders (collection ``Occluders``) hide the cloth and are written as ignore masks.
 """
+
 from __future__ import annotations
 
 import os
@@ -39,9 +40,10 @@ def _render_work(steps, scene, out_dir, noise, seed, engine):
         finalize_capture,
         write_capture,
     )
-    from ...core.observation.silhouette_files import save_silhouette
     from ...core.observation.metrics import add_boundary_noise
+    from ...core.observation.silhouette_files import save_silhouette
     from ...core.observation.synth import noise_rng
+
     p = props(scene)
     noise = p.noise if noise is None else float(noise)
     seed = p.noise_seed if seed is None else int(seed)
@@ -54,8 +56,12 @@ def _render_work(steps, scene, out_dir, noise, seed, engine):
     # the cameras as Blender renders them: the exact (float64) imported camera while the Blender
     # camera still shows it, minus lens distortion (Blender renders a pinhole image)
     dropped = inp.distortion_dropped
-    meta = {"generator": f"{GENERATOR_PREFIX}{bpy.app.version_string} {engine.title()} (addon/blender/render.py)",
-            "true_params": par.as_dict(), "noise_fraction": noise, "seed": seed}
+    meta = {
+        "generator": f"{GENERATOR_PREFIX}{bpy.app.version_string} {engine.title()} (addon/blender/render.py)",
+        "true_params": par.as_dict(),
+        "noise_fraction": noise,
+        "seed": seed,
+    }
     if occluders:
         meta["occluders"] = [o.name for o in occluders]
     if dropped:
@@ -64,8 +70,17 @@ def _render_work(steps, scene, out_dir, noise, seed, engine):
     yield 0.0, f"rendering {len(cams)} cameras x {len(times)} capture times"
     # two steps: everything but capture.json now, capture.json only once every PNG is written, so a
     # render that fails or stops midway never leaves a capture that looks complete
-    pending = write_capture(root, cams, sc, None, shapes=inp.shapes, cloth_mass=par.m * sc.grid.n_vertices,
-                            meta=meta, finalize=False, ignore=True if occluders else None)
+    pending = write_capture(
+        root,
+        cams,
+        sc,
+        None,
+        shapes=inp.shapes,
+        cloth_mass=par.m * sc.grid.n_vertices,
+        meta=meta,
+        finalize=False,
+        ignore=True if occluders else None,
+    )
     steps.kept = f"no silhouette was rendered yet; {root} holds the capture's cameras.json (no capture.json)"
     frame0 = scene.frame_current
     tmp = os.path.join(root, ".render_tmp")
@@ -73,24 +88,34 @@ def _render_work(steps, scene, out_dir, noise, seed, engine):
     try:
         for fi, t in enumerate(times):
             scene.frame_set(S.frame_of_time(scene, t))
-            masks = R.render_masks(scene, inp.cloth, inp.camera_objects, tmpdir=tmp, engine=engine,
-                                   occluders=occluders if occluders else None)
+            masks = R.render_masks(
+                scene,
+                inp.cloth,
+                inp.camera_objects,
+                tmpdir=tmp,
+                engine=engine,
+                occluders=occluders if occluders else None,
+            )
             for ci, m in enumerate(masks):
                 ign = None
                 if occluders:
                     m, ign = m
                 if not m.any():
-                    raise ClothFitError(f"camera '{cams[ci].name}' does not see the cloth at t = {t:.3f} s "
-                                        f"(empty silhouette{', occluders included' if occluders else ''})")
+                    raise ClothFitError(
+                        f"camera '{cams[ci].name}' does not see the cloth at t = {t:.3f} s "
+                        f"(empty silhouette{', occluders included' if occluders else ''})"
+                    )
                 if noise > 0:
                     m = add_boundary_noise(m, noise, noise_rng(seed, ci, fi))
                     if ign is not None:
-                        m &= ~ign      # boundary noise at an occluder's edge is not cloth seen
+                        m &= ~ign  # boundary noise at an occluder's edge is not cloth seen
                 save_silhouette(pending.silhouette_path(ci, fi), m)
                 if ign is not None:
                     save_silhouette(pending.ignore_path(ci, fi), ign)
-            steps.kept = (f"kept the silhouettes of {fi + 1} of {len(times)} capture times ({(fi + 1) * len(cams)} "
-                          f"files) in {root}; capture.json not written (the capture is incomplete: render again)")
+            steps.kept = (
+                f"kept the silhouettes of {fi + 1} of {len(times)} capture times ({(fi + 1) * len(cams)} "
+                f"files) in {root}; capture.json not written (the capture is incomplete: render again)"
+            )
             if fi + 1 < len(times):
                 yield (fi + 1) / len(times), f"capture time {fi + 1}/{len(times)} (t = {t:.3f} s)"
         cap = finalize_capture(pending)
@@ -103,10 +128,8 @@ def _render_work(steps, scene, out_dir, noise, seed, engine):
     return cap
 
 
-
-
 GENERATOR_PREFIX = "Blender "
-BAKE_TOL = 1e-5   # m: a held handle vertex of the bake vs the manipulation's position for it
+BAKE_TOL = 1e-5  # m: a held handle vertex of the bake vs the manipulation's position for it
 
 
 def check_bake_follows_handles(scenario, shapes):
@@ -122,7 +145,9 @@ def check_bake_follows_handles(scenario, shapes):
         err = np.linalg.norm(got - want, axis=-1)
         k = int(np.argmax(err))
         if err[k] > BAKE_TOL:
-            raise ClothFitError(f"the baked cloth does not follow the current manipulation: the handle on vertex "
-                                f"{h.vertex} is {1000 * err[k]:.3f} mm away from its position at t = "
-                                f"{times[held][k]:.3f} s (handles, empties or settings changed since Simulate): "
-                                f"simulate again")
+            raise ClothFitError(
+                f"the baked cloth does not follow the current manipulation: the handle on vertex "
+                f"{h.vertex} is {1000 * err[k]:.3f} mm away from its position at t = "
+                f"{times[held][k]:.3f} s (handles, empties or settings changed since Simulate): "
+                f"simulate again"
+            )

@@ -9,6 +9,7 @@ While it works it keeps ``steps.kept`` saying what stays if it is stopped now; `
 the generator (its ``finally`` blocks tidy up; what was written stays) and returns that line.
 bpy is touched only by the thread that calls ``step`` (Blender's main thread).
 """
+
 from __future__ import annotations
 
 
@@ -17,7 +18,7 @@ class Steps:
         self.name = getattr(work, "__name__", "work")
         self.fraction = 0.0
         self.text = ""
-        self.kept = ""          # set by the work: what stays on disk / in the scene if it stops now
+        self.kept = ""  # set by the work: what stays on disk / in the scene if it stops now
         self.result = None
         self.finished = False
         self.cancelled = False

@@ -1,2 +1,1 @@
-"""Fitting a model to a capture: the objective, the optimisers, the steppable fit job, scoring.
-"""
+"""Fitting a model to a capture: the objective, the optimisers, the steppable fit job, scoring."""

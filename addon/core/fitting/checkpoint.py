@@ -7,6 +7,7 @@ refuses a checkpoint whose identity differs from the job asked for, naming the d
 only the budget (``max_evaluations``) and the target may change. Checkpoints hold plain numbers
 only (no pickle) and are checked field by field when read (one-line ``ClothFitError``).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -24,18 +25,39 @@ from .quality import Ladder
 
 STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
 CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
-CHECKPOINT_VERSION = 3          # 3: the fit's stages (quality ladder, manipulation profile)
-CHECKPOINT_KEYS = ("format", "version", "identity", "config", "capture", "optimizer_state", "stages", "elapsed", "exploded",
-                   "finished", "cancelled", "stop_reason", "error", "result")
+CHECKPOINT_VERSION = 3  # 3: the fit's stages (quality ladder, manipulation profile)
+CHECKPOINT_KEYS = (
+    "format",
+    "version",
+    "identity",
+    "config",
+    "capture",
+    "optimizer_state",
+    "stages",
+    "elapsed",
+    "exploded",
+    "finished",
+    "cancelled",
+    "stop_reason",
+    "error",
+    "result",
+)
 MAX_CHECKPOINT_BYTES = 64 * 1024 * 1024
 
 
 def capture_hash(capture) -> str:
     """sha256 of a capture's cameras (name, size, K, R, t, dist), frame times and scenario."""
-    return hashlib.sha256(dumps({"cameras": [c.to_dict() for c in capture.cameras],
-                                 "frame_times": [float(t) for t in capture.frame_times],
-                                 "scenario": capture.scenario.to_dict()},
-                                indent=None, sort_keys=True).encode()).hexdigest()
+    return hashlib.sha256(
+        dumps(
+            {
+                "cameras": [c.to_dict() for c in capture.cameras],
+                "frame_times": [float(t) for t in capture.frame_times],
+                "scenario": capture.scenario.to_dict(),
+            },
+            indent=None,
+            sort_keys=True,
+        ).encode()
+    ).hexdigest()
 
 
 def silhouettes_hash(observed, ignore=None) -> str:
@@ -74,8 +96,9 @@ def identity(job) -> dict:
         "times": list(job.train_times),
         "resolution": None if job.config.resolution is None else [int(x) for x in job.config.resolution],
         "model": job._model_at(job.start_quality).to_dict(),
-        "fixed": None if getattr(job.par, "fixed", None) is None else
-        dict(job.par.fixed, quality=job.start_quality or job.par.fixed.get("quality")),
+        "fixed": None
+        if getattr(job.par, "fixed", None) is None
+        else dict(job.par.fixed, quality=job.start_quality or job.par.fixed.get("quality")),
         "mass": float(job.m),
         "optimizer": job.optimizer_name,
         "population": int(getattr(opt, "popsize", getattr(opt, "population", 0))),
@@ -84,29 +107,42 @@ def identity(job) -> dict:
         "seed": int(job.config.seed),
         "bounds": job.space.state_dict(),
         "initial": None if job.par.initial is None else np.asarray(job.par.initial).tolist(),
-        "quality_ladder": None if job.ladder is None else {"start": job.ladder.start,
-                                                            "probe_only": job.ladder.probe_only},
-        "scene": None if job.evaluator is None else {
+        "quality_ladder": None
+        if job.ladder is None
+        else {"start": job.ladder.start, "probe_only": job.ladder.probe_only},
+        "scene": None
+        if job.evaluator is None
+        else {
             "blend": os.path.abspath(job.config.blend) if job.config.blend else None,
-            "object": job.config.blend_object, "frame_zero": job.config.frame_zero},
+            "object": job.config.blend_object,
+            "frame_zero": job.config.frame_zero,
+        },
     }
-    if job.config.search_options():      # only when set: a checkpoint from before them resumes
+    if job.config.search_options():  # only when set: a checkpoint from before them resumes
         ident["search_options"] = job.config.search_options()
     return plain(ident)
 
 
 def stages_state(job) -> dict:
     """The fit's stages (search, quality rungs, profile) as plain numbers: the checkpoint's ``stages``."""
-    return {"stage": job.stage, "stage_quality": job.stage_quality, "stage_end": job.stage_end,
-            "done_evals": job.done_evals, "records": job.records,
-            "best_by_quality": [[q, f, x] for q, (f, x) in job.best_by_quality.items()],
-            "history_prev": job.history_prev, "search_stop": job.search_stop,
-            "ladder": None if job.ladder is None else job.ladder.state_dict(), "profile": job.profile,
-            "start_f": job.start_f}
+    return {
+        "stage": job.stage,
+        "stage_quality": job.stage_quality,
+        "stage_end": job.stage_end,
+        "done_evals": job.done_evals,
+        "records": job.records,
+        "best_by_quality": [[q, f, x] for q, (f, x) in job.best_by_quality.items()],
+        "history_prev": job.history_prev,
+        "search_stop": job.search_stop,
+        "ladder": None if job.ladder is None else job.ladder.state_dict(),
+        "profile": job.profile,
+        "start_f": job.start_f,
+    }
 
 
 def load_stages(job, st: dict, path):
     """The stages' state of a checkpoint, checked field by field (one-line errors)."""
+
     def bad(what):
         return ClothFitError(f"checkpoint {path}: bad 'stages' ({what})")
 
@@ -121,8 +157,19 @@ def load_stages(job, st: dict, path):
 
     if not isinstance(st, dict):
         raise bad("not an object")
-    keys = {"stage", "stage_quality", "stage_end", "done_evals", "records", "best_by_quality", "history_prev",
-            "search_stop", "ladder", "profile", "start_f"}
+    keys = {
+        "stage",
+        "stage_quality",
+        "stage_end",
+        "done_evals",
+        "records",
+        "best_by_quality",
+        "history_prev",
+        "search_stop",
+        "ladder",
+        "profile",
+        "start_f",
+    }
     if set(st) != keys:
         raise bad(f"fields {sorted(set(st) ^ keys)}")
     if st["stage"] not in ("search", "rung", "profile", "done"):
@@ -131,42 +178,65 @@ def load_stages(job, st: dict, path):
         raise bad("stage_quality, stage_end or done_evals")
     recs = st["records"]
     if not isinstance(recs, list) or not all(
-            isinstance(r, dict) and r.get("stage") in ("search", "rung") and is_q(r.get("quality"))
-            and is_int(r.get("evaluations")) and is_int(r.get("generations"))
-            and (r.get("best_f") is None or is_num(r.get("best_f"))) and r.get("stop") in ("converged", "budget")
-            for r in recs):
+        isinstance(r, dict)
+        and r.get("stage") in ("search", "rung")
+        and is_q(r.get("quality"))
+        and is_int(r.get("evaluations"))
+        and is_int(r.get("generations"))
+        and (r.get("best_f") is None or is_num(r.get("best_f")))
+        and r.get("stop") in ("converged", "budget")
+        for r in recs
+    ):
         raise bad("records")
     bq = st["best_by_quality"]
     if not isinstance(bq, list) or not all(
-            isinstance(e, list) and len(e) == 3 and is_q(e[0]) and is_num(e[1]) and isinstance(e[2], list)
-            and len(e[2]) == job.space.n and all(is_num(v) for v in e[2]) for e in bq):
+        isinstance(e, list)
+        and len(e) == 3
+        and is_q(e[0])
+        and is_num(e[1])
+        and isinstance(e[2], list)
+        and len(e[2]) == job.space.n
+        and all(is_num(v) for v in e[2])
+        for e in bq
+    ):
         raise bad("best_by_quality")
     hp = st["history_prev"]
     if not isinstance(hp, list) or not all(
-            isinstance(e, list) and len(e) == 2 and is_int(e[0]) and (e[1] is None or is_num(e[1])) for e in hp):
+        isinstance(e, list) and len(e) == 2 and is_int(e[0]) and (e[1] is None or is_num(e[1])) for e in hp
+    ):
         raise bad("history_prev")
     if st["search_stop"] not in (None, "converged", "budget"):
         raise bad("search_stop")
     if st["start_f"] is not None and not is_num(st["start_f"]):
         raise bad("start_f")
     prof = st["profile"]
-    if prof is not None and (job.manip is None or not isinstance(prof, dict) or set(prof) != set(job.manip.names)
-                             or not all(isinstance(v, dict) and isinstance(v.get("separated"), bool) and
-                                        (v.get("uncertainty") is None or is_num(v.get("uncertainty")))
-                                        for v in prof.values())):
+    if prof is not None and (
+        job.manip is None
+        or not isinstance(prof, dict)
+        or set(prof) != set(job.manip.names)
+        or not all(
+            isinstance(v, dict)
+            and isinstance(v.get("separated"), bool)
+            and (v.get("uncertainty") is None or is_num(v.get("uncertainty")))
+            for v in prof.values()
+        )
+    ):
         raise bad("profile")
     if (st["ladder"] is None) != (job.ladder is None):
         raise bad("a quality ladder in one and not the other")
     ladder = None if st["ladder"] is None else Ladder.from_state(st["ladder"])
-    if ladder is not None and (not isinstance(st["ladder"], dict) or ladder.start != job.ladder.start
-                               or ladder.probe_only != job.ladder.probe_only
-                               or any(q not in ladder.rungs for q in ladder.tried)):
+    if ladder is not None and (
+        not isinstance(st["ladder"], dict)
+        or ladder.start != job.ladder.start
+        or ladder.probe_only != job.ladder.probe_only
+        or any(q not in ladder.rungs for q in ladder.tried)
+    ):
         raise bad("quality ladder")
     if st["stage"] == "rung" and (ladder is None or st["stage_quality"] not in ladder.rungs):
         raise bad("a rung outside the ladder")
     job.stage = st["stage"]
     job.stage_quality = st["stage_quality"]
-    if job.stage != "search":          # the search's end follows the budget asked for now
+    if job.stage != "search":  # the search's end follows the budget asked for now
         job.stage_end = st["stage_end"]
     job.done_evals = st["done_evals"]
     job.records = [dict(r) for r in recs]
@@ -187,8 +257,14 @@ def reopen_search(job):
     """A search that stopped on its budget and was followed by nothing but its profile continues
     when resumed with a larger budget (the profile is made again at its new end)."""
     last = job.records[-1] if job.records else None
-    if not (job.stage in ("done", "profile") and last and last["stage"] == "search" and last["stop"] == "budget"
-            and len(job.records) == 1 and job.config.max_evaluations > job.evaluations):
+    if not (
+        job.stage in ("done", "profile")
+        and last
+        and last["stage"] == "search"
+        and last["stop"] == "budget"
+        and len(job.records) == 1
+        and job.config.max_evaluations > job.evaluations
+    ):
         return
     job.records = []
     job.done_evals = 0 if job.start_f is None else 1
@@ -206,11 +282,22 @@ def reopen_search(job):
 
 def checkpoint_dict(job) -> dict:
     """A job's checkpoint (format v3): what it is a fit of, its optimiser and stages, its result so far."""
-    return {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "identity": job.identity(),
-            "config": asdict(job.config), "capture": os.path.abspath(job.capture.root),
-            "optimizer_state": job.opt.state_dict(), "stages": stages_state(job), "elapsed": job.elapsed,
-            "exploded": job.exploded, "finished": job.finished, "cancelled": job.cancelled,
-            "stop_reason": job.stop_reason, "error": job.error, "result": job.result()}
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "identity": job.identity(),
+        "config": asdict(job.config),
+        "capture": os.path.abspath(job.capture.root),
+        "optimizer_state": job.opt.state_dict(),
+        "stages": stages_state(job),
+        "elapsed": job.elapsed,
+        "exploded": job.exploded,
+        "finished": job.finished,
+        "cancelled": job.cancelled,
+        "stop_reason": job.stop_reason,
+        "error": job.error,
+        "result": job.result(),
+    }
 
 
 def write_checkpoint(path, ck: dict):
@@ -218,38 +305,55 @@ def write_checkpoint(path, ck: dict):
     write_json(path, ck, strict=True)
 
 
-def resume(cls, config_type, path, capture=None, config=None, checkpoint_interval: float = 0.0,
-           evaluator=None):
+def resume(cls, config_type, path, capture=None, config=None, checkpoint_interval: float = 0.0, evaluator=None):
     """Continue a job from its checkpoint. ``config`` is the fit asked for now (default: the
     checkpoint's own); a checkpoint of another fit (another capture, cameras, times, resolution,
     model, optimiser, population, seed, bounds...) is refused naming the differing fields. The
     budget (``max_evaluations``) and the target may differ. ``evaluator``: the workers of a
     Blender-scene fit."""
     from ..observation.capture import load_capture
+
     ck = read_checkpoint(path)
     saved_cfg = config_type.from_dict(ck["config"])
     if config is None:
         config = saved_cfg
     cap = capture or load_capture(ck["capture"])
-    job = cls(cap, config, checkpoint=path, checkpoint_interval=checkpoint_interval,
-              evaluator=evaluator)
+    job = cls(cap, config, checkpoint=path, checkpoint_interval=checkpoint_interval, evaluator=evaluator)
     diff = identity_diff(ck["identity"], job.identity())
     if diff:
         names = list(dict.fromkeys(d.split(":")[0].split(".")[0] for d in diff))
-        raise ClothFitError(f"checkpoint {path} is of another fit: {', '.join(names)} differ "
-                            f"({'; '.join(diff)}); resume with the same capture and options, or start afresh "
-                            f"with --force or another --out")
+        raise ClothFitError(
+            f"checkpoint {path} is of another fit: {', '.join(names)} differ "
+            f"({'; '.join(diff)}); resume with the same capture and options, or start afresh "
+            f"with --force or another --out"
+        )
     opt = optimizer_from_state(ck["optimizer_state"])
     load_stages(job, ck["stages"], path)
     main = job.stage == "search" or (job.stage in ("done", "profile") and len(job.records) == 1)
-    mine = (type(job.opt), job.opt.space.state_dict(), job.opt.seed, _int_attr(job.opt, "popsize"),
-            _int_attr(job.opt, "population"), _int_attr(job.opt, "children"), _int_attr(job.opt, "restarts"))
-    theirs = (type(opt), opt.space.state_dict(), opt.seed, _int_attr(opt, "popsize"),
-              _int_attr(opt, "population"), _int_attr(opt, "children"), _int_attr(opt, "restarts"))
-    n = 7 if main else 3                 # a rung's optimiser is a warm-started CMA-ES of the same space
+    mine = (
+        type(job.opt),
+        job.opt.space.state_dict(),
+        job.opt.seed,
+        _int_attr(job.opt, "popsize"),
+        _int_attr(job.opt, "population"),
+        _int_attr(job.opt, "children"),
+        _int_attr(job.opt, "restarts"),
+    )
+    theirs = (
+        type(opt),
+        opt.space.state_dict(),
+        opt.seed,
+        _int_attr(opt, "popsize"),
+        _int_attr(opt, "population"),
+        _int_attr(opt, "children"),
+        _int_attr(opt, "restarts"),
+    )
+    n = 7 if main else 3  # a rung's optimiser is a warm-started CMA-ES of the same space
     if mine[:n] != theirs[:n]:
-        raise ClothFitError(f"checkpoint {path}: its optimiser state does not match its recorded fit "
-                            f"(optimiser, bounds, seed or population differ)")
+        raise ClothFitError(
+            f"checkpoint {path}: its optimiser state does not match its recorded fit "
+            f"(optimiser, bounds, seed or population differ)"
+        )
     job.opt = opt
     reopen_search(job)
     job.elapsed = ck["elapsed"]
@@ -270,18 +374,20 @@ def identity_diff(saved, now) -> list:
     keys = sorted(set(saved) | set(now))
     differ = {k for k in keys if saved.get(k, "<missing>") != now.get(k, "<missing>")}
     if differ & {"cameras", "camera_indices", "times", "capture_hash"}:
-        differ.discard("silhouettes_hash")     # other images, of course
+        differ.discard("silhouettes_hash")  # other images, of course
     if "cameras" in differ:
         differ.discard("camera_indices")
     for k in keys:
         if k not in differ:
             continue
         a, b = saved.get(k, "<missing>"), now.get(k, "<missing>")
-        if isinstance(a, dict) and isinstance(b, dict):       # name the entries that differ
+        if isinstance(a, dict) and isinstance(b, dict):  # name the entries that differ
             for sub in sorted(set(a) | set(b), key=str):
                 if a.get(sub, "<missing>") != b.get(sub, "<missing>"):
-                    out.append(f"{k}.{sub}: checkpoint {_short(a.get(sub, '<missing>'), 40)}, "
-                               f"now {_short(b.get(sub, '<missing>'), 40)}")
+                    out.append(
+                        f"{k}.{sub}: checkpoint {_short(a.get(sub, '<missing>'), 40)}, "
+                        f"now {_short(b.get(sub, '<missing>'), 40)}"
+                    )
         else:
             out.append(f"{k}: checkpoint {_short(a, 40)}, now {_short(b, 40)}")
     return out
@@ -289,7 +395,7 @@ def identity_diff(saved, now) -> list:
 
 def _short(v, limit=80):
     s = json.dumps(v, default=str) if not isinstance(v, str) else v
-    return s if len(s) <= limit else s[:limit - 3] + "..."
+    return s if len(s) <= limit else s[: limit - 3] + "..."
 
 
 def read_checkpoint(path) -> dict:
@@ -313,17 +419,29 @@ def read_checkpoint(path) -> dict:
     if not isinstance(ck, dict):
         raise ClothFitError(f"checkpoint {path} is corrupt: expected a JSON object")
     if ck.get("format") != CHECKPOINT_FORMAT:
-        raise ClothFitError(f"checkpoint {path}: 'format' is {ck.get('format')!r}, expected {CHECKPOINT_FORMAT!r} "
-                            f"(a checkpoint of an older version cannot be resumed: start afresh with --force)")
+        raise ClothFitError(
+            f"checkpoint {path}: 'format' is {ck.get('format')!r}, expected {CHECKPOINT_FORMAT!r} "
+            f"(a checkpoint of an older version cannot be resumed: start afresh with --force)"
+        )
     if ck.get("version") != CHECKPOINT_VERSION:
-        raise ClothFitError(f"checkpoint {path}: version {ck.get('version')!r} is not supported "
-                            f"(this reader knows version {CHECKPOINT_VERSION})")
+        raise ClothFitError(
+            f"checkpoint {path}: version {ck.get('version')!r} is not supported "
+            f"(this reader knows version {CHECKPOINT_VERSION})"
+        )
     unknown = sorted(set(ck) - set(CHECKPOINT_KEYS))
     missing = [k for k in CHECKPOINT_KEYS if k not in ck]
     if unknown or missing:
-        raise ClothFitError(f"checkpoint {path}: " + ", ".join(
-            x for x in (f"unknown fields {unknown}" if unknown else "", f"missing fields {missing}" if missing else "")
-            if x))
+        raise ClothFitError(
+            f"checkpoint {path}: "
+            + ", ".join(
+                x
+                for x in (
+                    f"unknown fields {unknown}" if unknown else "",
+                    f"missing fields {missing}" if missing else "",
+                )
+                if x
+            )
+        )
     for k in ("identity", "config", "optimizer_state"):
         if not isinstance(ck[k], dict):
             raise ClothFitError(f"checkpoint {path}: '{k}' must be an object")

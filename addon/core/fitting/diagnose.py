@@ -17,6 +17,7 @@ so, with the likely cause among those it can test by a few evaluations of the be
   simulator, or the observation has an error the floor estimate cannot see (a segmenter's bias):
   the result says which were tested and that it cannot tell these apart.
 """
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -32,7 +33,7 @@ from .objective import SilhouetteObjective
 if TYPE_CHECKING:
     from .job import FitJob
 
-CLEARLY = D.QUALITY_CLEARLY_BETTER      # a probe "fits clearly better" below (1 - CLEARLY) x the best error
+CLEARLY = D.QUALITY_CLEARLY_BETTER  # a probe "fits clearly better" below (1 - CLEARLY) x the best error
 
 
 def _heldout(job):
@@ -47,12 +48,14 @@ def _heldout(job):
 
 def _objective(job, cams, fidx):
     from .job import load_observed
+
     cap = job.capture
     times = [float(cap.frame_times[i]) for i in fidx]
     sc = job.evaluator.scenario(times) if job.evaluator is not None else cap.scenario.with_frames(times)
     cameras, observed, ignore = load_observed(cap, cams, fidx, job.config.resolution)
-    return SilhouetteObjective(sc, cameras, observed, backend=job.config.backend, model=job.objective.model,
-                               ignore=ignore)
+    return SilhouetteObjective(
+        sc, cameras, observed, backend=job.config.backend, model=job.objective.model, ignore=ignore
+    )
 
 
 def _probes(job, x, f0):
@@ -66,37 +69,50 @@ def _probes(job, x, f0):
     if lad is None and job.evaluator is None and getattr(job.par.model, "name", "") == "blender":
         q = job.par.model.quality
         from ..physics.models import BlenderModel
+
         cameras, observed, ignore, names = job._images
-        obj = SilhouetteObjective(job.scenario, cameras, observed, backend=job.config.backend, names=names,
-                                  model=BlenderModel(job.par.model.fps, min(80, 2 * q), job.par.model.bending_model),
-                                  ignore=ignore)
+        obj = SilhouetteObjective(
+            job.scenario,
+            cameras,
+            observed,
+            backend=job.config.backend,
+            names=names,
+            model=BlenderModel(job.par.model.fps, min(80, 2 * q), job.par.model.bending_model),
+            ignore=ignore,
+        )
         f = float(job.evaluate(x[None], objective=obj)[0])
         out.append(("quality", f"quality {min(80, 2 * q)} instead of {q}", f / f0))
     if job.evaluator is None and getattr(job.par.model, "name", "") == "blender":
         X = np.atleast_2d(x)
-        rows = job.par.rows(X[:, :job.npar])
+        rows = job.par.rows(X[:, : job.npar])
         k = B.FLOAT_SETTINGS.index("time_scale")
         if abs(rows[0, k] - 1.0) > 1e-3:
             rows[:, k] = 1.0
             if job.manip is None:
                 f = float(job.objective(rows)[0])
             else:
-                f = float(job.objective(rows, offsets=job.manip.offsets(X[:, job.npar:]))[0])
+                f = float(job.objective(rows, offsets=job.manip.offsets(X[:, job.npar :]))[0])
             out.append(("time scale", "Blender's default Speed Multiplier 1 instead of the real-time one", f / f0))
     if job.manip is None or "time_offset_s" not in job.manip.names:
         ft = np.asarray(job.capture.frame_times, dtype=np.float64)
         dt = float(np.median(np.diff(ft))) if ft.size > 1 else 1.0 / 24
         from ..physics.scenario import Offsets
-        P = job.par.rows(np.atleast_2d(x)[:, :job.npar])
+
+        P = job.par.rows(np.atleast_2d(x)[:, : job.npar])
         H = len(getattr(job.scenario, "handles", []))
         if H and job.evaluator is None:
             base = np.zeros((2, H, 3))
             if job.manip is not None:
-                base[:] = job.manip.offsets(np.atleast_2d(x)[:, job.npar:]).handles[0]
+                base[:] = job.manip.offsets(np.atleast_2d(x)[:, job.npar :]).handles[0]
             off = Offsets(np.array([0.5 * dt, -0.5 * dt]), base)
             f = job.objective(np.repeat(P, 2, 0), offsets=off)
-            out.append(("manipulation", f"the capture read half a frame ({1000 * 0.5 * dt:.0f} ms) earlier or later",
-                        float(np.min(f)) / f0))
+            out.append(
+                (
+                    "manipulation",
+                    f"the capture read half a frame ({1000 * 0.5 * dt:.0f} ms) earlier or later",
+                    float(np.min(f)) / f0,
+                )
+            )
     return out
 
 
@@ -114,8 +130,10 @@ def _still_improving(job):
     if not before:
         return None
     if hist[-1][1] < (1.0 - CLEARLY) * before[-1]:
-        return (f"the search stopped on its budget ({n} evaluations) with its error still falling "
-                f"({100 * (1 - hist[-1][1] / before[-1]):.0f} % over its last fifth): a larger --max-evaluations")
+        return (
+            f"the search stopped on its budget ({n} evaluations) with its error still falling "
+            f"({100 * (1 - hist[-1][1] / before[-1]):.0f} % over its last fifth): a larger --max-evaluations"
+        )
     return None
 
 
@@ -128,8 +146,13 @@ def report(job: FitJob) -> dict:
     n = job.objective.n_images
     f0 = float(job.best_error)
     tf = capture_floor(cap, job.train_cameras, job.train_frames, res)
-    d = {"train_E_sil_pct": 100.0 * f0 / n, "train_floor_pct": 100.0 * tf.floor,
-         "threshold": D.FLOOR_FAR_ABOVE, "floor_basis": tf.basis, "floor_limits": tf.limits}
+    d = {
+        "train_E_sil_pct": 100.0 * f0 / n,
+        "train_floor_pct": 100.0 * tf.floor,
+        "threshold": D.FLOOR_FAR_ABOVE,
+        "floor_basis": tf.basis,
+        "floor_limits": tf.limits,
+    }
     d["train_ratio"] = d["train_E_sil_pct"] / d["train_floor_pct"] if tf.floor > 0 else None
     ho = _heldout(job)
     if ho is not None:
@@ -138,10 +161,17 @@ def report(job: FitJob) -> dict:
             obj = _objective(job, cams, fidx)
             e = float(job.evaluate(x[None], objective=obj)[0]) / obj.n_images
             hf = capture_floor(cap, cams, fidx, res)
-            d.update(heldout_cameras=[cap.cameras[c].name for c in cams], heldout_n_frames=len(fidx),
-                     heldout_E_sil_pct=100.0 * e if np.isfinite(e) else None, heldout_floor_pct=100.0 * hf.floor)
-            d["heldout_ratio"] = (d["heldout_E_sil_pct"] / d["heldout_floor_pct"]
-                                  if hf.floor > 0 and d["heldout_E_sil_pct"] is not None else None)
+            d.update(
+                heldout_cameras=[cap.cameras[c].name for c in cams],
+                heldout_n_frames=len(fidx),
+                heldout_E_sil_pct=100.0 * e if np.isfinite(e) else None,
+                heldout_floor_pct=100.0 * hf.floor,
+            )
+            d["heldout_ratio"] = (
+                d["heldout_E_sil_pct"] / d["heldout_floor_pct"]
+                if hf.floor > 0 and d["heldout_E_sil_pct"] is not None
+                else None
+            )
         except ClothFitError as err:
             d["heldout_error"] = str(err)
     ratios = [r for r in (d.get("train_ratio"), d.get("heldout_ratio")) if r is not None]
@@ -156,17 +186,28 @@ def report(job: FitJob) -> dict:
         if not hits and still:
             hits = [(0.0, "search", still)]
         if hits:
-            d["likely_cause"] = f"{hits[0][1]} ({hits[0][2]}: error x{hits[0][0]:.2f})" if hits[0][0] > 0 else \
-                f"{hits[0][1]} ({hits[0][2]})"
+            d["likely_cause"] = (
+                f"{hits[0][1]} ({hits[0][2]}: error x{hits[0][0]:.2f})"
+                if hits[0][0] > 0
+                else f"{hits[0][1]} ({hits[0][2]})"
+            )
         else:
-            d["likely_cause"] = ("none of those tested (" + ", ".join(sorted({c for c, _, _ in probes} | {"search"}))
-                                 + "): the search may have stopped in a local minimum (another --seed, a larger "
-                                 "--max-evaluations), the cloth may not move like this simulator, or the silhouettes "
-                                 "carry an error the floor cannot see (a segmenter's bias)")
+            d["likely_cause"] = (
+                "none of those tested ("
+                + ", ".join(sorted({c for c, _, _ in probes} | {"search"}))
+                + "): the search may have stopped in a local minimum (another --seed, a larger "
+                "--max-evaluations), the cloth may not move like this simulator, or the silhouettes "
+                "carry an error the floor cannot see (a segmenter's bias)"
+            )
         worst = max(ratios)
-        d["warning"] = (f"the fit ends {worst:.1f}x above its images' noise floor (training {d['train_E_sil_pct']:.2f} % "
-                        f"against {d['train_floor_pct']:.2f} %" +
-                        (f"; held-out {d['heldout_E_sil_pct']:.2f} % against {d['heldout_floor_pct']:.2f} %"
-                         if d.get("heldout_E_sil_pct") is not None else "") +
-                        f"): likely cause: {d['likely_cause']}")
+        d["warning"] = (
+            f"the fit ends {worst:.1f}x above its images' noise floor (training {d['train_E_sil_pct']:.2f} % "
+            f"against {d['train_floor_pct']:.2f} %"
+            + (
+                f"; held-out {d['heldout_E_sil_pct']:.2f} % against {d['heldout_floor_pct']:.2f} %"
+                if d.get("heldout_E_sil_pct") is not None
+                else ""
+            )
+            + f"): likely cause: {d['likely_cause']}"
+        )
     return d

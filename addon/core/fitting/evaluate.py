@@ -1,4 +1,5 @@
 """Scores of a parameter set on a capture: silhouette error per image, shape error where known."""
+
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
@@ -17,8 +18,14 @@ if TYPE_CHECKING:
     from ..observation.capture import Capture
 
 
-def evaluate(capture: Capture, params: dict[str, Any], cameras: Iterable[int] | None = None,
-             times: Iterable[float] | None = None, resolution: Sequence[int] | None = None, backend: str = "auto") -> dict:
+def evaluate(
+    capture: Capture,
+    params: dict[str, Any],
+    cameras: Iterable[int] | None = None,
+    times: Iterable[float] | None = None,
+    resolution: Sequence[int] | None = None,
+    backend: str = "auto",
+) -> dict:
     """Mean ``E_sil x 100`` over the images of ``cameras`` (indices) at ``times`` and, if the capture
     has ground-truth shapes, the mean vertex distance [mm] per shape and overall. ``params``: a fit
     result (its model is used), paper m, k, l, d, or ClothSettings values (the capture's model).
@@ -31,15 +38,19 @@ def evaluate(capture: Capture, params: dict[str, Any], cameras: Iterable[int] | 
     times = list(capture.frame_times) if times is None else list(times)
     fidx = [capture.frame_index(t) for t in times]
     tt = [float(capture.frame_times[i]) for i in fidx]
-    sc = fitted_scenario(capture.scenario.with_frames(tt), params)   # a result's estimated manipulation
+    sc = fitted_scenario(capture.scenario.with_frames(tt), params)  # a result's estimated manipulation
     camobjs, observed, ignore = load_observed(capture, cams, fidx, resolution)
     obj = SilhouetteObjective(sc, camobjs, observed, backend=backend, model=model, ignore=ignore)
     esil, exploded = obj.per_image(row[None])
-    out = {"model": model.to_dict(), "cameras": [capture.cameras[c].name for c in cams], "times": tt,
-           "exploded": bool(exploded[0]),
-           "silhouette_error_pct": float(100 * esil[0].mean()),
-           "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
-           "silhouette_error_pct_per_time": (100 * esil[0].mean(0)).tolist()}
+    out = {
+        "model": model.to_dict(),
+        "cameras": [capture.cameras[c].name for c in cams],
+        "times": tt,
+        "exploded": bool(exploded[0]),
+        "silhouette_error_pct": float(100 * esil[0].mean()),
+        "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
+        "silhouette_error_pct_per_time": (100 * esil[0].mean(0)).tolist(),
+    }
     if capture.shapes is not None:
         sim = model.simulate(sc, row[None], backend=backend)
         true = capture.shapes[fidx]

@@ -25,6 +25,7 @@ With ``restarts = R > 0`` (IPOP-CMA-ES, Auger & Hansen 2005) a run that stops is
 new one from a uniformly random mean with twice the population, up to ``R`` times; the best
 over all runs is kept. ``stopped`` is True once the last run has ended.
 """
+
 from __future__ import annotations
 
 import math
@@ -58,25 +59,34 @@ class CMAES(Optimizer):
 
     name = "cma-es"
 
-    def __init__(self, space: SearchSpace, seed=None, initial=None, popsize: int | None = None,
-                 sigma0: float = 0.3, restarts: int = 0, tolx: float = 1e-11, tolfun: float = 1e-11,
-                 active: bool = False):
+    def __init__(
+        self,
+        space: SearchSpace,
+        seed=None,
+        initial=None,
+        popsize: int | None = None,
+        sigma0: float = 0.3,
+        restarts: int = 0,
+        tolx: float = 1e-11,
+        tolfun: float = 1e-11,
+        active: bool = False,
+    ):
         super().__init__(space, seed, initial)
-        self.active = _flag(active, "cma-es: active")     # active CMA: the worse half lowers the variance along its steps
+        self.active = _flag(active, "cma-es: active")  # active CMA: the worse half lowers the variance along its steps
         self.popsize = _integer(D.CMA_POPSIZE if popsize is None else popsize, "cma-es: popsize", 2)
         self.sigma0 = _number(sigma0, "cma-es: sigma0 (unit cube)", 0.0, 10.0, lo_open=True)
         self.restarts = _integer(restarts, "cma-es: restarts", 0, 20)
         self.tolx = _number(tolx, "cma-es: tolx")
         self.tolfun = _number(tolfun, "cma-es: tolfun")
         self.restarts_done = 0
-        self.stop_reason = None        # the criterion that ended the last run (None: running)
-        self.run_stops = []            # the criterion that ended each finished run
+        self.stop_reason = None  # the criterion that ended the last run (None: running)
+        self.run_stops = []  # the criterion that ended each finished run
         self._stopped = False
         n = space.n
         x0 = self._initial_u.mean(axis=0) if len(self._initial_u) else np.full(n, 0.5)
         self._start_run(x0, self.popsize)
         self._inject = self._initial_u.copy()
-        self._pending = None           # (lam, n) unbounded coordinates asked but not told
+        self._pending = None  # (lam, n) unbounded coordinates asked but not told
         self._pending_injected = 0
 
     # -- strategy parameters (derived from n and lambda, never stored)
@@ -86,7 +96,7 @@ class CMAES(Optimizer):
         self.mu = self.lam // 2
         w = math.log(self.mu + 0.5) - np.log(np.arange(1, self.mu + 1))
         self.weights = w / w.sum()
-        self.mueff = 1.0 / float(np.sum(self.weights ** 2))
+        self.mueff = 1.0 / float(np.sum(self.weights**2))
         self.cc = (4 + self.mueff / n) / (n + 4 + 2 * self.mueff / n)
         self.cs = (self.mueff + 2) / (n + self.mueff + 5)
         self.c1 = 2 / ((n + 1.3) ** 2 + self.mueff)
@@ -96,12 +106,13 @@ class CMAES(Optimizer):
             # scaled so the covariance stays positive definite
             wa = math.log((self.lam + 1) / 2) - np.log(np.arange(1, self.lam + 1))
             pos, neg = wa[wa >= 0], wa[wa < 0]
-            mueff_neg = float(neg.sum() ** 2 / np.sum(neg ** 2)) if neg.size else 0.0
+            mueff_neg = float(neg.sum() ** 2 / np.sum(neg**2)) if neg.size else 0.0
             amu = 1 + self.c1 / self.cmu
             amueff = 1 + 2 * mueff_neg / (self.mueff + 2)
             aposdef = (1 - self.c1 - self.cmu) / (n * self.cmu)
-            self.weights_all = np.where(wa >= 0, wa / pos.sum(),
-                                        min(amu, amueff, aposdef) * wa / max(np.abs(neg).sum(), 1e-300))
+            self.weights_all = np.where(
+                wa >= 0, wa / pos.sum(), min(amu, amueff, aposdef) * wa / max(np.abs(neg).sum(), 1e-300)
+            )
         else:
             self.weights_all = np.concatenate([self.weights, np.zeros(self.lam - self.mu)])
         self.damps = 1 + 2 * max(0.0, math.sqrt((self.mueff - 1) / (n + 1)) - 1) + self.cs
@@ -118,8 +129,8 @@ class CMAES(Optimizer):
         self.pc = np.zeros(n)
         self.ps = np.zeros(n)
         self.run_generation = 0
-        self.run_bests = []            # generation bests of this run, the last 2 * stag_window
-        self.last_fvals = []           # this generation's finite values (for tolfun)
+        self.run_bests = []  # generation bests of this run, the last 2 * stag_window
+        self.last_fvals = []  # this generation's finite values (for tolfun)
 
     def _eig(self):
         d2, B = np.linalg.eigh(self.C)
@@ -153,16 +164,16 @@ class CMAES(Optimizer):
         self._check_told(X, U)
         f = sanitize_fitness(f, len(U))
         n = self.space.n
-        order = np.argsort(f, kind="stable")           # +inf (bad) last
+        order = np.argsort(f, kind="stable")  # +inf (bad) last
         B, Dv = self._eig()
         invsqrt = (B / Dv) @ B.T
         Y = (G - self.mean) / self.sigma
         k = self._pending_injected
-        if k:   # injected solutions: clip their steps in Mahalanobis norm
+        if k:  # injected solutions: clip their steps in Mahalanobis norm
             cap = math.sqrt(n) + 2 * n / (n + 2)
             norms = np.linalg.norm(Y[:k] @ invsqrt.T, axis=1)
             Y[:k] *= np.minimum(1.0, cap / np.maximum(norms, 1e-300))[:, None]
-        sel = Y[order[:self.mu]]
+        sel = Y[order[: self.mu]]
         yw = self.weights @ sel
         self.mean = self.mean + self.sigma * yw
         self.ps = (1 - self.cs) * self.ps + math.sqrt(self.cs * (2 - self.cs) * self.mueff) * (invsqrt @ yw)
@@ -175,12 +186,15 @@ class CMAES(Optimizer):
             Yo = Y[order]
             wo = self.weights_all.copy()
             neg = wo < 0
-            if neg.any():       # negative weights act on steps normalised in the Mahalanobis norm
+            if neg.any():  # negative weights act on steps normalised in the Mahalanobis norm
                 m2 = np.sum((Yo[neg] @ invsqrt.T) ** 2, axis=1)
                 wo[neg] *= n / np.maximum(m2, 1e-300)
             rank_mu = (Yo.T * wo) @ Yo
-            self.C = ((1 - c1a - self.cmu * float(self.weights_all.sum())) * self.C
-                      + self.c1 * np.outer(self.pc, self.pc) + self.cmu * rank_mu)
+            self.C = (
+                (1 - c1a - self.cmu * float(self.weights_all.sum())) * self.C
+                + self.c1 * np.outer(self.pc, self.pc)
+                + self.cmu * rank_mu
+            )
         else:
             rank_mu = (sel.T * self.weights) @ sel
             self.C = (1 - c1a - self.cmu) * self.C + self.c1 * np.outer(self.pc, self.pc) + self.cmu * rank_mu
@@ -192,12 +206,12 @@ class CMAES(Optimizer):
         fin = f[np.isfinite(f)]
         self.last_fvals = fin.tolist()
         self.run_bests.append(float(fin.min()) if fin.size else math.inf)
-        del self.run_bests[:-2 * self.stag_window]
+        del self.run_bests[: -2 * self.stag_window]
         reason = self._run_stop()
         if reason is not None:
             self.run_stops.append(reason)
             self.stop_reason = reason
-            if self.restarts_done < self.restarts:          # IPOP: twice the population, a new random mean
+            if self.restarts_done < self.restarts:  # IPOP: twice the population, a new random mean
                 self.restarts_done += 1
                 self._start_run(self.rng.random(n), 2 * self.lam)
             else:
@@ -208,7 +222,7 @@ class CMAES(Optimizer):
         sd = self.sigma * np.sqrt(np.diag(self.C))
         if np.all(sd < self.tolx) and np.all(self.sigma * np.abs(self.pc) < self.tolx):
             return "tolx"
-        hist = self.run_bests[-self.tolfun_window:]
+        hist = self.run_bests[-self.tolfun_window :]
         if len(hist) >= self.tolfun_window and all(math.isfinite(v) for v in hist) and self.last_fvals:
             vals = hist + self.last_fvals
             if max(vals) - min(vals) < self.tolfun:
@@ -230,38 +244,84 @@ class CMAES(Optimizer):
             return "tolupsigma"
         return None
 
-    STATE_KEYS = ("popsize", "sigma0", "restarts", "tolx", "tolfun", "active", "restarts_done", "stop_reason", "run_stops",
-                  "stopped", "lam", "mean", "sigma", "C", "pc", "ps", "run_generation", "run_bests", "last_fvals",
-                  "rng", "initial_u", "inject", "pending", "pending_injected")
+    STATE_KEYS = (
+        "popsize",
+        "sigma0",
+        "restarts",
+        "tolx",
+        "tolfun",
+        "active",
+        "restarts_done",
+        "stop_reason",
+        "run_stops",
+        "stopped",
+        "lam",
+        "mean",
+        "sigma",
+        "C",
+        "pc",
+        "ps",
+        "run_generation",
+        "run_bests",
+        "last_fvals",
+        "rng",
+        "initial_u",
+        "inject",
+        "pending",
+        "pending_injected",
+    )
 
     def state_dict(self) -> dict:
         d = self._base_state()
-        d.update({"popsize": self.popsize, "sigma0": self.sigma0, "restarts": self.restarts,
-                  "tolx": self.tolx, "tolfun": self.tolfun, "active": self.active,
-                  "restarts_done": self.restarts_done,
-                  "stop_reason": self.stop_reason, "run_stops": list(self.run_stops), "stopped": self._stopped,
-                  "lam": self.lam, "mean": self.mean.tolist(), "sigma": self.sigma, "C": self.C.tolist(),
-                  "pc": self.pc.tolist(), "ps": self.ps.tolist(), "run_generation": self.run_generation,
-                  "run_bests": [_float_to_json(v) for v in self.run_bests], "last_fvals": list(self.last_fvals),
-                  "rng": self.rng.bit_generator.state, "initial_u": self._initial_u.tolist(),
-                  "inject": self._inject.tolist(),
-                  "pending": None if self._pending is None else self._pending.tolist(),
-                  "pending_injected": self._pending_injected})
+        d.update(
+            {
+                "popsize": self.popsize,
+                "sigma0": self.sigma0,
+                "restarts": self.restarts,
+                "tolx": self.tolx,
+                "tolfun": self.tolfun,
+                "active": self.active,
+                "restarts_done": self.restarts_done,
+                "stop_reason": self.stop_reason,
+                "run_stops": list(self.run_stops),
+                "stopped": self._stopped,
+                "lam": self.lam,
+                "mean": self.mean.tolist(),
+                "sigma": self.sigma,
+                "C": self.C.tolist(),
+                "pc": self.pc.tolist(),
+                "ps": self.ps.tolist(),
+                "run_generation": self.run_generation,
+                "run_bests": [_float_to_json(v) for v in self.run_bests],
+                "last_fvals": list(self.last_fvals),
+                "rng": self.rng.bit_generator.state,
+                "initial_u": self._initial_u.tolist(),
+                "inject": self._inject.tolist(),
+                "pending": None if self._pending is None else self._pending.tolist(),
+                "pending_injected": self._pending_injected,
+            }
+        )
         return d
 
     @classmethod
-    def from_state(cls, d: dict) -> "CMAES":
+    def from_state(cls, d: dict) -> CMAES:
         w = cls.name
         space = cls._check_state(d, w, cls.STATE_KEYS)
         n = space.n
-        opt = cls(space, seed=d["seed"], popsize=_num(d, "popsize", w, int, 2, 10 ** 6),
-                  sigma0=_num(d, "sigma0", w, float, 1e-300, 10.0), restarts=_num(d, "restarts", w, int, 0, 20),
-                  tolx=_num(d, "tolx", w, float, 0.0), tolfun=_num(d, "tolfun", w, float, 0.0),
-                  active=_active(d, w))
+        opt = cls(
+            space,
+            seed=d["seed"],
+            popsize=_num(d, "popsize", w, int, 2, 10**6),
+            sigma0=_num(d, "sigma0", w, float, 1e-300, 10.0),
+            restarts=_num(d, "restarts", w, int, 0, 20),
+            tolx=_num(d, "tolx", w, float, 0.0),
+            tolfun=_num(d, "tolfun", w, float, 0.0),
+            active=_active(d, w),
+        )
         opt._load_base(d)
         opt.restarts_done = _num(d, "restarts_done", w, int, 0, opt.restarts)
-        lam = _num(d, "lam", w, int, 2, 10 ** 7)
-        if lam != opt.popsize * 2 ** opt.restarts_done:
+        lam = _num(d, "lam", w, int, 2, 10**7)
+        if lam != opt.popsize * 2**opt.restarts_done:
             raise ClothFitError(f"checkpoint: {w} 'lam' {lam} is not popsize x 2^restarts_done")
         opt._setup(lam)
         opt.stop_reason = _stop_reason(d, w, CMA_STOPS)
@@ -304,4 +364,3 @@ class CMAES(Optimizer):
             raise ClothFitError(f"checkpoint: {w} 'pending' is absurdly far from the unit cube")
         opt._pending_injected = _num(d, "pending_injected", w, int, 0, lam if opt._pending is not None else 0)
         return opt
-

@@ -21,6 +21,7 @@ SPX + MGG stops when its population has collapsed (spread below ``tolx`` in ever
 coordinate) or when the best value has not improved by more than ``tolfun`` during the last
 ``stall_evaluations`` evaluations (both off unless set).
 """
+
 from __future__ import annotations
 
 import math
@@ -54,12 +55,12 @@ def spx_children(parents: np.ndarray, n_children: int, eps: float, rng) -> np.nd
     P = np.asarray(parents, dtype=np.float64)
     m = P.shape[0]
     G = P.mean(axis=0)
-    Y = G + eps * (P - G)                              # (m, dim) expanded vertices y_0..y_{m-1}
+    Y = G + eps * (P - G)  # (m, dim) expanded vertices y_0..y_{m-1}
     u = rng.random((n_children, m - 1))
-    r = u ** (1.0 / np.arange(1, m))                   # r_j = u_j^(1/(j+1)), j = 0..m-2
+    r = u ** (1.0 / np.arange(1, m))  # r_j = u_j^(1/(j+1)), j = 0..m-2
     C = np.zeros((n_children, P.shape[1]))
     for k in range(1, m):
-        C = r[:, k - 1:k] * (Y[k - 1] - Y[k] + C)
+        C = r[:, k - 1 : k] * (Y[k - 1] - Y[k] + C)
     return Y[m - 1] + C
 
 
@@ -68,9 +69,18 @@ class SPXMGG(Optimizer):
 
     name = "spx-mgg"
 
-    def __init__(self, space: SearchSpace, seed=None, initial=None, population: int | None = None,
-                 children: int | None = None, eps: float | None = None, tolx: float = 0.0,
-                 tolfun: float = 0.0, stall_evaluations: int | None = None):
+    def __init__(
+        self,
+        space: SearchSpace,
+        seed=None,
+        initial=None,
+        population: int | None = None,
+        children: int | None = None,
+        eps: float | None = None,
+        tolx: float = 0.0,
+        tolfun: float = 0.0,
+        stall_evaluations: int | None = None,
+    ):
         super().__init__(space, seed, initial)
         n = space.n
         self.population = _integer(D.GA_POPULATION if population is None else population, "spx-mgg: population")
@@ -78,10 +88,11 @@ class SPXMGG(Optimizer):
         self.eps = float(math.sqrt(n + 2) if eps is None else eps)
         self.tolx = _number(tolx, "spx-mgg: tolx")
         self.tolfun = _number(tolfun, "spx-mgg: tolfun")
-        self.stall_evaluations = (None if stall_evaluations is None else
-                                  _integer(stall_evaluations, "spx-mgg: stall_evaluations"))
-        self._ref_best = math.inf     # best at the last improvement by more than tolfun
-        self._last_improved = 0       # evaluations then
+        self.stall_evaluations = (
+            None if stall_evaluations is None else _integer(stall_evaluations, "spx-mgg: stall_evaluations")
+        )
+        self._ref_best = math.inf  # best at the last improvement by more than tolfun
+        self._last_improved = 0  # evaluations then
         self.stop_reason = None
         if self.population < n + 1:
             raise ClothFitError(f"spx-mgg: population must be at least n + 1 = {n + 1}, got {self.population}")
@@ -90,12 +101,13 @@ class SPXMGG(Optimizer):
         if not (math.isfinite(self.eps) and self.eps > 0):
             raise ClothFitError(f"spx-mgg: eps must be a positive number, got {self.eps}")
         if len(self._initial_u) > self.population:
-            raise ClothFitError(f"spx-mgg: {len(self._initial_u)} initial guesses do not fit in a "
-                                f"population of {self.population}")
-        self.pop_u = None           # (P, n) unit-cube population, None until initialised
-        self.pop_f = None           # (P,) fitness (+inf = bad)
-        self._pending = None        # (B, n) unit-cube candidates asked but not told
-        self._replace = None        # (2,) population slots replaced by the pending family
+            raise ClothFitError(
+                f"spx-mgg: {len(self._initial_u)} initial guesses do not fit in a population of {self.population}"
+            )
+        self.pop_u = None  # (P, n) unit-cube population, None until initialised
+        self.pop_f = None  # (P,) fitness (+inf = bad)
+        self._pending = None  # (B, n) unit-cube candidates asked but not told
+        self._replace = None  # (2,) population slots replaced by the pending family
 
     @property
     def population_x(self):
@@ -108,7 +120,7 @@ class SPXMGG(Optimizer):
             n = self.space.n
             if self.pop_u is None:
                 U = self.rng.random((self.population, n))
-                U[:len(self._initial_u)] = self._initial_u
+                U[: len(self._initial_u)] = self._initial_u
                 self._pending, self._replace = U, None
             else:
                 idx = self.rng.choice(self.population, size=n + 1, replace=False)
@@ -129,7 +141,7 @@ class SPXMGG(Optimizer):
             fam_f = np.concatenate([f, self.pop_f[slots]])
             order = np.argsort(fam_f, kind="stable")
             best, rest = order[0], order[1:]
-            w = np.arange(len(rest), 0, -1, dtype=np.float64)     # linear ranking: m, m-1, ..., 1
+            w = np.arange(len(rest), 0, -1, dtype=np.float64)  # linear ranking: m, m-1, ..., 1
             other = rest[self.rng.choice(len(rest), p=w / w.sum())]
             new_u, new_f = fam_u[[best, other]], fam_f[[best, other]]
             self.pop_u[slots] = new_u
@@ -156,35 +168,63 @@ class SPXMGG(Optimizer):
     def stopped(self) -> bool:
         return self.stop_reason is not None
 
-    STATE_KEYS = ("population", "children", "eps", "tolx", "tolfun", "stall_evaluations", "ref_best",
-                  "last_improved", "stop_reason", "rng", "initial_u", "pop_u", "pop_f", "pending_u", "replace")
+    STATE_KEYS = (
+        "population",
+        "children",
+        "eps",
+        "tolx",
+        "tolfun",
+        "stall_evaluations",
+        "ref_best",
+        "last_improved",
+        "stop_reason",
+        "rng",
+        "initial_u",
+        "pop_u",
+        "pop_f",
+        "pending_u",
+        "replace",
+    )
 
     def state_dict(self) -> dict:
         d = self._base_state()
-        d.update({
-            "population": self.population, "children": self.children, "eps": self.eps,
-            "tolx": self.tolx, "tolfun": self.tolfun, "stall_evaluations": self.stall_evaluations,
-            "ref_best": _float_to_json(self._ref_best), "last_improved": int(self._last_improved),
-            "stop_reason": self.stop_reason,
-            "rng": self.rng.bit_generator.state,
-            "initial_u": self._initial_u.tolist(),
-            "pop_u": None if self.pop_u is None else self.pop_u.tolist(),
-            "pop_f": None if self.pop_f is None else [_float_to_json(v) for v in self.pop_f],
-            "pending_u": None if self._pending is None else self._pending.tolist(),
-            "replace": None if self._replace is None else [int(i) for i in self._replace],
-        })
+        d.update(
+            {
+                "population": self.population,
+                "children": self.children,
+                "eps": self.eps,
+                "tolx": self.tolx,
+                "tolfun": self.tolfun,
+                "stall_evaluations": self.stall_evaluations,
+                "ref_best": _float_to_json(self._ref_best),
+                "last_improved": int(self._last_improved),
+                "stop_reason": self.stop_reason,
+                "rng": self.rng.bit_generator.state,
+                "initial_u": self._initial_u.tolist(),
+                "pop_u": None if self.pop_u is None else self.pop_u.tolist(),
+                "pop_f": None if self.pop_f is None else [_float_to_json(v) for v in self.pop_f],
+                "pending_u": None if self._pending is None else self._pending.tolist(),
+                "replace": None if self._replace is None else [int(i) for i in self._replace],
+            }
+        )
         return d
 
     @classmethod
-    def from_state(cls, d: dict) -> "SPXMGG":
+    def from_state(cls, d: dict) -> SPXMGG:
         w = cls.name
         space = cls._check_state(d, w, cls.STATE_KEYS)
         n = space.n
-        stall = _num(d, "stall_evaluations", w, int, 1, 10 ** 12, allow_none=True)
-        opt = cls(space, seed=d["seed"], population=_num(d, "population", w, int, n + 1, 10 ** 6),
-                  children=_num(d, "children", w, int, 1, 10 ** 6), eps=_num(d, "eps", w, float, 1e-12, 1e6),
-                  tolx=_num(d, "tolx", w, float, 0.0), tolfun=_num(d, "tolfun", w, float, 0.0),
-                  stall_evaluations=stall)
+        stall = _num(d, "stall_evaluations", w, int, 1, 10**12, allow_none=True)
+        opt = cls(
+            space,
+            seed=d["seed"],
+            population=_num(d, "population", w, int, n + 1, 10**6),
+            children=_num(d, "children", w, int, 1, 10**6),
+            eps=_num(d, "eps", w, float, 1e-12, 1e6),
+            tolx=_num(d, "tolx", w, float, 0.0),
+            tolfun=_num(d, "tolfun", w, float, 0.0),
+            stall_evaluations=stall,
+        )
         opt._load_base(d)
         rb = _num(d, "ref_best", w, float, allow_none=True)
         opt._ref_best = math.inf if rb is None else rb
@@ -203,12 +243,14 @@ class SPXMGG(Optimizer):
         opt._pending = _array(d, "pending_u", w, (rows, n), allow_none=True)
         rep = _field(d, "replace", w)
         if opt._pending is not None and opt.pop_u is not None:
-            if (not isinstance(rep, list) or len(rep) != 2 or len(set(map(repr, rep))) != 2
-                    or not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < opt.population
-                               for i in rep)):
+            if (
+                not isinstance(rep, list)
+                or len(rep) != 2
+                or len(set(map(repr, rep))) != 2
+                or not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < opt.population for i in rep)
+            ):
                 raise ClothFitError(f"checkpoint: {w} 'replace' must be two distinct population slots")
             opt._replace = np.array(rep, dtype=np.int64)
         elif rep is not None:
             raise ClothFitError(f"checkpoint: {w} 'replace' must be null without a pending family")
         return opt
-

@@ -21,6 +21,7 @@ mass, in log scale. The result reports the model's parameters for that mass (pap
 the identifiable k/m, d/m, l; Blender: ``blender_cloth``, ClothSettings values a Cloth modifier
 takes, with the scene frame rate they belong to).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -33,19 +34,19 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from ..jsonio import write_json
-from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
-from . import checkpoint
-from .checkpoint import STOP_REASONS, capture_hash, silhouettes_hash  # noqa: F401 (re-exported)
-from .checkpoint import identity_diff, read_checkpoint  # noqa: F401 (re-exported for the CLI and tests)
-from .objective import SilhouetteObjective
 from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
 from ..physics.models import BlenderModel
 from ..physics.scenario import Uncertainty
-from .optimise import FIT_OPTIMIZERS, canonical_name, make_optimizer, optimizer_from_state
+from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
+from . import checkpoint
+from .checkpoint import STOP_REASONS, capture_hash, identity_diff, read_checkpoint, silhouettes_hash  # noqa: F401 (re-exported)  # noqa: F401 (re-exported for the CLI and tests)
+from .objective import SilhouetteObjective
+from .optimise import FIT_OPTIMIZERS, canonical_name, make_optimizer
 from .parameters import ManipulationParameters, PaperParameters, SceneParameters, declared_model, make_parameters
 from .quality import Ladder
+from .result import FitResult, job_result
+from .result import finite_or_none as _finite
 from .space import SearchSpace
-
 
 _CMA = ("cma-es", "cma-portfolio")
 # FitConfig's optimiser options: field -> (the optimiser's keyword, the optimisers it applies to). None (the
@@ -64,56 +65,56 @@ SEARCH_OPTIONS = {
     "portfolio_max_polishes": ("max_polishes", ("cma-portfolio",)),
     "portfolio_refine_until": ("refine_until", ("cma-portfolio",)),
 }
-from .result import FitResult, job_result
-from .result import finite_or_none as _finite
 
 
 @dataclass
 class FitConfig:
-    train_cameras: list | None = None     # camera indices (None = all)
-    train_times: list | None = None       # frame times (None = all of the capture's)
+    train_cameras: list | None = None  # camera indices (None = all)
+    train_times: list | None = None  # frame times (None = all of the capture's)
     optimizer: str = D.DEFAULT_OPTIMIZER
     seed: int = 0
     max_evaluations: int = D.FIT_EVALUATIONS
-    target_error: float | None = None     # stop when E_all per image falls below this
-    resolution: list | None = None        # (H, W) to fit at: silhouettes resampled, cameras rescaled
-    cloth_mass: float | None = None       # kg, total; m = cloth_mass / n_vertices
-    bounds: dict | None = None            # per free name (low, high); None = the model's defaults
+    target_error: float | None = None  # stop when E_all per image falls below this
+    resolution: list | None = None  # (H, W) to fit at: silhouettes resampled, cameras rescaled
+    cloth_mass: float | None = None  # kg, total; m = cloth_mass / n_vertices
+    bounds: dict | None = None  # per free name (low, high); None = the model's defaults
     backend: str = "auto"
     population: int | None = None
     children: int | None = None
-    model: object = None                  # "paper", "blender" or a model dict; None = the capture's, else paper
-    fps: float | None = None              # blender: the scene frame rate the settings are for (24)
-    quality: int | None = None            # blender: solver steps per frame (5, or the warm start's)
-    bending_model: str | None = None      # blender: ANGULAR (default) or LINEAR
-    free: list | None = None              # blender: settings to search (default parameters.BLENDER_FREE)
-    fixed: dict | None = None             # blender: settings held at given values
-    init: str | None = None               # a result JSON to start from (warm start)
-    evaluator: str = "core"               # where candidates are simulated: "core" or "blender" (a .blend's own
-                                          # solver in worker processes: addon.farm, handed to FitJob)
-    blend: str | None = None              # blender: the scene file, its cloth object, the frame of t = 0
+    model: object = None  # "paper", "blender" or a model dict; None = the capture's, else paper
+    fps: float | None = None  # blender: the scene frame rate the settings are for (24)
+    quality: int | None = None  # blender: solver steps per frame (5, or the warm start's)
+    bending_model: str | None = None  # blender: ANGULAR (default) or LINEAR
+    free: list | None = None  # blender: settings to search (default parameters.BLENDER_FREE)
+    fixed: dict | None = None  # blender: settings held at given values
+    init: str | None = None  # a result JSON to start from (warm start)
+    evaluator: str = "core"  # where candidates are simulated: "core" or "blender" (a .blend's own
+    # solver in worker processes: addon.farm, handed to FitJob)
+    blend: str | None = None  # blender: the scene file, its cloth object, the frame of t = 0
     blend_object: str | None = None
     frame_zero: float | None = None
-    workers: int | None = None            # blender: worker processes (default: the cores)
-    address: str | None = None            # blender: a running Ray cluster ("auto", "ray://host:port")
-    executor: str = "auto"                # blender: "ray", "process" (no Ray) or "auto"
-    restarts: int | None = None           # cma-es: IPOP restarts after convergence (population doubled each);
-                                          # None = the model's default (paper 0, blender BLENDER_FIT_RESTARTS)
-    uncertain: object = None              # the manipulation's unknowns to estimate: None = the capture's
-                                          # 'uncertain' block; "none" = nothing; "time_offset=S,handles=M" or an
-                                          # object {time_offset, handles} (physics/scenario.Uncertainty)
+    workers: int | None = None  # blender: worker processes (default: the cores)
+    address: str | None = None  # blender: a running Ray cluster ("auto", "ray://host:port")
+    executor: str = "auto"  # blender: "ray", "process" (no Ray) or "auto"
+    restarts: int | None = None  # cma-es: IPOP restarts after convergence (population doubled each);
+    # None = the model's default (paper 0, blender BLENDER_FIT_RESTARTS)
+    uncertain: object = None  # the manipulation's unknowns to estimate: None = the capture's
+    # 'uncertain' block; "none" = nothing; "time_offset=S,handles=M" or an
+    # object {time_offset, handles} (physics/scenario.Uncertainty)
     # the optimiser's own settings (SEARCH_OPTIONS; None = the default it has always had)
-    sigma0: float | None = None           # cma-es, cma-portfolio: first step (unit cube; 0.3, from --init WARM_START_SIGMA)
-    cma_active: bool | None = None        # cma-es, cma-portfolio: active CMA (default: cma-es off, cma-portfolio on)
-    tolx: float | None = None             # unit-cube step (GA: population spread) = converged (D.FIT_TOLX)
-    tolfun_per_image: float | None = None  # spread of recent bests per training image = converged (D.FIT_TOLFUN_PER_IMAGE)
-    ga_eps: float | None = None           # spx-mgg: simplex expansion (sqrt(n + 2))
-    ga_stall: int | None = None           # spx-mgg: evaluations without improvement = stagnated (D.FIT_GA_STALL)
-    portfolio_runs: int | None = None     # cma-portfolio: CMA-ES runs at the start (4)
+    sigma0: float | None = None  # cma-es, cma-portfolio: first step (unit cube; 0.3, from --init WARM_START_SIGMA)
+    cma_active: bool | None = None  # cma-es, cma-portfolio: active CMA (default: cma-es off, cma-portfolio on)
+    tolx: float | None = None  # unit-cube step (GA: population spread) = converged (D.FIT_TOLX)
+    tolfun_per_image: float | None = (
+        None  # spread of recent bests per training image = converged (D.FIT_TOLFUN_PER_IMAGE)
+    )
+    ga_eps: float | None = None  # spx-mgg: simplex expansion (sqrt(n + 2))
+    ga_stall: int | None = None  # spx-mgg: evaluations without improvement = stagnated (D.FIT_GA_STALL)
+    portfolio_runs: int | None = None  # cma-portfolio: CMA-ES runs at the start (4)
     portfolio_explore: float | None = None  # cma-portfolio: budget share of successive halving (0.5)
-    portfolio_polish: str | None = None   # cma-portfolio: "cma" (active CMA-ES) or "coord" (coordinate polish)
+    portfolio_polish: str | None = None  # cma-portfolio: "cma" (active CMA-ES) or "coord" (coordinate polish)
     portfolio_polish_sigma: float | None = None  # cma-portfolio: a polish's first step (0.05)
-    portfolio_max_polishes: int | None = None    # cma-portfolio: polishes before it stops (20)
+    portfolio_max_polishes: int | None = None  # cma-portfolio: polishes before it stops (20)
     portfolio_refine_until: float | None = None  # cma-portfolio: budget share after which refining gives way (1.0)
 
     @classmethod
@@ -126,9 +127,10 @@ class FitConfig:
             raise ClothFitError(f"fit config: unknown keys {sorted(bad)}")
         return cls(**d).checked()
 
-    def checked(self) -> "FitConfig":
+    def checked(self) -> FitConfig:
         """The config with every value checked (one-line ClothFitError naming the first bad one)."""
-        def intval(name, lo, hi=10 ** 12, none_ok=True):
+
+        def intval(name, lo, hi=10**12, none_ok=True):
             v = getattr(self, name)
             if v is None and none_ok:
                 return
@@ -140,20 +142,26 @@ class FitConfig:
             v = getattr(self, name)
             if v is None and none_ok:
                 return
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(v) \
-                    or not lo <= v <= hi:
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float, np.number))
+                or not math.isfinite(v)
+                or not lo <= v <= hi
+            ):
                 raise ClothFitError(f"fit config: {name} must be a finite number in [{lo}, {hi}], got {v!r}")
 
         def intlist(name):
             v = getattr(self, name)
-            if v is not None and (not isinstance(v, (list, tuple)) or not all(
-                    isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in v)):
+            if v is not None and (
+                not isinstance(v, (list, tuple))
+                or not all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in v)
+            ):
                 raise ClothFitError(f"fit config: {name} must be a list of integers, got {v!r}")
 
-        intval("seed", 0, 2 ** 63 - 1, none_ok=False)
+        intval("seed", 0, 2**63 - 1, none_ok=False)
         intval("max_evaluations", 1, none_ok=False)
-        intval("population", 2, 10 ** 6)
-        intval("children", 1, 10 ** 6)
+        intval("population", 2, 10**6)
+        intval("children", 1, 10**6)
         intval("restarts", 0, 20)
         if self.quality != "auto":
             intval("quality", 1, 80)
@@ -162,14 +170,18 @@ class FitConfig:
         numval("fps", 1e-3, 1e4)
         intlist("train_cameras")
         tt = self.train_times
-        if tt is not None and (not isinstance(tt, (list, tuple)) or not all(
-                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in tt)):
+        if tt is not None and (
+            not isinstance(tt, (list, tuple))
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in tt)
+        ):
             raise ClothFitError(f"fit config: train_times must be a list of finite numbers, got {tt!r}")
         if not isinstance(self.optimizer, str):
             raise ClothFitError(f"fit config: optimizer must be a name, got {self.optimizer!r}")
         if canonical_name(self.optimizer) not in FIT_OPTIMIZERS:
-            raise ClothFitError(f"fit config: optimizer {self.optimizer!r} is a polish, not a fit's search: choose one "
-                                f"of {', '.join(FIT_OPTIMIZERS)}")
+            raise ClothFitError(
+                f"fit config: optimizer {self.optimizer!r} is a polish, not a fit's search: choose one "
+                f"of {', '.join(FIT_OPTIMIZERS)}"
+            )
         if self.resolution is not None:
             check_resolution(self.resolution, "fit config: resolution")
         if self.backend not in ("auto", "numba", "numpy"):
@@ -178,25 +190,33 @@ class FitConfig:
             v = getattr(self, name)
             if v is not None and not isinstance(v, dict):
                 raise ClothFitError(f"fit config: {name} must be an object, got {v!r}")
-        if self.free is not None and (not isinstance(self.free, (list, tuple))
-                                      or not all(isinstance(x, str) for x in self.free)):
+        if self.free is not None and (
+            not isinstance(self.free, (list, tuple)) or not all(isinstance(x, str) for x in self.free)
+        ):
             raise ClothFitError(f"fit config: free must be a list of setting names, got {self.free!r}")
         for name in ("bending_model", "init"):
             v = getattr(self, name)
             if v is not None and not isinstance(v, str):
                 raise ClothFitError(f"fit config: {name} must be a string, got {v!r}")
         if self.uncertain is not None and not isinstance(self.uncertain, (str, dict)):
-            raise ClothFitError(f"fit config: uncertain must be 'none', 'time_offset=S,handles=M' or an object, "
-                                f"got {self.uncertain!r}")
+            raise ClothFitError(
+                f"fit config: uncertain must be 'none', 'time_offset=S,handles=M' or an object, got {self.uncertain!r}"
+            )
         if self.model is not None and not isinstance(self.model, (str, dict)):
             raise ClothFitError(f"fit config: model must be a name or a model object, got {self.model!r}")
-        for name, lo, hi in (("sigma0", 1e-9, 10.0), ("tolx", 0.0, 1.0), ("tolfun_per_image", 0.0, math.inf),
-                             ("ga_eps", 1e-9, 1e6), ("portfolio_explore", 0.0, 1.0),
-                             ("portfolio_polish_sigma", 1e-9, 10.0), ("portfolio_refine_until", 0.0, 1.0)):
+        for name, lo, hi in (
+            ("sigma0", 1e-9, 10.0),
+            ("tolx", 0.0, 1.0),
+            ("tolfun_per_image", 0.0, math.inf),
+            ("ga_eps", 1e-9, 1e6),
+            ("portfolio_explore", 0.0, 1.0),
+            ("portfolio_polish_sigma", 1e-9, 10.0),
+            ("portfolio_refine_until", 0.0, 1.0),
+        ):
             numval(name, lo, hi)
         intval("ga_stall", 1)
         intval("portfolio_runs", 1, 64)
-        intval("portfolio_max_polishes", 1, 10 ** 6)
+        intval("portfolio_max_polishes", 1, 10**6)
         if self.cma_active is not None and not isinstance(self.cma_active, bool):
             raise ClothFitError(f"fit config: cma_active must be true or false, got {self.cma_active!r}")
         if self.portfolio_polish not in (None, "cma", "coord"):
@@ -224,8 +244,9 @@ def check_resolution(res, what="resolution"):
         raise ClothFitError(f"{what} {res!r} must be two integers (height, width)")
     h, w = int(h), int(w)
     if not (0 < h <= D.MAX_IMAGE_SIDE and 0 < w <= D.MAX_IMAGE_SIDE and h * w <= D.MAX_FIT_PIXELS):
-        raise ClothFitError(f"{what} {h}x{w} must be positive, at most {D.MAX_IMAGE_SIDE} per side and "
-                            f"{D.MAX_FIT_PIXELS} pixels in all")
+        raise ClothFitError(
+            f"{what} {h}x{w} must be positive, at most {D.MAX_IMAGE_SIDE} per side and {D.MAX_FIT_PIXELS} pixels in all"
+        )
     return [h, w]
 
 
@@ -241,8 +262,6 @@ def load_observed(capture, cams, fidx, resolution=None):
     return cameras, observed, ignore
 
 
-
-
 class FitJob:
     """A fit in stages, one generation per ``step()``: the main search; then, where the quality is
     the fit's to choose, the quality ladder's rungs (``quality.Ladder``: short warm-started CMA-ES runs
@@ -251,8 +270,14 @@ class FitJob:
     them). At the end, ``diagnose.report`` puts the training and held-out errors beside the images'
     noise floor."""
 
-    def __init__(self, capture, config: FitConfig | None = None, checkpoint: str | None = None,
-                 checkpoint_interval: float = 0.0, evaluator=None):
+    def __init__(
+        self,
+        capture,
+        config: FitConfig | None = None,
+        checkpoint: str | None = None,
+        checkpoint_interval: float = 0.0,
+        evaluator=None,
+    ):
         """``evaluator``: where candidates are simulated when not by the core's models: a model-like
         object (``simulate(scenario, rows) -> SimResult``, ``scenario(times)``, ``describe()``), e.g.
         ``addon.farm.scene.BlendSceneEvaluator`` (Blender's solver on a .blend in worker processes)."""
@@ -262,8 +287,10 @@ class FitJob:
         if cfg.evaluator not in ("core", "blender"):
             raise ClothFitError(f"fit config: evaluator {cfg.evaluator!r} must be 'core' or 'blender'")
         if cfg.evaluator != "core" and evaluator is None:
-            raise ClothFitError(f"a fit with the {cfg.evaluator} backend needs its workers "
-                                f"(python -m addon fit ... --backend blender --blend SCENE.blend)")
+            raise ClothFitError(
+                f"a fit with the {cfg.evaluator} backend needs its workers "
+                f"(python -m clothfit fit ... --backend blender --blend SCENE.blend)"
+            )
         self.evaluator = evaluator
         self.checkpoint_interval = float(checkpoint_interval)
         self._last_save = -math.inf
@@ -296,8 +323,9 @@ class FitJob:
         else:
             self.scenario = capture.scenario.with_frames(self.train_times)
             self.par = make_parameters(capture, cfg)
-        self.objective = SilhouetteObjective(self.scenario, cameras, observed, backend=cfg.backend, names=names,
-                                             model=self.par.model, ignore=ignore)
+        self.objective = SilhouetteObjective(
+            self.scenario, cameras, observed, backend=cfg.backend, names=names, model=self.par.model, ignore=ignore
+        )
         self._objectives = {}
         self.m, self.m_source = self.par.m, self.par.m_source
         self.manip, self.manip_note = self._manipulation(capture, cfg, evaluator)
@@ -310,21 +338,21 @@ class FitJob:
         if self.ladder is not None:
             reserved = (D.QUALITY_RUNGS_RESERVED if not self.ladder.probe_only else 1) * self._rung_budget()
         if self.manip is not None:
-            reserved += 2 * self.manip.n            # the profile: the objective either side of each offset
+            reserved += 2 * self.manip.n  # the profile: the objective either side of each offset
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
         self.stage_quality = self.start_quality
         self.stage_end = self.search_end = cfg.max_evaluations - reserved
         self.done_evals = 0
-        self.records = []                 # finished stages
-        self.best_by_quality = {}         # quality (or None) -> [best_f, best_x]
+        self.records = []  # finished stages
+        self.best_by_quality = {}  # quality (or None) -> [best_f, best_x]
         self.history_prev = []
         self.search_stop = None
         self.profile = None
         self.final = None
         self.start_x = self._start_point()
-        self.start_f = None               # its training error, once evaluated (the fit never ends worse)
+        self.start_f = None  # its training error, once evaluated (the fit never ends worse)
         self.started = time.time()
         self.elapsed = 0.0
         self.finished = False
@@ -348,20 +376,25 @@ class FitJob:
             return None, None
         notes = []
         if evaluator is not None and any(b > 0 for b in unc.handles):
-            raise ClothFitError("fit: uncertain handles cannot be estimated with --backend blender (the scene's pins "
-                                "are its own objects): give --uncertain time_offset=S,handles=0, or fit the capture "
-                                "with the core model")
+            raise ClothFitError(
+                "fit: uncertain handles cannot be estimated with --backend blender (the scene's pins "
+                "are its own objects): give --uncertain time_offset=S,handles=0, or fit the capture "
+                "with the core model"
+            )
         n_frames = len(self.train_times)
         rel = [h.release_time for h in sc.handles if h.release_time is not None]
         after = sum(t >= min(rel) for t in self.train_times) if rel else n_frames
         t_bound, h_bounds = unc.time_offset, unc.handles
         if t_bound > 0 and after < D.MIN_FRAMES_FOR_TIME_OFFSET:
-            notes.append(f"time_offset not estimated: {after} training frame(s) after the release cannot separate "
-                         f"it from the cloth's settings (need {D.MIN_FRAMES_FOR_TIME_OFFSET})")
+            notes.append(
+                f"time_offset not estimated: {after} training frame(s) after the release cannot separate "
+                f"it from the cloth's settings (need {D.MIN_FRAMES_FOR_TIME_OFFSET})"
+            )
             t_bound = 0.0
         if any(b > 0 for b in h_bounds) and n_frames < 2:
-            notes.append("handle offsets not estimated: one training frame cannot separate them from the cloth's "
-                         "settings")
+            notes.append(
+                "handle offsets not estimated: one training frame cannot separate them from the cloth's settings"
+            )
             h_bounds = (0.0,) * nh
         unc = Uncertainty(t_bound, tuple(h_bounds))
         note = "; ".join(notes) or None
@@ -374,8 +407,11 @@ class FitJob:
         if isinstance(self.par, PaperParameters):
             return None
         if evaluator is not None:
-            return Ladder(evaluator.quality, probe_only=cfg.quality != "auto",
-                          max_rungs=1 if cfg.quality != "auto" else D.QUALITY_RUNGS_RESERVED)
+            return Ladder(
+                evaluator.quality,
+                probe_only=cfg.quality != "auto",
+                max_rungs=1 if cfg.quality != "auto" else D.QUALITY_RUNGS_RESERVED,
+            )
         if cfg.quality != "auto" and (cfg.quality is not None or cfg.init or "quality" in declared_model(capture, cfg)):
             return None
         return Ladder(self.par.model.quality)
@@ -403,46 +439,55 @@ class FitJob:
                 self.best_by_quality[q] = [f, self.start_x.tolist()]
 
     def _rung_budget(self) -> int:
-        frac = D.SCENE_QUALITY_PROBE if (self.ladder is not None and self.ladder.probe_only) else \
-            D.QUALITY_RUNG_FRACTION
+        frac = (
+            D.SCENE_QUALITY_PROBE if (self.ladder is not None and self.ladder.probe_only) else D.QUALITY_RUNG_FRACTION
+        )
         return max(1, int(round(frac * self.config.max_evaluations)))
 
     def _optimizer_kw(self, warm_x=None):
         cfg = self.config
         is_cma = self.optimizer_name in ("cma-es", "cma-portfolio")
-        tolfun = (D.FIT_TOLFUN_PER_IMAGE if cfg.tolfun_per_image is None else cfg.tolfun_per_image) \
-            * self.objective.n_images
+        tolfun = (
+            D.FIT_TOLFUN_PER_IMAGE if cfg.tolfun_per_image is None else cfg.tolfun_per_image
+        ) * self.objective.n_images
         kw = {"tolx": D.FIT_TOLX if cfg.tolx is None else cfg.tolx, "tolfun": tolfun}
         initial = None
         if warm_x is not None:
             initial = [np.asarray(warm_x, dtype=np.float64)]
-        elif self.par.initial is not None:          # warm start: from the given result, a closer search
-            initial = [np.concatenate([np.asarray(x, dtype=np.float64), np.zeros(self.space.n - self.npar)])
-                       for x in self.par.initial]
+        elif self.par.initial is not None:  # warm start: from the given result, a closer search
+            initial = [
+                np.concatenate([np.asarray(x, dtype=np.float64), np.zeros(self.space.n - self.npar)])
+                for x in self.par.initial
+            ]
         if initial is not None:
             kw["initial"] = initial
             if is_cma:
                 kw["sigma0"] = D.WARM_START_SIGMA
         paper = isinstance(self.par, PaperParameters)
         n = self.space.n
-        if self.optimizer_name == "cma-portfolio" and warm_x is None:   # docs/search.md: runs share the budget
+        if self.optimizer_name == "cma-portfolio" and warm_x is None:  # docs/search.md: runs share the budget
             kw["budget"] = max(1, self.search_budget())
             kw["popsize"] = cfg.population if cfg.population is not None else 4 + int(3 * math.log(n))
         elif is_cma:
-            kw["restarts"] = (0 if warm_x is not None else cfg.restarts if cfg.restarts is not None else
-                              D.FIT_RESTARTS if paper else D.BLENDER_FIT_RESTARTS)
+            kw["restarts"] = (
+                0
+                if warm_x is not None
+                else cfg.restarts
+                if cfg.restarts is not None
+                else D.FIT_RESTARTS
+                if paper
+                else D.BLENDER_FIT_RESTARTS
+            )
             # Hansen's default population 4 + 3 ln n (7 for the paper's 3 free quantities)
             kw["popsize"] = cfg.population if cfg.population is not None else 4 + int(3 * math.log(n))
-        else:   # the paper's GA: population 7n, 5n children per family
-            kw["population"] = (cfg.population if cfg.population is not None else
-                                D.FIT_GA_POPULATION if paper else 7 * n)
-            kw["children"] = (cfg.children if cfg.children is not None else
-                              D.FIT_GA_CHILDREN if paper else 5 * n)
+        else:  # the paper's GA: population 7n, 5n children per family
+            kw["population"] = cfg.population if cfg.population is not None else D.FIT_GA_POPULATION if paper else 7 * n
+            kw["children"] = cfg.children if cfg.children is not None else D.FIT_GA_CHILDREN if paper else 5 * n
             kw["stall_evaluations"] = D.FIT_GA_STALL
-        for name, value in cfg.search_options().items():       # the config's own settings of this optimiser
+        for name, value in cfg.search_options().items():  # the config's own settings of this optimiser
             key, optimizers = SEARCH_OPTIONS[name]
             if name in ("sigma0", "tolx", "tolfun_per_image") or self.optimizer_name not in optimizers:
-                continue                        # set above (a rung's sigma0 stays the warm start's)
+                continue  # set above (a rung's sigma0 stays the warm start's)
             kw[key] = value
         if cfg.sigma0 is not None and warm_x is None:
             kw["sigma0"] = cfg.sigma0
@@ -461,8 +506,14 @@ class FitJob:
         if self.optimizer_name == "cma-portfolio":
             kw.pop("budget", None)
         if self.optimizer_name != "cma-es":
-            kw = {"tolx": kw["tolx"], "tolfun": kw["tolfun"], "initial": kw["initial"],
-                  "sigma0": D.WARM_START_SIGMA, "restarts": 0, "popsize": 4 + int(3 * math.log(self.space.n))}
+            kw = {
+                "tolx": kw["tolx"],
+                "tolfun": kw["tolfun"],
+                "initial": kw["initial"],
+                "sigma0": D.WARM_START_SIGMA,
+                "restarts": 0,
+                "popsize": 4 + int(3 * math.log(self.space.n)),
+            }
         return make_optimizer("cma-es", self.space, self.config.seed, **kw)
 
     def _model_at(self, quality):
@@ -486,8 +537,14 @@ class FitJob:
             else:
                 cameras, observed, ignore, names = self._images
                 self._objectives[quality] = SilhouetteObjective(
-                    self.scenario, cameras, observed, backend=self.config.backend, names=names,
-                    model=self._model_at(quality), ignore=ignore)
+                    self.scenario,
+                    cameras,
+                    observed,
+                    backend=self.config.backend,
+                    names=names,
+                    model=self._model_at(quality),
+                    ignore=ignore,
+                )
         self.objective = self._objectives[quality]
         self.par.model = self.objective.model
         self.par.fixed["quality"] = int(quality)
@@ -500,16 +557,16 @@ class FitJob:
     # ------------------------------------------------------------- mapping
     def to_params(self, X):
         """Free vectors -> the model's parameter rows (paper: (P, 4) rows of m, k, l, d)."""
-        return self.par.rows(np.atleast_2d(X)[:, :self.npar])
+        return self.par.rows(np.atleast_2d(X)[:, : self.npar])
 
     def evaluate(self, X, objective=None):
         """Training error (sum of E_sil over the training images) of candidates ``X`` (search space)."""
         obj = objective or self.objective
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-        rows = self.par.rows(X[:, :self.npar])
+        rows = self.par.rows(X[:, : self.npar])
         if self.manip is None:
             return obj(rows)
-        return obj(rows, offsets=self.manip.offsets(X[:, self.npar:]))
+        return obj(rows, offsets=self.manip.offsets(X[:, self.npar :]))
 
     # ---------------------------------------------------------------- state
     @property
@@ -518,8 +575,10 @@ class FitJob:
 
     @property
     def generation(self):
-        return int(sum(r["generations"] for r in self.records) +
-                   (self.opt.generation if self.stage in ("search", "rung") else 0))
+        return int(
+            sum(r["generations"] for r in self.records)
+            + (self.opt.generation if self.stage in ("search", "rung") else 0)
+        )
 
     @property
     def progress(self):
@@ -556,9 +615,9 @@ class FitJob:
         if x is None:
             return None
         if isinstance(self.par, PaperParameters):
-            return self.par.params(x[:self.npar])
+            return self.par.params(x[: self.npar])
         with self._at_quality(self.chosen_quality()):
-            return self.par.settings(x[:self.npar])
+            return self.par.settings(x[: self.npar])
 
     @contextlib.contextmanager
     def _at_quality(self, quality):
@@ -586,8 +645,10 @@ class FitJob:
             return
         n_img = self.objective.n_images
         if self.stage == "search" and self.opt.best_x is None and self.evaluations >= D.FIT_EXPLODED_LIMIT:
-            self.error = (f"every one of the {self.evaluations} candidates tried made the simulation explode or "
-                          f"fail: check the capture's scenario (settle_time, gravity, cloth size) and the bounds")
+            self.error = (
+                f"every one of the {self.evaluations} candidates tried made the simulation explode or "
+                f"fail: check the capture's scenario (settle_time, gravity, cloth size) and the bounds"
+            )
             self.stop_reason = "error"
         elif self.config.target_error is not None and self.best_error / n_img <= self.config.target_error:
             self.stop_reason = "target"
@@ -600,10 +661,16 @@ class FitJob:
     def _end_running(self):
         if self.stage in ("search", "rung"):
             self._track()
-            self.records.append({"stage": self.stage, "quality": self.stage_quality,
-                                 "evaluations": int(self.opt.evaluations), "generations": int(self.opt.generation),
-                                 "best_f": _finite(self.opt.best_f) if self.opt.best_x is not None else None,
-                                 "stop": "converged" if self.opt.stopped else "budget"})
+            self.records.append(
+                {
+                    "stage": self.stage,
+                    "quality": self.stage_quality,
+                    "evaluations": int(self.opt.evaluations),
+                    "generations": int(self.opt.generation),
+                    "best_f": _finite(self.opt.best_f) if self.opt.best_x is not None else None,
+                    "stop": "converged" if self.opt.stopped else "budget",
+                }
+            )
             self.history_prev += [[int(a) + self.done_evals, b] for a, b in self._opt_history()]
             self.done_evals += int(self.opt.evaluations)
             if self.stage == "search":
@@ -618,7 +685,7 @@ class FitJob:
         if self.stage in ("search", "rung") and self.ladder is not None and self.best_by_quality:
             q = self.ladder.next()
             rung = self._rung_budget()
-            if q is not None and left >= max(1, rung // 2):    # the search's last generation may eat into a rung
+            if q is not None and left >= max(1, rung // 2):  # the search's last generation may eat into a rung
                 f, x = self.best_by_quality[self.chosen_quality()]
                 self.stage, self.stage_quality = "rung", q
                 self._activate(q)
@@ -653,9 +720,14 @@ class FitJob:
             fp, fm = float(f[2 * i]), float(f[2 * i + 1])
             a = (fp + fm - 2 * f0) / (2 * h[i] ** 2) if math.isfinite(fp) and math.isfinite(fm) else float("nan")
             unc = math.sqrt(D.PROFILE_RISE * f0 / a) if a > 0 and f0 > 0 else None
-            prof[n] = {"step": float(h[i]), "E_plus": _finite(fp), "E_minus": _finite(fm), "E_best": _finite(f0),
-                       "uncertainty": unc,
-                       "separated": unc is not None and unc < self.manip.bounds[n][1]}
+            prof[n] = {
+                "step": float(h[i]),
+                "E_plus": _finite(fp),
+                "E_minus": _finite(fm),
+                "E_best": _finite(f0),
+                "uncertainty": unc,
+                "separated": unc is not None and unc < self.manip.bounds[n][1],
+            }
         self.profile = prof
         self.stage = "done"
         self.stop_reason = self.search_stop or "budget"
@@ -706,9 +778,10 @@ class FitJob:
         if self.final is not None or self.error or self.best_x is None:
             return
         from .diagnose import report
+
         try:
             self.final = report(self)
-        except ClothFitError as e:            # never a reason to lose the result
+        except ClothFitError as e:  # never a reason to lose the result
             self.final = {"error": str(e)}
 
     def cancel(self):
@@ -738,7 +811,7 @@ class FitJob:
         x = self.best_x
         if self.manip is None or x is None:
             return {"manipulation_note": self.manip_note} if self.manip_note else {}
-        m = np.array(x[self.npar:], dtype=np.float64)
+        m = np.array(x[self.npar :], dtype=np.float64)
         spread = None
         notes = [self.manip_note] if self.manip_note else []
         if self.profile is not None:
@@ -747,11 +820,16 @@ class FitJob:
             for n in flat:
                 m[self.manip.names.index(n)] = 0.0
             if flat:
-                notes.append(f"cannot be separated from the cloth's settings (the error is flat within the bound): "
-                             f"{', '.join(flat)}; the capture's own value kept, not reported")
+                notes.append(
+                    f"cannot be separated from the cloth's settings (the error is flat within the bound): "
+                    f"{', '.join(flat)}; the capture's own value kept, not reported"
+                )
         d = self.manip.describe(m, self.capture.scenario, spread)
-        if self.profile is not None and "time_offset_s" in self.manip.names \
-                and not self.profile["time_offset_s"]["separated"]:
+        if (
+            self.profile is not None
+            and "time_offset_s" in self.manip.names
+            and not self.profile["time_offset_s"]["separated"]
+        ):
             d["time_offset_s"] = None
         if self.profile is None:
             notes.append("uncertainties not estimated (the fit stopped before its profile)")
@@ -775,8 +853,9 @@ class FitJob:
         self._last_save = time.monotonic()
 
     @classmethod
-    def resume(cls, path, capture=None, config: FitConfig | None = None, checkpoint_interval: float = 0.0,
-               evaluator=None):
+    def resume(
+        cls, path, capture=None, config: FitConfig | None = None, checkpoint_interval: float = 0.0, evaluator=None
+    ):
         """Continue a job from its checkpoint (``checkpoint.resume``: a checkpoint of another fit is refused
         naming the differing fields; only the budget and the target may differ). ``evaluator``: the workers
         of a Blender-scene fit."""
@@ -799,4 +878,4 @@ def atomic_json(path, obj):
     write_json(path, obj, strict=True)
 
 
-_atomic_json = atomic_json      # the CLI's name for it
+_atomic_json = atomic_json  # the CLI's name for it

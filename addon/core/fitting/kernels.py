@@ -3,6 +3,7 @@ silhouettes in the same thread, so a population never holds all its simulated fr
 for models simulated elsewhere (Blender's cloth runs its candidates as SIMD lanes), score given
 positions, one candidate per thread.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -15,28 +16,95 @@ from ..physics.paper_kernels import simulate_one
 @njit(**JIT)
 def work_buffers(span_cap, max_h, max_w):
     """One thread's scratch arrays for ``eval_frames`` (row spans and prefix sums)."""
-    return (np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
-            np.empty(span_cap, dtype=np.int32), np.zeros(max_h + 2, dtype=np.int64),
-            np.zeros(max_h + 2, dtype=np.int64), np.empty(span_cap, dtype=np.int32),
-            np.empty(span_cap, dtype=np.int32), np.zeros(max_w + 2, dtype=np.int64),
-            np.empty(span_cap, dtype=np.int32), np.empty(span_cap, dtype=np.int32),
-            np.empty(span_cap, dtype=np.int32))
+    return (
+        np.empty(span_cap, dtype=np.int32),
+        np.empty(span_cap, dtype=np.int32),
+        np.empty(span_cap, dtype=np.int32),
+        np.zeros(max_h + 2, dtype=np.int64),
+        np.zeros(max_h + 2, dtype=np.int64),
+        np.empty(span_cap, dtype=np.int32),
+        np.empty(span_cap, dtype=np.int32),
+        np.zeros(max_w + 2, dtype=np.int64),
+        np.empty(span_cap, dtype=np.int32),
+        np.empty(span_cap, dtype=np.int32),
+        np.empty(span_cap, dtype=np.int32),
+    )
 
 
 @njit(**PARALLEL)
-def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
-                         events, n_events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
-                         max_strain, max_steps, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris,
-                         max_h, max_w, span_cap, esil, codes):
+def objective_population(
+    P,
+    nx,
+    ny,
+    rest,
+    springs,
+    rest_factor,
+    hv,
+    key_start,
+    key_times,
+    key_pos,
+    release,
+    events,
+    n_events,
+    frame_of_event,
+    n_frames,
+    gravity,
+    settle_rate,
+    safety,
+    centre,
+    limit,
+    max_strain,
+    max_steps,
+    Ks,
+    Rs,
+    ts,
+    dists,
+    Hs,
+    Ws,
+    pre,
+    pofs,
+    bbs,
+    ipre,
+    ipofs,
+    ibbs,
+    areas,
+    tris,
+    max_h,
+    max_w,
+    span_cap,
+    esil,
+    codes,
+):
     """Simulate and score every candidate (its own key positions and events, as
     ``paper_kernels.population_arrays`` gives them): esil[p, c, f]; codes[p] != 0 = exploded."""
     V = rest.shape[0]
     for p in prange(P.shape[0]):
         X = np.zeros((n_frames, V, 3))
         ne = n_events[p]
-        code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos[p],
-                                release, events[p, :ne], frame_of_event[p, :ne], n_frames, gravity, settle_rate,
-                                safety, centre, limit, max_strain, max_steps, X)
+        code, st = simulate_one(
+            P[p],
+            nx,
+            ny,
+            rest,
+            springs,
+            rest_factor,
+            hv,
+            key_start,
+            key_times,
+            key_pos[p],
+            release,
+            events[p, :ne],
+            frame_of_event[p, :ne],
+            n_frames,
+            gravity,
+            settle_rate,
+            safety,
+            centre,
+            limit,
+            max_strain,
+            max_steps,
+            X,
+        )
         codes[p] = code
         if code != 0:
             continue
@@ -44,10 +112,10 @@ def objective_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, k
         eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, work, esil[p])
 
 
-
 @njit(**PARALLEL)
-def score_population(X, ok, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, max_h, max_w,
-                     span_cap, esil):
+def score_population(
+    X, ok, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, max_h, max_w, span_cap, esil
+):
     """esil[p, c, f] for the positions X (P, F, V, 3) of every candidate with ok[p]."""
     for p in prange(X.shape[0]):
         if not ok[p]:

@@ -10,6 +10,7 @@ Pixels of unknown truth (``ignore[c][f]``: occluders such as a hand or a post in
 leave eq. 6 entirely: they are neither observed cloth nor observed background, so a model pixel
 there is neither missing nor extra, and the normaliser is the observed area outside them.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -46,20 +47,25 @@ class SilhouetteObjective:
                 o = np.asarray(observed[c][f], dtype=bool)
                 nm = names[c][f] if names else f"camera '{cam.name}' frame {f}"
                 if o.shape != (cam.height, cam.width):
-                    raise ClothFitError(f"{nm}: silhouette is {o.shape[0]}x{o.shape[1]} but camera '{cam.name}' is "
-                                        f"{cam.height}x{cam.width}")
+                    raise ClothFitError(
+                        f"{nm}: silhouette is {o.shape[0]}x{o.shape[1]} but camera '{cam.name}' is "
+                        f"{cam.height}x{cam.width}"
+                    )
                 g = None if ignore is None or ignore[c][f] is None else np.asarray(ignore[c][f], dtype=bool)
                 if g is not None:
                     if g.shape != o.shape:
-                        raise ClothFitError(f"{nm}: ignore mask is {g.shape[0]}x{g.shape[1]} but camera '{cam.name}' "
-                                            f"is {cam.height}x{cam.width}")
+                        raise ClothFitError(
+                            f"{nm}: ignore mask is {g.shape[0]}x{g.shape[1]} but camera '{cam.name}' "
+                            f"is {cam.height}x{cam.width}"
+                        )
                     g = g if g.any() else None
                     if g is not None:
                         o = o & ~g
                 a = int(o.sum())
                 if a == 0:
-                    raise ClothFitError(f"{nm}: observed silhouette is empty" + (" outside the ignore mask" if g is not None
-                                                                                 else ""))
+                    raise ClothFitError(
+                        f"{nm}: observed silhouette is empty" + (" outside the ignore mask" if g is not None else "")
+                    )
                 self.areas[c, f] = a
                 obs.append(o)
                 ign.append(g)
@@ -82,9 +88,11 @@ class SilhouetteObjective:
             d = np.zeros((C, 5))
             for i, c in enumerate(self.cameras):
                 if c.dist.size > 5 and np.any(c.dist[5:] != 0):
-                    raise ClothFitError(f"camera '{c.name}': only 5 distortion coefficients (k1 k2 p1 p2 k3) are "
-                                        f"supported in the fitter; undistort the silhouettes first")
-                d[i, :min(5, c.dist.size)] = c.dist[:5]
+                    raise ClothFitError(
+                        f"camera '{c.name}': only 5 distortion coefficients (k1 k2 p1 p2 k3) are "
+                        f"supported in the fitter; undistort the silhouettes first"
+                    )
+                d[i, : min(5, c.dist.size)] = c.dist[:5]
             self._dists = d
             self._Hs = np.array([c.height for c in self.cameras], dtype=np.int64)
             self._Ws = np.array([c.width for c in self.cameras], dtype=np.int64)
@@ -112,14 +120,37 @@ class SilhouetteObjective:
             esil = np.full((P.shape[0], C, F), np.inf)
             codes = np.zeros(P.shape[0], dtype=np.int64)
             a = paper_kernels.population_arrays(self.scenario, P.shape[0], offsets=offsets)
-            kernels.objective_population(P, *[a[k] for k in paper_kernels.ORDER], self._Ks, self._Rs, self._ts,
-                                         self._dists, self._Hs, self._Ws, self._pre, self._pofs, self._bbs, self._ipre,
-                                         self._ipofs, self._ibbs, self.areas, self._tris, self._maxh, self._maxw, self._span_cap, esil, codes)
+            kernels.objective_population(
+                P,
+                *[a[k] for k in paper_kernels.ORDER],
+                self._Ks,
+                self._Rs,
+                self._ts,
+                self._dists,
+                self._Hs,
+                self._Ws,
+                self._pre,
+                self._pofs,
+                self._bbs,
+                self._ipre,
+                self._ipofs,
+                self._ibbs,
+                self.areas,
+                self._tris,
+                self._maxh,
+                self._maxw,
+                self._span_cap,
+                esil,
+                codes,
+            )
             exploded = codes != 0
             esil[exploded] = np.inf
             return esil, exploded
-        sim = simulate_numpy(self.scenario, P) if offsets is None else self.model.simulate(
-            self.scenario, P, backend="numpy", offsets=offsets)
+        sim = (
+            simulate_numpy(self.scenario, P)
+            if offsets is None
+            else self.model.simulate(self.scenario, P, backend="numpy", offsets=offsets)
+        )
         esil = np.full((P.shape[0], C, F), np.inf)
         tris = self.scenario.grid.triangles
         for p in range(P.shape[0]):
@@ -128,8 +159,9 @@ class SilhouetteObjective:
             for c, cam in enumerate(self.cameras):
                 uv = cam.project(sim.positions[p])  # (F, V, 2)
                 for f in range(F):
-                    esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f],
-                                                     self.ignore[c][f])
+                    esil[p, c, f] = self._esil_numpy(
+                        uv[f], tris, cam, self.observed[c][f], self.areas[c, f], self.ignore[c][f]
+                    )
         return esil, sim.exploded
 
     def _per_image_positions(self, rows, offsets=None):
@@ -138,24 +170,46 @@ class SilhouetteObjective:
         rows = rows.reshape(-1, len(self.model.row_names))
         C, F = self.areas.shape
         self.evaluations += rows.shape[0]
-        sim = (self.model.simulate(self.scenario, rows, backend=self.backend) if offsets is None else
-               self.model.simulate(self.scenario, rows, backend=self.backend, offsets=offsets))
+        sim = (
+            self.model.simulate(self.scenario, rows, backend=self.backend)
+            if offsets is None
+            else self.model.simulate(self.scenario, rows, backend=self.backend, offsets=offsets)
+        )
         esil = np.full((rows.shape[0], C, F), np.inf)
         ok = ~sim.exploded
         if self.backend == "numba":
             X = np.ascontiguousarray(np.where(ok[:, None, None, None], sim.positions, 0.0))
-            kernels.score_population(X, ok, self._Ks, self._Rs, self._ts, self._dists, self._Hs, self._Ws,
-                                     self._pre, self._pofs, self._bbs, self._ipre, self._ipofs, self._ibbs,
-                                     self.areas, self._tris, self._maxh,
-                                     self._maxw, self._span_cap, esil)
+            kernels.score_population(
+                X,
+                ok,
+                self._Ks,
+                self._Rs,
+                self._ts,
+                self._dists,
+                self._Hs,
+                self._Ws,
+                self._pre,
+                self._pofs,
+                self._bbs,
+                self._ipre,
+                self._ipofs,
+                self._ibbs,
+                self.areas,
+                self._tris,
+                self._maxh,
+                self._maxw,
+                self._span_cap,
+                esil,
+            )
         else:
             tris = self.scenario.grid.triangles
             for p in np.nonzero(ok)[0]:
                 for c, cam in enumerate(self.cameras):
                     uv = cam.project(sim.positions[p])
                     for f in range(F):
-                        esil[p, c, f] = self._esil_numpy(uv[f], tris, cam, self.observed[c][f], self.areas[c, f],
-                                                     self.ignore[c][f])
+                        esil[p, c, f] = self._esil_numpy(
+                            uv[f], tris, cam, self.observed[c][f], self.areas[c, f], self.ignore[c][f]
+                        )
         esil[sim.exploded] = np.inf
         return esil, sim.exploded
 
@@ -163,9 +217,9 @@ class SilhouetteObjective:
     def _esil_numpy(uv, tris, cam, obs, area, ignore=None):
         r0, c0, win = rasterize_window(uv, tris, cam.height, cam.width)
         if ignore is not None and win.size:
-            win = win & ~ignore[r0:r0 + win.shape[0], c0:c0 + win.shape[1]]
+            win = win & ~ignore[r0 : r0 + win.shape[0], c0 : c0 + win.shape[1]]
         nmod = int(win.sum())
-        inter = int(np.count_nonzero(obs[r0:r0 + win.shape[0], c0:c0 + win.shape[1]] & win)) if nmod else 0
+        inter = int(np.count_nonzero(obs[r0 : r0 + win.shape[0], c0 : c0 + win.shape[1]] & win)) if nmod else 0
         return (area + nmod - 2 * inter) / area
 
     def __call__(self, P, offsets=None):
@@ -191,7 +245,7 @@ def _prefix_sums(images, C, F):
             rows = np.flatnonzero(im.any(1))
             cols = np.flatnonzero(im.any(0))
             r0, r1, c0, c1 = rows[0], rows[-1], cols[0], cols[-1]
-            crop = im[r0:r1 + 1, c0:c1 + 1].astype(np.int32)
+            crop = im[r0 : r1 + 1, c0 : c1 + 1].astype(np.int32)
             pre = np.zeros((crop.shape[0], crop.shape[1] + 1), dtype=np.int32)
             np.cumsum(crop, axis=1, out=pre[:, 1:])
             pofs[c, f] = o

@@ -23,6 +23,7 @@ The optimisers, one per module, each with ``ask`` / ``tell`` / ``stopped`` and a
 This module only names them: :data:`OPTIMIZERS`, :data:`FIT_OPTIMIZERS`, :func:`make_optimizer`,
 :func:`optimizer_from_state`.
 """
+
 from __future__ import annotations
 
 from ..errors import ClothFitError
@@ -34,18 +35,30 @@ from .space import SearchSpace
 from .steppable import Optimizer
 
 OPTIMIZERS = {"spx-mgg": SPXMGG, "cma-es": CMAES, "cma-portfolio": CMAPortfolio, "coord-polish": CoordinatePolish}
-FIT_OPTIMIZERS = ("cma-es", "spx-mgg", "cma-portfolio")   # the searches a fit may run (coord-polish is a polish)
-ALIASES = {"spx-mgg": "spx-mgg", "spx_mgg": "spx-mgg", "ga": "spx-mgg", "spxmgg": "spx-mgg",
-           "cma-es": "cma-es", "cma": "cma-es", "cma_es": "cma-es", "cmaes": "cma-es",
-           "cma-portfolio": "cma-portfolio", "cma_portfolio": "cma-portfolio", "portfolio": "cma-portfolio",
-           "coord-polish": "coord-polish", "coord_polish": "coord-polish"}
+FIT_OPTIMIZERS = ("cma-es", "spx-mgg", "cma-portfolio")  # the searches a fit may run (coord-polish is a polish)
+ALIASES = {
+    "spx-mgg": "spx-mgg",
+    "spx_mgg": "spx-mgg",
+    "ga": "spx-mgg",
+    "spxmgg": "spx-mgg",
+    "cma-es": "cma-es",
+    "cma": "cma-es",
+    "cma_es": "cma-es",
+    "cmaes": "cma-es",
+    "cma-portfolio": "cma-portfolio",
+    "cma_portfolio": "cma-portfolio",
+    "portfolio": "cma-portfolio",
+    "coord-polish": "coord-polish",
+    "coord_polish": "coord-polish",
+}
 
 
 def canonical_name(name: str) -> str:
     key = str(name).strip().lower()
     if key not in ALIASES:
-        raise ClothFitError(f"unknown optimiser '{name}': choose one of "
-                            f"{', '.join(sorted(ALIASES))} (i.e. {' or '.join(OPTIMIZERS)})")
+        raise ClothFitError(
+            f"unknown optimiser '{name}': choose one of {', '.join(sorted(ALIASES))} (i.e. {' or '.join(OPTIMIZERS)})"
+        )
     return ALIASES[key]
 
 
@@ -59,4 +72,3 @@ def optimizer_from_state(d: dict) -> Optimizer:
     if not isinstance(d, dict) or "algorithm" not in d:
         raise ClothFitError("checkpoint: not an optimiser state (no 'algorithm' key)")
     return OPTIMIZERS[canonical_name(d["algorithm"])].from_state(d)
-

@@ -13,12 +13,13 @@ the rest is searched per unit mass, in log scale.
   that makes the cloth move in real time at the target frame rate. Bounds are the defaults'
   ranges, clipped to Blender's own limits at the fixed mass.
 """
+
 from __future__ import annotations
 
 import math
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -41,24 +42,46 @@ PAPER_FREE = ("k_over_m", "d_over_m", "l_rel")
 
 # Blender settings searched by default (see README, "Identifiability"); the rest stay fixed.
 BLENDER_FREE = {
-    "ANGULAR": ("tension_stiffness", "compression_stiffness", "shear_stiffness", "bending_stiffness",
-                "tension_damping", "shear_damping", "bending_damping", "air_damping"),
-    "LINEAR": ("tension_stiffness", "shear_stiffness", "bending_stiffness", "tension_damping", "shear_damping",
-               "bending_damping", "air_damping"),
+    "ANGULAR": (
+        "tension_stiffness",
+        "compression_stiffness",
+        "shear_stiffness",
+        "bending_stiffness",
+        "tension_damping",
+        "shear_damping",
+        "bending_damping",
+        "air_damping",
+    ),
+    "LINEAR": (
+        "tension_stiffness",
+        "shear_stiffness",
+        "bending_stiffness",
+        "tension_damping",
+        "shear_damping",
+        "bending_damping",
+        "air_damping",
+    ),
 }
 # search ranges in Blender's units *for a vertex mass of 0.3 kg* (Blender's default); scaled with the
 # fixed mass for the mass-scaled settings, then clipped to Blender's limits
 BLENDER_BOUNDS_AT_DEFAULT_MASS = {
-    "tension_stiffness": (0.5, 2000.0), "compression_stiffness": (0.5, 2000.0), "shear_stiffness": (0.05, 2000.0),
-    "bending_stiffness": (1e-3, 500.0), "tension_damping": (1e-3, 50.0), "compression_damping": (1e-3, 50.0),
-    "shear_damping": (1e-3, 50.0), "bending_damping": (1e-4, 50.0), "air_damping": (1e-3, 10.0),
+    "tension_stiffness": (0.5, 2000.0),
+    "compression_stiffness": (0.5, 2000.0),
+    "shear_stiffness": (0.05, 2000.0),
+    "bending_stiffness": (1e-3, 500.0),
+    "tension_damping": (1e-3, 50.0),
+    "compression_damping": (1e-3, 50.0),
+    "shear_damping": (1e-3, 50.0),
+    "bending_damping": (1e-4, 50.0),
+    "air_damping": (1e-3, 10.0),
     "pin_stiffness": (1e-2, 50.0),
 }
 FITTABLE = tuple(BLENDER_BOUNDS_AT_DEFAULT_MASS)
 
 
-def point_mass(capture: Capture, cfg_mass: float | None, default: float | None, n_vertices: int | None = None
-               ) -> tuple[float | None, str | None]:
+def point_mass(
+    capture: Capture, cfg_mass: float | None, default: float | None, n_vertices: int | None = None
+) -> tuple[float | None, str | None]:
     """(mass per vertex, source) from the given total mass, the capture's, or ``default``; the
     total is spread over ``n_vertices`` (default: the capture's grid)."""
     n = capture.scenario.grid.n_vertices if n_vertices is None else int(n_vertices)
@@ -120,7 +143,7 @@ class BlenderParameters:
     """Blender's cloth: free ClothSettings (per unit mass, log scale), the rest fixed."""
 
     def __init__(self, capture, cfg, spec=None):
-        spec = get_model(spec or "blender")          # the asked-for model (frame rate, quality, bending)
+        spec = get_model(spec or "blender")  # the asked-for model (frame rate, quality, bending)
         init = load_init(cfg.init) if cfg.init else None
         base = dict(B.DEFAULTS, quality=spec.quality, bending_model=spec.bending_model)
         fps = spec.fps
@@ -137,13 +160,17 @@ class BlenderParameters:
             init_settings = settings_from_result(init, self.model, capture.scenario.grid)
         if m is None:
             m = init_settings["mass"] if init_settings else B.DEFAULTS["mass"]
-            src = ("warm-start result's mass" if init_settings else
-                   "Blender's default vertex mass (cloth mass unknown: every stiffness and damping scales with it)")
+            src = (
+                "warm-start result's mass"
+                if init_settings
+                else "Blender's default vertex mass (cloth mass unknown: every stiffness and damping scales with it)"
+            )
         self.m, self.m_source = float(m), src
         # Blender's defaults are for its default vertex mass: moved to this mass, they move alike
         fixed = _rescale(dict(base, mass=B.DEFAULTS["mass"]), self.m, self.model.bending_model)
-        fixed.update(quality=self.model.quality, bending_model=self.model.bending_model,
-                     time_scale=B.physical_time_scale(fps))
+        fixed.update(
+            quality=self.model.quality, bending_model=self.model.bending_model, time_scale=B.physical_time_scale(fps)
+        )
         if init_settings:
             fixed.update(_rescale(init_settings, self.m, self.model.bending_model))
         fixed.update(cfg.fixed or {})
@@ -158,20 +185,24 @@ class BlenderParameters:
             lo, hi = user if user is not None else BLENDER_BOUNDS_AT_DEFAULT_MASS[n]
             ref = self.m if user is not None else B.DEFAULTS["mass"]
             hard = B.RANGES[n][1]
-            if n in self.scaled:          # coordinates per unit mass
+            if n in self.scaled:  # coordinates per unit mass
                 lo, hi, hard = lo / ref, hi / ref, hard / self.m
             hi = min(hi, hard)
             if not (0 < lo < hi):
-                raise ClothFitError(f"fit: the search range of {n} is empty at vertex mass {self.m:g} kg "
-                                    f"(bounds must be positive and within Blender's limit {B.RANGES[n][1]:g})")
+                raise ClothFitError(
+                    f"fit: the search range of {n} is empty at vertex mass {self.m:g} kg "
+                    f"(bounds must be positive and within Blender's limit {B.RANGES[n][1]:g})"
+                )
             bounds[n] = (lo, hi)
         self.space = SearchSpace(list(free), bounds, {n: True for n in free})
         self.initial = None
         if init_settings:
             x0 = np.array([self._coord(n, self.fixed[n]) for n in free])
             self.initial = [self.space.clip(x0[None])[0]]
-        self.note = ("silhouettes cannot tell mass from stiffness and damping (the motion depends on their ratios): "
-                     "the vertex mass is fixed and every stiffness and damping scales with it")
+        self.note = (
+            "silhouettes cannot tell mass from stiffness and damping (the motion depends on their ratios): "
+            "the vertex mass is fixed and every stiffness and damping scales with it"
+        )
 
     def _coord(self, name, value):
         return value / self.m if name in self.scaled else value
@@ -191,11 +222,16 @@ class BlenderParameters:
     def describe(self, x: ArrayLike) -> dict:
         s = self.settings(x)
         per_mass = {n: s[n] / s["mass"] for n in sorted(self.scaled)}
-        return {"model": self.model.to_dict(), "blender_cloth": s, "blender_scene": {"fps": self.model.fps},
-                "free": list(self.free), "per_unit_mass": per_mass}
+        return {
+            "model": self.model.to_dict(),
+            "blender_cloth": s,
+            "blender_scene": {"fps": self.model.fps},
+            "free": list(self.free),
+            "per_unit_mass": per_mass,
+        }
 
 
-SCENE_BOUND_FACTOR = 20.0   # a scene fit searches value / 20 .. value * 20 around the scene's (or warm start's) value
+SCENE_BOUND_FACTOR = 20.0  # a scene fit searches value / 20 .. value * 20 around the scene's (or warm start's) value
 
 
 class SceneParameters(BlenderParameters):
@@ -221,11 +257,16 @@ class SceneParameters(BlenderParameters):
             ini = settings_from_result(res, core, capture.scenario.grid)
             ini = _rescale(ini, self.m, bending)
             fixed.update({n: ini[n] for n in free_set(cfg, bending) if n in ini})
-            if abs(ini["time_scale"] - scene["time_scale"]) > 1e-6 * scene["time_scale"] or \
-                    ini["quality"] != scene["quality"] or ini["bending_model"] != bending:
-                self.init_note = (f"warm start {cfg.init} was fitted at time_scale {ini['time_scale']:.6g}, quality "
-                                  f"{ini['quality']}, {ini['bending_model']}; the scene's are kept "
-                                  f"({scene['time_scale']:.6g}, {scene['quality']}, {bending})")
+            if (
+                abs(ini["time_scale"] - scene["time_scale"]) > 1e-6 * scene["time_scale"]
+                or ini["quality"] != scene["quality"]
+                or ini["bending_model"] != bending
+            ):
+                self.init_note = (
+                    f"warm start {cfg.init} was fitted at time_scale {ini['time_scale']:.6g}, quality "
+                    f"{ini['quality']}, {ini['bending_model']}; the scene's are kept "
+                    f"({scene['time_scale']:.6g}, {scene['quality']}, {bending})"
+                )
         fixed.update(cfg.fixed or {})
         fixed["mass"] = self.m
         self.fixed = B.check_settings(fixed, "fit: fixed Blender settings")
@@ -243,22 +284,26 @@ class SceneParameters(BlenderParameters):
                 c = self._coord(n, self.fixed[n])
                 if c > 0:
                     lo, hi = c / SCENE_BOUND_FACTOR, c * SCENE_BOUND_FACTOR
-                else:                       # a zero setting: Blender's presets' range at this mass
+                else:  # a zero setting: Blender's presets' range at this mass
                     lo, hi = BLENDER_BOUNDS_AT_DEFAULT_MASS[n]
                     if n in self.scaled:
                         lo, hi = lo / B.DEFAULTS["mass"], hi / B.DEFAULTS["mass"]
             hi = min(hi, hard)
             if not (0 < lo < hi):
-                raise ClothFitError(f"fit: the search range of {n} is empty at vertex mass {self.m:g} kg "
-                                    f"(bounds must be positive and within Blender's limit {B.RANGES[n][1]:g})")
+                raise ClothFitError(
+                    f"fit: the search range of {n} is empty at vertex mass {self.m:g} kg "
+                    f"(bounds must be positive and within Blender's limit {B.RANGES[n][1]:g})"
+                )
             bounds[n] = (lo, hi)
         self.space = SearchSpace(list(free), bounds, {n: True for n in free})
         self.initial = None
         if cfg.init:
             x0 = np.array([self._coord(n, self.fixed[n]) for n in free])
             self.initial = [self.space.clip(x0[None])[0]]
-        self.note = ("Blender's own solver on the scene's cloth object; silhouettes cannot tell mass from stiffness "
-                     "and damping: the vertex mass is fixed and every stiffness and damping scales with it")
+        self.note = (
+            "Blender's own solver on the scene's cloth object; silhouettes cannot tell mass from stiffness "
+            "and damping: the vertex mass is fixed and every stiffness and damping scales with it"
+        )
         if self.init_note:
             self.note += "; " + self.init_note
 
@@ -304,25 +349,38 @@ def settings_from_result(res: dict, model: BlenderModel, grid: ClothGrid) -> dic
     approximation (the paper's springs as structural = compression = shear stiffness, its viscous
     damping as air damping, in Blender's time unit at the model's frame rate)."""
     if res.get("blender_cloth"):
-        return B.check_settings({k: v for k, v in res["blender_cloth"].items() if k in B.DEFAULTS},
-                                "warm-start blender_cloth")
+        return B.check_settings(
+            {k: v for k, v in res["blender_cloth"].items() if k in B.DEFAULTS}, "warm-start blender_cloth"
+        )
     p = res.get("params") or {}
     try:
         m, k, d = float(p["m"]), float(p["k"]), float(p["d"])
     except (KeyError, TypeError, ValueError):
         raise ClothFitError("warm-start result: its 'params' lack m, k, d") from None
-    unit = 1.0 / (model.fps * B.physical_time_scale(model.fps))      # seconds per solver time unit
+    unit = 1.0 / (model.fps * B.physical_time_scale(model.fps))  # seconds per solver time unit
     avg = grid.spacing
-    stiff = k * unit * unit * avg                                    # Blender: k_spring = stiffness / avg
+    stiff = k * unit * unit * avg  # Blender: k_spring = stiffness / avg
     air = d * unit / B.AIR_SCALE
-    conv = {"mass": m, "tension_stiffness": stiff, "compression_stiffness": stiff, "shear_stiffness": stiff,
-            "air_damping": air, "tension_damping": 0.0, "compression_damping": 0.0, "shear_damping": 0.0}
+    conv = {
+        "mass": m,
+        "tension_stiffness": stiff,
+        "compression_stiffness": stiff,
+        "shear_stiffness": stiff,
+        "air_damping": air,
+        "tension_damping": 0.0,
+        "compression_damping": 0.0,
+        "shear_damping": 0.0,
+    }
     # moved to Blender's default mass so the numbers fall in Blender's ranges; the paper's sheet has no
     # bending: Blender's default bending at that mass
     f = B.DEFAULTS["mass"] / m
     scaled = set(B.mass_scaled(model.bending_model))
-    s = dict(B.DEFAULTS, quality=model.quality, bending_model=model.bending_model,
-             time_scale=B.physical_time_scale(model.fps))
+    s = dict(
+        B.DEFAULTS,
+        quality=model.quality,
+        bending_model=model.bending_model,
+        time_scale=B.physical_time_scale(model.fps),
+    )
     s.update({n: (v * f if n in scaled else v) for n, v in conv.items()})
     for n in scaled:
         s[n] = min(s[n], B.RANGES[n][1])
@@ -342,7 +400,7 @@ class ManipulationParameters:
         if uncertainty.time_offset > 0:
             names.append("time_offset_s")
             bounds["time_offset_s"] = (-uncertainty.time_offset, uncertainty.time_offset)
-        self.handle_coords = []                      # (name, handle index, axis)
+        self.handle_coords = []  # (name, handle index, axis)
         for k, b in enumerate(uncertainty.handles):
             if b > 0:
                 for a, ax in enumerate("xyz"):
@@ -382,7 +440,9 @@ class ManipulationParameters:
                 d["offset_bound_m"] = self.uncertainty.handles[k]
                 d["offset_uncertainty_m"] = [sd.get(f"handle{k}_{ax}") for ax in "xyz"]
             handles.append(d)
-        return {"time_offset_s": float(off.time[0]),
-                "time_offset_uncertainty_s": sd.get("time_offset_s"),
-                "uncertain": self.uncertainty.to_dict(),
-                "handles": handles}
+        return {
+            "time_offset_s": float(off.time[0]),
+            "time_offset_uncertainty_s": sd.get("time_offset_s"),
+            "uncertain": self.uncertainty.to_dict(),
+            "handles": handles,
+        }

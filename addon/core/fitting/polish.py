@@ -1,4 +1,5 @@
 """Coordinate polish ("coord-polish"): a batch coordinate pattern search with a step per coordinate."""
+
 from __future__ import annotations
 
 import math
@@ -35,8 +36,16 @@ class CoordinatePolish(Optimizer):
 
     name = "coord-polish"
 
-    def __init__(self, space: SearchSpace, seed=None, initial=None, f0=None, step: float = 0.05,
-                 max_step: float = 0.3, tolx: float = 1e-11):
+    def __init__(
+        self,
+        space: SearchSpace,
+        seed=None,
+        initial=None,
+        f0=None,
+        step: float = 0.05,
+        max_step: float = 0.3,
+        tolx: float = 1e-11,
+    ):
         super().__init__(space, seed, initial)
         self.step0 = _number(step, "coord-polish: step (unit cube)", 0.0, 10.0, lo_open=True)
         self.max_step = _number(max_step, "coord-polish: max_step (unit cube)", 0.0, 10.0, lo_open=True)
@@ -49,7 +58,7 @@ class CoordinatePolish(Optimizer):
         if math.isfinite(self.fx):
             self.best_f, self._best_u = self.fx, self.x.copy()
         self.steps = np.full(n, self.step0)
-        self.pattern = None            # the next pattern probe (unit cube), or None
+        self.pattern = None  # the next pattern probe (unit cube), or None
         self._pending = None
         self.stop_reason = None
         self._stopped = False
@@ -79,7 +88,7 @@ class CoordinatePolish(Optimizer):
         f = sanitize_fitness(f, len(P))
         n = self.space.n
         if not math.isfinite(self.fx):
-            self.fx = float(f[2 * n])                 # x itself was evaluated (no f0 given)
+            self.fx = float(f[2 * n])  # x itself was evaluated (no f0 given)
         better = np.array([min(f[2 * i], f[2 * i + 1]) < self.fx for i in range(n)])
         move = np.zeros(n)
         for i in np.nonzero(better)[0]:
@@ -96,25 +105,51 @@ class CoordinatePolish(Optimizer):
         if np.all(self.steps < self.tolx):
             self._stopped, self.stop_reason = True, "tolx"
 
-    STATE_KEYS = ("step0", "max_step", "tolx", "x", "fx", "steps", "pattern", "pending", "stop_reason", "stopped",
-                  "initial_u")
+    STATE_KEYS = (
+        "step0",
+        "max_step",
+        "tolx",
+        "x",
+        "fx",
+        "steps",
+        "pattern",
+        "pending",
+        "stop_reason",
+        "stopped",
+        "initial_u",
+    )
 
     def state_dict(self) -> dict:
         d = self._base_state()
-        d.update({"step0": self.step0, "max_step": self.max_step, "tolx": self.tolx, "x": self.x.tolist(),
-                  "fx": _float_to_json(self.fx), "steps": self.steps.tolist(),
-                  "pattern": None if self.pattern is None else self.pattern.tolist(),
-                  "pending": None if self._pending is None else self._pending.tolist(),
-                  "stop_reason": self.stop_reason, "stopped": self._stopped, "initial_u": self._initial_u.tolist()})
+        d.update(
+            {
+                "step0": self.step0,
+                "max_step": self.max_step,
+                "tolx": self.tolx,
+                "x": self.x.tolist(),
+                "fx": _float_to_json(self.fx),
+                "steps": self.steps.tolist(),
+                "pattern": None if self.pattern is None else self.pattern.tolist(),
+                "pending": None if self._pending is None else self._pending.tolist(),
+                "stop_reason": self.stop_reason,
+                "stopped": self._stopped,
+                "initial_u": self._initial_u.tolist(),
+            }
+        )
         return d
 
     @classmethod
-    def from_state(cls, d: dict) -> "CoordinatePolish":
+    def from_state(cls, d: dict) -> CoordinatePolish:
         w = cls.name
         space = cls._check_state(d, w, cls.STATE_KEYS)
         n = space.n
-        opt = cls(space, seed=d["seed"], step=_num(d, "step0", w, float), max_step=_num(d, "max_step", w, float),
-                  tolx=_num(d, "tolx", w, float, 0.0))
+        opt = cls(
+            space,
+            seed=d["seed"],
+            step=_num(d, "step0", w, float),
+            max_step=_num(d, "max_step", w, float),
+            tolx=_num(d, "tolx", w, float, 0.0),
+        )
         opt._load_base(d)
         opt._initial_u = _array(d, "initial_u", w, (None, n))
         opt.x = _array(d, "x", w, (n,))
@@ -134,4 +169,3 @@ class CoordinatePolish(Optimizer):
             raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
         opt._stopped = st
         return opt
-

@@ -6,6 +6,7 @@ successive halving among ``runs`` runs, the best continued, then polishes from t
 exact-resume contract (docs/search.md has what it and the coordinate polish were measured to
 do: neither beat plain IPOP CMA-ES on the exact-model captures).
 """
+
 from __future__ import annotations
 
 import math
@@ -60,10 +61,24 @@ class CMAPortfolio(Optimizer):
 
     name = "cma-portfolio"
 
-    def __init__(self, space: SearchSpace, seed=None, initial=None, popsize=None, sigma0: float = 0.3,
-                 tolx: float = 1e-11, tolfun: float = 1e-11, active: bool = True, runs: int = 4,
-                 explore: float = 0.5, budget: int | None = None, polish_sigma: float = 0.05,
-                 max_polishes: int = 20, polish: str = "cma", refine_until: float = 1.0):
+    def __init__(
+        self,
+        space: SearchSpace,
+        seed=None,
+        initial=None,
+        popsize=None,
+        sigma0: float = 0.3,
+        tolx: float = 1e-11,
+        tolfun: float = 1e-11,
+        active: bool = True,
+        runs: int = 4,
+        explore: float = 0.5,
+        budget: int | None = None,
+        polish_sigma: float = 0.05,
+        max_polishes: int = 20,
+        polish: str = "cma",
+        refine_until: float = 1.0,
+    ):
         super().__init__(space, seed, initial)
         if polish not in PORTFOLIO_POLISH:
             raise ClothFitError(f"cma-portfolio: polish must be one of {list(PORTFOLIO_POLISH)}, got {polish!r}")
@@ -87,7 +102,7 @@ class CMAPortfolio(Optimizer):
         self.stop_reason = None
         self.run_stops = []
         self._stopped = False
-        self._current = None           # the run whose batch is pending (between ask and tell)
+        self._current = None  # the run whose batch is pending (between ask and tell)
         n = space.n
         x0 = self._initial_u.mean(axis=0) if len(self._initial_u) else np.full(n, 0.5)
         starts = [x0] + [self.rng.random(n) for _ in range(self.runs - 1)]
@@ -102,9 +117,18 @@ class CMAPortfolio(Optimizer):
         self._advance()
 
     def _child(self, sigma, active, initial=None):
-        s = int(self.rng.integers(0, 2 ** 63 - 1))
-        return CMAES(self.space, seed=s, initial=initial, popsize=self.popsize, sigma0=sigma, restarts=0,
-                     tolx=self.tolx, tolfun=self.tolfun, active=active)
+        s = int(self.rng.integers(0, 2**63 - 1))
+        return CMAES(
+            self.space,
+            seed=s,
+            initial=initial,
+            popsize=self.popsize,
+            sigma0=sigma,
+            restarts=0,
+            tolx=self.tolx,
+            tolfun=self.tolfun,
+            active=active,
+        )
 
     @property
     def round_budget(self) -> float:
@@ -137,10 +161,10 @@ class CMAPortfolio(Optimizer):
                     return
                 if self.round < self.n_rounds - 1 and len(self.alive) > 1:
                     keep = sorted(self.alive, key=lambda i: (self.children[i].best_f, i))
-                    keep = keep[:int(math.ceil(len(keep) / 2))]
+                    keep = keep[: int(math.ceil(len(keep) / 2))]
                     for i in self.alive:
                         if i not in keep:
-                            self.children[i] = None          # dropped: its state is no longer kept
+                            self.children[i] = None  # dropped: its state is no longer kept
                     self.alive = sorted(keep, key=lambda i: (self.children[i].best_f, i))
                     self.round += 1
                     self.round_spent = 0
@@ -160,9 +184,14 @@ class CMAPortfolio(Optimizer):
             self.polishes += 1
             u = self._best_u if self._best_u is not None else np.full(self.space.n, 0.5)
             if self.polish == "coord":
-                c = CoordinatePolish(self.space, initial=[self.space.decode(u)], step=self.polish_sigma,
-                                     f0=self.best_f if self._best_u is not None else None, tolx=self.tolx)
-                c.x = u.copy()                    # exactly the best point (decode/encode may round)
+                c = CoordinatePolish(
+                    self.space,
+                    initial=[self.space.decode(u)],
+                    step=self.polish_sigma,
+                    f0=self.best_f if self._best_u is not None else None,
+                    tolx=self.tolx,
+                )
+                c.x = u.copy()  # exactly the best point (decode/encode may round)
                 if self._best_u is not None:
                     c._best_u = u.copy()
             else:
@@ -195,41 +224,84 @@ class CMAPortfolio(Optimizer):
         self._current = None
         self._advance()
 
-    STATE_KEYS = ("popsize", "sigma0", "polish_sigma", "tolx", "tolfun", "active", "runs", "explore", "budget",
-                  "max_polishes", "polish", "refine_until", "phase", "round", "round_spent", "polishes", "stop_reason", "run_stops",
-                  "stopped", "current", "alive", "children", "rng", "initial_u")
+    STATE_KEYS = (
+        "popsize",
+        "sigma0",
+        "polish_sigma",
+        "tolx",
+        "tolfun",
+        "active",
+        "runs",
+        "explore",
+        "budget",
+        "max_polishes",
+        "polish",
+        "refine_until",
+        "phase",
+        "round",
+        "round_spent",
+        "polishes",
+        "stop_reason",
+        "run_stops",
+        "stopped",
+        "current",
+        "alive",
+        "children",
+        "rng",
+        "initial_u",
+    )
 
     def state_dict(self) -> dict:
         d = self._base_state()
-        d.update({"popsize": self.popsize, "sigma0": self.sigma0, "polish_sigma": self.polish_sigma,
-                  "tolx": self.tolx, "tolfun": self.tolfun, "active": self.active, "runs": self.runs,
-                  "explore": self.explore, "budget": self.budget, "max_polishes": self.max_polishes,
-                  "polish": self.polish, "refine_until": self.refine_until,
-                  "phase": self.phase, "round": self.round, "round_spent": self.round_spent,
-                  "polishes": self.polishes, "stop_reason": self.stop_reason, "run_stops": list(self.run_stops),
-                  "stopped": self._stopped, "current": self._current, "alive": list(self.alive),
-                  "children": [None if c is None else c.state_dict() for c in self.children],
-                  "rng": self.rng.bit_generator.state, "initial_u": self._initial_u.tolist()})
+        d.update(
+            {
+                "popsize": self.popsize,
+                "sigma0": self.sigma0,
+                "polish_sigma": self.polish_sigma,
+                "tolx": self.tolx,
+                "tolfun": self.tolfun,
+                "active": self.active,
+                "runs": self.runs,
+                "explore": self.explore,
+                "budget": self.budget,
+                "max_polishes": self.max_polishes,
+                "polish": self.polish,
+                "refine_until": self.refine_until,
+                "phase": self.phase,
+                "round": self.round,
+                "round_spent": self.round_spent,
+                "polishes": self.polishes,
+                "stop_reason": self.stop_reason,
+                "run_stops": list(self.run_stops),
+                "stopped": self._stopped,
+                "current": self._current,
+                "alive": list(self.alive),
+                "children": [None if c is None else c.state_dict() for c in self.children],
+                "rng": self.rng.bit_generator.state,
+                "initial_u": self._initial_u.tolist(),
+            }
+        )
         return d
 
     @classmethod
-    def from_state(cls, d: dict) -> "CMAPortfolio":
+    def from_state(cls, d: dict) -> CMAPortfolio:
         w = cls.name
         space = cls._check_state(d, w, cls.STATE_KEYS)
         n = space.n
         opt = cls.__new__(cls)
         Optimizer.__init__(opt, space, d["seed"], None)
-        opt.popsize = _num(d, "popsize", w, int, 2, 10 ** 6)
+        opt.popsize = _num(d, "popsize", w, int, 2, 10**6)
         opt.sigma0 = _number(_num(d, "sigma0", w, float), f"checkpoint: {w} 'sigma0'", 0.0, 10.0, lo_open=True)
-        opt.polish_sigma = _number(_num(d, "polish_sigma", w, float), f"checkpoint: {w} 'polish_sigma'", 0.0, 10.0,
-                                   lo_open=True)
+        opt.polish_sigma = _number(
+            _num(d, "polish_sigma", w, float), f"checkpoint: {w} 'polish_sigma'", 0.0, 10.0, lo_open=True
+        )
         opt.tolx = _num(d, "tolx", w, float, 0.0)
         opt.tolfun = _num(d, "tolfun", w, float, 0.0)
         opt.active = _active(d, w)
         opt.runs = _num(d, "runs", w, int, 1, 64)
         opt.explore = _num(d, "explore", w, float, 0.0, 1.0)
-        opt.budget = _num(d, "budget", w, int, 1, 10 ** 12)
-        opt.max_polishes = _num(d, "max_polishes", w, int, 1, 10 ** 6)
+        opt.budget = _num(d, "budget", w, int, 1, 10**12)
+        opt.max_polishes = _num(d, "max_polishes", w, int, 1, 10**6)
         opt.polish = _field(d, "polish", w)
         if opt.polish not in PORTFOLIO_POLISH:
             raise ClothFitError(f"checkpoint: {w} 'polish' must be one of {list(PORTFOLIO_POLISH)}")
@@ -240,7 +312,7 @@ class CMAPortfolio(Optimizer):
         if opt.phase not in PORTFOLIO_PHASES:
             raise ClothFitError(f"checkpoint: {w} 'phase' must be one of {list(PORTFOLIO_PHASES)}")
         opt.round = _num(d, "round", w, int, 0, opt.n_rounds - 1)
-        opt.round_spent = _num(d, "round_spent", w, int, 0, 10 ** 12)
+        opt.round_spent = _num(d, "round_spent", w, int, 0, 10**12)
         opt.polishes = _num(d, "polishes", w, int, 0, opt.max_polishes)
         opt.stop_reason = _stop_reason(d, w, PORTFOLIO_STOPS)
         rs = _field(d, "run_stops", w)
@@ -264,21 +336,35 @@ class CMAPortfolio(Optimizer):
                 raise ClothFitError(f"checkpoint: {w} 'children' hold a state of the wrong algorithm")
             c = (CoordinatePolish if polish_child else CMAES).from_state(k)
             if c.space.state_dict() != space.state_dict() or (
-                    not polish_child and (c.popsize != opt.popsize or c.restarts != 0)):
+                not polish_child and (c.popsize != opt.popsize or c.restarts != 0)
+            ):
                 raise ClothFitError(f"checkpoint: {w} 'children' hold a run of another space or population")
             opt.children.append(c)
         al = _field(d, "alive", w)
-        if (not isinstance(al, list) or not al or len(set(al)) != len(al)
-                or any(isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < len(opt.children)
-                       or opt.children[i] is None for i in al)):
+        if (
+            not isinstance(al, list)
+            or not al
+            or len(set(al)) != len(al)
+            or any(
+                isinstance(i, bool)
+                or not isinstance(i, int)
+                or not 0 <= i < len(opt.children)
+                or opt.children[i] is None
+                for i in al
+            )
+        ):
             raise ClothFitError(f"checkpoint: {w} 'alive' must list kept runs")
         opt.alive = list(al)
         cur = _field(d, "current", w)
-        if cur is not None and (isinstance(cur, bool) or not isinstance(cur, int) or not 0 <= cur < len(opt.children)
-                                or opt.children[cur] is None or opt.children[cur]._pending is None):
+        if cur is not None and (
+            isinstance(cur, bool)
+            or not isinstance(cur, int)
+            or not 0 <= cur < len(opt.children)
+            or opt.children[cur] is None
+            or opt.children[cur]._pending is None
+        ):
             raise ClothFitError(f"checkpoint: {w} 'current' must be a run with a pending batch, or null")
         opt._current = cur
         opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
         opt._initial_u = _array(d, "initial_u", w, (None, n))
         return opt
-

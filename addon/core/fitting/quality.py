@@ -11,6 +11,7 @@ than every lower one. The choice is the lowest quality whose training error is w
 ``Ladder`` is plain decisions on numbers (which quality next, which is chosen), kept apart from the
 job that runs the rungs, so it is tested on its own and its state is plain JSON in checkpoints.
 """
+
 from __future__ import annotations
 
 from .. import defaults as D
@@ -20,15 +21,21 @@ from ..errors import ClothFitError
 class Ladder:
     """``tried``: quality -> best training error found there (sum of E_sil over the images)."""
 
-    def __init__(self, start: int, rungs=D.QUALITY_LADDER, tolerance: float = D.QUALITY_TOLERANCE,
-                 clearly: float = D.QUALITY_CLEARLY_BETTER, max_rungs: int = D.QUALITY_RUNGS_RESERVED,
-                 probe_only: bool = False):
+    def __init__(
+        self,
+        start: int,
+        rungs=D.QUALITY_LADDER,
+        tolerance: float = D.QUALITY_TOLERANCE,
+        clearly: float = D.QUALITY_CLEARLY_BETTER,
+        max_rungs: int = D.QUALITY_RUNGS_RESERVED,
+        probe_only: bool = False,
+    ):
         self.rungs = sorted(set(int(q) for q in rungs) | {int(start)})
         self.start = int(start)
         self.tolerance = float(tolerance)
         self.clearly = float(clearly)
         self.max_rungs = int(max_rungs)
-        self.probe_only = bool(probe_only)   # --backend blender: try one rung up, keep the scene's quality
+        self.probe_only = bool(probe_only)  # --backend blender: try one rung up, keep the scene's quality
         self.tried: dict[int, float] = {}
         self.order: list[int] = []
 
@@ -56,14 +63,14 @@ class Ladder:
             return up if up is not None and up not in self.tried else None
         top = max(self.tried)
         up = self._above(top)
-        if len(self.tried) == 1 and up is not None:     # first rung: one above the start
+        if len(self.tried) == 1 and up is not None:  # first rung: one above the start
             return up
         lower = [e for q, e in self.tried.items() if q < top]
         climbing = bool(lower) and self.tried[top] < (1.0 - self.clearly) * min(lower)
         if climbing and up is not None:
             return up
         down = self._below(min(self.tried))
-        if down is not None and min(self.tried) == self.start:   # one rung below the start, once
+        if down is not None and min(self.tried) == self.start:  # one rung below the start, once
             return down
         return None
 
@@ -86,12 +93,18 @@ class Ladder:
         return None
 
     def state_dict(self) -> dict:
-        return {"start": self.start, "rungs": self.rungs, "tolerance": self.tolerance, "clearly": self.clearly,
-                "max_rungs": self.max_rungs, "probe_only": self.probe_only,
-                "tried": [[q, self.tried[q]] for q in self.order]}
+        return {
+            "start": self.start,
+            "rungs": self.rungs,
+            "tolerance": self.tolerance,
+            "clearly": self.clearly,
+            "max_rungs": self.max_rungs,
+            "probe_only": self.probe_only,
+            "tried": [[q, self.tried[q]] for q in self.order],
+        }
 
     @classmethod
-    def from_state(cls, d: dict) -> "Ladder":
+    def from_state(cls, d: dict) -> Ladder:
         try:
             lad = cls(d["start"], d["rungs"], d["tolerance"], d["clearly"], d["max_rungs"], d["probe_only"])
             for q, e in d["tried"]:
@@ -103,13 +116,22 @@ class Ladder:
     def describe(self, n_images: int) -> dict:
         """The result's ``quality_choice``: every rung's training error (mean E_sil %) and the choice."""
         tried = [{"quality": q, "train_E_sil_pct": 100.0 * self.tried[q] / n_images} for q in self.order]
-        d = {"start": self.start, "chosen": self.chosen(), "tolerance": self.tolerance,
-             "tried": sorted(tried, key=lambda r: r["quality"]),
-             "rule": ("kept the scene's quality; one rung above it tried" if self.probe_only else
-                      f"the lowest quality within {100 * self.tolerance:g} % of the best training error")}
+        d = {
+            "start": self.start,
+            "chosen": self.chosen(),
+            "tolerance": self.tolerance,
+            "tried": sorted(tried, key=lambda r: r["quality"]),
+            "rule": (
+                "kept the scene's quality; one rung above it tried"
+                if self.probe_only
+                else f"the lowest quality within {100 * self.tolerance:g} % of the best training error"
+            ),
+        }
         if self.probe_only:
             up = self.clearly_better_above()
             if up:
-                d["advice"] = (f"quality {up[0]} fits {100 * (1 - up[1]):.0f} % better than the scene's "
-                               f"{self.start}: refit with --quality {up[0]} (or --quality auto)")
+                d["advice"] = (
+                    f"quality {up[0]} fits {100 * (1 - up[1]):.0f} % better than the scene's "
+                    f"{self.start}: refit with --quality {up[0]} (or --quality auto)"
+                )
         return d

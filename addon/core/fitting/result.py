@@ -15,6 +15,7 @@ Keys (see README's fit result): ``format``/``version``; what was fitted (``captu
 ``blender_cloth``, ``blender_scene``); the errors (``best_E_sil_mean_pct``, ``floor``...); the
 fitted manipulation (``time_offset_s``, ``handles``, ``manipulation_profile``, ``manipulation_note``).
 """
+
 from __future__ import annotations
 
 import math
@@ -49,7 +50,7 @@ class FitResult(dict):
         return dict(self)
 
     @classmethod
-    def from_json(cls, data, what: str = "fit result", need_parameters: bool = True) -> "FitResult":
+    def from_json(cls, data, what: str = "fit result", need_parameters: bool = True) -> FitResult:
         """A result from a dict or a JSON file, checked: an object; ``format`` (when given) a fit
         result's; ``blender_cloth`` or ``params`` an object (``need_parameters``: one of them must be
         there: a result that found nothing cannot be applied, exported or warm-started from);
@@ -68,7 +69,7 @@ class FitResult(dict):
         res.check(need_parameters)
         return res
 
-    def check(self, need_parameters: bool = True) -> "FitResult":
+    def check(self, need_parameters: bool = True) -> FitResult:
         """The checks of ``from_json`` (see there)."""
         src = self.source
 
@@ -77,16 +78,20 @@ class FitResult(dict):
 
         fmt = self.get("format")
         if fmt is not None and fmt != RESULT_FORMAT:
-            raise bad("format", f"is {fmt!r}, not a fit result's {RESULT_FORMAT!r}"
-                      + (" (a checkpoint: give the fit's --out file)" if "checkpoint" in str(fmt) else ""))
+            raise bad(
+                "format",
+                f"is {fmt!r}, not a fit result's {RESULT_FORMAT!r}"
+                + (" (a checkpoint: give the fit's --out file)" if "checkpoint" in str(fmt) else ""),
+            )
         if fmt is not None and self.get("version", RESULT_VERSION) != RESULT_VERSION:
             raise bad("version", f"{self.get('version')!r} is not supported (this reader knows {RESULT_VERSION})")
         for key in ("blender_cloth", "params", "blender_scene"):
             if self.get(key) is not None and not isinstance(self[key], dict):
                 raise bad(key, f"must be an object, got {type(self[key]).__name__}")
         if need_parameters and not (self.get("blender_cloth") or self.get("params")):
-            raise ClothFitError(f"{src}: no 'blender_cloth' or 'params' in it (not a fit result, or a fit that "
-                                f"found no parameters)")
+            raise ClothFitError(
+                f"{src}: no 'blender_cloth' or 'params' in it (not a fit result, or a fit that found no parameters)"
+            )
         m = self.get("model")
         if m is not None and not isinstance(m, (str, dict)):
             raise bad("model", f"must be a name or an object, got {type(m).__name__}")
@@ -123,8 +128,9 @@ class FitResult(dict):
     def paper_params(self) -> Params:
         """The paper model's fitted m, k, l, d (checked)."""
         if not isinstance(self.get("params"), dict):
-            raise ClothFitError(f"{self.source}: no 'params' (m, k, l, d) in it"
-                                + (" (a Blender-cloth fit)" if self.is_blender else ""))
+            raise ClothFitError(
+                f"{self.source}: no 'params' (m, k, l, d) in it" + (" (a Blender-cloth fit)" if self.is_blender else "")
+            )
         return Params.from_dict(self["params"], self.source)
 
     @property
@@ -135,15 +141,19 @@ class FitResult(dict):
     def replay(self, default_model=None):
         """(model, parameter row) that replays the fit (``physics.models.model_and_row``)."""
         from ..physics.models import model_and_row
+
         return model_and_row(self, default_model)
 
     def blender_settings(self):
         """(BlenderModel, ClothSettings values) of a Blender-cloth fit; a paper-model fit is an error."""
         from ..physics.models import BlenderModel
+
         model, row = self.replay()
         if not isinstance(model, BlenderModel):
-            raise ClothFitError(f"{self.source}: a {model.name}-model fit has no Blender cloth settings "
-                                "(fit with --model blender, or warm-start one from it with --init)")
+            raise ClothFitError(
+                f"{self.source}: a {model.name}-model fit has no Blender cloth settings "
+                "(fit with --model blender, or warm-start one from it with --init)"
+            )
         return model, model.settings(row)
 
     def blender_export(self) -> dict:
@@ -159,42 +169,56 @@ class FitResult(dict):
     def blender_python(self) -> str:
         """``export-blender-cloth --python``: Python lines that set a Cloth modifier's settings."""
         from ..physics import blender as B
+
         model, s = self.blender_settings()
         manip = self.manipulation
-        lines = [f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
-                 "cloth = bpy.context.object.modifiers['Cloth'].settings"]
+        lines = [
+            f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
+            "cloth = bpy.context.object.modifiers['Cloth'].settings",
+        ]
         lines += [f"cloth.{k} = {s[k]!r}" for k in ("quality", "bending_model") + B.FLOAT_SETTINGS]
         if manip.get("time_offset_s") is not None:
-            lines.append(f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
-                         f"happened at capture time + time_offset_s")
+            lines.append(
+                f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
+                f"happened at capture time + time_offset_s"
+            )
         for h in manip.get("handles") or []:
             if any(h.get("offset_m") or []):
-                lines.append(f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
-                             f"from the capture's measurement")
+                lines.append(
+                    f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
+                    f"from the capture's measurement"
+                )
         return "\n".join(lines)
 
 
-def job_result(job, paper: bool) -> "FitResult":
+def job_result(job, paper: bool) -> FitResult:
     """The result of ``job`` (a ``fitting.job.FitJob``) so far: what a fit writes. ``paper``: a fit of
     the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``)."""
     bp = job.best_params
     n_img = job.objective.n_images
-    history = job.history_prev + ([[a + job.done_evals, b] for a, b in job._opt_history()]
-                                  if job.stage in ("search", "rung") else [])
+    history = job.history_prev + (
+        [[a + job.done_evals, b] for a, b in job._opt_history()] if job.stage in ("search", "rung") else []
+    )
     res = {
-        "format": RESULT_FORMAT, "version": RESULT_VERSION,
+        "format": RESULT_FORMAT,
+        "version": RESULT_VERSION,
         "capture": os.path.abspath(job.capture.root),
-        "capture_hash": job.capture_hash, "silhouettes_hash": job.silhouettes_hash,
-        "optimizer": job.config.optimizer, "seed": job.config.seed,
+        "capture_hash": job.capture_hash,
+        "silhouettes_hash": job.silhouettes_hash,
+        "optimizer": job.config.optimizer,
+        "seed": job.config.seed,
         "train_cameras": [job.capture.cameras[c].name for c in job.train_cameras],
         "train_camera_indices": job.train_cameras,
         "train_times": job.train_times,
         "resolution": job.config.resolution,
-        "evaluations": job.evaluations, "generations": job.generation,
+        "evaluations": job.evaluations,
+        "generations": job.generation,
         "max_evaluations": job.config.max_evaluations,
         "stop_reason": job.stop_reason,
-        "converged_by": list(getattr(job.opt, "run_stops", None) or
-                             ([job.opt.stop_reason] if getattr(job.opt, "stop_reason", None) else [])),
+        "converged_by": list(
+            getattr(job.opt, "run_stops", None)
+            or ([job.opt.stop_reason] if getattr(job.opt, "stop_reason", None) else [])
+        ),
         "exploded_candidates": job.exploded,
         "best_E_all": finite_or_none(job.best_error),
         "best_E_sil_mean_pct": finite_or_none(100.0 * job.best_error / n_img),
@@ -204,15 +228,18 @@ def job_result(job, paper: bool) -> "FitResult":
         "identifiable": identifiable(bp) if bp and paper else None,
         "mass_source": job.m_source,
         "note": job.par.note,
-        "finished": job.finished, "cancelled": job.cancelled, "error": job.error,
-        "elapsed_s": job.elapsed, "backend": job.objective.backend,
+        "finished": job.finished,
+        "cancelled": job.cancelled,
+        "error": job.error,
+        "elapsed_s": job.elapsed,
+        "backend": job.objective.backend,
         "stages": job.records,
         "start_E_sil_mean_pct": None if job.start_f is None else finite_or_none(100.0 * job.start_f / n_img),
         "history": history,
     }
     if bp and not paper:
         with job._at_quality(job.chosen_quality()):
-            res.update(job.par.describe(job.best_x[:job.npar]))
+            res.update(job.par.describe(job.best_x[: job.npar]))
     if job.ladder is not None and job.ladder.tried:
         res["quality_choice"] = job.ladder.describe(n_img)
         if isinstance(res.get("blender_cloth"), dict):
@@ -235,6 +262,7 @@ def job_result(job, paper: bool) -> "FitResult":
             res["true_params"] = truth
             res["true_identifiable"] = identifiable(truth)
             est, tru = identifiable(bp), identifiable(truth)
-            res["identifiable_error_pct"] = {k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None)
-                                             for k in est}
+            res["identifiable_error_pct"] = {
+                k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None) for k in est
+            }
     return FitResult(res)

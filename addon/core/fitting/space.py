@@ -22,6 +22,7 @@ Validators
 ``_field`` ... check a checkpoint's fields. Each raises a one-line :class:`ClothFitError`
 naming the value at fault.
 """
+
 from __future__ import annotations
 
 import math
@@ -31,6 +32,7 @@ import numpy as np
 from ..errors import ClothFitError
 
 # --------------------------------------------------------------------------- helpers
+
 
 def _new_rng(seed):
     return np.random.Generator(np.random.PCG64(seed))
@@ -70,6 +72,7 @@ def reflect_unit(U: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- state validation
 
+
 def _field(d, key, where):
     if key not in d:
         raise ClothFitError(f"checkpoint: {where} state lacks '{key}'")
@@ -87,8 +90,9 @@ def _num(d, key, where, kind=float, lo=None, hi=None, allow_none=False):
     if v is None and allow_none:
         return None
     if isinstance(v, bool) or not isinstance(v, (int, float)) or (kind is int and not isinstance(v, int)):
-        raise ClothFitError(f"checkpoint: {where} '{key}' must be {'an integer' if kind is int else 'a number'}, "
-                            f"got {type(v).__name__}")
+        raise ClothFitError(
+            f"checkpoint: {where} '{key}' must be {'an integer' if kind is int else 'a number'}, got {type(v).__name__}"
+        )
     if kind is float and not math.isfinite(v):
         raise ClothFitError(f"checkpoint: {where} '{key}' must be finite, got {v!r}")
     if (lo is not None and v < lo) or (hi is not None and v > hi):
@@ -129,12 +133,16 @@ def _array(d, key, where, shape, allow_none=False, inf_as_none=False):
 
 def _rng_state_from_json(v, where):
     """A PCG64 bit-generator state made of plain integers, validated."""
-    if (not isinstance(v, dict) or set(v) != {"bit_generator", "state", "has_uint32", "uinteger"}
-            or v["bit_generator"] != "PCG64" or not isinstance(v["state"], dict)
-            or set(v["state"]) != {"state", "inc"}):
+    if (
+        not isinstance(v, dict)
+        or set(v) != {"bit_generator", "state", "has_uint32", "uinteger"}
+        or v["bit_generator"] != "PCG64"
+        or not isinstance(v["state"], dict)
+        or set(v["state"]) != {"state", "inc"}
+    ):
         raise ClothFitError(f"checkpoint: {where} 'rng' is not a PCG64 generator state")
     ints = [v["state"]["state"], v["state"]["inc"], v["has_uint32"], v["uinteger"]]
-    if not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < 2 ** 128 for i in ints):
+    if not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < 2**128 for i in ints):
         raise ClothFitError(f"checkpoint: {where} 'rng' must hold non-negative integers below 2**128")
     try:
         return _rng_from_state(v)
@@ -149,9 +157,8 @@ def _stop_reason(d, where, allowed):
     return v
 
 
-
 def _active(d, where):
-    v = d.get("active", False)          # older checkpoints: plain CMA-ES
+    v = d.get("active", False)  # older checkpoints: plain CMA-ES
     if not isinstance(v, bool):
         raise ClothFitError(f"checkpoint: {where} 'active' must be true or false")
     return v
@@ -180,13 +187,14 @@ def _flag(v, what):
 def _integer(v, what, lo=1, hi=None):
     """``v`` as an int in ``lo..hi`` (no upper bound when None; a bool is not an integer), else a
     one-line ClothFitError naming ``what``."""
-    if (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) < lo
-            or (hi is not None and int(v) > hi)):
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) < lo or (hi is not None and int(v) > hi):
         span = f">= {lo}" if hi is None else f"in {lo}..{hi}"
         raise ClothFitError(f"{what} must be an integer {span}, got {v!r}")
     return int(v)
 
+
 # --------------------------------------------------------------------------- search space
+
 
 class SearchSpace:
     """Bounded real parameters <-> the unit cube ``[0, 1]^n`` (log scale where asked).
@@ -210,17 +218,19 @@ class SearchSpace:
                 a, b = bounds[name]
                 a, b = float(a), float(b)
             except (TypeError, ValueError) as exc:
-                raise ClothFitError(f"search space: bounds of parameter '{name}' must be a pair of "
-                                    f"numbers (lo, hi), got {bounds[name]!r}") from exc
+                raise ClothFitError(
+                    f"search space: bounds of parameter '{name}' must be a pair of "
+                    f"numbers (lo, hi), got {bounds[name]!r}"
+                ) from exc
             if not (math.isfinite(a) and math.isfinite(b)):
-                raise ClothFitError(f"search space: bounds of parameter '{name}' must be finite, "
-                                    f"got ({a}, {b})")
+                raise ClothFitError(f"search space: bounds of parameter '{name}' must be finite, got ({a}, {b})")
             if not a < b:
                 raise ClothFitError(f"search space: parameter '{name}' needs lo < hi, got ({a}, {b})")
             is_log = bool(log_scaled.get(name, False))
             if is_log and a <= 0.0:
-                raise ClothFitError(f"search space: parameter '{name}' is log-scaled, so its bounds "
-                                    f"must be > 0, got ({a}, {b})")
+                raise ClothFitError(
+                    f"search space: parameter '{name}' is log-scaled, so its bounds must be > 0, got ({a}, {b})"
+                )
             lo.append(a)
             hi.append(b)
             logs.append(is_log)
@@ -249,8 +259,9 @@ class SearchSpace:
         except (TypeError, ValueError) as exc:
             raise ClothFitError(f"{what}: expected numbers, got {X!r}") from exc
         if A.ndim not in (1, 2) or A.shape[-1] != self.n:
-            raise ClothFitError(f"{what}: expected shape ({self.n},) or (B, {self.n}) for "
-                                f"parameters {self.names}, got {A.shape}")
+            raise ClothFitError(
+                f"{what}: expected shape ({self.n},) or (B, {self.n}) for parameters {self.names}, got {A.shape}"
+            )
         return A
 
     def encode(self, X) -> np.ndarray:
@@ -260,9 +271,11 @@ class SearchSpace:
         bad = ~np.isfinite(A2) | (self.log & (A2 <= 0.0))
         if bad.any():
             j = int(np.nonzero(bad.any(axis=0))[0][0])
-            raise ClothFitError(f"encode: parameter '{self.names[j]}' has a non-finite"
-                                f"{' or non-positive (log-scaled)' if self.log[j] else ''} value "
-                                f"{A2[bad[:, j], j][0]!r}")
+            raise ClothFitError(
+                f"encode: parameter '{self.names[j]}' has a non-finite"
+                f"{' or non-positive (log-scaled)' if self.log[j] else ''} value "
+                f"{A2[bad[:, j], j][0]!r}"
+            )
         T = np.where(self.log, np.log(np.where(self.log, A2, 1.0)), A2)
         U = (T - self._tlo) / (self._thi - self._tlo)
         return U.reshape(A.shape)
@@ -292,26 +305,35 @@ class SearchSpace:
         return np.array([float(values[n]) for n in self.names])
 
     def state_dict(self) -> dict:
-        return {"names": list(self.names),
-                "bounds": {n: [float(a), float(b)] for n, a, b in zip(self.names, self.lo, self.hi)},
-                "log_scaled": self.log_scaled}
+        return {
+            "names": list(self.names),
+            "bounds": {n: [float(a), float(b)] for n, a, b in zip(self.names, self.lo, self.hi)},
+            "log_scaled": self.log_scaled,
+        }
 
     @classmethod
-    def from_state(cls, d: dict) -> "SearchSpace":
+    def from_state(cls, d: dict) -> SearchSpace:
         if not isinstance(d, dict):
             raise ClothFitError("checkpoint: search space must be an object")
         _check_keys(d, ("names", "bounds", "log_scaled"), "search space")
         names, bounds, logs = d.get("names"), d.get("bounds"), d.get("log_scaled") or {}
-        if (not isinstance(names, list) or not all(isinstance(n, str) for n in names) or len(names) > 1000
-                or not isinstance(bounds, dict) or not isinstance(logs, dict)
-                or not all(isinstance(v, list) and len(v) == 2 for v in bounds.values())
-                or not all(isinstance(v, bool) for v in logs.values())):
-            raise ClothFitError("checkpoint: search space needs 'names' (strings), 'bounds' (name: [lo, hi]) "
-                                "and 'log_scaled' (name: true/false)")
+        if (
+            not isinstance(names, list)
+            or not all(isinstance(n, str) for n in names)
+            or len(names) > 1000
+            or not isinstance(bounds, dict)
+            or not isinstance(logs, dict)
+            or not all(isinstance(v, list) and len(v) == 2 for v in bounds.values())
+            or not all(isinstance(v, bool) for v in logs.values())
+        ):
+            raise ClothFitError(
+                "checkpoint: search space needs 'names' (strings), 'bounds' (name: [lo, hi]) "
+                "and 'log_scaled' (name: true/false)"
+            )
         return cls(names, {k: tuple(v) for k, v in bounds.items()}, logs)
 
     def __repr__(self):
-        parts = [f"{n}=[{a:g}, {b:g}]{' log' if g else ''}"
-                 for n, a, b, g in zip(self.names, self.lo, self.hi, self.log)]
+        parts = [
+            f"{n}=[{a:g}, {b:g}]{' log' if g else ''}" for n, a, b, g in zip(self.names, self.lo, self.hi, self.log)
+        ]
         return f"SearchSpace({', '.join(parts)})"
-

@@ -19,6 +19,7 @@ unpickled or executed: ``from_state`` checks every field (known keys only, types
 finiteness, ranges, a symmetric positive-definite covariance) and raises a one-line
 :class:`ClothFitError` naming the field at fault.
 """
+
 from __future__ import annotations
 
 import math
@@ -69,11 +70,12 @@ class Optimizer:
             try:
                 rows.append(self.space.encode(np.asarray(x, dtype=np.float64).reshape(self.space.n)))
             except (ValueError, TypeError) as exc:
-                raise ClothFitError(f"initial guess #{i}: expected {self.space.n} values for "
-                                    f"{self.space.names}, got {x!r}") from exc
+                raise ClothFitError(
+                    f"initial guess #{i}: expected {self.space.n} values for {self.space.names}, got {x!r}"
+                ) from exc
         if not rows:
             return np.zeros((0, self.space.n))
-        return np.clip(np.array(rows), 0.0, 1.0)   # guesses outside the bounds are clipped
+        return np.clip(np.array(rows), 0.0, 1.0)  # guesses outside the bounds are clipped
 
     # -- best so far
     @property
@@ -102,7 +104,7 @@ class Optimizer:
                 self._best_u = np.array(U[i], dtype=np.float64)
         h = self.history
         if len(h) >= 2 and h[-1][1] == self.best_f and h[-2][1] == self.best_f:
-            h[-1] = (self.evaluations, self.best_f)       # a run of equal bests: move its end
+            h[-1] = (self.evaluations, self.best_f)  # a run of equal bests: move its end
         else:
             h.append((self.evaluations, self.best_f))
 
@@ -115,8 +117,9 @@ class Optimizer:
             raise ClothFitError("tell(): X must be the array returned by ask()") from exc
         expected = self.space.decode(pending_u)
         if A.shape != expected.shape or not np.allclose(A, expected, rtol=1e-9, atol=0.0, equal_nan=True):
-            raise ClothFitError(f"tell(): X (shape {A.shape}) is not the batch returned by the "
-                                f"last ask() (shape {expected.shape})")
+            raise ClothFitError(
+                f"tell(): X (shape {A.shape}) is not the batch returned by the last ask() (shape {expected.shape})"
+            )
 
     # -- to implement
     def ask(self) -> np.ndarray:
@@ -148,29 +151,51 @@ class Optimizer:
 
     # -- checkpoints
     def _base_state(self) -> dict:
-        return {"algorithm": self.name, "version": STATE_VERSION,
-                "space": self.space.state_dict(), "seed": self.seed,
-                "evaluations": int(self.evaluations), "generation": int(self.generation),
-                "history": [[int(e), _float_to_json(b)] for e, b in self.history],
-                "best_f": _float_to_json(self.best_f),
-                "best_u": None if self._best_u is None else self._best_u.tolist(),
-                "best_x": None if self._best_u is None else self.best_x.tolist()}
+        return {
+            "algorithm": self.name,
+            "version": STATE_VERSION,
+            "space": self.space.state_dict(),
+            "seed": self.seed,
+            "evaluations": int(self.evaluations),
+            "generation": int(self.generation),
+            "history": [[int(e), _float_to_json(b)] for e, b in self.history],
+            "best_f": _float_to_json(self.best_f),
+            "best_u": None if self._best_u is None else self._best_u.tolist(),
+            "best_x": None if self._best_u is None else self.best_x.tolist(),
+        }
 
-    BASE_KEYS = ("algorithm", "version", "space", "seed", "evaluations", "generation", "history", "best_f",
-                 "best_u", "best_x")
+    BASE_KEYS = (
+        "algorithm",
+        "version",
+        "space",
+        "seed",
+        "evaluations",
+        "generation",
+        "history",
+        "best_f",
+        "best_u",
+        "best_x",
+    )
 
     def _load_base(self, d: dict):
         w = self.name
-        self.evaluations = _num(d, "evaluations", w, int, 0, 10 ** 12)
-        self.generation = _num(d, "generation", w, int, 0, 10 ** 12)
+        self.evaluations = _num(d, "evaluations", w, int, 0, 10**12)
+        self.generation = _num(d, "generation", w, int, 0, 10**12)
         hist = _field(d, "history", w)
-        if not isinstance(hist, list) or len(hist) > 10 ** 6:
+        if not isinstance(hist, list) or len(hist) > 10**6:
             raise ClothFitError(f"checkpoint: {w} 'history' must be a list of [evaluations, best] pairs")
         out = []
         for item in hist:
-            if (not isinstance(item, list) or len(item) != 2 or isinstance(item[0], bool)
-                    or not isinstance(item[0], int) or not (item[1] is None or (
-                        isinstance(item[1], (int, float)) and not isinstance(item[1], bool) and math.isfinite(item[1])))):
+            if (
+                not isinstance(item, list)
+                or len(item) != 2
+                or isinstance(item[0], bool)
+                or not isinstance(item[0], int)
+                or not (
+                    item[1] is None
+                    or (isinstance(item[1], (int, float)) and not isinstance(item[1], bool) and math.isfinite(item[1]))
+                )
+            ):
                 raise ClothFitError(f"checkpoint: {w} 'history' must be a list of [evaluations, best] pairs")
             out.append((int(item[0]), _float_from_json(item[1])))
         self.history = out
@@ -187,8 +212,10 @@ class Optimizer:
             got = d.get("algorithm") if isinstance(d, dict) else type(d).__name__
             raise ClothFitError(f"checkpoint: expected an '{name}' optimiser state, got {got!r}")
         if d.get("version") != STATE_VERSION:
-            raise ClothFitError(f"checkpoint: unsupported {name} state version {d.get('version')!r} "
-                                f"(this version reads {STATE_VERSION})")
+            raise ClothFitError(
+                f"checkpoint: unsupported {name} state version {d.get('version')!r} "
+                f"(this version reads {STATE_VERSION})"
+            )
         _check_keys(d, Optimizer.BASE_KEYS + tuple(keys), name)
         seed = _field(d, "seed", name)
         if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
@@ -199,9 +226,9 @@ class Optimizer:
         raise NotImplementedError
 
     @classmethod
-    def from_state(cls, d: dict) -> "Optimizer":
+    def from_state(cls, d: dict) -> Optimizer:
         from .optimise import (
             optimizer_from_state,  # the registry of every optimiser (imports this module)
         )
-        return optimizer_from_state(d)
 
+        return optimizer_from_state(d)

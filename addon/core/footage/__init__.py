@@ -1,2 +1,1 @@
-"""Real footage into captures: silhouette extraction and calibrated cameras in and out.
-"""
+"""Real footage into captures: silhouette extraction and calibrated cameras in and out."""

@@ -2,6 +2,7 @@
 and every moment's board pose refined jointly (``scipy.optimize.least_squares``, a sparse Jacobian,
 a robust loss). The steps of a calibration: ``calibrate.py``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,27 +11,28 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .calib_intrinsics import DISTORTION_MODELS, DIST_ORDER, Intrinsics, Options, project_points, rodrigues, rotvec
 from .calib_board import Board, _natural_key
-
+from .calib_intrinsics import DIST_ORDER, DISTORTION_MODELS, Intrinsics, Options, project_points, rodrigues, rotvec
 
 # =================================================================== bundle adjustment
+
 
 @dataclass
 class Problem:
     """The observations and the parameter layout of the bundle adjustment."""
+
     cams: list
     moments: list
     ref: str
-    obs_cam: np.ndarray             # (N,) camera index per corner observation
-    obs_mom: np.ndarray             # (N,) moment index
-    obs_X: np.ndarray               # (N, 3) board point
-    obs_x: np.ndarray               # (N, 2) detected pixel
-    intr_group: list                # per camera: index of its intrinsic group (-1: fixed)
-    n_intr: int                     # parameters per intrinsic group
-    dist_idx: list                  # which of the 5 distortion coefficients are free
+    obs_cam: np.ndarray  # (N,) camera index per corner observation
+    obs_mom: np.ndarray  # (N,) moment index
+    obs_X: np.ndarray  # (N, 3) board point
+    obs_x: np.ndarray  # (N, 2) detected pixel
+    intr_group: list  # per camera: index of its intrinsic group (-1: fixed)
+    n_intr: int  # parameters per intrinsic group
+    dist_idx: list  # which of the 5 distortion coefficients are free
     square_pixels: bool
-    fixed_intr: dict                # camera index -> Intrinsics (fixed)
+    fixed_intr: dict  # camera index -> Intrinsics (fixed)
 
 
 def _intr_layout(opts: Options):
@@ -68,13 +70,13 @@ def _unpack(prob: Problem, x: np.ndarray):
     """(fx, fy, cx, cy, dist5) per camera, (rvec, t) per camera, (rvec, t) per moment."""
     ng = _n_groups(prob)
     C, M = len(prob.cams), len(prob.moments)
-    intr = x[:ng * prob.n_intr].reshape(ng, prob.n_intr)
+    intr = x[: ng * prob.n_intr].reshape(ng, prob.n_intr)
     o = ng * prob.n_intr
     ext = np.zeros((C, 6))
     others = [ci for ci, c in enumerate(prob.cams) if c != prob.ref]
-    ext[others] = x[o:o + 6 * len(others)].reshape(-1, 6)
+    ext[others] = x[o : o + 6 * len(others)].reshape(-1, 6)
     o += 6 * len(others)
-    brd = x[o:o + 6 * M].reshape(M, 6)
+    brd = x[o : o + 6 * M].reshape(M, 6)
     fx, fy, cx, cy = np.zeros(C), np.zeros(C), np.zeros(C), np.zeros(C)
     dist = np.zeros((C, 5))
     nf = 1 if prob.square_pixels else 2
@@ -89,7 +91,7 @@ def _unpack(prob: Problem, x: np.ndarray):
         fx[ci] = p[0]
         fy[ci] = p[0] if prob.square_pixels else p[1]
         cx[ci], cy[ci] = p[nf], p[nf + 1]
-        dist[ci, prob.dist_idx] = p[nf + 2:]
+        dist[ci, prob.dist_idx] = p[nf + 2 :]
     return fx, fy, cx, cy, dist, ext, brd
 
 
@@ -106,6 +108,7 @@ def _residuals(x: np.ndarray, prob: Problem) -> np.ndarray:
 
 def _sparsity(prob: Problem):
     from scipy.sparse import lil_matrix  # noqa: PLC0415  (scipy checked in bundle_adjust)
+
     ng = _n_groups(prob)
     N = prob.obs_cam.size
     others = [ci for ci, c in enumerate(prob.cams) if c != prob.ref]
@@ -153,31 +156,66 @@ def _problem(board: Board, views: dict, intr: dict, ref: str, opts: Options) -> 
             fixed[ci] = intr[c]
         else:
             group.append(0 if opts.shared else free.index(c))
-    return Problem(cams, moments, ref, np.concatenate(oc), np.concatenate(om), np.concatenate(oX),
-                   np.concatenate(ox), group, n_intr, dist_idx, opts.square_pixels, fixed)
+    return Problem(
+        cams,
+        moments,
+        ref,
+        np.concatenate(oc),
+        np.concatenate(om),
+        np.concatenate(oX),
+        np.concatenate(ox),
+        group,
+        n_intr,
+        dist_idx,
+        opts.square_pixels,
+        fixed,
+    )
 
 
-def bundle_adjust(board: Board, views: dict, intr: dict, ref: str, cam_pose: dict, board_pose: dict,
-                  opts: Options, max_nfev: int = D.CALIB_MAX_NFEV):
+def bundle_adjust(
+    board: Board,
+    views: dict,
+    intr: dict,
+    ref: str,
+    cam_pose: dict,
+    board_pose: dict,
+    opts: Options,
+    max_nfev: int = D.CALIB_MAX_NFEV,
+):
     """Refine everything jointly; returns (intrinsics, camera poses, board poses, per-observation
     residual vectors (N, 2), the problem, the optimiser's status)."""
     try:
         from scipy.optimize import least_squares
     except ImportError:
-        raise ClothFitError("calibrate needs scipy for its bundle adjustment: pip install scipy "
-                            "(see requirements.txt)") from None
+        raise ClothFitError(
+            "calibrate needs scipy for its bundle adjustment: pip install scipy (see requirements.txt)"
+        ) from None
     prob = _problem(board, views, intr, ref, opts)
     x0 = _pack(prob, intr, cam_pose, board_pose)
     r0 = _residuals(x0, prob)
     if not np.all(np.isfinite(r0)):
-        raise ClothFitError("calibration: the initial estimate puts the board behind a camera (the views are "
-                            "inconsistent: are the same moment's images really of the same moment?)")
+        raise ClothFitError(
+            "calibration: the initial estimate puts the board behind a camera (the views are "
+            "inconsistent: are the same moment's images really of the same moment?)"
+        )
     # x_scale "jac" evens out pixels, metres and radians; lsmr's default tolerances stop its inner solves
     # too early on this ill-conditioned system (hundreds of tiny steps): 1e-10 converges in tens
-    res = least_squares(_residuals, x0, jac_sparsity=_sparsity(prob), method="trf", loss=opts.loss,
-                        f_scale=opts.loss_scale_px, x_scale="jac", max_nfev=max_nfev, args=(prob,),
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10, tr_solver="lsmr",
-                        tr_options={"atol": 1e-10, "btol": 1e-10})
+    res = least_squares(
+        _residuals,
+        x0,
+        jac_sparsity=_sparsity(prob),
+        method="trf",
+        loss=opts.loss,
+        f_scale=opts.loss_scale_px,
+        x_scale="jac",
+        max_nfev=max_nfev,
+        args=(prob,),
+        xtol=1e-10,
+        ftol=1e-10,
+        gtol=1e-10,
+        tr_solver="lsmr",
+        tr_options={"atol": 1e-10, "btol": 1e-10},
+    )
     fx, fy, cx, cy, dist, ext, brd = _unpack(prob, res.x)
     out_intr, out_cam, out_board = {}, {}, {}
     for ci, c in enumerate(prob.cams):

@@ -3,6 +3,7 @@ camera or one video per camera), the detector, the blur test (:func:`sharpness`)
 pass over every camera and moment (:func:`detect_views`), and the checks that tell a wrong board
 or dictionary from bad footage. The steps of a calibration: ``calibrate.py``.
 """
+
 from __future__ import annotations
 
 import math
@@ -16,22 +17,23 @@ from ..errors import ClothFitError
 from ..observation.camera import check_camera_name
 from .calib_board import Board, _natural_key, dictionaries
 
-
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 
 
 # ========================================================================= detection
 
+
 @dataclass
 class View:
     """The board seen by one camera at one moment: ChArUco corner ids and their pixel positions."""
+
     camera: str
     moment: str
-    ids: np.ndarray                 # (n,) int corner ids
-    points: np.ndarray              # (n, 2) float pixel positions (pixel centres at integers)
+    ids: np.ndarray  # (n,) int corner ids
+    points: np.ndarray  # (n, 2) float pixel positions (pixel centres at integers)
     markers: int = 0
     sharpness: float = float("nan")
-    marker_ratio: float = float("nan")   # marker side measured against the chessboard / the board's marker side
+    marker_ratio: float = float("nan")  # marker side measured against the chessboard / the board's marker side
 
 
 class Detector:
@@ -39,17 +41,20 @@ class Detector:
 
     def __init__(self, board: Board):
         import cv2
+
         self.board = board
         self.cv = cv2
         self.cvb = board.cv_board()
         dp = cv2.aruco.DetectorParameters()
-        dp.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX      # marker corners: for the interpolation
+        dp.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX  # marker corners: for the interpolation
         cp = cv2.aruco.CharucoParameters()
-        cp.minMarkers = 1                                                # a corner needs one adjacent marker
+        cp.minMarkers = 1  # a corner needs one adjacent marker
         cp.tryRefineMarkers = True
         self.det = cv2.aruco.CharucoDetector(self.cvb, cp, dp)
-        self.marker_obj = {int(i): np.asarray(o, np.float64).reshape(4, 3)[:, :2]
-                           for i, o in zip(np.asarray(self.cvb.getIds()).reshape(-1), self.cvb.getObjPoints())}
+        self.marker_obj = {
+            int(i): np.asarray(o, np.float64).reshape(4, 3)[:, :2]
+            for i, o in zip(np.asarray(self.cvb.getIds()).reshape(-1), self.cvb.getObjPoints())
+        }
 
     def marker_ratio(self, ids, pts, mids, mcorners) -> float:
         """The markers' side as the chessboard corners measure it (a homography from the corners, the
@@ -135,8 +140,9 @@ class Detector:
             if np.linalg.norm(pred - pts[k]) <= tol:
                 continue
             w = int(win[k])
-            again = cv2.cornerSubPix(grey, pred.astype(np.float32).reshape(1, 1, 2).copy(), (w, w), (-1, -1),
-                                     crit).reshape(2)
+            again = cv2.cornerSubPix(
+                grey, pred.astype(np.float32).reshape(1, 1, 2).copy(), (w, w), (-1, -1), crit
+            ).reshape(2)
             out[k] = again if np.linalg.norm(again - pred) <= tol else np.nan
         return out
 
@@ -148,6 +154,7 @@ def sharpness(grey: np.ndarray, points: np.ndarray) -> float:
     contrast (95th - 5th percentile of grey). About 1 / edge width in pixels, independent of the
     board's size in the image and of exposure."""
     import cv2
+
     if points.shape[0] < 2:
         return float("nan")
     h, w = grey.shape[:2]
@@ -167,12 +174,14 @@ def sharpness(grey: np.ndarray, points: np.ndarray) -> float:
 
 # ============================================================================== inputs
 
+
 @dataclass
 class Source:
     """Where the frames come from: images per camera folder, or one video per camera."""
-    kind: str                                  # "images" | "videos"
+
+    kind: str  # "images" | "videos"
     folder: str
-    cameras: list                              # camera names, natural order
+    cameras: list  # camera names, natural order
     images: dict = field(default_factory=dict)  # images: {camera: {moment: path}}
     videos: dict = field(default_factory=dict)  # videos: {camera: path}
 
@@ -180,22 +189,34 @@ class Source:
 def find_source(folder: str) -> Source:
     """The cameras of ``folder``: sub-folders of images, or videos ``<camera>.<ext>``; not both."""
     from .video import VIDEO_EXTS
+
     if not os.path.isdir(folder):
         raise ClothFitError(f"calibration folder not found: {folder}")
     entries = sorted(os.listdir(folder), key=_natural_key)
     dirs = [e for e in entries if not e.startswith(".") and os.path.isdir(os.path.join(folder, e))]
-    vids = [e for e in entries if not e.startswith(".") and os.path.splitext(e)[1].lower() in VIDEO_EXTS
-            and os.path.isfile(os.path.join(folder, e))]
+    vids = [
+        e
+        for e in entries
+        if not e.startswith(".")
+        and os.path.splitext(e)[1].lower() in VIDEO_EXTS
+        and os.path.isfile(os.path.join(folder, e))
+    ]
     img_dirs = {}
     for d in dirs:
-        files = [f for f in os.listdir(os.path.join(folder, d))
-                 if not f.startswith(".") and os.path.splitext(f)[1].lower() in IMAGE_EXTS
-                 and os.path.isfile(os.path.join(folder, d, f))]
+        files = [
+            f
+            for f in os.listdir(os.path.join(folder, d))
+            if not f.startswith(".")
+            and os.path.splitext(f)[1].lower() in IMAGE_EXTS
+            and os.path.isfile(os.path.join(folder, d, f))
+        ]
         if files:
             img_dirs[d] = files
     if img_dirs and vids:
-        raise ClothFitError(f"calibration folder {folder}: holds both camera folders of images "
-                            f"({', '.join(list(img_dirs)[:3])}) and videos ({', '.join(vids[:3])}); keep one kind")
+        raise ClothFitError(
+            f"calibration folder {folder}: holds both camera folders of images "
+            f"({', '.join(list(img_dirs)[:3])}) and videos ({', '.join(vids[:3])}); keep one kind"
+        )
     if vids:
         names = [os.path.splitext(v)[0] for v in vids]
         dup = sorted({n for n in names if names.count(n) > 1})
@@ -205,8 +226,10 @@ def find_source(folder: str) -> Source:
             check_camera_name(n, f"calibration folder {folder}")
         return Source("videos", folder, names, videos={os.path.splitext(v)[0]: os.path.join(folder, v) for v in vids})
     if not img_dirs:
-        raise ClothFitError(f"calibration folder {folder}: no camera folders of images "
-                            f"(<camera>/<moment>.png|jpg) and no videos (<camera>.mp4|mov|mkv|avi)")
+        raise ClothFitError(
+            f"calibration folder {folder}: no camera folders of images "
+            f"(<camera>/<moment>.png|jpg) and no videos (<camera>.mp4|mov|mkv|avi)"
+        )
     images = {}
     for d, files in img_dirs.items():
         check_camera_name(d, f"calibration folder {folder}")
@@ -214,8 +237,10 @@ def find_source(folder: str) -> Source:
         for f in files:
             stem = os.path.splitext(f)[0]
             if stem in by_moment:
-                raise ClothFitError(f"camera folder {os.path.join(folder, d)}: moment '{stem}' has several images "
-                                    f"({os.path.basename(by_moment[stem])}, {f}); keep one")
+                raise ClothFitError(
+                    f"camera folder {os.path.join(folder, d)}: moment '{stem}' has several images "
+                    f"({os.path.basename(by_moment[stem])}, {f}); keep one"
+                )
             by_moment[stem] = os.path.join(folder, d, f)
         images[d] = dict(sorted(by_moment.items(), key=lambda kv: _natural_key(kv[0])))
     return Source("images", folder, list(images), images=images)
@@ -226,6 +251,7 @@ def read_grey(path: str) -> np.ndarray:
     import cv2
 
     from .extract import read_image
+
     img = read_image(path)
     if img.ndim == 3:
         img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
@@ -240,6 +266,7 @@ def moment_name(t: float) -> str:
 def video_times(videos: dict, sync: dict, every: float, times=None) -> list:
     """Capture times sampled every ``every`` s over the span all videos cover (or ``times`` checked)."""
     from .video import Video
+
     spans = {}
     for name, path in videos.items():
         v = Video(path)
@@ -249,12 +276,15 @@ def video_times(videos: dict, sync: dict, every: float, times=None) -> list:
     if times is not None:
         bad = [t for t in times if not lo <= t < hi]
         if bad:
-            raise ClothFitError(f"--times: {bad[0]:g} s is outside the span every video covers "
-                                f"({lo:.3f} .. {hi:.3f} s of capture time)")
+            raise ClothFitError(
+                f"--times: {bad[0]:g} s is outside the span every video covers ({lo:.3f} .. {hi:.3f} s of capture time)"
+            )
         return sorted(float(t) for t in times)
     if not hi > lo:
-        raise ClothFitError("the videos do not overlap in capture time (check the sync): " +
-                            ", ".join(f"{n} {a:.2f}..{b:.2f} s" for n, (a, b) in spans.items()))
+        raise ClothFitError(
+            "the videos do not overlap in capture time (check the sync): "
+            + ", ".join(f"{n} {a:.2f}..{b:.2f} s" for n, (a, b) in spans.items())
+        )
     if not (math.isfinite(every) and every > 0):
         raise ClothFitError(f"--every {every:g}: must be a positive number of seconds")
     n = int(math.floor((hi - lo - 1e-6) / every)) + 1
@@ -263,22 +293,32 @@ def video_times(videos: dict, sync: dict, every: float, times=None) -> list:
 
 # ====================================================================== detection pass
 
+
 @dataclass
 class Detections:
     """What :func:`detect_views` found: the views kept, the image sizes, and why others were dropped."""
-    views: dict                                # {camera: {moment: View}}
-    sizes: dict                                # {camera: (width, height)}
-    stats: dict                                # {camera: {"frames", "found", "few_corners", "blurred", ...}}
+
+    views: dict  # {camera: {moment: View}}
+    sizes: dict  # {camera: (width, height)}
+    stats: dict  # {camera: {"frames", "found", "few_corners", "blurred", ...}}
     marker_ids: set = field(default_factory=set)
-    debug_frames: dict = field(default_factory=dict)   # {(camera, moment): encoded JPEG} when asked
-    moments: list = field(default_factory=list)        # every moment read, natural order (the first = the world's)
+    debug_frames: dict = field(default_factory=dict)  # {(camera, moment): encoded JPEG} when asked
+    moments: list = field(default_factory=list)  # every moment read, natural order (the first = the world's)
 
 
-def detect_views(source: Source, board: Board, min_corners: int = D.CALIB_MIN_CORNERS,
-                 blur_ratio: float = D.CALIB_BLUR_RATIO, sync: dict | None = None, times=None,
-                 keep_frames: bool = False, progress=None) -> Detections:
+def detect_views(
+    source: Source,
+    board: Board,
+    min_corners: int = D.CALIB_MIN_CORNERS,
+    blur_ratio: float = D.CALIB_BLUR_RATIO,
+    sync: dict | None = None,
+    times=None,
+    keep_frames: bool = False,
+    progress=None,
+) -> Detections:
     """Detect the board in every frame; keep the views with enough corners, not collinear, not blurred."""
     import cv2
+
     det = Detector(board)
     views, sizes, stats, debug = {}, {}, {}, {}
     all_markers: set = set()
@@ -295,8 +335,10 @@ def detect_views(source: Source, board: Board, min_corners: int = D.CALIB_MIN_CO
             if cam not in sizes:
                 sizes[cam] = (w, h)
             elif sizes[cam] != (w, h):
-                raise ClothFitError(f"{where}: {w}x{h} px but camera '{cam}''s other frames are "
-                                    f"{sizes[cam][0]}x{sizes[cam][1]} (one camera, one image size)")
+                raise ClothFitError(
+                    f"{where}: {w}x{h} px but camera '{cam}''s other frames are "
+                    f"{sizes[cam][0]}x{sizes[cam][1]} (one camera, one image size)"
+                )
             ids, pts, mids, mcorners = det.detect(grey)
             all_markers.update(int(m) for m in mids)
             if keep_frames:
@@ -313,8 +355,9 @@ def detect_views(source: Source, board: Board, min_corners: int = D.CALIB_MIN_CO
             if _collinear(board, ids):
                 st["collinear"] += 1
                 continue
-            found[moment] = View(cam, moment, ids, pts, int(mids.size),
-                                 marker_ratio=det.marker_ratio(ids, pts, mids, mcorners))
+            found[moment] = View(
+                cam, moment, ids, pts, int(mids.size), marker_ratio=det.marker_ratio(ids, pts, mids, mcorners)
+            )
             sharp[moment] = sharpness(grey, pts)
             if progress:
                 progress(ci, len(source.cameras), cam, moment)
@@ -342,13 +385,14 @@ def _frames(source: Source, cam: str, sync, times):
     import cv2
 
     from .video import Video
+
     v = Video(source.videos[cam])
     vts = [sync[cam] + t for t in times]
     # decode in batches so that a long video never sits in memory as a whole
     batch = D.CALIB_VIDEO_BATCH
     for i in range(0, len(times), batch):
-        frames, _ = v.frames_at(vts[i:i + batch])
-        for t, fr in zip(times[i:i + batch], frames):
+        frames, _ = v.frames_at(vts[i : i + batch])
+        for t, fr in zip(times[i : i + batch], frames):
             yield moment_name(t), cv2.cvtColor(fr, cv2.COLOR_BGR2GRAY), f"video {source.videos[cam]} at {t:.3f} s"
 
 
@@ -361,6 +405,7 @@ def _collinear(board: Board, ids: np.ndarray) -> bool:
 
 # ===================================================================== board mismatch
 
+
 def check_detections(det: Detections, board: Board, source: Source):
     """One-line errors when nothing fits: the board found nowhere (and which dictionary the markers
     belong to, if another one), markers found but no corners (a board definition that does not
@@ -372,39 +417,52 @@ def check_detections(det: Detections, board: Board, source: Source):
     extra = sorted(i for i in det.marker_ids if i >= board.n_markers)
     in_board = [i for i in det.marker_ids if i < board.n_markers]
     if extra and len(extra) >= max(2, len(in_board) // 4):
-        other = sniff_dictionary(source, board, det)    # a wrong dictionary decodes a print into stray ids too
+        other = sniff_dictionary(source, board, det)  # a wrong dictionary decodes a print into stray ids too
         if other:
-            raise ClothFitError(f"--board {board.text}: stray {board.dictionary} ids up to {max(extra)}, but {other} "
-                                f"markers are there: the board definition does not match the printed board "
-                                f"(its dictionary)")
-        raise ClothFitError(f"--board {board.text}: markers with ids up to {max(extra)} were found but this board has "
-                            f"ids 0..{board.n_markers - 1}: the board definition does not match the printed board "
-                            f"(its numbers of squares?)")
+            raise ClothFitError(
+                f"--board {board.text}: stray {board.dictionary} ids up to {max(extra)}, but {other} "
+                f"markers are there: the board definition does not match the printed board "
+                f"(its dictionary)"
+            )
+        raise ClothFitError(
+            f"--board {board.text}: markers with ids up to {max(extra)} were found but this board has "
+            f"ids 0..{board.n_markers - 1}: the board definition does not match the printed board "
+            f"(its numbers of squares?)"
+        )
     ratios = np.array([v.marker_ratio for vs in det.views.values() for v in vs.values()])
     ratios = ratios[np.isfinite(ratios)]
     if ratios.size >= 3 and abs(float(np.median(ratios)) - 1) > D.CALIB_MARKER_RATIO_TOL:
         r = float(np.median(ratios))
-        raise ClothFitError(f"--board {board.text}: the markers measure {r * board.marker_m * 1000:.1f} mm against "
-                            f"the chessboard, the board definition says {board.marker_m * 1000:g} mm: the board "
-                            f"definition does not match the printed board (its marker size)")
+        raise ClothFitError(
+            f"--board {board.text}: the markers measure {r * board.marker_m * 1000:.1f} mm against "
+            f"the chessboard, the board definition says {board.marker_m * 1000:g} mm: the board "
+            f"definition does not match the printed board (its marker size)"
+        )
     if total_views == 0 and not any(s["found"] for s in det.stats.values()):
         markers_only = sum(s["markers_only"] for s in det.stats.values())
         if markers_only:
-            raise ClothFitError(f"--board {board.text}: {board.dictionary} markers were found in {markers_only} "
-                                f"frames but no chessboard corner between them: the board definition does not match "
-                                f"the printed board (squares, sizes or --legacy-board)")
+            raise ClothFitError(
+                f"--board {board.text}: {board.dictionary} markers were found in {markers_only} "
+                f"frames but no chessboard corner between them: the board definition does not match "
+                f"the printed board (squares, sizes or --legacy-board)"
+            )
         other = sniff_dictionary(source, board, det)
         if other:
-            raise ClothFitError(f"--board {board.text}: no {board.dictionary} marker in any of {frames} frames, but "
-                                f"{other} markers are there: the board definition does not match the printed board "
-                                f"(its dictionary)")
-        raise ClothFitError(f"the board ({board.text}) was found in none of the {frames} frames of "
-                            f"{source.folder} (check the board definition, lighting and focus)")
+            raise ClothFitError(
+                f"--board {board.text}: no {board.dictionary} marker in any of {frames} frames, but "
+                f"{other} markers are there: the board definition does not match the printed board "
+                f"(its dictionary)"
+            )
+        raise ClothFitError(
+            f"the board ({board.text}) was found in none of the {frames} frames of "
+            f"{source.folder} (check the board definition, lighting and focus)"
+        )
 
 
 def sniff_dictionary(source: Source, board: Board, det: Detections, per_camera: int = 3):
     """The predefined dictionary whose markers the first frames show, when it is not the board's."""
     import cv2
+
     frames = []
     for cam in source.cameras:
         if source.kind == "images":
@@ -412,6 +470,7 @@ def sniff_dictionary(source: Source, board: Board, det: Detections, per_camera: 
                 frames.append(read_grey(path))
     if not frames:
         return None
+
     def count(name):
         d = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)))
         n = 0
@@ -419,7 +478,8 @@ def sniff_dictionary(source: Source, board: Board, det: Detections, per_camera: 
             _, ids, _ = d.detectMarkers(g)
             n += 0 if ids is None else len(ids)
         return n
-    own = count(board.dictionary)        # stray decodings of another dictionary's print: a few, not most
+
+    own = count(board.dictionary)  # stray decodings of another dictionary's print: a few, not most
     best, best_n = None, 0
     for name, (bits, size) in sorted(dictionaries().items(), key=lambda kv: (kv[1][0], kv[1][1])):
         if name == board.dictionary:

@@ -3,6 +3,7 @@ with distortion, the calibration options, per camera ``cv2.calibrateCamera`` on 
 (:func:`initial_intrinsics`) and the cameras joined through the moments they share
 (:func:`initial_extrinsics`). The steps of a calibration: ``calibrate.py``.
 """
+
 from __future__ import annotations
 
 import math
@@ -14,8 +15,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from .calib_board import Board, _natural_key
 
-
-DISTORTION_MODELS = {            # name -> which of (k1, k2, p1, p2, k3) are estimated
+DISTORTION_MODELS = {  # name -> which of (k1, k2, p1, p2, k3) are estimated
     "none": (),
     "k1": ("k1",),
     "k1k2": ("k1", "k2"),
@@ -27,6 +27,7 @@ DIST_ORDER = ("k1", "k2", "p1", "p2", "k3")
 
 # ================================================================= camera geometry
 
+
 def rodrigues(r: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(N, 3, 3)`` of rotation vectors ``(N, 3)`` (Rodrigues' formula, vectorised;
     first order below 1e-12 rad)."""
@@ -35,17 +36,30 @@ def rodrigues(r: np.ndarray) -> np.ndarray:
     small = th < 1e-12
     k = r / np.where(small, 1.0, th)[:, None]
     z = np.zeros(len(r))
-    Kx = np.stack([np.stack([z, -k[:, 2], k[:, 1]], -1), np.stack([k[:, 2], z, -k[:, 0]], -1),
-                   np.stack([-k[:, 1], k[:, 0], z], -1)], 1)
+    Kx = np.stack(
+        [
+            np.stack([z, -k[:, 2], k[:, 1]], -1),
+            np.stack([k[:, 2], z, -k[:, 0]], -1),
+            np.stack([-k[:, 1], k[:, 0], z], -1),
+        ],
+        1,
+    )
     s, c = np.sin(th)[:, None, None], (1 - np.cos(th))[:, None, None]
     R = np.eye(3)[None] + s * Kx + c * (Kx @ Kx)
-    rx = np.stack([np.stack([z, -r[:, 2], r[:, 1]], -1), np.stack([r[:, 2], z, -r[:, 0]], -1),
-                   np.stack([-r[:, 1], r[:, 0], z], -1)], 1)
+    rx = np.stack(
+        [
+            np.stack([z, -r[:, 2], r[:, 1]], -1),
+            np.stack([r[:, 2], z, -r[:, 0]], -1),
+            np.stack([-r[:, 1], r[:, 0], z], -1),
+        ],
+        1,
+    )
     return np.where(small[:, None, None], np.eye(3)[None] + rx, R)
 
 
 def rotvec(R: np.ndarray) -> np.ndarray:
     import cv2
+
     return cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].reshape(3)
 
 
@@ -86,16 +100,18 @@ def rotation_angle_deg(R: np.ndarray) -> float:
 
 # ========================================================================= options
 
+
 @dataclass
 class Options:
     """How to calibrate (the CLI's options; every default in ``defaults.py``)."""
+
     distortion: str = D.CALIB_DISTORTION
-    square_pixels: bool = True                 # fx = fy
-    shared: bool = False                       # one set of intrinsics for every camera (same phone model)
+    square_pixels: bool = True  # fx = fy
+    shared: bool = False  # one set of intrinsics for every camera (same phone model)
     fixed: dict = field(default_factory=dict)  # {camera: Camera} whose intrinsics are held fixed
-    world: str | None = None                   # moment of the world board (default: the first moment)
-    level: str | None = None                   # a moment where the board lies level (its normal = up)
-    gravity: tuple | None = None               # (camera, (gx, gy, gz)): gravity in that camera's frame
+    world: str | None = None  # moment of the world board (default: the first moment)
+    level: str | None = None  # a moment where the board lies level (its normal = up)
+    gravity: tuple | None = None  # (camera, (gx, gy, gz)): gravity in that camera's frame
     min_views: int = D.CALIB_MIN_VIEWS
     min_corners: int = D.CALIB_MIN_CORNERS
     blur_ratio: float = D.CALIB_BLUR_RATIO
@@ -126,10 +142,11 @@ class Options:
 
 # ================================================================= initial estimates
 
+
 @dataclass
 class Intrinsics:
     K: np.ndarray
-    dist: np.ndarray               # 5 coefficients k1, k2, p1, p2, k3
+    dist: np.ndarray  # 5 coefficients k1, k2, p1, p2, k3
     fixed: bool = False
 
 
@@ -142,6 +159,7 @@ def _obj_img(board: Board, views):
 
 def _cv_flags(opts: Options) -> int:
     import cv2
+
     est = set(DISTORTION_MODELS[opts.distortion])
     f = 0
     if opts.square_pixels:
@@ -161,14 +179,18 @@ def initial_intrinsics(board: Board, views: dict, sizes: dict, opts: Options):
     """Per camera: (Intrinsics, {moment: (R, t) board -> camera}) from its own views; with
     ``opts.shared`` one calibrateCamera over every camera's views; fixed cameras: solvePnP."""
     import cv2
+
     intr, poses = {}, {}
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
     free = [c for c in views if c not in opts.fixed]
     if opts.shared and free:
         sz = {sizes[c] for c in free}
         if len(sz) > 1:
-            raise ClothFitError("--shared-intrinsics: the cameras' images differ in size (" +
-                                ", ".join(f"{c} {sizes[c][0]}x{sizes[c][1]}" for c in free) + "): one lens, one size")
+            raise ClothFitError(
+                "--shared-intrinsics: the cameras' images differ in size ("
+                + ", ".join(f"{c} {sizes[c][0]}x{sizes[c][1]}" for c in free)
+                + "): one lens, one size"
+            )
     groups = [free] if opts.shared and free else [[c] for c in free]
     for group in groups:
         vs = [v for c in group for v in views[c].values()]
@@ -176,16 +198,21 @@ def initial_intrinsics(board: Board, views: dict, sizes: dict, opts: Options):
         w, h = sizes[group[0]]
         K0 = np.array([[1.0, 0, (w - 1) / 2], [0, 1.0, (h - 1) / 2], [0, 0, 1]])
         try:
-            rms, K, dist, rv, tv = cv2.calibrateCamera(obj, img, (w, h), K0, np.zeros(5), flags=_cv_flags(opts),
-                                                       criteria=crit)
+            rms, K, dist, rv, tv = cv2.calibrateCamera(
+                obj, img, (w, h), K0, np.zeros(5), flags=_cv_flags(opts), criteria=crit
+            )
         except cv2.error as e:
-            raise ClothFitError(f"camera(s) {', '.join(group)}: OpenCV's calibrateCamera failed on "
-                                f"{len(vs)} views ({str(e).strip().splitlines()[-1]})") from None
+            raise ClothFitError(
+                f"camera(s) {', '.join(group)}: OpenCV's calibrateCamera failed on "
+                f"{len(vs)} views ({str(e).strip().splitlines()[-1]})"
+            ) from None
         if not (np.all(np.isfinite(K)) and K[0, 0] > 0):
-            raise ClothFitError(f"camera(s) {', '.join(group)}: no finite intrinsics from {len(vs)} views "
-                                f"(more views at varied tilts needed)")
+            raise ClothFitError(
+                f"camera(s) {', '.join(group)}: no finite intrinsics from {len(vs)} views "
+                f"(more views at varied tilts needed)"
+            )
         d5 = np.zeros(5)
-        d5[:min(5, dist.size)] = np.asarray(dist).reshape(-1)[:5]
+        d5[: min(5, dist.size)] = np.asarray(dist).reshape(-1)[:5]
         for c in group:
             intr[c] = Intrinsics(K.copy(), d5.copy())
         for v, r, t in zip(vs, rv, tv):
@@ -195,13 +222,17 @@ def initial_intrinsics(board: Board, views: dict, sizes: dict, opts: Options):
             continue
         cam = opts.fixed[c]
         if (cam.width, cam.height) != tuple(sizes[c]):
-            raise ClothFitError(f"--intrinsics: camera '{c}' is {cam.width}x{cam.height} there but its images are "
-                                f"{sizes[c][0]}x{sizes[c][1]}")
+            raise ClothFitError(
+                f"--intrinsics: camera '{c}' is {cam.width}x{cam.height} there but its images are "
+                f"{sizes[c][0]}x{sizes[c][1]}"
+            )
         if cam.dist.size > 5 and np.any(cam.dist[5:] != 0):
-            raise ClothFitError(f"--intrinsics: camera '{c}' uses more than 5 distortion coefficients "
-                                f"(k1, k2, p1, p2, k3 are supported)")
+            raise ClothFitError(
+                f"--intrinsics: camera '{c}' uses more than 5 distortion coefficients "
+                f"(k1, k2, p1, p2, k3 are supported)"
+            )
         d5 = np.zeros(5)
-        d5[:min(5, cam.dist.size)] = cam.dist[:5]
+        d5[: min(5, cam.dist.size)] = cam.dist[:5]
         intr[c] = Intrinsics(cam.K.copy(), d5, fixed=True)
         for v in views[c].values():
             obj, img = _obj_img(board, [v])
@@ -216,17 +247,20 @@ def initial_extrinsics(poses: dict, reference: str | None = None):
     ``{moment: (R, t)}`` (board -> reference frame), from per-view board poses, along the spanning
     tree of most shared moments. Cameras not connected: one-line error naming the groups."""
     cams = list(poses)
-    shared = {(a, b): sorted(set(poses[a]) & set(poses[b])) for i, a in enumerate(cams) for b in cams[i + 1:]}
+    shared = {(a, b): sorted(set(poses[a]) & set(poses[b])) for i, a in enumerate(cams) for b in cams[i + 1 :]}
     groups = _components(cams, [(a, b) for (a, b), s in shared.items() if s])
     if len(groups) > 1:
         desc = "; ".join("{" + ", ".join(g) + "}" for g in groups)
-        raise ClothFitError(f"the cameras are not connected by shared views: {desc} share no moment where both "
-                            f"see the board (show the board to neighbouring cameras at once, e.g. lying on the "
-                            f"table between them)")
-    ref = reference or max(cams, key=lambda c: (sum(len(s) for (a, b), s in shared.items() if c in (a, b)),
-                                                 len(poses[c])))
+        raise ClothFitError(
+            f"the cameras are not connected by shared views: {desc} share no moment where both "
+            f"see the board (show the board to neighbouring cameras at once, e.g. lying on the "
+            f"table between them)"
+        )
+    ref = reference or max(
+        cams, key=lambda c: (sum(len(s) for (a, b), s in shared.items() if c in (a, b)), len(poses[c]))
+    )
     cam_pose = {ref: (np.eye(3), np.zeros(3))}
-    while len(cam_pose) < len(cams):        # Prim: the edge with most shared moments to a new camera
+    while len(cam_pose) < len(cams):  # Prim: the edge with most shared moments to a new camera
         best = None
         for (a, b), s in shared.items():
             if (a in cam_pose) != (b in cam_pose) and s and (best is None or len(s) > len(best[2])):
@@ -260,6 +294,7 @@ def _components(nodes, edges):
             parent[x] = parent[parent[x]]
             x = parent[x]
         return x
+
     for a, b in edges:
         parent[find(a)] = find(b)
     groups = {}

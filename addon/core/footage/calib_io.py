@@ -36,6 +36,7 @@ triangle edges stay straight between projected vertices, which is accurate for s
 Or undistort the silhouettes with :func:`undistort_silhouette` and use the camera without
 distortion.
 """
+
 from __future__ import annotations
 
 import os
@@ -58,8 +59,10 @@ OPENCV_EXTS = (".yml", ".yaml", ".json", ".xml")
 
 # ============================================================== OpenCV FileStorage: read
 
+
 def _open_storage(path: str):
     import cv2
+
     if not os.path.isfile(path):
         raise ClothFitError(f"calibration file not found: {path}")
     try:
@@ -73,12 +76,15 @@ def _open_storage(path: str):
     if ext in (".yml", ".yaml") and not text.lstrip().startswith("%YAML"):
         text = "%YAML:1.0\n---\n" + text  # OpenCV insists on its header; plain YAML is common
     try:
-        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY |
-                             (cv2.FILE_STORAGE_FORMAT_JSON if ext == ".json" else 0))
+        fs = cv2.FileStorage(
+            text,
+            cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY | (cv2.FILE_STORAGE_FORMAT_JSON if ext == ".json" else 0),
+        )
         ok = fs.isOpened()
     except cv2.error as e:
-        raise ClothFitError(f"calibration file {path} could not be parsed by OpenCV FileStorage: "
-                            f"{str(e).strip().splitlines()[-1]}") from None
+        raise ClothFitError(
+            f"calibration file {path} could not be parsed by OpenCV FileStorage: {str(e).strip().splitlines()[-1]}"
+        ) from None
     except Exception as e:  # cv2 raises SystemError on some syntax errors
         raise ClothFitError(f"calibration file {path} could not be parsed by OpenCV FileStorage ({e})") from None
     if not ok:
@@ -126,7 +132,9 @@ def _array(value, what, where, sizes=None, shape=None):
         raise ClothFitError(f"{where}: {what} is not numeric: {value!r}") from None
     if shape is not None:
         if a.size != int(np.prod(shape)):
-            raise ClothFitError(f"{where}: {what} must have {int(np.prod(shape))} values ({shape}), got shape {a.shape}")
+            raise ClothFitError(
+                f"{where}: {what} must have {int(np.prod(shape))} values ({shape}), got shape {a.shape}"
+            )
         a = a.reshape(shape)
     else:
         a = a.reshape(-1)
@@ -161,6 +169,7 @@ def _image_size(d, where, width, height):
 
 def _camera_from_mapping(d: dict, name: str, where: str, width=None, height=None) -> Camera:
     import cv2
+
     kk, K = _first(d, _K_KEYS)
     if kk is None:
         raise ClothFitError(f"{where}: no camera matrix (looked for {', '.join(_K_KEYS)})")
@@ -216,8 +225,10 @@ def read_opencv(path: str, width: int | None = None, height: int | None = None) 
             if _looks_like_camera(v):
                 entries.append((k, v, f"{path} camera '{k}'"))
     if not entries:
-        raise ClothFitError(f"calibration file {path}: no camera found (no camera matrix under any of "
-                            f"{', '.join(_K_KEYS)}, and no 'cameras' list)")
+        raise ClothFitError(
+            f"calibration file {path}: no camera found (no camera matrix under any of "
+            f"{', '.join(_K_KEYS)}, and no 'cameras' list)"
+        )
     cams = [_camera_from_mapping(v, k, where, width, height) for k, v, where in entries]
     _check_unique(cams, path)
     return cams
@@ -237,6 +248,7 @@ def read_opencv_dir(folder: str, width: int | None = None, height: int | None = 
 
 # ============================================================= OpenCV FileStorage: write
 
+
 def _safe_key(name: str) -> str:
     k = re.sub(r"[^A-Za-z0-9_]", "_", name)
     return k if k and k[0].isalpha() else "cam_" + k
@@ -244,6 +256,7 @@ def _safe_key(name: str) -> str:
 
 def _write_camera(fs, cam: Camera):
     import cv2
+
     fs.write("name", cam.name)
     fs.write("image_width", int(cam.width))
     fs.write("image_height", int(cam.height))
@@ -256,6 +269,7 @@ def _write_camera(fs, cam: Camera):
 
 def _storage_for_write(path: str):
     import cv2
+
     ext = os.path.splitext(path)[1].lower()
     if ext not in OPENCV_EXTS:
         raise ClothFitError(f"OpenCV calibration file {path}: extension must be one of {', '.join(OPENCV_EXTS)}")
@@ -270,6 +284,7 @@ def _storage_for_write(path: str):
 def write_opencv(path: str, cameras) -> str:
     """All cameras in one FileStorage file (format from the extension: .yml/.yaml/.json/.xml)."""
     import cv2
+
     fs = _storage_for_write(path)
     fs.write("camera_count", len(cameras))
     fs.write("convention", "x_cam = R X + t; +Z forward, +Y down; pixel centres at integers (OpenCV)")
@@ -309,6 +324,7 @@ def read_easymocap(folder: str, width: int | None = None, height: int | None = N
     """Cameras of an EasyMocap calibration folder (``intri.yml`` + ``extri.yml``); see the module text.
     ``sizes``: ``{name: (height, width)}`` for files without ``H_``/``W_``."""
     import cv2
+
     if os.path.isfile(folder):
         folder = os.path.dirname(folder) or "."
     data = {}
@@ -355,11 +371,15 @@ def read_easymocap(folder: str, width: int | None = None, height: int | None = N
         elif width and height:
             h, w = int(height), int(width)
         elif sizes is not None:
-            raise ClothFitError(f"camera '{n}': no video {n}.<mp4|mov|mkv|avi> in {getattr(sizes, 'source', 'the videos')} "
-                                f"(its image size comes from the video: EasyMocap's {folder} stores none)")
+            raise ClothFitError(
+                f"camera '{n}': no video {n}.<mp4|mov|mkv|avi> in {getattr(sizes, 'source', 'the videos')} "
+                f"(its image size comes from the video: EasyMocap's {folder} stores none)"
+            )
         else:
-            raise ClothFitError(f"EasyMocap calibration {folder}: camera '{n}' has no image size (EasyMocap files "
-                                f"store none): pass --width/--height, or extract from its video")
+            raise ClothFitError(
+                f"EasyMocap calibration {folder}: camera '{n}' has no image size (EasyMocap files "
+                f"store none): pass --width/--height, or extract from its video"
+            )
         cam = Camera.__new__(Camera)
         cam.K, cam.R, cam.t, cam.dist, cam.width, cam.height, cam.name = K, R, t, dist, w, h, n
         cam.validate(where)
@@ -391,6 +411,7 @@ def detect_format(path: str) -> str:
         # our own cameras JSON has a "cameras" list of objects with K/R/t; OpenCV JSON otherwise
         try:
             import json
+
             with open(path) as f:
                 d = json.load(f)
             cams = d.get("cameras") if isinstance(d, dict) else None
@@ -401,12 +422,15 @@ def detect_format(path: str) -> str:
         return "opencv"
     if ext in OPENCV_EXTS:
         return "opencv"
-    raise ClothFitError(f"cannot tell the camera file format of {path} (use a .yml/.yaml/.json/.xml file, "
-                        "a COLMAP model folder or name the format)")
+    raise ClothFitError(
+        f"cannot tell the camera file format of {path} (use a .yml/.yaml/.json/.xml file, "
+        "a COLMAP model folder or name the format)"
+    )
 
 
-def import_cameras(path: str, fmt: str = "auto", width: int | None = None, height: int | None = None,
-                   sizes=None) -> list:
+def import_cameras(
+    path: str, fmt: str = "auto", width: int | None = None, height: int | None = None, sizes=None
+) -> list:
     """Cameras from any supported file or folder.
 
     ``fmt``: ``auto`` (by extension/content), ``json`` (our cameras JSON, see ``camera.py``),
@@ -458,13 +482,16 @@ def export_cameras(cameras, path: str, fmt: str = "auto") -> str:
 
 # ==================================================================== distortion
 
+
 def undistort_maps(camera: Camera):
     """cv2.remap maps from the undistorted image (same K, no distortion) into the distorted one."""
     import cv2
+
     if camera.dist.size == 0 or not np.any(camera.dist != 0):
         return None
-    return cv2.initUndistortRectifyMap(camera.K, camera.dist, None, camera.K,
-                                       (camera.width, camera.height), cv2.CV_32FC1)
+    return cv2.initUndistortRectifyMap(
+        camera.K, camera.dist, None, camera.K, (camera.width, camera.height), cv2.CV_32FC1
+    )
 
 
 def undistort_silhouette(mask: np.ndarray, camera: Camera, maps=None) -> np.ndarray:
@@ -475,41 +502,59 @@ def undistort_silhouette(mask: np.ndarray, camera: Camera, maps=None) -> np.ndar
     undistort many masks of one camera quickly.
     """
     import cv2
+
     m = np.asarray(mask)
     if m.shape[:2] != (camera.height, camera.width):
-        raise ClothFitError(f"undistort: silhouette is {m.shape[0]}x{m.shape[1]} but camera '{camera.name}' "
-                            f"images {camera.height}x{camera.width}")
+        raise ClothFitError(
+            f"undistort: silhouette is {m.shape[0]}x{m.shape[1]} but camera '{camera.name}' "
+            f"images {camera.height}x{camera.width}"
+        )
     maps = undistort_maps(camera) if maps is None else maps
     if maps is None:
         return m.astype(bool)
-    out = cv2.remap(m.astype(np.uint8), maps[0], maps[1], interpolation=cv2.INTER_NEAREST,
-                    borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    out = cv2.remap(
+        m.astype(np.uint8),
+        maps[0],
+        maps[1],
+        interpolation=cv2.INTER_NEAREST,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    )
     return out > 0
 
 
 def undistorted_camera(camera: Camera) -> Camera:
     """The same camera without distortion (what :func:`undistort_silhouette` images)."""
-    return Camera(camera.K.copy(), camera.R.copy(), camera.t.copy(), camera.width, camera.height,
-                  camera.name, np.zeros(0))
+    return Camera(
+        camera.K.copy(), camera.R.copy(), camera.t.copy(), camera.width, camera.height, camera.name, np.zeros(0)
+    )
 
 
 def undistort_image(image: np.ndarray, camera: Camera, interpolation=None) -> np.ndarray:
     """Undistort a colour/grey image (bilinear by default), e.g. for overlays."""
     import cv2
+
     maps = undistort_maps(camera)
     if maps is None:
         return image
-    return cv2.remap(image, maps[0], maps[1], interpolation=cv2.INTER_LINEAR if interpolation is None else interpolation,
-                     borderMode=cv2.BORDER_CONSTANT)
+    return cv2.remap(
+        image,
+        maps[0],
+        maps[1],
+        interpolation=cv2.INTER_LINEAR if interpolation is None else interpolation,
+        borderMode=cv2.BORDER_CONSTANT,
+    )
 
 
 # ================================================================ cameras of anything
+
 
 def _cameras_from_any(path: str, fmt: str = "auto", width=None, height=None) -> list:
     """Cameras of a calibration file/folder, or of a capture (its folder or capture.json)."""
     cj = path if os.path.basename(path) == "capture.json" else os.path.join(path, "capture.json")
     if os.path.isfile(cj) and fmt == "auto":
         from ..observation.capture import load_capture
+
         return load_capture(cj).cameras
     return import_cameras(path, fmt, width, height)
 
@@ -517,8 +562,9 @@ def _cameras_from_any(path: str, fmt: str = "auto", width=None, height=None) -> 
 def describe(cameras) -> str:
     lines = []
     for c in cameras:
-        d = "none" if c.dist.size == 0 or not np.any(c.dist != 0) else \
-            " ".join(f"{v:.4g}" for v in c.dist)
-        lines.append(f"{c.name:<12} {c.width}x{c.height}  fx {c.K[0, 0]:.2f} fy {c.K[1, 1]:.2f} "
-                     f"cx {c.K[0, 2]:.2f} cy {c.K[1, 2]:.2f}  centre {np.round(c.center, 4).tolist()}  dist {d}")
+        d = "none" if c.dist.size == 0 or not np.any(c.dist != 0) else " ".join(f"{v:.4g}" for v in c.dist)
+        lines.append(
+            f"{c.name:<12} {c.width}x{c.height}  fx {c.K[0, 0]:.2f} fy {c.K[1, 1]:.2f} "
+            f"cx {c.K[0, 2]:.2f} cy {c.K[1, 2]:.2f}  centre {np.round(c.center, 4).tolist()}  dist {d}"
+        )
     return "\n".join(lines)

@@ -33,6 +33,7 @@ reprojection RMS, the views used and every view's RMS). Bad input is one ClothFi
 module writes only what the caller asks, through :func:`write_outputs`, after everything
 succeeded.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,25 +45,38 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from ..observation.camera import Camera
-from .calib_board import Board, _natural_key
-from .calib_detect import Detections, View, check_detections, detect_views, find_source, video_times
-from .calib_intrinsics import DIST_ORDER, Options, _components, initial_extrinsics, initial_intrinsics
-from .calib_bundle import bundle_adjust
-from .calib_world import world_frame
 
 # calibrate.X names that addon/cli.py, tests/test_calibrate.py and tools/phone_rig.py use
-from .calib_board import make_board, parse_board  # noqa: E402,F401
-from .calib_detect import Detector  # noqa: E402,F401
-from .calib_intrinsics import DISTORTION_MODELS, rotation_angle_deg  # noqa: E402,F401
-
+from .calib_board import Board, _natural_key, make_board, parse_board  # noqa: E402,F401
+from .calib_bundle import bundle_adjust
+from .calib_detect import (
+    Detections,
+    Detector,  # noqa: E402,F401
+    View,
+    check_detections,
+    detect_views,
+    find_source,
+    video_times,
+)
+from .calib_intrinsics import (  # noqa: E402,F401
+    DIST_ORDER,
+    DISTORTION_MODELS,
+    Options,
+    _components,
+    initial_extrinsics,
+    initial_intrinsics,
+    rotation_angle_deg,
+)
+from .calib_world import world_frame
 
 # ========================================================================== the run
 
+
 @dataclass
 class Result:
-    cameras: list                 # Camera objects (world frame)
+    cameras: list  # Camera objects (world frame)
     report: dict
-    board_poses: dict = field(default_factory=dict)   # {moment: (R, t)} board -> world
+    board_poses: dict = field(default_factory=dict)  # {moment: (R, t)} board -> world
 
 
 def calibrate_views(board: Board, det: Detections, opts: Options, log=None) -> Result:
@@ -88,24 +102,30 @@ def calibrate_views(board: Board, det: Detections, opts: Options, log=None) -> R
         c, n, need = few[0]
         st = det.stats.get(c, {})
         why = f"; of its {st.get('frames', 0)} frames, {st.get('found', 0)} show the board" if st else ""
-        dropped = ", ".join(f"{st[k]} {k.replace('_', ' ')}" for k in ("few_corners", "collinear", "blurred")
-                            if st.get(k))
-        raise ClothFitError(f"camera '{c}' sees the board in {n} usable view(s), at least {need} needed{why}"
-                            f"{' (dropped: ' + dropped + ')' if dropped else ''}"
-                            f"{'; other cameras short too: ' + ', '.join(f[0] for f in few[1:]) if len(few) > 1 else ''}")
+        dropped = ", ".join(
+            f"{st[k]} {k.replace('_', ' ')}" for k in ("few_corners", "collinear", "blurred") if st.get(k)
+        )
+        raise ClothFitError(
+            f"camera '{c}' sees the board in {n} usable view(s), at least {need} needed{why}"
+            f"{' (dropped: ' + dropped + ')' if dropped else ''}"
+            f"{'; other cameras short too: ' + ', '.join(f[0] for f in few[1:]) if len(few) > 1 else ''}"
+        )
     intr, poses = initial_intrinsics(board, views, det.sizes, opts)
-    for c in views:                        # views whose pose failed (solvePnP) are dropped
+    for c in views:  # views whose pose failed (solvePnP) are dropped
         views[c] = {m: v for m, v in views[c].items() if m in poses.get(c, {})}
     ref, cam_pose, board_pose = initial_extrinsics(poses)
     say(f"initial estimate: reference camera {ref}, {len(board_pose)} moments")
     dropped_views = []
     rejected = 0
     for rnd in range(D.CALIB_ROUNDS):
-        intr, cam_pose, board_pose, resid, prob, status = bundle_adjust(board, views, intr, ref, cam_pose,
-                                                                         board_pose, opts)
+        intr, cam_pose, board_pose, resid, prob, status = bundle_adjust(
+            board, views, intr, ref, cam_pose, board_pose, opts
+        )
         err = np.linalg.norm(resid, axis=1)
-        say(f"bundle adjustment round {rnd + 1}: RMS {math.sqrt(np.mean(err ** 2)):.3f} px over {err.size} corners "
-            f"({status.nfev} evaluations)")
+        say(
+            f"bundle adjustment round {rnd + 1}: RMS {math.sqrt(np.mean(err**2)):.3f} px over {err.size} corners "
+            f"({status.nfev} evaluations)"
+        )
         if rnd == D.CALIB_ROUNDS - 1:
             break
         views, n_rej, n_drop = _drop_outliers(views, prob, err, opts, dropped_views)
@@ -122,9 +142,11 @@ def calibrate_views(board: Board, det: Detections, opts: Options, log=None) -> R
         world = det.moments[0] if det.moments else moments[0]
         if world not in board_pose:
             seen = [c for c in views if world in det.views.get(c, {})]
-            raise ClothFitError(f"the board at the first moment {world} (the world frame: the board flat on the "
-                                f"table) is in no usable view{' (its views were dropped: ' + ', '.join(seen) + ')' if seen else ''}"
-                                f": retake it where every phone sees it, or give --world MOMENT of another flat view")
+            raise ClothFitError(
+                f"the board at the first moment {world} (the world frame: the board flat on the "
+                f"table) is in no usable view{' (its views were dropped: ' + ', '.join(seen) + ')' if seen else ''}"
+                f": retake it where every phone sees it, or give --world MOMENT of another flat view"
+            )
     R_w, t_w, frame = world_frame(board, cam_pose, board_pose, world, opts)
     cams_out = []
     for c in prob.cams:
@@ -133,10 +155,10 @@ def calibrate_views(board: Board, det: Detections, opts: Options, log=None) -> R
         t = tc - R @ t_w
         w, h = det.sizes[c]
         it = intr[c]
-        dist = it.dist[:len(DIST_ORDER)].copy()
+        dist = it.dist[: len(DIST_ORDER)].copy()
         cams_out.append(Camera(it.K, _orthonormal(R), t, w, h, name=c, dist=dist))
     board_world = {}
-    for m, (Rb, tb) in board_pose.items():          # board -> world
+    for m, (Rb, tb) in board_pose.items():  # board -> world
         board_world[m] = (R_w @ Rb, R_w @ tb + t_w)
     report = _report(board, det, views, prob, resid, cams_out, frame, dropped_views, rejected, opts, status)
     return Result(cams_out, report, board_world)
@@ -144,11 +166,13 @@ def calibrate_views(board: Board, det: Detections, opts: Options, log=None) -> R
 
 def _components_check(views, prefix=""):
     cams = list(views)
-    edges = [(a, b) for i, a in enumerate(cams) for b in cams[i + 1:] if set(views[a]) & set(views[b])]
+    edges = [(a, b) for i, a in enumerate(cams) for b in cams[i + 1 :] if set(views[a]) & set(views[b])]
     groups = _components(cams, edges)
     if len(groups) > 1:
-        raise ClothFitError(f"{prefix}the cameras are not connected by shared views: " +
-                            "; ".join("{" + ", ".join(g) + "}" for g in groups))
+        raise ClothFitError(
+            f"{prefix}the cameras are not connected by shared views: "
+            + "; ".join("{" + ", ".join(g) + "}" for g in groups)
+        )
 
 
 def _view_errors(views, prob, err):
@@ -156,7 +180,7 @@ def _view_errors(views, prob, err):
     k = 0
     for c in prob.cams:
         for m, v in views[c].items():
-            yield c, m, v, err[k:k + v.ids.size]
+            yield c, m, v, err[k : k + v.ids.size]
             k += v.ids.size
 
 
@@ -170,14 +194,20 @@ def _drop_outliers(views, prob, err, opts: Options, dropped_views: list):
     for c, m, v, e in _view_errors(views, prob, err):
         keep = e <= thr
         if keep.sum() < opts.min_corners:
-            gone.append({"camera": c, "moment": m, "rms_px": float(np.sqrt(np.mean(e ** 2))),
-                         "why": f"fewer than {opts.min_corners} corners within {thr:.2f} px of the joint fit"})
+            gone.append(
+                {
+                    "camera": c,
+                    "moment": m,
+                    "rms_px": float(np.sqrt(np.mean(e**2))),
+                    "why": f"fewer than {opts.min_corners} corners within {thr:.2f} px of the joint fit",
+                }
+            )
             continue
         n_rej += int((~keep).sum())
         out[c][m] = v if keep.all() else View(c, m, v.ids[keep], v.points[keep], v.markers, v.sharpness)
     for c in views:
         need = 1 if (c in opts.fixed or opts.shared) else opts.min_views
-        if len(out[c]) < need:                  # never below the minimum: that camera keeps every view
+        if len(out[c]) < need:  # never below the minimum: that camera keeps every view
             out[c] = dict(views[c])
             gone = [g for g in gone if g["camera"] != c]
     dropped_views += gone
@@ -196,33 +226,71 @@ def _report(board, det, views, prob, resid, cams_out, frame, dropped_views, reje
     per_view = {}
     for c in prob.cams:
         for m, v in views[c].items():
-            e = err[k:k + v.ids.size]
+            e = err[k : k + v.ids.size]
             k += v.ids.size
-            per_view.setdefault(c, {})[m] = {"rms_px": float(np.sqrt(np.mean(e ** 2))), "corners": int(v.ids.size)}
+            per_view.setdefault(c, {})[m] = {"rms_px": float(np.sqrt(np.mean(e**2))), "corners": int(v.ids.size)}
     for ci, (c, cam) in enumerate(zip(prob.cams, cams_out)):
         e = err[prob.obs_cam == ci]
         shared = sorted({m for m in views[c] if sum(m in views[o] for o in views) > 1}, key=_natural_key)
-        cams.append({"name": c, "width": cam.width, "height": cam.height,
-                     "rms_px": float(np.sqrt(np.mean(e ** 2))), "max_px": float(e.max()),
-                     "views_used": len(views[c]), "views_shared": len(shared), "corners": int(e.size),
-                     "fx": float(cam.K[0, 0]), "fy": float(cam.K[1, 1]), "cx": float(cam.K[0, 2]),
-                     "cy": float(cam.K[1, 2]), "dist": cam.dist.tolist(), "centre_m": cam.center.tolist(),
-                     "intrinsics": "fixed" if c in opts.fixed else ("shared" if opts.shared else "estimated"),
-                     "frames": det.stats.get(c, {}), "views": per_view.get(c, {})})
-    return {"board": board.to_dict(), "rms_px": float(np.sqrt(np.mean(err ** 2))), "corners": int(err.size),
-            "moments": len(prob.moments), "cameras": cams, "world": frame,
-            "options": {"distortion": opts.distortion, "square_pixels": opts.square_pixels, "shared": opts.shared,
-                        "fixed": sorted(opts.fixed), "min_views": opts.min_views, "min_corners": opts.min_corners,
-                        "blur_ratio": opts.blur_ratio, "loss": opts.loss, "loss_scale_px": opts.loss_scale_px,
-                        "outlier_px": opts.outlier_px},
-            "rejected_corners": rejected, "dropped_views": dropped_views,
-            "optimizer": {"nfev": int(status.nfev), "status": int(status.status), "message": str(status.message)}}
+        cams.append(
+            {
+                "name": c,
+                "width": cam.width,
+                "height": cam.height,
+                "rms_px": float(np.sqrt(np.mean(e**2))),
+                "max_px": float(e.max()),
+                "views_used": len(views[c]),
+                "views_shared": len(shared),
+                "corners": int(e.size),
+                "fx": float(cam.K[0, 0]),
+                "fy": float(cam.K[1, 1]),
+                "cx": float(cam.K[0, 2]),
+                "cy": float(cam.K[1, 2]),
+                "dist": cam.dist.tolist(),
+                "centre_m": cam.center.tolist(),
+                "intrinsics": "fixed" if c in opts.fixed else ("shared" if opts.shared else "estimated"),
+                "frames": det.stats.get(c, {}),
+                "views": per_view.get(c, {}),
+            }
+        )
+    return {
+        "board": board.to_dict(),
+        "rms_px": float(np.sqrt(np.mean(err**2))),
+        "corners": int(err.size),
+        "moments": len(prob.moments),
+        "cameras": cams,
+        "world": frame,
+        "options": {
+            "distortion": opts.distortion,
+            "square_pixels": opts.square_pixels,
+            "shared": opts.shared,
+            "fixed": sorted(opts.fixed),
+            "min_views": opts.min_views,
+            "min_corners": opts.min_corners,
+            "blur_ratio": opts.blur_ratio,
+            "loss": opts.loss,
+            "loss_scale_px": opts.loss_scale_px,
+            "outlier_px": opts.outlier_px,
+        },
+        "rejected_corners": rejected,
+        "dropped_views": dropped_views,
+        "optimizer": {"nfev": int(status.nfev), "status": int(status.status), "message": str(status.message)},
+    }
 
 
 # ====================================================================== whole command
 
-def calibrate_folder(folder: str, board: Board, opts: Options, sync: dict | None = None, every: float | None = None,
-                     times=None, debug_dir: str | None = None, log=None) -> tuple:
+
+def calibrate_folder(
+    folder: str,
+    board: Board,
+    opts: Options,
+    sync: dict | None = None,
+    every: float | None = None,
+    times=None,
+    debug_dir: str | None = None,
+    log=None,
+) -> tuple:
     """Detect and calibrate: (Result, Detections, Source). Videos need ``sync`` ({camera: video time
     at capture time 0}); they are sampled every ``every`` s (or at ``times``). ``debug_dir``: the
     detections drawn per camera and moment (see :func:`write_debug`), also when the calibration
@@ -233,8 +301,9 @@ def calibrate_folder(folder: str, board: Board, opts: Options, sync: dict | None
     t = None
     if src.kind == "videos":
         if sync is None:
-            raise ClothFitError(f"calibration folder {folder} holds videos: give their sync (--sync FILE or "
-                                f"--find-sync flash)")
+            raise ClothFitError(
+                f"calibration folder {folder} holds videos: give their sync (--sync FILE or --find-sync flash)"
+            )
         missing = [c for c in src.cameras if c not in sync]
         if missing:
             raise ClothFitError(f"the sync has no time for camera(s) {', '.join(missing)}")
@@ -244,14 +313,18 @@ def calibrate_folder(folder: str, board: Board, opts: Options, sync: dict | None
         say(f"{len(src.cameras)} cameras, {sum(len(v) for v in src.images.values())} images")
     unknown = [c for c in opts.fixed if c not in src.cameras]
     if unknown and not any(c in src.cameras for c in opts.fixed):
-        raise ClothFitError(f"--intrinsics: none of its cameras ({', '.join(unknown[:5])}) is a camera of {folder} "
-                            f"({', '.join(src.cameras)})")
-    opts.fixed = {c: cam for c, cam in opts.fixed.items() if c in src.cameras}   # the others: another rig's
+        raise ClothFitError(
+            f"--intrinsics: none of its cameras ({', '.join(unknown[:5])}) is a camera of {folder} "
+            f"({', '.join(src.cameras)})"
+        )
+    opts.fixed = {c: cam for c, cam in opts.fixed.items() if c in src.cameras}  # the others: another rig's
     det = detect_views(src, board, opts.min_corners, opts.blur_ratio, sync, t, keep_frames=bool(debug_dir))
     for c in src.cameras:
         st = det.stats[c]
-        say(f"  {c}: {st['frames']} frames, board in {st['found']}, {st['views']} views kept"
-            + "".join(f", {st[k]} {k.replace('_', ' ')}" for k in ("few_corners", "collinear", "blurred") if st[k]))
+        say(
+            f"  {c}: {st['frames']} frames, board in {st['found']}, {st['views']} views kept"
+            + "".join(f", {st[k]} {k.replace('_', ' ')}" for k in ("few_corners", "collinear", "blurred") if st[k])
+        )
     result = None
     try:
         check_detections(det, board, src)
@@ -267,13 +340,15 @@ def calibrate_folder(folder: str, board: Board, opts: Options, sync: dict | None
     return result, det, src
 
 
-def write_outputs(result: Result, out: str, export: str | None = None, fmt: str = "auto",
-                  report_path: str | None = None) -> dict:
+def write_outputs(
+    result: Result, out: str, export: str | None = None, fmt: str = "auto", report_path: str | None = None
+) -> dict:
     """Write the cameras JSON (ours, with the calibration's summary), and optionally an export
     (``calib_io.export_cameras``) and the full report. Every destination is checked before the first
     file is written; each file is written atomically."""
     from ..safeio import atomic_json
     from .calib_io import FORMATS, export_cameras
+
     dests = [p for p in (out, export, report_path) if p]
     real = [os.path.realpath(p) for p in dests]
     if len(set(real)) < len(real):
@@ -284,9 +359,11 @@ def write_outputs(result: Result, out: str, export: str | None = None, fmt: str 
     if export and fmt not in FORMATS:
         raise ClothFitError(f"--format {fmt!r}: one of {', '.join(FORMATS)}")
     summary = {k: result.report[k] for k in ("board", "rms_px", "world", "moments")}
-    summary["cameras"] = {c["name"]: {"rms_px": c["rms_px"], "views_used": c["views_used"]}
-                          for c in result.report["cameras"]}
+    summary["cameras"] = {
+        c["name"]: {"rms_px": c["rms_px"], "views_used": c["views_used"]} for c in result.report["cameras"]
+    }
     from ..observation.camera import save_cameras
+
     save_cameras(out, result.cameras, extra={"calibration": summary})
     written = {"out": out}
     if export:
@@ -304,15 +381,17 @@ def write_debug(folder: str, det: Detections, result: Result | None, board: Boar
     import cv2
 
     from ..safeio import atomic_write
+
     P = board.corners()
     cams = {c.name: c for c in (result.cameras if result else [])}
     written = 0
     for (cam, moment), (jpg, mids, mcorners) in det.debug_frames.items():
         grey = cv2.imdecode(np.frombuffer(jpg, np.uint8), cv2.IMREAD_GRAYSCALE)
         img = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
-        for c in (mcorners or ()):
-            cv2.polylines(img, [np.round(np.asarray(c).reshape(-1, 2)).astype(np.int32)], True, (255, 128, 0), 1,
-                          cv2.LINE_AA)
+        for c in mcorners or ():
+            cv2.polylines(
+                img, [np.round(np.asarray(c).reshape(-1, 2)).astype(np.int32)], True, (255, 128, 0), 1, cv2.LINE_AA
+            )
         v = det.views.get(cam, {}).get(moment)
         if v is not None:
             for p in v.points:

@@ -24,6 +24,7 @@ COLMAP binary models (``cameras.bin`` + ``images.bin``)
     camera id, a NUL-terminated name, uint64 number of 2D points and 24 bytes per point (x, y
     float64, point3D id int64). Then exactly as the text model.
 """
+
 from __future__ import annotations
 
 import math
@@ -49,12 +50,12 @@ def _check_unique(cams, where):
 
 # model name -> (number of params, how they map to fx, fy, cx, cy, dist)
 COLMAP_MODELS = {
-    "SIMPLE_PINHOLE": 3,   # f, cx, cy
-    "PINHOLE": 4,          # fx, fy, cx, cy
-    "SIMPLE_RADIAL": 4,    # f, cx, cy, k
-    "RADIAL": 5,           # f, cx, cy, k1, k2
-    "OPENCV": 8,           # fx, fy, cx, cy, k1, k2, p1, p2
-    "FULL_OPENCV": 12,     # fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6
+    "SIMPLE_PINHOLE": 3,  # f, cx, cy
+    "PINHOLE": 4,  # fx, fy, cx, cy
+    "SIMPLE_RADIAL": 4,  # f, cx, cy, k
+    "RADIAL": 5,  # f, cx, cy, k1, k2
+    "OPENCV": 8,  # fx, fy, cx, cy, k1, k2, p1, p2
+    "FULL_OPENCV": 12,  # fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6
 }
 COLMAP_PIXEL_OFFSET = 0.5  # COLMAP's pixel centres are at +0.5: cx_ours = cx_colmap - 0.5
 
@@ -108,23 +109,27 @@ def intrinsics_to_colmap(cam: Camera):
     if d.size == 0 or not np.any(d != 0):
         return "PINHOLE", [fx, fy, cx, cy]
     if d.size > 8 and np.any(d[8:] != 0):
-        raise ClothFitError(f"camera '{cam.name}': distortion with {d.size} coefficients (thin prism / tilt) "
-                            "has no COLMAP model")
+        raise ClothFitError(
+            f"camera '{cam.name}': distortion with {d.size} coefficients (thin prism / tilt) has no COLMAP model"
+        )
     if d.size <= 4 or (d.size >= 5 and not np.any(d[4:] != 0)):
         dd = np.zeros(4)
-        dd[:min(4, d.size)] = d[:4]
+        dd[: min(4, d.size)] = d[:4]
         return "OPENCV", [fx, fy, cx, cy, *dd.tolist()]
     dd = np.zeros(8)
-    dd[:min(8, d.size)] = d[:8]
+    dd[: min(8, d.size)] = d[:8]
     return "FULL_OPENCV", [fx, fy, cx, cy, *dd.tolist()]
 
 
 def _quat_to_R(q):
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _R_to_quat(R):
@@ -217,6 +222,7 @@ def read_colmap(folder: str) -> list:
 def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
     """A COLMAP text model: one COLMAP camera and one image (``<name><image_ext>``) per Camera."""
     from ..safeio import atomic_write
+
     os.makedirs(folder, exist_ok=True)
     for c in cameras:
         check_camera_name(c.name, f"COLMAP export to {folder}")
@@ -242,16 +248,26 @@ def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
         f.write("# 3D point list with one line of data per point:\n")
         f.write("#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n")
         f.write("# Number of points: 0, mean track length: 0\n")
-    for name, text in files.items():         # each file whole, never through a planted symlink
+    for name, text in files.items():  # each file whole, never through a planted symlink
         atomic_write(os.path.join(folder, name), text.encode("utf-8"))
     return folder
 
 
 # ================================================================ COLMAP binary
 
-COLMAP_MODEL_IDS = {0: "SIMPLE_PINHOLE", 1: "PINHOLE", 2: "SIMPLE_RADIAL", 3: "RADIAL", 4: "OPENCV",
-                    5: "OPENCV_FISHEYE", 6: "FULL_OPENCV", 7: "FOV", 8: "SIMPLE_RADIAL_FISHEYE",
-                    9: "RADIAL_FISHEYE", 10: "THIN_PRISM_FISHEYE"}
+COLMAP_MODEL_IDS = {
+    0: "SIMPLE_PINHOLE",
+    1: "PINHOLE",
+    2: "SIMPLE_RADIAL",
+    3: "RADIAL",
+    4: "OPENCV",
+    5: "OPENCV_FISHEYE",
+    6: "FULL_OPENCV",
+    7: "FOV",
+    8: "SIMPLE_RADIAL_FISHEYE",
+    9: "RADIAL_FISHEYE",
+    10: "THIN_PRISM_FISHEYE",
+}
 COLMAP_MODEL_NPARAMS = {0: 3, 1: 4, 2: 4, 3: 5, 4: 8, 5: 8, 6: 12, 7: 5, 8: 4, 9: 5, 10: 12}
 
 
@@ -265,10 +281,12 @@ class _Bin:
 
     def read(self, fmt):
         import struct
+
         n = struct.calcsize("<" + fmt)
         if self.pos + n > len(self.data):
-            raise ClothFitError(f"COLMAP binary file {self.path}: truncated at byte {self.pos} "
-                                f"(file has {len(self.data)} bytes)")
+            raise ClothFitError(
+                f"COLMAP binary file {self.path}: truncated at byte {self.pos} (file has {len(self.data)} bytes)"
+            )
         v = struct.unpack_from("<" + fmt, self.data, self.pos)
         self.pos += n
         return v
@@ -277,7 +295,7 @@ class _Bin:
         end = self.data.find(b"\0", self.pos)
         if end < 0:
             raise ClothFitError(f"COLMAP binary file {self.path}: truncated image name at byte {self.pos}")
-        s = self.data[self.pos:end].decode("utf-8", errors="replace")
+        s = self.data[self.pos : end].decode("utf-8", errors="replace")
         self.pos = end + 1
         return s
 
@@ -299,8 +317,9 @@ def read_colmap_bin(folder: str) -> list:
             raise ClothFitError(f"{where}: camera id {cid} defined twice")
         intr[cid] = (K, dist, int(w), int(h))
     if b.pos != len(b.data):
-        raise ClothFitError(f"COLMAP binary file {cpath}: {len(b.data) - b.pos} bytes left after {n} cameras "
-                            f"(not a cameras.bin?)")
+        raise ClothFitError(
+            f"COLMAP binary file {cpath}: {len(b.data) - b.pos} bytes left after {n} cameras (not a cameras.bin?)"
+        )
     if not intr:
         raise ClothFitError(f"{cpath}: no cameras")
     b = _Bin(ipath)
@@ -358,6 +377,7 @@ class _Text:
 
     def __init__(self, files, name):
         import io
+
         self.files, self.name, self.buf = files, name, io.StringIO()
 
     def __enter__(self):

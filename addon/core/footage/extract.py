@@ -22,6 +22,7 @@ Camera folders are matched to the cameras by name. Distorted cameras are kept wi
 distortion (the fitter projects with it) unless ``undistort=True``, which undistorts the
 silhouettes (``calib_io.undistort_silhouette``) and writes the cameras without distortion.
 """
+
 from __future__ import annotations
 
 import json
@@ -34,10 +35,23 @@ import numpy as np
 from ..errors import ClothFitError
 from ..observation.camera import check_camera_name
 from ..safeio import atomic_json
-from .silhouette import (MIN_AUTO_THRESHOLD, THRESHOLD_MODES, CameraResult, ExtractOptions,  # noqa: F401
-                         as_float_image, bgr_to_yuv, camera_thresholds, clean_mask, difference,
-                         extract_camera, fill_holes, noise_threshold, otsu_threshold, read_image,
-                         refine_boundary)  # re-exported: the extraction's API in one place
+from .silhouette import (  # noqa: F401
+    MIN_AUTO_THRESHOLD,
+    THRESHOLD_MODES,
+    CameraResult,
+    ExtractOptions,
+    as_float_image,
+    bgr_to_yuv,
+    camera_thresholds,
+    clean_mask,
+    difference,
+    extract_camera,
+    fill_holes,
+    noise_threshold,
+    otsu_threshold,
+    read_image,
+    refine_boundary,  # re-exported: the extraction's API in one place
+)
 
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp", ".exr")
 BACKGROUND_PREFIXES = ("background", "bg")
@@ -48,25 +62,29 @@ MAX_LISTED_ERRORS = 25
 
 # ================================================================== footage folders
 
+
 def _natural_key(s: str):
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", s)]
 
 
 def footage_images(capture):
-    """For a capture extracted from image footage (``python -m addon extract``, not ``--videos``):
+    """For a capture extracted from image footage (``python -m clothfit extract``, not ``--videos``):
     a function ``(camera index, frame index) -> RGB uint8`` frame the silhouette was extracted from
     (``capture_overlays(images=...)`` draws on it). Raises ClothFitError if the capture names no
     image footage, or if its silhouettes were undistorted (they no longer match the frames)."""
     import cv2
 
     from ..jsonio import read_json
+
     footage = (capture.meta or {}).get("footage")
     if not footage or not os.path.isdir(footage):
         raise ClothFitError(f"{capture.root}: not extracted from image footage (no camera images to draw on)")
     rep_path = os.path.join(capture.root, REPORT_JSON)
     if os.path.isfile(rep_path) and read_json(rep_path, "extraction report").get("options", {}).get("undistort"):
-        raise ClothFitError(f"{capture.root}: the silhouettes were undistorted, so they no longer match the "
-                            f"camera images; draw the overlays without them")
+        raise ClothFitError(
+            f"{capture.root}: the silhouettes were undistorted, so they no longer match the "
+            f"camera images; draw the overlays without them"
+        )
     cache = {}
 
     def image(ci, fi):
@@ -80,6 +98,7 @@ def footage_images(capture):
         if img is None:
             raise ClothFitError(f"camera image {frames[fi]} is unreadable")
         return np.ascontiguousarray(img[..., ::-1])
+
     return image
 
 
@@ -88,9 +107,16 @@ def list_camera_images(folder: str):
     ``background*`` or ``bg*`` (case-insensitive), frames are the other images, natural order."""
     if not os.path.isdir(folder):
         raise ClothFitError(f"camera folder not found: {folder}")
-    files = sorted((f for f in os.listdir(folder)
-                    if not f.startswith(".") and os.path.splitext(f)[1].lower() in IMAGE_EXTS
-                    and os.path.isfile(os.path.join(folder, f))), key=_natural_key)
+    files = sorted(
+        (
+            f
+            for f in os.listdir(folder)
+            if not f.startswith(".")
+            and os.path.splitext(f)[1].lower() in IMAGE_EXTS
+            and os.path.isfile(os.path.join(folder, f))
+        ),
+        key=_natural_key,
+    )
     bgs = [os.path.join(folder, f) for f in files if f.lower().startswith(BACKGROUND_PREFIXES)]
     frames = [os.path.join(folder, f) for f in files if not f.lower().startswith(BACKGROUND_PREFIXES)]
     return bgs, frames
@@ -129,11 +155,18 @@ def _resolve_scenario(scenario, frame_times, where):
 def _resolve_scenario_uncertain(scenario, frame_times, where):
     """(Scenario, note or None, the scenario file's ``uncertain`` block or None)."""
     from ..physics.scenario import Scenario, paper_scenario
+
     unc = None
     if scenario is None:
-        return paper_scenario(frame_times=frame_times), ("no scenario given: the paper's manipulation is assumed "
-                                                         "(10 cm 16x16 cloth, 4 corners held at z = 0.1 m, corner 0 "
-                                                         "released at t = 0)"), None
+        return (
+            paper_scenario(frame_times=frame_times),
+            (
+                "no scenario given: the paper's manipulation is assumed "
+                "(10 cm 16x16 cloth, 4 corners held at z = 0.1 m, corner 0 "
+                "released at t = 0)"
+            ),
+            None,
+        )
     if isinstance(scenario, Scenario):
         return scenario.with_frames(frame_times), None, None
     if isinstance(scenario, str):
@@ -145,7 +178,7 @@ def _resolve_scenario_uncertain(scenario, frame_times, where):
         except (OSError, json.JSONDecodeError) as e:
             raise ClothFitError(f"scenario file {scenario}: not valid JSON ({e})") from None
         if isinstance(d, dict) and isinstance(d.get("scenario"), dict):
-            unc = d.get("uncertain")           # a `clothfit handles` file or a capture.json: its bounds
+            unc = d.get("uncertain")  # a `clothfit handles` file or a capture.json: its bounds
             d = d["scenario"]
         where = scenario
         scenario = d
@@ -162,6 +195,7 @@ def _uncertain_for(scen, explicit, from_scenario, from_footage, frame_period=Non
     videos at their timestamps, one frame period for the time (a frame is the one on display at the asked
     time, up to a frame earlier, and a flash sync is good to a frame) and nothing for the handles."""
     from ..physics.scenario import Uncertainty
+
     n = len(scen.handles)
     if explicit is not None:
         if isinstance(explicit, Uncertainty):
@@ -178,9 +212,20 @@ def _uncertain_for(scen, explicit, from_scenario, from_footage, frame_period=Non
     return None, None
 
 
-def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=None, scenario=None,
-                    cloth_mass=None, options: ExtractOptions | None = None, camera_names=None,
-                    progress=None, should_stop=None, uncertain=None, **option_overrides) -> dict:
+def extract_capture(
+    footage_dir: str,
+    out_dir: str,
+    cameras=None,
+    frame_times=None,
+    scenario=None,
+    cloth_mass=None,
+    options: ExtractOptions | None = None,
+    camera_names=None,
+    progress=None,
+    should_stop=None,
+    uncertain=None,
+    **option_overrides,
+) -> dict:
     """Extract every camera's silhouettes from a footage folder and write a capture.
 
     ``cameras``: a calibration path (anything ``calib_io.import_cameras`` reads) or a list of
@@ -212,7 +257,7 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
         inputs.append(cameras)
         cameras = calib_io.import_cameras(cameras)
     cameras = list(cameras)
-    for c in cameras:        # names become folders (debug images, silhouettes): checked before any is used
+    for c in cameras:  # names become folders (debug images, silhouettes): checked before any is used
         check_camera_name(c.name, "calibration")
     if isinstance(scenario, str):
         inputs.append(scenario)
@@ -236,12 +281,22 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
     errors, warnings = [], []
     if scen_note:
         warnings.append(scen_note)
-    report = {"footage": os.path.abspath(footage_dir), "out": os.path.abspath(out_dir),
-              "options": asdict(opts), "frame_times": frame_times, "cameras": {}}
+    report = {
+        "footage": os.path.abspath(footage_dir),
+        "out": os.path.abspath(out_dir),
+        "options": asdict(opts),
+        "frame_times": frame_times,
+        "cameras": {},
+    }
     known = {c.name for c in cameras}
-    extra = sorted(d for d in os.listdir(footage_dir)
-                   if os.path.isdir(os.path.join(footage_dir, d)) and d not in known and not d.startswith(".")
-                   and any(os.path.splitext(f)[1].lower() in IMAGE_EXTS for f in os.listdir(os.path.join(footage_dir, d))))
+    extra = sorted(
+        d
+        for d in os.listdir(footage_dir)
+        if os.path.isdir(os.path.join(footage_dir, d))
+        and d not in known
+        and not d.startswith(".")
+        and any(os.path.splitext(f)[1].lower() in IMAGE_EXTS for f in os.listdir(os.path.join(footage_dir, d)))
+    )
     if extra and not camera_names:
         warnings.append(f"folders with images that are not calibrated cameras were ignored: {', '.join(extra)}")
     all_masks = []
@@ -263,8 +318,21 @@ def extract_capture(footage_dir: str, out_dir: str, cameras=None, frame_times=No
     cap_meta = {"generator": "addon.core.extract", "footage": os.path.abspath(footage_dir)}
     if isinstance(meta.get("meta"), dict):
         cap_meta["footage_meta"] = meta["meta"]
-    return _write_result(out_dir, footage_dir, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report,
-                         errors, warnings, unc, unc_src)
+    return _write_result(
+        out_dir,
+        footage_dir,
+        out_cameras,
+        scen,
+        all_masks,
+        cloth_mass,
+        cap_meta,
+        opts,
+        report,
+        errors,
+        warnings,
+        unc,
+        unc_src,
+    )
 
 
 def _options(options, overrides) -> ExtractOptions:
@@ -290,8 +358,10 @@ def _footage_calibration(footage_dir, meta, meta_path):
     else:
         cameras = _find_calibration(footage_dir)
     if cameras is None:
-        raise ClothFitError(f"footage {footage_dir}: no cameras given and no {FOOTAGE_JSON}, cameras.* / "
-                            "calibration.* file or COLMAP folder found")
+        raise ClothFitError(
+            f"footage {footage_dir}: no cameras given and no {FOOTAGE_JSON}, cameras.* / "
+            "calibration.* file or COLMAP folder found"
+        )
     return cameras
 
 
@@ -314,11 +384,14 @@ def _camera_images(cam, folder, frame_times, errors):
         return None
     bg_paths, fr_paths = list_camera_images(folder)
     if not bg_paths:
-        errors.append(f"camera '{cam.name}': no background image in {folder} (name it background.png; "
-                      f"files named background* or bg* are background plates)")
+        errors.append(
+            f"camera '{cam.name}': no background image in {folder} (name it background.png; "
+            f"files named background* or bg* are background plates)"
+        )
     if len(fr_paths) != len(frame_times):
-        errors.append(f"camera '{cam.name}': {len(fr_paths)} foreground images in {folder} but "
-                      f"{len(frame_times)} frame times")
+        errors.append(
+            f"camera '{cam.name}': {len(fr_paths)} foreground images in {folder} but {len(frame_times)} frame times"
+        )
     if not bg_paths or not fr_paths:
         return None
     bgs, frames, names, bad = [], [], [], False
@@ -330,8 +403,10 @@ def _camera_images(cam, folder, frame_times, errors):
             bad = True
             continue
         if img.shape[:2] != (cam.height, cam.width):
-            errors.append(f"camera '{cam.name}': image {p} is {img.shape[0]}x{img.shape[1]} (HxW) but the "
-                          f"calibrated camera images {cam.height}x{cam.width}")
+            errors.append(
+                f"camera '{cam.name}': image {p} is {img.shape[0]}x{img.shape[1]} (HxW) but the "
+                f"calibrated camera images {cam.height}x{cam.width}"
+            )
             bad = True
             continue
         if p in bg_paths:
@@ -359,6 +434,7 @@ def _stop(should_stop, ci, n, report, warnings) -> bool:
 def _extract_one(cam, bgs, frames, names, opts, report, errors, warnings):
     """Silhouettes of one camera from its loaded images (+ undistortion); problems go to ``errors``."""
     from . import calib_io
+
     res = extract_camera(bgs, frames, opts, cam.name, names, (cam.height, cam.width))
     report["cameras"][cam.name] = res.report
     errors.extend(res.errors)
@@ -372,31 +448,70 @@ def _extract_one(cam, bgs, frames, names, opts, report, errors, warnings):
     return masks, out_cam
 
 
-def _write_result(out_dir, source, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report, errors,
-                  warnings, uncertain=None, uncertain_source=None):
+def _write_result(
+    out_dir,
+    source,
+    out_cameras,
+    scen,
+    all_masks,
+    cloth_mass,
+    cap_meta,
+    opts,
+    report,
+    errors,
+    warnings,
+    uncertain=None,
+    uncertain_source=None,
+):
     """All cameras done: one error listing every problem (nothing written), else the capture + report."""
     from ..observation.capture import write_capture
+
     report["warnings"] = warnings
     if errors:
         listed = errors[:MAX_LISTED_ERRORS]
         more = f"\n  ... and {len(errors) - len(listed)} more" if len(errors) > len(listed) else ""
-        raise ClothFitError(f"extraction from {source} failed, nothing written ({len(errors)} problem"
-                            f"{'s' if len(errors) > 1 else ''}):\n  " + "\n  ".join(listed) + more)
-    cap_meta["extraction"] = {"options": {k: v for k, v in asdict(opts).items() if k != "debug_dir"},
-                              "thresholds": {n: r["threshold"] for n, r in report["cameras"].items()}}
+        raise ClothFitError(
+            f"extraction from {source} failed, nothing written ({len(errors)} problem"
+            f"{'s' if len(errors) > 1 else ''}):\n  " + "\n  ".join(listed) + more
+        )
+    cap_meta["extraction"] = {
+        "options": {k: v for k, v in asdict(opts).items() if k != "debug_dir"},
+        "thresholds": {n: r["threshold"] for n, r in report["cameras"].items()},
+    }
     if "stopped" in report:
         cap_meta["extraction"]["stopped"] = report["stopped"]
     if uncertain is not None:
         report["uncertain"] = dict(uncertain.to_dict(), source=uncertain_source)
-    write_capture(out_dir, out_cameras, scen, all_masks, cloth_mass=cloth_mass, meta=cap_meta,
-                  allow_empty=opts.allow_empty, uncertain=uncertain)
+    write_capture(
+        out_dir,
+        out_cameras,
+        scen,
+        all_masks,
+        cloth_mass=cloth_mass,
+        meta=cap_meta,
+        allow_empty=opts.allow_empty,
+        uncertain=uncertain,
+    )
     atomic_json(os.path.join(out_dir, REPORT_JSON), report)
     return report
 
 
-def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras, frame_times, scenario=None,
-                   cloth_mass=None, options: ExtractOptions | None = None, camera_names=None, progress=None,
-                   should_stop=None, uncertain=None, **option_overrides) -> dict:
+def extract_videos(
+    videos_dir: str,
+    plates_dir: str,
+    sync,
+    out_dir: str,
+    cameras,
+    frame_times,
+    scenario=None,
+    cloth_mass=None,
+    options: ExtractOptions | None = None,
+    camera_names=None,
+    progress=None,
+    should_stop=None,
+    uncertain=None,
+    **option_overrides,
+) -> dict:
     """Silhouettes from one video per camera (``footage/video.py``: layout, timing rule) -> a capture.
 
     ``sync``: a sync file path or ``{camera: video time at t = 0}``; ``cameras``: a calibration path or
@@ -408,6 +523,7 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
     :func:`extract_capture`. Returns the report (also ``out_dir/extract_report.json``).
     """
     from . import calib_io, video
+
     opts = _options(options, option_overrides)
     if cameras is None:
         raise ClothFitError("extract --videos needs the calibrated cameras (--cameras)")
@@ -416,7 +532,7 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
         inputs.append(cameras)
         cameras = calib_io.import_cameras(cameras)
     cameras = list(cameras)
-    for c in cameras:        # names become folders (debug images, silhouettes): checked before any is used
+    for c in cameras:  # names become folders (debug images, silhouettes): checked before any is used
         check_camera_name(c.name, "calibration")
     if isinstance(scenario, str):
         inputs.append(scenario)
@@ -433,13 +549,20 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
     sync_path = sync if isinstance(sync, str) else "sync"
     sync = video.read_sync(sync, [c.name for c in cameras]) if isinstance(sync, str) else dict(sync)
     scen, scen_note, scen_unc = _resolve_scenario_uncertain(scenario, frame_times, "extract --videos")
-    _uncertain_for(scen, uncertain, scen_unc, None)           # a bad block fails before the videos are read
+    _uncertain_for(scen, uncertain, scen_unc, None)  # a bad block fails before the videos are read
     errors, warnings = [], []
     if scen_note:
         warnings.append(scen_note)
-    report = {"videos": os.path.abspath(videos_dir), "plates": os.path.abspath(plates_dir),
-              "out": os.path.abspath(out_dir), "options": asdict(opts), "frame_times": frame_times, "sync": sync,
-              "cameras": {}, "video": {}}
+    report = {
+        "videos": os.path.abspath(videos_dir),
+        "plates": os.path.abspath(plates_dir),
+        "out": os.path.abspath(out_dir),
+        "options": asdict(opts),
+        "frame_times": frame_times,
+        "sync": sync,
+        "cameras": {},
+        "video": {},
+    }
     all_masks, out_cameras = [], []
     for ci, cam in enumerate(cameras):
         if _stop(should_stop, ci, len(cameras), report, warnings):
@@ -449,8 +572,11 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
         if progress:
             progress(ci, len(cameras), f"{cam.name}: plate")
         plate, plate_src = video.read_plate(plates_dir, cam)
-        step = (lambda k, n, ci=ci, cam=cam: progress(ci + k / max(n, 1), len(cameras), f"{cam.name}: frame {k}/{n}")) \
-            if progress else None
+        step = (
+            (lambda k, n, ci=ci, cam=cam: progress(ci + k / max(n, 1), len(cameras), f"{cam.name}: frame {k}/{n}"))
+            if progress
+            else None
+        )
         frames, vrep = video.camera_frames(videos_dir, cam, sync[cam.name], frame_times, sync_path, step)
         vrep["plate"] = plate_src
         report["video"][cam.name] = vrep
@@ -460,26 +586,48 @@ def extract_videos(videos_dir: str, plates_dir: str, sync, out_dir: str, cameras
         out_cameras.append(out_cam)
     if progress:
         progress(len(cameras), len(cameras), "done")
-    cap_meta = {"generator": "addon.core.extract (videos)", "videos": os.path.abspath(videos_dir),
-                "sync": sync, "frame_timestamps": {n: r["frame_timestamps"] for n, r in report["video"].items()}}
+    cap_meta = {
+        "generator": "addon.core.extract (videos)",
+        "videos": os.path.abspath(videos_dir),
+        "sync": sync,
+        "frame_timestamps": {n: r["frame_timestamps"] for n, r in report["video"].items()},
+    }
     fps = [r["mean_fps"] for r in report["video"].values() if r.get("mean_fps")]
     unc, unc_src = _uncertain_for(scen, uncertain, scen_unc, None, 1.0 / min(fps) if fps else None)
-    return _write_result(out_dir, videos_dir, out_cameras, scen, all_masks, cloth_mass, cap_meta, opts, report,
-                         errors, warnings, unc, unc_src)
+    return _write_result(
+        out_dir,
+        videos_dir,
+        out_cameras,
+        scen,
+        all_masks,
+        cloth_mass,
+        cap_meta,
+        opts,
+        report,
+        errors,
+        warnings,
+        unc,
+        unc_src,
+    )
 
 
 def _refuse_overwriting(out_dir, inputs):
     """The capture written to ``out_dir`` must not replace the extraction's own input files."""
     from ..observation.capture import CAMERAS_JSON, CAPTURE_JSON, SHAPES_NPZ
-    outs = {os.path.realpath(os.path.join(out_dir, n)): n for n in (CAPTURE_JSON, CAMERAS_JSON, SHAPES_NPZ, REPORT_JSON)}
+
+    outs = {
+        os.path.realpath(os.path.join(out_dir, n)): n for n in (CAPTURE_JSON, CAMERAS_JSON, SHAPES_NPZ, REPORT_JSON)
+    }
     for p in inputs:
         if not os.path.exists(p):
             continue
         real = os.path.realpath(p)
         hit = [outs[real]] if real in outs else []
         if hit:
-            raise ClothFitError(f"extract: writing the capture to {out_dir} would overwrite its input {p} "
-                                f"({', '.join(hit)}): choose another -o folder")
+            raise ClothFitError(
+                f"extract: writing the capture to {out_dir} would overwrite its input {p} "
+                f"({', '.join(hit)}): choose another -o folder"
+            )
 
 
 def format_report(report: dict) -> str:
@@ -487,8 +635,10 @@ def format_report(report: dict) -> str:
     lines = [f"{'camera':<10} {'threshold':>9} {'mode':>10} {'otsu':>7} {'noise':>7} {'area min..max [px]':>20}"]
     for name, r in report["cameras"].items():
         areas = [f["area"] for f in r["frames"]]
-        lines.append(f"{name:<10} {r['threshold']:9.2f} {r['mode']:>10} {r['otsu']:7.2f} {r['noise']:7.2f} "
-                     f"{min(areas):>9}..{max(areas):<9}")
+        lines.append(
+            f"{name:<10} {r['threshold']:9.2f} {r['mode']:>10} {r['otsu']:7.2f} {r['noise']:7.2f} "
+            f"{min(areas):>9}..{max(areas):<9}"
+        )
     for w in report.get("warnings", []):
         lines.append("warning: " + w)
     return "\n".join(lines)

@@ -2,6 +2,7 @@
 parsed and checked (a handle marked in at least two cameras, inside their images, unknown keys
 refused).
 """
+
 from __future__ import annotations
 
 import math
@@ -11,7 +12,6 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..jsonio import read_json
 
-
 CORNERS = ("top-left", "top-right", "bottom-left", "bottom-right")
 MOTIONS = ("fixed", "moving")
 MARKS_KEYS = ("frame", "handles")
@@ -19,6 +19,7 @@ HANDLE_KEYS = ("name", "marks", "at", "motion", "released", "frame", "size")
 
 
 # ==================================================================== options
+
 
 @dataclass
 class HandleOptions:
@@ -35,8 +36,16 @@ class HandleOptions:
     settle_time: float = D.SETTLE_TIME
 
     def check(self):
-        for nm in ("mark_sigma", "max_residual", "fb_max", "ref_max", "departure_min", "departure_k", "max_pin_offset",
-                   "clip_size"):
+        for nm in (
+            "mark_sigma",
+            "max_residual",
+            "fb_max",
+            "ref_max",
+            "departure_min",
+            "departure_k",
+            "max_pin_offset",
+            "clip_size",
+        ):
             v = getattr(self, nm)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ClothFitError(f"handles option {nm} = {v!r} must be a positive number")
@@ -51,16 +60,17 @@ class HandleOptions:
 
 # ====================================================================== marks
 
+
 @dataclass
 class HandleMarks:
     name: str
-    marks: dict                 # camera name -> (x, y)
+    marks: dict  # camera name -> (x, y)
     frame: int
-    at: tuple | None = None     # (u, v) metres on the cloth from its top-left corner
+    at: tuple | None = None  # (u, v) metres on the cloth from its top-left corner
     at_text: str | None = None
     motion: str = "fixed"
     released: bool = False
-    size: float | None = None   # the clip's size [m] (sets the tracking window); None = the option's
+    size: float | None = None  # the clip's size [m] (sets the tracking window); None = the option's
 
 
 def _num(v):
@@ -107,12 +117,15 @@ def parse_marks(d, cameras, n_frames: int, cloth_size=None, source: str = "marks
             c = cams[cn]
             x, y = float(p[0]), float(p[1])
             if not (-0.5 <= x <= c.width - 0.5 and -0.5 <= y <= c.height - 0.5):
-                raise ClothFitError(f"{where}: the mark ({x:g}, {y:g}) in camera '{cn}' is outside its "
-                                    f"{c.width}x{c.height} image")
+                raise ClothFitError(
+                    f"{where}: the mark ({x:g}, {y:g}) in camera '{cn}' is outside its {c.width}x{c.height} image"
+                )
             pts[cn] = (x, y)
         if len(pts) < 2:
-            raise ClothFitError(f"{where}: marked in {len(pts)} camera{'s' if len(pts) != 1 else ''}; a point "
-                                f"needs marks in at least 2 cameras to be triangulated")
+            raise ClothFitError(
+                f"{where}: marked in {len(pts)} camera{'s' if len(pts) != 1 else ''}; a point "
+                f"needs marks in at least 2 cameras to be triangulated"
+            )
         motion = h.get("motion", "fixed")
         if motion not in MOTIONS:
             raise ClothFitError(f"{where}: motion {motion!r} must be one of {', '.join(MOTIONS)}")
@@ -123,8 +136,18 @@ def parse_marks(d, cameras, n_frames: int, cloth_size=None, source: str = "marks
         size = h.get("size")
         if size is not None and not (_num(size) and 0 < size <= 1.0):
             raise ClothFitError(f"{where}: 'size' {size!r} must be the clip's size in metres (at most 1)")
-        out.append(HandleMarks(name, pts, _frame(h.get("frame", frame0), n_frames, where), at, at_text, motion,
-                               released, None if size is None else float(size)))
+        out.append(
+            HandleMarks(
+                name,
+                pts,
+                _frame(h.get("frame", frame0), n_frames, where),
+                at,
+                at_text,
+                motion,
+                released,
+                None if size is None else float(size),
+            )
+        )
     return out
 
 
@@ -145,8 +168,9 @@ def _parse_at(v, size, where):
         w, h = size
         return ((0.0 if "left" in v else w), (0.0 if "top" in v else h)), v
     if not (isinstance(v, (list, tuple)) and len(v) == 2 and all(_num(x) for x in v)):
-        raise ClothFitError(f"{where}: 'at' must be [u, v] metres from the cloth's top-left corner or a corner "
-                            f"name, got {v!r}")
+        raise ClothFitError(
+            f"{where}: 'at' must be [u, v] metres from the cloth's top-left corner or a corner name, got {v!r}"
+        )
     u, vv = float(v[0]), float(v[1])
     if size is not None:
         w, h = size

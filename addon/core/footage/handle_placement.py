@@ -2,6 +2,7 @@
 onto the triangulated pins (Kabsch; hanging below a line of pins), the grid resolution, and each
 handle assigned to its grid vertex.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,16 +13,16 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..physics.scenario import ClothGrid, rotation_vector
 
-
 # ================================================================== placement
+
 
 @dataclass
 class Placement:
     grid: ClothGrid
     method: str
-    residuals_m: np.ndarray     # per handle with 'at': |placed at-point - pin|
-    with_at: list               # indices of those handles
-    ats: list                   # per handle the (u, v) used (the given 'at', the top-edge rule's) or None
+    residuals_m: np.ndarray  # per handle with 'at': |placed at-point - pin|
+    with_at: list  # indices of those handles
+    ats: list  # per handle the (u, v) used (the given 'at', the top-edge rule's) or None
 
 
 def cloth_local(at, width, height):
@@ -43,7 +44,7 @@ def _hanging(Q, P, width, height, gravity):
     """Placement from points on one line (two clips, or several along an edge): the line of the ``at``
     points onto the line of the pins, the cloth hanging below it (its centre as low as it can be)."""
     down = -np.asarray(gravity, dtype=np.float64)
-    down = -down / np.linalg.norm(down)                  # unit vector along gravity
+    down = -down / np.linalg.norm(down)  # unit vector along gravity
     qc, pc = Q.mean(0), P.mean(0)
     i0, i1 = _extremes(Q)
     uq = Q[i1] - Q[i0]
@@ -59,8 +60,10 @@ def _hanging(Q, P, width, height, gravity):
     # in the world: gravity's component across the pins' line
     cw = down - np.dot(down, up_) * up_
     if np.linalg.norm(cw) < 1e-6:
-        raise ClothFitError("the clips with 'at' lie on a vertical line: the cloth's plane is unknown; give 'at' for "
-                            "a clip off that line")
+        raise ClothFitError(
+            "the clips with 'at' lie on a vertical line: the cloth's plane is unknown; give 'at' for "
+            "a clip off that line"
+        )
     cw /= np.linalg.norm(cw)
     A = np.stack([uq, cq, np.cross(uq, cq)], 1)
     B = np.stack([up_, cw, np.cross(up_, cw)], 1)
@@ -110,8 +113,10 @@ def place_cloth(width, height, nx, ny, pins, ats, gravity=D.GRAVITY) -> Placemen
     else:
         method = "the clips' 'at' onto their pins"
     if len(with_at) < 2:
-        raise ClothFitError("only one handle says where it holds the cloth ('at'): give 'at' for at least 2 handles "
-                            "(or for none: the cloth then hangs by its top edge)")
+        raise ClothFitError(
+            "only one handle says where it holds the cloth ('at'): give 'at' for at least 2 handles "
+            "(or for none: the cloth then hangs by its top edge)"
+        )
     Q = np.array([cloth_local(ats[k], width, height) for k in with_at])
     P = pins[with_at]
     if _collinear(Q) or _collinear(P, 1e-3):
@@ -142,6 +147,7 @@ def grid_resolution(width, height, n=None, nx=None, ny=None, ats=()):
         if width >= height:
             return n, max(2, int(round(height / (width / (n - 1)))) + 1)
         return max(2, int(round(width / (height / (n - 1)))) + 1), n
+
     if n is not None:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
             raise ClothFitError(f"grid resolution {n!r} must be a whole number >= 2")
@@ -155,6 +161,7 @@ def grid_resolution(width, height, n=None, nx=None, ny=None, ats=()):
         gu = np.linspace(0, width, cx)
         gv = np.linspace(0, height, cy)
         return max(float(np.hypot(np.abs(gu - u).min(), np.abs(gv - v).min())) for u, v in pts)
+
     cands = range(max(2, D.HANDLE_GRID_N - 4), D.HANDLE_GRID_N + 9)
     return square(min(cands, key=lambda n: (round(miss(n), 4), abs(n - D.HANDLE_GRID_N))))
 
@@ -176,21 +183,28 @@ def assign_vertices(marks, keys, width, height, nx, ny, rows, opts, warnings):
             v = int(np.argmin(np.linalg.norm(grid.rest - pins[k], axis=1)))
         for k2, v2 in enumerate(vertices):
             if v2 == v:
-                raise ClothFitError(f"handles '{marks[k2].name}' and '{h.name}' fall on the same grid vertex (row "
-                                    f"{v // nx}, column {v % nx}): they are closer than a grid cell "
-                                    f"({grid.spacing * 1000:.1f} mm) on the cloth; use a finer grid or check their "
-                                    f"'at' and marks")
+                raise ClothFitError(
+                    f"handles '{marks[k2].name}' and '{h.name}' fall on the same grid vertex (row "
+                    f"{v // nx}, column {v % nx}): they are closer than a grid cell "
+                    f"({grid.spacing * 1000:.1f} mm) on the cloth; use a finer grid or check their "
+                    f"'at' and marks"
+                )
         vertices.append(v)
     for k, h in enumerate(marks):
         v, a = vertices[k], place.ats[k]
         off = float(np.linalg.norm(grid.rest[v] - pins[k]))
         if off > opts.max_pin_offset:
-            raise ClothFitError(f"handle '{h.name}' is {off * 1000:.0f} mm from its vertex (row {v // nx}, column "
-                                f"{v % nx}) of the placed {width:g} x {height:g} m cloth (at most "
-                                f"{opts.max_pin_offset * 1000:g} mm): check the cloth size, its 'at' and its marks")
-        rows[k].update(vertex=v, row=v // nx, column=v % nx, pin_offset_mm=off * 1000.0,
-                       at=list(a) if a is not None else None)
+            raise ClothFitError(
+                f"handle '{h.name}' is {off * 1000:.0f} mm from its vertex (row {v // nx}, column "
+                f"{v % nx}) of the placed {width:g} x {height:g} m cloth (at most "
+                f"{opts.max_pin_offset * 1000:g} mm): check the cloth size, its 'at' and its marks"
+            )
+        rows[k].update(
+            vertex=v, row=v // nx, column=v % nx, pin_offset_mm=off * 1000.0, at=list(a) if a is not None else None
+        )
     if float(place.residuals_m.max(initial=0.0)) > 0.5 * grid.spacing:
-        warnings.append(f"the placed cloth misses the clips by up to {place.residuals_m.max() * 1000:.1f} mm (more than "
-                        f"half a grid cell): the rest lengths near them are distorted; check the cloth size and 'at'")
+        warnings.append(
+            f"the placed cloth misses the clips by up to {place.residuals_m.max() * 1000:.1f} mm (more than "
+            f"half a grid cell): the rest lengths near them are distorted; check the cloth size and 'at'"
+        )
     return place, vertices

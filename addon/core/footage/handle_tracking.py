@@ -2,6 +2,7 @@
 Lucas-Kanade frame to frame with a forward-backward check, refined against the marked frame's own
 patch; a slipped track searched for by normalised cross-correlation).
 """
+
 from __future__ import annotations
 
 import math
@@ -11,30 +12,35 @@ import numpy as np
 
 from .handle_marks import HandleOptions
 
-
-NCC_RETRY = 0.8          # a tracked patch less like the previous frame's than this: search for it (a slipped track)
-NCC_ACCEPT = 0.5         # a searched match less alike than this is no match (the track is lost)
-MAX_SEARCH_PX = 150      # radius of that search around the prediction
+NCC_RETRY = 0.8  # a tracked patch less like the previous frame's than this: search for it (a slipped track)
+NCC_ACCEPT = 0.5  # a searched match less alike than this is no match (the track is lost)
+MAX_SEARCH_PX = 150  # radius of that search around the prediction
 
 
 # =================================================================== tracking
+
 
 @dataclass
 class CameraTrack:
     """One camera's tracks: ``points (F, H, 2)`` pixels (NaN where not tracked or lost) and, per
     handle, the frame where the track was lost forwards / backwards (None = kept to the end)."""
+
     name: str
     points: np.ndarray
     lost_forward: list
     lost_backward: list
     lost_reason: list = field(default_factory=list)
-    marked: dict = field(default_factory=dict)   # handle -> its marked frame (where tracking began)
+    marked: dict = field(default_factory=dict)  # handle -> its marked frame (where tracking began)
 
 
 def _lk_params(window, opts):
     import cv2
-    return dict(winSize=(window, window), maxLevel=opts.levels,
-                criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 0.001))
+
+    return dict(
+        winSize=(window, window),
+        maxLevel=opts.levels,
+        criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 0.001),
+    )
 
 
 def window_for(size_m, depth_m, focal_px, lo=7, hi=41) -> int:
@@ -49,6 +55,7 @@ def window_for(size_m, depth_m, focal_px, lo=7, hi=41) -> int:
 def _lk(a, b, p, guess, params, fb_max, shape):
     """Track points ``p`` (N, 2) from image a to b (optionally from ``guess``); returns (points, ok, fb error)."""
     import cv2
+
     p0 = np.ascontiguousarray(p, dtype=np.float32).reshape(-1, 1, 2)
     if guess is not None:
         p1 = np.ascontiguousarray(guess, dtype=np.float32).reshape(-1, 1, 2).copy()
@@ -66,6 +73,7 @@ def _lk(a, b, p, guess, params, fb_max, shape):
 
 def _patch(img, p, w):
     import cv2
+
     return cv2.getRectSubPix(img, (w, w), (float(p[0]), float(p[1]))).astype(np.float64)
 
 
@@ -82,7 +90,6 @@ def _step(prev, nxt, cur, guess, win, params, opts, shape):
     patch is searched around the prediction (normalised cross-correlation inside a disc, sub-pixel peak)
     and refined by LK without pyramid (a coarse level, mostly background, would pull it back). Returns
     (point or None, forward-backward error)."""
-    import cv2
     q, ok, fb = _lk(prev, nxt, cur[None], guess[None], params, opts.fb_max, shape)
     tmpl = _patch(prev, cur, win)
     score = _ncc(tmpl, _patch(nxt, q[0], win)) if ok[0] else -1.0
@@ -107,6 +114,7 @@ def _search(img, tmpl, centre, radius, shape):
     """Best match of ``tmpl`` (odd square, compared inside its inscribed disc) within ``radius`` px of
     ``centre``: its sub-pixel position (parabola through the peak's neighbours), or None."""
     import cv2
+
     win = tmpl.shape[0]
     r = int(min(radius, MAX_SEARCH_PX))
     h, w = shape
@@ -117,8 +125,9 @@ def _search(img, tmpl, centre, radius, shape):
         return None
     yy, xx = np.mgrid[0:win, 0:win] - (win - 1) / 2.0
     mask = ((xx * xx + yy * yy) <= (win / 2.0) ** 2).astype(np.float32)
-    res = cv2.matchTemplate(img[Y0:Y1, X0:X1].astype(np.float32), tmpl.astype(np.float32), cv2.TM_CCOEFF_NORMED,
-                            mask=mask)
+    res = cv2.matchTemplate(
+        img[Y0:Y1, X0:X1].astype(np.float32), tmpl.astype(np.float32), cv2.TM_CCOEFF_NORMED, mask=mask
+    )
     res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
     iy, ix = np.unravel_index(int(np.argmax(res)), res.shape)
     dx = dy = 0.0
@@ -167,8 +176,9 @@ def track_camera(name, frames, marks, opts: HandleOptions) -> CameraTrack:
                         lost_b[k] = f
                     why[k] = f"forward-backward error {fb:.2f} px" if np.isfinite(fb) else "no match"
                     break
-                r, ok_r, _ = _lk(frames[fm], frames[f], np.asarray(p, dtype=np.float64)[None], q[None], params,
-                                 opts.fb_max, shape)
+                r, ok_r, _ = _lk(
+                    frames[fm], frames[f], np.asarray(p, dtype=np.float64)[None], q[None], params, opts.fb_max, shape
+                )
                 if ok_r[0] and np.linalg.norm(r[0] - q) <= opts.ref_max:
                     q = r[0]
                 acc = (q - cur) - vel

@@ -3,6 +3,7 @@ DLT on the undistorted rays, then Gauss-Newton on the reprojection error with th
 distortion; residuals in pixels and millimetres), and a tracked handle to its 3-D trajectory, a
 camera that disagrees with the others dropped from that frame on.
 """
+
 from __future__ import annotations
 
 import math
@@ -14,20 +15,20 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from .handle_marks import HandleOptions
 
-
 # ============================================================== triangulation
+
 
 @dataclass
 class Triangulation:
-    X: np.ndarray               # (3,) world point
-    residuals: np.ndarray       # (C,) reprojection distance per camera [px]
-    residuals_mm: np.ndarray    # (C,) the same at the point's depth [mm]
-    cov: np.ndarray             # (3, 3) covariance [m^2] for the pixel noise ``sigma``
-    sigma: float                # pixel noise used: the residual's estimate, floored at the mark noise
+    X: np.ndarray  # (3,) world point
+    residuals: np.ndarray  # (C,) reprojection distance per camera [px]
+    residuals_mm: np.ndarray  # (C,) the same at the point's depth [mm]
+    cov: np.ndarray  # (3, 3) covariance [m^2] for the pixel noise ``sigma``
+    sigma: float  # pixel noise used: the residual's estimate, floored at the mark noise
 
     @property
     def rms(self) -> float:
-        return float(np.sqrt(np.mean(self.residuals ** 2)))
+        return float(np.sqrt(np.mean(self.residuals**2)))
 
     @property
     def sd_max(self) -> float:
@@ -39,6 +40,7 @@ def _normalised(cam, p):
     p = np.asarray(p, dtype=np.float64).reshape(2)
     if cam.dist.size and np.any(cam.dist != 0):
         import cv2
+
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
         return cv2.undistortPointsIter(p.reshape(1, 1, 2), cam.K, cam.dist, None, None, crit).reshape(2)
     K = cam.K
@@ -68,10 +70,10 @@ def triangulate(cams, pts, sigma_floor: float = D.HANDLE_MARK_SIGMA_PX) -> Trian
         raise ClothFitError(f"the marks meet behind camera {', '.join(bad)}: marks of different points?")
     f = np.array([0.5 * (c.K[0, 0] + c.K[1, 1]) for c in cams])
     dof = 2 * len(cams) - 3
-    s_est = math.sqrt(float(np.sum(res ** 2)) / dof)
+    s_est = math.sqrt(float(np.sum(res**2)) / dof)
     sigma = max(s_est, sigma_floor)
     try:
-        cov = np.linalg.inv(J.T @ J) * sigma ** 2
+        cov = np.linalg.inv(J.T @ J) * sigma**2
     except np.linalg.LinAlgError:
         cov = np.full((3, 3), np.inf)
     return Triangulation(X, res, res * depth / f * 1000.0, cov, sigma)
@@ -101,13 +103,14 @@ def _refine(cams, pts, X, iters=20):
 
 # ============================================================ 3-D trajectories
 
+
 @dataclass
 class Trajectory3D:
-    X: np.ndarray               # (F, 3), NaN where fewer than 2 cameras
-    cameras: list               # per frame: names of the cameras used
-    rms_px: np.ndarray          # (F,)
-    problems: dict              # frame -> reason it has no point (lost tracks, disagreement)
-    dropped: list               # (camera, frame, residual px): cameras dropped as drifted
+    X: np.ndarray  # (F, 3), NaN where fewer than 2 cameras
+    cameras: list  # per frame: names of the cameras used
+    rms_px: np.ndarray  # (F,)
+    problems: dict  # frame -> reason it has no point (lost tracks, disagreement)
+    dropped: list  # (camera, frame, residual px): cameras dropped as drifted
 
 
 def triangulate_track(cams, tracks, k, opts: HandleOptions) -> Trajectory3D:
@@ -119,10 +122,11 @@ def triangulate_track(cams, tracks, k, opts: HandleOptions) -> Trajectory3D:
     used = [[] for _ in range(F)]
     rms = np.full(F, np.nan)
     problems, dropped = {}, []
-    banned = {}        # camera index -> set of frames excluded
+    banned = {}  # camera index -> set of frames excluded
     for f in range(F):
-        idx = [ci for ci, tr in enumerate(tracks) if np.all(np.isfinite(tr.points[f, k]))
-               and f not in banned.get(ci, ())]
+        idx = [
+            ci for ci, tr in enumerate(tracks) if np.all(np.isfinite(tr.points[f, k])) and f not in banned.get(ci, ())
+        ]
         while len(idx) >= 2:
             tri = triangulate([cams[ci] for ci in idx], [tracks[ci].points[f, k] for ci in idx], opts.mark_sigma)
             worst = int(np.argmax(tri.residuals))
@@ -132,8 +136,10 @@ def triangulate_track(cams, tracks, k, opts: HandleOptions) -> Trajectory3D:
                 rms[f] = tri.rms
                 break
             if len(idx) == 2:
-                problems[f] = (f"cameras {cams[idx[0]].name} and {cams[idx[1]].name} disagree by "
-                               f"{tri.residuals.max():.1f} px (a track drifted off its point)")
+                problems[f] = (
+                    f"cameras {cams[idx[0]].name} and {cams[idx[1]].name} disagree by "
+                    f"{tri.residuals.max():.1f} px (a track drifted off its point)"
+                )
                 idx = []
                 break
             ci = idx[worst]
@@ -147,7 +153,10 @@ def triangulate_track(cams, tracks, k, opts: HandleOptions) -> Trajectory3D:
                 if k not in tr.marked or np.all(np.isfinite(tr.points[f, k])):
                     continue
                 at = tr.lost_forward[k] if f > tr.marked[k] else tr.lost_backward[k]
-                lost.append(f"camera {tr.name} at frame {at}" + (f" ({tr.lost_reason[k]})" if tr.lost_reason[k] else "")
-                            if at is not None else f"camera {tr.name} (dropped as drifted)")
+                lost.append(
+                    f"camera {tr.name} at frame {at}" + (f" ({tr.lost_reason[k]})" if tr.lost_reason[k] else "")
+                    if at is not None
+                    else f"camera {tr.name} (dropped as drifted)"
+                )
             problems[f] = ("its track is lost in " + ", ".join(lost)) if lost else "fewer than 2 cameras see it"
     return Trajectory3D(X, used, rms, problems, dropped)

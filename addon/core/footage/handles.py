@@ -48,6 +48,7 @@ media, a mark outside its image or in fewer than two cameras, marks that do not 
 lost while it is needed (the camera and frame named), a released handle that never leaves its pin, a
 clip far from every vertex of the cloth, two clips on one vertex.
 """
+
 from __future__ import annotations
 
 import math
@@ -58,20 +59,23 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from ..physics.scenario import MAX_HANDLE_OFFSET_M, Handle, Scenario, Uncertainty
-from .handle_marks import HandleOptions, _num, read_marks
+from .handle_marks import (
+    HandleOptions,
+    _num,
+    parse_marks,  # noqa: E402,F401  (handles.parse_marks: tests/test_handles.py)
+    read_marks,
+)
 from .handle_placement import assign_vertices, grid_resolution
-from .handle_triangulate import triangulate, triangulate_track
-from .handle_tracking import track_camera, window_for
 from .handle_release import detect_release, smooth_track
-
-from .handle_marks import parse_marks  # noqa: E402,F401  (handles.parse_marks: tests/test_handles.py)
-
+from .handle_tracking import track_camera, window_for
+from .handle_triangulate import triangulate, triangulate_track
 
 FORMAT = "silhouette-cloth-fit/scenario"
 G = 9.81
 
 
 # ===================================================================== footage
+
 
 class FootageSource:
     """Frames of every camera as grey uint8 images, and their capture times: image folders
@@ -86,19 +90,24 @@ class FootageSource:
 
     def frames(self, name):
         import cv2
+
         cam = self.cameras[name]
         if self.videos:
             from . import video
+
             if name not in self.sync:
                 raise ClothFitError(f"sync: no time for camera '{name}'")
             frames, rep = video.camera_frames(self.videos, cam, self.sync[name], self.times)
             self.used[name] = rep["video"]
             return [cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) for f in frames]
         from .extract import list_camera_images
+
         _, paths = list_camera_images(os.path.join(self.folder, name))
         if len(paths) != len(self.times):
-            raise ClothFitError(f"camera '{name}': {len(paths)} frames in {os.path.join(self.folder, name)} but "
-                                f"{len(self.times)} frame times")
+            raise ClothFitError(
+                f"camera '{name}': {len(paths)} frames in {os.path.join(self.folder, name)} but "
+                f"{len(self.times)} frame times"
+            )
         out = []
         for p in paths:
             if os.path.getsize(p) == 0:
@@ -107,8 +116,10 @@ class FootageSource:
             if img is None:
                 raise ClothFitError(f"image {p} is unreadable (not an image, corrupt or truncated)")
             if img.shape[:2] != (cam.height, cam.width):
-                raise ClothFitError(f"image {p} is {img.shape[0]}x{img.shape[1]} (HxW) but camera '{name}' images "
-                                    f"{cam.height}x{cam.width}")
+                raise ClothFitError(
+                    f"image {p} is {img.shape[0]}x{img.shape[1]} (HxW) but camera '{name}' images "
+                    f"{cam.height}x{cam.width}"
+                )
             out.append(img)
         self.used[name] = os.path.join(self.folder, name)
         return out
@@ -116,8 +127,18 @@ class FootageSource:
 
 # ================================================================== the whole job
 
-def measure_handles(cameras, source: FootageSource, marks, cloth_size, grid_n=None, grid_nx=None, grid_ny=None,
-                    options: HandleOptions | None = None, progress=None) -> dict:
+
+def measure_handles(
+    cameras,
+    source: FootageSource,
+    marks,
+    cloth_size,
+    grid_n=None,
+    grid_nx=None,
+    grid_ny=None,
+    options: HandleOptions | None = None,
+    progress=None,
+) -> dict:
     """Triangulate, track, find releases, place the cloth: returns ``{"scenario": Scenario, "uncertain":
     Uncertainty, "report": dict}``. ``marks``: HandleMarks list (``parse_marks``); ``cloth_size``
     ``(width, height)`` [m]."""
@@ -154,30 +175,48 @@ def measure_handles(cameras, source: FootageSource, marks, cloth_size, grid_n=No
     for k, row in enumerate(rows):
         b = max(D.HANDLE_BOUND_K * row["sd_mm"] / 1000.0, D.HANDLE_BOUND_FLOOR_M)
         if b > MAX_HANDLE_OFFSET_M:
-            raise ClothFitError(f"handle '{marks[k].name}': its position is uncertain by {b * 1000:.0f} mm (3 sigma), "
-                                f"more than the {MAX_HANDLE_OFFSET_M * 1000:g} mm a capture may declare: mark it in "
-                                f"cameras seeing it from more different directions")
+            raise ClothFitError(
+                f"handle '{marks[k].name}': its position is uncertain by {b * 1000:.0f} mm (3 sigma), "
+                f"more than the {MAX_HANDLE_OFFSET_M * 1000:g} mm a capture may declare: mark it in "
+                f"cameras seeing it from more different directions"
+            )
         bounds.append(round(b, 6))
         row["uncertain_mm"] = b * 1000.0
     rels = [r for r in rel_info if r is not None]
     period = float(np.median(np.diff(times))) if F > 1 else 0.0
-    t_off = period if rels else 0.0      # the release frame is exact: the instant is within its frame interval
+    t_off = period if rels else 0.0  # the release frame is exact: the instant is within its frame interval
     unc = Uncertainty.parse({"time_offset": round(t_off, 6), "handles": bounds}, len(handles), "handles")
-    report = {"cloth": {"width": width, "height": height, "nx": nx, "ny": ny, "spacing_mm": 1000.0 * grid.spacing,
-                        "spacing_y_mm": 1000.0 * grid.side_y / (ny - 1), "origin": grid.origin.tolist(),
-                        "rotation": grid.rotation.tolist(), "normal": grid.R[:, 2].tolist(),
-                        "placement": place.method,
-                        "placement_residual_mm": {marks[k].name: float(r) * 1000.0
-                                                  for k, r in zip(place.with_at, place.residuals_m)},
-                        "placement_rms_mm": float(1000.0 * np.sqrt(np.mean(place.residuals_m ** 2)))},
-              "frames": F, "frame_period_s": period, "cameras": [c.name for c in cams],
-              "handles": rows, "uncertain": unc.to_dict(),
-              "uncertain_rule": (f"handles: {D.HANDLE_BOUND_K:g} x the largest standard deviation of the triangulated "
-                                 f"pin (pixel noise = the residual's estimate, at least {opts.mark_sigma:g} px), at "
-                                 f"least {D.HANDLE_BOUND_FLOOR_M * 1000:g} mm; time_offset: one frame period when a "
-                                 f"handle is released (its release time lies in the release frame's interval), else "
-                                 f"0 (the handles are measured on the frames' own clock)"),
-              "warnings": warnings}
+    report = {
+        "cloth": {
+            "width": width,
+            "height": height,
+            "nx": nx,
+            "ny": ny,
+            "spacing_mm": 1000.0 * grid.spacing,
+            "spacing_y_mm": 1000.0 * grid.side_y / (ny - 1),
+            "origin": grid.origin.tolist(),
+            "rotation": grid.rotation.tolist(),
+            "normal": grid.R[:, 2].tolist(),
+            "placement": place.method,
+            "placement_residual_mm": {
+                marks[k].name: float(r) * 1000.0 for k, r in zip(place.with_at, place.residuals_m)
+            },
+            "placement_rms_mm": float(1000.0 * np.sqrt(np.mean(place.residuals_m**2))),
+        },
+        "frames": F,
+        "frame_period_s": period,
+        "cameras": [c.name for c in cams],
+        "handles": rows,
+        "uncertain": unc.to_dict(),
+        "uncertain_rule": (
+            f"handles: {D.HANDLE_BOUND_K:g} x the largest standard deviation of the triangulated "
+            f"pin (pixel noise = the residual's estimate, at least {opts.mark_sigma:g} px), at "
+            f"least {D.HANDLE_BOUND_FLOOR_M * 1000:g} mm; time_offset: one frame period when a "
+            f"handle is released (its release time lies in the release frame's interval), else "
+            f"0 (the handles are measured on the frames' own clock)"
+        ),
+        "warnings": warnings,
+    }
     return {"scenario": scen, "uncertain": unc, "report": report}
 
 
@@ -189,9 +228,11 @@ def _triangulate_marks(cams, marks, opts: HandleOptions) -> list:
         tri0 = triangulate(mc, [h.marks[c.name] for c in mc], opts.mark_sigma)
         worst = int(np.argmax(tri0.residuals))
         if tri0.residuals[worst] > opts.max_residual:
-            raise ClothFitError(f"handle '{h.name}': its marks do not meet in 3-D (camera {mc[worst].name} misses "
-                                f"by {tri0.residuals[worst]:.1f} px at frame {h.frame}): a mark on another point, or "
-                                f"the wrong calibration")
+            raise ClothFitError(
+                f"handle '{h.name}': its marks do not meet in 3-D (camera {mc[worst].name} misses "
+                f"by {tri0.residuals[worst]:.1f} px at frame {h.frame}): a mark on another point, or "
+                f"the wrong calibration"
+            )
         tri0s.append(tri0)
     return tri0s
 
@@ -203,9 +244,18 @@ def _track_cameras(cams, source: FootageSource, marks, tri0s, opts: HandleOption
         if progress:
             progress(i, len(cams), f"tracking in {cam.name}")
         frames = source.frames(cam.name)
-        mk = [(h.frame, h.marks[cam.name],
-               window_for(h.size or opts.clip_size, float(cam.to_camera(tri0s[k].X)[2]), 0.5 * (cam.K[0, 0] + cam.K[1, 1])))
-              if cam.name in h.marks else None for k, h in enumerate(marks)]
+        mk = [
+            (
+                h.frame,
+                h.marks[cam.name],
+                window_for(
+                    h.size or opts.clip_size, float(cam.to_camera(tri0s[k].X)[2]), 0.5 * (cam.K[0, 0] + cam.K[1, 1])
+                ),
+            )
+            if cam.name in h.marks
+            else None
+            for k, h in enumerate(marks)
+        ]
         tracks.append(track_camera(cam.name, frames, mk, opts))
         del frames
     if progress:
@@ -221,8 +271,10 @@ def _measure_handle(k, h, cams, tracks, tri0s, times, opts: HandleOptions, warni
     marked_cams = [c.name for c in cams if c.name in h.marks]
     traj = triangulate_track(cams, tracks, k, opts)
     for cn, f, r in traj.dropped:
-        warnings.append(f"handle '{h.name}': camera {cn} dropped from frame {f} on (its track misses the others' "
-                        f"point by {r:.1f} px)")
+        warnings.append(
+            f"handle '{h.name}': camera {cn} dropped from frame {f} on (its track misses the others' "
+            f"point by {r:.1f} px)"
+        )
     ok = np.all(np.isfinite(traj.X), axis=1)
     rel = None
     if h.released:
@@ -233,25 +285,38 @@ def _measure_handle(k, h, cams, tracks, tri0s, times, opts: HandleOptions, warni
     missing = [f for f in need if not ok[f]]
     if missing:
         f = missing[0]
-        raise ClothFitError(f"handle '{h.name}': no 3-D point at frame {f} (t = {times[f]:g} s): "
-                            f"{traj.problems.get(f, 'fewer than 2 cameras')}")
-    track_len = {tr.name: int(np.sum(np.all(np.isfinite(tr.points[:, k]), axis=1))) for tr in tracks
-                 if k in tr.marked}
-    row = {"name": h.name, "motion": h.motion, "released": h.released, "marked_frame": h.frame,
-           "cameras": marked_cams,
-           "residual_px": {cn: float(r) for cn, r in zip(marked_cams, tri0.residuals)},
-           "residual_rms_px": tri0.rms,
-           "residual_mm": {cn: float(r) for cn, r in zip(marked_cams, tri0.residuals_mm)},
-           "residual_rms_mm": float(np.sqrt(np.mean(tri0.residuals_mm ** 2))),
-           "sd_mm": 1000.0 * tri0.sd_max, "sigma_px": tri0.sigma,
-           "marked_position": tri0.X.tolist(),
-           "track_frames": track_len, "tracked_3d_frames": int(ok.sum()),
-           "track_rms_px": float(np.nanmean(traj.rms_px)) if ok.any() else None}
+        raise ClothFitError(
+            f"handle '{h.name}': no 3-D point at frame {f} (t = {times[f]:g} s): "
+            f"{traj.problems.get(f, 'fewer than 2 cameras')}"
+        )
+    track_len = {tr.name: int(np.sum(np.all(np.isfinite(tr.points[:, k]), axis=1))) for tr in tracks if k in tr.marked}
+    row = {
+        "name": h.name,
+        "motion": h.motion,
+        "released": h.released,
+        "marked_frame": h.frame,
+        "cameras": marked_cams,
+        "residual_px": {cn: float(r) for cn, r in zip(marked_cams, tri0.residuals)},
+        "residual_rms_px": tri0.rms,
+        "residual_mm": {cn: float(r) for cn, r in zip(marked_cams, tri0.residuals_mm)},
+        "residual_rms_mm": float(np.sqrt(np.mean(tri0.residuals_mm**2))),
+        "sd_mm": 1000.0 * tri0.sd_max,
+        "sigma_px": tri0.sigma,
+        "marked_position": tri0.X.tolist(),
+        "track_frames": track_len,
+        "tracked_3d_frames": int(ok.sum()),
+        "track_rms_px": float(np.nanmean(traj.rms_px)) if ok.any() else None,
+    }
     if rel is not None:
-        row.update(departure_frame=rel.departure_frame, release_frame=rel.release_frame,
-                   release_time=rel.release_time, release_extrapolated_time=rel.extrapolated_time,
-                   release_before_departure=rel.back, release_threshold_mm=rel.threshold_m * 1000.0,
-                   held_jitter_mm=rel.held_jitter_m * 1000.0)
+        row.update(
+            departure_frame=rel.departure_frame,
+            release_frame=rel.release_frame,
+            release_time=rel.release_time,
+            release_extrapolated_time=rel.extrapolated_time,
+            release_before_departure=rel.back,
+            release_threshold_mm=rel.threshold_m * 1000.0,
+            held_jitter_mm=rel.held_jitter_m * 1000.0,
+        )
     if h.motion == "moving":
         end = rel.departure_frame if rel is not None else F
         sm = smooth_track(times[:end], traj.X[:end], opts.smooth)
@@ -269,8 +334,10 @@ def _measure_handle(k, h, cams, tracks, tri0s, times, opts: HandleOptions, warni
         thr = max(opts.departure_min, opts.departure_k * float(np.median(d2)) / math.sqrt(6.0))
         if not h.released and drift > thr:
             fmax = int(held[np.argmax(dist)])
-            warnings.append(f"handle '{h.name}' is declared fixed but moves {drift * 1000:.1f} mm from its mean "
-                            f"position (frame {fmax}): declare it \"motion\": \"moving\"?")
+            warnings.append(
+                f"handle '{h.name}' is declared fixed but moves {drift * 1000:.1f} mm from its mean "
+                f'position (frame {fmax}): declare it "motion": "moving"?'
+            )
     return row, (key_t, key_x), rel
 
 
@@ -278,19 +345,26 @@ def write_scenario(path, result, inputs=()) -> dict:
     """The scenario file ``clothfit extract --scenario`` reads: ``{"format", "version", "scenario",
     "uncertain", "report"}``, written atomically; refuses to overwrite one of ``inputs``."""
     from ..safeio import atomic_json
+
     real = os.path.realpath(path)
     for p in inputs:
         if p and os.path.exists(p) and os.path.realpath(p) == real:
             raise ClothFitError(f"handles: writing {path} would overwrite its input {p}: choose another --out")
     if os.path.isdir(path):
         raise ClothFitError(f"handles: --out {path} is a directory: give a file name")
-    d = {"format": FORMAT, "version": 1, "scenario": result["scenario"].to_dict(),
-         "uncertain": result["uncertain"].to_dict(), "report": result["report"]}
+    d = {
+        "format": FORMAT,
+        "version": 1,
+        "scenario": result["scenario"].to_dict(),
+        "uncertain": result["uncertain"].to_dict(),
+        "report": result["report"],
+    }
     atomic_json(path, d)
     return d
 
 
 # ====================================================================== inputs
+
 
 def check_size(size):
     """(width, height) [m] of the cloth, checked."""
@@ -320,9 +394,24 @@ def frame_times_for(count=None, times=None, fps=None, start=0.0, what="footage")
     return [float(start) + i / float(fps) for i in range(int(count))]
 
 
-def run(out, marks, size, footage=None, videos=None, sync=None, find_sync=False, flash_time=0.0, cameras=None,
-        times=None, fps=None, start=0.0, frames=None, grid=None, options: HandleOptions | None = None,
-        progress=None) -> dict:
+def run(
+    out,
+    marks,
+    size,
+    footage=None,
+    videos=None,
+    sync=None,
+    find_sync=False,
+    flash_time=0.0,
+    cameras=None,
+    times=None,
+    fps=None,
+    start=0.0,
+    frames=None,
+    grid=None,
+    options: HandleOptions | None = None,
+    progress=None,
+) -> dict:
     """``clothfit handles``: read the inputs, measure, write ``out`` (``write_scenario``); returns the
     written document. ``footage``: image folders per camera (``extract``'s layout, ``footage.json``
     optional) or ``videos`` + ``sync`` (a sync JSON path, or ``find_sync`` for a flash); ``cameras``:
@@ -331,6 +420,7 @@ def run(out, marks, size, footage=None, videos=None, sync=None, find_sync=False,
     the longer side) or (nx, ny)."""
     from . import calib_io, video
     from .extract import _find_calibration, _read_footage_json, list_camera_images
+
     opts = (options or HandleOptions()).check()
     inputs = [marks]
     if videos and footage:
@@ -347,8 +437,10 @@ def run(out, marks, size, footage=None, videos=None, sync=None, find_sync=False,
             cameras = meta.get("cameras")
             cameras = os.path.join(footage, cameras) if isinstance(cameras, str) else _find_calibration(footage)
     if cameras is None:
-        raise ClothFitError("handles: no calibration: give --cameras (or a footage folder with footage.json's "
-                            "'cameras', a cameras.* / calibration.* file or a COLMAP folder)")
+        raise ClothFitError(
+            "handles: no calibration: give --cameras (or a footage folder with footage.json's "
+            "'cameras', a cameras.* / calibration.* file or a COLMAP folder)"
+        )
     if isinstance(cameras, str):
         inputs.append(cameras)
         sizes = video.video_sizes(videos) if videos and calib_io.detect_format(cameras) == "easymocap" else None
@@ -394,27 +486,40 @@ def run(out, marks, size, footage=None, videos=None, sync=None, find_sync=False,
     src = FootageSource(cams, times, folder=footage, videos=videos, sync=sync_times)
     result = measure_handles(cams, src, hmarks, (width, height), options=opts, progress=progress, **gkw)
     rep = result["report"]
-    rep.update({"marks": os.path.abspath(marks), "footage": os.path.abspath(footage) if footage else None,
-                "videos": os.path.abspath(videos) if videos else None, "sync": sync_times,
-                "calibration": os.path.abspath(cameras) if isinstance(cameras, str) else None,
-                "media": src.used})
+    rep.update(
+        {
+            "marks": os.path.abspath(marks),
+            "footage": os.path.abspath(footage) if footage else None,
+            "videos": os.path.abspath(videos) if videos else None,
+            "sync": sync_times,
+            "calibration": os.path.abspath(cameras) if isinstance(cameras, str) else None,
+            "media": src.used,
+        }
+    )
     return write_scenario(out, result, inputs)
 
 
 def format_report(rep: dict) -> str:
     """A table for people: one line per handle."""
     c = rep["cloth"]
-    lines = [f"cloth {c['width']:g} x {c['height']:g} m as {c['nx']} x {c['ny']} vertices "
-             f"({c['spacing_mm']:.1f} x {c['spacing_y_mm']:.1f} mm cells); placement: {c['placement']}; "
-             f"its residual {c['placement_rms_mm']:.2f} mm RMS",
-             f"{'handle':<14} {'vertex':>11} {'res px':>7} {'res mm':>7} {'sd mm':>6} {'bound mm':>8} {'track':>6} "
-             f"{'release':>16}"]
+    lines = [
+        f"cloth {c['width']:g} x {c['height']:g} m as {c['nx']} x {c['ny']} vertices "
+        f"({c['spacing_mm']:.1f} x {c['spacing_y_mm']:.1f} mm cells); placement: {c['placement']}; "
+        f"its residual {c['placement_rms_mm']:.2f} mm RMS",
+        f"{'handle':<14} {'vertex':>11} {'res px':>7} {'res mm':>7} {'sd mm':>6} {'bound mm':>8} {'track':>6} "
+        f"{'release':>16}",
+    ]
     for h in rep["handles"]:
-        rel = (f"frame {h['release_frame']} ({h['release_time']:.4f} s)" if h.get("released") else
-               ("moving" if h["motion"] == "moving" else "fixed"))
-        lines.append(f"{h['name'][:14]:<14} {'r%d c%d' % (h['row'], h['column']):>11} {h['residual_rms_px']:7.2f} "
-                     f"{h['residual_rms_mm']:7.2f} {h['sd_mm']:6.2f} {h['uncertain_mm']:8.2f} "
-                     f"{h['tracked_3d_frames']:>6} {rel:>16}")
+        rel = (
+            f"frame {h['release_frame']} ({h['release_time']:.4f} s)"
+            if h.get("released")
+            else ("moving" if h["motion"] == "moving" else "fixed")
+        )
+        lines.append(
+            f"{h['name'][:14]:<14} {'r%d c%d' % (h['row'], h['column']):>11} {h['residual_rms_px']:7.2f} "
+            f"{h['residual_rms_mm']:7.2f} {h['sd_mm']:6.2f} {h['uncertain_mm']:8.2f} "
+            f"{h['tracked_3d_frames']:>6} {rel:>16}"
+        )
     lines.append(f"uncertain: {rep['uncertain']}")
     for w in rep.get("warnings", []):
         lines.append("warning: " + w)

@@ -54,6 +54,7 @@ threshold by hand; we add what real footage needs (all pure numpy + cv2, no bpy)
 
 The footage folders and videos these images come from, and the capture written: ``extract.py``.
 """
+
 from __future__ import annotations
 
 import math
@@ -65,26 +66,26 @@ import numpy as np
 from ..errors import ClothFitError
 
 THRESHOLD_MODES = ("auto", "otsu", "noise")
-MIN_AUTO_THRESHOLD = 2.0   # "auto" never goes below this difference (0..255 scale): noise-free renders
+MIN_AUTO_THRESHOLD = 2.0  # "auto" never goes below this difference (0..255 scale): noise-free renders
 
 
 @dataclass
 class ExtractOptions:
-    threshold: object = "auto"        # "auto" | "otsu" | "noise" | a number (difference units)
-    thresholds: dict = field(default_factory=dict)   # per camera name -> number (overrides)
-    luma_weight: float = 0.35         # weight of dY against dU, dV (chroma weighting vs shadows)
-    shadow_min: float = 0.6           # background dimmed down to this ratio counts as shadow (1 = off)
-    shadow_window: int = 9            # px: one dimming ratio per window (shadows are smooth; 1 = per pixel)
-    noise_k: float = 6.0              # noise threshold = median + noise_k * robust sigma
-    blur: float = 1.0                 # Gaussian sigma [px] on both images before differencing (0 = off)
-    open_radius: int = 1              # morphological opening radius [px] (0 = off)
-    close_radius: int = 2             # morphological closing radius [px] (0 = off)
+    threshold: object = "auto"  # "auto" | "otsu" | "noise" | a number (difference units)
+    thresholds: dict = field(default_factory=dict)  # per camera name -> number (overrides)
+    luma_weight: float = 0.35  # weight of dY against dU, dV (chroma weighting vs shadows)
+    shadow_min: float = 0.6  # background dimmed down to this ratio counts as shadow (1 = off)
+    shadow_window: int = 9  # px: one dimming ratio per window (shadows are smooth; 1 = per pixel)
+    noise_k: float = 6.0  # noise threshold = median + noise_k * robust sigma
+    blur: float = 1.0  # Gaussian sigma [px] on both images before differencing (0 = off)
+    open_radius: int = 1  # morphological opening radius [px] (0 = off)
+    close_radius: int = 2  # morphological closing radius [px] (0 = off)
     keep_largest: bool = True
     fill_holes: bool = True
-    refine_radius: int = 2            # boundary refinement to half the local contrast, px (0 = off)
-    min_area: int = 50                # a silhouette smaller than this = nothing found
-    allow_empty: bool = False         # nothing found: warning + empty silhouette instead of an error
-    undistort: bool = False           # undistort silhouettes, write cameras without distortion
+    refine_radius: int = 2  # boundary refinement to half the local contrast, px (0 = off)
+    min_area: int = 50  # a silhouette smaller than this = nothing found
+    allow_empty: bool = False  # nothing found: warning + empty silhouette instead of an error
+    undistort: bool = False  # undistort silhouettes, write cameras without distortion
     debug_dir: str | None = None
 
     def check(self):
@@ -94,8 +95,9 @@ class ExtractOptions:
                 try:
                     self.threshold = float(t)
                 except ValueError:
-                    raise ClothFitError(f"extraction threshold {t!r} must be one of {', '.join(THRESHOLD_MODES)} "
-                                        f"or a number") from None
+                    raise ClothFitError(
+                        f"extraction threshold {t!r} must be one of {', '.join(THRESHOLD_MODES)} or a number"
+                    ) from None
         t = self.threshold
         if not isinstance(t, str) and not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0):
             raise ClothFitError(f"extraction threshold {t!r} must be a positive number")
@@ -109,16 +111,20 @@ class ExtractOptions:
         if not (self.noise_k > 0):
             raise ClothFitError(f"noise factor {self.noise_k} must be positive")
         if self.blur < 0 or min(self.open_radius, self.close_radius, self.refine_radius, self.min_area) < 0:
-            raise ClothFitError(f"blur {self.blur}, open radius {self.open_radius}, close radius "
-                                f"{self.close_radius} and min area {self.min_area} must be >= 0")
+            raise ClothFitError(
+                f"blur {self.blur}, open radius {self.open_radius}, close radius "
+                f"{self.close_radius} and min area {self.min_area} must be >= 0"
+            )
         return self
 
 
 # ================================================================ images and colour
 
+
 def read_image(path: str) -> np.ndarray:
     """An image file as float32 ``(H, W, 3)`` BGR or ``(H, W)`` grey on the 0..255 scale."""
     import cv2
+
     if not os.path.isfile(path):
         raise ClothFitError(f"image not found: {path}")
     if os.path.getsize(path) == 0:
@@ -164,8 +170,14 @@ def bgr_to_yuv(img: np.ndarray) -> np.ndarray:
     return np.stack([y, 0.492 * (b - y), 0.877 * (r - y)], -1).astype(np.float32)
 
 
-def difference(frame_yuv: np.ndarray, bg_yuv: np.ndarray, luma_weight: float, blur: float,
-               shadow_min: float = 1.0, shadow_window: int = 1) -> np.ndarray:
+def difference(
+    frame_yuv: np.ndarray,
+    bg_yuv: np.ndarray,
+    luma_weight: float,
+    blur: float,
+    shadow_min: float = 1.0,
+    shadow_window: int = 1,
+) -> np.ndarray:
     """The weighted YUV difference image ``D`` (float32 ``(H, W)``).
 
     With ``shadow_min < 1`` the frame is compared with the background dimmed by the best ratio
@@ -173,6 +185,7 @@ def difference(frame_yuv: np.ndarray, bg_yuv: np.ndarray, luma_weight: float, bl
     Grey images (one channel): ``D = |dY|`` without shadow model.
     """
     import cv2
+
     f = frame_yuv
     b = bg_yuv
     if blur > 0:
@@ -202,6 +215,7 @@ def difference(frame_yuv: np.ndarray, bg_yuv: np.ndarray, luma_weight: float, bl
 
 
 # ====================================================================== thresholds
+
 
 def otsu_threshold(values: np.ndarray, bins: int = 512) -> float:
     """Otsu's threshold of a set of non-negative values (maximises the between-class variance)."""
@@ -243,14 +257,17 @@ def _sample(a: np.ndarray, n: int = 400_000, seed: int = 0) -> np.ndarray:
 
 # ======================================================================= clean-up
 
+
 def _disk(r: int):
     import cv2
+
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
 
 
 def fill_holes(mask: np.ndarray) -> np.ndarray:
     """Fill background regions not connected to the image border (4-connected)."""
     import cv2
+
     m = mask.astype(np.uint8)
     h, w = m.shape
     pad = np.zeros((h + 2, w + 2), np.uint8)
@@ -274,6 +291,7 @@ def refine_boundary(mask: np.ndarray, diff: np.ndarray, radius: int, floor: floa
     and only where an interior is near. ``floor``: a pixel never becomes object below it.
     """
     import cv2
+
     if radius <= 0 or not mask.any():
         return mask
     m8 = mask.astype(np.uint8)
@@ -294,6 +312,7 @@ def clean_mask(raw: np.ndarray, opts: ExtractOptions, diff: np.ndarray | None = 
     """Opening, closing, largest component, hole filling, boundary refinement (needs ``diff``).
     Returns (final, steps dict, info dict)."""
     import cv2
+
     steps = {"threshold": raw}
     m = raw.astype(np.uint8)
     if opts.open_radius > 0:
@@ -333,6 +352,7 @@ def clean_mask(raw: np.ndarray, opts: ExtractOptions, diff: np.ndarray | None = 
 
 # ================================================================== one camera
 
+
 @dataclass
 class CameraResult:
     name: str
@@ -360,13 +380,26 @@ def camera_thresholds(diffs, noise_sample, opts: ExtractOptions, name: str):
         thr, mode = max(thr_noise, MIN_AUTO_THRESHOLD), "auto"
     if not math.isfinite(thr):
         thr = thr_noise
-    return {"threshold": float(thr), "mode": mode, "otsu": float(otsu), "noise": float(thr_noise),
-            "noise_median": med, "noise_sigma": sigma,
-            "noise_source": "background plates" if noise_sample is not None else "frames (robust)"}
+    return {
+        "threshold": float(thr),
+        "mode": mode,
+        "otsu": float(otsu),
+        "noise": float(thr_noise),
+        "noise_median": med,
+        "noise_sigma": sigma,
+        "noise_source": "background plates" if noise_sample is not None else "frames (robust)",
+    }
 
 
-def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, name: str = "cam",
-                   frame_names=None, shape=None, debug_dir: str | None = None) -> CameraResult:
+def extract_camera(
+    backgrounds,
+    frames,
+    options: ExtractOptions | None = None,
+    name: str = "cam",
+    frame_names=None,
+    shape=None,
+    debug_dir: str | None = None,
+) -> CameraResult:
     """Silhouettes of one camera from in-memory images (what the Blender operator can call).
 
     ``backgrounds``: one or more background plates, ``frames``: the foreground images (uint8 /
@@ -384,8 +417,10 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
     size = shape or bgs[0].shape[:2]
     for i, b in enumerate(bgs):
         if b.shape[:2] != tuple(size):
-            errors.append(f"camera '{name}' background {i}: size {b.shape[0]}x{b.shape[1]} (HxW) but the camera "
-                          f"images {size[0]}x{size[1]}")
+            errors.append(
+                f"camera '{name}' background {i}: size {b.shape[0]}x{b.shape[1]} (HxW) but the camera "
+                f"images {size[0]}x{size[1]}"
+            )
         if b.ndim != bgs[0].ndim:
             errors.append(f"camera '{name}' background {i}: colour and grey background plates mixed")
     if errors:
@@ -395,18 +430,24 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
     noise_sample = None
     if len(yuv_bgs) >= 2:
         scale = math.sqrt((1.0 + 1.0 / len(yuv_bgs)) / 2.0)
-        noise_sample = _sample(difference(yuv_bgs[0], yuv_bgs[1], opts.luma_weight, opts.blur, opts.shadow_min, opts.shadow_window) * scale)
+        noise_sample = _sample(
+            difference(yuv_bgs[0], yuv_bgs[1], opts.luma_weight, opts.blur, opts.shadow_min, opts.shadow_window) * scale
+        )
     diffs = []
     for fname, fr in zip(frame_names, frames):
         f = as_float_image(fr, f"camera '{name}' {fname}")
         if f.shape[:2] != tuple(size):
-            errors.append(f"camera '{name}' {fname}: size {f.shape[0]}x{f.shape[1]} (HxW) but the camera/background "
-                          f"is {size[0]}x{size[1]}")
+            errors.append(
+                f"camera '{name}' {fname}: size {f.shape[0]}x{f.shape[1]} (HxW) but the camera/background "
+                f"is {size[0]}x{size[1]}"
+            )
             diffs.append(None)
             continue
         if f.ndim != bgs[0].ndim:
-            errors.append(f"camera '{name}' {fname}: {'grey' if f.ndim == 2 else 'colour'} image but the background "
-                          f"is {'grey' if bgs[0].ndim == 2 else 'colour'}")
+            errors.append(
+                f"camera '{name}' {fname}: {'grey' if f.ndim == 2 else 'colour'} image but the background "
+                f"is {'grey' if bgs[0].ndim == 2 else 'colour'}"
+            )
             diffs.append(None)
             continue
         diffs.append(difference(bgr_to_yuv(f), bg, opts.luma_weight, opts.blur, opts.shadow_min, opts.shadow_window))
@@ -417,8 +458,10 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
     thr = stats["threshold"]
     report.update(stats)
     if stats["mode"] == "otsu" and stats["otsu"] < stats["noise"]:
-        warnings.append(f"camera '{name}': Otsu's threshold {stats['otsu']:.2f} is below the noise threshold "
-                        f"{stats['noise']:.2f}; the object is weak against the background noise")
+        warnings.append(
+            f"camera '{name}': Otsu's threshold {stats['otsu']:.2f} is below the noise threshold "
+            f"{stats['noise']:.2f}; the object is weak against the background noise"
+        )
     masks = []
     debug = debug_dir or (os.path.join(opts.debug_dir, name) if opts.debug_dir else None)
     for fi, (fname, d) in enumerate(zip(frame_names, diffs)):
@@ -428,12 +471,20 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
         raw = d > thr
         final, steps, info = clean_mask(raw, opts, d, stats["noise"])
         area = int(final.sum())
-        fr_rep = {"frame": fname, "area": area, "raw_area": int(raw.sum()), "components": info["components"],
-                  "dropped_area": info["dropped_area"], "max_difference": float(d.max())}
+        fr_rep = {
+            "frame": fname,
+            "area": area,
+            "raw_area": int(raw.sum()),
+            "components": info["components"],
+            "dropped_area": info["dropped_area"],
+            "max_difference": float(d.max()),
+        }
         report["frames"].append(fr_rep)
         if area < max(1, opts.min_area):
-            msg = (f"camera '{name}' {fname}: nothing found (silhouette of {area} px < min area {opts.min_area}; "
-                   f"{int(raw.sum())} px above threshold {thr:.2f}, largest difference {float(d.max()):.2f})")
+            msg = (
+                f"camera '{name}' {fname}: nothing found (silhouette of {area} px < min area {opts.min_area}; "
+                f"{int(raw.sum())} px above threshold {thr:.2f}, largest difference {float(d.max()):.2f})"
+            )
             if opts.allow_empty:
                 warnings.append(msg + "; written as an empty silhouette")
                 final = np.zeros_like(final)
@@ -441,11 +492,14 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
                 errors.append(msg)
         else:
             if final[0, :].any() or final[-1, :].any() or final[:, 0].any() or final[:, -1].any():
-                warnings.append(f"camera '{name}' {fname}: the silhouette touches the image border "
-                                f"(object cut off by the frame?)")
+                warnings.append(
+                    f"camera '{name}' {fname}: the silhouette touches the image border (object cut off by the frame?)"
+                )
             if info["second_area"] > 0.1 * area:
-                warnings.append(f"camera '{name}' {fname}: dropped a second region of {info['second_area']} px "
-                                f"(the silhouette has {area} px): shadow, reflection or a second object?")
+                warnings.append(
+                    f"camera '{name}' {fname}: dropped a second region of {info['second_area']} px "
+                    f"(the silhouette has {area} px): shadow, reflection or a second object?"
+                )
         masks.append(final)
         if debug:
             _write_debug(debug, fi, fname, d, thr, steps, frames[fi])
@@ -454,8 +508,9 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
         med = float(np.median(areas))
         for r in report["frames"]:
             if r["area"] > 0 and (r["area"] > 2.5 * med or r["area"] < med / 2.5):
-                warnings.append(f"camera '{name}' {r['frame']}: area {r['area']} px is far from the camera's "
-                                f"median {med:.0f} px")
+                warnings.append(
+                    f"camera '{name}' {r['frame']}: area {r['area']} px is far from the camera's median {med:.0f} px"
+                )
     if debug:
         _write_histogram(os.path.join(debug, "histogram.png"), good, stats)
     return CameraResult(name, masks, report, errors, warnings)
@@ -463,8 +518,10 @@ def extract_camera(backgrounds, frames, options: ExtractOptions | None = None, n
 
 # ==================================================================== debug output
 
+
 def _write_png(path, img):
     import cv2
+
     os.makedirs(os.path.dirname(path), exist_ok=True)
     if not cv2.imwrite(path, img):
         raise ClothFitError(f"cannot write debug image {path}")
@@ -472,6 +529,7 @@ def _write_png(path, img):
 
 def _write_debug(folder, fi, fname, d, thr, steps, frame):
     import cv2
+
     stem = f"{fi:03d}"
     scaled = np.clip(d * (128.0 / max(thr, 1e-6)), 0, 255).astype(np.uint8)
     _write_png(os.path.join(folder, f"{stem}_1_difference.png"), scaled)
@@ -488,6 +546,7 @@ def _write_debug(folder, fi, fname, d, thr, steps, frame):
 
 def _write_histogram(path, diffs, stats, w=512, h=200):
     import cv2
+
     v = np.concatenate([_sample(x, 100_000) for x in diffs])
     hi = max(float(np.percentile(v, 99.9)), stats["threshold"] * 1.5, 1.0)
     hist, _ = np.histogram(np.minimum(v, hi), bins=w, range=(0, hi))
@@ -501,6 +560,13 @@ def _write_histogram(path, diffs, stats, w=512, h=200):
         if val is not None and math.isfinite(val):
             x = int(min(w - 1, val / hi * w))
             cv2.line(img, (x, 0), (x, h - 1), col, 1)
-            cv2.putText(img, f"{key} {val:.1f}", (min(x + 3, w - 110), 12 + 14 * ("noise", "otsu", "threshold").index(key)),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.4, col, 1)
+            cv2.putText(
+                img,
+                f"{key} {val:.1f}",
+                (min(x + 3, w - 110), 12 + 14 * ("noise", "otsu", "threshold").index(key)),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.4,
+                col,
+                1,
+            )
     _write_png(path, img)

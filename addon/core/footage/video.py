@@ -27,6 +27,7 @@ forces OpenCV. Bad input is one line naming the file: a video that
 does not open or has no video stream, a camera without a video or plate, a sync time outside the
 video, a capture time past the video's end, a frame size different from the calibration.
 """
+
 from __future__ import annotations
 
 import math
@@ -39,8 +40,8 @@ from ..jsonio import read_json
 
 VIDEO_EXTS = (".mp4", ".mov", ".mkv", ".avi")
 PLATE_IMAGE_EXTS = (".png", ".jpg", ".jpeg")
-TIME_TOL = 1e-3          # s: a frame starting up to this much after the asked time counts as on display
-PLATE_FRAMES = 31        # frames of a plate video whose median is the plate
+TIME_TOL = 1e-3  # s: a frame starting up to this much after the asked time counts as on display
+PLATE_FRAMES = 31  # frames of a plate video whose median is the plate
 
 
 BACKENDS = ("av", "opencv")
@@ -60,6 +61,7 @@ def default_backend() -> str:
     if want in BACKENDS:
         return want
     import importlib.util
+
     return "av" if importlib.util.find_spec("av") is not None else "opencv"
 
 
@@ -73,6 +75,7 @@ class _CvReader:
 
     def __init__(self, path):
         import cv2
+
         self.cv2 = cv2
         self.cap = cv2.VideoCapture(path, cv2.CAP_FFMPEG)
         if not self.cap.isOpened():
@@ -99,12 +102,17 @@ def find_camera_file(folder: str, camera: str, exts, what: str):
     two candidates are an error."""
     if not os.path.isdir(folder):
         raise ClothFitError(f"{what} folder not found: {folder}")
-    hits = sorted(f for f in os.listdir(folder)
-                  if os.path.splitext(f)[0] == camera and os.path.splitext(f)[1].lower() in exts
-                  and os.path.isfile(os.path.join(folder, f)))
+    hits = sorted(
+        f
+        for f in os.listdir(folder)
+        if os.path.splitext(f)[0] == camera
+        and os.path.splitext(f)[1].lower() in exts
+        and os.path.isfile(os.path.join(folder, f))
+    )
     if len(hits) > 1:
-        raise ClothFitError(f"{what} folder {folder}: camera '{camera}' has several files ({', '.join(hits)}); "
-                            f"keep one")
+        raise ClothFitError(
+            f"{what} folder {folder}: camera '{camera}' has several files ({', '.join(hits)}); keep one"
+        )
     return os.path.join(folder, hits[0]) if hits else None
 
 
@@ -161,7 +169,7 @@ class Video:
         if not times:
             raise ClothFitError(f"video {self.path}: holds no frames (or OpenCV cannot decode them)")
         self.times = np.sort(np.asarray(times, dtype=np.float64))
-        self.pts = np.round(self.times * 1e6).astype(np.int64)      # microseconds: the key of a frame
+        self.pts = np.round(self.times * 1e6).astype(np.int64)  # microseconds: the key of a frame
         last = float(np.median(np.diff(self.times))) if self.times.size > 1 else 0.0
         self.start = float(self.times[0])
         self.end = float(self.times[-1] + last)
@@ -187,8 +195,9 @@ class Video:
         with av.open(self.path) as c:
             for fr in c.decode(c.streams.video[0]):
                 if want_keys is None or (fr.pts in want_keys and fr.pts not in got):
-                    got[int(fr.pts)] = fr.to_ndarray(format="bgr24") if want_frames else \
-                        float(fr.to_ndarray(format="gray").mean())
+                    got[int(fr.pts)] = (
+                        fr.to_ndarray(format="bgr24") if want_frames else float(fr.to_ndarray(format="gray").mean())
+                    )
                     if want_keys is not None and len(got) == len(want_keys):
                         break
         return got
@@ -202,8 +211,9 @@ class Video:
         idx = [self.frame_index(t) for t in video_times]
         for t, i in zip(video_times, idx):
             if i < 0 or t > self.end:
-                raise ClothFitError(f"video {self.path}: time {t:.4f} s is outside the video "
-                                    f"({self.start:.4f} .. {self.end:.4f} s)")
+                raise ClothFitError(
+                    f"video {self.path}: time {t:.4f} s is outside the video ({self.start:.4f} .. {self.end:.4f} s)"
+                )
         want = {int(self.pts[i]) for i in idx}
         try:
             got = self._decode(want)
@@ -216,8 +226,10 @@ class Video:
         missing = sorted(want - set(got))
         if missing:
             tt = [float(self.times[np.searchsorted(self.pts, p)]) for p in missing[:5]]
-            raise ClothFitError(f"video {self.path}: the frames at {', '.join(f'{t:.4f}' for t in tt)} s "
-                                f"are in the container but could not be decoded (a cut or corrupt file?)")
+            raise ClothFitError(
+                f"video {self.path}: the frames at {', '.join(f'{t:.4f}' for t in tt)} s "
+                f"are in the container but could not be decoded (a cut or corrupt file?)"
+            )
         return [got[int(self.pts[i])] for i in idx], [float(self.times[i]) for i in idx]
 
     def sampled_frames(self, n: int):
@@ -239,8 +251,10 @@ class Video:
 
 def video_sizes(videos_dir: str) -> dict:
     """``{camera: (height, width)}`` of every video in ``videos_dir`` (for calibrations without image size)."""
+
     class Sizes(dict):
         source = videos_dir
+
     out = Sizes()
     if not os.path.isdir(videos_dir):
         raise ClothFitError(f"videos folder not found: {videos_dir}")
@@ -288,8 +302,10 @@ def flash_time_of(video: Video) -> float:
     med = float(np.nanmedian(rise))
     spread = 1.4826 * float(np.nanmedian(np.abs(rise - med)))
     if not rise[i] > max(10.0 * spread, 10.0):
-        raise ClothFitError(f"video {video.path}: no flash found (largest brightening {rise[i]:.1f} grey levels is "
-                            f"not clearly above the frame-to-frame changes, robust sigma {spread:.2f})")
+        raise ClothFitError(
+            f"video {video.path}: no flash found (largest brightening {rise[i]:.1f} grey levels is "
+            f"not clearly above the frame-to-frame changes, robust sigma {spread:.2f})"
+        )
     return float(video.times[i + 1])
 
 
@@ -300,10 +316,13 @@ def flash_sync(videos_dir: str, camera_names, flash_time: float = 0.0, out_path:
     for name in camera_names:
         p = find_camera_file(videos_dir, name, VIDEO_EXTS, "videos")
         if p is None:
-            raise ClothFitError(f"camera '{name}': no video {name}.<{'|'.join(e[1:] for e in VIDEO_EXTS)}> in {videos_dir}")
+            raise ClothFitError(
+                f"camera '{name}': no video {name}.<{'|'.join(e[1:] for e in VIDEO_EXTS)}> in {videos_dir}"
+            )
         sync[name] = flash_time_of(Video(p)) - float(flash_time)
     if out_path:
         from ..safeio import atomic_json
+
         atomic_json(out_path, sync)
     return sync
 
@@ -313,10 +332,13 @@ def read_plate(plates_dir: str, camera) -> tuple:
     img_path = find_camera_file(plates_dir, camera.name, PLATE_IMAGE_EXTS, "plates")
     vid_path = find_camera_file(plates_dir, camera.name, VIDEO_EXTS, "plates")
     if img_path and vid_path:
-        raise ClothFitError(f"plates folder {plates_dir}: camera '{camera.name}' has both an image and a video plate "
-                            f"({os.path.basename(img_path)}, {os.path.basename(vid_path)}); keep one")
+        raise ClothFitError(
+            f"plates folder {plates_dir}: camera '{camera.name}' has both an image and a video plate "
+            f"({os.path.basename(img_path)}, {os.path.basename(vid_path)}); keep one"
+        )
     if img_path:
         import cv2
+
         img = cv2.imread(img_path, cv2.IMREAD_COLOR)
         if img is None:
             raise ClothFitError(f"plate {img_path}: unreadable image (not an image, corrupt or truncated)")
@@ -329,32 +351,46 @@ def read_plate(plates_dir: str, camera) -> tuple:
     else:
         raise ClothFitError(f"camera '{camera.name}': no plate {camera.name}.<png|jpg|mp4|mov|mkv|avi> in {plates_dir}")
     if img.shape[:2] != (camera.height, camera.width):
-        raise ClothFitError(f"plate {img_path or vid_path}: {img.shape[0]}x{img.shape[1]} (HxW) but camera "
-                            f"'{camera.name}' images {camera.height}x{camera.width}")
+        raise ClothFitError(
+            f"plate {img_path or vid_path}: {img.shape[0]}x{img.shape[1]} (HxW) but camera "
+            f"'{camera.name}' images {camera.height}x{camera.width}"
+        )
     return img, src
 
 
-def camera_frames(videos_dir: str, camera, sync_time: float, frame_times, sync_path: str = "sync file",
-                  progress=None):
+def camera_frames(videos_dir: str, camera, sync_time: float, frame_times, sync_path: str = "sync file", progress=None):
     """The frames of one camera at the capture times, and a report (video, timestamps used)."""
     path = find_camera_file(videos_dir, camera.name, VIDEO_EXTS, "videos")
     if path is None:
-        raise ClothFitError(f"camera '{camera.name}': no video {camera.name}.<{'|'.join(e[1:] for e in VIDEO_EXTS)}> "
-                            f"in {videos_dir}")
+        raise ClothFitError(
+            f"camera '{camera.name}': no video {camera.name}.<{'|'.join(e[1:] for e in VIDEO_EXTS)}> in {videos_dir}"
+        )
     v = Video(path)
     if (v.height, v.width) != (camera.height, camera.width):
-        raise ClothFitError(f"video {path}: frames are {v.height}x{v.width} (HxW) but camera '{camera.name}' images "
-                            f"{camera.height}x{camera.width}")
+        raise ClothFitError(
+            f"video {path}: frames are {v.height}x{v.width} (HxW) but camera '{camera.name}' images "
+            f"{camera.height}x{camera.width}"
+        )
     if not (v.start - TIME_TOL <= sync_time <= v.end):
-        raise ClothFitError(f"{sync_path}: camera '{camera.name}': sync time {sync_time:.4f} s is outside video {path} "
-                            f"({v.start:.4f} .. {v.end:.4f} s)")
+        raise ClothFitError(
+            f"{sync_path}: camera '{camera.name}': sync time {sync_time:.4f} s is outside video {path} "
+            f"({v.start:.4f} .. {v.end:.4f} s)"
+        )
     vts = [sync_time + float(t) for t in frame_times]
     for t, vt in zip(frame_times, vts):
         if vt >= v.end:
-            raise ClothFitError(f"video {path}: capture time {float(t):g} s is video time {vt:.4f} s, past the video's "
-                                f"end ({v.end:.4f} s)")
+            raise ClothFitError(
+                f"video {path}: capture time {float(t):g} s is video time {vt:.4f} s, past the video's "
+                f"end ({v.end:.4f} s)"
+            )
     frames, used = v.frames_at(vts, progress)
-    report = {"video": path, "sync": sync_time, "video_times": vts, "frame_timestamps": used,
-              "lag_s": [vt - u for vt, u in zip(vts, used)], "frames_in_video": int(v.pts.size),
-              "mean_fps": float((v.pts.size - 1) / (v.times[-1] - v.times[0])) if v.pts.size > 1 else None}
+    report = {
+        "video": path,
+        "sync": sync_time,
+        "video_times": vts,
+        "frame_timestamps": used,
+        "lag_s": [vt - u for vt, u in zip(vts, used)],
+        "frames_in_video": int(v.pts.size),
+        "mean_fps": float((v.pts.size - 1) / (v.times[-1] - v.times[0])) if v.pts.size > 1 else None,
+    }
     return frames, report

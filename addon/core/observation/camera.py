@@ -13,6 +13,7 @@ Convention (used by every file this project reads or writes):
 
 World units are metres; the world is Z-up (as in Blender).
 """
+
 from __future__ import annotations
 
 import math
@@ -27,18 +28,26 @@ from numpy.typing import ArrayLike
 from ..errors import ClothFitError
 from ..jsonio import read_json
 
-
-MAX_IMAGE_SIDE = 16384          # pixels per side of a camera image
+MAX_IMAGE_SIDE = 16384  # pixels per side of a camera image
 
 
 def check_camera_name(name: Any, where: str = "camera") -> str:
     """A camera name becomes a folder name (silhouettes, debug images): refuse anything that is not
     one plain path component."""
-    if (not isinstance(name, str) or not name or name in (".", "..") or name != name.strip()
-            or any(ch in name for ch in '/\\:*?"<>|') or any(ord(ch) < 32 for ch in name) or len(name) > 200):
-        raise ClothFitError(f"{where}: camera name {name!r} cannot be used in a file name "
-                            f"(no empty names, '.', '..', '/', '\\', ':', '*', '?', '\"', '<', '>', '|', control "
-                            f"characters or edge spaces)")
+    if (
+        not isinstance(name, str)
+        or not name
+        or name in (".", "..")
+        or name != name.strip()
+        or any(ch in name for ch in '/\\:*?"<>|')
+        or any(ord(ch) < 32 for ch in name)
+        or len(name) > 200
+    ):
+        raise ClothFitError(
+            f"{where}: camera name {name!r} cannot be used in a file name "
+            f"(no empty names, '.', '..', '/', '\\', ':', '*', '?', '\"', '<', '>', '|', control "
+            f"characters or edge spaces)"
+        )
     return name
 
 
@@ -51,8 +60,9 @@ def check_image_size(width: Any, height: Any, where: str = "camera") -> tuple[in
         except (TypeError, ValueError, OverflowError):
             ok = False
         if not ok or not 0 < int(float(v)) <= MAX_IMAGE_SIDE:
-            raise ClothFitError(f"{where}: image {nm} {v!r} must be positive: a whole number of pixels in "
-                                f"1..{MAX_IMAGE_SIDE}")
+            raise ClothFitError(
+                f"{where}: image {nm} {v!r} must be positive: a whole number of pixels in 1..{MAX_IMAGE_SIDE}"
+            )
         out.append(int(float(v)))
     return out[0], out[1]
 
@@ -86,14 +96,23 @@ class Camera:
             raise ClothFitError(f"{where}: image size {self.width}x{self.height} must be positive")
         if self.K[0, 0] <= 0 or self.K[1, 1] <= 0:
             raise ClothFitError(f"{where}: focal lengths fx={self.K[0, 0]}, fy={self.K[1, 1]} must be positive")
-        if abs(self.K[2, 2] - 1.0) > 1e-9 or abs(self.K[1, 0]) > 1e-9 or abs(self.K[2, 0]) > 1e-9 or abs(self.K[2, 1]) > 1e-9:
+        if (
+            abs(self.K[2, 2] - 1.0) > 1e-9
+            or abs(self.K[1, 0]) > 1e-9
+            or abs(self.K[2, 0]) > 1e-9
+            or abs(self.K[2, 1]) > 1e-9
+        ):
             raise ClothFitError(f"{where}: K must be upper triangular with K[2,2] = 1, got {self.K.tolist()}")
-        with np.errstate(over="ignore", invalid="ignore"):      # absurd entries: caught just below
+        with np.errstate(over="ignore", invalid="ignore"):  # absurd entries: caught just below
             err = np.abs(self.R @ self.R.T - np.eye(3)).max()
         if not err <= 1e-6 or np.linalg.det(self.R) < 0:
-            raise ClothFitError(f"{where}: R is not a rotation (|R R^T - I| = {err:.2e}, det = {np.linalg.det(self.R):.3f})")
+            raise ClothFitError(
+                f"{where}: R is not a rotation (|R R^T - I| = {err:.2e}, det = {np.linalg.det(self.R):.3f})"
+            )
         if self.dist.size not in (0, 4, 5, 8, 12, 14):
-            raise ClothFitError(f"{where}: distortion must have 0, 4, 5, 8, 12 or 14 coefficients, got {self.dist.size}")
+            raise ClothFitError(
+                f"{where}: distortion must have 0, 4, 5, 8, 12 or 14 coefficients, got {self.dist.size}"
+            )
 
     # ------------------------------------------------------------- geometry
     @property
@@ -136,7 +155,7 @@ class Camera:
         out[bad] = np.nan
         return out
 
-    def resized(self, height: int, width: int) -> "Camera":
+    def resized(self, height: int, width: int) -> Camera:
         """The same camera imaging at another resolution (pixel-centre convention kept)."""
         sx = width / self.width
         sy = height / self.height
@@ -163,7 +182,7 @@ class Camera:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict, source: str = "camera") -> "Camera":
+    def from_dict(cls, d: dict, source: str = "camera") -> Camera:
         if not isinstance(d, dict):
             raise ClothFitError(f"{source}: camera entry must be an object, got {type(d).__name__}")
         missing = [k for k in ("K", "R", "t", "width", "height") if k not in d]
@@ -178,8 +197,8 @@ class Camera:
             raise ClothFitError(f"{source}: camera '{d.get('name', '?')}' has non-numeric data ({e})") from None
         if K.shape != (3, 3) or R.shape != (3, 3) or t.size != 3:
             raise ClothFitError(
-                f"{source}: camera '{d.get('name', '?')}' needs K 3x3, R 3x3, t 3; got "
-                f"{K.shape}, {R.shape}, {t.shape}")
+                f"{source}: camera '{d.get('name', '?')}' needs K 3x3, R 3x3, t 3; got {K.shape}, {R.shape}, {t.shape}"
+            )
         name = d.get("name", "cam")
         check_camera_name(name, source)
         w, h = check_image_size(d["width"], d["height"], f"{source}: camera '{name}'")
@@ -196,6 +215,7 @@ def _distort(x, y, dist):
     d[:n] = dist[:n]
     if dist.size > 5 and np.any(dist[5:] != 0):
         import cv2  # rational / thin prism / tilted models: let OpenCV do it
+
         pts = np.stack([x, y, np.ones_like(x)], -1).reshape(-1, 1, 3)
         good = np.all(np.isfinite(pts), axis=-1).reshape(-1)
         out = np.full((pts.shape[0], 2), np.nan)
@@ -214,6 +234,7 @@ def _distort(x, y, dist):
 
 # ---------------------------------------------------------------- construction
 
+
 def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
     """R, t of an OpenCV camera at ``eye`` looking at ``target`` with world ``up`` up in the image."""
     eye = np.asarray(eye, dtype=np.float64)
@@ -231,17 +252,25 @@ def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) 
     return R, t
 
 
-def intrinsics(fx: float, width: float, height: float, fy: float | None = None, cx: float | None = None,
-               cy: float | None = None) -> np.ndarray:
+def intrinsics(
+    fx: float, width: float, height: float, fy: float | None = None, cx: float | None = None, cy: float | None = None
+) -> np.ndarray:
     fy = fx if fy is None else fy
     cx = (width - 1) / 2.0 if cx is None else cx
     cy = (height - 1) / 2.0 if cy is None else cy
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
-def ring_rig(n_per_ring: Sequence[int] = (8, 8, 2), elevations_deg: Sequence[float] = (30.0, -10.0, 70.0),
-             distance: float = 0.6, target: ArrayLike = (0.0, 0.0, 0.0), width: int = 640, height: int = 480,
-             fx: float = 900.0, azimuth_offsets_deg: Sequence[float] | None = None) -> list[Camera]:
+def ring_rig(
+    n_per_ring: Sequence[int] = (8, 8, 2),
+    elevations_deg: Sequence[float] = (30.0, -10.0, 70.0),
+    distance: float = 0.6,
+    target: ArrayLike = (0.0, 0.0, 0.0),
+    width: int = 640,
+    height: int = 480,
+    fx: float = 900.0,
+    azimuth_offsets_deg: Sequence[float] | None = None,
+) -> list[Camera]:
     """A parametric rig: rings of cameras at given elevations, all looking at ``target``."""
     cams = []
     target = np.asarray(target, dtype=np.float64)
@@ -261,12 +290,16 @@ def ring_rig(n_per_ring: Sequence[int] = (8, 8, 2), elevations_deg: Sequence[flo
 
 # -------------------------------------------------------------------- rig io
 
+
 def save_cameras(path: str, cameras: Iterable[Camera], extra: dict | None = None) -> None:
-    d = {"convention": "opencv: x_cam = R X + t, +Z forward, +Y down, pixel centres at integers",
-         "cameras": [c.to_dict() for c in cameras]}
+    d = {
+        "convention": "opencv: x_cam = R X + t, +Z forward, +Y down, pixel centres at integers",
+        "cameras": [c.to_dict() for c in cameras],
+    }
     if extra:
         d.update(extra)
     from ..safeio import atomic_json
+
     atomic_json(path, d)
 
 
@@ -286,8 +319,11 @@ def load_cameras(path: str) -> list[Camera]:
 
 # the rig presets: rigs/ beside addon/ (a checkout, the extension), or addon/rigs/ in a wheel (pyproject.toml)
 _PACKAGED_RIGS = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "rigs"))
-RIGS_DIR = _PACKAGED_RIGS if os.path.isdir(_PACKAGED_RIGS) else \
-    os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "rigs"))
+RIGS_DIR = (
+    _PACKAGED_RIGS
+    if os.path.isdir(_PACKAGED_RIGS)
+    else os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "rigs"))
+)
 
 
 def rig_path(name_or_path: str) -> str:
@@ -305,6 +341,7 @@ def load_rig(name_or_path: str) -> list[Camera]:
 
 
 # ------------------------------------------------------- training-camera rule
+
 
 def spread_order(cameras: Sequence[Camera], first: int = 0) -> list[int]:
     """Order camera indices so that every prefix is spread around the rig.

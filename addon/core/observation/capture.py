@@ -15,6 +15,7 @@ written by ``silhouette_files.py``, the format's names, file-name pattern and va
 ``capture_format.py``.
 Every problem is a ``ClothFitError`` whose message names the file or the value at fault.
 """
+
 from __future__ import annotations
 
 import io
@@ -25,18 +26,44 @@ import string
 import numpy as np
 
 from ..errors import ClothFitError
-from ..safeio import atomic_write
 from ..physics.scenario import Scenario, Uncertainty
+from ..safeio import atomic_write
 from .camera import Camera, load_cameras, save_cameras
-from .capture_format import (CAMERAS_JSON, CAPTURE_JSON, DEFAULT_IGNORE_PATTERN, DEFAULT_PATTERN, FORMAT,
-                             FRAME_TIME_TOL, MASK_KEYS, REQUIRED_KEYS, SHAPES_NPZ, VERSION, _Time, _check_camera_name,
-                             _check_frame_times, _check_model, _field_regex, _names_str, _times_str, check_cloth_mass,
-                             check_pattern, check_shapes)
-from .silhouette_files import (_mask_from_array, _where, _write_bytes_atomic, check_mask_spec, read_label_silhouette,
-                               read_matte, read_silhouette, save_silhouette)
-
+from .capture_format import (
+    CAMERAS_JSON,
+    CAPTURE_JSON,
+    DEFAULT_IGNORE_PATTERN,
+    DEFAULT_PATTERN,
+    FORMAT,
+    FRAME_TIME_TOL,
+    MASK_KEYS,
+    REQUIRED_KEYS,
+    SHAPES_NPZ,
+    VERSION,
+    _check_camera_name,
+    _check_frame_times,
+    _check_model,
+    _field_regex,
+    _names_str,
+    _Time,
+    _times_str,
+    check_cloth_mass,
+    check_pattern,
+    check_shapes,
+)
+from .silhouette_files import (
+    _mask_from_array,
+    _where,
+    _write_bytes_atomic,
+    check_mask_spec,
+    read_label_silhouette,
+    read_matte,
+    read_silhouette,
+    save_silhouette,
+)
 
 # =========================================================================== capture
+
 
 class Capture:
     """A capture in memory: cameras, scenario, frame times and where the silhouettes are.
@@ -45,9 +72,22 @@ class Capture:
     ``frame_times`` of this object; a ``subset`` keeps pointing at the right files.
     """
 
-    def __init__(self, root, cameras, scenario: Scenario, pattern: str = DEFAULT_PATTERN, shapes=None,
-                 cloth_mass=None, meta=None, json_path=None, _file_frames=None, _all_camera_names=None, model=None,
-                 masks=None, uncertain=None):
+    def __init__(
+        self,
+        root,
+        cameras,
+        scenario: Scenario,
+        pattern: str = DEFAULT_PATTERN,
+        shapes=None,
+        cloth_mass=None,
+        meta=None,
+        json_path=None,
+        _file_frames=None,
+        _all_camera_names=None,
+        model=None,
+        masks=None,
+        uncertain=None,
+    ):
         self.root = os.path.abspath(str(root))
         self.json_path = json_path or os.path.join(self.root, CAPTURE_JSON)
         where = f"capture {self.json_path}"
@@ -66,11 +106,13 @@ class Capture:
         self.scenario = scenario
         self.frame_times = np.asarray(scenario.frame_times, dtype=np.float64).copy()
         self.pattern = check_pattern(pattern, f"{where}: silhouettes pattern")
-        self._file_frames = (np.arange(self.frame_times.size) if _file_frames is None
-                             else np.asarray(_file_frames, dtype=np.int64))
+        self._file_frames = (
+            np.arange(self.frame_times.size) if _file_frames is None else np.asarray(_file_frames, dtype=np.int64)
+        )
         self._all_camera_names = list(_all_camera_names) if _all_camera_names is not None else names
-        self.shapes = None if shapes is None else check_shapes(shapes, self.frame_times.size,
-                                                               scenario.grid.n_vertices, where)
+        self.shapes = (
+            None if shapes is None else check_shapes(shapes, self.frame_times.size, scenario.grid.n_vertices, where)
+        )
         self.cloth_mass = check_cloth_mass(cloth_mass, where)
         if meta is None:
             meta = {}
@@ -81,7 +123,7 @@ class Capture:
         self.masks = check_mask_spec(masks, where)
         if uncertain is not None and not isinstance(uncertain, Uncertainty):
             uncertain = Uncertainty.parse(uncertain, len(scenario.handles), f"{where}: uncertain")
-        self.uncertain = uncertain        # what the manipulation could not measure (None: all exact)
+        self.uncertain = uncertain  # what the manipulation could not measure (None: all exact)
         self._check_unique_paths()
 
     # ------------------------------------------------------------------ basics
@@ -103,15 +145,18 @@ class Capture:
         return None if self.cloth_mass is None else self.cloth_mass / self.scenario.grid.n_vertices
 
     def __repr__(self):
-        return (f"Capture({self.root!r}, {self.n_cameras} cameras, {self.n_frames} frames, "
-                f"shapes={'yes' if self.shapes is not None else 'no'})")
+        return (
+            f"Capture({self.root!r}, {self.n_cameras} cameras, {self.n_frames} frames, "
+            f"shapes={'yes' if self.shapes is not None else 'no'})"
+        )
 
     def camera_index(self, name: str) -> int:
         for i, c in enumerate(self.cameras):
             if c.name == name:
                 return i
-        raise ClothFitError(f"capture {self.json_path}: no camera named {name!r} "
-                            f"(cameras: {', '.join(self.camera_names)})")
+        raise ClothFitError(
+            f"capture {self.json_path}: no camera named {name!r} (cameras: {', '.join(self.camera_names)})"
+        )
 
     def frame_index(self, time: float, tol: float = 1e-6) -> int:
         try:
@@ -122,8 +167,10 @@ class Capture:
         i = int(np.argmin(d))
         if not (d[i] <= tol):
             avail = ", ".join(f"{x:g}" for x in self.frame_times)
-            raise ClothFitError(f"capture {self.json_path}: time {t:g} s is not a frame of the capture "
-                                f"(tolerance {tol:g}); available times: {avail}")
+            raise ClothFitError(
+                f"capture {self.json_path}: time {t:g} s is not a frame of the capture "
+                f"(tolerance {tol:g}); available times: {avail}"
+            )
         return i
 
     def frame_indices(self, times, tol: float = 1e-6):
@@ -153,8 +200,9 @@ class Capture:
         if "ignore" not in self.masks:
             return None
         ci, fi = self._check_cam(cam_index), self._check_frame(frame_index)
-        rel = self.masks["ignore"].format(camera=self.cameras[ci].name, frame=int(self._file_frames[fi]),
-                                          time=_Time(self.frame_times[fi]))
+        rel = self.masks["ignore"].format(
+            camera=self.cameras[ci].name, frame=int(self._file_frames[fi]), time=_Time(self.frame_times[fi])
+        )
         return os.path.join(self.root, *rel.replace("\\", "/").split("/"))
 
     @property
@@ -162,8 +210,7 @@ class Capture:
         """True when the capture marks pixels of unknown truth (``ignore_ids`` or an ``ignore`` pattern)."""
         return "ignore_ids" in self.masks or "ignore" in self.masks
 
-    def load_observation(self, cam_index: int, frame_index: int, allow_empty: bool = False,
-                         binarize_threshold=None):
+    def load_observation(self, cam_index: int, frame_index: int, allow_empty: bool = False, binarize_threshold=None):
         """``(mask, ignore)`` of a camera and frame: the cloth silhouette (bool (H, W)) and the pixels
         whose truth is unknown (bool (H, W), or None when the capture marks none). Cloth pixels under
         an ignore mask are not cloth (they count as unknown); the silhouette must keep some pixel
@@ -175,32 +222,42 @@ class Capture:
         path = self.silhouette_path(ci, fi)
         ignore = None
         if "silhouette_ids" in self.masks:
-            mask, ignore = read_label_silhouette(path, self.masks["silhouette_ids"], self.masks.get("ignore_ids", ()),
-                                                 shape, allow_empty=allow_empty, source=src)
+            mask, ignore = read_label_silhouette(
+                path,
+                self.masks["silhouette_ids"],
+                self.masks.get("ignore_ids", ()),
+                shape,
+                allow_empty=allow_empty,
+                source=src,
+            )
         elif "matte_threshold" in self.masks:
             mask = read_matte(path, self.masks["matte_threshold"], shape, allow_empty=allow_empty, source=src)
         else:
-            mask = read_silhouette(path, shape, binarize_threshold=binarize_threshold, allow_empty=allow_empty,
-                                   source=src)
+            mask = read_silhouette(
+                path, shape, binarize_threshold=binarize_threshold, allow_empty=allow_empty, source=src
+            )
         if "ignore" in self.masks:
-            extra = read_silhouette(self.ignore_path(ci, fi), shape, allow_empty=True,
-                                    source=f"ignore mask of {src}")
+            extra = read_silhouette(self.ignore_path(ci, fi), shape, allow_empty=True, source=f"ignore mask of {src}")
             ignore = extra if ignore is None else (ignore | extra)
         if ignore is not None:
             mask = mask & ~ignore
             if not allow_empty and not mask.any():
-                raise ClothFitError(f"{_where(path, src)}: every cloth pixel is ignored (hidden by the ignore mask "
-                                    f"or ignore labels): nothing left to compare")
+                raise ClothFitError(
+                    f"{_where(path, src)}: every cloth pixel is ignored (hidden by the ignore mask "
+                    f"or ignore labels): nothing left to compare"
+                )
         return mask, ignore
 
-    def load_silhouette(self, cam_index: int, frame_index: int, allow_empty: bool = False,
-                        binarize_threshold=None) -> np.ndarray:
+    def load_silhouette(
+        self, cam_index: int, frame_index: int, allow_empty: bool = False, binarize_threshold=None
+    ) -> np.ndarray:
         """bool (H, W) silhouette of camera ``cam_index`` at frame ``frame_index`` (validated); pixels
         of unknown truth (``load_observation``) are not part of it."""
         return self.load_observation(cam_index, frame_index, allow_empty, binarize_threshold)[0]
 
-    def load_silhouettes(self, cam_indices=None, frame_indices=None, allow_empty: bool = False,
-                         binarize_threshold=None):
+    def load_silhouettes(
+        self, cam_indices=None, frame_indices=None, allow_empty: bool = False, binarize_threshold=None
+    ):
         """``[[mask for frame in frame_indices] for cam in cam_indices]`` (None = all)."""
         cams = range(self.n_cameras) if cam_indices is None else cam_indices
         frames = range(self.n_frames) if frame_indices is None else list(frame_indices)
@@ -215,7 +272,9 @@ class Capture:
 
     def _check_unique_paths(self):
         seen = {}
-        patterns = [("silhouettes", self.pattern)] + ([("ignore", self.masks["ignore"])] if "ignore" in self.masks else [])
+        patterns = [("silhouettes", self.pattern)] + (
+            [("ignore", self.masks["ignore"])] if "ignore" in self.masks else []
+        )
         for kind, pat in patterns:
             for ci, c in enumerate(self.cameras):
                 for fi in range(self.n_frames):
@@ -223,11 +282,12 @@ class Capture:
                     if p in seen:
                         raise ClothFitError(
                             f"capture {self.json_path}: {kind} pattern {pat!r} gives the same file {p} "
-                            f"to {seen[p]} and to camera '{c.name}' frame {fi}{f' ({kind})' if kind != 'silhouettes' else ''}")
+                            f"to {seen[p]} and to camera '{c.name}' frame {fi}{f' ({kind})' if kind != 'silhouettes' else ''}"
+                        )
                     seen[p] = f"camera '{c.name}' frame {fi}" + (f" ({kind})" if kind != "silhouettes" else "")
 
     # ------------------------------------------------------------------ subset
-    def subset(self, cam_indices=None, frame_indices=None) -> "Capture":
+    def subset(self, cam_indices=None, frame_indices=None) -> Capture:
         """The same capture restricted to some cameras and frames (files are not touched)."""
         cams = list(range(self.n_cameras)) if cam_indices is None else [self._check_cam(c) for c in cam_indices]
         frames = list(range(self.n_frames)) if frame_indices is None else [self._check_frame(f) for f in frame_indices]
@@ -239,12 +299,24 @@ class Capture:
             raise ClothFitError(f"capture {self.json_path}: subset camera indices repeat: {cams}")
         scen = self.scenario.with_frames(self.frame_times[frames])
         shapes = None if self.shapes is None else self.shapes[frames]
-        return Capture(self.root, [self.cameras[c] for c in cams], scen, self.pattern, shapes, self.cloth_mass,
-                       dict(self.meta), self.json_path, self._file_frames[frames], self._all_camera_names, model=self.model,
-                       masks=self.masks, uncertain=self.uncertain)
+        return Capture(
+            self.root,
+            [self.cameras[c] for c in cams],
+            scen,
+            self.pattern,
+            shapes,
+            self.cloth_mass,
+            dict(self.meta),
+            self.json_path,
+            self._file_frames[frames],
+            self._all_camera_names,
+            model=self.model,
+            masks=self.masks,
+            uncertain=self.uncertain,
+        )
 
     # ---------------------------------------------------------------- validate
-    def validate(self, full: bool = True, allow_empty: bool = False, binarize_threshold=None) -> "Capture":
+    def validate(self, full: bool = True, allow_empty: bool = False, binarize_threshold=None) -> Capture:
         """Check the capture against its files; raise one ClothFitError describing the problems.
 
         Always: the silhouette directory layout matches the cameras ("camera count mismatch"
@@ -258,20 +330,28 @@ class Capture:
         # ---- silhouette tree vs cameras
         found = self._scan_camera_names()
         unknown = [] if found is None else sorted(set(found) - set(self._all_camera_names))
-        without = [c.name for ci, c in enumerate(self.cameras)
-                   if not any(os.path.isfile(self.silhouette_path(ci, fi)) for fi in range(self.n_frames))]
+        without = [
+            c.name
+            for ci, c in enumerate(self.cameras)
+            if not any(os.path.isfile(self.silhouette_path(ci, fi)) for fi in range(self.n_frames))
+        ]
         if unknown or without:
             all_names = self._all_camera_names
-            msg = (f"{where}: camera count mismatch: cameras.json lists {len(all_names)} cameras "
-                   f"({_names_str(all_names)})")
+            msg = (
+                f"{where}: camera count mismatch: cameras.json lists {len(all_names)} cameras ({_names_str(all_names)})"
+            )
             if found is not None:
-                msg += (f" but the silhouettes (pattern {self.pattern!r}) are for {len(set(found))} cameras "
-                        f"({_names_str(sorted(set(found)))})")
+                msg += (
+                    f" but the silhouettes (pattern {self.pattern!r}) are for {len(set(found))} cameras "
+                    f"({_names_str(sorted(set(found)))})"
+                )
             if unknown:
                 msg += f"; silhouettes of cameras not in cameras.json: {', '.join(unknown)}"
             if without:
-                msg += (f"; cameras without any silhouette: {', '.join(without)} (expected e.g. "
-                        f"{self.silhouette_path(names.index(without[0]), 0)})")
+                msg += (
+                    f"; cameras without any silhouette: {', '.join(without)} (expected e.g. "
+                    f"{self.silhouette_path(names.index(without[0]), 0)})"
+                )
             raise ClothFitError(msg)
         # ---- shapes
         if self.shapes is not None:
@@ -288,8 +368,10 @@ class Capture:
             if problems:
                 head = "\n  ".join(problems[:10])
                 more = f"\n  ... and {len(problems) - 10} more" if len(problems) > 10 else ""
-                raise ClothFitError(f"{where}: {len(problems)} bad silhouette file(s) of "
-                                    f"{self.n_cameras * self.n_frames}:\n  {head}{more}")
+                raise ClothFitError(
+                    f"{where}: {len(problems)} bad silhouette file(s) of "
+                    f"{self.n_cameras * self.n_frames}:\n  {head}{more}"
+                )
         return self
 
     def _scan_camera_names(self):
@@ -327,9 +409,14 @@ class Capture:
 
     # ------------------------------------------------------------------ io
     def to_dict(self) -> dict:
-        d = {"format": FORMAT, "version": VERSION, "cameras": CAMERAS_JSON,
-             "scenario": self.scenario.to_dict(), "frame_times": self.frame_times.tolist(),
-             "silhouettes": self.pattern}
+        d = {
+            "format": FORMAT,
+            "version": VERSION,
+            "cameras": CAMERAS_JSON,
+            "scenario": self.scenario.to_dict(),
+            "frame_times": self.frame_times.tolist(),
+            "silhouettes": self.pattern,
+        }
         if self.shapes is not None:
             d["shapes"] = SHAPES_NPZ
         if self.cloth_mass is not None:
@@ -344,6 +431,7 @@ class Capture:
 
 
 # ========================================================================= loading
+
 
 def _resolve(root: str, rel, where: str, key: str) -> str:
     if not isinstance(rel, str) or not rel.strip():
@@ -362,11 +450,12 @@ def load_capture(path, validate: bool = False) -> Capture:
         json_path = os.path.join(path, CAPTURE_JSON)
         if not os.path.isfile(json_path):
             if os.path.isfile(os.path.join(path, CAMERAS_JSON)):  # a writer started but did not finish
-                raise ClothFitError(f"capture directory {path}: {CAPTURE_JSON} missing: the capture is incomplete "
-                                    f"({CAMERAS_JSON} was written but the writer never finalised it, e.g. a "
-                                    f"render or extraction stopped midway); write the capture again")
-            raise ClothFitError(f"capture directory {path} has no {CAPTURE_JSON} ({CAPTURE_JSON} missing: "
-                                f"{json_path})")
+                raise ClothFitError(
+                    f"capture directory {path}: {CAPTURE_JSON} missing: the capture is incomplete "
+                    f"({CAMERAS_JSON} was written but the writer never finalised it, e.g. a "
+                    f"render or extraction stopped midway); write the capture again"
+                )
+            raise ClothFitError(f"capture directory {path} has no {CAPTURE_JSON} ({CAPTURE_JSON} missing: {json_path})")
     elif os.path.isfile(path):
         json_path = path
     else:
@@ -397,8 +486,9 @@ def load_capture(path, validate: bool = False) -> Capture:
     if isinstance(ver, bool) or not isinstance(ver, int):
         raise ClothFitError(f"{where}: 'version' must be an integer, got {ver!r}")
     if ver != VERSION:
-        raise ClothFitError(f"{where}: capture format version {ver} is not supported (this reader knows version "
-                            f"{VERSION})")
+        raise ClothFitError(
+            f"{where}: capture format version {ver} is not supported (this reader knows version {VERSION})"
+        )
 
     # ---- scenario and frame times
     if not isinstance(d["scenario"], dict):
@@ -413,8 +503,9 @@ def load_capture(path, validate: bool = False) -> Capture:
     top = _check_frame_times(d["frame_times"], where, "'frame_times'")
     st = scenario.frame_times
     if top.shape != st.shape or np.max(np.abs(top - st)) > FRAME_TIME_TOL:
-        raise ClothFitError(f"{where}: frame_times mismatch between the top level {_times_str(top)} and "
-                            f"the scenario {_times_str(st)}")
+        raise ClothFitError(
+            f"{where}: frame_times mismatch between the top level {_times_str(top)} and the scenario {_times_str(st)}"
+        )
 
     pattern = check_pattern(d["silhouettes"], f"{where}: 'silhouettes' pattern")
 
@@ -437,8 +528,19 @@ def load_capture(path, validate: bool = False) -> Capture:
         raise ClothFitError(f"{where}: 'meta' must be an object, got {type(meta).__name__}")
 
     masks = check_mask_spec({k: d.get(k) for k in MASK_KEYS}, where)
-    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, json_path=json_path,
-                  model=d.get("model"), masks=masks, uncertain=d.get("uncertain"))
+    cap = Capture(
+        root,
+        cameras,
+        scenario,
+        pattern,
+        shapes,
+        cloth_mass,
+        meta,
+        json_path=json_path,
+        model=d.get("model"),
+        masks=masks,
+        uncertain=d.get("uncertain"),
+    )
     if validate:
         cap.validate(full=True)
     return cap
@@ -472,6 +574,7 @@ def read_shapes(path: str, frame_times=None, n_vertices=None) -> np.ndarray:
 
 # ========================================================================= writing
 
+
 def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
@@ -480,9 +583,22 @@ def _json_default(o):
     raise TypeError(f"{type(o).__name__} is not JSON serialisable")
 
 
-def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, cloth_mass=None, meta=None,
-                  pattern: str = DEFAULT_PATTERN, allow_empty: bool = False, finalize: bool = True, model=None,
-                  ignore=None, ignore_pattern: str = DEFAULT_IGNORE_PATTERN, uncertain=None):
+def write_capture(
+    root,
+    cameras,
+    scenario: Scenario,
+    silhouettes,
+    shapes=None,
+    cloth_mass=None,
+    meta=None,
+    pattern: str = DEFAULT_PATTERN,
+    allow_empty: bool = False,
+    finalize: bool = True,
+    model=None,
+    ignore=None,
+    ignore_pattern: str = DEFAULT_IGNORE_PATTERN,
+    uncertain=None,
+):
     """Write a capture directory and return it as a ``Capture`` (or a ``PendingCapture``).
 
     ``silhouettes[c][f]`` (bool / 0-1 / 0-255 arrays of camera c's height x width) for every
@@ -507,17 +623,19 @@ def write_capture(root, cameras, scenario: Scenario, silhouettes, shapes=None, c
     """
     root = os.path.abspath(os.fspath(root))
     masks = {"ignore": ignore_pattern} if ignore is not None else None
-    cap = Capture(root, cameras, scenario, pattern, shapes, cloth_mass, meta, model=model, masks=masks,
-                  uncertain=uncertain)
+    cap = Capture(
+        root, cameras, scenario, pattern, shapes, cloth_mass, meta, model=model, masks=masks, uncertain=uncertain
+    )
     where = f"capture {cap.json_path}"
     if os.path.splitext(cap.pattern)[1].lower() != ".png":
-        raise ClothFitError(f"{where}: silhouettes pattern {cap.pattern!r} must end with .png "
-                            f"(silhouettes are written as lossless PNG)")
+        raise ClothFitError(
+            f"{where}: silhouettes pattern {cap.pattern!r} must end with .png (silhouettes are written as lossless PNG)"
+        )
     try:
         text = json.dumps(cap.to_dict(), indent=1, default=_json_default, allow_nan=False)
     except (TypeError, ValueError) as e:
         raise ClothFitError(f"{where}: meta is not JSON serialisable ({e})") from None
-    cap.meta = json.loads(text)["meta"]   # what a reader will get back
+    cap.meta = json.loads(text)["meta"]  # what a reader will get back
 
     ign_arrays = ignore if ignore is not None and ignore is not True else None
     if silhouettes is not None:
@@ -603,8 +721,9 @@ class PendingCapture:
                 n = self.capture.n_cameras * self.capture.n_frames
                 head = "\n  ".join(missing[:5])
                 more = f"\n  ... and {len(missing) - 5} more" if len(missing) > 5 else ""
-                raise ClothFitError(f"{where}: cannot finalise: {len(missing)} of {n} silhouette files are "
-                                    f"missing:\n  {head}{more}")
+                raise ClothFitError(
+                    f"{where}: cannot finalise: {len(missing)} of {n} silhouette files are missing:\n  {head}{more}"
+                )
         try:
             _write_bytes_atomic(self.json_path, self._text.encode("utf-8"))
         except OSError as e:
@@ -619,8 +738,10 @@ class PendingCapture:
 def finalize_capture(pending: PendingCapture, check_files: bool = True) -> Capture:
     """Second step of ``write_capture(..., finalize=False)``: write capture.json last."""
     if not isinstance(pending, PendingCapture):
-        raise ClothFitError(f"finalize_capture needs the PendingCapture returned by write_capture(..., "
-                            f"finalize=False), got {type(pending).__name__}")
+        raise ClothFitError(
+            f"finalize_capture needs the PendingCapture returned by write_capture(..., "
+            f"finalize=False), got {type(pending).__name__}"
+        )
     return pending.finalize(check_files)
 
 
@@ -628,15 +749,18 @@ def _check_silhouettes(cap: Capture, silhouettes, allow_empty: bool, where: str,
     try:
         n = len(silhouettes)
     except TypeError:
-        raise ClothFitError(f"{where}: silhouettes must be indexable [camera][frame], "
-                            f"got {type(silhouettes).__name__}") from None
+        raise ClothFitError(
+            f"{where}: silhouettes must be indexable [camera][frame], got {type(silhouettes).__name__}"
+        ) from None
     if n != cap.n_cameras:
         raise ClothFitError(f"{where}: silhouettes for {n} cameras but {cap.n_cameras} cameras given")
     for ci, cam in enumerate(cap.cameras):
         row = silhouettes[ci]
         if len(row) != cap.n_frames:
-            raise ClothFitError(f"{where}: camera '{cam.name}' has {len(row)} silhouettes but the scenario has "
-                                f"{cap.n_frames} frame times")
+            raise ClothFitError(
+                f"{where}: camera '{cam.name}' has {len(row)} silhouettes but the scenario has "
+                f"{cap.n_frames} frame times"
+            )
         for fi in range(cap.n_frames):
             w = f"{where}: silhouette of camera '{cam.name}' frame {fi} (t={cap.frame_times[fi]:g})"
             m = _mask_from_array(row[fi], w)
@@ -645,7 +769,11 @@ def _check_silhouettes(cap: Capture, silhouettes, allow_empty: bool, where: str,
             if ignore is not None and ignore[ci][fi] is not None:
                 g = _mask_from_array(ignore[ci][fi], w + " ignore mask")
                 if g.shape != m.shape:
-                    raise ClothFitError(f"{w}: ignore mask shape {g.shape} but the camera is {cam.height} x {cam.width}")
+                    raise ClothFitError(
+                        f"{w}: ignore mask shape {g.shape} but the camera is {cam.height} x {cam.width}"
+                    )
                 m = m & ~g
             if not allow_empty and not m.any():
-                raise ClothFitError(f"{w}: empty silhouette (no object pixel{' outside the ignore mask' if ignore else ''})")
+                raise ClothFitError(
+                    f"{w}: empty silhouette (no object pixel{' outside the ignore mask' if ignore else ''})"
+                )

@@ -3,6 +3,7 @@
 ``{frame}``, ``{time}`` fields) and the checks of the values ``capture.json`` holds (model, shapes,
 cloth mass, frame times).
 """
+
 from __future__ import annotations
 
 import math
@@ -15,7 +16,6 @@ import numpy as np
 from ..errors import ClothFitError
 from .camera import check_camera_name
 
-
 FORMAT = "silhouette-cloth-fit/capture"
 VERSION = 1
 CAPTURE_JSON = "capture.json"
@@ -23,15 +23,16 @@ CAMERAS_JSON = "cameras.json"
 SHAPES_NPZ = "shapes.npz"
 DEFAULT_PATTERN = "sil/{camera}/{frame:03d}.png"
 PATTERN_FIELDS = ("camera", "frame", "time")
-TIME_FORMAT = ".3f"          # how a bare {time} is formatted: 0.05 -> "0.050"
+TIME_FORMAT = ".3f"  # how a bare {time} is formatted: 0.05 -> "0.050"
 REQUIRED_KEYS = ("format", "version", "cameras", "scenario", "frame_times", "silhouettes")
-MAX_FIELD_WIDTH = 32        # largest width / precision of a pattern field ({frame:03d})
-FRAME_TIME_TOL = 1e-9        # top-level vs scenario vs shapes.npz frame times
+MAX_FIELD_WIDTH = 32  # largest width / precision of a pattern field ({frame:03d})
+FRAME_TIME_TOL = 1e-9  # top-level vs scenario vs shapes.npz frame times
 DEFAULT_IGNORE_PATTERN = "ignore/{camera}/{frame:03d}.png"
-MASK_KEYS = ("silhouette_ids", "ignore_ids", "matte_threshold", "ignore")   # how silhouettes are stored
+MASK_KEYS = ("silhouette_ids", "ignore_ids", "matte_threshold", "ignore")  # how silhouettes are stored
 
 
 # =========================================================================== pattern
+
 
 class _Time(float):
     """A frame time that formats as ``0.050`` under a bare ``{time}``."""
@@ -53,15 +54,18 @@ def check_pattern(pattern, where: str = "silhouettes pattern") -> str:
         if name is None:
             continue
         if name not in PATTERN_FIELDS:
-            raise ClothFitError(f"{where} {pattern!r}: unknown field {{{name}}} "
-                                f"(allowed: {', '.join('{' + f + '}' for f in PATTERN_FIELDS)})")
+            raise ClothFitError(
+                f"{where} {pattern!r}: unknown field {{{name}}} "
+                f"(allowed: {', '.join('{' + f + '}' for f in PATTERN_FIELDS)})"
+            )
         if conv:
             raise ClothFitError(f"{where} {pattern!r}: conversions (!{conv}) are not allowed")
         if spec and "{" in spec:
             raise ClothFitError(f"{where} {pattern!r}: nested fields are not allowed")
         if spec and any(int(n) > MAX_FIELD_WIDTH for n in re.findall(r"\d+", spec)):
-            raise ClothFitError(f"{where} {pattern!r}: field width or precision in {{{name}:{spec}}} above "
-                                f"{MAX_FIELD_WIDTH}")
+            raise ClothFitError(
+                f"{where} {pattern!r}: field width or precision in {{{name}:{spec}}} above {MAX_FIELD_WIDTH}"
+            )
         fields.add(name)
     if "camera" not in fields:
         raise ClothFitError(f"{where} {pattern!r}: must contain {{camera}}")
@@ -105,11 +109,13 @@ def _field_regex(component: str, camera: str | None = None) -> re.Pattern:
 
 # ================================================================= value checks
 
+
 def _check_model(model, where: str):
     """The capture's optional ``model`` (the model a fit uses unless told otherwise), as a dict."""
     if model is None:
         return None
     from ..physics.models import get_model
+
     try:
         return get_model(model).to_dict()
     except ClothFitError as e:
@@ -126,8 +132,10 @@ def check_shapes(shapes, n_frames: int, n_vertices: int, where: str) -> np.ndarr
     if s.shape[0] != n_frames:
         raise ClothFitError(f"{where}: shapes have {s.shape[0]} frames but the capture has {n_frames} frame times")
     if s.shape[1] != n_vertices:
-        raise ClothFitError(f"{where}: shapes have {s.shape[1]} vertices per frame but the cloth grid has "
-                            f"{n_vertices} vertices (shape {s.shape}, expected ({n_frames}, {n_vertices}, 3))")
+        raise ClothFitError(
+            f"{where}: shapes have {s.shape[1]} vertices per frame but the cloth grid has "
+            f"{n_vertices} vertices (shape {s.shape}, expected ({n_frames}, {n_vertices}, 3))"
+        )
     if not np.all(np.isfinite(s)):
         raise ClothFitError(f"{where}: shapes contain {int(np.count_nonzero(~np.isfinite(s)))} non-finite values")
     return s

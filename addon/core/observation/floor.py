@@ -35,6 +35,7 @@ where a fit's residual lies (on that rim or in the bulk, one-sided or not, and t
 pixels that would explain it). Clean silhouettes with real pixel-scale detail (a cloth edge that
 zig-zags at one pixel at low resolution) read as noise and raise the estimate.
 """
+
 from __future__ import annotations
 
 import math
@@ -52,27 +53,39 @@ if TYPE_CHECKING:
     from .capture import Capture
 
 # --- calibration (tools/floor_calibration.py, docs/noise_floor.md)
-STRAIGHT_RADIUS = 20.0       # px: outline with a larger curvature radius counts as straight (a 3 x 3 median never
-                             # changes a clean digitised edge there: measured baseline < 0.01 % at 240 x 320)
-CURVATURE_SIGMA = 2.0        # px: blur of the silhouette for its curvature (isolated flipped pixels barely move it)
-POOL_STRENGTH = 200.0        # straight boundary pixels: an image's rate is shrunk to its capture's pooled rate with
-                             # this weight (an image with 200 straight boundary pixels gets half its own rate)
-MIN_STRAIGHT = 50            # fewer straight boundary pixels in the whole capture: use every boundary pixel's votes
-                             # (corners vote too: an over-estimate, flagged by ``basis``)
-PROXY_SIGMA = 2.0            # image px: blur of the smooth shape used for the resampling part (1: the staircase
-                             # ripple adds disagreements; 3: rounds pixel-sized features away at 8x downsampling)
-PROXY_SHIFTS = ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25),
-                (0.25, 0.25))  # sub-pixel offsets of the shape (image px) the resampling part is averaged over
+STRAIGHT_RADIUS = 20.0  # px: outline with a larger curvature radius counts as straight (a 3 x 3 median never
+# changes a clean digitised edge there: measured baseline < 0.01 % at 240 x 320)
+CURVATURE_SIGMA = 2.0  # px: blur of the silhouette for its curvature (isolated flipped pixels barely move it)
+POOL_STRENGTH = 200.0  # straight boundary pixels: an image's rate is shrunk to its capture's pooled rate with
+# this weight (an image with 200 straight boundary pixels gets half its own rate)
+MIN_STRAIGHT = 50  # fewer straight boundary pixels in the whole capture: use every boundary pixel's votes
+# (corners vote too: an over-estimate, flagged by ``basis``)
+PROXY_SIGMA = 2.0  # image px: blur of the smooth shape used for the resampling part (1: the staircase
+# ripple adds disagreements; 3: rounds pixel-sized features away at 8x downsampling)
+PROXY_SHIFTS = (
+    (0.0, 0.0),
+    (0.5, 0.0),
+    (0.0, 0.5),
+    (0.5, 0.5),
+    (-0.25, -0.25),
+    (0.25, -0.25),
+    (-0.25, 0.25),
+    (0.25, 0.25),
+)  # sub-pixel offsets of the shape (image px) the resampling part is averaged over
 FAR_ABOVE = D.FLOOR_FAR_ABOVE  # a fit error more than this times its floor is "far above" it (issue 20)
 
-LIMITS = ("lower bound for real footage: a segmenter's bias (a rim lost or added along the whole outline) and "
-          "dropped low-contrast parts look like shape and are invisible to any check of an image against itself")
+LIMITS = (
+    "lower bound for real footage: a segmenter's bias (a rim lost or added along the whole outline) and "
+    "dropped low-contrast parts look like shape and are invisible to any check of an image against itself"
+)
 
 
 # ============================================================================ helpers
 
+
 def _mask(m, where: str) -> np.ndarray:
     from .silhouette_files import _mask_from_array
+
     return _mask_from_array(m, where)
 
 
@@ -93,6 +106,7 @@ def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray
     """Silhouette at another resolution as the fitter makes it (``fitting/job.load_observed`` calls this):
     area average, object where it is at least one half."""
     import cv2
+
     if mask.shape == (height, width):
         return mask.astype(bool)
     img = cv2.resize(mask.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
@@ -102,6 +116,7 @@ def resample_silhouette(mask: np.ndarray, height: int, width: int) -> np.ndarray
 def resample_ignore(mask: np.ndarray | None, height: int, width: int) -> np.ndarray | None:
     """An ignore mask at another resolution as the fitter makes it (unknown where any part was unknown)."""
     import cv2
+
     if mask is None or mask.shape == (height, width):
         return mask
     img = cv2.resize(mask.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
@@ -117,6 +132,7 @@ def inner_boundary(mask: np.ndarray) -> np.ndarray:
 def majority3(mask: np.ndarray) -> np.ndarray:
     """3 x 3 median (majority of 9) of a binary image; outside the image counts as background."""
     import cv2
+
     p = np.pad(mask.astype(np.uint8), 1, mode="constant")
     s = cv2.boxFilter(p, cv2.CV_16U, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
     return (s >= 5)[1:-1, 1:-1]
@@ -125,40 +141,44 @@ def majority3(mask: np.ndarray) -> np.ndarray:
 def curvature(mask: np.ndarray, sigma: float = CURVATURE_SIGMA) -> np.ndarray:
     """|curvature| [1/px] of the level lines of the blurred silhouette (div of the unit gradient)."""
     import cv2
+
     u = cv2.GaussianBlur(mask.astype(np.float64), (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
     uy, ux = np.gradient(u)
     uyy, uyx = np.gradient(uy)
     uxy, uxx = np.gradient(ux)
     g2 = ux * ux + uy * uy
     with np.errstate(divide="ignore", invalid="ignore"):
-        k = (uxx * uy * uy - 2.0 * ux * uy * uxy + uyy * ux * ux) / g2 ** 1.5
+        k = (uxx * uy * uy - 2.0 * ux * uy * uxy + uyy * ux * ux) / g2**1.5
     return np.where(g2 > 1e-12, np.abs(k), np.inf)
 
 
 def _grid_sample(u, xs, ys):
     import cv2
+
     mx, my = np.meshgrid(np.asarray(xs, np.float32), np.asarray(ys, np.float32))
     return cv2.remap(u, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
 # ============================================================================ one image
 
+
 @dataclass
 class FloorEstimate:
     """The floor of one image at the fit resolution. Fractions like ``E_sil`` (x 100 for %)."""
-    floor: float            # estimated E_sil of a perfect model = noise + resampling
-    noise: float            # part from random pixel-scale boundary errors
-    resampling: float       # part from resampling to the fit resolution (0 at the images' own)
-    rim: float              # inner-boundary pixels / area at the fit resolution: E_sil of a 1-pixel shift of
-                            # the whole outline (the scale of a segmenter's bias, which ``floor`` cannot see)
-    votes: int              # pixels the 3 x 3 majority flips on straight outline (image resolution)
-    straight: int           # inner-boundary pixels on straight outline (image resolution)
-    boundary: int           # inner-boundary pixels (image resolution, outside the ignore mask and image border)
-    area: int               # observed area outside the ignore mask (image resolution)
-    fit_area: int           # the same at the fit resolution (eq. 6's normaliser)
-    shape: tuple            # image (H, W)
-    fit_shape: tuple        # fit (h, w)
-    basis: str = "straight outline"   # where the noise rate came from
+
+    floor: float  # estimated E_sil of a perfect model = noise + resampling
+    noise: float  # part from random pixel-scale boundary errors
+    resampling: float  # part from resampling to the fit resolution (0 at the images' own)
+    rim: float  # inner-boundary pixels / area at the fit resolution: E_sil of a 1-pixel shift of
+    # the whole outline (the scale of a segmenter's bias, which ``floor`` cannot see)
+    votes: int  # pixels the 3 x 3 majority flips on straight outline (image resolution)
+    straight: int  # inner-boundary pixels on straight outline (image resolution)
+    boundary: int  # inner-boundary pixels (image resolution, outside the ignore mask and image border)
+    area: int  # observed area outside the ignore mask (image resolution)
+    fit_area: int  # the same at the fit resolution (eq. 6's normaliser)
+    shape: tuple  # image (H, W)
+    fit_shape: tuple  # fit (h, w)
+    basis: str = "straight outline"  # where the noise rate came from
 
     @property
     def rate(self) -> float:
@@ -177,14 +197,18 @@ def _prepare(observed, ignore, where):
     if ignore is not None:
         g = _mask(ignore, f"{where} ignore mask")
         if g.shape != o.shape:
-            raise ClothFitError(f"{where}: ignore mask is {g.shape[0]}x{g.shape[1]} but the silhouette is "
-                                f"{o.shape[0]}x{o.shape[1]}")
+            raise ClothFitError(
+                f"{where}: ignore mask is {g.shape[0]}x{g.shape[1]} but the silhouette is {o.shape[0]}x{o.shape[1]}"
+            )
         g = g if g.any() else None
     if g is not None:
         o = o & ~g
     if not o.any():
-        raise ClothFitError(f"{where}: the observed silhouette is empty" + (" outside the ignore mask" if g is not None
-                                                                            else "") + ", its floor is undefined")
+        raise ClothFitError(
+            f"{where}: the observed silhouette is empty"
+            + (" outside the ignore mask" if g is not None else "")
+            + ", its floor is undefined"
+        )
     return o, g
 
 
@@ -192,6 +216,7 @@ def _counts(o, g):
     """(votes on straight outline, straight boundary, boundary, all votes on the boundary band) at the image's
     own resolution, over pixels whose surroundings are known (away from the ignore mask and the image border)."""
     import cv2
+
     valid = np.ones(o.shape, bool)
     valid[0, :] = valid[-1, :] = valid[:, 0] = valid[:, -1] = False
     if g is not None:
@@ -207,8 +232,12 @@ def _counts(o, g):
     votes = (oc ^ med) & vc
     straight = curvature(oc) < 1.0 / STRAIGHT_RADIUS
     inner = inner_boundary(med) & vc
-    return (int(np.count_nonzero(votes & straight)), int(np.count_nonzero(inner & straight)),
-            int(np.count_nonzero(inner)), int(np.count_nonzero(votes)))
+    return (
+        int(np.count_nonzero(votes & straight)),
+        int(np.count_nonzero(inner & straight)),
+        int(np.count_nonzero(inner)),
+        int(np.count_nonzero(votes)),
+    )
 
 
 def _resampling_part(o, g, fit_shape):
@@ -216,6 +245,7 @@ def _resampling_part(o, g, fit_shape):
     H, W = o.shape
     h, w = fit_shape
     import cv2
+
     r = resample_silhouette(o, h, w)
     gl = resample_ignore(g, h, w)
     known = np.ones((h, w), bool) if gl is None else ~gl
@@ -233,8 +263,13 @@ def _resampling_part(o, g, fit_shape):
     return resamp, noise, r
 
 
-def estimate_floor(observed: np.ndarray, ignore: np.ndarray | None = None, fit_shape: Sequence[int] | None = None,
-                   rate: float | None = None, name: str = "silhouette") -> FloorEstimate:
+def estimate_floor(
+    observed: np.ndarray,
+    ignore: np.ndarray | None = None,
+    fit_shape: Sequence[int] | None = None,
+    rate: float | None = None,
+    name: str = "silhouette",
+) -> FloorEstimate:
     """The floor of one observed silhouette (bool / 0-1 / 0-255 (H, W)), ``E_sil`` units.
 
     ``ignore``: pixels of unknown truth (as in the fit: they leave eq. 6); ``fit_shape`` (h, w): the
@@ -273,24 +308,43 @@ def _estimate(o, g, fs, counts, rate, name) -> FloorEstimate:
     if gl is not None:
         ib &= ~gl
     rim = int(np.count_nonzero(ib)) / fit_area
-    return FloorEstimate(float(noise + resamp), float(noise), float(resamp), float(rim), votes, straight, boundary,
-                         area, fit_area, tuple(o.shape), tuple(fs), basis)
+    return FloorEstimate(
+        float(noise + resamp),
+        float(noise),
+        float(resamp),
+        float(rim),
+        votes,
+        straight,
+        boundary,
+        area,
+        fit_area,
+        tuple(o.shape),
+        tuple(fs),
+        basis,
+    )
 
 
 # ============================================================================ a capture
 
+
 @dataclass
 class CaptureFloor:
     """The floors of a capture's chosen images at the fit resolution."""
-    images: list                 # [cam][frame] FloorEstimate
+
+    images: list  # [cam][frame] FloorEstimate
     camera_names: list
     frame_times: list
     fit_resolution: list | None  # (h, w), None = the images' own
-    rate: float                  # pooled votes per straight boundary pixel (all chosen images)
+    rate: float  # pooled votes per straight boundary pixel (all chosen images)
     basis: str
     limits: str = LIMITS
-    method: dict = field(default_factory=lambda: {"straight_radius_px": STRAIGHT_RADIUS,
-                                                  "pool_strength": POOL_STRENGTH, "proxy_sigma_px": PROXY_SIGMA})
+    method: dict = field(
+        default_factory=lambda: {
+            "straight_radius_px": STRAIGHT_RADIUS,
+            "pool_strength": POOL_STRENGTH,
+            "proxy_sigma_px": PROXY_SIGMA,
+        }
+    )
 
     def per_image(self) -> np.ndarray:
         """(C, F) floors."""
@@ -303,11 +357,21 @@ class CaptureFloor:
 
     def to_dict(self, per_image: bool = True) -> dict:
         P = self.per_image()
-        parts = {k: float(np.mean([[getattr(e, k) for e in row] for row in self.images]))
-                 for k in ("noise", "resampling", "rim")}
-        d = {"floor": float(P.mean()), "floor_median": float(np.median(P)), **parts,
-             "rate": self.rate, "basis": self.basis, "n_images": int(P.size),
-             "fit_resolution": self.fit_resolution, "limits": self.limits, "method": self.method}
+        parts = {
+            k: float(np.mean([[getattr(e, k) for e in row] for row in self.images]))
+            for k in ("noise", "resampling", "rim")
+        }
+        d = {
+            "floor": float(P.mean()),
+            "floor_median": float(np.median(P)),
+            **parts,
+            "rate": self.rate,
+            "basis": self.basis,
+            "n_images": int(P.size),
+            "fit_resolution": self.fit_resolution,
+            "limits": self.limits,
+            "method": self.method,
+        }
         if per_image:
             d["cameras"] = self.camera_names
             d["frame_times"] = self.frame_times
@@ -315,10 +379,12 @@ class CaptureFloor:
         return d
 
 
-def pooled_floors(observed: Sequence[Sequence[np.ndarray]],
-                  ignore: Sequence[Sequence[np.ndarray | None] | None] | None = None,
-                  fit_shape: Sequence[int] | None = None, names: Sequence[Sequence[str]] | None = None
-                  ) -> tuple[list[list[FloorEstimate]], float, str]:
+def pooled_floors(
+    observed: Sequence[Sequence[np.ndarray]],
+    ignore: Sequence[Sequence[np.ndarray | None] | None] | None = None,
+    fit_shape: Sequence[int] | None = None,
+    names: Sequence[Sequence[str]] | None = None,
+) -> tuple[list[list[FloorEstimate]], float, str]:
     """``(estimates, rate, basis)`` for silhouettes ``observed[c][f]`` (and ``ignore[c][f]``, None or
     entries None) at their own resolution, for a fit at ``fit_shape`` (h, w; default their own):
     ``estimates[c][f]`` are ``FloorEstimate``; the noise rate is pooled over all of them (``rate``) and
@@ -329,8 +395,13 @@ def pooled_floors(observed: Sequence[Sequence[np.ndarray]],
         raise ClothFitError("floor: no silhouettes given")
     if names is None:
         names = [[f"silhouette [{c}][{f}]" for f in range(len(observed[c]))] for c in range(C)]
-    prepared = [[_prepare(observed[c][f], None if ignore is None or ignore[c] is None else ignore[c][f],
-                          names[c][f]) for f in range(len(observed[c]))] for c in range(C)]
+    prepared = [
+        [
+            _prepare(observed[c][f], None if ignore is None or ignore[c] is None else ignore[c][f], names[c][f])
+            for f in range(len(observed[c]))
+        ]
+        for c in range(C)
+    ]
     fs = None if fit_shape is None else _fit_shape(fit_shape, (1, 1), "floor: fit resolution")
     counts = [[_counts(o, g) for o, g in row] for row in prepared]
     V = sum(k[0] for row in counts for k in row)
@@ -354,8 +425,12 @@ def pooled_floors(observed: Sequence[Sequence[np.ndarray]],
     return images, float(pooled), basis
 
 
-def capture_floor(capture: Capture, cams: Iterable[int] | None = None, fidx: Iterable[int] | None = None,
-                  resolution: Sequence[int] | None = None) -> CaptureFloor:
+def capture_floor(
+    capture: Capture,
+    cams: Iterable[int] | None = None,
+    fidx: Iterable[int] | None = None,
+    resolution: Sequence[int] | None = None,
+) -> CaptureFloor:
     """Floors of ``capture``'s cameras ``cams`` (indices, default all) at frames ``fidx`` (indices,
     default all), for a fit at ``resolution`` (h, w; default the images' own), as ``fitting/job.
     load_observed`` would feed them to the fitter (``pooled_floors`` on the images as stored)."""
@@ -366,12 +441,18 @@ def capture_floor(capture: Capture, cams: Iterable[int] | None = None, fidx: Ite
     observed, ignore = capture.load_observations(cams, fidx)
     names = [[f"camera '{capture.cameras[c].name}' frame {f}" for f in fidx] for c in cams]
     images, rate, basis = pooled_floors(observed, ignore, resolution, names)
-    return CaptureFloor(images, [capture.cameras[c].name for c in cams],
-                        [float(capture.frame_times[f]) for f in fidx],
-                        None if resolution is None else [int(x) for x in resolution], rate, basis)
+    return CaptureFloor(
+        images,
+        [capture.cameras[c].name for c in cams],
+        [float(capture.frame_times[f]) for f in fidx],
+        None if resolution is None else [int(x) for x in resolution],
+        rate,
+        basis,
+    )
 
 
 # ============================================================================ a fit against its floor
+
 
 def floor_ratios(e_sil: ArrayLike, floors: ArrayLike, far: float = FAR_ABOVE) -> tuple[np.ndarray, np.ndarray]:
     """``(ratio, far_mask)``: per image ``E_sil / floor`` (same shapes, e.g. (C, F)) and where it exceeds
@@ -387,8 +468,13 @@ def floor_ratios(e_sil: ArrayLike, floors: ArrayLike, far: float = FAR_ABOVE) ->
     return r, r > far
 
 
-def residual_profile(observed: np.ndarray, model: np.ndarray, ignore: np.ndarray | None = None, width: float = 1.0,
-                     name: str = "silhouette") -> dict:
+def residual_profile(
+    observed: np.ndarray,
+    model: np.ndarray,
+    ignore: np.ndarray | None = None,
+    width: float = 1.0,
+    name: str = "silhouette",
+) -> dict:
     """Where a fit's residual (``observed`` XOR ``model``, outside ``ignore``) lies, for naming its cause:
 
     * ``e_sil``: eq. 6;
@@ -406,6 +492,7 @@ def residual_profile(observed: np.ndarray, model: np.ndarray, ignore: np.ndarray
     Measured (docs/noise_floor.md): the perfect model on the photoreal footage has rim share 0.83 and
     bias 0.47 px; the true shape 0.15 s late on synthetic footage, rim share 0.16 at 36 % E_sil."""
     import cv2
+
     o = _mask(observed, name)
     m = _mask(model, f"{name} model")
     if o.shape != m.shape:
@@ -424,12 +511,16 @@ def residual_profile(observed: np.ndarray, model: np.ndarray, ignore: np.ndarray
     n = int(np.count_nonzero(x))
     ib = inner_boundary(o) & known
     rim = int(np.count_nonzero(ib)) / area
-    out = {"e_sil": n / area, "rim": rim, "bias_px": (n / area) / rim if rim else float("nan"),
-           "rim_share": float("nan"), "balance": float("nan")}
+    out = {
+        "e_sil": n / area,
+        "rim": rim,
+        "bias_px": (n / area) / rim if rim else float("nan"),
+        "rim_share": float("nan"),
+        "balance": float("nan"),
+    }
     if n:
         d_in = cv2.distanceTransform(np.pad(o, 1).astype(np.uint8), cv2.DIST_L2, 3)[1:-1, 1:-1]
-        d_out = cv2.distanceTransform(np.pad(~o, 1, constant_values=True).astype(np.uint8), cv2.DIST_L2,
-                                      3)[1:-1, 1:-1]
+        d_out = cv2.distanceTransform(np.pad(~o, 1, constant_values=True).astype(np.uint8), cv2.DIST_L2, 3)[1:-1, 1:-1]
         d = np.where(o, d_in, d_out)
         out["rim_share"] = int(np.count_nonzero(x & (d <= width))) / n
         out["balance"] = (int(np.count_nonzero(x & m)) - int(np.count_nonzero(x & o))) / n

@@ -1,4 +1,5 @@
 """Silhouette error (paper eq. 6, 7), shape error, and the boundary-noise model (docs/method.md#spec-4, #spec-5)."""
+
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -13,8 +14,10 @@ def e_sil(observed: np.ndarray, model: np.ndarray, name: str = "silhouette") -> 
     observed = np.asarray(observed, dtype=bool)
     model = np.asarray(model, dtype=bool)
     if observed.shape != model.shape:
-        raise ClothFitError(f"{name}: observed silhouette is {observed.shape[0]}x{observed.shape[1]} but the "
-                            f"model's is {model.shape[0]}x{model.shape[1]}")
+        raise ClothFitError(
+            f"{name}: observed silhouette is {observed.shape[0]}x{observed.shape[1]} but the "
+            f"model's is {model.shape[0]}x{model.shape[1]}"
+        )
     area = int(observed.sum())
     if area == 0:
         raise ClothFitError(f"{name}: the observed silhouette is empty, E_sil is undefined")

@@ -7,6 +7,7 @@ the ids, so for a palette PNG we rewrite its ``PLTE`` chunk in memory into a gre
 decodes to its own index, whatever the bit depth, row filters or interlacing. Greyscale PNGs
 (8 or 16 bit) are decoded unchanged. RGB/RGBA PNGs are not label images and are refused.
 """
+
 from __future__ import annotations
 
 import struct
@@ -24,10 +25,10 @@ LABEL_COLOUR_TYPES = (0, 3, 4)
 def _chunks(data: bytes, where: str):
     pos, out = 8, []
     while pos + 8 <= len(data):
-        n, typ = struct.unpack(">I4s", data[pos:pos + 8])
+        n, typ = struct.unpack(">I4s", data[pos : pos + 8])
         if pos + 12 + n > len(data):
             raise ClothFitError(f"{where}: corrupt or truncated PNG (chunk {typ!r} runs past the end of the file)")
-        out.append((typ, data[pos + 8:pos + 8 + n]))
+        out.append((typ, data[pos + 8 : pos + 8 + n]))
         pos += 12 + n
         if typ == b"IEND":
             break
@@ -67,12 +68,15 @@ def _grey_ramp_palette(data: bytes, where: str) -> bytes:
 def decode_label_png(data: bytes, where: str) -> np.ndarray:
     """Label values (H, W) (uint8, or uint16 for 16-bit grey) of PNG bytes."""
     import cv2
+
     if not data:
         raise ClothFitError(f"{where}: the file is empty (0 bytes), not an image")
     w, h, depth, ctype = png_info(data, where)
     if ctype not in LABEL_COLOUR_TYPES:
-        raise ClothFitError(f"{where}: a label image must be a palette (indexed-colour) or greyscale PNG; this one is "
-                            f"{COLOUR_TYPE_NAMES.get(ctype, f'colour type {ctype}')} ({depth}-bit)")
+        raise ClothFitError(
+            f"{where}: a label image must be a palette (indexed-colour) or greyscale PNG; this one is "
+            f"{COLOUR_TYPE_NAMES.get(ctype, f'colour type {ctype}')} ({depth}-bit)"
+        )
     if ctype == 3:
         data = _grey_ramp_palette(data, where)
     try:
@@ -82,7 +86,7 @@ def decode_label_png(data: bytes, where: str) -> np.ndarray:
     if img is None or img.size == 0:
         raise ClothFitError(f"{where}: corrupt or unreadable PNG ({len(data)} bytes that OpenCV cannot decode)")
     if img.ndim == 3:
-        img = img[..., 0]          # palette -> equal B, G, R = the index; grey + alpha -> the grey
+        img = img[..., 0]  # palette -> equal B, G, R = the index; grey + alpha -> the grey
     if img.shape != (h, w):
         raise ClothFitError(f"{where}: corrupt PNG (decoded {img.shape} but the header says {h} x {w})")
     return img

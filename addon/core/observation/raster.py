@@ -13,6 +13,7 @@ crosses; spans are accumulated in a difference buffer and a cumulative sum over 
 coverage count. Everything is vectorised over the triangles; triangles with a vertex behind the
 camera (NaN) are skipped.
 """
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -23,14 +24,16 @@ if TYPE_CHECKING:
     from .camera import Camera
 
 
-def triangle_spans(pts: np.ndarray, tris: np.ndarray, height: int, width: int
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def triangle_spans(
+    pts: np.ndarray, tris: np.ndarray, height: int, width: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Row spans of all triangles: arrays ``row, x_start, x_end`` (inclusive, clipped to the image)."""
     P = pts[tris]  # (T, 3, 2)
     ok = np.all(np.isfinite(P), axis=(1, 2))
     with np.errstate(invalid="ignore"):
-        area2 = ((P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1])
-                 - (P[:, 2, 0] - P[:, 0, 0]) * (P[:, 1, 1] - P[:, 0, 1]))
+        area2 = (P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1]) - (P[:, 2, 0] - P[:, 0, 0]) * (
+            P[:, 1, 1] - P[:, 0, 1]
+        )
     ok &= area2 != 0  # zero-area triangles cover nothing (as in Blender)
     P = P[ok]
     if P.shape[0] == 0:
@@ -78,8 +81,9 @@ def rasterize(pts: np.ndarray, tris: np.ndarray, height: int, width: int) -> np.
     return np.cumsum(diff[:, :width], axis=1) > 0.5
 
 
-def silhouette(camera: Camera, vertices: np.ndarray, tris: np.ndarray, height: int | None = None,
-               width: int | None = None) -> np.ndarray:
+def silhouette(
+    camera: Camera, vertices: np.ndarray, tris: np.ndarray, height: int | None = None, width: int | None = None
+) -> np.ndarray:
     """Silhouette of a mesh (world vertices ``(V, 3)``) seen by ``camera``."""
     h = camera.height if height is None else height
     w = camera.width if width is None else width
@@ -101,6 +105,7 @@ def reference_fill(pts: np.ndarray, tris: np.ndarray, height: int, width: int) -
 
         def cross(p, q1, q2):
             return (q2[0] - q1[0]) * (p[:, 1] - q1[1]) - (q2[1] - q1[1]) * (p[:, 0] - q1[0])
+
         d1, d2, d3 = cross(q, a, b), cross(q, b, c), cross(q, c, a)
         neg = (d1 < 0) | (d2 < 0) | (d3 < 0)
         pos = (d1 > 0) | (d2 > 0) | (d3 > 0)

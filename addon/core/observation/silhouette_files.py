@@ -3,6 +3,7 @@ camera and frame (0 = background, 255 = object), or a label image / a matte read
 capture's mask keys; read and checked (size, values, emptiness) and written atomically. Every
 problem is a ``ClothFitError`` naming the file.
 """
+
 from __future__ import annotations
 
 import os
@@ -13,8 +14,8 @@ from ..errors import ClothFitError
 from ..safeio import atomic_write
 from .capture_format import check_pattern
 
-
 # =============================================================== silhouette files
+
 
 def _short_values(values, limit=8):
     vals = [int(v) if float(v).is_integer() else float(v) for v in values[:limit]]
@@ -36,8 +37,9 @@ def _mask_from_array(mask, where: str) -> np.ndarray:
         raise ClothFitError(f"{where}: the silhouette has non-finite values")
     if np.all(np.isin(vals, (0, 1))) or np.all(np.isin(vals, (0, 255))):
         return m > 0
-    raise ClothFitError(f"{where}: the silhouette is not binary: values {_short_values(vals)} "
-                        f"(expected bool, 0/1 or 0/255)")
+    raise ClothFitError(
+        f"{where}: the silhouette is not binary: values {_short_values(vals)} (expected bool, 0/1 or 0/255)"
+    )
 
 
 def save_silhouette(path: str, mask) -> None:
@@ -48,8 +50,9 @@ def save_silhouette(path: str, mask) -> None:
     """
     m = _mask_from_array(mask, f"silhouette {path}")
     if os.path.splitext(path)[1].lower() != ".png":
-        raise ClothFitError(f"silhouette {path}: silhouettes are written as PNG (lossless); "
-                            f"the file name must end with .png")
+        raise ClothFitError(
+            f"silhouette {path}: silhouettes are written as PNG (lossless); the file name must end with .png"
+        )
     img = np.where(m, 255, 0).astype(np.uint8)
     ok, buf = _imencode(".png", img)
     if not ok:
@@ -65,6 +68,7 @@ def save_silhouette(path: str, mask) -> None:
 
 def _imencode(ext, img):
     import cv2
+
     return cv2.imencode(ext, img)
 
 
@@ -72,8 +76,9 @@ def _write_bytes_atomic(path: str, data: bytes):
     atomic_write(path, data)
 
 
-def read_silhouette(path: str, expected_shape=None, binarize_threshold=None, allow_empty: bool = False,
-                    source: str | None = None) -> np.ndarray:
+def read_silhouette(
+    path: str, expected_shape=None, binarize_threshold=None, allow_empty: bool = False, source: str | None = None
+) -> np.ndarray:
     """Read a silhouette image -> bool array (H, W), True = object.
 
     Accepted: 8-bit (or 16-bit) images with values {0, max} or {0, 1}; single channel, or 3/4
@@ -85,10 +90,10 @@ def read_silhouette(path: str, expected_shape=None, binarize_threshold=None, all
     messages.
     """
     import cv2
+
     where = f"silhouette {path}" + (f" ({source})" if source else "")
     if not os.path.isfile(path):
-        raise ClothFitError(f"{where}: file not found" if os.path.exists(path) is False
-                            else f"{where}: not a file")
+        raise ClothFitError(f"{where}: file not found" if os.path.exists(path) is False else f"{where}: not a file")
     try:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError as e:
@@ -125,7 +130,8 @@ def read_silhouette(path: str, expected_shape=None, binarize_threshold=None, all
             if n_transp:
                 raise ClothFitError(
                     f"{where}: has an alpha channel with {n_transp} non-opaque pixels; the silhouette must be "
-                    f"in the grey value (0 background, 255 object), not in the alpha channel")
+                    f"in the grey value (0 background, 255 object), not in the alpha channel"
+                )
             img = img[..., :-1]
             c -= 1
         if c == 1:
@@ -138,7 +144,8 @@ def read_silhouette(path: str, expected_shape=None, binarize_threshold=None, all
                 if binarize_threshold is None:
                     raise ClothFitError(
                         f"{where}: colour image whose channels differ in {n_diff} pixels; a silhouette must be "
-                        f"grey (pass binarize_threshold to convert to grey and threshold)")
+                        f"grey (pass binarize_threshold to convert to grey and threshold)"
+                    )
                 img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
             else:
                 img = b
@@ -158,7 +165,7 @@ def read_silhouette(path: str, expected_shape=None, binarize_threshold=None, all
         mask = scaled > thr
     else:
         if grey.max(initial=0) <= 1:
-            mask = grey > 0                      # 0/1 image
+            mask = grey > 0  # 0/1 image
         else:
             bad = (grey != 0) & (grey != maxval)
             n_bad = int(np.count_nonzero(bad))
@@ -167,7 +174,8 @@ def read_silhouette(path: str, expected_shape=None, binarize_threshold=None, all
                 raise ClothFitError(
                     f"{where}: not binary: {n_bad} pixels have values other than 0 and {maxval} "
                     f"({len(vals)} distinct offending values: {_short_values(vals)}); "
-                    f"pass binarize_threshold to threshold grey images")
+                    f"pass binarize_threshold to threshold grey images"
+                )
             mask = grey > 0
     if not allow_empty and not mask.any():
         raise ClothFitError(f"{where}: empty silhouette (no object pixel)")
@@ -186,8 +194,9 @@ def _check_size(img, expected_shape, where):
             raise ClothFitError(f"{where}: image is {h} x {w} (H x W) but {eh} x {ew} was expected")
 
 
-def read_label_silhouette(path: str, silhouette_ids, ignore_ids=(), expected_shape=None, allow_empty: bool = False,
-                          source: str | None = None):
+def read_label_silhouette(
+    path: str, silhouette_ids, ignore_ids=(), expected_shape=None, allow_empty: bool = False, source: str | None = None
+):
     """A label image (palette or greyscale PNG, e.g. a SAM 2 / XMem / DAVIS mask) -> ``(mask, ignore)``.
 
     ``mask`` = pixels whose label is one of ``silhouette_ids`` (the cloth), ``ignore`` = pixels whose
@@ -195,6 +204,7 @@ def read_label_silhouette(path: str, silhouette_ids, ignore_ids=(), expected_sha
     The stored values are used as they are (palette indices, grey levels), never converted.
     """
     from .png import read_label_png
+
     where = _where(path, source)
     if not os.path.isfile(path):
         raise ClothFitError(f"{where}: file not found")
@@ -204,16 +214,20 @@ def read_label_silhouette(path: str, silhouette_ids, ignore_ids=(), expected_sha
     ignore = np.isin(labels, np.asarray(ignore_ids)) if len(ignore_ids) else None
     if not allow_empty and not mask.any():
         present = np.unique(labels)
-        raise ClothFitError(f"{where}: no cloth label: the image holds labels {_short_values(present, 12)} but "
-                            f"silhouette_ids are {list(silhouette_ids)}")
+        raise ClothFitError(
+            f"{where}: no cloth label: the image holds labels {_short_values(present, 12)} but "
+            f"silhouette_ids are {list(silhouette_ids)}"
+        )
     return mask, ignore
 
 
-def read_matte(path: str, threshold: float, expected_shape=None, allow_empty: bool = False,
-               source: str | None = None) -> np.ndarray:
+def read_matte(
+    path: str, threshold: float, expected_shape=None, allow_empty: bool = False, source: str | None = None
+) -> np.ndarray:
     """An alpha matte (PNG; grey, or the alpha channel of grey + alpha / RGBA) -> object = value >
     ``threshold`` (0..1 of full scale, so 8- and 16-bit mattes take the same threshold)."""
     import cv2
+
     where = _where(path, source)
     if not os.path.isfile(path):
         raise ClothFitError(f"{where}: file not found")
@@ -228,7 +242,7 @@ def read_matte(path: str, threshold: float, expected_shape=None, allow_empty: bo
     _check_size(img, expected_shape, where)
     if img.ndim == 3:
         if img.shape[2] in (2, 4):
-            img = img[..., -1]             # the alpha channel
+            img = img[..., -1]  # the alpha channel
         elif np.any(img[..., 0] != img[..., 1]) or np.any(img[..., 1] != img[..., 2]):
             raise ClothFitError(f"{where}: a colour image is not an alpha matte (use grey, grey + alpha or RGBA)")
         else:
@@ -257,10 +271,14 @@ def check_mask_spec(d, where: str) -> dict:
             return None
         if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
             v = [v]
-        if not isinstance(v, (list, tuple)) or not v or any(
-                isinstance(x, bool) or not isinstance(x, (int, np.integer)) or not 0 <= x <= 65535 for x in v):
-            raise ClothFitError(f"{where}: '{key}' must be a non-empty list of label values (integers 0..65535), "
-                                f"got {v!r:.80}")
+        if (
+            not isinstance(v, (list, tuple))
+            or not v
+            or any(isinstance(x, bool) or not isinstance(x, (int, np.integer)) or not 0 <= x <= 65535 for x in v)
+        ):
+            raise ClothFitError(
+                f"{where}: '{key}' must be a non-empty list of label values (integers 0..65535), got {v!r:.80}"
+            )
         return [int(x) for x in v]
 
     sil, ign = ids("silhouette_ids"), ids("ignore_ids")
@@ -276,11 +294,13 @@ def check_mask_spec(d, where: str) -> dict:
     t = d.get("matte_threshold")
     if t is not None:
         if sil is not None:
-            raise ClothFitError(f"{where}: 'matte_threshold' (alpha mattes) and 'silhouette_ids' (label images) "
-                                f"exclude each other")
+            raise ClothFitError(
+                f"{where}: 'matte_threshold' (alpha mattes) and 'silhouette_ids' (label images) exclude each other"
+            )
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not (0.0 <= float(t) < 1.0):
-            raise ClothFitError(f"{where}: 'matte_threshold' must be a number in [0, 1) (fraction of full alpha), "
-                                f"got {t!r}")
+            raise ClothFitError(
+                f"{where}: 'matte_threshold' must be a number in [0, 1) (fraction of full alpha), got {t!r}"
+            )
         out["matte_threshold"] = float(t)
     if d.get("ignore") is not None:
         out["ignore"] = check_pattern(d["ignore"], f"{where}: 'ignore' pattern")

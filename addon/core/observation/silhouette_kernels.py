@@ -4,6 +4,7 @@ observed silhouette from the observation's per-row prefix sums; model pixels ins
 ignore mask (pixels of unknown truth, e.g. behind an occluder) are counted from the ignore mask's
 prefix sums in the same way and leave the XOR.
 """
+
 from __future__ import annotations
 
 import math
@@ -43,9 +44,11 @@ def _project(X, K, R, t, dist, uv, ok):
         uv[i, 0] = K[0, 0] * x + K[0, 1] * y + K[0, 2]
         uv[i, 1] = K[1, 1] * y + K[1, 2]
 
+
 @njit(**JIT)
-def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, ipre, ipofs, ibb, srow, sc0, sc1, cnt, start, oc0, oc1, cntc,
-                trow, tc0, tc1):
+def _span_count(
+    uv, ok, tris, Hh, Ww, pre, pofs, bb, ipre, ipofs, ibb, srow, sc0, sc1, cnt, start, oc0, oc1, cntc, trow, tc0, tc1
+):
     """Model pixel count, overlap with the observation and overlap with the ignore mask, from row
     spans only (an image without ignore mask has an empty box ``ibb``: rows 0..-1).
 
@@ -181,6 +184,7 @@ def _span_count(uv, ok, tris, Hh, Ww, pre, pofs, bb, ipre, ipofs, ibb, srow, sc0
                 cb = oc1[i]
     return nmod, inter, hid
 
+
 @njit(**JIT)
 def eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, work, out):
     """E_sil for every camera c and frame f of one simulated candidate: out[c, f]. ``areas`` are the
@@ -194,11 +198,31 @@ def eval_frames(X, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs,
     for c in range(C):
         for f in range(Fn):
             _project(X[f], Ks[c], Rs[c], ts[c], dists[c], uv, ok)
-            nmod, inter, hid = _span_count(uv, ok, tris, Hs[c], Ws[c], pre, pofs[c, f], bbs[c, f], ipre,
-                                           ipofs[c, f], ibbs[c, f], srow, sc0, sc1, cnt, start, oc0, oc1, cntc,
-                                           trow, tc0, tc1)
+            nmod, inter, hid = _span_count(
+                uv,
+                ok,
+                tris,
+                Hs[c],
+                Ws[c],
+                pre,
+                pofs[c, f],
+                bbs[c, f],
+                ipre,
+                ipofs[c, f],
+                ibbs[c, f],
+                srow,
+                sc0,
+                sc1,
+                cnt,
+                start,
+                oc0,
+                oc1,
+                cntc,
+                trow,
+                tc0,
+                tc1,
+            )
             if nmod < 0:
                 out[c, f] = np.inf
             else:
                 out[c, f] = (areas[c, f] + nmod - hid - 2 * inter) / areas[c, f]
-

@@ -3,6 +3,7 @@
 The Blender layer has its own path that renders the observations with Blender instead; both write
 the same capture format.
 """
+
 from __future__ import annotations
 
 import os
@@ -28,20 +29,32 @@ def noise_rng(seed: int, cam: int, frame: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), int(cam), int(frame)])
 
 
-def synth_capture(root: str | os.PathLike, params: dict[str, Any] | None = None, rig: str = D.DEFAULT_RIG,
-                  noise: float = D.NOISE_FRACTION, resolution: Sequence[int] | None = None, seed: int = 0,
-                  scenario: Scenario | None = None, cameras: Sequence[Camera] | None = None,
-                  truth_dt_safety: float = D.TRUTH_DT_SAFETY,
-                  model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None) -> Capture:
+def synth_capture(
+    root: str | os.PathLike,
+    params: dict[str, Any] | None = None,
+    rig: str = D.DEFAULT_RIG,
+    noise: float = D.NOISE_FRACTION,
+    resolution: Sequence[int] | None = None,
+    seed: int = 0,
+    scenario: Scenario | None = None,
+    cameras: Sequence[Camera] | None = None,
+    truth_dt_safety: float = D.TRUTH_DT_SAFETY,
+    model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None,
+) -> Capture:
     """Simulate ``params`` on ``scenario`` (default: the paper's) with ``model`` (default: the paper's
     sheet, ``params`` = m, k, l, d, default the ground truth; ``"blender"`` or a Blender model dict:
     ``params`` = ClothSettings values, missing ones Blender's defaults, ``time_scale`` the real-time
     one for the model's frame rate) and write a capture with ``noise`` boundary noise to ``root``.
     Returns the Capture."""
-    if isinstance(truth_dt_safety, bool) or not isinstance(truth_dt_safety, (int, float)) \
-            or not (0 < truth_dt_safety <= 1):          # also rejects NaN
-        raise ClothFitError(f"synth: truth_dt_safety must be a number in (0, 1] (a fraction of the model's "
-                            f"stable time step), got {truth_dt_safety!r}")
+    if (
+        isinstance(truth_dt_safety, bool)
+        or not isinstance(truth_dt_safety, (int, float))
+        or not (0 < truth_dt_safety <= 1)
+    ):  # also rejects NaN
+        raise ClothFitError(
+            f"synth: truth_dt_safety must be a number in (0, 1] (a fraction of the model's "
+            f"stable time step), got {truth_dt_safety!r}"
+        )
     if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not (0 <= noise <= 1):
         raise ClothFitError(f"synth: noise must be a fraction in [0, 1], got {noise!r}")
     scenario = scenario or paper_scenario()
@@ -76,12 +89,27 @@ def synth_capture(root: str | os.PathLike, params: dict[str, Any] | None = None,
         for fi in range(X.shape[0]):
             s = silhouette(cam, X[fi], tris)
             if not s.any():
-                raise ClothFitError(f"camera '{cam.name}' does not see the cloth at t = {scenario.frame_times[fi]:.3f} s")
+                raise ClothFitError(
+                    f"camera '{cam.name}' does not see the cloth at t = {scenario.frame_times[fi]:.3f} s"
+                )
             if noise > 0:
                 s = add_boundary_noise(s, noise, noise_rng(seed, ci, fi))
             row.append(s)
         sils.append(row)
-    meta = {"generator": f"synth (core {model.name} model, core rasteriser)", **truth, "noise_fraction": noise,
-            "seed": seed, "rig": rig if cameras is None else "custom"}
-    return write_capture(root, cams, scenario, sils, shapes=X, cloth_mass=cloth_mass, meta=meta,
-                         model=None if isinstance(model, PaperModel) else model.to_dict())
+    meta = {
+        "generator": f"synth (core {model.name} model, core rasteriser)",
+        **truth,
+        "noise_fraction": noise,
+        "seed": seed,
+        "rig": rig if cameras is None else "custom",
+    }
+    return write_capture(
+        root,
+        cams,
+        scenario,
+        sils,
+        shapes=X,
+        cloth_mass=cloth_mass,
+        meta=meta,
+        model=None if isinstance(model, PaperModel) else model.to_dict(),
+    )

@@ -47,6 +47,7 @@ Scaling ``mass``, every stiffness, every damping (``bending_damping`` too with a
 with linear bending, where it is a ratio) and ``air_damping`` by one factor leaves the motion
 unchanged: silhouettes cannot tell them apart (``mass_scaled``).
 """
+
 from __future__ import annotations
 
 import math
@@ -62,55 +63,145 @@ from .scenario import ClothGrid, Scenario
 
 # --------------------------------------------------------------------------- settings
 
-FLOAT_SETTINGS = ("mass", "air_damping", "tension_stiffness", "compression_stiffness", "shear_stiffness",
-                  "bending_stiffness", "tension_damping", "compression_damping", "shear_damping",
-                  "bending_damping", "pin_stiffness", "time_scale")
+FLOAT_SETTINGS = (
+    "mass",
+    "air_damping",
+    "tension_stiffness",
+    "compression_stiffness",
+    "shear_stiffness",
+    "bending_stiffness",
+    "tension_damping",
+    "compression_damping",
+    "shear_damping",
+    "bending_damping",
+    "pin_stiffness",
+    "time_scale",
+)
 BENDING_MODELS = ("ANGULAR", "LINEAR")
 # Blender's own limits (hard_min, hard_max) of bpy.types.ClothSettings (4.2 - 4.5; a Blender test
 # reads them back from bpy and compares); mass and time_scale must also be > 0 here.
 RANGES = {
-    "mass": (0.0, 3.4028234663852886e+38), "air_damping": (0.0, 10.0),
-    "tension_stiffness": (0.0, 10000.0), "compression_stiffness": (0.0, 10000.0),
-    "shear_stiffness": (0.0, 10000.0), "bending_stiffness": (0.0, 10000.0),
-    "tension_damping": (0.0, 50.0), "compression_damping": (0.0, 50.0), "shear_damping": (0.0, 50.0),
-    "bending_damping": (0.0, 1000.0), "pin_stiffness": (0.0, 50.0),
-    "time_scale": (0.0, 3.4028234663852886e+38), "quality": (1, 2147483647),
+    "mass": (0.0, 3.4028234663852886e38),
+    "air_damping": (0.0, 10.0),
+    "tension_stiffness": (0.0, 10000.0),
+    "compression_stiffness": (0.0, 10000.0),
+    "shear_stiffness": (0.0, 10000.0),
+    "bending_stiffness": (0.0, 10000.0),
+    "tension_damping": (0.0, 50.0),
+    "compression_damping": (0.0, 50.0),
+    "shear_damping": (0.0, 50.0),
+    "bending_damping": (0.0, 1000.0),
+    "pin_stiffness": (0.0, 50.0),
+    "time_scale": (0.0, 3.4028234663852886e38),
+    "quality": (1, 2147483647),
 }
 POSITIVE = ("mass", "time_scale")
 # A new Cloth modifier's values (Blender 4.2 - 4.5)
-DEFAULTS = {"quality": 5, "bending_model": "ANGULAR", "mass": 0.3, "air_damping": 1.0,
-            "tension_stiffness": 15.0, "compression_stiffness": 15.0, "shear_stiffness": 5.0,
-            "bending_stiffness": 0.5, "tension_damping": 5.0, "compression_damping": 5.0,
-            "shear_damping": 5.0, "bending_damping": 0.5, "pin_stiffness": 1.0, "time_scale": 1.0}
+DEFAULTS = {
+    "quality": 5,
+    "bending_model": "ANGULAR",
+    "mass": 0.3,
+    "air_damping": 1.0,
+    "tension_stiffness": 15.0,
+    "compression_stiffness": 15.0,
+    "shear_stiffness": 5.0,
+    "bending_stiffness": 0.5,
+    "tension_damping": 5.0,
+    "compression_damping": 5.0,
+    "shear_damping": 5.0,
+    "bending_damping": 0.5,
+    "pin_stiffness": 1.0,
+    "time_scale": 1.0,
+}
 # the settings that scale with the mass (the symmetry of the equations of motion)
-MASS_SCALED = ("mass", "air_damping", "tension_stiffness", "compression_stiffness", "shear_stiffness",
-               "bending_stiffness", "tension_damping", "compression_damping", "shear_damping", "pin_stiffness")
+MASS_SCALED = (
+    "mass",
+    "air_damping",
+    "tension_stiffness",
+    "compression_stiffness",
+    "shear_stiffness",
+    "bending_stiffness",
+    "tension_damping",
+    "compression_damping",
+    "shear_damping",
+    "pin_stiffness",
+)
 # Blender 4.5's cloth presets (scripts/presets/cloth/*.py), as ClothSettings values
 PRESETS = {
-    "cotton": {"quality": 5, "mass": 0.3, "tension_stiffness": 15, "compression_stiffness": 15,
-               "shear_stiffness": 15, "bending_stiffness": 0.5, "tension_damping": 5, "compression_damping": 5,
-               "shear_damping": 5, "air_damping": 1, "bending_damping": 0.5},
-    "silk": {"quality": 5, "mass": 0.15, "tension_stiffness": 5, "compression_stiffness": 5, "shear_stiffness": 5,
-             "bending_stiffness": 0.05, "tension_damping": 0, "compression_damping": 0, "shear_damping": 0,
-             "air_damping": 1, "bending_damping": 0.5},
-    "denim": {"quality": 12, "mass": 1, "tension_stiffness": 40, "compression_stiffness": 40, "shear_stiffness": 40,
-              "bending_stiffness": 10, "tension_damping": 25, "compression_damping": 25, "shear_damping": 25,
-              "air_damping": 1, "bending_damping": 0.5},
-    "leather": {"quality": 15, "mass": 0.4, "tension_stiffness": 80, "compression_stiffness": 80,
-                "shear_stiffness": 80, "bending_stiffness": 150, "tension_damping": 25, "compression_damping": 25,
-                "shear_damping": 25, "air_damping": 1, "bending_damping": 0.5},
-    "rubber": {"quality": 7, "mass": 3, "tension_stiffness": 15, "compression_stiffness": 15, "shear_stiffness": 15,
-               "bending_stiffness": 25, "tension_damping": 25, "compression_damping": 25, "shear_damping": 25,
-               "air_damping": 1, "bending_damping": 0.5},
+    "cotton": {
+        "quality": 5,
+        "mass": 0.3,
+        "tension_stiffness": 15,
+        "compression_stiffness": 15,
+        "shear_stiffness": 15,
+        "bending_stiffness": 0.5,
+        "tension_damping": 5,
+        "compression_damping": 5,
+        "shear_damping": 5,
+        "air_damping": 1,
+        "bending_damping": 0.5,
+    },
+    "silk": {
+        "quality": 5,
+        "mass": 0.15,
+        "tension_stiffness": 5,
+        "compression_stiffness": 5,
+        "shear_stiffness": 5,
+        "bending_stiffness": 0.05,
+        "tension_damping": 0,
+        "compression_damping": 0,
+        "shear_damping": 0,
+        "air_damping": 1,
+        "bending_damping": 0.5,
+    },
+    "denim": {
+        "quality": 12,
+        "mass": 1,
+        "tension_stiffness": 40,
+        "compression_stiffness": 40,
+        "shear_stiffness": 40,
+        "bending_stiffness": 10,
+        "tension_damping": 25,
+        "compression_damping": 25,
+        "shear_damping": 25,
+        "air_damping": 1,
+        "bending_damping": 0.5,
+    },
+    "leather": {
+        "quality": 15,
+        "mass": 0.4,
+        "tension_stiffness": 80,
+        "compression_stiffness": 80,
+        "shear_stiffness": 80,
+        "bending_stiffness": 150,
+        "tension_damping": 25,
+        "compression_damping": 25,
+        "shear_damping": 25,
+        "air_damping": 1,
+        "bending_damping": 0.5,
+    },
+    "rubber": {
+        "quality": 7,
+        "mass": 3,
+        "tension_stiffness": 15,
+        "compression_stiffness": 15,
+        "shear_stiffness": 15,
+        "bending_stiffness": 25,
+        "tension_damping": 25,
+        "compression_damping": 25,
+        "shear_damping": 25,
+        "air_damping": 1,
+        "bending_damping": 0.5,
+    },
 }
-GRAVITY_SCALE = 0.001       # Blender scales the scene gravity by 1/1000 for cloth
-AIR_SCALE = 0.01            # drag = AIR_SCALE * air_damping
-SOFTGOALSNAP = 0.999        # goal weight (w^4) from which a vertex is pinned
-CG_TOLERANCE = 0.01         # relative residual at which Blender's CG stops
+GRAVITY_SCALE = 0.001  # Blender scales the scene gravity by 1/1000 for cloth
+AIR_SCALE = 0.01  # drag = AIR_SCALE * air_damping
+SOFTGOALSNAP = 0.999  # goal weight (w^4) from which a vertex is pinned
+CG_TOLERANCE = 0.01  # relative residual at which Blender's CG stops
 CG_MAX_ITERATIONS = 100
-ALMOST_ZERO = 1.1920928955078125e-07   # FLT_EPSILON: shorter springs have no direction
+ALMOST_ZERO = 1.1920928955078125e-07  # FLT_EPSILON: shorter springs have no direction
 MAX_STEPS_PER_FRAME = 1000  # a (time_scale, quality) pair needing more is refused
-MAX_STRAIN = D.MAX_STRAIN   # a structural spring longer than (1 + MAX_STRAIN) rest = exploded
+MAX_STRAIN = D.MAX_STRAIN  # a structural spring longer than (1 + MAX_STRAIN) rest = exploded
 EXPLODE_FACTOR = D.EXPLODE_FACTOR
 
 
@@ -138,8 +229,10 @@ def check_settings(s: dict, source: str = "Blender cloth settings") -> dict:
     known = set(FLOAT_SETTINGS) | {"quality", "bending_model"}
     bad = sorted(set(s) - known)
     if bad:
-        raise ClothFitError(f"{source}: unknown or unsupported setting(s) {', '.join(bad)} "
-                            f"(supported: quality, bending_model, {', '.join(FLOAT_SETTINGS)})")
+        raise ClothFitError(
+            f"{source}: unknown or unsupported setting(s) {', '.join(bad)} "
+            f"(supported: quality, bending_model, {', '.join(FLOAT_SETTINGS)})"
+        )
     out = dict(DEFAULTS)
     out.update(s)
     bm = out["bending_model"]
@@ -201,6 +294,7 @@ def steps_per_frame(time_scale: float, quality: int) -> tuple[float, np.ndarray]
 
 # --------------------------------------------------------------------------- the spring network
 
+
 @dataclass
 class Network:
     """Blender's springs of a polygon mesh (cloth.cc's rules) for one bending model.
@@ -213,27 +307,28 @@ class Network:
     padded with -1) and the rest angle. The per-family arrays (``struct``, ``shear``, ``bend``) are
     the same springs grouped, for the vectorised reference solver.
     """
-    rest: np.ndarray              # (V, 3) first-frame positions
+
+    rest: np.ndarray  # (V, 3) first-frame positions
     bending_model: str
-    edges: np.ndarray             # (E, 2) mesh edges in mesh order (structural springs)
-    struct: np.ndarray            # (S, 2)
-    struct_len: np.ndarray        # (S,)
-    shear: np.ndarray             # (H, 2)
+    edges: np.ndarray  # (E, 2) mesh edges in mesh order (structural springs)
+    struct: np.ndarray  # (S, 2)
+    struct_len: np.ndarray  # (S,)
+    shear: np.ndarray  # (H, 2)
     shear_len: np.ndarray
-    hinge: np.ndarray             # (B, 2) the spring a hinge bends across (angular)
-    hinge_len: np.ndarray         # its rest length
-    hinge_pa: np.ndarray          # (B, maxlen) corners of the polygon on side a, -1 padded
+    hinge: np.ndarray  # (B, 2) the spring a hinge bends across (angular)
+    hinge_len: np.ndarray  # its rest length
+    hinge_pa: np.ndarray  # (B, maxlen) corners of the polygon on side a, -1 padded
     hinge_pb: np.ndarray
-    hinge_rest: np.ndarray        # (B,) rest angle
-    bend: np.ndarray              # (L, 2) linear bending springs
+    hinge_rest: np.ndarray  # (B,) rest angle
+    bend: np.ndarray  # (L, 2) linear bending springs
     bend_len: np.ndarray
     avg_spring_len: float
-    sp_i: np.ndarray              # Blender's spring list
+    sp_i: np.ndarray  # Blender's spring list
     sp_j: np.ndarray
-    sp_kind: np.ndarray           # 0 structural, 1 shear, 2 linear bending
+    sp_kind: np.ndarray  # 0 structural, 1 shear, 2 linear bending
     sp_hinge: np.ndarray
-    struct_creation: np.ndarray   # list positions of the structural springs in creation (edge) order
-    triangles: np.ndarray         # the faces as triangles (corners 0, c, c + 1), for silhouettes
+    struct_creation: np.ndarray  # list positions of the structural springs in creation (edge) order
+    triangles: np.ndarray  # the faces as triangles (corners 0, c, c + 1), for silhouettes
     faces: list
 
     @property
@@ -241,8 +336,13 @@ class Network:
         return int(self.rest.shape[0])
 
     @classmethod
-    def from_mesh(cls, rest: ArrayLike, faces: Iterable[Iterable[int]], bending_model: str = "ANGULAR",
-                  edges: ArrayLike | None = None) -> "Network":
+    def from_mesh(
+        cls,
+        rest: ArrayLike,
+        faces: Iterable[Iterable[int]],
+        bending_model: str = "ANGULAR",
+        edges: ArrayLike | None = None,
+    ) -> Network:
         """Springs of the mesh ``(rest, faces)``; ``edges`` gives the mesh's edge order (default: each
         face's sides in face order, which is what Cloth Fit builds its Blender meshes with)."""
         rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
@@ -271,27 +371,27 @@ class Network:
             if set(elist) != set(sides) or len(set(elist)) != len(elist):
                 raise ClothFitError("cloth mesh: the edges do not match the faces (loose or missing edges)")
         angular = bending_model == "ANGULAR"
-        created = [(a, b, 0) for a, b in elist]          # (i, j, kind) in creation order
+        created = [(a, b, 0) for a, b in elist]  # (i, j, kind) in creation order
         spring_of_edge = {e: k for k, e in enumerate(elist)}
-        hinges = []                                      # (spring creation index, pa, pb)
+        hinges = []  # (spring creation index, pa, pb)
         edge_faces = {}
         for fi, f in enumerate(faces):
             n = len(f)
             if n > 3:
                 for j in range(1, n - 1):
                     pairs = ([(0, j)] if j > 1 else []) + [(j, k) for k in range(j + 2, n)]
-                    for (jj, kk) in pairs:
+                    for jj, kk in pairs:
                         a, b = f[jj], f[kk]
                         created.append((min(a, b), max(a, b), 1))
                         if angular:
-                            hinges.append((len(created) - 1, f[jj:kk + 1], f[:jj + 1] + f[kk:]))
+                            hinges.append((len(created) - 1, f[jj : kk + 1], f[: jj + 1] + f[kk:]))
             if angular:
                 for c in range(n):
                     a, b = f[c], f[(c + 1) % n]
                     edge_faces.setdefault((min(a, b), max(a, b)), []).append(fi)
         if angular:
             for key, fl in edge_faces.items():
-                if len(fl) == 2:   # a third polygon on the edge removes its hinge in Blender
+                if len(fl) == 2:  # a third polygon on the edge removes its hinge in Blender
                     hinges.append((spring_of_edge[key], faces[fl[0]], faces[fl[1]]))
         shear_created = [(a, b) for a, b, k in created if k == 1]
         if not angular and shear_created:
@@ -310,7 +410,7 @@ class Network:
                         seen.add(key)
                         created.append((key[0], key[1], 2))
         N = len(created)
-        order = np.arange(N)[::-1]                       # list position p holds creation index order[p]
+        order = np.arange(N)[::-1]  # list position p holds creation index order[p]
         pos_of = np.empty(N, dtype=np.int64)
         pos_of[order] = np.arange(N)
         cr = np.array([(a, b, k) for a, b, k in created], dtype=np.int64).reshape(-1, 3)
@@ -323,12 +423,14 @@ class Network:
         pb = np.full((B, maxlen), -1, dtype=np.int64)
         for k, (ci, a, b) in enumerate(hinges):
             hinge[k] = cr[ci, :2]
-            pa[k, :len(a)] = a
-            pb[k, :len(b)] = b
+            pa[k, : len(a)] = a
+            pb[k, : len(b)] = b
             sp_hinge[pos_of[ci]] = k
+
         def fam(kind):
             ij = cr[cr[:, 2] == kind, :2]
             return ij, np.linalg.norm(rest[ij[:, 1]] - rest[ij[:, 0]], axis=1) if len(ij) else np.zeros(0)
+
         struct, struct_len = fam(0)
         shear, shear_len = fam(1)
         bend, bend_len = fam(2)
@@ -336,14 +438,35 @@ class Network:
         tris = []
         for f in faces:
             tris.extend([(f[0], f[c], f[c + 1]) for c in range(1, len(f) - 1)])
-        return cls(rest, bending_model, np.array(elist, dtype=np.int64).reshape(-1, 2), struct, struct_len,
-                   shear, shear_len, hinge, hinge_len, pa, pb, hinge_angles(rest, hinge, pa, pb), bend, bend_len,
-                   float(struct_len.mean()), sp_i, sp_j, sp_kind, sp_hinge, pos_of[:len(elist)].copy(),
-                   np.array(tris, dtype=np.int64).reshape(-1, 3), faces)
+        return cls(
+            rest,
+            bending_model,
+            np.array(elist, dtype=np.int64).reshape(-1, 2),
+            struct,
+            struct_len,
+            shear,
+            shear_len,
+            hinge,
+            hinge_len,
+            pa,
+            pb,
+            hinge_angles(rest, hinge, pa, pb),
+            bend,
+            bend_len,
+            float(struct_len.mean()),
+            sp_i,
+            sp_j,
+            sp_kind,
+            sp_hinge,
+            pos_of[: len(elist)].copy(),
+            np.array(tris, dtype=np.int64).reshape(-1, 3),
+            faces,
+        )
 
     @classmethod
-    def from_grid(cls, grid: ClothGrid, bending_model: str = "ANGULAR",
-                  first_frame: np.ndarray | None = None) -> "Network":
+    def from_grid(
+        cls, grid: ClothGrid, bending_model: str = "ANGULAR", first_frame: np.ndarray | None = None
+    ) -> Network:
         """The grid's quads; ``first_frame`` (V, 3) replaces the rest positions (Blender's rest shape
         is the first frame's mesh)."""
         rest = grid.rest if first_frame is None else first_frame
@@ -382,6 +505,7 @@ def hinge_angles(X: np.ndarray, hinge: np.ndarray, pa: np.ndarray, pb: np.ndarra
 
 # --------------------------------------------------------------------------- the manipulation in frames
 
+
 def settle_frames(settle_time: float, fps: float) -> int:
     """Blender steps whole frames: the settle (which only brings the cloth to rest before t = 0) is
     rounded to the nearest whole number of frames at ``fps`` (``settle_note`` says so)."""
@@ -394,8 +518,10 @@ def settle_note(settle_time: float, fps: float) -> str | None:
     sf = settle_frames(settle_time, fps)
     if abs(n - sf) <= 1e-6:
         return None
-    return (f"settle_time {settle_time:g} s is {n:.2f} frames at {fps:g} fps: rounded to {sf} frames "
-            f"({sf / fps:.4g} s); the settle only brings the cloth to rest before t = 0")
+    return (
+        f"settle_time {settle_time:g} s is {n:.2f} frames at {fps:g} fps: rounded to {sf} frames "
+        f"({sf / fps:.4g} s); the settle only brings the cloth to rest before t = 0"
+    )
 
 
 @dataclass
@@ -409,23 +535,24 @@ class FramePlan:
     handle is pinned during the step into every frame at or before its release time, and all of
     them while settling). Capture times between frames are read by linear interpolation
     (``lo``, ``hi``, ``w``)."""
+
     fps: float
     settle_frames: int
-    n_frames: int                 # frames simulated after the start frame
-    handle_vertices: np.ndarray   # (H,)
-    targets: np.ndarray           # (n_frames + 1, H, 3): index 0 = start frame
-    weights: np.ndarray           # (n_frames + 1, H)
-    lo: np.ndarray                # (F,) frame index (from the start frame) at or before each capture time
+    n_frames: int  # frames simulated after the start frame
+    handle_vertices: np.ndarray  # (H,)
+    targets: np.ndarray  # (n_frames + 1, H, 3): index 0 = start frame
+    weights: np.ndarray  # (n_frames + 1, H)
+    lo: np.ndarray  # (F,) frame index (from the start frame) at or before each capture time
     hi: np.ndarray
-    w: np.ndarray                 # weight of hi
-    between: int                  # capture times that fall between frames
+    w: np.ndarray  # weight of hi
+    between: int  # capture times that fall between frames
 
     @property
-    def release_frame(self) -> int:      # relative to the start frame
+    def release_frame(self) -> int:  # relative to the start frame
         return self.settle_frames
 
     @classmethod
-    def from_scenario(cls, scenario: Scenario, fps: float) -> "FramePlan":
+    def from_scenario(cls, scenario: Scenario, fps: float) -> FramePlan:
         if not (fps > 0 and math.isfinite(fps)):
             raise ClothFitError(f"frame rate {fps} must be a positive number")
         sf = settle_frames(scenario.settle_time, fps)
@@ -464,13 +591,14 @@ class FramePlan:
 
 # --------------------------------------------------------------------------- the reference solver
 
+
 @dataclass
 class Trajectory:
-    positions: np.ndarray        # (F, V, 3) at the capture times (NaN if exploded)
-    frames: np.ndarray | None    # (n_frames + 1, V, 3) every frame, if kept
+    positions: np.ndarray  # (F, V, 3) at the capture times (NaN if exploded)
+    frames: np.ndarray | None  # (n_frames + 1, V, 3) every frame, if kept
     exploded: bool
     reason: str
-    cg_iterations: np.ndarray    # per step
+    cg_iterations: np.ndarray  # per step
     steps_per_frame: int
 
 
@@ -479,11 +607,11 @@ def _sym_outer(d):
 
 
 def _fb(x):
-    return -11.541 * x ** 4 + 34.193 * x ** 3 - 39.083 * x ** 2 + 23.116 * x - 9.713
+    return -11.541 * x**4 + 34.193 * x**3 - 39.083 * x**2 + 23.116 * x - 9.713
 
 
 def _fb_deriv(x):
-    return -46.164 * x ** 3 + 102.579 * x ** 2 - 78.166 * x + 23.116
+    return -46.164 * x**3 + 102.579 * x**2 - 78.166 * x + 23.116
 
 
 def _fbstar(length, L, kb, cb):
@@ -633,8 +761,9 @@ def _cg_filtered(A, B, pinned):
     return dV, it
 
 
-def simulate_reference(net: Network, plan: FramePlan, settings: dict, gravity: ArrayLike = D.GRAVITY,
-                       keep_frames: bool = False) -> Trajectory:
+def simulate_reference(
+    net: Network, plan: FramePlan, settings: dict, gravity: ArrayLike = D.GRAVITY, keep_frames: bool = False
+) -> Trajectory:
     """One candidate, step by step as Blender's solver runs it (numpy; the numba kernels of
     ``blender_kernels`` compute the same and are tested against it)."""
     s = check_settings(settings)
@@ -691,10 +820,21 @@ def simulate_reference(net: Network, plan: FramePlan, settings: dict, gravity: A
             dfdv.diag += -drag * np.eye(3)
             if angular:
                 _bending_angular(X, Vel, net, 0.1 * s["bending_stiffness"] * net.hinge_len, s["bending_damping"], F)
-            _linear_springs(X, Vel, net.struct, net.struct_len, k_t, s["tension_damping"], k_c,
-                            s["compression_damping"], angular, F, dfdx, dfdv)
-            _linear_springs(X, Vel, net.shear, net.shear_len, k_s, s["shear_damping"], 0.0, 0.0, False,
-                            F, dfdx, dfdv)
+            _linear_springs(
+                X,
+                Vel,
+                net.struct,
+                net.struct_len,
+                k_t,
+                s["tension_damping"],
+                k_c,
+                s["compression_damping"],
+                angular,
+                F,
+                dfdx,
+                dfdv,
+            )
+            _linear_springs(X, Vel, net.shear, net.shear_len, k_s, s["shear_damping"], 0.0, 0.0, False, F, dfdx, dfdv)
             if not angular:
                 kb = s["bending_stiffness"] / (20.0 * avg)
                 _bending_linear(X, net.bend, net.bend_len, kb, kb * s["bending_damping"], F, dfdx, dfdv)

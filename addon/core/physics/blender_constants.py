@@ -1,10 +1,10 @@
 """float32 constants, lane-parameter columns and result codes of the Blender cloth kernels
 (``blender_kernels.py``, ``blender_springs.py``).
 """
+
 from __future__ import annotations
 
 import numpy as np
-
 
 F32 = np.float32
 ZERO = F32(0.0)
@@ -12,12 +12,12 @@ ONE = F32(1.0)
 HALF = F32(0.5)
 TENTH = F32(0.1)
 TWENTY = F32(20.0)
-FLT_EPS = F32(1.1920928955078125e-07)      # FLT_EPSILON, also Blender's ALMOST_ZERO
-NORM_EPS = F32(1.0e-35)                     # normalize_v3's threshold
+FLT_EPS = F32(1.1920928955078125e-07)  # FLT_EPSILON, also Blender's ALMOST_ZERO
+NORM_EPS = F32(1.0e-35)  # normalize_v3's threshold
 CG_EPS = F32(0.01)
-SNAP = F32(0.999)                           # SOFTGOALSNAP
-C4 = (F32(-11.541), F32(34.193), F32(-39.083), F32(23.116), F32(-9.713))   # Choi & Ko's fb
-D3 = (F32(-46.164), F32(102.579), F32(-78.166), F32(23.116))               # and its derivative
+SNAP = F32(0.999)  # SOFTGOALSNAP
+C4 = (F32(-11.541), F32(34.193), F32(-39.083), F32(23.116), F32(-9.713))  # Choi & Ko's fb
+D3 = (F32(-46.164), F32(102.579), F32(-78.166), F32(23.116))  # and its derivative
 CG_MAX = 100
 
 # lane parameters (columns of the float32 parameter table)

@@ -6,7 +6,7 @@ spring list order of cloth.cc (newest spring first), force and Jacobian accumula
 product of ``mul_bfmatrix_lfvector``, sequential float dot products and the filtered conjugate
 gradient of ``cg_filtered``. The CG stops at a 1 % residual, so its iteration count, and with it
 the motion, depends on rounding: doing the same operations on the same floats keeps the kernel on
-Blender's trajectory (measured: ``python -m addon blender-agreement``), where a float64 solver
+Blender's trajectory (measured: ``python -m clothfit blender-agreement``), where a float64 solver
 drifts by up to millimetres on soft cloth.
 
 Candidates run as SIMD lanes: every array has the lane (candidate) axis last, and every operation
@@ -16,6 +16,7 @@ runs the batches in parallel threads. The lane operations are hand-written LLVM 
 ``blender_springs.py``; why, what they gain, and ``CLOTHFIT_NO_SIMD=1`` to run their plain numba
 twins instead: ``docs/kernels.md``).
 """
+
 from __future__ import annotations
 
 import math
@@ -24,18 +25,48 @@ import numpy as np
 
 from . import simd as _simd_ir
 from . import simd_plain
-from .jit import JIT, PARALLEL, njit, prange
-from .blender_constants import (C4, CG_EPS, CG_MAX, D3, F32, FLEW, FLT_EPS, KIND_STRUCT, NONFINITE, NORM_EPS,
-                                N_LANE_PARAMS, OK, ONE, P_AVG, P_BDAMP, P_BEND, P_CB, P_DC, P_DRAG, P_DS, P_DT, P_KB,
-                                P_KC, P_KGOAL, P_KS, P_KT, P_MASS, SNAP, STRETCHED, ZERO)
-from .blender_constants import REASONS  # noqa: F401  (blender_kernels.REASONS: models.py)
+from .blender_constants import (
+    C4,
+    CG_EPS,
+    CG_MAX,
+    D3,
+    F32,
+    FLEW,
+    FLT_EPS,
+    KIND_STRUCT,
+    N_LANE_PARAMS,
+    NONFINITE,
+    NORM_EPS,
+    OK,
+    ONE,
+    P_AVG,
+    P_BDAMP,
+    P_BEND,
+    P_CB,
+    P_DC,
+    P_DRAG,
+    P_DS,
+    P_DT,
+    P_KB,
+    P_KC,
+    P_KGOAL,
+    P_KS,
+    P_KT,
+    P_MASS,
+    REASONS,  # noqa: F401  (blender_kernels.REASONS: models.py)
+    SNAP,
+    STRETCHED,
+    ZERO,
+)
 from .blender_springs import _springs_plain
+from .jit import JIT, PARALLEL, njit, prange
 
 # The lane operations: simd.py's and blender_springs.py's hand-written LLVM IR, or with CLOTHFIT_NO_SIMD=1
 # their plain numba twins (docs/kernels.md). The kernels that call them are then not cached, so that a cached
 # build of the other path is never loaded for them.
 if _simd_ir.ENABLED:  # pragma: no branch
     from .blender_springs import _springs_v
+
     simd, LANES_JIT, LANES_PARALLEL = _simd_ir, JIT, PARALLEL
 else:
     _springs_v, simd = _springs_plain, simd_plain
@@ -83,10 +114,16 @@ def _poly_avg(P, inds, n, l):
 def _hinge_angle(P, i, j, pa, la, pb, lb, l):
     """spring_angle: polygon normals on both sides, edge direction, signed angle (lane l)."""
     m0, m1, m2 = _poly_avg(P, pa, la, l)
-    a0, a1, a2 = _normal_tri(P[3 * j, l], P[3 * j + 1, l], P[3 * j + 2, l], P[3 * i, l], P[3 * i + 1, l], P[3 * i + 2, l], m0, m1, m2)
+    a0, a1, a2 = _normal_tri(
+        P[3 * j, l], P[3 * j + 1, l], P[3 * j + 2, l], P[3 * i, l], P[3 * i + 1, l], P[3 * i + 2, l], m0, m1, m2
+    )
     m0, m1, m2 = _poly_avg(P, pb, lb, l)
-    b0, b1, b2 = _normal_tri(P[3 * i, l], P[3 * i + 1, l], P[3 * i + 2, l], P[3 * j, l], P[3 * j + 1, l], P[3 * j + 2, l], m0, m1, m2)
-    e0, e1, e2 = _normalize(P[3 * i, l] - P[3 * j, l], P[3 * i + 1, l] - P[3 * j + 1, l], P[3 * i + 2, l] - P[3 * j + 2, l])
+    b0, b1, b2 = _normal_tri(
+        P[3 * i, l], P[3 * i + 1, l], P[3 * i + 2, l], P[3 * j, l], P[3 * j + 1, l], P[3 * j + 2, l], m0, m1, m2
+    )
+    e0, e1, e2 = _normalize(
+        P[3 * i, l] - P[3 * j, l], P[3 * i + 1, l] - P[3 * j + 1, l], P[3 * i + 2, l] - P[3 * j + 2, l]
+    )
     cos = a0 * b0 + a1 * b1 + a2 * b2
     t0 = a1 * b2 - a2 * b1
     t1 = a2 * b0 - a0 * b2
@@ -153,8 +190,37 @@ def _add_block(Mb, k, l, o00, o01, o02, o11, o12, o22):
 
 
 @njit(**LANES_JIT)
-def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb,
-              restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg, L):
+def _assemble(
+    X,
+    Vel,
+    F,
+    Xd,
+    Vd,
+    Xo,
+    Vo,
+    act,
+    sp_i,
+    sp_j,
+    sp_kind,
+    sp_hinge,
+    restlen,
+    h_pa,
+    h_la,
+    h_pb,
+    h_lb,
+    restang,
+    angular,
+    par,
+    parT,
+    g,
+    goal,
+    pinned,
+    xold,
+    xconst,
+    hv,
+    tg,
+    L,
+):
     """cloth_calc_force for every lane: forces F and the blocks of dF/dx (Xd diagonal, Xo per spring)
     and dF/dv (Vd, Vo); ``act[s, l]`` = spring s has a block in lane l."""
     V = X.shape[0] // 3
@@ -212,8 +278,17 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
                 o01 = (ZERO - d1 * d0) * (ZERO / ln)
                 o02 = (ZERO - d2 * d0) * (ZERO / ln)
                 o12 = (ZERO - d2 * d1) * (ZERO / ln)
-                _add_block(Xd, v, l, (o00 - ONE) * k, (o01 - ZERO) * k, (o02 - ZERO) * k, (o11 - ONE) * k,
-                           (o12 - ZERO) * k, (o22 - ONE) * k)
+                _add_block(
+                    Xd,
+                    v,
+                    l,
+                    (o00 - ONE) * k,
+                    (o01 - ZERO) * k,
+                    (o02 - ZERO) * k,
+                    (o11 - ONE) * k,
+                    (o12 - ZERO) * k,
+                    (o22 - ONE) * k,
+                )
     # air drag
     for v in range(V):
         for l in range(L):
@@ -228,14 +303,61 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, res
             Vd[6 * v + 4, l] += ZERO * nd
             Vd[6 * v + 5, l] += nd
     # springs, in Blender's list order (vectorised over the lanes)
-    _springs_v(X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang,
-               parT, angular)
+    _springs_v(
+        X,
+        Vel,
+        F,
+        Xd,
+        Vd,
+        Xo,
+        Vo,
+        sp_i,
+        sp_j,
+        sp_kind,
+        sp_hinge,
+        restlen,
+        h_pa,
+        h_la,
+        h_pb,
+        h_lb,
+        restang,
+        parT,
+        angular,
+    )
 
 
 @njit(**LANES_JIT)
-def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular,
-                   hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, par, keep, out,
-                   centre, limit, max_ratio, codes, iterations):
+def simulate_batch(
+    rest,
+    sp_i,
+    sp_j,
+    sp_kind,
+    sp_hinge,
+    restlen,
+    h_pa,
+    h_la,
+    h_pb,
+    h_lb,
+    restang,
+    angular,
+    hv,
+    targets,
+    weights,
+    n_steps,
+    dt,
+    tg_steps,
+    tp_steps,
+    inv_ts,
+    g,
+    par,
+    keep,
+    out,
+    centre,
+    limit,
+    max_ratio,
+    codes,
+    iterations,
+):
     """Simulate the W = simd.W lanes of ``par`` (W, N_LANE_PARAMS) in lockstep through every frame.
 
     The manipulation may differ between lanes (a fit of uncertain pins): ``targets``
@@ -323,8 +445,37 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
                     for l in range(L):
                         Vel[3 * hv[h] + a, l] = (xconst[h, a, l] - xold[h, a, l]) * inv_ts
         for st in range(n_steps):
-            _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb,
-                      h_lb, restang, angular, par, parT, g, goal, pinned, xold, xconst, hv, tg_steps[st], L)
+            _assemble(
+                X,
+                Vel,
+                F,
+                Xd,
+                Vd,
+                Xo,
+                Vo,
+                act,
+                sp_i,
+                sp_j,
+                sp_kind,
+                sp_hinge,
+                restlen,
+                h_pa,
+                h_la,
+                h_pb,
+                h_lb,
+                restang,
+                angular,
+                par,
+                parT,
+                g,
+                goal,
+                pinned,
+                xold,
+                xconst,
+                hv,
+                tg_steps[st],
+                L,
+            )
             # A = M - (dF/dv dt + dF/dx dt^2); B = F dt + (dF/dx v) dt^2
             for v in range(V):
                 for qq in range(6):
@@ -362,13 +513,13 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
                 simd.scale_rows(q, free)
                 simd.dot(c, q, cq)
                 for l in range(L):
-                    cq[0, l] = delta[0, l] / cq[0, l]          # alpha
+                    cq[0, l] = delta[0, l] / cq[0, l]  # alpha
                 simd.cg_step(dV, r, c, q, cq, run)
                 for l in range(L):
-                    ratio[0, l] = delta[0, l]                  # delta_old
+                    ratio[0, l] = delta[0, l]  # delta_old
                 simd.dot(r, r, delta)
                 for l in range(L):
-                    ratio[0, l] = delta[0, l] / ratio[0, l]    # delta_new / delta_old
+                    ratio[0, l] = delta[0, l] / ratio[0, l]  # delta_new / delta_old
                 simd.cg_direction(c, r, ratio, run, free)
                 it += 1
                 anyrun = False
@@ -435,18 +586,75 @@ def simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_p
 
 
 @njit(**LANES_PARALLEL)
-def simulate_population(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, angular,
-                        hv, targets, weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, par, lane_start,
-                        keep, out, centre, limit, max_ratio, codes, iterations):
+def simulate_population(
+    rest,
+    sp_i,
+    sp_j,
+    sp_kind,
+    sp_hinge,
+    restlen,
+    h_pa,
+    h_la,
+    h_pb,
+    h_lb,
+    restang,
+    angular,
+    hv,
+    targets,
+    weights,
+    n_steps,
+    dt,
+    tg_steps,
+    tp_steps,
+    inv_ts,
+    g,
+    par,
+    lane_start,
+    keep,
+    out,
+    centre,
+    limit,
+    max_ratio,
+    codes,
+    iterations,
+):
     """Batches of simd.W lanes ``lane_start[b]:lane_start[b] + W`` of ``par`` in parallel threads;
     ``restlen`` (NB, S, W), ``restang`` (NB, B, W) and ``targets`` (NB, n_frames + 1, H, 3, W) per batch."""
     nb = lane_start.shape[0]
     for b in prange(nb):
         a = lane_start[b]
         e = a + simd.W
-        simulate_batch(rest, sp_i, sp_j, sp_kind, sp_hinge, restlen[b], h_pa, h_la, h_pb, h_lb, restang[b], angular,
-                       hv, targets[b], weights, n_steps, dt, tg_steps, tp_steps, inv_ts, g, par[a:e], keep,
-                       out[a:e], centre, limit, max_ratio, codes[a:e], iterations[a:e])
+        simulate_batch(
+            rest,
+            sp_i,
+            sp_j,
+            sp_kind,
+            sp_hinge,
+            restlen[b],
+            h_pa,
+            h_la,
+            h_pb,
+            h_lb,
+            restang[b],
+            angular,
+            hv,
+            targets[b],
+            weights,
+            n_steps,
+            dt,
+            tg_steps,
+            tp_steps,
+            inv_ts,
+            g,
+            par[a:e],
+            keep,
+            out[a:e],
+            centre,
+            limit,
+            max_ratio,
+            codes[a:e],
+            iterations[a:e],
+        )
 
 
 # --------------------------------------------------------------------------- the Python side
@@ -457,6 +665,7 @@ class Prepared:
 
     def __init__(self, net, plan, quality: int, time_scale: float, gravity, all_frames: bool = False):
         from .blender import MAX_STRAIN, _explosion_limits
+
         self.net, self.plan = net, plan
         self.rest = np.ascontiguousarray(net.rest, dtype=np.float32)
         self.sp_i = np.ascontiguousarray(net.sp_i, dtype=np.int64)
@@ -489,21 +698,23 @@ class Prepared:
         self.tg = np.array([F32(st / ts) for st in starts], dtype=np.float32)
         self.tp = np.array([F32(F32(st + dt) / ts) for st in starts], dtype=np.float32)
         self.inv_ts = F32(F32(1.0) / ts)
-        self.g = np.array([F32(gi) * (F32(0.001) * F32(1.0)) for gi in np.asarray(gravity, dtype=np.float64)],
-                          dtype=np.float32)
+        self.g = np.array(
+            [F32(gi) * (F32(0.001) * F32(1.0)) for gi in np.asarray(gravity, dtype=np.float64)], dtype=np.float32
+        )
         centre, limit = _explosion_limits(net, plan)
         self.centre = np.asarray(centre, dtype=np.float32)
         self.limit = F32(limit)
         self.max_ratio = F32(1.0 + MAX_STRAIN)
-        frames = (np.arange(plan.n_frames + 1) if all_frames else np.unique(np.concatenate([plan.lo, plan.hi])))
+        frames = np.arange(plan.n_frames + 1) if all_frames else np.unique(np.concatenate([plan.lo, plan.hi]))
         self.keep = np.full(plan.n_frames + 1, -1, dtype=np.int64)
         self.keep[frames] = np.arange(frames.size)
         self.kept = frames
 
     def _setup(self, first):
         """(rest lengths, mean structural rest length, rest angles) of a first frame (V, 3) float32."""
-        return setup(first, self.sp_i, self.sp_j, self.struct_creation, self.h_spring, self.h_pa, self.h_la,
-                     self.h_pb, self.h_lb)
+        return setup(
+            first, self.sp_i, self.sp_j, self.struct_creation, self.h_spring, self.h_pa, self.h_la, self.h_pb, self.h_lb
+        )
 
     def manipulation(self, offsets):
         """Each candidate's pin targets (P, n_frames + 1, H, 3), rest lengths (P, S), rest angles (P, B)
@@ -536,11 +747,15 @@ class Prepared:
         """float32 lane parameters from rows of FLOAT_SETTINGS values, computed as Blender does
         (``avg_eps``: per row, for candidates with their own rest shape; default the plan's)."""
         from .blender import FLOAT_SETTINGS
+
         rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(FLOAT_SETTINGS))
         col = {n: rows[:, k].astype(np.float32) for k, n in enumerate(FLOAT_SETTINGS)}
         P = np.zeros((rows.shape[0], N_LANE_PARAMS), dtype=np.float32)
-        a = np.full(rows.shape[0], self.avg_eps, dtype=np.float32) if avg_eps is None else \
-            np.asarray(avg_eps, dtype=np.float32)
+        a = (
+            np.full(rows.shape[0], self.avg_eps, dtype=np.float32)
+            if avg_eps is None
+            else np.asarray(avg_eps, dtype=np.float32)
+        )
         P[:, P_AVG] = a
         P[:, P_MASS] = col["mass"]
         P[:, P_DRAG] = col["air_damping"] * F32(0.01)
@@ -569,26 +784,60 @@ class Prepared:
         pad = np.concatenate([np.arange(n), np.full(nb * W - n, n - 1)])
         if man is None:
             par = self.lane_params(rows)
-            restlen = np.ascontiguousarray(np.broadcast_to(self.restlen[None, :, None], (nb,) + self.restlen.shape + (W,)))
-            restang = np.ascontiguousarray(np.broadcast_to(self.restang[None, :, None], (nb,) + self.restang.shape + (W,)))
-            targets = np.ascontiguousarray(np.broadcast_to(self.targets[None, ..., None], (nb,) + self.targets.shape + (W,)))
+            restlen = np.ascontiguousarray(
+                np.broadcast_to(self.restlen[None, :, None], (nb,) + self.restlen.shape + (W,))
+            )
+            restang = np.ascontiguousarray(
+                np.broadcast_to(self.restang[None, :, None], (nb,) + self.restang.shape + (W,))
+            )
+            targets = np.ascontiguousarray(
+                np.broadcast_to(self.targets[None, ..., None], (nb,) + self.targets.shape + (W,))
+            )
         else:
             tg, rl, ra, avg = man
             par = self.lane_params(rows, avg)
 
-            def lanes(a):           # (P, ...) -> (NB, ..., W): the candidates of each batch on the last axis
+            def lanes(a):  # (P, ...) -> (NB, ..., W): the candidates of each batch on the last axis
                 a = a[pad].reshape((nb, W) + a.shape[1:])
                 return np.ascontiguousarray(np.moveaxis(a, 1, -1))
+
             restlen, restang, targets = lanes(rl), lanes(ra), lanes(tg)
         padded = np.ascontiguousarray(par[pad])
         out = np.zeros((nb * W, self.kept.size, self.rest.shape[0], 3), dtype=np.float32)
         codes = np.zeros(nb * W, dtype=np.int64)
         its = np.zeros(nb * W, dtype=np.int64)
-        simulate_population(self.rest, self.sp_i, self.sp_j, self.sp_kind, self.sp_hinge, restlen, self.h_pa,
-                            self.h_la, self.h_pb, self.h_lb, restang, self.angular, self.hv, targets,
-                            self.weights, self.tg.size, self.dt, self.tg, self.tp, self.inv_ts, self.g,
-                            padded, np.arange(nb, dtype=np.int64) * W, self.keep,
-                            out, self.centre, self.limit, self.max_ratio, codes, its)
+        simulate_population(
+            self.rest,
+            self.sp_i,
+            self.sp_j,
+            self.sp_kind,
+            self.sp_hinge,
+            restlen,
+            self.h_pa,
+            self.h_la,
+            self.h_pb,
+            self.h_lb,
+            restang,
+            self.angular,
+            self.hv,
+            targets,
+            self.weights,
+            self.tg.size,
+            self.dt,
+            self.tg,
+            self.tp,
+            self.inv_ts,
+            self.g,
+            padded,
+            np.arange(nb, dtype=np.int64) * W,
+            self.keep,
+            out,
+            self.centre,
+            self.limit,
+            self.max_ratio,
+            codes,
+            its,
+        )
         return out[:n], codes[:n], its[:n]
 
     def sample(self, out, frames=None):

@@ -16,6 +16,7 @@ weight, plus the Cloth settings and gravity. ``network()`` and ``plan()`` turn i
 model's inputs; ``simulate()`` runs the kernel. Built this way the core model follows Blender's
 solver bit for bit (tests/test_blender_user_scenes.py).
 """
+
 from __future__ import annotations
 
 import os
@@ -53,18 +54,19 @@ class SceneCloth:
     vertex ``handle_vertices[h]`` as the Cloth modifier receives them at frame ``frame_start + f``
     (its input: the mesh after the modifiers above it); every vertex that has a non-zero weight in
     some frame is a handle. ``rest`` is the first frame's world positions (float32 values)."""
-    rest: np.ndarray                   # (V, 3)
-    faces: list                        # polygons, corner order as in the mesh
-    edges: np.ndarray                  # (E, 2) mesh edge order
-    triangles: np.ndarray              # (T, 3) the mesh's loop triangles (for silhouettes)
-    handle_vertices: np.ndarray        # (H,)
-    weights: np.ndarray                # (n_frames + 1, H)
-    targets: np.ndarray                # (n_frames + 1, H, 3)
-    settings: dict                     # ClothSettings values (quality, bending_model, FLOAT_SETTINGS)
-    gravity: np.ndarray                # (3,) m/s^2
+
+    rest: np.ndarray  # (V, 3)
+    faces: list  # polygons, corner order as in the mesh
+    edges: np.ndarray  # (E, 2) mesh edge order
+    triangles: np.ndarray  # (T, 3) the mesh's loop triangles (for silhouettes)
+    handle_vertices: np.ndarray  # (H,)
+    weights: np.ndarray  # (n_frames + 1, H)
+    targets: np.ndarray  # (n_frames + 1, H, 3)
+    settings: dict  # ClothSettings values (quality, bending_model, FLOAT_SETTINGS)
+    gravity: np.ndarray  # (3,) m/s^2
     fps: float
-    frame_start: int                   # the cloth cache's first frame (the rest frame)
-    info: dict = field(default_factory=dict)   # blend, object, notes: anything for people
+    frame_start: int  # the cloth cache's first frame (the rest frame)
+    info: dict = field(default_factory=dict)  # blend, object, notes: anything for people
 
     @property
     def n_frames(self) -> int:
@@ -87,28 +89,44 @@ class SceneCloth:
         n = self.n_frames
         f = np.arange(n + 1, dtype=np.float64) if frames is None else np.asarray(frames, dtype=np.float64).reshape(-1)
         if f.size == 0 or f.min() < 0 or np.ceil(f.max() - 1e-9) > n:
-            raise ClothFitError(f"scene cloth: frames {f.min():g}..{f.max():g} outside the {n} frames read "
-                                f"from the scene")
+            raise ClothFitError(
+                f"scene cloth: frames {f.min():g}..{f.max():g} outside the {n} frames read from the scene"
+            )
         fr = np.round(f)
         exact = np.abs(f - fr) < 1e-9
         lo = np.where(exact, fr, np.floor(f)).astype(np.int64)
         hi = np.where(exact, fr, np.floor(f) + 1).astype(np.int64)
         w = np.where(exact, 0.0, f - np.floor(f))
-        return B.FramePlan(float(self.fps), int(release_frame), n, np.asarray(self.handle_vertices, dtype=np.int64),
-                           np.asarray(self.targets, dtype=np.float64), np.asarray(self.weights, dtype=np.float64),
-                           lo, hi, w, int((~exact).sum()))
+        return B.FramePlan(
+            float(self.fps),
+            int(release_frame),
+            n,
+            np.asarray(self.handle_vertices, dtype=np.int64),
+            np.asarray(self.targets, dtype=np.float64),
+            np.asarray(self.weights, dtype=np.float64),
+            lo,
+            hi,
+            w,
+            int((~exact).sum()),
+        )
 
     def settings_row(self, **changes: float | str) -> np.ndarray:
         s = dict(self.settings)
         s.update(changes)
         return B.settings_row(B.check_settings(s, "scene cloth settings"))
 
-    def simulate(self, rows: ArrayLike | None = None, net: B.Network | None = None, plan: B.FramePlan | None = None,
-                 quality: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def simulate(
+        self,
+        rows: ArrayLike | None = None,
+        net: B.Network | None = None,
+        plan: B.FramePlan | None = None,
+        quality: int | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Every frame ``(P, n_frames + 1, V, 3)`` (float64 of the kernel's float32) and the
         explosion codes, for parameter rows (default: the scene's own settings). All rows must share
         one ``time_scale`` (the kernel runs one time step)."""
         from .blender_kernels import Prepared
+
         rows = np.atleast_2d(self.settings_row() if rows is None else np.asarray(rows, dtype=np.float64))
         ts = rows[:, B.FLOAT_SETTINGS.index("time_scale")]
         if np.any(ts != ts[0]):
@@ -124,20 +142,36 @@ class SceneCloth:
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the scene cloth as one ``.npz`` (arrays, and the rest as JSON text)."""
+        import io
+
         from ..jsonio import dumps
         from ..safeio import atomic_write
-        import io
-        meta = {"format": FORMAT, "version": 1, "faces": [list(map(int, f)) for f in self.faces],
-                "settings": self.settings, "gravity": np.asarray(self.gravity, dtype=np.float64).tolist(),
-                "fps": float(self.fps), "frame_start": int(self.frame_start), "info": self.info}
+
+        meta = {
+            "format": FORMAT,
+            "version": 1,
+            "faces": [list(map(int, f)) for f in self.faces],
+            "settings": self.settings,
+            "gravity": np.asarray(self.gravity, dtype=np.float64).tolist(),
+            "fps": float(self.fps),
+            "frame_start": int(self.frame_start),
+            "info": self.info,
+        }
         buf = io.BytesIO()
-        np.savez(buf, rest=self.rest, edges=self.edges, triangles=self.triangles,
-                 handle_vertices=self.handle_vertices, weights=self.weights, targets=self.targets,
-                 meta=np.array(dumps(meta)))
+        np.savez(
+            buf,
+            rest=self.rest,
+            edges=self.edges,
+            triangles=self.triangles,
+            handle_vertices=self.handle_vertices,
+            weights=self.weights,
+            targets=self.targets,
+            meta=np.array(dumps(meta)),
+        )
         atomic_write(path, buf.getvalue())
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "SceneCloth":
+    def load(cls, path: str | os.PathLike) -> SceneCloth:
         if not os.path.isfile(path):
             raise ClothFitError(f"scene cloth {path}: file not found")
         try:
@@ -147,13 +181,24 @@ class SceneCloth:
         except (OSError, ValueError, KeyError) as e:
             raise ClothFitError(f"scene cloth {path}: not a scene-cloth file ({e})") from None
         if meta.get("format") != FORMAT or meta.get("version") != 1:
-            raise ClothFitError(f"scene cloth {path}: format {meta.get('format')!r} version {meta.get('version')!r} "
-                                f"is not {FORMAT!r} version 1")
-        return cls(arr["rest"].astype(np.float64), meta["faces"], arr["edges"].astype(np.int64),
-                   arr["triangles"].astype(np.int64), arr["handle_vertices"].astype(np.int64),
-                   arr["weights"].astype(np.float64), arr["targets"].astype(np.float64),
-                   B.check_settings(meta["settings"], f"scene cloth {path}"), np.asarray(meta["gravity"], dtype=np.float64),
-                   float(meta["fps"]), int(meta["frame_start"]), meta.get("info", {}))
+            raise ClothFitError(
+                f"scene cloth {path}: format {meta.get('format')!r} version {meta.get('version')!r} "
+                f"is not {FORMAT!r} version 1"
+            )
+        return cls(
+            arr["rest"].astype(np.float64),
+            meta["faces"],
+            arr["edges"].astype(np.int64),
+            arr["triangles"].astype(np.int64),
+            arr["handle_vertices"].astype(np.int64),
+            arr["weights"].astype(np.float64),
+            arr["targets"].astype(np.float64),
+            B.check_settings(meta["settings"], f"scene cloth {path}"),
+            np.asarray(meta["gravity"], dtype=np.float64),
+            float(meta["fps"]),
+            int(meta["frame_start"]),
+            meta.get("info", {}),
+        )
 
 
 def grid_order(positions: ArrayLike, grid: ClothGrid, tol: float = 1e-6) -> np.ndarray | None:

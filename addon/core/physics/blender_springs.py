@@ -4,6 +4,7 @@ hand-written LLVM IR through a numba intrinsic (``_springs_v``, on ``simd.py``'s
 lane), which the kernel runs with ``CLOTHFIT_NO_SIMD=1``. Why the IR is hand-written, what it gains
 (``python tools/simd_bench.py``) and how to run without it: ``docs/kernels.md``.
 """
+
 from __future__ import annotations
 
 import math
@@ -11,10 +12,30 @@ import math
 import numpy as np
 
 from . import simd
+from .blender_constants import (
+    C4,
+    D3,
+    F32,
+    FLT_EPS,
+    HALF,
+    KIND_BEND,
+    KIND_STRUCT,
+    NORM_EPS,
+    ONE,
+    P_BDAMP,
+    P_BEND,
+    P_CB,
+    P_DC,
+    P_DS,
+    P_DT,
+    P_KB,
+    P_KC,
+    P_KS,
+    P_KT,
+    TENTH,
+    ZERO,
+)
 from .jit import JIT, njit
-from .blender_constants import (F32, HALF, NORM_EPS, ONE, TENTH, ZERO, C4, D3, FLT_EPS, KIND_BEND, KIND_STRUCT, P_BDAMP, P_BEND, P_CB, P_DC, P_DS, P_DT,
-                                P_KB, P_KC, P_KS, P_KT)
-
 
 if simd.available():  # pragma: no branch
     from llvmlite import ir as _ir
@@ -110,19 +131,58 @@ if simd.available():  # pragma: no branch
         for a in range(3):
             _subrow(vb, f_, b.add(j3, c(a)), fe[a])
 
-
     @_intrinsic
-    def _springs_v(typingctx, X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la,
-                   h_pb, h_lb, restang, par, angular):
+    def _springs_v(
+        typingctx,
+        X,
+        Vel,
+        F,
+        Xd,
+        Vd,
+        Xo,
+        Vo,
+        sp_i,
+        sp_j,
+        sp_kind,
+        sp_hinge,
+        restlen,
+        h_pa,
+        h_la,
+        h_pb,
+        h_lb,
+        restang,
+        par,
+        angular,
+    ):
         """The spring part of cloth_calc_force for W lanes at once, spring by spring in Blender's list
         order: the hinge's angular bending force (explicit), then the spring's linear force, its
         Jacobian blocks (diagonal into Xd/Vd, off-diagonal into Xo/Vo) and damping; per-lane
         branches (tension or compression, active or not) become selections."""
-        sig = _types.void(X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb,
-                          h_lb, restang, par, angular)
+        sig = _types.void(
+            X,
+            Vel,
+            F,
+            Xd,
+            Vd,
+            Xo,
+            Vo,
+            sp_i,
+            sp_j,
+            sp_kind,
+            sp_hinge,
+            restlen,
+            h_pa,
+            h_la,
+            h_pb,
+            h_lb,
+            restang,
+            par,
+            angular,
+        )
 
         def codegen(context, builder, signature, args):
             from .simd import VB, _data
+
             vb = VB(context, builder)
             b = builder
             I64 = _ir.IntType(64)
@@ -131,7 +191,8 @@ if simd.available():  # pragma: no branch
                 return _ir.Constant(I64, i)
 
             (x_, v_, f_, xd_, vd_, xo_, vo_, si_, sj_, sk_, sh_, rl_, pa_, la_, pb_, lb_, ra_, par_) = (
-                _data(context, builder, t, a) for t, a in zip(signature.args[:18], args[:18]))
+                _data(context, builder, t, a) for t, a in zip(signature.args[:18], args[:18])
+            )
             ang_on = b.icmp_signed("!=", args[18], c(0))
             S = b.extract_value(context.make_array(signature.args[7])(context, builder, args[7]).shape, 0)
             maxl = b.extract_value(context.make_array(signature.args[12])(context, builder, args[12]).shape, 1)
@@ -162,8 +223,14 @@ if simd.available():  # pragma: no branch
                 okd = vb.gt(ln, vb.k(FLT_EPS))
                 inv = vb.div(vb.k(1.0), ln)
                 d = [vb.sel(okd, vb.mul(ext[a], inv), vb.zero) for a in range(3)]
-                pp = [vb.mul(d[0], d[0]), vb.mul(d[1], d[0]), vb.mul(d[2], d[0]),
-                      vb.mul(d[1], d[1]), vb.mul(d[2], d[1]), vb.mul(d[2], d[2])]
+                pp = [
+                    vb.mul(d[0], d[0]),
+                    vb.mul(d[1], d[0]),
+                    vb.mul(d[2], d[0]),
+                    vb.mul(d[1], d[1]),
+                    vb.mul(d[2], d[1]),
+                    vb.mul(d[2], d[2]),
+                ]
                 diag = (True, False, False, True, False, True)
                 is_struct = b.icmp_signed("==", kind, c(KIND_STRUCT))
                 is_bend = b.icmp_signed("==", kind, c(KIND_BEND))
@@ -174,8 +241,12 @@ if simd.available():  # pragma: no branch
                 sf_t = vb.mul(kt, vb.sub(ln, L0))
                 r_ = vb.div(L0, ln)
                 one = vb.k(1.0)
-                jt = [vb.mul(vb.sub(vb.mul(vb.sub(one if diag[q] else vb.zero, pp[q]), r_), one if diag[q] else vb.zero), kt)
-                      for q in range(6)]
+                jt = [
+                    vb.mul(
+                        vb.sub(vb.mul(vb.sub(one if diag[q] else vb.zero, pp[q]), r_), one if diag[q] else vb.zero), kt
+                    )
+                    for q in range(6)
+                ]
                 # compression: Choi & Ko (structural springs with angular bending; linear bending springs)
                 kb = vb.sel(vb.splat_bool(is_bend), prow(P_KB), prow(P_KC))
                 cb = vb.sel(vb.splat_bool(is_bend), prow(P_CB), prow(P_KC))
@@ -209,10 +280,12 @@ if simd.available():  # pragma: no branch
                     _addrow(vb, vd_, b.add(j6, c(q)), jv[q], act)
                     vb.st(vo_, b.add(s6, c(q)), vb.sel(act, vb.sub(vb.zero, jv[q]), vb.zero))
             return context.get_dummy_value()
+
         return sig, codegen
 
 
 # ------------------------------------------------------------------ the plain numba twin (CLOTHFIT_NO_SIMD=1)
+
 
 @njit(**JIT)
 def _fb_p(x):
@@ -311,8 +384,9 @@ def _hinge_p(X, Vel, F, i3, j3, L0, hb, h_pa, h_la, h_pb, h_lb, restang, par, l)
 
 
 @njit(**JIT)
-def _springs_plain(X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb,
-                   restang, par, angular):
+def _springs_plain(
+    X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, par, angular
+):
     """``_springs_v`` as ordinary numba loops, lane by lane, with the same operations in the same order."""
     pp = np.empty(6, dtype=np.float32)
     jx = np.empty(6, dtype=np.float32)

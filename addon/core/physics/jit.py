@@ -6,6 +6,7 @@ compute the same quantities with the same formulas (tests check the agreement) a
 magnitude faster, and run the candidates of a population in parallel threads. Set
 ``CLOTHFIT_NO_NUMBA=1`` to disable them.
 """
+
 from __future__ import annotations
 
 import os
@@ -17,6 +18,7 @@ try:  # pragma: no cover - depends on the environment
         raise ImportError("disabled by CLOTHFIT_NO_NUMBA")
     import numba
     from numba import njit, prange
+
     _HAVE = True
 except ImportError:  # pragma: no cover
     numba = None
@@ -29,7 +31,7 @@ except ImportError:  # pragma: no cover
 
     prange = range
 
-JIT = dict(cache=True, nogil=True, fastmath=False)     # options of every serial kernel
+JIT = dict(cache=True, nogil=True, fastmath=False)  # options of every serial kernel
 PARALLEL = dict(parallel=True, cache=True, nogil=True)  # options of the population loops
 
 

@@ -12,6 +12,7 @@ numba kernels (``*_kernels``) or the numpy reference code they are tested agains
 ``get_model`` builds one from a name or its ``to_dict()``; ``simulate`` keeps the paper model's
 historical call.
 """
+
 from __future__ import annotations
 
 import math
@@ -53,8 +54,13 @@ class PaperModel:
     def to_dict(self) -> dict:
         return {"name": self.name}
 
-    def simulate(self, scenario: Scenario, rows: Params | dict[str, float] | ArrayLike | Iterable[Params | dict[str, float]],
-                 backend: str = "auto", offsets: Offsets | None = None) -> SimResult:
+    def simulate(
+        self,
+        scenario: Scenario,
+        rows: Params | dict[str, float] | ArrayLike | Iterable[Params | dict[str, float]],
+        backend: str = "auto",
+        offsets: Offsets | None = None,
+    ) -> SimResult:
         """``offsets``: each candidate's own manipulation (``Scenario.moved``), None = the scenario's."""
         P = _as_params(rows)
         if _backend(backend) == "numba":
@@ -99,7 +105,7 @@ class BlenderModel:
             first[plan.handle_vertices] = plan.targets[0]
             net = B.Network.from_grid(scenario.grid, self.bending_model, first_frame=first)
             hit = (scenario, net, plan, {})
-            if len(self._cache) >= 4:                 # a few scenarios (a fit's and its time-spanning one)
+            if len(self._cache) >= 4:  # a few scenarios (a fit's and its time-spanning one)
                 self._cache.pop(next(iter(self._cache)))
             self._cache[key] = hit
         return hit[1], hit[2]
@@ -121,14 +127,17 @@ class BlenderModel:
         if rows.ndim == 1:
             rows = rows[None]
         if rows.ndim != 2 or rows.shape[1] != len(B.FLOAT_SETTINGS):
-            raise ClothFitError(f"blender model: rows must have {len(B.FLOAT_SETTINGS)} values "
-                                f"({', '.join(B.FLOAT_SETTINGS)}), got shape {rows.shape}")
+            raise ClothFitError(
+                f"blender model: rows must have {len(B.FLOAT_SETTINGS)} values "
+                f"({', '.join(B.FLOAT_SETTINGS)}), got shape {rows.shape}"
+            )
         for r in rows:
             B.check_settings(self.settings(r), "blender model")
         return rows
 
-    def simulate(self, scenario: Scenario, rows: ArrayLike, backend: str = "auto",
-                 offsets: Offsets | None = None) -> SimResult:
+    def simulate(
+        self, scenario: Scenario, rows: ArrayLike, backend: str = "auto", offsets: Offsets | None = None
+    ) -> SimResult:
         """``offsets``: each candidate's own manipulation (its frames read ``offsets.time`` s earlier,
         its handles moved, its rest shape that of its own first frame); None = the scenario's."""
         rows = self.check_rows(rows)
@@ -152,7 +161,7 @@ class BlenderModel:
         codes = np.zeros(n, dtype=np.int64)
         steps = np.zeros(n, dtype=np.int64)
         ts_col = B.FLOAT_SETTINGS.index("time_scale")
-        for ts in np.unique(rows[:, ts_col]):            # the kernel runs one time step per call
+        for ts in np.unique(rows[:, ts_col]):  # the kernel runs one time step per call
             sel = np.nonzero(rows[:, ts_col] == ts)[0]
             prep = self.prepared(scenario, float(ts))
             frames, c, _ = prep.run(rows[sel])
@@ -170,8 +179,9 @@ class BlenderModel:
         store = self._cache[id(scenario)][3]
         prep = store.get((time_scale, all_frames))
         if prep is None:
-            prep = store[(time_scale, all_frames)] = blender_kernels.Prepared(net, plan, self.quality, time_scale,
-                                                                              scenario.gravity, all_frames)
+            prep = store[(time_scale, all_frames)] = blender_kernels.Prepared(
+                net, plan, self.quality, time_scale, scenario.gravity, all_frames
+            )
         return prep
 
     def _simulate_offsets(self, scenario, rows, backend, offsets: Offsets) -> SimResult:
@@ -205,10 +215,15 @@ class BlenderModel:
 
 def _each(rows, offsets: Offsets, simulate_one, scenario: Scenario) -> SimResult:
     """The reference path of a population with offsets: each candidate on its own moved scenario."""
-    parts = [simulate_one(rows[p:p + 1], scenario.moved(offsets.time[p], offsets.handles[p]))
-             for p in range(len(offsets))]
-    return SimResult(np.concatenate([r.positions for r in parts]), np.concatenate([r.exploded for r in parts]),
-                     np.concatenate([np.atleast_1d(r.substeps) for r in parts]), [x for r in parts for x in r.reason])
+    parts = [
+        simulate_one(rows[p : p + 1], scenario.moved(offsets.time[p], offsets.handles[p])) for p in range(len(offsets))
+    ]
+    return SimResult(
+        np.concatenate([r.positions for r in parts]),
+        np.concatenate([r.exploded for r in parts]),
+        np.concatenate([np.atleast_1d(r.substeps) for r in parts]),
+        [x for r in parts for x in r.reason],
+    )
 
 
 def get_model(spec: str | dict[str, Any] | PaperModel | BlenderModel | Any = None) -> PaperModel | BlenderModel | Any:
@@ -218,7 +233,7 @@ def get_model(spec: str | dict[str, Any] | PaperModel | BlenderModel | Any = Non
     if isinstance(spec, (PaperModel, BlenderModel)):
         return spec
     if callable(getattr(spec, "simulate", None)) and hasattr(spec, "row_names"):
-        return spec                                  # a model-like evaluator (e.g. Blender workers on a scene)
+        return spec  # a model-like evaluator (e.g. Blender workers on a scene)
     if isinstance(spec, str):
         spec = {"name": spec}
     if not isinstance(spec, dict) or "name" not in spec:
@@ -230,13 +245,17 @@ def get_model(spec: str | dict[str, Any] | PaperModel | BlenderModel | Any = Non
         extra = set(spec) - {"name", "fps", "quality", "bending_model"}
         if extra:
             raise ClothFitError(f"model: unknown key(s) {sorted(extra)} for the blender model")
-        return BlenderModel(spec.get("fps", D.BLENDER_FPS), spec.get("quality", B.DEFAULTS["quality"]),
-                            spec.get("bending_model", B.DEFAULTS["bending_model"]))
+        return BlenderModel(
+            spec.get("fps", D.BLENDER_FPS),
+            spec.get("quality", B.DEFAULTS["quality"]),
+            spec.get("bending_model", B.DEFAULTS["bending_model"]),
+        )
     raise ClothFitError(f"unknown model {spec['name']!r}: choose one of {', '.join(MODEL_NAMES)}")
 
 
-def model_and_row(res: dict[str, Any], default_model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None
-                  ) -> tuple[PaperModel | BlenderModel | Any, np.ndarray]:
+def model_and_row(
+    res: dict[str, Any], default_model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None
+) -> tuple[PaperModel | BlenderModel | Any, np.ndarray]:
     """(model, one parameter row) to replay ``res``: a fit result (its ``model``, ``blender_cloth``,
     ``blender_scene`` or ``params``), a paper parameter object (m, k, l, d) or an object of
     ClothSettings values (for ``default_model``'s frame rate, else Blender's default 24 fps)."""
@@ -244,20 +263,24 @@ def model_and_row(res: dict[str, Any], default_model: str | dict[str, Any] | Pap
         raise ClothFitError("parameters: expected a JSON object (a fit result, m/k/l/d or ClothSettings values)")
     bc = res.get("blender_cloth")
     if bc is None and set(res) & (set(B.FLOAT_SETTINGS) | {"quality", "bending_model"}) and "k" not in res:
-        bc = res                                     # bare ClothSettings values
+        bc = res  # bare ClothSettings values
     spec = res.get("model") or ("blender" if bc is not None else None)
     if spec is None:
         spec = default_model if default_model is not None else "paper"
         if get_model(spec).name == "blender":
-            raise ClothFitError("parameters: the blender model needs 'blender_cloth' (ClothSettings values), "
-                                "not m, k, l, d")
+            raise ClothFitError(
+                "parameters: the blender model needs 'blender_cloth' (ClothSettings values), not m, k, l, d"
+            )
     model = get_model(spec)
     if isinstance(model, BlenderModel):
         if not isinstance(bc, dict):
             raise ClothFitError("parameters: a blender-model result needs 'blender_cloth'")
         base = get_model(default_model) if default_model is not None else model
-        fps = float((res.get("blender_scene") or {}).get("fps", model.fps if res.get("model") else
-                                                             getattr(base, "fps", model.fps)))
+        fps = float(
+            (res.get("blender_scene") or {}).get(
+                "fps", model.fps if res.get("model") else getattr(base, "fps", model.fps)
+            )
+        )
         given = dict(bc)
         given.setdefault("time_scale", B.physical_time_scale(fps))
         s = B.check_settings(given, "blender_cloth")
@@ -267,9 +290,13 @@ def model_and_row(res: dict[str, Any], default_model: str | dict[str, Any] | Pap
     return model, np.array([p.m, p.k, p.l, p.d])
 
 
-def simulate(scenario: Scenario, params: Params | dict[str, float] | ArrayLike | Iterable[Params | dict[str, float]],
-             backend: str = "auto", safety: float = D.DT_SAFETY,
-             model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None) -> SimResult:
+def simulate(
+    scenario: Scenario,
+    params: Params | dict[str, float] | ArrayLike | Iterable[Params | dict[str, float]],
+    backend: str = "auto",
+    safety: float = D.DT_SAFETY,
+    model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None,
+) -> SimResult:
     """Simulate a population of ``model`` (default: the paper's sheet, rows (m, k, l, d)).
     ``safety`` scales the paper model's time step (``dt <= safety * sqrt(m/k)``); synthetic ground
     truth may use a finer step than the fitter (``defaults.TRUTH_DT_SAFETY``)."""

@@ -30,6 +30,7 @@ Integrator (part of the model, documented in the README):
 
 Only k/m, d/m and l enter the equations (``model.identifiable``).
 """
+
 from __future__ import annotations
 
 import math
@@ -93,13 +94,12 @@ def identifiable_errors(est: dict, true: dict) -> dict:
     return {k: 100.0 * abs(a[k] - b[k]) / abs(b[k]) for k in a}
 
 
-
 @dataclass
 class SimResult:
-    positions: np.ndarray   # (P, F, V, 3), NaN for exploded candidates
-    exploded: np.ndarray    # (P,) bool
-    substeps: np.ndarray    # (P,) total number of integration steps per candidate
-    reason: list            # per candidate: "" or why it was flagged
+    positions: np.ndarray  # (P, F, V, 3), NaN for exploded candidates
+    exploded: np.ndarray  # (P,) bool
+    substeps: np.ndarray  # (P,) total number of integration steps per candidate
+    reason: list  # per candidate: "" or why it was flagged
 
 
 def _as_params(params):
@@ -130,8 +130,9 @@ def event_times(scenario: Scenario) -> np.ndarray:
     return ev[ev >= -scenario.settle_time - 1e-15]
 
 
-def step_plan(params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def step_plan(
+    params: np.ndarray, seg_len: float, safety: float = D.DT_SAFETY
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per candidate: step ``dt``, number of whole steps, remainder step (0 = none) for an interval."""
     m, k = params[:, 0], params[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -147,7 +148,13 @@ MAX_TOTAL_STEPS = D.MAX_TOTAL_STEPS
 
 
 def check_params(params: np.ndarray) -> np.ndarray:
-    bad = ~np.all(np.isfinite(params), axis=1) | (params[:, 0] <= 0) | (params[:, 1] <= 0) | (params[:, 2] <= 0) | (params[:, 3] < 0)
+    bad = (
+        ~np.all(np.isfinite(params), axis=1)
+        | (params[:, 0] <= 0)
+        | (params[:, 1] <= 0)
+        | (params[:, 2] <= 0)
+        | (params[:, 3] < 0)
+    )
     return bad
 
 
@@ -161,7 +168,11 @@ def handle_state(scenario: Scenario, t: ArrayLike) -> tuple[np.ndarray, np.ndarr
     t = np.asarray(t, dtype=np.float64)
     pos = np.stack([h.position(t) for h in scenario.handles], -2) if scenario.handles else np.zeros(t.shape + (0, 3))
     vel = np.stack([h.velocity(t) for h in scenario.handles], -2) if scenario.handles else np.zeros(t.shape + (0, 3))
-    held = np.stack([h.held(t) | (t < 0) for h in scenario.handles], -1) if scenario.handles else np.zeros(t.shape + (0,), bool)
+    held = (
+        np.stack([h.held(t) | (t < 0) for h in scenario.handles], -1)
+        if scenario.handles
+        else np.zeros(t.shape + (0,), bool)
+    )
     return pos, vel, held
 
 
@@ -256,7 +267,7 @@ def simulate_numpy(scenario: Scenario, P: np.ndarray, safety: float = D.DT_SAFET
                 pos, vel, held = handle_state(scenario, tc)  # (P, H, 3), (P, H)
                 if settling:
                     held = np.ones_like(held)
-                m = (held & active[:, None])
+                m = held & active[:, None]
                 if m.any():
                     pi, hk = np.nonzero(m)
                     x[pi, hi[hk], hj[hk]] = pos[pi, hk]
@@ -272,7 +283,11 @@ def simulate_numpy(scenario: Scenario, P: np.ndarray, safety: float = D.DT_SAFET
             strain[fin] = _max_strain(x[fin], Pw[fin, 2]) > 1.0 + D.MAX_STRAIN
         newbad = ~exploded & (~fin | far | strain)
         for p in np.nonzero(newbad)[0]:
-            reason[p] = f"exploded before t = {b:.3f} s (" + ("non-finite state" if not fin[p] else "flew away" if far[p] else "spring overstretched") + ")"
+            reason[p] = (
+                f"exploded before t = {b:.3f} s ("
+                + ("non-finite state" if not fin[p] else "flew away" if far[p] else "spring overstretched")
+                + ")"
+            )
         exploded |= newbad
         x[exploded] = 0.0
         v[exploded] = 0.0
@@ -288,8 +303,11 @@ def simulate_numpy(scenario: Scenario, P: np.ndarray, safety: float = D.DT_SAFET
 def _max_strain(x, L):
     """Largest length / rest-length ratio over the springs, per candidate."""
     r = []
-    for d, fac in ((x[:, :, 1:] - x[:, :, :-1], 1.0), (x[:, 1:, :] - x[:, :-1, :], 1.0),
-                   (x[:, 1:, 1:] - x[:, :-1, :-1], math.sqrt(2.0))):
+    for d, fac in (
+        (x[:, :, 1:] - x[:, :, :-1], 1.0),
+        (x[:, 1:, :] - x[:, :-1, :], 1.0),
+        (x[:, 1:, 1:] - x[:, :-1, :-1], math.sqrt(2.0)),
+    ):
         ln = np.sqrt((d * d).sum(-1)).reshape(len(x), -1).max(1)
         r.append(ln / (fac * L))
     return np.max(r, axis=0)

@@ -1,6 +1,7 @@
 """numba kernels of the paper's sheet: the simulator of ``paper.simulate_numpy``, one candidate per
 thread. Same formulas, same order of operations (tests compare them with the numpy reference).
 """
+
 from __future__ import annotations
 
 import math
@@ -17,6 +18,7 @@ from .scenario import Offsets, Scenario
 REASONS = ["", "invalid parameters", "non-finite state", "flew away", "spring overstretched", "too many steps"]
 
 _jit = dict(cache=True, nogil=True, fastmath=False)
+
 
 @njit(**JIT)
 def _handle_at(h, t, key_start, key_times, key_pos, out_p, out_v):
@@ -45,6 +47,7 @@ def _handle_at(h, t, key_start, key_times, key_pos, out_p, out_v):
         out_p[a] = key_pos[j, a] + w * (key_pos[j + 1, a] - key_pos[j, a])
         out_v[a] = (key_pos[j + 1, a] - key_pos[j, a]) / (key_times[j + 1] - key_times[j])
 
+
 @njit(**JIT)
 def _family(X, Fb, n, off, rl, kap, mask):
     """Forces of one spring family: pairs (q, q + off) for q < n, masked (0 = no spring)."""
@@ -58,6 +61,7 @@ def _family(X, Fb, n, off, rl, kap, mask):
         Fb[1, q] = w * d1
         Fb[2, q] = w * d2
 
+
 @njit(**JIT)
 def _scatter(F, Fb, n, off):
     for a in range(3):
@@ -65,6 +69,7 @@ def _scatter(F, Fb, n, off):
             F[a, q] += Fb[a, q]
         for q in range(n):
             F[a, q + off] -= Fb[a, q]
+
 
 @njit(**JIT)
 def _soa_forces(X, F, Fb, mh, mv, md, nx, V, kap, L, g):
@@ -82,6 +87,7 @@ def _soa_forces(X, F, Fb, mh, mv, md, nx, V, kap, L, g):
     _family(X, Fb, V - nx - 1, nx + 1, math.sqrt(2.0) * L, kap, md)
     _scatter(F, Fb, V - nx - 1, nx + 1)
 
+
 @njit(**JIT)
 def _max_strain(x, springs, rest_factor, L):
     r = 0.0
@@ -96,14 +102,41 @@ def _max_strain(x, springs, rest_factor, L):
             r = q
     return r
 
+
 @njit(**JIT)
-def simulate_one(par, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
-                 events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
-                 max_strain, max_steps, out):
+def simulate_one(
+    par,
+    nx,
+    ny,
+    rest,
+    springs,
+    rest_factor,
+    hv,
+    key_start,
+    key_times,
+    key_pos,
+    release,
+    events,
+    frame_of_event,
+    n_frames,
+    gravity,
+    settle_rate,
+    safety,
+    centre,
+    limit,
+    max_strain,
+    max_steps,
+    out,
+):
     """Simulate one candidate; writes frames into ``out`` (F, V, 3). Returns (code, steps)."""
     m, k, L, dmp = par[0], par[1], par[2], par[3]
-    if not (math.isfinite(m) and math.isfinite(k) and math.isfinite(L) and math.isfinite(dmp)) \
-            or m <= 0 or k <= 0 or L <= 0 or dmp < 0:
+    if (
+        not (math.isfinite(m) and math.isfinite(k) and math.isfinite(L) and math.isfinite(dmp))
+        or m <= 0
+        or k <= 0
+        or L <= 0
+        or dmp < 0
+    ):
         return 1, 0
     kap = k / m
     beta = dmp / m
@@ -180,17 +213,63 @@ def simulate_one(par, nx, ny, rest, springs, rest_factor, hv, key_start, key_tim
             out[f] = xt
     return 0, steps
 
+
 @njit(**PARALLEL)
-def simulate_population(P, nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos, release,
-                        events, n_events, frame_of_event, n_frames, gravity, settle_rate, safety, centre, limit,
-                        max_strain, max_steps, out, codes, steps):
+def simulate_population(
+    P,
+    nx,
+    ny,
+    rest,
+    springs,
+    rest_factor,
+    hv,
+    key_start,
+    key_times,
+    key_pos,
+    release,
+    events,
+    n_events,
+    frame_of_event,
+    n_frames,
+    gravity,
+    settle_rate,
+    safety,
+    centre,
+    limit,
+    max_strain,
+    max_steps,
+    out,
+    codes,
+    steps,
+):
     """Every candidate p with its own handle keys ``key_pos[p]`` and events ``events[p, :n_events[p]]``
     (a fit of an uncertain manipulation; otherwise all the same)."""
     for p in prange(P.shape[0]):
         ne = n_events[p]
-        code, st = simulate_one(P[p], nx, ny, rest, springs, rest_factor, hv, key_start, key_times, key_pos[p],
-                                release, events[p, :ne], frame_of_event[p, :ne], n_frames, gravity, settle_rate,
-                                safety, centre, limit, max_strain, max_steps, out[p])
+        code, st = simulate_one(
+            P[p],
+            nx,
+            ny,
+            rest,
+            springs,
+            rest_factor,
+            hv,
+            key_start,
+            key_times,
+            key_pos[p],
+            release,
+            events[p, :ne],
+            frame_of_event[p, :ne],
+            n_frames,
+            gravity,
+            settle_rate,
+            safety,
+            centre,
+            limit,
+            max_strain,
+            max_steps,
+            out[p],
+        )
         codes[p] = code
         steps[p] = st
 
@@ -212,24 +291,58 @@ def scenario_arrays(scenario: Scenario, safety: float = D.DT_SAFETY) -> dict[str
     for e, t in enumerate(ev):
         frame_of_event[e] = lookup.get(round(float(t), 12), -1)
     centre, limit = explosion_limits(scenario)
-    return dict(nx=int(grid.nx), ny=int(grid.ny), rest=np.ascontiguousarray(grid.rest, dtype=np.float64),
-                springs=np.ascontiguousarray(grid.springs, dtype=np.int64),
-                rest_factor=np.ascontiguousarray(grid.rest_factor, dtype=np.float64),
-                hv=hv, key_start=key_start, key_times=np.ascontiguousarray(key_times, dtype=np.float64),
-                key_pos=np.ascontiguousarray(key_pos, dtype=np.float64), release=release,
-                events=ev, frame_of_event=frame_of_event, n_frames=int(scenario.frame_times.size),
-                gravity=np.asarray(scenario.gravity, dtype=np.float64), settle_rate=float(D.SETTLE_DAMPING_RATE),
-                safety=float(safety), centre=np.asarray(centre, dtype=np.float64), limit=float(limit),
-                max_strain=float(D.MAX_STRAIN), max_steps=int(D.MAX_TOTAL_STEPS))
+    return dict(
+        nx=int(grid.nx),
+        ny=int(grid.ny),
+        rest=np.ascontiguousarray(grid.rest, dtype=np.float64),
+        springs=np.ascontiguousarray(grid.springs, dtype=np.int64),
+        rest_factor=np.ascontiguousarray(grid.rest_factor, dtype=np.float64),
+        hv=hv,
+        key_start=key_start,
+        key_times=np.ascontiguousarray(key_times, dtype=np.float64),
+        key_pos=np.ascontiguousarray(key_pos, dtype=np.float64),
+        release=release,
+        events=ev,
+        frame_of_event=frame_of_event,
+        n_frames=int(scenario.frame_times.size),
+        gravity=np.asarray(scenario.gravity, dtype=np.float64),
+        settle_rate=float(D.SETTLE_DAMPING_RATE),
+        safety=float(safety),
+        centre=np.asarray(centre, dtype=np.float64),
+        limit=float(limit),
+        max_strain=float(D.MAX_STRAIN),
+        max_steps=int(D.MAX_TOTAL_STEPS),
+    )
 
 
-ORDER = ["nx", "ny", "rest", "springs", "rest_factor", "hv", "key_start", "key_times", "key_pos", "release", "events",
-          "n_events", "frame_of_event", "n_frames", "gravity", "settle_rate", "safety", "centre", "limit",
-          "max_strain", "max_steps"]
+ORDER = [
+    "nx",
+    "ny",
+    "rest",
+    "springs",
+    "rest_factor",
+    "hv",
+    "key_start",
+    "key_times",
+    "key_pos",
+    "release",
+    "events",
+    "n_events",
+    "frame_of_event",
+    "n_frames",
+    "gravity",
+    "settle_rate",
+    "safety",
+    "centre",
+    "limit",
+    "max_strain",
+    "max_steps",
+]
 
 
-def population_arrays(scenario: Scenario, n: int, safety: float = D.DT_SAFETY,
-                      offsets: Offsets | None = None) -> dict[str, Any]:
+def population_arrays(
+    scenario: Scenario, n: int, safety: float = D.DT_SAFETY, offsets: Offsets | None = None
+) -> dict[str, Any]:
     """``scenario_arrays`` for ``n`` candidates: ``key_pos`` (n, K, 3), ``events`` and
     ``frame_of_event`` (n, E) and ``n_events`` (n,) per candidate: the same for all, or each
     candidate's own manipulation (``scenario.Offsets``: its frames read earlier by its time offset,
@@ -238,7 +351,9 @@ def population_arrays(scenario: Scenario, n: int, safety: float = D.DT_SAFETY,
     if offsets is None:
         a["key_pos"] = np.ascontiguousarray(np.broadcast_to(a["key_pos"], (n,) + a["key_pos"].shape))
         a["events"] = np.ascontiguousarray(np.broadcast_to(a["events"], (n,) + a["events"].shape))
-        a["frame_of_event"] = np.ascontiguousarray(np.broadcast_to(a["frame_of_event"], (n,) + a["frame_of_event"].shape))
+        a["frame_of_event"] = np.ascontiguousarray(
+            np.broadcast_to(a["frame_of_event"], (n,) + a["frame_of_event"].shape)
+        )
         a["n_events"] = np.full(n, a["events"].shape[1], dtype=np.int64)
         return a
     per = [scenario_arrays(scenario.moved(offsets.time[p], offsets.handles[p]), safety) for p in range(n)]
@@ -246,15 +361,20 @@ def population_arrays(scenario: Scenario, n: int, safety: float = D.DT_SAFETY,
     ev = np.zeros((n, E))
     foe = np.full((n, E), -1, dtype=np.int64)
     for p, q in enumerate(per):
-        ev[p, :q["events"].size] = q["events"]
-        foe[p, :q["events"].size] = q["frame_of_event"]
-    a.update(key_pos=np.ascontiguousarray([q["key_pos"] for q in per]), events=ev, frame_of_event=foe,
-             n_events=np.array([q["events"].size for q in per], dtype=np.int64))
+        ev[p, : q["events"].size] = q["events"]
+        foe[p, : q["events"].size] = q["frame_of_event"]
+    a.update(
+        key_pos=np.ascontiguousarray([q["key_pos"] for q in per]),
+        events=ev,
+        frame_of_event=foe,
+        n_events=np.array([q["events"].size for q in per], dtype=np.int64),
+    )
     return a
 
 
-def simulate(scenario: Scenario, P: ArrayLike, safety: float = D.DT_SAFETY,
-             offsets: Offsets | None = None) -> SimResult:
+def simulate(
+    scenario: Scenario, P: ArrayLike, safety: float = D.DT_SAFETY, offsets: Offsets | None = None
+) -> SimResult:
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 4)
     a = population_arrays(scenario, P.shape[0], safety, offsets)
     V = a["rest"].shape[0]

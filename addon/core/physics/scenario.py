@@ -6,6 +6,7 @@ triangles; springs lie on every triangle edge: ``ny (nx-1)`` horizontal, ``(ny-1
 ``(ny-1)(nx-1)`` diagonal. For 16 x 16: 450 triangles, 240 + 240 + 225 = 705 springs.
 
 """
+
 from __future__ import annotations
 
 import math
@@ -22,10 +23,10 @@ from ..errors import ClothFitError
 # (memory exhaustion, a simulation that never ends), not a cloth
 MAX_GRID_SIDE = 1000
 MAX_GRID_VERTICES = 250_000
-MAX_SIZE_M = 1000.0          # lengths and positions [m]
-MAX_TIME_S = 3600.0          # frame and key times [s]
-MAX_SETTLE_S = 60.0          # settling before t = 0 [s]
-MAX_GRAVITY = 1000.0         # [m/s^2]
+MAX_SIZE_M = 1000.0  # lengths and positions [m]
+MAX_TIME_S = 3600.0  # frame and key times [s]
+MAX_SETTLE_S = 60.0  # settling before t = 0 [s]
+MAX_GRAVITY = 1000.0  # [m/s^2]
 MAX_FRAMES = 100_000
 # the manipulation's unknowns a capture may declare (``Uncertainty``): bounds beyond these are not an
 # uncertain measurement but a wrong one (a release misread by more than a second, a pin 5 cm away)
@@ -46,8 +47,16 @@ class ClothGrid:
     clips). ``height`` is the z of ``origin``.
     """
 
-    def __init__(self, nx: int = D.GRID_N, ny: int | None = None, side: float = D.CLOTH_SIDE,
-                 height: float | None = None, side_y: float | None = None, origin=None, rotation=None):
+    def __init__(
+        self,
+        nx: int = D.GRID_N,
+        ny: int | None = None,
+        side: float = D.CLOTH_SIDE,
+        height: float | None = None,
+        side_y: float | None = None,
+        origin=None,
+        rotation=None,
+    ):
         ny = nx if ny is None else ny
         for v in (nx, ny):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer, float)) or v != int(v):
@@ -55,16 +64,19 @@ class ClothGrid:
         if nx < 2 or ny < 2:
             raise ClothFitError(f"cloth grid must be at least 2 x 2, got {nx} x {ny}")
         if nx > MAX_GRID_SIDE or ny > MAX_GRID_SIDE or nx * ny > MAX_GRID_VERTICES:
-            raise ClothFitError(f"cloth grid {nx} x {ny} is too large (at most {MAX_GRID_SIDE} per side and "
-                                f"{MAX_GRID_VERTICES} vertices)")
+            raise ClothFitError(
+                f"cloth grid {nx} x {ny} is too large (at most {MAX_GRID_SIDE} per side and "
+                f"{MAX_GRID_VERTICES} vertices)"
+            )
         for nm, v in (("side", side), ("side_y", side if side_y is None else side_y)):
             if not (isinstance(v, (int, float, np.floating)) and math.isfinite(v) and 0 < v <= MAX_SIZE_M):
                 raise ClothFitError(f"cloth {nm} must be a positive finite length up to {MAX_SIZE_M:g} m, got {v}")
         if origin is not None:
             origin = _vector3(origin, "cloth origin", MAX_SIZE_M)
             if height is not None and abs(float(height) - origin[2]) > 1e-9:
-                raise ClothFitError(f"cloth height {height} differs from the z of its origin {origin[2]} "
-                                    f"(give one of them)")
+                raise ClothFitError(
+                    f"cloth height {height} differs from the z of its origin {origin[2]} (give one of them)"
+                )
             height = float(origin[2])
         height = D.CLOTH_HEIGHT if height is None else height
         if not (isinstance(height, (int, float, np.floating)) and math.isfinite(height) and abs(height) <= MAX_SIZE_M):
@@ -83,7 +95,7 @@ class ClothGrid:
         self.local = np.stack([X, Y, np.zeros_like(X)], -1).reshape(-1, 3)
         if self.placed:
             self.rest = self.origin + self.local @ self.R.T
-        else:   # the paper's sheet, exactly as it always was (no rounding from a product with I)
+        else:  # the paper's sheet, exactly as it always was (no rounding from a product with I)
             self.rest = np.stack([X, Y, np.full_like(X, self.height)], -1).reshape(-1, 3)
         idx = np.arange(self.nx * self.ny).reshape(self.ny, self.nx)
         a = idx[:-1, :-1].ravel()
@@ -119,7 +131,7 @@ class ClothGrid:
 
     def to_dict(self) -> dict[str, Any]:
         d = {"nx": self.nx, "ny": self.ny, "side": self.side, "side_y": self.side_y, "height": self.height}
-        if self.placed:                # written only when used: older readers see the same keys as before
+        if self.placed:  # written only when used: older readers see the same keys as before
             d["origin"] = self.origin.tolist()
             d["rotation"] = self.rotation.tolist()
         return d
@@ -130,11 +142,15 @@ class ClothGrid:
             raise ClothFitError(f"{source}: the cloth must be an object, got {d!r}")
         try:
             origin = d.get("origin")
-            return cls(int(d.get("nx", D.GRID_N)), int(d.get("ny", d.get("nx", D.GRID_N))),
-                       float(d.get("side", D.CLOTH_SIDE)),
-                       None if d.get("height") is None else float(d["height"]),
-                       None if d.get("side_y") is None else float(d["side_y"]),
-                       origin=origin, rotation=d.get("rotation"))
+            return cls(
+                int(d.get("nx", D.GRID_N)),
+                int(d.get("ny", d.get("nx", D.GRID_N))),
+                float(d.get("side", D.CLOTH_SIDE)),
+                None if d.get("height") is None else float(d["height"]),
+                None if d.get("side_y") is None else float(d["side_y"]),
+                origin=origin,
+                rotation=d.get("rotation"),
+            )
         except ClothFitError as e:
             raise ClothFitError(f"{source}: {e}") from None
         except (TypeError, ValueError, AttributeError) as e:
@@ -169,7 +185,7 @@ def rotation_vector(R: ArrayLike) -> np.ndarray:
     th = math.acos(c)
     if th < 1e-12:
         return np.zeros(3)
-    if th > math.pi - 1e-6:        # near pi: the axis from the symmetric part
+    if th > math.pi - 1e-6:  # near pi: the axis from the symmetric part
         B = (R + np.eye(3)) / 2.0
         k = np.sqrt(np.maximum(np.diag(B), 0.0))
         i = int(np.argmax(k))
@@ -188,6 +204,7 @@ class Handle:
     before ``times[0]`` and at the last after ``times[-1]``); a single key = a fixed point.
     After ``release_time`` (if given) the vertex is free.
     """
+
     vertex: int
     times: np.ndarray
     positions: np.ndarray
@@ -197,18 +214,22 @@ class Handle:
         self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
         self.positions = np.asarray(self.positions, dtype=np.float64).reshape(-1, 3)
         if self.times.size != self.positions.shape[0] or self.times.size == 0:
-            raise ClothFitError(f"handle on vertex {self.vertex}: {self.times.size} times but "
-                                f"{self.positions.shape[0]} positions")
+            raise ClothFitError(
+                f"handle on vertex {self.vertex}: {self.times.size} times but {self.positions.shape[0]} positions"
+            )
         if np.any(np.diff(self.times) <= 0):
             raise ClothFitError(f"handle on vertex {self.vertex}: key times must increase, got {self.times.tolist()}")
         if not np.all(np.isfinite(self.positions)) or not np.all(np.isfinite(self.times)):
             raise ClothFitError(f"handle on vertex {self.vertex}: non-finite key")
         if np.abs(self.positions).max() > MAX_SIZE_M or np.abs(self.times).max() > MAX_TIME_S:
             raise ClothFitError(f"handle on vertex {self.vertex}: keys beyond {MAX_SIZE_M:g} m or {MAX_TIME_S:g} s")
-        if self.release_time is not None and not (math.isfinite(self.release_time)
-                                                  and abs(self.release_time) <= MAX_TIME_S):
-            raise ClothFitError(f"handle on vertex {self.vertex}: release_time {self.release_time} must be finite "
-                                f"and within {MAX_TIME_S:g} s")
+        if self.release_time is not None and not (
+            math.isfinite(self.release_time) and abs(self.release_time) <= MAX_TIME_S
+        ):
+            raise ClothFitError(
+                f"handle on vertex {self.vertex}: release_time {self.release_time} must be finite "
+                f"and within {MAX_TIME_S:g} s"
+            )
 
     def position(self, t: ArrayLike) -> np.ndarray:
         """Positions at times ``t`` (array) -> ``t.shape + (3,)``."""
@@ -244,7 +265,12 @@ class Handle:
     def from_dict(cls, d: dict[str, Any], n_vertices: int | None = None, source: str = "handle") -> Handle:
         try:
             v = int(d["vertex"])
-            h = cls(v, d.get("times", [0.0]), d["positions"], None if d.get("release_time") is None else float(d["release_time"]))
+            h = cls(
+                v,
+                d.get("times", [0.0]),
+                d["positions"],
+                None if d.get("release_time") is None else float(d["release_time"]),
+            )
         except KeyError as e:
             raise ClothFitError(f"{source}: missing {e.args[0]!r}") from None
         except (TypeError, ValueError) as e:
@@ -257,6 +283,7 @@ class Handle:
 @dataclass
 class Scenario:
     """A cloth, its handles, the settling phase and the capture times: one manipulation."""
+
     grid: ClothGrid
     handles: list
     frame_times: np.ndarray
@@ -277,28 +304,38 @@ class Scenario:
         except (TypeError, ValueError):
             raise ClothFitError(f"scenario: settle_time must be a number, got {self.settle_time!r}") from None
         if not (math.isfinite(self.settle_time) and 0 <= self.settle_time <= MAX_SETTLE_S):
-            raise ClothFitError(f"scenario: settle_time {self.settle_time} must be a finite number of seconds in "
-                                f"[0, {MAX_SETTLE_S:g}]")
+            raise ClothFitError(
+                f"scenario: settle_time {self.settle_time} must be a finite number of seconds in [0, {MAX_SETTLE_S:g}]"
+            )
         if not np.all(np.isfinite(self.gravity)) or np.linalg.norm(self.gravity) > MAX_GRAVITY:
-            raise ClothFitError(f"scenario: gravity {self.gravity.tolist()} must be finite and at most "
-                                f"{MAX_GRAVITY:g} m/s^2")
+            raise ClothFitError(
+                f"scenario: gravity {self.gravity.tolist()} must be finite and at most {MAX_GRAVITY:g} m/s^2"
+            )
         if np.any(np.diff(self.frame_times) <= 0):
             raise ClothFitError(f"scenario: frame times must increase, got {self.frame_times.tolist()}")
         if self.frame_times[0] < -self.settle_time - 1e-12:
-            raise ClothFitError(f"scenario: frame times must be >= -settle_time (the cloth settles from "
-                                f"t = -{self.settle_time:g} s to t = 0), got {self.frame_times[0]}")
+            raise ClothFitError(
+                f"scenario: frame times must be >= -settle_time (the cloth settles from "
+                f"t = -{self.settle_time:g} s to t = 0), got {self.frame_times[0]}"
+            )
         seen = set()
         for h in self.handles:
             if not (0 <= h.vertex < self.grid.n_vertices):
-                raise ClothFitError(f"scenario: handle vertex {h.vertex} outside the grid (0..{self.grid.n_vertices - 1})")
+                raise ClothFitError(
+                    f"scenario: handle vertex {h.vertex} outside the grid (0..{self.grid.n_vertices - 1})"
+                )
             if h.vertex in seen:
                 raise ClothFitError(f"scenario: vertex {h.vertex} has two handles")
             seen.add(h.vertex)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"cloth": self.grid.to_dict(), "handles": [h.to_dict() for h in self.handles],
-                "frame_times": self.frame_times.tolist(), "settle_time": self.settle_time,
-                "gravity": self.gravity.tolist()}
+        return {
+            "cloth": self.grid.to_dict(),
+            "handles": [h.to_dict() for h in self.handles],
+            "frame_times": self.frame_times.tolist(),
+            "settle_time": self.settle_time,
+            "gravity": self.gravity.tolist(),
+        }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "scenario") -> Scenario:
@@ -309,13 +346,14 @@ class Scenario:
         handles = [Handle.from_dict(h, grid.n_vertices, f"{source} handle #{i}") for i, h in enumerate(hs)]
         if "frame_times" not in d:
             raise ClothFitError(f"{source}: missing 'frame_times'")
-        return cls(grid, handles, d["frame_times"], float(d.get("settle_time", D.SETTLE_TIME)),
-                   d.get("gravity", D.GRAVITY))
+        return cls(
+            grid, handles, d["frame_times"], float(d.get("settle_time", D.SETTLE_TIME)), d.get("gravity", D.GRAVITY)
+        )
 
     def with_frames(self, times: ArrayLike) -> Scenario:
         return Scenario(self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity)
 
-    def moved(self, time_offset: float = 0.0, handle_offsets: ArrayLike | None = None) -> "Scenario":
+    def moved(self, time_offset: float = 0.0, handle_offsets: ArrayLike | None = None) -> Scenario:
         """The manipulation a fit estimated (``Uncertainty``): the frames read ``time_offset`` s earlier
         on the manipulation's clock (true time = capture time - time_offset; a frame before the
         settle's start reads its start), every handle's trajectory moved by its offset (H, 3) [m]."""
@@ -327,8 +365,9 @@ class Scenario:
         return Scenario(self.grid, hs, times, self.settle_time, self.gravity)
 
 
-def paper_scenario(grid: ClothGrid | None = None, frame_times: ArrayLike | None = None,
-                   released_corner: int = D.RELEASED_CORNER) -> Scenario:
+def paper_scenario(
+    grid: ClothGrid | None = None, frame_times: ArrayLike | None = None, released_corner: int = D.RELEASED_CORNER
+) -> Scenario:
     """docs/method.md#spec-5: all four corners held at the flat square, settle, release one corner at t = 0."""
     grid = grid or ClothGrid()
     handles = []
@@ -349,6 +388,7 @@ class Uncertainty:
     * ``handles`` [m]: per handle (in the scenario's order) the bound of a 3-D offset of its whole
       trajectory, each coordinate in ``[-b, b]``; one number = the same for every handle; 0 = exact.
     """
+
     time_offset: float = 0.0
     handles: tuple = ()
 
@@ -358,11 +398,10 @@ class Uncertainty:
 
     def to_dict(self) -> dict:
         h = list(self.handles)
-        return {"time_offset": self.time_offset,
-                "handles": h[0] if h and all(b == h[0] for b in h) else h}
+        return {"time_offset": self.time_offset, "handles": h[0] if h and all(b == h[0] for b in h) else h}
 
     @classmethod
-    def parse(cls, value: Any, n_handles: int, source: str = "uncertain") -> "Uncertainty | None":
+    def parse(cls, value: Any, n_handles: int, source: str = "uncertain") -> Uncertainty | None:
         """From a capture's ``"uncertain"`` object (None/absent = nothing uncertain). Bounds must be
         numbers >= 0 and at most ``MAX_TIME_OFFSET_S`` / ``MAX_HANDLE_OFFSET_M``; ``handles`` is one
         bound or a list with one per handle."""
@@ -377,15 +416,16 @@ class Uncertainty:
         hv = value.get("handles", 0.0)
         if isinstance(hv, (list, tuple)):
             if len(hv) != n_handles:
-                raise ClothFitError(f"{source} handles: {len(hv)} bounds for {n_handles} handles (give one number "
-                                    f"or one per handle)")
+                raise ClothFitError(
+                    f"{source} handles: {len(hv)} bounds for {n_handles} handles (give one number or one per handle)"
+                )
             hs = tuple(_bound(b, f"{source} handles[{i}]", MAX_HANDLE_OFFSET_M, "m") for i, b in enumerate(hv))
         else:
             hs = (_bound(hv, f"{source} handles", MAX_HANDLE_OFFSET_M, "m"),) * n_handles
         return cls(t, hs)
 
     @classmethod
-    def from_text(cls, text: str, n_handles: int, source: str = "--uncertain") -> "Uncertainty | None":
+    def from_text(cls, text: str, n_handles: int, source: str = "--uncertain") -> Uncertainty | None:
         """``time_offset=0.05,handles=0.005`` (seconds, metres) or ``none``."""
         text = str(text).strip()
         if text.lower() == "none":
@@ -395,8 +435,9 @@ class Uncertainty:
             key, eq, val = part.partition("=")
             key = key.strip()
             if not eq:
-                raise ClothFitError(f"{source}: {part!r} must be KEY=VALUE (keys: {', '.join(UNCERTAIN_KEYS)}), "
-                                    f"or 'none'")
+                raise ClothFitError(
+                    f"{source}: {part!r} must be KEY=VALUE (keys: {', '.join(UNCERTAIN_KEYS)}), or 'none'"
+                )
             if key in d:
                 raise ClothFitError(f"{source}: {key!r} given twice")
             try:
@@ -424,6 +465,7 @@ class Offsets:
     """Per-candidate estimates of a manipulation's unknowns (a fit's ``Uncertainty``): ``time`` (P,)
     [s] (``time_offset_s``: the model is read at capture time - time) and ``handles`` (P, H, 3) [m]
     (each handle's trajectory moved by it)."""
+
     time: np.ndarray
     handles: np.ndarray
 
@@ -431,13 +473,15 @@ class Offsets:
         self.time = np.asarray(self.time, dtype=np.float64).reshape(-1)
         self.handles = np.asarray(self.handles, dtype=np.float64)
         if self.handles.ndim != 3 or self.handles.shape[0] != self.time.size or self.handles.shape[2] != 3:
-            raise ClothFitError(f"offsets: {self.time.size} time offsets but handle offsets of shape "
-                                f"{self.handles.shape} (expected (P, H, 3))")
+            raise ClothFitError(
+                f"offsets: {self.time.size} time offsets but handle offsets of shape "
+                f"{self.handles.shape} (expected (P, H, 3))"
+            )
 
     def __len__(self):
         return self.time.size
 
-    def take(self, idx: np.ndarray | list[int] | slice) -> "Offsets":
+    def take(self, idx: np.ndarray | list[int] | slice) -> Offsets:
         return Offsets(self.time[idx], self.handles[idx])
 
     @property
@@ -461,8 +505,10 @@ def fitted_scenario(scenario: Scenario, result: dict[str, Any]) -> Scenario:
     offsets = None
     if hs:
         if not isinstance(hs, list) or len(hs) != len(scenario.handles):
-            raise ClothFitError(f"result: {len(hs) if isinstance(hs, list) else 'bad'} fitted handles for a scenario "
-                                f"with {len(scenario.handles)}")
+            raise ClothFitError(
+                f"result: {len(hs) if isinstance(hs, list) else 'bad'} fitted handles for a scenario "
+                f"with {len(scenario.handles)}"
+            )
         offsets = np.zeros((len(hs), 3))
         for k, (d, h) in enumerate(zip(hs, scenario.handles)):
             if not isinstance(d, dict) or int(d.get("vertex", -1)) != h.vertex:

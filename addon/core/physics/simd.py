@@ -17,6 +17,7 @@ which rules out ``fastmath``, and without it LLVM leaves the lane loops scalar. 
 less CPU per candidate than on the plain numba twins (``simd_plain.py``), with the same trajectory
 to the bit. ``CLOTHFIT_NO_SIMD=1`` runs those twins instead (``ENABLED`` below).
 """
+
 from __future__ import annotations
 
 import os
@@ -25,7 +26,7 @@ from typing import SupportsFloat
 
 from .jit import available
 
-W = 8   # lanes per vector: 8 float32 = 256 bits (AVX2; two per AVX-512 register on Zen 4)
+W = 8  # lanes per vector: 8 float32 = 256 bits (AVX2; two per AVX-512 register on Zen 4)
 # CLOTHFIT_NO_SIMD=1: the Blender kernel runs on simd_plain.py's numba loops instead (docs/kernels.md)
 ENABLED = available() and os.environ.get("CLOTHFIT_NO_SIMD", "") in ("", "0")
 
@@ -59,7 +60,9 @@ if available():  # pragma: no branch
 
     def _splat(builder, x):
         v = builder.insert_element(ir.Constant(_VEC, ir.Undefined), x, ir.Constant(ir.IntType(32), 0))
-        return builder.shuffle_vector(v, ir.Constant(_VEC, ir.Undefined), ir.Constant(ir.VectorType(ir.IntType(32), W), [0] * W))
+        return builder.shuffle_vector(
+            v, ir.Constant(_VEC, ir.Undefined), ir.Constant(ir.VectorType(ir.IntType(32), W), [0] * W)
+        )
 
     def _c(i):
         return ir.Constant(_I64, i)
@@ -113,6 +116,7 @@ if available():  # pragma: no branch
             with cgutils.for_range(builder, rows) as lp:
                 _st(builder, tt, lp.index, builder.fadd(_ld(builder, tt, lp.index), _ld(builder, tp, lp.index)))
             return context.get_dummy_value()
+
         return sig, codegen
 
     @intrinsic
@@ -136,6 +140,7 @@ if available():  # pragma: no branch
                 builder.store(builder.fadd(builder.load(acc), p), acc)
             _st(builder, od, _c(0), builder.load(acc))
             return context.get_dummy_value()
+
         return sig, codegen
 
     @intrinsic
@@ -154,6 +159,7 @@ if available():  # pragma: no branch
                     row = builder.add(v3, _c(a))
                     _st(builder, xd, row, builder.fmul(_ld(builder, xd, row), f))
             return context.get_dummy_value()
+
         return sig, codegen
 
     @intrinsic
@@ -176,6 +182,7 @@ if available():  # pragma: no branch
                 _st(builder, dv, k, builder.select(m, builder.fadd(d0, builder.fmul(cv, a)), d0))
                 _st(builder, rr, k, builder.select(m, builder.fadd(r0, builder.fmul(qv, na)), r0))
             return context.get_dummy_value()
+
         return sig, codegen
 
     @intrinsic
@@ -197,6 +204,7 @@ if available():  # pragma: no branch
                     nc = builder.fmul(builder.fadd(_ld(builder, rr, k), builder.fmul(c0, rt)), f)
                     _st(builder, cc, k, builder.select(m, nc, c0))
             return context.get_dummy_value()
+
         return sig, codegen
 
 
@@ -214,6 +222,7 @@ if available():  # pragma: no branch
         def k(self, x: SupportsFloat) -> ir.Constant:
             """A float32 constant in every lane (x is rounded to float32 first)."""
             import numpy as np
+
             return ir.Constant(_VEC, [float(np.float32(x))] * W)
 
         def splat(self, x: ir.Value) -> ir.Value:
@@ -290,17 +299,20 @@ if available():  # pragma: no branch
             """An i1 scalar in every lane."""
             m = ir.VectorType(ir.IntType(1), W)
             v = self.b.insert_element(ir.Constant(m, ir.Undefined), bit, ir.Constant(ir.IntType(32), 0))
-            return self.b.shuffle_vector(v, ir.Constant(m, ir.Undefined),
-                                         ir.Constant(ir.VectorType(ir.IntType(32), W), [0] * W))
+            return self.b.shuffle_vector(
+                v, ir.Constant(m, ir.Undefined), ir.Constant(ir.VectorType(ir.IntType(32), W), [0] * W)
+            )
 
         # 3-vectors as lists of lane vectors
         def dot3(self, a: Sequence[ir.Value], b: Sequence[ir.Value]) -> ir.Value:
             return self.add(self.add(self.mul(a[0], b[0]), self.mul(a[1], b[1])), self.mul(a[2], b[2]))
 
         def cross3(self, a: Sequence[ir.Value], b: Sequence[ir.Value]) -> list[ir.Value]:
-            return [self.sub(self.mul(a[1], b[2]), self.mul(a[2], b[1])),
-                    self.sub(self.mul(a[2], b[0]), self.mul(a[0], b[2])),
-                    self.sub(self.mul(a[0], b[1]), self.mul(a[1], b[0]))]
+            return [
+                self.sub(self.mul(a[1], b[2]), self.mul(a[2], b[1])),
+                self.sub(self.mul(a[2], b[0]), self.mul(a[0], b[2])),
+                self.sub(self.mul(a[0], b[1]), self.mul(a[1], b[0])),
+            ]
 
         def normalize3(self, a: Sequence[ir.Value]) -> list[ir.Value]:
             """normalize_v3: a / |a| if |a|^2 > 1e-35, else 0."""
@@ -313,9 +325,13 @@ if available():  # pragma: no branch
             """normal_tri_v3(n, p, q, r) = normalize((p - q) x (q - r))."""
             n1 = [self.sub(p[a], q[a]) for a in range(3)]
             n2 = [self.sub(q[a], r[a]) for a in range(3)]
-            return self.normalize3([self.sub(self.mul(n1[1], n2[2]), self.mul(n1[2], n2[1])),
-                                    self.sub(self.mul(n1[2], n2[0]), self.mul(n1[0], n2[2])),
-                                    self.sub(self.mul(n1[0], n2[1]), self.mul(n1[1], n2[0]))])
+            return self.normalize3(
+                [
+                    self.sub(self.mul(n1[1], n2[2]), self.mul(n1[2], n2[1])),
+                    self.sub(self.mul(n1[2], n2[0]), self.mul(n1[0], n2[2])),
+                    self.sub(self.mul(n1[0], n2[1]), self.mul(n1[1], n2[0])),
+                ]
+            )
 
         def var(self, init: ir.Value) -> ir.Value:
             p = cgutils.alloca_once(self.b, _VEC)

@@ -5,6 +5,7 @@ rounding per operation, in the same order), written as ordinary numba loops over
 Blender kernel runs on these when ``CLOTHFIT_NO_SIMD=1`` is set, gives the same trajectory (to the
 float32 rounding; ``tests/test_simd_switch.py``) and is slower (``docs/kernels.md``).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,13 +36,29 @@ def matvec(Md, Mo, sp_i, sp_j, x, to, temp):
         v3, v6 = 3 * v, 6 * v
         for l in range(L):
             for a in range(3):
-                temp[v3 + a, l] = temp[v3 + a, l] + _row3(Md[v6, l], Md[v6 + 1, l], Md[v6 + 2, l], Md[v6 + 3, l],
-                                                          Md[v6 + 4, l], Md[v6 + 5, l], x[v3, l], x[v3 + 1, l],
-                                                          x[v3 + 2, l], a)
+                temp[v3 + a, l] = temp[v3 + a, l] + _row3(
+                    Md[v6, l],
+                    Md[v6 + 1, l],
+                    Md[v6 + 2, l],
+                    Md[v6 + 3, l],
+                    Md[v6 + 4, l],
+                    Md[v6 + 5, l],
+                    x[v3, l],
+                    x[v3 + 1, l],
+                    x[v3 + 2, l],
+                    a,
+                )
     for s in range(sp_i.shape[0]):
         r3, c3, s6 = 3 * sp_i[s], 3 * sp_j[s], 6 * s
         for l in range(L):
-            m0, m1, m2, m3, m4, m5 = Mo[s6, l], Mo[s6 + 1, l], Mo[s6 + 2, l], Mo[s6 + 3, l], Mo[s6 + 4, l], Mo[s6 + 5, l]
+            m0, m1, m2, m3, m4, m5 = (
+                Mo[s6, l],
+                Mo[s6 + 1, l],
+                Mo[s6 + 2, l],
+                Mo[s6 + 3, l],
+                Mo[s6 + 4, l],
+                Mo[s6 + 5, l],
+            )
             xr0, xr1, xr2 = x[r3, l], x[r3 + 1, l], x[r3 + 2, l]
             xc0, xc1, xc2 = x[c3, l], x[c3 + 1, l], x[c3 + 2, l]
             for a in range(3):

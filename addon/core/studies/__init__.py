@@ -1,2 +1,1 @@
-"""Experiments and benchmarks built on the whole core: the paper protocol, speed figures.
-"""
+"""Experiments and benchmarks built on the whole core: the paper protocol, speed figures."""

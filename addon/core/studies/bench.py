@@ -1,4 +1,4 @@
-"""``python -m addon bench --json FILE``: speed figures against the targets of issue 2.
+"""``python -m clothfit bench --json FILE``: speed figures against the targets of issue 2.
 
 * candidate evaluations per second on the full paper workload: simulate one candidate over the
   settling phase and 1.5 s, rasterise and compare its silhouettes for 16 cameras x 15 training
@@ -6,6 +6,7 @@
 * the split between simulation and silhouettes;
 * the wall time of one whole 16-camera fit (the protocol's budget) -> target under 120 s.
 """
+
 from __future__ import annotations
 
 import os
@@ -52,6 +53,7 @@ def _bench_blender_model(tmp, quick, paper_rate):
     21 x 21 cloth with the default free set."""
     from ..physics import blender as B
     from ..physics.scenario import ClothGrid, paper_scenario
+
     truth = {"tension_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness": 0.2, "air_damping": 2.0}
     cap = load_capture(synth_capture(os.path.join(tmp, "blender_cap"), truth, model="blender", seed=0).root)
     train, _ = select_training(cap.cameras, 16)
@@ -61,35 +63,55 @@ def _bench_blender_model(tmp, quick, paper_rate):
     cams = [cap.cameras[c] for c in train]
     base = B.check_settings(dict(truth, time_scale=B.physical_time_scale(D.BLENDER_FPS)))
     rng = np.random.default_rng(0)
-    pop = 16                                  # two batches of 8 SIMD lanes
+    pop = 16  # two batches of 8 SIMD lanes
     P = np.repeat(B.settings_row(base)[None], pop, 0)
     for n in ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping", "tension_damping"):
         P[:, B.FLOAT_SETTINGS.index(n)] *= rng.uniform(0.8, 1.25, pop)
     obj = SilhouetteObjective(sc, cams, obs, backend="numba", model=cap.model)
     r, rc = _rate(lambda: obj(P), pop, min_time=3.0)
     s, sc_ms = _rate(lambda: obj.model.simulate(sc, P), pop, min_time=2.0)
-    res = {"evals_per_s": r, "cpu_ms_per_eval": rc, "sim_only_per_s": s, "sim_cpu_ms_per_eval": sc_ms,
-           "ratio_to_target": r / TARGET_EVALS_PER_S,
-           "ratio_to_paper_model": (r / paper_rate) if paper_rate else None}
-    print(f"[blender model] candidate evaluations/s: {r:.1f} (target {TARGET_EVALS_PER_S:.0f}, ratio "
-          f"{r / TARGET_EVALS_PER_S:.2f}; paper model {paper_rate or float('nan'):.1f}/s); CPU per evaluation "
-          f"{rc:.1f} ms (simulation {sc_ms:.1f} ms); simulation alone {s:.1f}/s", flush=True)
+    res = {
+        "evals_per_s": r,
+        "cpu_ms_per_eval": rc,
+        "sim_only_per_s": s,
+        "sim_cpu_ms_per_eval": sc_ms,
+        "ratio_to_target": r / TARGET_EVALS_PER_S,
+        "ratio_to_paper_model": (r / paper_rate) if paper_rate else None,
+    }
+    print(
+        f"[blender model] candidate evaluations/s: {r:.1f} (target {TARGET_EVALS_PER_S:.0f}, ratio "
+        f"{r / TARGET_EVALS_PER_S:.2f}; paper model {paper_rate or float('nan'):.1f}/s); CPU per evaluation "
+        f"{rc:.1f} ms (simulation {sc_ms:.1f} ms); simulation alone {s:.1f}/s",
+        flush=True,
+    )
     # a 4-camera fit of a 21 x 21 cloth, the default free set, CMA-ES
     sc21 = paper_scenario(ClothGrid(21, 21, D.CLOTH_SIDE))
-    cap21 = load_capture(synth_capture(os.path.join(tmp, "blender_cap21"), truth, model="blender", seed=0,
-                                       scenario=sc21).root)
+    cap21 = load_capture(
+        synth_capture(os.path.join(tmp, "blender_cap21"), truth, model="blender", seed=0, scenario=sc21).root
+    )
     evals = 600 if quick else 3000
     t0 = time.perf_counter()
-    job = FitJob(cap21, FitConfig(train_cameras=select_training(cap21.cameras, 4)[0],
-                                  train_times=D.TRAIN_TIMES, max_evaluations=evals, seed=0))
+    job = FitJob(
+        cap21,
+        FitConfig(
+            train_cameras=select_training(cap21.cameras, 4)[0], train_times=D.TRAIN_TIMES, max_evaluations=evals, seed=0
+        ),
+    )
     job.run()
     wall = time.perf_counter() - t0
-    res["fit_21x21_4cams"] = {"evaluations": job.evaluations, "wall_s": wall, "evals_per_s": job.evaluations / wall,
-                              "free": list(job.par.free),
-                              "best_E_sil_pct": 100 * job.best_error / job.objective.n_images}
-    print(f"[blender model] 4-camera fit of a 21 x 21 cloth ({len(job.par.free)} free settings, "
-          f"{job.evaluations} evaluations): {wall:.1f} s wall, best training E_sil "
-          f"{res['fit_21x21_4cams']['best_E_sil_pct']:.3f} %", flush=True)
+    res["fit_21x21_4cams"] = {
+        "evaluations": job.evaluations,
+        "wall_s": wall,
+        "evals_per_s": job.evaluations / wall,
+        "free": list(job.par.free),
+        "best_E_sil_pct": 100 * job.best_error / job.objective.n_images,
+    }
+    print(
+        f"[blender model] 4-camera fit of a 21 x 21 cloth ({len(job.par.free)} free settings, "
+        f"{job.evaluations} evaluations): {wall:.1f} s wall, best training E_sil "
+        f"{res['fit_21x21_4cams']['best_E_sil_pct']:.3f} %",
+        flush=True,
+    )
     return res
 
 
@@ -99,34 +121,56 @@ def bench_default_fit(tmp, echo=print, max_evaluations=None):
     fit (the capture declares none) and the manipulation's unknowns estimated (time offset 50 ms,
     handles 5 mm); wall and CPU time with the load, against the 3-minute target."""
     from ..physics.scenario import ClothGrid, Scenario, paper_scenario
+
     sc0 = paper_scenario(ClothGrid(21, 21, 0.25), frame_times=D.FRAME_TIMES)
     sc = Scenario(sc0.grid, sc0.handles, sc0.frame_times, 1.0, sc0.gravity)
     truth = {"tension_stiffness": 15.0, "shear_stiffness": 5.0, "bending_stiffness": 0.5, "air_damping": 1.0}
     root = os.path.join(tmp, "default21")
-    synth_capture(root, truth, model={"name": "blender", "fps": 24}, rig="lab18", resolution=(480, 640),
-                  scenario=sc, seed=0)
+    synth_capture(
+        root, truth, model={"name": "blender", "fps": 24}, rig="lab18", resolution=(480, 640), scenario=sc, seed=0
+    )
     path = os.path.join(root, "capture.json")
     d = read_json(path, "capture")
-    d["model"] = {"name": "blender", "fps": 24}          # (a loaded model names a quality: auto below)
+    d["model"] = {"name": "blender", "fps": 24}  # (a loaded model names a quality: auto below)
     d["uncertain"] = {"time_offset": 0.05, "handles": 0.005}
     write_json(path, d)
     cap = load_capture(root)
     train, _ = select_training(cap.cameras, 4)
     load = os.getloadavg()[0]
     t0, c0 = time.perf_counter(), time.process_time()
-    job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=0, quality="auto",
-                                max_evaluations=max_evaluations or D.FIT_EVALUATIONS))
+    job = FitJob(
+        cap,
+        FitConfig(
+            train_cameras=train,
+            train_times=D.TRAIN_TIMES,
+            seed=0,
+            quality="auto",
+            max_evaluations=max_evaluations or D.FIT_EVALUATIONS,
+        ),
+    )
     r = job.run()
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    out = {"workload": "21 x 21 blender cloth, 4 cameras x 15 frames at 480 x 640, quality chosen, time offset and "
-                       "4 handle offsets estimated", "evaluations": r["evaluations"], "wall_s": wall, "cpu_s": cpu,
-           "load_1min_at_start": load, "target_s": 180.0, "ratio_to_target": wall / 180.0,
-           "quality_choice": r.get("quality_choice"), "stages": r.get("stages"),
-           "train_E_sil_pct": r["best_E_sil_mean_pct"], "floor": r.get("floor")}
-    echo(f"default fit (21 x 21, 4 cameras x 15 frames at 480 x 640, quality chosen, manipulation estimated; "
-         f"{r['evaluations']} evaluations): {wall:.0f} s wall, {cpu:.0f} s CPU (target 180 s, ratio "
-         f"{wall / 180.0:.2f}; 1-min load {load:.2f} at the start); quality "
-         f"{(r.get('quality_choice') or {}).get('chosen')}", flush=True)
+    out = {
+        "workload": "21 x 21 blender cloth, 4 cameras x 15 frames at 480 x 640, quality chosen, time offset and "
+        "4 handle offsets estimated",
+        "evaluations": r["evaluations"],
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "load_1min_at_start": load,
+        "target_s": 180.0,
+        "ratio_to_target": wall / 180.0,
+        "quality_choice": r.get("quality_choice"),
+        "stages": r.get("stages"),
+        "train_E_sil_pct": r["best_E_sil_mean_pct"],
+        "floor": r.get("floor"),
+    }
+    echo(
+        f"default fit (21 x 21, 4 cameras x 15 frames at 480 x 640, quality chosen, manipulation estimated; "
+        f"{r['evaluations']} evaluations): {wall:.0f} s wall, {cpu:.0f} s CPU (target 180 s, ratio "
+        f"{wall / 180.0:.2f}; 1-min load {load:.2f} at the start); quality "
+        f"{(r.get('quality_choice') or {}).get('chosen')}",
+        flush=True,
+    )
     return out
 
 
@@ -135,8 +179,10 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
     Blender's solver on workers (``farm.bench.bench_blender_workers``, passed in by the CLI: the farm
     is a layer above the core); without it they are reported as skipped."""
     if blender_workers is None:
+
         def blender_workers(tmp):
             return {"skipped": "Blender workers are measured by the CLI's bench (farm layer)"}
+
     if only_default_fit:
         out = {"default_fit": bench_default_fit(tempfile.mkdtemp(prefix="clothfit_bench_"))}
         write_json(json_path, out)
@@ -162,22 +208,36 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
         load = os.getloadavg()[0]
     except OSError:
         load = None
-    out = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "numba": jit.available(),
-                       "load_average_1min_at_start": load},
-           "workload": "16 cameras x 15 shapes at 480x640, settle 0.5 s + 1.5 s of motion, 705 springs",
-           "targets": {"evals_per_s": TARGET_EVALS_PER_S, "fit_seconds": TARGET_FIT_S}}
+    out = {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "numba": jit.available(),
+            "load_average_1min_at_start": load,
+        },
+        "workload": "16 cameras x 15 shapes at 480x640, settle 0.5 s + 1.5 s of motion, 705 springs",
+        "targets": {"evals_per_s": TARGET_EVALS_PER_S, "fit_seconds": TARGET_FIT_S},
+    }
     backends = ["numba", "numpy"] if jit.available() else ["numpy"]
     for be in backends:
         obj = SilhouetteObjective(sc, cams, obs, backend=be)
         Pb = P if be == "numba" else P[:4]
         r, rc = _rate(lambda: obj(Pb), len(Pb), min_time=3.0 if be == "numba" else 1.0)
         s, sc_ms = _rate(lambda: simulate(sc, Pb, backend=be), len(Pb), min_time=1.5)
-        out[be] = {"evals_per_s": r, "cpu_ms_per_eval": rc, "sim_only_per_s": s, "sim_cpu_ms_per_eval": sc_ms,
-                   "silhouette_share_of_cpu_pct": max(0.0, 100.0 * (1 - sc_ms / rc)),
-                   "ratio_to_target": r / TARGET_EVALS_PER_S}
-        print(f"[{be}] candidate evaluations/s: {r:.1f} (target {TARGET_EVALS_PER_S:.0f}, ratio {r / TARGET_EVALS_PER_S:.2f}); "
-              f"CPU per evaluation {rc:.1f} ms (simulation {sc_ms:.1f} ms, silhouettes "
-              f"{out[be]['silhouette_share_of_cpu_pct']:.0f} %); simulation alone {s:.1f}/s", flush=True)
+        out[be] = {
+            "evals_per_s": r,
+            "cpu_ms_per_eval": rc,
+            "sim_only_per_s": s,
+            "sim_cpu_ms_per_eval": sc_ms,
+            "silhouette_share_of_cpu_pct": max(0.0, 100.0 * (1 - sc_ms / rc)),
+            "ratio_to_target": r / TARGET_EVALS_PER_S,
+        }
+        print(
+            f"[{be}] candidate evaluations/s: {r:.1f} (target {TARGET_EVALS_PER_S:.0f}, ratio {r / TARGET_EVALS_PER_S:.2f}); "
+            f"CPU per evaluation {rc:.1f} ms (simulation {sc_ms:.1f} ms, silhouettes "
+            f"{out[be]['silhouette_share_of_cpu_pct']:.0f} %); simulation alone {s:.1f}/s",
+            flush=True,
+        )
     X = simulate(sc, [gt]).positions[0]
     t0 = time.perf_counter()
     n = 0
@@ -189,23 +249,36 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
     print(f"numpy full-frame silhouette (480x640): {out['numpy_full_frame_silhouette_ms']:.2f} ms", flush=True)
     evals = S["evals"]
     t0 = time.perf_counter()
-    job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, optimizer=DEFAULT_OPTIMIZER,
-                                max_evaluations=evals, seed=0))
+    job = FitJob(
+        cap,
+        FitConfig(
+            train_cameras=train, train_times=D.TRAIN_TIMES, optimizer=DEFAULT_OPTIMIZER, max_evaluations=evals, seed=0
+        ),
+    )
     job.run()
     wall = time.perf_counter() - t0
     try:
         import resource
+
         peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
     except (ImportError, OSError):
         peak_mb = None
     out["peak_memory_mb"] = peak_mb
-    out["fit"] = {"optimizer": DEFAULT_OPTIMIZER, "evaluations": job.evaluations, "wall_s": wall,
-                  "evals_per_s": job.evaluations / wall, "ratio_to_target": wall / TARGET_FIT_S,
-                  "best_E_sil_pct": 100 * job.best_error / job.objective.n_images}
-    print(f"16-camera fit ({DEFAULT_OPTIMIZER}, {job.evaluations} evaluations): {wall:.1f} s wall "
-          f"(target {TARGET_FIT_S:.0f} s, ratio {wall / TARGET_FIT_S:.2f}), best training E_sil "
-          f"{out['fit']['best_E_sil_pct']:.3f} %", flush=True)
-    with tempfile.TemporaryDirectory() as td:      # what one checkpoint costs (written at most every 2 s)
+    out["fit"] = {
+        "optimizer": DEFAULT_OPTIMIZER,
+        "evaluations": job.evaluations,
+        "wall_s": wall,
+        "evals_per_s": job.evaluations / wall,
+        "ratio_to_target": wall / TARGET_FIT_S,
+        "best_E_sil_pct": 100 * job.best_error / job.objective.n_images,
+    }
+    print(
+        f"16-camera fit ({DEFAULT_OPTIMIZER}, {job.evaluations} evaluations): {wall:.1f} s wall "
+        f"(target {TARGET_FIT_S:.0f} s, ratio {wall / TARGET_FIT_S:.2f}), best training E_sil "
+        f"{out['fit']['best_E_sil_pct']:.3f} %",
+        flush=True,
+    )
+    with tempfile.TemporaryDirectory() as td:  # what one checkpoint costs (written at most every 2 s)
         ck = os.path.join(td, "fit.checkpoint.json")
         t0 = time.perf_counter()
         for _ in range(20):
@@ -213,14 +286,22 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
         out["checkpoint_ms"] = 1000 * (time.perf_counter() - t0) / 20
         out["checkpoint_bytes"] = os.path.getsize(ck)
     out["fit"]["stop_reason"] = job.stop_reason
-    print(f"checkpoint: {out['checkpoint_ms']:.1f} ms per write ({out['checkpoint_bytes']} bytes, after "
-          f"{job.generation} generations; written at most every {D.CHECKPOINT_INTERVAL_S:g} s by the CLI)", flush=True)
+    print(
+        f"checkpoint: {out['checkpoint_ms']:.1f} ms per write ({out['checkpoint_bytes']} bytes, after "
+        f"{job.generation} generations; written at most every {D.CHECKPOINT_INTERVAL_S:g} s by the CLI)",
+        flush=True,
+    )
     if peak_mb is not None:
-        print(f"peak memory of the whole bench process (capture, 240 observed silhouettes, numba): {peak_mb:.0f} MB",
-              flush=True)
+        print(
+            f"peak memory of the whole bench process (capture, 240 observed silhouettes, numba): {peak_mb:.0f} MB",
+            flush=True,
+        )
     if load is not None and load > 0.5:
-        print(f"note: the machine was busy (1-min load {load:.2f} on {os.cpu_count()} CPUs at the start): wall-clock "
-              f"figures are pessimistic; CPU ms per evaluation is the load-independent figure", flush=True)
+        print(
+            f"note: the machine was busy (1-min load {load:.2f} on {os.cpu_count()} CPUs at the start): wall-clock "
+            f"figures are pessimistic; CPU ms per evaluation is the load-independent figure",
+            flush=True,
+        )
     if jit.available():
         out["blender_model"] = _bench_blender_model(tmp, quick, out.get("numba", {}).get("evals_per_s"))
     out["blender_workers"] = blender_workers(tmp)

@@ -17,6 +17,7 @@ fitter uses) and the ``lab18`` rig:
 * optimisers: evaluations for SPX+MGG and CMA-ES to reach given mean training ``E_sil`` levels,
   over several seeds, on the 4-camera problem.
 """
+
 from __future__ import annotations
 
 import json
@@ -43,10 +44,11 @@ QUICK = dict(evals=700, fig8_cameras=[4], opt_seeds=2, opt_evals=600, opt_camera
 DEFAULT_OPTIMIZER = D.DEFAULT_OPTIMIZER
 # optimiser variants compared: the paper's GA with the textbook sizes (population 20n, 10n children),
 # the same GA with a smaller population (7n, 5n children), and CMA-ES with its default population
-OPT_VARIANTS = [("spx-mgg", {"optimizer": "spx-mgg", "population": D.GA_POPULATION_TEXTBOOK,
-                             "children": D.GA_CHILDREN_TEXTBOOK}),
-                ("spx-mgg-small", {"optimizer": "spx-mgg", "population": 7 * D.N_FREE, "children": 5 * D.N_FREE}),
-                ("cma-es", {"optimizer": "cma-es"})]
+OPT_VARIANTS = [
+    ("spx-mgg", {"optimizer": "spx-mgg", "population": D.GA_POPULATION_TEXTBOOK, "children": D.GA_CHILDREN_TEXTBOOK}),
+    ("spx-mgg-small", {"optimizer": "spx-mgg", "population": 7 * D.N_FREE, "children": 5 * D.N_FREE}),
+    ("cma-es", {"optimizer": "cma-es"}),
+]
 
 
 def noise_floor(capture: Capture, cams: Iterable[int], times: Iterable[float]) -> float:
@@ -66,40 +68,76 @@ def _log(msg):
     print(msg, flush=True)
 
 
-def fit_and_score(train_cap: Capture, test_cap: Capture, n_cams: int, train_times: Sequence[float], optimizer: str,
-                  evals: int, seed: int, resolution: Sequence[int] | None = None, sizes: dict[str, int] | None = None
-                  ) -> tuple[dict[str, Any], list[int]]:
+def fit_and_score(
+    train_cap: Capture,
+    test_cap: Capture,
+    n_cams: int,
+    train_times: Sequence[float],
+    optimizer: str,
+    evals: int,
+    seed: int,
+    resolution: Sequence[int] | None = None,
+    sizes: dict[str, int] | None = None,
+) -> tuple[dict[str, Any], list[int]]:
     train, held = select_training(train_cap.cameras, n_cams)
     t0 = time.time()
-    job = FitJob(train_cap, FitConfig(train_cameras=train, train_times=train_times, optimizer=optimizer,
-                                      seed=seed, max_evaluations=evals, **(sizes or {})))
+    job = FitJob(
+        train_cap,
+        FitConfig(
+            train_cameras=train,
+            train_times=train_times,
+            optimizer=optimizer,
+            seed=seed,
+            max_evaluations=evals,
+            **(sizes or {}),
+        ),
+    )
     res = job.run()
     ev = evaluate(test_cap, res["params"], cameras=held, times=D.TEST_TIMES)
     gt = test_cap.meta["true_params"]
-    row = {"cameras": n_cams, "train_shapes": len(train_times),
-           "silhouette_error_pct": ev["silhouette_error_pct"], "shape_error_mm": ev["shape_error_mm"],
-           "train_E_sil_pct": res["best_E_sil_mean_pct"], "params": res["params"],
-           "identifiable": identifiable(res["params"]),
-           "identifiable_error_pct": identifiable_errors(res["params"], gt),
-           "evaluations": res["evaluations"], "fit_seconds": time.time() - t0,
-           "train_cameras": [train_cap.cameras[c].name for c in train],
-           "heldout_cameras": [test_cap.cameras[c].name for c in held]}
+    row = {
+        "cameras": n_cams,
+        "train_shapes": len(train_times),
+        "silhouette_error_pct": ev["silhouette_error_pct"],
+        "shape_error_mm": ev["shape_error_mm"],
+        "train_E_sil_pct": res["best_E_sil_mean_pct"],
+        "params": res["params"],
+        "identifiable": identifiable(res["params"]),
+        "identifiable_error_pct": identifiable_errors(res["params"], gt),
+        "evaluations": res["evaluations"],
+        "fit_seconds": time.time() - t0,
+        "train_cameras": [train_cap.cameras[c].name for c in train],
+        "heldout_cameras": [test_cap.cameras[c].name for c in held],
+    }
     if resolution:
         row["train_resolution"] = list(resolution)
     return row, held
 
 
-def run_paper(json_path: str | os.PathLike, quick: bool = False, out_dir: str | os.PathLike = "out/paper", seed: int = 0,
-              optimizer: str | None = None, max_evaluations: int | None = None, only: str | None = None,
-              truth_dt_safety: float | None = None, population: int | None = None, children: int | None = None,
-              rig: str | None = None) -> dict[str, Any]:
+def run_paper(
+    json_path: str | os.PathLike,
+    quick: bool = False,
+    out_dir: str | os.PathLike = "out/paper",
+    seed: int = 0,
+    optimizer: str | None = None,
+    max_evaluations: int | None = None,
+    only: str | None = None,
+    truth_dt_safety: float | None = None,
+    population: int | None = None,
+    children: int | None = None,
+    rig: str | None = None,
+) -> dict[str, Any]:
     S = dict(QUICK if quick else FULL)
-    for name, v, lo in (("max_evaluations", max_evaluations, 1), ("population", population, 2),
-                        ("children", children, 1)):
+    for name, v, lo in (
+        ("max_evaluations", max_evaluations, 1),
+        ("population", population, 2),
+        ("children", children, 1),
+    ):
         if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < lo):
             raise ClothFitError(f"paper: {name} must be an integer >= {lo}, got {v!r}")
-    if truth_dt_safety is not None and not (isinstance(truth_dt_safety, (int, float))
-                                            and math.isfinite(truth_dt_safety) and 0 < truth_dt_safety <= 1):
+    if truth_dt_safety is not None and not (
+        isinstance(truth_dt_safety, (int, float)) and math.isfinite(truth_dt_safety) and 0 < truth_dt_safety <= 1
+    ):
         raise ClothFitError(f"paper: --truth-dt-safety must be a number in (0, 1], got {truth_dt_safety!r}")
     if max_evaluations is not None:
         S["evals"] = max_evaluations
@@ -115,10 +153,20 @@ def run_paper(json_path: str | os.PathLike, quick: bool = False, out_dir: str | 
     synth_capture(cap_path, seed=seed, truth_dt_safety=tds, rig=rig)
     cap = load_capture(cap_path)
     gt = cap.meta["true_params"]
-    out = {"protocol": "SPEC 5 (see addon/core/studies/experiment.py)", "quick": quick, "seed": seed,
-           "optimizer": optimizer, "optimizer_sizes": sizes, "evaluations_per_fit": S["evals"], "true_params": gt,
-           "truth_dt_safety": tds, "model_dt_safety": D.DT_SAFETY,
-           "true_identifiable": identifiable(gt), "rig": rig, "noise_fraction": D.NOISE_FRACTION}
+    out = {
+        "protocol": "SPEC 5 (see addon/core/studies/experiment.py)",
+        "quick": quick,
+        "seed": seed,
+        "optimizer": optimizer,
+        "optimizer_sizes": sizes,
+        "evaluations_per_fit": S["evals"],
+        "true_params": gt,
+        "truth_dt_safety": tds,
+        "model_dt_safety": D.DT_SAFETY,
+        "true_identifiable": identifiable(gt),
+        "rig": rig,
+        "noise_fraction": D.NOISE_FRACTION,
+    }
 
     if "table1" in parts:
         rows = []
@@ -129,14 +177,20 @@ def run_paper(json_path: str | os.PathLike, quick: bool = False, out_dir: str | 
             row["floor_true_params_pct"] = fl["silhouette_error_pct"]
             row["floor_true_params_shape_mm"] = fl["shape_error_mm"]
             rows.append(row)
-            _log(f"table1 cameras={n:2d}: silhouette {row['silhouette_error_pct']:.3f} % (floors: noise "
-                 f"{row['floor_noise_only_pct']:.3f} %, true params {row['floor_true_params_pct']:.3f} %), shape "
-                 f"{row['shape_error_mm']:.3f} mm, recovery {_fmt_id(row['identifiable_error_pct'])} "
-                 f"[{row['fit_seconds']:.0f} s]")
+            _log(
+                f"table1 cameras={n:2d}: silhouette {row['silhouette_error_pct']:.3f} % (floors: noise "
+                f"{row['floor_noise_only_pct']:.3f} %, true params {row['floor_true_params_pct']:.3f} %), shape "
+                f"{row['shape_error_mm']:.3f} mm, recovery {_fmt_id(row['identifiable_error_pct'])} "
+                f"[{row['fit_seconds']:.0f} s]"
+            )
         out["table1"] = rows
         best = rows[-1]
-        out["identifiable"] = {"estimated": best["identifiable"], "true": identifiable(gt),
-                               "error_pct": best["identifiable_error_pct"], "cameras": best["cameras"]}
+        out["identifiable"] = {
+            "estimated": best["identifiable"],
+            "true": identifiable(gt),
+            "error_pct": best["identifiable_error_pct"],
+            "cameras": best["cameras"],
+        }
         _dump(json_path, out)
 
     if "fig8" in parts:
@@ -145,8 +199,10 @@ def run_paper(json_path: str | os.PathLike, quick: bool = False, out_dir: str | 
             for N in D.FIG8_SHAPES:
                 row, _ = fit_and_score(cap, cap, n, D.TRAIN_TIMES[:N], optimizer, S["evals"], seed, sizes=sizes)
                 rows.append(row)
-                _log(f"fig8 cameras={n:2d} shapes={N:2d}: silhouette {row['silhouette_error_pct']:.3f} %, shape "
-                     f"{row['shape_error_mm']:.3f} mm [{row['fit_seconds']:.0f} s]")
+                _log(
+                    f"fig8 cameras={n:2d} shapes={N:2d}: silhouette {row['silhouette_error_pct']:.3f} %, shape "
+                    f"{row['shape_error_mm']:.3f} mm [{row['fit_seconds']:.0f} s]"
+                )
         out["fig8"] = rows
         _dump(json_path, out)
 
@@ -157,12 +213,15 @@ def run_paper(json_path: str | os.PathLike, quick: bool = False, out_dir: str | 
             synth_capture(lp, seed=seed, resolution=res, truth_dt_safety=tds, rig=rig)
             low = load_capture(lp)
             for n in D.TABLE2_CAMERAS:
-                row, held = fit_and_score(low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res,
-                                          sizes=sizes)
+                row, held = fit_and_score(
+                    low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res, sizes=sizes
+                )
                 row["floor_noise_only_pct"] = noise_floor(cap, held, D.TEST_TIMES)
                 rows.append(row)
-                _log(f"table2 {res[0]}x{res[1]} cameras={n}: silhouette {row['silhouette_error_pct']:.3f} %, shape "
-                     f"{row['shape_error_mm']:.3f} mm [{row['fit_seconds']:.0f} s]")
+                _log(
+                    f"table2 {res[0]}x{res[1]} cameras={n}: silhouette {row['silhouette_error_pct']:.3f} %, shape "
+                    f"{row['shape_error_mm']:.3f} mm [{row['fit_seconds']:.0f} s]"
+                )
         out["table2"] = rows
         _dump(json_path, out)
 
@@ -176,17 +235,26 @@ def run_paper(json_path: str | os.PathLike, quick: bool = False, out_dir: str | 
     return out
 
 
-def compare_optimizers(cap: Capture, n_cams: int, seeds: int, evals: int, levels: Sequence[float] = (2.0, 1.0, 0.5)
-                       ) -> dict[str, Any]:
+def compare_optimizers(
+    cap: Capture, n_cams: int, seeds: int, evals: int, levels: Sequence[float] = (2.0, 1.0, 0.5)
+) -> dict[str, Any]:
     """Evaluations each optimiser needs to bring the mean training E_sil below ``levels`` [%]."""
     train, _ = select_training(cap.cameras, n_cams)
-    out = {"cameras": n_cams, "seeds": seeds, "budget": evals, "levels_pct": list(levels), "runs": [],
-           "variants": {k: v for k, v in OPT_VARIANTS}}
+    out = {
+        "cameras": n_cams,
+        "seeds": seeds,
+        "budget": evals,
+        "levels_pct": list(levels),
+        "runs": [],
+        "variants": {k: v for k, v in OPT_VARIANTS},
+    }
     for label, kw in OPT_VARIANTS:
         opt = label
         for s in range(seeds):
-            job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=100 + s,
-                                        max_evaluations=evals, **kw))
+            job = FitJob(
+                cap,
+                FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=100 + s, max_evaluations=evals, **kw),
+            )
             job.run()
             n_img = job.objective.n_images
             hist = [(e, 100 * f / n_img) for e, f in job.opt.history]
@@ -194,8 +262,15 @@ def compare_optimizers(cap: Capture, n_cams: int, seeds: int, evals: int, levels
             for lv in levels:
                 hit = [e for e, f in hist if f <= lv]
                 reach[str(lv)] = int(hit[0]) if hit else None
-            out["runs"].append({"optimizer": opt, "seed": 100 + s, "final_E_sil_pct": hist[-1][1],
-                                "evaluations_to_reach": reach, "evaluations": job.evaluations})
+            out["runs"].append(
+                {
+                    "optimizer": opt,
+                    "seed": 100 + s,
+                    "final_E_sil_pct": hist[-1][1],
+                    "evaluations_to_reach": reach,
+                    "evaluations": job.evaluations,
+                }
+            )
             _log(f"optimizers {opt} seed {100 + s}: final {hist[-1][1]:.3f} %, reach {reach}")
     summ = {}
     for opt, _ in OPT_VARIANTS:
@@ -216,6 +291,7 @@ def _fmt_id(e):
 
 def _dump(path, obj):
     from ..safeio import atomic_json
+
     atomic_json(path, obj)
 
 
@@ -223,18 +299,24 @@ def format_tables(out: dict[str, Any]) -> str:
     L = []
     if "table1" in out:
         L.append("Table 1 (held-out cameras, test shapes)           ours                paper")
-        L.append("cameras | silhouette % | floor noise / true-params % | shape mm | silhouette % | shape mm | k/m, d/m, l error %")
+        L.append(
+            "cameras | silhouette % | floor noise / true-params % | shape mm | silhouette % | shape mm | k/m, d/m, l error %"
+        )
         for r in out["table1"]:
             ps, pm = D.PAPER_TABLE1[r["cameras"]]
             e = r["identifiable_error_pct"]
-            L.append(f"{r['cameras']:7d} | {r['silhouette_error_pct']:12.3f} | {r['floor_noise_only_pct']:10.3f} / "
-                     f"{r['floor_true_params_pct']:6.3f}     | {r['shape_error_mm']:8.4f} | {ps:12.3f} | {pm:8.3f} | "
-                     f"{e['k_over_m']:.2f}, {e['d_over_m']:.2f}, {e['l']:.2f}")
+            L.append(
+                f"{r['cameras']:7d} | {r['silhouette_error_pct']:12.3f} | {r['floor_noise_only_pct']:10.3f} / "
+                f"{r['floor_true_params_pct']:6.3f}     | {r['shape_error_mm']:8.4f} | {ps:12.3f} | {pm:8.3f} | "
+                f"{e['k_over_m']:.2f}, {e['d_over_m']:.2f}, {e['l']:.2f}"
+            )
     if "fig8" in out:
         L.append("")
         L.append("Fig. 8 (first N training shapes): cameras | N | silhouette % | shape mm")
         for r in out["fig8"]:
-            L.append(f"  {r['cameras']:3d} | {r['train_shapes']:2d} | {r['silhouette_error_pct']:7.3f} | {r['shape_error_mm']:7.4f}")
+            L.append(
+                f"  {r['cameras']:3d} | {r['train_shapes']:2d} | {r['silhouette_error_pct']:7.3f} | {r['shape_error_mm']:7.4f}"
+            )
     if "table2" in out:
         L.append("")
         L.append("Table 2 (silhouette % at 480x640, held-out cameras): ours (paper)")
@@ -244,20 +326,28 @@ def format_tables(out: dict[str, Any]) -> str:
             for n in D.TABLE2_CAMERAS:
                 r = [x for x in out["table2"] if x["cameras"] == n and tuple(x["train_resolution"]) == tuple(res)]
                 fl = f" [floor {r[0]['floor_noise_only_pct']:.3f}]" if r and "floor_noise_only_pct" in r[0] else ""
-                cells.append(f"{r[0]['silhouette_error_pct']:.3f}{fl} ({D.PAPER_TABLE2[tuple(res)][n]:.3f})" if r else "-")
+                cells.append(
+                    f"{r[0]['silhouette_error_pct']:.3f}{fl} ({D.PAPER_TABLE2[tuple(res)][n]:.3f})" if r else "-"
+                )
             L.append(f"{res[0]}x{res[1]} | " + " | ".join(cells))
     if "optimizers" in out:
         o = out["optimizers"]
         L.append("")
-        L.append(f"Optimisers ({o['cameras']} cameras, {o['seeds']} seeds, budget {o['budget']}): "
-                 f"median evaluations to reach mean training E_sil")
+        L.append(
+            f"Optimisers ({o['cameras']} cameras, {o['seeds']} seeds, budget {o['budget']}): "
+            f"median evaluations to reach mean training E_sil"
+        )
         for opt, s in o["summary"].items():
-            L.append(f"  {opt:13s}: " + ", ".join(f"{lv} %: {s[f'median_evals_to_{lv}']} ({s[f'reached_{lv}']})"
-                                             for lv in o["levels_pct"]) +
-                     f"; median final {s['final_E_sil_pct_median']:.3f} %")
+            L.append(
+                f"  {opt:13s}: "
+                + ", ".join(f"{lv} %: {s[f'median_evals_to_{lv}']} ({s[f'reached_{lv}']})" for lv in o["levels_pct"])
+                + f"; median final {s['final_E_sil_pct_median']:.3f} %"
+            )
     if "identifiable" in out:
         i = out["identifiable"]
         L.append("")
-        L.append(f"Identifiable quantities ({i['cameras']} cameras): estimated {json.dumps({k: round(v, 6) for k, v in i['estimated'].items()})}, "
-                 f"true {json.dumps({k: round(v, 6) for k, v in i['true'].items()})}, error % {json.dumps({k: round(v, 3) for k, v in i['error_pct'].items()})}")
+        L.append(
+            f"Identifiable quantities ({i['cameras']} cameras): estimated {json.dumps({k: round(v, 6) for k, v in i['estimated'].items()})}, "
+            f"true {json.dumps({k: round(v, 6) for k, v in i['true'].items()})}, error % {json.dumps({k: round(v, 3) for k, v in i['error_pct'].items()})}"
+        )
     return "\n".join(L)

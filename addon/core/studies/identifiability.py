@@ -1,4 +1,4 @@
-"""``python -m addon identifiability``: which Blender cloth settings silhouettes can tell apart.
+"""``python -m clothfit identifiability``: which Blender cloth settings silhouettes can tell apart.
 
 For a cloth (Blender's defaults, and presets) in the paper's scenario (the 16 x 16, 10 cm sheet
 hung by its corners, one released, 15 training times over 1.5 s), the core's blender model is
@@ -19,6 +19,7 @@ Positions are a generous stand-in for silhouettes (an outline sees only the moti
 these bounds are optimistic; their order is what chooses the free set. The mass is not listed:
 scaling it with every stiffness and damping leaves the motion unchanged (tested), so it is fixed.
 """
+
 from __future__ import annotations
 
 import os
@@ -32,20 +33,30 @@ from ..physics import blender as B
 from ..physics.models import BlenderModel
 from ..physics.scenario import Scenario, paper_scenario
 
-CANDIDATES = ("tension_stiffness", "compression_stiffness", "shear_stiffness", "bending_stiffness",
-              "tension_damping", "compression_damping", "shear_damping", "bending_damping", "air_damping")
+CANDIDATES = (
+    "tension_stiffness",
+    "compression_stiffness",
+    "shear_stiffness",
+    "bending_stiffness",
+    "tension_damping",
+    "compression_damping",
+    "shear_damping",
+    "bending_damping",
+    "air_damping",
+)
 MATERIALS = {
     "default": {},
     # Blender's silk preset with spring dampings of 0.5 instead of 0 (a log-derivative needs a value)
     "silk": dict(B.PRESETS["silk"], tension_damping=0.5, compression_damping=0.5, shear_damping=0.5),
     "denim": B.PRESETS["denim"],
 }
-SIGMA_M = 0.5e-3          # positions resolved to 0.5 mm (about one pixel of the lab18 rig at the cloth)
-STEP = 0.05               # +-5 % in log
+SIGMA_M = 0.5e-3  # positions resolved to 0.5 mm (about one pixel of the lab18 rig at the cloth)
+STEP = 0.05  # +-5 % in log
 
 
-def jacobian(settings: dict, names: Sequence[str] = CANDIDATES, fps: float = D.BLENDER_FPS,
-             scenario: Scenario | None = None) -> tuple[np.ndarray, np.ndarray]:
+def jacobian(
+    settings: dict, names: Sequence[str] = CANDIDATES, fps: float = D.BLENDER_FPS, scenario: Scenario | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(J (N, len(names)) metres per unit log setting, base positions (F, V, 3))."""
     scenario = scenario or paper_scenario(frame_times=D.TRAIN_TIMES)
     s = B.check_settings(dict(settings, time_scale=settings.get("time_scale", B.physical_time_scale(fps))))
@@ -69,7 +80,7 @@ def jacobian(settings: dict, names: Sequence[str] = CANDIDATES, fps: float = D.B
 
 def bounds_pct(J: np.ndarray, cols: Sequence[int], sigma: float = SIGMA_M) -> list[float]:
     """Cramer-Rao relative std [%] of the log settings ``cols`` free together."""
-    F = J[:, cols].T @ J[:, cols] / sigma ** 2
+    F = J[:, cols].T @ J[:, cols] / sigma**2
     try:
         cov = np.linalg.inv(F)
     except np.linalg.LinAlgError:
@@ -88,26 +99,45 @@ def table(material: str, settings: dict, default_free: Sequence[str], sigma: flo
     dset = dict(zip(default_free, bounds_pct(J, dcols, sigma)))
     rows = []
     for i, n in enumerate(names):
-        rows.append({"setting": n, "mm_per_10pct": rms10[i], "alone_pct": alone[i], "all_free_pct": allf[i],
-                     "default_set_pct": dset.get(n)})
-    return {"material": material, "settings": B.check_settings(settings), "sigma_mm": sigma * 1000,
-            "observed_points": n_obs, "rows": rows}
+        rows.append(
+            {
+                "setting": n,
+                "mm_per_10pct": rms10[i],
+                "alone_pct": alone[i],
+                "all_free_pct": allf[i],
+                "default_set_pct": dset.get(n),
+            }
+        )
+    return {
+        "material": material,
+        "settings": B.check_settings(settings),
+        "sigma_mm": sigma * 1000,
+        "observed_points": n_obs,
+        "rows": rows,
+    }
 
 
 def format_table(t: dict[str, Any]) -> str:
-    out = [f"{t['material']}: Cramer-Rao relative std of each setting (positions to {t['sigma_mm']:g} mm, "
-           f"{t['observed_points']} vertex observations)",
-           f"  {'setting':24s} {'mm per +10 %':>12s} {'alone %':>9s} {'all free %':>11s} {'default set %':>14s}"]
+    out = [
+        f"{t['material']}: Cramer-Rao relative std of each setting (positions to {t['sigma_mm']:g} mm, "
+        f"{t['observed_points']} vertex observations)",
+        f"  {'setting':24s} {'mm per +10 %':>12s} {'alone %':>9s} {'all free %':>11s} {'default set %':>14s}",
+    ]
     for r in t["rows"]:
         d = "-" if r["default_set_pct"] is None else f"{r['default_set_pct']:.2f}"
-        out.append(f"  {r['setting']:24s} {r['mm_per_10pct']:12.3f} {r['alone_pct']:9.3f} {r['all_free_pct']:11.2f} "
-                   f"{d:>14s}")
+        out.append(
+            f"  {r['setting']:24s} {r['mm_per_10pct']:12.3f} {r['alone_pct']:9.3f} {r['all_free_pct']:11.2f} {d:>14s}"
+        )
     return "\n".join(out)
 
 
-def run(json_path: str | os.PathLike | None = None, materials: Iterable[str] | None = None,
-        echo: Callable[[str], Any] = print) -> list[dict[str, Any]]:
+def run(
+    json_path: str | os.PathLike | None = None,
+    materials: Iterable[str] | None = None,
+    echo: Callable[[str], Any] = print,
+) -> list[dict[str, Any]]:
     from ..fitting.parameters import BLENDER_FREE
+
     out = []
     for name in materials or MATERIALS:
         s = MATERIALS[name]
@@ -116,5 +146,6 @@ def run(json_path: str | os.PathLike | None = None, materials: Iterable[str] | N
         out.append(t)
     if json_path:
         from ..safeio import atomic_json
+
         atomic_json(json_path, out)
     return out
