@@ -262,7 +262,7 @@ def story_pictures(summary, pics, state):
     fig["pictures"] = picture_hashes(pics)
     if state.get("first_guess_sheet"):
         fig["first_guess_sheet_mean_E_sil_pct"] = state["first_guess_sheet"]
-    for k, v in paths.items():
+    for v in paths.values():
         print(f"  picture {v}")
     return {"story": fig}
 

@@ -82,7 +82,7 @@ def fit_on_images(capture, images, rows, cams, t, roles, tile=300):
         _text(out, title, (gap + 2, y + 19), 0.52, ACCENT)
         y += tit
         errors[title] = []
-        for j, c in enumerate(cams):
+        for j in range(len(cams)):
             o, ign = obs[j]
             m = mods[title][j]
             e = e_sil_pct(o, m, ign)

@@ -331,7 +331,7 @@ def test_panel_sections_draw(state, tmp_path):
         p.fit_has_result, p.fit_best_m, p.fit_best_k, p.fit_best_l, p.fit_best_d = True, 1e-5, 9.0, 0.0066, 1e-4
         p.result_path, p.overlay_dir = "/tmp/r.json", "/tmp/o"
     drawn = []
-    for key, label, func in panel.SECTIONS:
+    for _key, _label, func in panel.SECTIONS:
         for src in ("PRESET", "RING"):
             p.rig_source = src
             func(FakeLayout(drawn), scene, p)

@@ -116,6 +116,8 @@ def test_help_names_the_program_and_documents_stdout_and_exit_codes():
 
 
 def test_version_comes_from_the_manifest():
+    import clothfit
+
     version = _manifest_version()
     assert clothfit.version() == version
     r = run("--version")

@@ -46,7 +46,7 @@ def test_capture_names_its_model_and_truth(cap):
 def test_search_space_is_per_unit_mass_and_inside_blenders_limits(cap):
     par = make_parameters(cap, FitConfig(cloth_mass=81 * 3.0))  # 3 kg per vertex: ten times the default
     assert par.m == pytest.approx(3.0)
-    for n, (lo, hi) in zip(par.free, zip(par.space.lo, par.space.hi)):
+    for n, (_lo, hi) in zip(par.free, zip(par.space.lo, par.space.hi)):
         if n in par.scaled:  # coordinates per unit mass, Blender limit respected
             assert hi * par.m <= B.RANGES[n][1] * (1 + 1e-9)
     x = np.array([(a * b) ** 0.5 for a, b in zip(par.space.lo, par.space.hi)])

@@ -58,7 +58,7 @@ def caps(tmp_path_factory):
     base = tmp_path_factory.mktemp("stages")
     sc = paper_scenario(ClothGrid(9, 9, 0.1), frame_times=TIMES)
     true_sc = Scenario(sc.grid, sc.handles, np.array(TIMES), sc.settle_time, sc.gravity)
-    shifted = synth_capture(
+    synth_capture(
         str(base / "shifted"),
         TRUTH,
         model={"name": "blender", "fps": 24},

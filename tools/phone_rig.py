@@ -1202,7 +1202,7 @@ def main(argv=None):
         run_e2e(a)
         return 0
     if a.cmd == "calibrate":
-        out = run_calibrate(a)
+        run_calibrate(a)
         return 0  # the goals met or missed are in the JSON; an error exits non-zero
     return 2
 

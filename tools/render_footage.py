@@ -374,7 +374,7 @@ def render_footage(
     tmp = os.path.join(out, "_render")
     os.makedirs(tmp, exist_ok=True)
     timing = []
-    for ci, cam in enumerate(cams):
+    for _ci, cam in enumerate(cams):
         d = os.path.join(out, cam.name)
         os.makedirs(d, exist_ok=True)
         margin = needed_margin(cam)
@@ -387,7 +387,7 @@ def render_footage(
             name = "background.png" if k == 0 else f"background_{k + 1}.png"
             cv2.imwrite(os.path.join(d, name), add_sensor_noise(bg, rng, read_sigma, shot))
         cloth.hide_render = False
-        for fi, t in enumerate(times):
+        for fi, _t in enumerate(times):
             set_cloth_shape(cloth, X[fi])
             t0 = time.time()
             pin = render_pinhole(scene, cam_obj, cam, margin, os.path.join(tmp, f"{cam.name}_{fi:03d}.png"))

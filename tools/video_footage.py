@@ -119,7 +119,7 @@ def make_video_footage(
     os.makedirs(vids, exist_ok=True)
     os.makedirs(plates, exist_ok=True)
     sync, plan = {}, []
-    for ci, cam in enumerate(cams):
+    for cam in cams:
         s = round(float(rng.uniform(0.3, 1.2)), 3)  # video time at t = 0 (ms grid: container precision)
         sync[cam.name] = s
         vt = [0.0]

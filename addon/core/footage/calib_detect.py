@@ -481,7 +481,7 @@ def sniff_dictionary(source: Source, board: Board, det: Detections, per_camera: 
 
     own = count(board.dictionary)  # stray decodings of another dictionary's print: a few, not most
     best, best_n = None, 0
-    for name, (bits, size) in sorted(dictionaries().items(), key=lambda kv: (kv[1][0], kv[1][1])):
+    for name, (_bits, _size) in sorted(dictionaries().items(), key=lambda kv: (kv[1][0], kv[1][1])):
         if name == board.dictionary:
             continue
         n = count(name)

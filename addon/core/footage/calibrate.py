@@ -385,7 +385,7 @@ def write_debug(folder: str, det: Detections, result: Result | None, board: Boar
     P = board.corners()
     cams = {c.name: c for c in (result.cameras if result else [])}
     written = 0
-    for (cam, moment), (jpg, mids, mcorners) in det.debug_frames.items():
+    for (cam, moment), (jpg, _mids, mcorners) in det.debug_frames.items():
         grey = cv2.imdecode(np.frombuffer(jpg, np.uint8), cv2.IMREAD_GRAYSCALE)
         img = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
         for c in mcorners or ():

@@ -166,7 +166,7 @@ def measure_handles(
     grid = place.grid
     # ---------------------------------------------------------------- scenario
     handles = []
-    for k, h in enumerate(marks):
+    for k in range(len(marks)):
         kt, kx = keys[k]
         rel = rel_info[k]
         handles.append(Handle(vertices[k], kt, kx, rel.release_time if rel is not None else None))
@@ -516,7 +516,7 @@ def format_report(rep: dict) -> str:
             else ("moving" if h["motion"] == "moving" else "fixed")
         )
         lines.append(
-            f"{h['name'][:14]:<14} {'r%d c%d' % (h['row'], h['column']):>11} {h['residual_rms_px']:7.2f} "
+            f"{h['name'][:14]:<14} {'r' + str(h['row']) + ' c' + str(h['column']):>11} {h['residual_rms_px']:7.2f} "
             f"{h['residual_rms_mm']:7.2f} {h['sd_mm']:6.2f} {h['uncertain_mm']:8.2f} "
             f"{h['tracked_3d_frames']:>6} {rel:>16}"
         )

@@ -276,7 +276,7 @@ class Capture:
             [("ignore", self.masks["ignore"])] if "ignore" in self.masks else []
         )
         for kind, pat in patterns:
-            for ci, c in enumerate(self.cameras):
+            for _ci, c in enumerate(self.cameras):
                 for fi in range(self.n_frames):
                     p = pat.format(camera=c.name, frame=int(self._file_frames[fi]), time=_Time(self.frame_times[fi]))
                     if p in seen:

@@ -92,7 +92,7 @@ def _field_regex(component: str, camera: str | None = None) -> re.Pattern:
     {frame} digits, {time} a number."""
     out = []
     seen_camera = False
-    for lit, name, spec, _ in string.Formatter().parse(component):
+    for lit, name, _spec, _ in string.Formatter().parse(component):
         out.append(re.escape(lit))
         if name == "camera":
             if camera is not None:

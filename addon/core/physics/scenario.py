@@ -371,7 +371,7 @@ def paper_scenario(
     """docs/method.md#spec-5: all four corners held at the flat square, settle, release one corner at t = 0."""
     grid = grid or ClothGrid()
     handles = []
-    for ci, v in enumerate(grid.corners()):
+    for _ci, v in enumerate(grid.corners()):
         handles.append(Handle(v, [0.0], grid.rest[v][None], 0.0 if v == grid.corners()[released_corner] else None))
     return Scenario(grid, handles, D.FRAME_TIMES if frame_times is None else frame_times)
 
