@@ -2,6 +2,7 @@
 #   make demo   - the paper scenario on the built-in lab18 rig: Blender-rendered observations, fit,
 #                 overlays and the pictures of the README's "The demo" under out/demo, Table 1 in out/
 #   make test   - the whole test suite (pure core + Blender layer through the bpy module)
+#   make lint   - ruff check and ruff format --check (pyproject.toml [tool.ruff])
 #   make bench  - speed figures (out/bench.json)
 #   make paper  - the full paper protocol (Table 1, Fig. 8, Table 2, optimisers; out/paper.json)
 #   make docs   - the docs site (MkDocs, strict: a broken link or reference fails) -> out/site
@@ -14,7 +15,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test bench paper extension clean docs docs-check docs-images docs-refresh docs-rerun
+.PHONY: venv demo test lint bench paper extension clean docs docs-check docs-images docs-refresh docs-rerun
 
 venv: $(STAMP)
 
@@ -35,6 +36,10 @@ demo: venv
 
 test: venv
 	$(PY) -m pytest -q tests
+
+lint: venv
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
 
 bench: venv
 	$(PY) -m clothfit bench --json out/bench.json >/dev/null
