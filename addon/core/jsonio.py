@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .errors import ClothFitError
 from .safeio import atomic_write
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 
 def read_json(path: str | os.PathLike, what: str = "JSON file", expect: type | None = dict) -> Any:
@@ -35,7 +38,7 @@ def read_json(path: str | os.PathLike, what: str = "JSON file", expect: type | N
     return d
 
 
-def encode(o):
+def encode(o: Any) -> Any:
     """The project's one JSON encoder (``json.dumps(default=encode)``): numpy scalars as numbers,
     arrays as (nested) lists; anything else is a TypeError."""
     if isinstance(o, np.generic):
@@ -45,18 +48,26 @@ def encode(o):
     raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
-def dumps(obj, strict: bool = False, indent=1, sort_keys: bool = False, default=None) -> str:
+def dumps(
+    obj: Any,
+    strict: bool = False,
+    indent: int | None = 1,
+    sort_keys: bool = False,
+    default: Callable[[Any], Any] | None = None,
+) -> str:
     """JSON text with the project's encoder; ``strict``: no NaN / Infinity (ValueError); ``indent``
     None for one line (hashes)."""
     return json.dumps(obj, indent=indent, sort_keys=sort_keys, default=default or encode, allow_nan=not strict)
 
 
-def plain(obj):
+def plain(obj: Any) -> Any:
     """``obj`` as the plain JSON values a reader of its file gets back (numpy values converted)."""
     return json.loads(dumps(obj, indent=None))
 
 
-def write_json(path, obj, strict: bool = False, default=None):
+def write_json(
+    path: str | os.PathLike, obj: Any, strict: bool = False, default: Callable[[Any], Any] | None = None
+) -> None:
     """Write ``obj`` as JSON (indent 1, a final newline) safely: temporary file, fsync, rename
     (``safeio.atomic_write``); ``strict``: no NaN / Infinity. One-line ClothFitError."""
     try:
@@ -66,7 +77,7 @@ def write_json(path, obj, strict: bool = False, default=None):
     atomic_write(path, (text + "\n").encode("utf-8"))
 
 
-def loads(text, what: str = "JSON text", expect=None):
+def loads(text: str | bytes, what: str = "JSON text", expect: type | None = None) -> Any:
     """JSON text (a scene property, an option) parsed; not JSON, or a top level that is not
     ``expect``, raises a one-line ``ClothFitError`` naming ``what``."""
     try:

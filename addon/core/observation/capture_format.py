@@ -10,11 +10,15 @@ import math
 import os
 import re
 import string
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import ClothFitError
 from .camera import check_camera_name
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 FORMAT = "silhouette-cloth-fit/capture"
 VERSION = 1
@@ -41,7 +45,7 @@ class _Time(float):
         return format(float(self), spec or TIME_FORMAT)
 
 
-def check_pattern(pattern, where: str = "silhouettes pattern") -> str:
+def check_pattern(pattern: Any, where: str = "silhouettes pattern") -> str:
     """Validate a silhouette file-name pattern and return it."""
     if not isinstance(pattern, str) or not pattern.strip():
         raise ClothFitError(f"{where}: must be a non-empty string, got {pattern!r}")
@@ -122,7 +126,7 @@ def _check_model(model, where: str):
         raise ClothFitError(f"{where}: 'model': {e}") from None
 
 
-def check_shapes(shapes, n_frames: int, n_vertices: int, where: str) -> np.ndarray:
+def check_shapes(shapes: ArrayLike, n_frames: int, n_vertices: int, where: str) -> np.ndarray:
     try:
         s = np.asarray(shapes, dtype=np.float64)
     except (TypeError, ValueError) as e:
@@ -141,7 +145,7 @@ def check_shapes(shapes, n_frames: int, n_vertices: int, where: str) -> np.ndarr
     return s
 
 
-def check_cloth_mass(cloth_mass, where: str):
+def check_cloth_mass(cloth_mass: Any, where: str) -> float | None:
     if cloth_mass is None:
         return None
     if isinstance(cloth_mass, bool):

@@ -7,12 +7,18 @@ problem is a ``ClothFitError`` naming the file.
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import ClothFitError
 from ..safeio import atomic_write
 from .capture_format import check_pattern
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from numpy.typing import ArrayLike
 
 # =============================================================== silhouette files
 
@@ -42,7 +48,7 @@ def _mask_from_array(mask, where: str) -> np.ndarray:
     )
 
 
-def save_silhouette(path: str, mask) -> None:
+def save_silhouette(path: str, mask: ArrayLike) -> None:
     """Write ``mask`` (bool, 0/1 or 0/255; shape (H, W)) as an 8-bit single-channel PNG 0/255.
 
     Parent directories are created; the file is written to a temporary name and renamed, so a
@@ -77,7 +83,11 @@ def _write_bytes_atomic(path: str, data: bytes):
 
 
 def read_silhouette(
-    path: str, expected_shape=None, binarize_threshold=None, allow_empty: bool = False, source: str | None = None
+    path: str,
+    expected_shape: tuple[int, int] | None = None,
+    binarize_threshold: float | None = None,
+    allow_empty: bool = False,
+    source: str | None = None,
 ) -> np.ndarray:
     """Read a silhouette image -> bool array (H, W), True = object.
 
@@ -195,8 +205,13 @@ def _check_size(img, expected_shape, where):
 
 
 def read_label_silhouette(
-    path: str, silhouette_ids, ignore_ids=(), expected_shape=None, allow_empty: bool = False, source: str | None = None
-):
+    path: str,
+    silhouette_ids: Sequence[int],
+    ignore_ids: Sequence[int] = (),
+    expected_shape: tuple[int, int] | None = None,
+    allow_empty: bool = False,
+    source: str | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
     """A label image (palette or greyscale PNG, e.g. a SAM 2 / XMem / DAVIS mask) -> ``(mask, ignore)``.
 
     ``mask`` = pixels whose label is one of ``silhouette_ids`` (the cloth), ``ignore`` = pixels whose
@@ -222,7 +237,11 @@ def read_label_silhouette(
 
 
 def read_matte(
-    path: str, threshold: float, expected_shape=None, allow_empty: bool = False, source: str | None = None
+    path: str,
+    threshold: float,
+    expected_shape: tuple[int, int] | None = None,
+    allow_empty: bool = False,
+    source: str | None = None,
 ) -> np.ndarray:
     """An alpha matte (PNG; grey, or the alpha channel of grey + alpha / RGBA) -> object = value >
     ``threshold`` (0..1 of full scale, so 8- and 16-bit mattes take the same threshold)."""
@@ -254,7 +273,7 @@ def read_matte(
     return mask
 
 
-def check_mask_spec(d, where: str) -> dict:
+def check_mask_spec(d: dict[str, Any] | None, where: str) -> dict[str, Any]:
     """The capture keys saying how silhouettes are stored (``MASK_KEYS``), checked; absent = binary PNGs.
 
     ``silhouette_ids``: silhouettes are label images (palette or greyscale PNGs) and these labels
