@@ -22,6 +22,7 @@ import io
 import json
 import os
 import string
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -61,6 +62,11 @@ from .silhouette_files import (
     read_silhouette,
     save_silhouette,
 )
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
+
+    from numpy.typing import ArrayLike
 
 # =========================================================================== capture
 
@@ -136,11 +142,11 @@ class Capture:
         return int(self.frame_times.size)
 
     @property
-    def camera_names(self):
+    def camera_names(self) -> list[str]:
         return [c.name for c in self.cameras]
 
     @property
-    def point_mass(self):
+    def point_mass(self) -> float | None:
         """``cloth_mass / n_vertices`` [kg] (the fixed m of docs/method.md#spec-2), or None."""
         return None if self.cloth_mass is None else self.cloth_mass / self.scenario.grid.n_vertices
 
@@ -173,7 +179,7 @@ class Capture:
             )
         return i
 
-    def frame_indices(self, times, tol: float = 1e-6):
+    def frame_indices(self, times: Iterable[float], tol: float = 1e-6) -> list[int]:
         return [self.frame_index(t, tol) for t in times]
 
     def _check_cam(self, ci):
@@ -195,7 +201,7 @@ class Capture:
         rel = self._relpath(self.cameras[ci].name, self._file_frames[fi], self.frame_times[fi])
         return os.path.join(self.root, *rel.replace("\\", "/").split("/"))
 
-    def ignore_path(self, cam_index: int, frame_index: int):
+    def ignore_path(self, cam_index: int, frame_index: int) -> str | None:
         """The ignore mask file of a camera and frame (the capture's ``ignore`` pattern), or None."""
         if "ignore" not in self.masks:
             return None
@@ -210,7 +216,9 @@ class Capture:
         """True when the capture marks pixels of unknown truth (``ignore_ids`` or an ``ignore`` pattern)."""
         return "ignore_ids" in self.masks or "ignore" in self.masks
 
-    def load_observation(self, cam_index: int, frame_index: int, allow_empty: bool = False, binarize_threshold=None):
+    def load_observation(
+        self, cam_index: int, frame_index: int, allow_empty: bool = False, binarize_threshold: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         """``(mask, ignore)`` of a camera and frame: the cloth silhouette (bool (H, W)) and the pixels
         whose truth is unknown (bool (H, W), or None when the capture marks none). Cloth pixels under
         an ignore mask are not cloth (they count as unknown); the silhouette must keep some pixel
@@ -249,21 +257,30 @@ class Capture:
         return mask, ignore
 
     def load_silhouette(
-        self, cam_index: int, frame_index: int, allow_empty: bool = False, binarize_threshold=None
+        self, cam_index: int, frame_index: int, allow_empty: bool = False, binarize_threshold: float | None = None
     ) -> np.ndarray:
         """bool (H, W) silhouette of camera ``cam_index`` at frame ``frame_index`` (validated); pixels
         of unknown truth (``load_observation``) are not part of it."""
         return self.load_observation(cam_index, frame_index, allow_empty, binarize_threshold)[0]
 
     def load_silhouettes(
-        self, cam_indices=None, frame_indices=None, allow_empty: bool = False, binarize_threshold=None
-    ):
+        self,
+        cam_indices: Iterable[int] | None = None,
+        frame_indices: Iterable[int] | None = None,
+        allow_empty: bool = False,
+        binarize_threshold: float | None = None,
+    ) -> list[list[np.ndarray]]:
         """``[[mask for frame in frame_indices] for cam in cam_indices]`` (None = all)."""
         cams = range(self.n_cameras) if cam_indices is None else cam_indices
         frames = range(self.n_frames) if frame_indices is None else list(frame_indices)
         return [[self.load_silhouette(ci, fi, allow_empty, binarize_threshold) for fi in frames] for ci in cams]
 
-    def load_observations(self, cam_indices=None, frame_indices=None, allow_empty: bool = False):
+    def load_observations(
+        self,
+        cam_indices: Iterable[int] | None = None,
+        frame_indices: Iterable[int] | None = None,
+        allow_empty: bool = False,
+    ) -> tuple[list[list[np.ndarray]], list[list[np.ndarray | None]]]:
         """``(masks, ignores)``, each ``[cam][frame]`` (an ignore entry is None where nothing is ignored)."""
         cams = range(self.n_cameras) if cam_indices is None else cam_indices
         frames = range(self.n_frames) if frame_indices is None else list(frame_indices)
@@ -287,7 +304,7 @@ class Capture:
                     seen[p] = f"camera '{c.name}' frame {fi}" + (f" ({kind})" if kind != "silhouettes" else "")
 
     # ------------------------------------------------------------------ subset
-    def subset(self, cam_indices=None, frame_indices=None) -> Capture:
+    def subset(self, cam_indices: Iterable[int] | None = None, frame_indices: Iterable[int] | None = None) -> Capture:
         """The same capture restricted to some cameras and frames (files are not touched)."""
         cams = list(range(self.n_cameras)) if cam_indices is None else [self._check_cam(c) for c in cam_indices]
         frames = list(range(self.n_frames)) if frame_indices is None else [self._check_frame(f) for f in frame_indices]
@@ -316,7 +333,9 @@ class Capture:
         )
 
     # ---------------------------------------------------------------- validate
-    def validate(self, full: bool = True, allow_empty: bool = False, binarize_threshold=None) -> Capture:
+    def validate(
+        self, full: bool = True, allow_empty: bool = False, binarize_threshold: float | None = None
+    ) -> Capture:
         """Check the capture against its files; raise one ClothFitError describing the problems.
 
         Always: the silhouette directory layout matches the cameras ("camera count mismatch"
@@ -439,7 +458,7 @@ def _resolve(root: str, rel, where: str, key: str) -> str:
     return rel if os.path.isabs(rel) else os.path.join(root, rel)
 
 
-def load_capture(path, validate: bool = False) -> Capture:
+def load_capture(path: str | os.PathLike, validate: bool = False) -> Capture:
     """Read a capture directory (or its capture.json). Silhouettes are not read here.
 
     The JSON structure, cameras.json and shapes.npz are checked with precise messages; with
@@ -546,7 +565,7 @@ def load_capture(path, validate: bool = False) -> Capture:
     return cap
 
 
-def read_shapes(path: str, frame_times=None, n_vertices=None) -> np.ndarray:
+def read_shapes(path: str, frame_times: ArrayLike | None = None, n_vertices: int | None = None) -> np.ndarray:
     """``positions`` (F, V, 3) of a shapes.npz, checked against the capture's frames and grid."""
     where = f"shapes file {path}"
     if not os.path.isfile(path):
@@ -584,21 +603,21 @@ def _json_default(o):
 
 
 def write_capture(
-    root,
-    cameras,
+    root: str | os.PathLike,
+    cameras: Iterable[Camera],
     scenario: Scenario,
-    silhouettes,
-    shapes=None,
-    cloth_mass=None,
-    meta=None,
+    silhouettes: Sequence[Sequence[ArrayLike]] | None,
+    shapes: ArrayLike | None = None,
+    cloth_mass: float | None = None,
+    meta: dict[str, Any] | None = None,
     pattern: str = DEFAULT_PATTERN,
     allow_empty: bool = False,
     finalize: bool = True,
-    model=None,
-    ignore=None,
+    model: Any = None,
+    ignore: Sequence[Sequence[ArrayLike | None]] | bool | None = None,
     ignore_pattern: str = DEFAULT_IGNORE_PATTERN,
-    uncertain=None,
-):
+    uncertain: Uncertainty | dict[str, Any] | None = None,
+) -> Capture | PendingCapture:
     """Write a capture directory and return it as a ``Capture`` (or a ``PendingCapture``).
 
     ``silhouettes[c][f]`` (bool / 0-1 / 0-255 arrays of camera c's height x width) for every
@@ -688,20 +707,20 @@ class PendingCapture:
         self.finalized = False
 
     @property
-    def root(self):
+    def root(self) -> str:
         return self.capture.root
 
     @property
-    def json_path(self):
+    def json_path(self) -> str:
         return self.capture.json_path
 
     def silhouette_path(self, cam_index: int, frame_index: int) -> str:
         return self.capture.silhouette_path(cam_index, frame_index)
 
-    def ignore_path(self, cam_index: int, frame_index: int):
+    def ignore_path(self, cam_index: int, frame_index: int) -> str | None:
         return self.capture.ignore_path(cam_index, frame_index)
 
-    def missing_silhouettes(self):
+    def missing_silhouettes(self) -> list[str]:
         """Paths of the silhouette (and ignore mask) files not written yet."""
         cap = self.capture
         paths = [cap.silhouette_path(ci, fi) for ci in range(cap.n_cameras) for fi in range(cap.n_frames)]
