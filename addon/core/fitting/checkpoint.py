@@ -15,6 +15,7 @@ import json
 import math
 import os
 from dataclasses import asdict
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,6 +23,14 @@ from ..errors import ClothFitError
 from ..jsonio import dumps, plain, write_json
 from .optimise import optimizer_from_state
 from .quality import Ladder
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from numpy.typing import ArrayLike
+
+    from ..observation.capture import Capture
+    from .job import FitConfig, FitJob
 
 STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
 CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
@@ -45,7 +54,7 @@ CHECKPOINT_KEYS = (
 MAX_CHECKPOINT_BYTES = 64 * 1024 * 1024
 
 
-def capture_hash(capture) -> str:
+def capture_hash(capture: Capture) -> str:
     """sha256 of a capture's cameras (name, size, K, R, t, dist), frame times and scenario."""
     return hashlib.sha256(
         dumps(
@@ -60,7 +69,9 @@ def capture_hash(capture) -> str:
     ).hexdigest()
 
 
-def silhouettes_hash(observed, ignore=None) -> str:
+def silhouettes_hash(
+    observed: Sequence[Sequence[ArrayLike]], ignore: Sequence[Sequence[ArrayLike | None]] | None = None
+) -> str:
     """sha256 of the training silhouettes and their ignore masks (as fitted), in order."""
     h = hashlib.sha256()
     for c, oc in enumerate(observed):
@@ -85,7 +96,7 @@ def _int_attr(opt, name):
     return int(v) if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else None
 
 
-def identity(job) -> dict:
+def identity(job: FitJob) -> dict[str, Any]:
     """What this job is a fit of: a checkpoint is only resumed by a job with the same identity."""
     opt = job.opt if job.stage == "search" else job._main_optimizer()
     ident = {
@@ -123,7 +134,7 @@ def identity(job) -> dict:
     return plain(ident)
 
 
-def stages_state(job) -> dict:
+def stages_state(job: FitJob) -> dict[str, Any]:
     """The fit's stages (search, quality rungs, profile) as plain numbers: the checkpoint's ``stages``."""
     return {
         "stage": job.stage,
@@ -140,7 +151,7 @@ def stages_state(job) -> dict:
     }
 
 
-def load_stages(job, st: dict, path):
+def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> None:
     """The stages' state of a checkpoint, checked field by field (one-line errors)."""
 
     def bad(what):
@@ -253,7 +264,7 @@ def load_stages(job, st: dict, path):
         job._activate(job.stage_quality)
 
 
-def reopen_search(job):
+def reopen_search(job: FitJob) -> None:
     """A search that stopped on its budget and was followed by nothing but its profile continues
     when resumed with a larger budget (the profile is made again at its new end)."""
     last = job.records[-1] if job.records else None
@@ -280,7 +291,7 @@ def reopen_search(job):
     job.stop_reason = None
 
 
-def checkpoint_dict(job) -> dict:
+def checkpoint_dict(job: FitJob) -> dict[str, Any]:
     """A job's checkpoint (format v3): what it is a fit of, its optimiser and stages, its result so far."""
     return {
         "format": CHECKPOINT_FORMAT,
@@ -300,12 +311,20 @@ def checkpoint_dict(job) -> dict:
     }
 
 
-def write_checkpoint(path, ck: dict):
+def write_checkpoint(path: str | os.PathLike, ck: dict[str, Any]) -> None:
     """Checkpoints and results: strict JSON (no NaN), written atomically (``jsonio.write_json``)."""
     write_json(path, ck, strict=True)
 
 
-def resume(cls, config_type, path, capture=None, config=None, checkpoint_interval: float = 0.0, evaluator=None):
+def resume(
+    cls: type[FitJob],
+    config_type: type[FitConfig],
+    path: str | os.PathLike,
+    capture: Capture | None = None,
+    config: FitConfig | None = None,
+    checkpoint_interval: float = 0.0,
+    evaluator: Any = None,
+) -> FitJob:
     """Continue a job from its checkpoint. ``config`` is the fit asked for now (default: the
     checkpoint's own); a checkpoint of another fit (another capture, cameras, times, resolution,
     model, optimiser, population, seed, bounds...) is refused naming the differing fields. The
@@ -366,7 +385,7 @@ def resume(cls, config_type, path, capture=None, config=None, checkpoint_interva
     return job
 
 
-def identity_diff(saved, now) -> list:
+def identity_diff(saved: Any, now: dict[str, Any]) -> list[str]:
     """Human-readable differences between two ``identity()`` dicts."""
     if not isinstance(saved, dict):
         return ["it records no identity"]
@@ -398,7 +417,7 @@ def _short(v, limit=80):
     return s if len(s) <= limit else s[: limit - 3] + "..."
 
 
-def read_checkpoint(path) -> dict:
+def read_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
     """A checkpoint's JSON, checked at the top level (the optimiser state is checked by the optimiser)."""
     path = os.fspath(path)
     try:
