@@ -20,16 +20,23 @@ from __future__ import annotations
 
 import math
 import os
+from typing import TYPE_CHECKING, Any
 
 from ..errors import ClothFitError
 from ..jsonio import read_json, write_json
 from ..physics.paper import Params, identifiable
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    from ..physics.models import BlenderModel, PaperModel
+    from .job import FitJob
+
 RESULT_FORMAT = "silhouette-cloth-fit/result"
 RESULT_VERSION = 1
 
 
-def finite_or_none(x):
+def finite_or_none(x: float) -> float | None:
     """A finite number as a float, else None (results are strict JSON)."""
     return float(x) if math.isfinite(x) else None
 
@@ -50,7 +57,9 @@ class FitResult(dict):
         return dict(self)
 
     @classmethod
-    def from_json(cls, data, what: str = "fit result", need_parameters: bool = True) -> FitResult:
+    def from_json(
+        cls, data: str | os.PathLike | dict[str, Any], what: str = "fit result", need_parameters: bool = True
+    ) -> FitResult:
         """A result from a dict or a JSON file, checked: an object; ``format`` (when given) a fit
         result's; ``blender_cloth`` or ``params`` an object (``need_parameters``: one of them must be
         there: a result that found nothing cannot be applied, exported or warm-started from);
@@ -106,7 +115,7 @@ class FitResult(dict):
             raise bad("time_offset_s", f"must be a number, got {t!r}")
         return self
 
-    def save(self, path):
+    def save(self, path: str | os.PathLike) -> None:
         """Write the result file: strict JSON (no NaN), atomically (``jsonio.write_json``)."""
         write_json(path, self.to_json(), strict=True)
 
@@ -138,13 +147,15 @@ class FitResult(dict):
         """The manipulation the fit estimated: ``time_offset_s`` and ``handles`` where given."""
         return {k: self[k] for k in ("time_offset_s", "handles") if self.get(k) is not None}
 
-    def replay(self, default_model=None):
+    def replay(
+        self, default_model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None
+    ) -> tuple[PaperModel | BlenderModel | Any, np.ndarray]:
         """(model, parameter row) that replays the fit (``physics.models.model_and_row``)."""
         from ..physics.models import model_and_row
 
         return model_and_row(self, default_model)
 
-    def blender_settings(self):
+    def blender_settings(self) -> tuple[BlenderModel, dict[str, Any]]:
         """(BlenderModel, ClothSettings values) of a Blender-cloth fit; a paper-model fit is an error."""
         from ..physics.models import BlenderModel
 
@@ -191,7 +202,7 @@ class FitResult(dict):
         return "\n".join(lines)
 
 
-def job_result(job, paper: bool) -> FitResult:
+def job_result(job: FitJob, paper: bool) -> FitResult:
     """The result of ``job`` (a ``fitting.job.FitJob``) so far: what a fit writes. ``paper``: a fit of
     the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``)."""
     bp = job.best_params
