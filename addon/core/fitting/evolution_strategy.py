@@ -29,6 +29,7 @@ over all runs is kept. ``stopped`` is True once the last run has ended.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -50,6 +51,9 @@ from .space import (
     sanitize_fitness,
 )
 from .steppable import Optimizer
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 CMA_STOPS = ("tolx", "tolfun", "tolstagnation", "conditioncov", "noeffectcoord", "noeffectaxis", "tolupsigma")
 
@@ -158,7 +162,7 @@ class CMAES(Optimizer):
             self._pending, self._pending_injected = G, k
         return self.space.decode(reflect_unit(self._pending))
 
-    def tell(self, X, f) -> None:
+    def tell(self, X: ArrayLike, f: ArrayLike) -> None:
         G = self._pending
         U = None if G is None else reflect_unit(G)
         self._check_told(X, U)

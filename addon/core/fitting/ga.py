@@ -25,6 +25,7 @@ coordinate) or when the best value has not improved by more than ``tolfun`` duri
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -45,8 +46,11 @@ from .space import (
 )
 from .steppable import Optimizer
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
-def spx_children(parents: np.ndarray, n_children: int, eps: float, rng) -> np.ndarray:
+
+def spx_children(parents: np.ndarray, n_children: int, eps: float, rng: np.random.Generator) -> np.ndarray:
     """Tsutsui's simplex crossover: (n_children, dim) children of ``parents`` (m, dim).
 
     Children are uniform in the simplex of the ``m`` parents expanded by ``eps`` about their
@@ -110,7 +114,7 @@ class SPXMGG(Optimizer):
         self._replace = None  # (2,) population slots replaced by the pending family
 
     @property
-    def population_x(self):
+    def population_x(self) -> np.ndarray | None:
         """Current population in real space (P, n), None before the first ask()."""
         return None if self.pop_u is None else self.space.decode(self.pop_u)
 
@@ -129,7 +133,7 @@ class SPXMGG(Optimizer):
                 self._pending = reflect_unit(kids)
         return self.space.decode(self._pending)
 
-    def tell(self, X, f) -> None:
+    def tell(self, X: ArrayLike, f: ArrayLike) -> None:
         self._check_told(X, self._pending)
         U = self._pending
         f = sanitize_fitness(f, len(U))

@@ -26,6 +26,8 @@ This module only names them: :data:`OPTIMIZERS`, :data:`FIT_OPTIMIZERS`, :func:`
 
 from __future__ import annotations
 
+from typing import Any
+
 from ..errors import ClothFitError
 from .evolution_strategy import CMAES
 from .ga import SPXMGG
@@ -62,7 +64,7 @@ def canonical_name(name: str) -> str:
     return ALIASES[key]
 
 
-def make_optimizer(name: str, space: SearchSpace, seed=None, **kw) -> Optimizer:
+def make_optimizer(name: str, space: SearchSpace, seed: int | None = None, **kw: Any) -> Optimizer:
     """Build an optimiser by name: "spx-mgg" ("ga", "spx_mgg") or "cma-es" ("cma")."""
     return OPTIMIZERS[canonical_name(name)](space, seed=seed, **kw)
 

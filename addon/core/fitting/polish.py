@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from .space import (
     sanitize_fitness,
 )
 from .steppable import Optimizer
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 class CoordinatePolish(Optimizer):
@@ -82,7 +86,7 @@ class CoordinatePolish(Optimizer):
             self._pending = self._probes()
         return self.space.decode(self._pending)
 
-    def tell(self, X, f) -> None:
+    def tell(self, X: ArrayLike, f: ArrayLike) -> None:
         P = self._pending
         self._check_told(X, P)
         f = sanitize_fitness(f, len(P))

@@ -10,6 +10,7 @@ do: neither beat plain IPOP CMA-ES on the exact-model captures).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,6 +33,9 @@ from .space import (
     sanitize_fitness,
 )
 from .steppable import Optimizer
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 PORTFOLIO_PHASES = ("explore", "refine", "polish")
 PORTFOLIO_STOPS = CMA_STOPS + ("polishes",)
@@ -206,7 +210,7 @@ class CMAPortfolio(Optimizer):
             self._current = self._next()
         return self.children[self._current].ask()
 
-    def tell(self, X, f) -> None:
+    def tell(self, X: ArrayLike, f: ArrayLike) -> None:
         if self._current is None:
             raise ClothFitError("tell() called without a pending ask()")
         c = self.children[self._current]

@@ -26,10 +26,14 @@ naming the value at fault.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ClothFitError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 # --------------------------------------------------------------------------- helpers
 
@@ -53,7 +57,7 @@ def _float_from_json(v):
     return math.inf if v is None else float(v)
 
 
-def sanitize_fitness(f, count: int) -> np.ndarray:
+def sanitize_fitness(f: ArrayLike, count: int) -> np.ndarray:
     """``f`` as a float (count,) array with every non-finite value replaced by ``+inf``."""
     try:
         arr = np.asarray(f, dtype=np.float64).reshape(-1)
@@ -264,7 +268,7 @@ class SearchSpace:
             )
         return A
 
-    def encode(self, X) -> np.ndarray:
+    def encode(self, X: ArrayLike) -> np.ndarray:
         """Real values (n,) or (B, n) -> unit-cube coordinates, same shape (not clipped)."""
         A = self._rows(X, "encode")
         A2 = A.reshape(-1, self.n)
@@ -280,7 +284,7 @@ class SearchSpace:
         U = (T - self._tlo) / (self._thi - self._tlo)
         return U.reshape(A.shape)
 
-    def decode(self, U) -> np.ndarray:
+    def decode(self, U: ArrayLike) -> np.ndarray:
         """Unit-cube coordinates (n,) or (B, n) -> real values, clipped to the bounds."""
         A = self._rows(U, "decode")
         A = np.clip(A, 0.0, 1.0)
@@ -288,11 +292,11 @@ class SearchSpace:
         X = np.where(self.log, np.exp(T), T)
         return np.clip(X, self.lo, self.hi)
 
-    def clip(self, X) -> np.ndarray:
+    def clip(self, X: ArrayLike) -> np.ndarray:
         """Real values clipped to the bounds."""
         return np.clip(self._rows(X, "clip"), self.lo, self.hi)
 
-    def to_dict(self, x) -> dict:
+    def to_dict(self, x: ArrayLike) -> dict[str, float]:
         """One real vector -> {name: value}."""
         x = self._rows(x, "to_dict").reshape(self.n)
         return {n: float(v) for n, v in zip(self.names, x)}

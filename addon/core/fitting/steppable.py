@@ -23,6 +23,7 @@ finiteness, ranges, a symmetric positive-definite covariance) and raises a one-l
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,6 +38,11 @@ from .space import (
     _new_rng,
     _num,
 )
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from numpy.typing import ArrayLike
 
 STATE_VERSION = 2
 
@@ -79,12 +85,12 @@ class Optimizer:
 
     # -- best so far
     @property
-    def best_x(self):
+    def best_x(self) -> np.ndarray | None:
         """Best real-space vector (n,) told so far, None before any finite value."""
         return None if self._best_u is None else self.space.decode(self._best_u)
 
     @property
-    def best_params(self):
+    def best_params(self) -> dict[str, float] | None:
         """``best_x`` as {name: value}, None before any finite value."""
         return None if self._best_u is None else self.space.to_dict(self.best_x)
 
@@ -125,18 +131,24 @@ class Optimizer:
     def ask(self) -> np.ndarray:
         raise NotImplementedError
 
-    def tell(self, X, f) -> None:
+    def tell(self, X: ArrayLike, f: ArrayLike) -> None:
         raise NotImplementedError
 
     # -- driving
-    def step(self, fn) -> float:
+    def step(self, fn: Callable[[np.ndarray], ArrayLike]) -> float:
         """One generation: ``X = ask(); f = fn(X); tell(X, f)``; returns ``best_f``."""
         X = self.ask()
         f = fn(X)
         self.tell(X, f)
         return self.best_f
 
-    def run(self, fn, max_evaluations: int, target=None, callback=None):
+    def run(
+        self,
+        fn: Callable[[np.ndarray], ArrayLike],
+        max_evaluations: int,
+        target: float | None = None,
+        callback: Callable[[Optimizer], Any] | None = None,
+    ) -> tuple[np.ndarray | None, float]:
         """Step until ``evaluations >= max_evaluations`` (a total, so a resumed run continues
         to the same budget; the last generation may overshoot it), ``best_f <= target``, the
         algorithm stops itself, or ``callback(self)`` returns True. Returns (best_x, best_f)."""
