@@ -42,10 +42,10 @@ def test_preferences_idname_is_the_add_on_module():
         prefs.addon_name("bl_ext.user_default.silhouette_cloth_fit.addon.blender")
         == "bl_ext.user_default.silhouette_cloth_fit"
     )
-    assert prefs.addon_name("clothfit.blender") == "addon"
-    assert prefs.ClothFitPreferences.bl_idname == prefs.ADDON_NAME == "addon"
+    assert prefs.addon_name("clothfit.blender") == "clothfit"
+    assert prefs.ClothFitPreferences.bl_idname == prefs.ADDON_NAME == "clothfit"
     # not enabled under that name (a checkout): the operators get the defaults
-    assert bpy.context.preferences.addons.get("addon") is None
+    assert bpy.context.preferences.addons.get("clothfit") is None
     d = prefs.preferences()
     assert (d.workers, d.ray_address, d.cache_dir) == (0, "", "")
     p = addon_preferences()
