@@ -12,8 +12,13 @@ from .common import _command, _floats, _pair
 
 def add_extract_arguments(parser):
     """Arguments of ``clothfit extract`` (run by :func:`cmd_extract`)."""
-    from ..core.footage.extract import ExtractOptions
+    _extract_input_args(parser)
+    _extract_mask_args(parser)
+    return parser
 
+
+def _extract_input_args(parser):
+    """``extract``'s inputs and output: footage, videos, sync, calibration, times, scenario."""
     parser.add_argument(
         "footage",
         nargs="?",
@@ -53,6 +58,12 @@ def add_extract_arguments(parser):
         "or none (default: the --scenario file's, else footage.json's, else with "
         "--videos one frame period for the time)",
     )
+
+
+def _extract_mask_args(parser):
+    """``extract``'s silhouette options: threshold, clean-up, empty, undistort, cameras, debug."""
+    from ..core.footage.extract import ExtractOptions
+
     parser.add_argument(
         "--threshold", default="auto", help="difference threshold: auto, otsu, noise or a number (default: %(default)s)"
     )
@@ -133,7 +144,6 @@ def add_extract_arguments(parser):
         help="extract only this camera (repeatable; default: every camera)",
     )
     parser.add_argument("--debug", dest="debug_dir", help="write debug images of every step here")
-    return parser
 
 
 def extract_options(args):
@@ -445,9 +455,13 @@ def cmd_calibrate(a):
 
 
 def _calibrate_args(s):
-    from ..core.footage import calibrate as CB
-    from ..core.footage.calib_io import FORMATS
+    _calibrate_board_args(s)
+    _calibrate_solve_args(s)
+    return s
 
+
+def _calibrate_board_args(s):
+    """``calibrate``'s input, board, output and world options."""
     s.add_argument(
         "folder",
         nargs="?",
@@ -505,6 +519,13 @@ def _calibrate_args(s):
         help="the direction gravity pulls, in that camera's axes (x right, y down, z forward in its "
         "images), e.g. from the phone's accelerometer (default: the world board's normal is up)",
     )
+
+
+def _calibrate_solve_args(s):
+    """``calibrate``'s estimation, video, debug and export options."""
+    from ..core.footage import calibrate as CB
+    from ..core.footage.calib_io import FORMATS
+
     s.add_argument(
         "--distortion",
         default=D.CALIB_DISTORTION,
@@ -572,7 +593,6 @@ def _calibrate_args(s):
         "anything else a COLMAP folder (default: %(default)s)",
     )
     s.add_argument("--report", metavar="FILE", help="also write the full report (stdout's JSON) to this file")
-    return s
 
 
 def _add_calibration(sub):

@@ -106,10 +106,8 @@ def extract_steps(scene) -> Steps:
     return Steps(_extract_work, scene)
 
 
-def _extract_work(steps, scene):
-    from ...core.footage import extract as X
-
-    p = props(scene)
+def _extract_paths(scene, p):
+    """The footage folder and the output capture folder of an extraction, checked."""
     footage = abspath(p.footage_dir, "footage directory")
     if not os.path.isdir(footage):
         raise ClothFitError(f"footage folder not found: {footage}")
@@ -121,6 +119,14 @@ def _extract_work(steps, scene):
     if os.path.normpath(out) == os.path.normpath(footage):
         raise ClothFitError(f"the output capture directory is the footage folder {footage}: choose another one")
     refuse_foreign_capture(out, EXTRACT_GENERATOR, "Extract Silhouettes", "extractions")
+    return footage, out
+
+
+def _extract_work(steps, scene):
+    from ...core.footage import extract as X
+
+    p = props(scene)
+    footage, out = _extract_paths(scene, p)
     videos = getattr(p, "footage_kind", "IMAGES") == "VIDEOS"
     sizes = None
     if videos:

@@ -288,15 +288,7 @@ def extract_capture(
         "frame_times": frame_times,
         "cameras": {},
     }
-    known = {c.name for c in cameras}
-    extra = sorted(
-        d
-        for d in os.listdir(footage_dir)
-        if os.path.isdir(os.path.join(footage_dir, d))
-        and d not in known
-        and not d.startswith(".")
-        and any(os.path.splitext(f)[1].lower() in IMAGE_EXTS for f in os.listdir(os.path.join(footage_dir, d)))
-    )
+    extra = _uncalibrated_folders(footage_dir, {c.name for c in cameras})
     if extra and not camera_names:
         warnings.append(f"folders with images that are not calibrated cameras were ignored: {', '.join(extra)}")
     all_masks = []
@@ -332,6 +324,18 @@ def extract_capture(
         warnings,
         unc,
         unc_src,
+    )
+
+
+def _uncalibrated_folders(footage_dir, known) -> list:
+    """The footage's sub-folders holding images that are not among the ``known`` camera names, sorted."""
+    return sorted(
+        d
+        for d in os.listdir(footage_dir)
+        if os.path.isdir(os.path.join(footage_dir, d))
+        and d not in known
+        and not d.startswith(".")
+        and any(os.path.splitext(f)[1].lower() in IMAGE_EXTS for f in os.listdir(os.path.join(footage_dir, d)))
     )
 
 

@@ -503,6 +503,14 @@ def extract_camera(
         masks.append(final)
         if debug:
             _write_debug(debug, fi, fname, d, thr, steps, frames[fi])
+    _area_outlier_warnings(report, name, warnings)
+    if debug:
+        _write_histogram(os.path.join(debug, "histogram.png"), good, stats)
+    return CameraResult(name, masks, report, errors, warnings)
+
+
+def _area_outlier_warnings(report, name, warnings):
+    """A warning (appended to ``warnings``) per frame whose silhouette area is far from the camera's median."""
     areas = [r["area"] for r in report["frames"] if r["area"] > 0]
     if len(areas) >= 3:
         med = float(np.median(areas))
@@ -511,9 +519,6 @@ def extract_camera(
                 warnings.append(
                     f"camera '{name}' {r['frame']}: area {r['area']} px is far from the camera's median {med:.0f} px"
                 )
-    if debug:
-        _write_histogram(os.path.join(debug, "histogram.png"), good, stats)
-    return CameraResult(name, masks, report, errors, warnings)
 
 
 # ==================================================================== debug output
