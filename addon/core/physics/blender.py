@@ -59,240 +59,82 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
+from .blender_settings import (  # noqa: F401  (re-exported: blender.X is the public path)
+    AIR_SCALE,
+    ALMOST_ZERO,
+    BENDING_MODELS,
+    CG_MAX_ITERATIONS,
+    CG_TOLERANCE,
+    DEFAULTS,
+    EXPLODE_FACTOR,
+    FLOAT_SETTINGS,
+    GRAVITY_SCALE,
+    MASS_SCALED,
+    MAX_STEPS_PER_FRAME,
+    MAX_STRAIN,
+    POSITIVE,
+    PRESETS,
+    RANGES,
+    SOFTGOALSNAP,
+    check_settings,
+    mass_scaled,
+    physical_time_scale,
+    row_settings,
+    settings_row,
+    steps_per_frame,
+)
 from .scenario import ClothGrid, Scenario
 
-# --------------------------------------------------------------------------- settings
-
-FLOAT_SETTINGS = (
-    "mass",
-    "air_damping",
-    "tension_stiffness",
-    "compression_stiffness",
-    "shear_stiffness",
-    "bending_stiffness",
-    "tension_damping",
-    "compression_damping",
-    "shear_damping",
-    "bending_damping",
-    "pin_stiffness",
-    "time_scale",
-)
-BENDING_MODELS = ("ANGULAR", "LINEAR")
-# Blender's own limits (hard_min, hard_max) of bpy.types.ClothSettings (4.2 - 4.5; a Blender test
-# reads them back from bpy and compares); mass and time_scale must also be > 0 here.
-RANGES = {
-    "mass": (0.0, 3.4028234663852886e38),
-    "air_damping": (0.0, 10.0),
-    "tension_stiffness": (0.0, 10000.0),
-    "compression_stiffness": (0.0, 10000.0),
-    "shear_stiffness": (0.0, 10000.0),
-    "bending_stiffness": (0.0, 10000.0),
-    "tension_damping": (0.0, 50.0),
-    "compression_damping": (0.0, 50.0),
-    "shear_damping": (0.0, 50.0),
-    "bending_damping": (0.0, 1000.0),
-    "pin_stiffness": (0.0, 50.0),
-    "time_scale": (0.0, 3.4028234663852886e38),
-    "quality": (1, 2147483647),
-}
-POSITIVE = ("mass", "time_scale")
-# A new Cloth modifier's values (Blender 4.2 - 4.5)
-DEFAULTS = {
-    "quality": 5,
-    "bending_model": "ANGULAR",
-    "mass": 0.3,
-    "air_damping": 1.0,
-    "tension_stiffness": 15.0,
-    "compression_stiffness": 15.0,
-    "shear_stiffness": 5.0,
-    "bending_stiffness": 0.5,
-    "tension_damping": 5.0,
-    "compression_damping": 5.0,
-    "shear_damping": 5.0,
-    "bending_damping": 0.5,
-    "pin_stiffness": 1.0,
-    "time_scale": 1.0,
-}
-# the settings that scale with the mass (the symmetry of the equations of motion)
-MASS_SCALED = (
-    "mass",
-    "air_damping",
-    "tension_stiffness",
-    "compression_stiffness",
-    "shear_stiffness",
-    "bending_stiffness",
-    "tension_damping",
-    "compression_damping",
-    "shear_damping",
-    "pin_stiffness",
-)
-# Blender 4.5's cloth presets (scripts/presets/cloth/*.py), as ClothSettings values
-PRESETS = {
-    "cotton": {
-        "quality": 5,
-        "mass": 0.3,
-        "tension_stiffness": 15,
-        "compression_stiffness": 15,
-        "shear_stiffness": 15,
-        "bending_stiffness": 0.5,
-        "tension_damping": 5,
-        "compression_damping": 5,
-        "shear_damping": 5,
-        "air_damping": 1,
-        "bending_damping": 0.5,
-    },
-    "silk": {
-        "quality": 5,
-        "mass": 0.15,
-        "tension_stiffness": 5,
-        "compression_stiffness": 5,
-        "shear_stiffness": 5,
-        "bending_stiffness": 0.05,
-        "tension_damping": 0,
-        "compression_damping": 0,
-        "shear_damping": 0,
-        "air_damping": 1,
-        "bending_damping": 0.5,
-    },
-    "denim": {
-        "quality": 12,
-        "mass": 1,
-        "tension_stiffness": 40,
-        "compression_stiffness": 40,
-        "shear_stiffness": 40,
-        "bending_stiffness": 10,
-        "tension_damping": 25,
-        "compression_damping": 25,
-        "shear_damping": 25,
-        "air_damping": 1,
-        "bending_damping": 0.5,
-    },
-    "leather": {
-        "quality": 15,
-        "mass": 0.4,
-        "tension_stiffness": 80,
-        "compression_stiffness": 80,
-        "shear_stiffness": 80,
-        "bending_stiffness": 150,
-        "tension_damping": 25,
-        "compression_damping": 25,
-        "shear_damping": 25,
-        "air_damping": 1,
-        "bending_damping": 0.5,
-    },
-    "rubber": {
-        "quality": 7,
-        "mass": 3,
-        "tension_stiffness": 15,
-        "compression_stiffness": 15,
-        "shear_stiffness": 15,
-        "bending_stiffness": 25,
-        "tension_damping": 25,
-        "compression_damping": 25,
-        "shear_damping": 25,
-        "air_damping": 1,
-        "bending_damping": 0.5,
-    },
-}
-GRAVITY_SCALE = 0.001  # Blender scales the scene gravity by 1/1000 for cloth
-AIR_SCALE = 0.01  # drag = AIR_SCALE * air_damping
-SOFTGOALSNAP = 0.999  # goal weight (w^4) from which a vertex is pinned
-CG_TOLERANCE = 0.01  # relative residual at which Blender's CG stops
-CG_MAX_ITERATIONS = 100
-ALMOST_ZERO = 1.1920928955078125e-07  # FLT_EPSILON: shorter springs have no direction
-MAX_STEPS_PER_FRAME = 1000  # a (time_scale, quality) pair needing more is refused
-MAX_STRAIN = D.MAX_STRAIN  # a structural spring longer than (1 + MAX_STRAIN) rest = exploded
-EXPLODE_FACTOR = D.EXPLODE_FACTOR
-
-
-def mass_scaled(bending_model: str = "ANGULAR") -> tuple:
-    """Settings multiplied together by a change of mass that leaves the motion unchanged."""
-    return MASS_SCALED + (("bending_damping",) if bending_model == "ANGULAR" else ())
-
-
-def physical_time_scale(fps: float, gravity: ArrayLike = D.GRAVITY) -> float:
-    """Speed Multiplier that makes Blender's cloth move in real time at ``fps`` frames per second.
-
-    Blender's solver advances ``time_scale`` time units per frame with gravity ``0.001 g`` per unit
-    squared; one unit is then ``1 / (fps * time_scale)`` seconds, and gravity in m/s^2 is
-    ``0.001 g (fps time_scale)^2``: equal to ``g`` when ``time_scale = sqrt(1000) / fps``. With the
-    default time_scale = 1 a cloth at 24 fps falls as if under 0.58 g."""
-    if not (fps > 0 and math.isfinite(fps)):
-        raise ClothFitError(f"frame rate {fps} must be a positive number")
-    return math.sqrt(1.0 / GRAVITY_SCALE) / float(fps)
-
-
-def check_settings(s: dict, source: str = "Blender cloth settings") -> dict:
-    """Validate settings against Blender's ranges; returns a complete dict (defaults filled in)."""
-    if not isinstance(s, dict):
-        raise ClothFitError(f"{source}: expected an object of ClothSettings values, got {type(s).__name__}")
-    known = set(FLOAT_SETTINGS) | {"quality", "bending_model"}
-    bad = sorted(set(s) - known)
-    if bad:
-        raise ClothFitError(
-            f"{source}: unknown or unsupported setting(s) {', '.join(bad)} "
-            f"(supported: quality, bending_model, {', '.join(FLOAT_SETTINGS)})"
-        )
-    out = dict(DEFAULTS)
-    out.update(s)
-    bm = out["bending_model"]
-    if bm not in BENDING_MODELS:
-        raise ClothFitError(f"{source}: bending_model {bm!r} must be one of {', '.join(BENDING_MODELS)}")
-    q = out["quality"]
-    if isinstance(q, bool) or not isinstance(q, (int, np.integer)) and not (isinstance(q, float) and q.is_integer()):
-        raise ClothFitError(f"{source}: quality {q!r} must be a whole number")
-    q = int(q)
-    if q < RANGES["quality"][0]:
-        raise ClothFitError(f"{source}: quality {q} must be >= 1 (steps per frame)")
-    out["quality"] = q
-    for n in FLOAT_SETTINGS:
-        v = out[n]
-        try:
-            v = float(v)
-        except (TypeError, ValueError):
-            raise ClothFitError(f"{source}: {n} = {out[n]!r} is not a number") from None
-        lo, hi = RANGES[n]
-        if not math.isfinite(v) or v < lo or v > hi or (n in POSITIVE and v <= 0):
-            rng = f"> {lo:g}" if n in POSITIVE else f"in [{lo:g}, {hi:g}]"
-            raise ClothFitError(f"{source}: {n} = {v!r} is outside Blender's range ({rng})")
-        out[n] = v
-    return out
-
-
-def settings_row(s: dict) -> np.ndarray:
-    """Settings dict -> row of FLOAT_SETTINGS values."""
-    return np.array([float(s[n]) for n in FLOAT_SETTINGS], dtype=np.float64)
-
-
-def row_settings(row: ArrayLike, quality: int, bending_model: str) -> dict:
-    """Row of FLOAT_SETTINGS values -> complete settings dict (ClothSettings names)."""
-    d = {"quality": int(quality), "bending_model": bending_model}
-    d.update({n: float(v) for n, v in zip(FLOAT_SETTINGS, np.asarray(row, dtype=np.float64).reshape(-1))})
-    return d
-
-
-def steps_per_frame(time_scale: float, quality: int) -> tuple[float, np.ndarray]:
-    """Blender's step loop for one frame, in float32 as Blender runs it.
-
-    Returns ``(dt, step_starts)``: the step length and the start time of every step in solver
-    time units (the loop ``while step < time_scale: step += dt``); the number of steps is
-    ``quality`` or, for some pairs, ``quality + 1``."""
-    f32 = np.float32
-    tf = f32(time_scale)
-    dt = f32(f32(1.0) / f32(quality)) * tf
-    if not (dt > 0):
-        raise ClothFitError(f"time_scale {time_scale} and quality {quality} give no time step")
-    step = f32(0.0)
-    starts = []
-    while step < tf:
-        starts.append(float(step))
-        step = f32(step + dt)
-        if len(starts) > MAX_STEPS_PER_FRAME:
-            raise ClothFitError(f"quality {quality} means more than {MAX_STEPS_PER_FRAME} steps per frame")
-    return float(dt), np.array(starts)
-
-
 # --------------------------------------------------------------------------- the spring network
+
+
+def _mesh_edges(V: int, faces, bending_model: str, edges) -> tuple[list, list]:
+    """Checked faces (lists of ints) and the mesh's edges ``(i, j)``, i < j, in mesh order (``edges``
+    or, by default, each face's sides in face order, each once)."""
+    faces = [list(map(int, f)) for f in faces]
+    if bending_model not in BENDING_MODELS:
+        raise ClothFitError(f"bending_model {bending_model!r} must be one of {', '.join(BENDING_MODELS)}")
+    if not faces:
+        raise ClothFitError("cloth mesh has no faces")
+    for f in faces:
+        if len(f) < 3 or len(set(f)) != len(f) or min(f) < 0 or max(f) >= V:
+            raise ClothFitError(f"cloth mesh: bad face {f} (at least 3 distinct corners in 0..{V - 1})")
+    sides = []
+    for f in faces:
+        for c in range(len(f)):
+            a, b = f[c], f[(c + 1) % len(f)]
+            sides.append((min(a, b), max(a, b)))
+    if edges is None:
+        seen, elist = set(), []
+        for key in sides:
+            if key not in seen:
+                seen.add(key)
+                elist.append(key)
+    else:
+        elist = [(min(int(a), int(b)), max(int(a), int(b))) for a, b in np.asarray(edges).reshape(-1, 2)]
+        if set(elist) != set(sides) or len(set(elist)) != len(elist):
+            raise ClothFitError("cloth mesh: the edges do not match the faces (loose or missing edges)")
+    return faces, elist
+
+
+def _linear_bend_springs(shear_created: list) -> list:
+    """Linear bending springs ``(i, j, 2)`` in creation order: from each shear spring (i, j), newest
+    first, springs to the far end of every shear spring at j (in creation order), each vertex pair
+    once."""
+    out = []
+    at = {}
+    for sij in shear_created:
+        at.setdefault(sij[0], []).append(sij)
+        at.setdefault(sij[1], []).append(sij)
+    seen = set()
+    for i, j in reversed(shear_created):
+        for t in at.get(j, []):
+            other = t[1] if t[0] == j else t[0]
+            key = (min(i, other), max(i, other))
+            if other != i and key not in seen:
+                seen.add(key)
+                out.append((key[0], key[1], 2))
+    return out
 
 
 @dataclass
@@ -346,30 +188,7 @@ class Network:
         """Springs of the mesh ``(rest, faces)``; ``edges`` gives the mesh's edge order (default: each
         face's sides in face order, which is what Cloth Fit builds its Blender meshes with)."""
         rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
-        V = rest.shape[0]
-        faces = [list(map(int, f)) for f in faces]
-        if bending_model not in BENDING_MODELS:
-            raise ClothFitError(f"bending_model {bending_model!r} must be one of {', '.join(BENDING_MODELS)}")
-        if not faces:
-            raise ClothFitError("cloth mesh has no faces")
-        for f in faces:
-            if len(f) < 3 or len(set(f)) != len(f) or min(f) < 0 or max(f) >= V:
-                raise ClothFitError(f"cloth mesh: bad face {f} (at least 3 distinct corners in 0..{V - 1})")
-        sides = []
-        for f in faces:
-            for c in range(len(f)):
-                a, b = f[c], f[(c + 1) % len(f)]
-                sides.append((min(a, b), max(a, b)))
-        if edges is None:
-            seen, elist = set(), []
-            for key in sides:
-                if key not in seen:
-                    seen.add(key)
-                    elist.append(key)
-        else:
-            elist = [(min(int(a), int(b)), max(int(a), int(b))) for a, b in np.asarray(edges).reshape(-1, 2)]
-            if set(elist) != set(sides) or len(set(elist)) != len(elist):
-                raise ClothFitError("cloth mesh: the edges do not match the faces (loose or missing edges)")
+        faces, elist = _mesh_edges(rest.shape[0], faces, bending_model, edges)
         angular = bending_model == "ANGULAR"
         created = [(a, b, 0) for a, b in elist]  # (i, j, kind) in creation order
         spring_of_edge = {e: k for k, e in enumerate(elist)}
@@ -395,20 +214,7 @@ class Network:
                     hinges.append((spring_of_edge[key], faces[fl[0]], faces[fl[1]]))
         shear_created = [(a, b) for a, b, k in created if k == 1]
         if not angular and shear_created:
-            # linear bending: from each shear spring (i, j), newest first, springs to the far end of
-            # every shear spring at j (in creation order), each vertex pair once
-            at = {}
-            for sij in shear_created:
-                at.setdefault(sij[0], []).append(sij)
-                at.setdefault(sij[1], []).append(sij)
-            seen = set()
-            for i, j in reversed(shear_created):
-                for t in at.get(j, []):
-                    other = t[1] if t[0] == j else t[0]
-                    key = (min(i, other), max(i, other))
-                    if other != i and key not in seen:
-                        seen.add(key)
-                        created.append((key[0], key[1], 2))
+            created.extend(_linear_bend_springs(shear_created))
         N = len(created)
         order = np.arange(N)[::-1]  # list position p holds creation index order[p]
         pos_of = np.empty(N, dtype=np.int64)
