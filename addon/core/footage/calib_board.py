@@ -8,11 +8,15 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
+
+if TYPE_CHECKING:
+    import cv2
 
 # ============================================================================ the board
 
@@ -45,12 +49,12 @@ class Board:
     def n_corners(self) -> int:
         return (self.squares_x - 1) * (self.squares_y - 1)
 
-    def cv_dictionary(self):
+    def cv_dictionary(self) -> cv2.aruco.Dictionary:
         import cv2
 
         return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
 
-    def cv_board(self):
+    def cv_board(self) -> cv2.aruco.CharucoBoard:
         import cv2
 
         b = cv2.aruco.CharucoBoard(

@@ -6,6 +6,7 @@ a robust loss). The steps of a calibration: ``calibrate.py``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -13,6 +14,11 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from .calib_board import Board, _natural_key
 from .calib_intrinsics import DIST_ORDER, DISTORTION_MODELS, Intrinsics, Options, project_points, rodrigues, rotvec
+
+if TYPE_CHECKING:
+    from scipy.optimize import OptimizeResult
+
+    from .calib_detect import View
 
 # =================================================================== bundle adjustment
 
@@ -174,14 +180,21 @@ def _problem(board: Board, views: dict, intr: dict, ref: str, opts: Options) -> 
 
 def bundle_adjust(
     board: Board,
-    views: dict,
-    intr: dict,
+    views: dict[str, dict[str, View]],
+    intr: dict[str, Intrinsics],
     ref: str,
-    cam_pose: dict,
-    board_pose: dict,
+    cam_pose: dict[str, tuple[np.ndarray, np.ndarray]],
+    board_pose: dict[str, tuple[np.ndarray, np.ndarray]],
     opts: Options,
     max_nfev: int = D.CALIB_MAX_NFEV,
-):
+) -> tuple[
+    dict[str, Intrinsics],
+    dict[str, tuple[np.ndarray, np.ndarray]],
+    dict[str, tuple[np.ndarray, np.ndarray]],
+    np.ndarray,
+    Problem,
+    OptimizeResult,
+]:
     """Refine everything jointly; returns (intrinsics, camera poses, board poses, per-observation
     residual vectors (N, 2), the problem, the optimiser's status)."""
     try:

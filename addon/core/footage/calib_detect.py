@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,6 +17,9 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..observation.camera import check_camera_name
 from .calib_board import Board, _natural_key, dictionaries
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
 
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 
@@ -56,7 +60,9 @@ class Detector:
             for i, o in zip(np.asarray(self.cvb.getIds()).reshape(-1), self.cvb.getObjPoints())
         }
 
-    def marker_ratio(self, ids, pts, mids, mcorners) -> float:
+    def marker_ratio(
+        self, ids: np.ndarray, pts: np.ndarray, mids: np.ndarray, mcorners: Sequence[np.ndarray] | None
+    ) -> float:
         """The markers' side as the chessboard corners measure it (a homography from the corners, the
         marker corners mapped back), over the side the board definition gives: 1 when they match."""
         cv2 = self.cv
@@ -73,7 +79,7 @@ class Detector:
             sides.append(np.mean(np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1)))
         return float(np.median(sides) / self.board.marker_m) if sides else float("nan")
 
-    def detect(self, grey: np.ndarray):
+    def detect(self, grey: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, Sequence[np.ndarray] | None]:
         """(corner ids, (n, 2) pixels, marker ids found) of the board in ``grey`` (uint8)."""
         ch_corners, ch_ids, m_corners, m_ids = self.det.detectBoard(grey)
         mids = np.zeros(0, int) if m_ids is None else np.asarray(m_ids).reshape(-1).astype(int)
@@ -263,7 +269,9 @@ def moment_name(t: float) -> str:
     return f"t{t:08.3f}"
 
 
-def video_times(videos: dict, sync: dict, every: float, times=None) -> list:
+def video_times(
+    videos: dict[str, str], sync: dict[str, float], every: float, times: Sequence[float] | None = None
+) -> list[float]:
     """Capture times sampled every ``every`` s over the span all videos cover (or ``times`` checked)."""
     from .video import Video
 
@@ -311,10 +319,10 @@ def detect_views(
     board: Board,
     min_corners: int = D.CALIB_MIN_CORNERS,
     blur_ratio: float = D.CALIB_BLUR_RATIO,
-    sync: dict | None = None,
-    times=None,
+    sync: dict[str, float] | None = None,
+    times: Sequence[float] | None = None,
     keep_frames: bool = False,
-    progress=None,
+    progress: Callable[[int, int, str, str], object] | None = None,
 ) -> Detections:
     """Detect the board in every frame; keep the views with enough corners, not collinear, not blurred."""
     import cv2
@@ -406,7 +414,7 @@ def _collinear(board: Board, ids: np.ndarray) -> bool:
 # ===================================================================== board mismatch
 
 
-def check_detections(det: Detections, board: Board, source: Source):
+def check_detections(det: Detections, board: Board, source: Source) -> None:
     """One-line errors when nothing fits: the board found nowhere (and which dictionary the markers
     belong to, if another one), markers found but no corners (a board definition that does not
     match), marker ids the board does not have."""
@@ -459,7 +467,7 @@ def check_detections(det: Detections, board: Board, source: Source):
         )
 
 
-def sniff_dictionary(source: Source, board: Board, det: Detections, per_camera: int = 3):
+def sniff_dictionary(source: Source, board: Board, det: Detections, per_camera: int = 3) -> str | None:
     """The predefined dictionary whose markers the first frames show, when it is not the board's."""
     import cv2
 

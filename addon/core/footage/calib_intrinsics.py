@@ -8,12 +8,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
 from .calib_board import Board, _natural_key
+
+if TYPE_CHECKING:
+    from .calib_detect import View
 
 DISTORTION_MODELS = {  # name -> which of (k1, k2, p1, p2, k3) are estimated
     "none": (),
@@ -63,7 +67,14 @@ def rotvec(R: np.ndarray) -> np.ndarray:
     return cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].reshape(3)
 
 
-def project_points(X_cam: np.ndarray, fx, fy, cx, cy, dist) -> np.ndarray:
+def project_points(
+    X_cam: np.ndarray,
+    fx: np.ndarray | float,
+    fy: np.ndarray | float,
+    cx: np.ndarray | float,
+    cy: np.ndarray | float,
+    dist: np.ndarray,
+) -> np.ndarray:
     """Pixels of camera-frame points with OpenCV's (k1, k2, p1, p2, k3) distortion; all arrays
     broadcast per point."""
     z = X_cam[:, 2]
@@ -119,7 +130,7 @@ class Options:
     loss_scale_px: float = D.CALIB_LOSS_SCALE_PX
     outlier_px: float = D.CALIB_OUTLIER_PX
 
-    def check(self):
+    def check(self) -> Options:
         if self.distortion not in DISTORTION_MODELS:
             raise ClothFitError(f"--distortion {self.distortion!r}: one of {', '.join(DISTORTION_MODELS)}")
         if self.loss not in ("linear", "huber", "soft_l1", "cauchy"):
@@ -175,7 +186,9 @@ def _cv_flags(opts: Options) -> int:
     return f
 
 
-def initial_intrinsics(board: Board, views: dict, sizes: dict, opts: Options):
+def initial_intrinsics(
+    board: Board, views: dict[str, dict[str, View]], sizes: dict[str, tuple[int, int]], opts: Options
+) -> tuple[dict[str, Intrinsics], dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]]:
     """Per camera: (Intrinsics, {moment: (R, t) board -> camera}) from its own views; with
     ``opts.shared`` one calibrateCamera over every camera's views; fixed cameras: solvePnP."""
     import cv2
@@ -242,7 +255,9 @@ def initial_intrinsics(board: Board, views: dict, sizes: dict, opts: Options):
     return intr, poses
 
 
-def initial_extrinsics(poses: dict, reference: str | None = None):
+def initial_extrinsics(
+    poses: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], reference: str | None = None
+) -> tuple[str, dict[str, tuple[np.ndarray, np.ndarray]], dict[str, tuple[np.ndarray, np.ndarray]]]:
     """Camera poses ``{camera: (R, t)}`` in the reference camera's frame, and board poses
     ``{moment: (R, t)}`` (board -> reference frame), from per-view board poses, along the spanning
     tree of most shared moments. Cameras not connected: one-line error naming the groups."""

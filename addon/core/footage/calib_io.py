@@ -41,12 +41,16 @@ from __future__ import annotations
 
 import os
 import re
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ClothFitError
 from ..observation.camera import Camera, check_image_size, load_cameras, save_cameras
 from .colmap import _check_unique, _colmap_folder, read_colmap, read_colmap_bin, write_colmap
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
 
 _K_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsic", "intrinsic_matrix", "intrinsics", "M")
 _D_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "distortion", "dist", "D")
@@ -281,7 +285,7 @@ def _storage_for_write(path: str):
     return fs
 
 
-def write_opencv(path: str, cameras) -> str:
+def write_opencv(path: str, cameras: Sequence[Camera]) -> str:
     """All cameras in one FileStorage file (format from the extension: .yml/.yaml/.json/.xml)."""
     import cv2
 
@@ -298,7 +302,7 @@ def write_opencv(path: str, cameras) -> str:
     return path
 
 
-def write_opencv_dir(folder: str, cameras, ext: str = ".yml") -> list:
+def write_opencv_dir(folder: str, cameras: Sequence[Camera], ext: str = ".yml") -> list[str]:
     """One FileStorage file per camera, ``<folder>/<name>.yml`` (name made file-safe)."""
     os.makedirs(folder, exist_ok=True)
     out = []
@@ -320,7 +324,12 @@ def _is_easymocap(folder: str) -> bool:
     return os.path.isdir(folder) and all(os.path.isfile(os.path.join(folder, f)) for f in EASYMOCAP_FILES)
 
 
-def read_easymocap(folder: str, width: int | None = None, height: int | None = None, sizes=None) -> list:
+def read_easymocap(
+    folder: str,
+    width: int | None = None,
+    height: int | None = None,
+    sizes: dict[str, tuple[int, int]] | None = None,
+) -> list[Camera]:
     """Cameras of an EasyMocap calibration folder (``intri.yml`` + ``extri.yml``); see the module text.
     ``sizes``: ``{name: (height, width)}`` for files without ``H_``/``W_``."""
     import cv2
@@ -429,8 +438,12 @@ def detect_format(path: str) -> str:
 
 
 def import_cameras(
-    path: str, fmt: str = "auto", width: int | None = None, height: int | None = None, sizes=None
-) -> list:
+    path: str,
+    fmt: str = "auto",
+    width: int | None = None,
+    height: int | None = None,
+    sizes: dict[str, tuple[int, int]] | None = None,
+) -> list[Camera]:
     """Cameras from any supported file or folder.
 
     ``fmt``: ``auto`` (by extension/content), ``json`` (our cameras JSON, see ``camera.py``),
@@ -458,7 +471,7 @@ def import_cameras(
     return read_colmap_bin(folder) if kind == "bin" else read_colmap(folder)
 
 
-def export_cameras(cameras, path: str, fmt: str = "auto") -> str:
+def export_cameras(cameras: Sequence[Camera], path: str, fmt: str = "auto") -> str:
     """Write cameras: ``json`` (ours), ``opencv`` (one file), ``opencv-dir`` (a file per camera),
     ``colmap`` (a text model folder). ``auto``: a path ending in .json -> json, .yml/.yaml/.xml
     -> opencv, anything else (a folder) -> colmap."""
@@ -483,7 +496,7 @@ def export_cameras(cameras, path: str, fmt: str = "auto") -> str:
 # ==================================================================== distortion
 
 
-def undistort_maps(camera: Camera):
+def undistort_maps(camera: Camera) -> tuple[np.ndarray, np.ndarray] | None:
     """cv2.remap maps from the undistorted image (same K, no distortion) into the distorted one."""
     import cv2
 
@@ -494,7 +507,9 @@ def undistort_maps(camera: Camera):
     )
 
 
-def undistort_silhouette(mask: np.ndarray, camera: Camera, maps=None) -> np.ndarray:
+def undistort_silhouette(
+    mask: np.ndarray, camera: Camera, maps: tuple[np.ndarray, np.ndarray] | None = None
+) -> np.ndarray:
     """The silhouette the same camera would see without lens distortion (nearest-neighbour remap).
 
     Returns a boolean ``(H, W)`` mask for ``undistorted_camera(camera)``. Pixels that map outside
@@ -530,7 +545,7 @@ def undistorted_camera(camera: Camera) -> Camera:
     )
 
 
-def undistort_image(image: np.ndarray, camera: Camera, interpolation=None) -> np.ndarray:
+def undistort_image(image: np.ndarray, camera: Camera, interpolation: int | None = None) -> np.ndarray:
     """Undistort a colour/grey image (bilinear by default), e.g. for overlays."""
     import cv2
 
@@ -559,7 +574,7 @@ def _cameras_from_any(path: str, fmt: str = "auto", width=None, height=None) -> 
     return import_cameras(path, fmt, width, height)
 
 
-def describe(cameras) -> str:
+def describe(cameras: Sequence[Camera]) -> str:
     lines = []
     for c in cameras:
         d = "none" if c.dist.size == 0 or not np.any(c.dist != 0) else " ".join(f"{v:.4g}" for v in c.dist)

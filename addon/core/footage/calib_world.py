@@ -6,6 +6,7 @@ level board or a gravity vector (see :func:`world_frame`; the steps of a calibra
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -19,7 +20,13 @@ FLIP = np.diag([1.0, -1.0, -1.0])  # board axes (x right, y down the print, z in
 # ====================================================================== world frame
 
 
-def world_frame(board: Board, ref_cam_pose: dict, board_pose: dict, world: str, opts: Options):
+def world_frame(
+    board: Board,
+    ref_cam_pose: dict[str, tuple[np.ndarray, np.ndarray]],
+    board_pose: dict[str, tuple[np.ndarray, np.ndarray]],
+    world: str,
+    opts: Options,
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """The transform reference frame -> world ``(R, t)`` (see the module text) and how up was set."""
     if world not in board_pose:
         raise ClothFitError(

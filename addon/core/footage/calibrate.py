@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -69,6 +70,11 @@ from .calib_intrinsics import (  # noqa: E402,F401
 )
 from .calib_world import world_frame
 
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+    from .calib_detect import Source
+
 # ========================================================================== the run
 
 
@@ -79,7 +85,7 @@ class Result:
     board_poses: dict = field(default_factory=dict)  # {moment: (R, t)} board -> world
 
 
-def calibrate_views(board: Board, det: Detections, opts: Options, log=None) -> Result:
+def calibrate_views(board: Board, det: Detections, opts: Options, log: Callable[[str], object] | None = None) -> Result:
     """Calibrate from detected views (see the module text); ``log(text)`` for progress messages."""
     opts.check()
     say = log or (lambda s: None)
@@ -285,12 +291,12 @@ def calibrate_folder(
     folder: str,
     board: Board,
     opts: Options,
-    sync: dict | None = None,
+    sync: dict[str, float] | None = None,
     every: float | None = None,
-    times=None,
+    times: Sequence[float] | None = None,
     debug_dir: str | None = None,
-    log=None,
-) -> tuple:
+    log: Callable[[str], object] | None = None,
+) -> tuple[Result, Detections, Source]:
     """Detect and calibrate: (Result, Detections, Source). Videos need ``sync`` ({camera: video time
     at capture time 0}); they are sampled every ``every`` s (or at ``times``). ``debug_dir``: the
     detections drawn per camera and moment (see :func:`write_debug`), also when the calibration
@@ -375,7 +381,7 @@ def write_outputs(
     return written
 
 
-def write_debug(folder: str, det: Detections, result: Result | None, board: Board):
+def write_debug(folder: str, det: Detections, result: Result | None, board: Board) -> int:
     """Per camera and moment a JPEG: detected markers (blue), ChArUco corners (green) and, after a
     calibration, where the cameras reproject them (red crosses)."""
     import cv2

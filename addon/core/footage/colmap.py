@@ -29,11 +29,15 @@ from __future__ import annotations
 
 import math
 import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ClothFitError
 from ..observation.camera import Camera, check_camera_name
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
 
 
 def _check_unique(cams, where):
@@ -71,7 +75,9 @@ def _colmap_lines(path):
     return [(i + 1, ln) for i, ln in enumerate(raw)]
 
 
-def colmap_to_intrinsics(model: str, params, where="COLMAP camera"):
+def colmap_to_intrinsics(
+    model: str, params: Iterable[float], where: str = "COLMAP camera"
+) -> tuple[np.ndarray, np.ndarray]:
     """``K`` (our pixel convention) and OpenCV ``dist`` from a COLMAP camera model."""
     if model not in COLMAP_MODELS:
         raise ClothFitError(f"{where}: camera model {model} is not supported (supported: {', '.join(COLMAP_MODELS)})")
@@ -99,7 +105,7 @@ def colmap_to_intrinsics(model: str, params, where="COLMAP camera"):
     return K, np.array(dist, dtype=np.float64)
 
 
-def intrinsics_to_colmap(cam: Camera):
+def intrinsics_to_colmap(cam: Camera) -> tuple[str, list[float]]:
     """(model, params) of a Camera in COLMAP's convention (the model that represents it exactly)."""
     if abs(cam.K[0, 1]) > 1e-12:
         raise ClothFitError(f"camera '{cam.name}': COLMAP models have no skew, K[0,1] = {cam.K[0, 1]}")
@@ -219,7 +225,7 @@ def read_colmap(folder: str) -> list:
     return _colmap_cameras(images, intr, ipath)
 
 
-def write_colmap(folder: str, cameras, image_ext: str = ".png") -> str:
+def write_colmap(folder: str, cameras: Sequence[Camera], image_ext: str = ".png") -> str:
     """A COLMAP text model: one COLMAP camera and one image (``<name><image_ext>``) per Camera."""
     from ..safeio import atomic_write
 

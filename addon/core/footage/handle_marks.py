@@ -7,10 +7,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from .. import defaults as D
 from ..errors import ClothFitError
 from ..jsonio import read_json
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from ..observation.camera import Camera
 
 CORNERS = ("top-left", "top-right", "bottom-left", "bottom-right")
 MOTIONS = ("fixed", "moving")
@@ -35,7 +41,7 @@ class HandleOptions:
     smooth: int = D.HANDLE_SMOOTH_FRAMES
     settle_time: float = D.SETTLE_TIME
 
-    def check(self):
+    def check(self) -> HandleOptions:
         for nm in (
             "mark_sigma",
             "max_residual",
@@ -77,7 +83,13 @@ def _num(v):
     return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
 
 
-def parse_marks(d, cameras, n_frames: int, cloth_size=None, source: str = "marks") -> list:
+def parse_marks(
+    d: Any,
+    cameras: Iterable[Camera],
+    n_frames: int,
+    cloth_size: tuple[float, float] | None = None,
+    source: str = "marks",
+) -> list[HandleMarks]:
     """The handles of a marks JSON object, checked against the cameras (names, image sizes), the
     number of frames and the cloth size ``(width, height)`` (for ``at``)."""
     if not isinstance(d, dict):
@@ -180,5 +192,7 @@ def _parse_at(v, size, where):
     return (u, vv), None
 
 
-def read_marks(path, cameras, n_frames, cloth_size=None) -> list:
+def read_marks(
+    path: str, cameras: Iterable[Camera], n_frames: int, cloth_size: tuple[float, float] | None = None
+) -> list[HandleMarks]:
     return parse_marks(read_json(path, "marks file"), cameras, n_frames, cloth_size, f"marks file {path}")

@@ -6,12 +6,18 @@ handle assigned to its grid vertex.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
 from ..physics.scenario import ClothGrid, rotation_vector
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
+
+    from .handle_marks import HandleMarks, HandleOptions
 
 # ================================================================== placement
 
@@ -25,7 +31,7 @@ class Placement:
     ats: list  # per handle the (u, v) used (the given 'at', the top-edge rule's) or None
 
 
-def cloth_local(at, width, height):
+def cloth_local(at: Sequence[float], width: float, height: float) -> np.ndarray:
     """Local grid coordinates of a point ``(u, v)`` on the cloth (from its top-left corner)."""
     return np.array([at[0] - width / 2.0, at[1] - height / 2.0, 0.0])
 
@@ -90,7 +96,15 @@ def _collinear(Q, tol=1e-6):
     return s[1] <= tol * max(s[0], 1e-12)
 
 
-def place_cloth(width, height, nx, ny, pins, ats, gravity=D.GRAVITY) -> Placement:
+def place_cloth(
+    width: float,
+    height: float,
+    nx: int,
+    ny: int,
+    pins: np.ndarray,
+    ats: Sequence[Sequence[float] | None],
+    gravity: Sequence[float] = D.GRAVITY,
+) -> Placement:
     """The rigid placement of the flat ``width x height`` cloth (grid ``nx x ny``) that puts the
     ``at`` points of the handles on their pins. ``pins (H, 3)``; ``ats``: per handle (u, v) or None.
     Without any ``at``: the cloth hangs by its top edge, the two pins furthest apart at its top
@@ -130,7 +144,14 @@ def place_cloth(width, height, nx, ny, pins, ats, gravity=D.GRAVITY) -> Placemen
     return Placement(grid, method, res, with_at, list(ats))
 
 
-def grid_resolution(width, height, n=None, nx=None, ny=None, ats=()):
+def grid_resolution(
+    width: float,
+    height: float,
+    n: int | None = None,
+    nx: int | None = None,
+    ny: int | None = None,
+    ats: Iterable[Sequence[float] | None] = (),
+) -> tuple[int, int]:
     """(nx, ny): given; else ``n`` vertices along the longer side and the other side's count making the
     cells as square as possible; without ``n``, the count within HANDLE_GRID_N - 4 .. + 8 that puts the
     given ``at`` points (u, v) nearest to grid vertices (ties: nearest to HANDLE_GRID_N), so that the
@@ -166,7 +187,17 @@ def grid_resolution(width, height, n=None, nx=None, ny=None, ats=()):
     return square(min(cands, key=lambda n: (round(miss(n), 4), abs(n - D.HANDLE_GRID_N))))
 
 
-def assign_vertices(marks, keys, width, height, nx, ny, rows, opts, warnings):
+def assign_vertices(
+    marks: Sequence[HandleMarks],
+    keys: Sequence[tuple[np.ndarray, np.ndarray]],
+    width: float,
+    height: float,
+    nx: int,
+    ny: int,
+    rows: Sequence[dict[str, Any]],
+    opts: HandleOptions,
+    warnings: list[str],
+) -> tuple[Placement, list[int]]:
     """The cloth placed on the handles' pins (``place_cloth``) and each handle's grid vertex: the one
     nearest its ``at`` (else its pin); ``rows`` (the report rows) get the vertex and its offset,
     ``warnings`` a line when the placement misses the clips. Returns ``(Placement, vertices)``."""

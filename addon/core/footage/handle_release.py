@@ -46,7 +46,7 @@ def _parabola(t, X, pin, lo, hi, n=801):
     return tr, A, math.sqrt(r / max(X.size, 1))
 
 
-def detect_release(times, X, marked: int, opts: HandleOptions, name="handle") -> Release:
+def detect_release(times: np.ndarray, X: np.ndarray, marked: int, opts: HandleOptions, name: str = "handle") -> Release:
     """Departure and release of a released handle from its 3-D track ``X (F, 3)`` (NaN = missing);
     the handle is held at frame ``marked``.
 
@@ -117,7 +117,7 @@ def detect_release(times, X, marked: int, opts: HandleOptions, name="handle") ->
 # ================================================================== smoothing
 
 
-def smooth_track(times, X, half: int) -> np.ndarray:
+def smooth_track(times: np.ndarray, X: np.ndarray, half: int) -> np.ndarray:
     """Local quadratic regression over +-``half`` frames at every frame (Savitzky-Golay for uneven times;
     keeps a constant acceleration exactly); ``half`` 0 = unchanged."""
     if half <= 0 or len(times) < 3:

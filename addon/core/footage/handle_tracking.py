@@ -7,10 +7,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .handle_marks import HandleOptions
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
 
 NCC_RETRY = 0.8  # a tracked patch less like the previous frame's than this: search for it (a slipped track)
 NCC_ACCEPT = 0.5  # a searched match less alike than this is no match (the track is lost)
@@ -43,7 +47,7 @@ def _lk_params(window, opts):
     )
 
 
-def window_for(size_m, depth_m, focal_px, lo=7, hi=41) -> int:
+def window_for(size_m: float, depth_m: float, focal_px: float, lo: int = 7, hi: int = 41) -> int:
     """The LK window of a clip ``size_m`` wide at ``depth_m`` from a camera of focal length ``focal_px``:
     its apparent size in pixels, odd, within ``lo..hi``. A window much larger than the clip holds mostly
     background, which stays still when the clip moves and drags the track back."""
@@ -142,7 +146,12 @@ def _search(img, tmpl, centre, radius, shape):
     return np.array([X0 + ix + dx + (win - 1) / 2.0, Y0 + iy + dy + (win - 1) / 2.0])
 
 
-def track_camera(name, frames, marks, opts: HandleOptions) -> CameraTrack:
+def track_camera(
+    name: str,
+    frames: Sequence[np.ndarray],
+    marks: Sequence[tuple[int, Sequence[float], int] | None],
+    opts: HandleOptions,
+) -> CameraTrack:
     """Track the marked points of one camera through its grey frames.
 
     ``frames``: list of ``(H, W)`` uint8 images; ``marks``: list of ``(frame index, (x, y), window px)``

@@ -8,12 +8,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
 from .handle_marks import HandleOptions
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from numpy.typing import ArrayLike
+
+    from ..observation.camera import Camera
+    from .handle_tracking import CameraTrack
 
 # ============================================================== triangulation
 
@@ -48,7 +57,7 @@ def _normalised(cam, p):
     return np.array([(p[0] - K[0, 2] - K[0, 1] * y) / K[0, 0], y])
 
 
-def triangulate(cams, pts, sigma_floor: float = D.HANDLE_MARK_SIGMA_PX) -> Triangulation:
+def triangulate(cams: Sequence[Camera], pts: ArrayLike, sigma_floor: float = D.HANDLE_MARK_SIGMA_PX) -> Triangulation:
     """The 3-D point seen at pixels ``pts`` (one (x, y) per camera, >= 2 cameras)."""
     pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
     if len(cams) < 2:
@@ -113,7 +122,9 @@ class Trajectory3D:
     dropped: list  # (camera, frame, residual px): cameras dropped as drifted
 
 
-def triangulate_track(cams, tracks, k, opts: HandleOptions) -> Trajectory3D:
+def triangulate_track(
+    cams: Sequence[Camera], tracks: Sequence[CameraTrack], k: int, opts: HandleOptions
+) -> Trajectory3D:
     """Handle ``k``'s 3-D trajectory from its per-camera tracks; a camera whose reprojection misses
     by more than ``max_residual`` is dropped from that frame on (in its direction of tracking) while
     at least 2 others remain."""

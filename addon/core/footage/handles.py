@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -69,6 +70,12 @@ from .handle_placement import assign_vertices, grid_resolution
 from .handle_release import detect_release, smooth_track
 from .handle_tracking import track_camera, window_for
 from .handle_triangulate import triangulate, triangulate_track
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable, Sequence
+
+    from ..observation.camera import Camera
+    from .handle_marks import HandleMarks
 
 FORMAT = "silhouette-cloth-fit/scenario"
 G = 9.81
@@ -88,7 +95,7 @@ class FootageSource:
         self.folder, self.videos, self.sync = folder, videos, sync
         self.used = {}
 
-    def frames(self, name):
+    def frames(self, name: str) -> list[np.ndarray]:
         import cv2
 
         cam = self.cameras[name]
@@ -129,16 +136,16 @@ class FootageSource:
 
 
 def measure_handles(
-    cameras,
+    cameras: Iterable[Camera],
     source: FootageSource,
-    marks,
-    cloth_size,
-    grid_n=None,
-    grid_nx=None,
-    grid_ny=None,
+    marks: Sequence[HandleMarks],
+    cloth_size: Iterable[float],
+    grid_n: int | None = None,
+    grid_nx: int | None = None,
+    grid_ny: int | None = None,
     options: HandleOptions | None = None,
-    progress=None,
-) -> dict:
+    progress: Callable[[int, int, str], object] | None = None,
+) -> dict[str, Any]:
     """Triangulate, track, find releases, place the cloth: returns ``{"scenario": Scenario, "uncertain":
     Uncertainty, "report": dict}``. ``marks``: HandleMarks list (``parse_marks``); ``cloth_size``
     ``(width, height)`` [m]."""
@@ -341,7 +348,7 @@ def _measure_handle(k, h, cams, tracks, tri0s, times, opts: HandleOptions, warni
     return row, (key_t, key_x), rel
 
 
-def write_scenario(path, result, inputs=()) -> dict:
+def write_scenario(path: str, result: dict[str, Any], inputs: Iterable[str | None] = ()) -> dict[str, Any]:
     """The scenario file ``clothfit extract --scenario`` reads: ``{"format", "version", "scenario",
     "uncertain", "report"}``, written atomically; refuses to overwrite one of ``inputs``."""
     from ..safeio import atomic_json
@@ -366,7 +373,7 @@ def write_scenario(path, result, inputs=()) -> dict:
 # ====================================================================== inputs
 
 
-def check_size(size):
+def check_size(size: Iterable[float]) -> tuple[float, float]:
     """(width, height) [m] of the cloth, checked."""
     try:
         w, h = (float(v) for v in size)
@@ -378,7 +385,13 @@ def check_size(size):
     return w, h
 
 
-def frame_times_for(count=None, times=None, fps=None, start=0.0, what="footage"):
+def frame_times_for(
+    count: int | None = None,
+    times: Iterable[float] | None = None,
+    fps: float | None = None,
+    start: float = 0.0,
+    what: str = "footage",
+) -> list[float]:
     """The capture times: ``times`` as given, else ``count`` frames at ``fps`` from ``start``."""
     if times is not None:
         t = [float(x) for x in times]
@@ -395,23 +408,23 @@ def frame_times_for(count=None, times=None, fps=None, start=0.0, what="footage")
 
 
 def run(
-    out,
-    marks,
-    size,
-    footage=None,
-    videos=None,
-    sync=None,
-    find_sync=False,
-    flash_time=0.0,
-    cameras=None,
-    times=None,
-    fps=None,
-    start=0.0,
-    frames=None,
-    grid=None,
+    out: str,
+    marks: str,
+    size: Iterable[float],
+    footage: str | None = None,
+    videos: str | None = None,
+    sync: str | None = None,
+    find_sync: bool = False,
+    flash_time: float = 0.0,
+    cameras: str | Iterable[Camera] | None = None,
+    times: Sequence[float] | None = None,
+    fps: float | None = None,
+    start: float = 0.0,
+    frames: int | None = None,
+    grid: int | tuple[int, int] | list[int] | None = None,
     options: HandleOptions | None = None,
-    progress=None,
-) -> dict:
+    progress: Callable[[int, int, str], object] | None = None,
+) -> dict[str, Any]:
     """``clothfit handles``: read the inputs, measure, write ``out`` (``write_scenario``); returns the
     written document. ``footage``: image folders per camera (``extract``'s layout, ``footage.json``
     optional) or ``videos`` + ``sync`` (a sync JSON path, or ``find_sync`` for a flash); ``cameras``:

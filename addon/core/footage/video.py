@@ -32,11 +32,17 @@ from __future__ import annotations
 
 import math
 import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import ClothFitError
 from ..jsonio import read_json
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Collection, Sequence
+
+    from ..observation.camera import Camera
 
 VIDEO_EXTS = (".mp4", ".mov", ".mkv", ".avi")
 PLATE_IMAGE_EXTS = (".png", ".jpg", ".jpeg")
@@ -97,7 +103,7 @@ class _CvReader:
         self.cap.release()
 
 
-def find_camera_file(folder: str, camera: str, exts, what: str):
+def find_camera_file(folder: str, camera: str, exts: Collection[str], what: str) -> str | None:
     """The file ``<camera><ext>`` in ``folder`` for one of ``exts`` (case-insensitive), or None;
     two candidates are an error."""
     if not os.path.isdir(folder):
@@ -206,7 +212,9 @@ class Video:
         """Index of the frame on display at ``video_time`` (see the module text)."""
         return int(np.searchsorted(self.times, video_time + TIME_TOL, side="right") - 1)
 
-    def frames_at(self, video_times, progress=None):
+    def frames_at(
+        self, video_times: Sequence[float], progress: Callable[[int, int], object] | None = None
+    ) -> tuple[list[np.ndarray], list[float]]:
         """BGR uint8 frames on display at each of ``video_times``, and their timestamps [s]."""
         idx = [self.frame_index(t) for t in video_times]
         for t, i in zip(video_times, idx):
@@ -232,13 +240,13 @@ class Video:
             )
         return [got[int(self.pts[i])] for i in idx], [float(self.times[i]) for i in idx]
 
-    def sampled_frames(self, n: int):
+    def sampled_frames(self, n: int) -> list[np.ndarray]:
         """About ``n`` frames spread evenly over the video (BGR uint8)."""
         pick = set(np.unique(np.linspace(0, self.pts.size - 1, min(n, self.pts.size)).round().astype(int)).tolist())
         frames, _ = self.frames_at([float(self.times[i]) for i in sorted(pick)])
         return frames
 
-    def mean_brightness(self):
+    def mean_brightness(self) -> np.ndarray:
         """Mean grey level of every frame, in timestamp order (for flash detection)."""
         try:
             vals = self._decode(None, want_frames=False)
@@ -279,7 +287,7 @@ def video_sizes(videos_dir: str) -> dict:
     return out
 
 
-def read_sync(path: str, camera_names) -> dict:
+def read_sync(path: str, camera_names: Collection[str]) -> dict[str, float]:
     """``{camera: video time [s] at t = 0}`` from a sync JSON file (an object camera -> seconds)."""
     d = read_json(path, "sync file")
     bad = {k: v for k, v in d.items() if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)}
@@ -309,7 +317,9 @@ def flash_time_of(video: Video) -> float:
     return float(video.times[i + 1])
 
 
-def flash_sync(videos_dir: str, camera_names, flash_time: float = 0.0, out_path: str | None = None) -> dict:
+def flash_sync(
+    videos_dir: str, camera_names: Collection[str], flash_time: float = 0.0, out_path: str | None = None
+) -> dict[str, float]:
     """Sync times from a flash seen by every camera at capture time ``flash_time``; optionally
     written to ``out_path`` as a sync file."""
     sync = {}
@@ -327,7 +337,7 @@ def flash_sync(videos_dir: str, camera_names, flash_time: float = 0.0, out_path:
     return sync
 
 
-def read_plate(plates_dir: str, camera) -> tuple:
+def read_plate(plates_dir: str, camera: Camera) -> tuple[np.ndarray, str]:
     """The background plate of a camera (BGR uint8) and where it came from."""
     img_path = find_camera_file(plates_dir, camera.name, PLATE_IMAGE_EXTS, "plates")
     vid_path = find_camera_file(plates_dir, camera.name, VIDEO_EXTS, "plates")
@@ -358,7 +368,14 @@ def read_plate(plates_dir: str, camera) -> tuple:
     return img, src
 
 
-def camera_frames(videos_dir: str, camera, sync_time: float, frame_times, sync_path: str = "sync file", progress=None):
+def camera_frames(
+    videos_dir: str,
+    camera: Camera,
+    sync_time: float,
+    frame_times: Sequence[float],
+    sync_path: str = "sync file",
+    progress: Callable[[int, int], object] | None = None,
+) -> tuple[list[np.ndarray], dict[str, Any]]:
     """The frames of one camera at the capture times, and a report (video, timestamps used)."""
     path = find_camera_file(videos_dir, camera.name, VIDEO_EXTS, "videos")
     if path is None:
