@@ -28,7 +28,9 @@ from __future__ import annotations
 import json
 import os
 import re
+from collections.abc import Callable, Sequence
 from dataclasses import asdict
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -53,6 +55,11 @@ from .silhouette import (  # noqa: F401
     refine_boundary,  # re-exported: the extraction's API in one place
 )
 
+if TYPE_CHECKING:
+    from ..observation.camera import Camera
+    from ..observation.capture import Capture
+    from ..physics.scenario import Scenario, Uncertainty
+
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp", ".exr")
 BACKGROUND_PREFIXES = ("background", "bg")
 FOOTAGE_JSON = "footage.json"
@@ -67,7 +74,7 @@ def _natural_key(s: str):
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", s)]
 
 
-def footage_images(capture):
+def footage_images(capture: Capture) -> Callable[[int, int], np.ndarray]:
     """For a capture extracted from image footage (``python -m clothfit extract``, not ``--videos``):
     a function ``(camera index, frame index) -> RGB uint8`` frame the silhouette was extracted from
     (``capture_overlays(images=...)`` draws on it). Raises ClothFitError if the capture names no
@@ -102,7 +109,7 @@ def footage_images(capture):
     return image
 
 
-def list_camera_images(folder: str):
+def list_camera_images(folder: str) -> tuple[list[str], list[str]]:
     """(background paths, frame paths) of a camera folder; backgrounds are files named
     ``background*`` or ``bg*`` (case-insensitive), frames are the other images, natural order."""
     if not os.path.isdir(folder):
@@ -215,16 +222,16 @@ def _uncertain_for(scen, explicit, from_scenario, from_footage, frame_period=Non
 def extract_capture(
     footage_dir: str,
     out_dir: str,
-    cameras=None,
-    frame_times=None,
-    scenario=None,
-    cloth_mass=None,
+    cameras: str | os.PathLike | list[Camera] | None = None,
+    frame_times: Sequence[float] | None = None,
+    scenario: Scenario | dict[str, Any] | str | os.PathLike | None = None,
+    cloth_mass: float | None = None,
     options: ExtractOptions | None = None,
-    camera_names=None,
-    progress=None,
-    should_stop=None,
-    uncertain=None,
-    **option_overrides,
+    camera_names: Sequence[str] | None = None,
+    progress: Callable[[int, int, str], Any] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    uncertain: Uncertainty | dict[str, Any] | str | None = None,
+    **option_overrides: Any,
 ) -> dict:
     """Extract every camera's silhouettes from a footage folder and write a capture.
 
@@ -503,18 +510,18 @@ def _write_result(
 def extract_videos(
     videos_dir: str,
     plates_dir: str,
-    sync,
+    sync: str | os.PathLike | dict[str, float],
     out_dir: str,
-    cameras,
-    frame_times,
-    scenario=None,
-    cloth_mass=None,
+    cameras: str | os.PathLike | list[Camera],
+    frame_times: Sequence[float],
+    scenario: Scenario | dict[str, Any] | str | os.PathLike | None = None,
+    cloth_mass: float | None = None,
     options: ExtractOptions | None = None,
-    camera_names=None,
-    progress=None,
-    should_stop=None,
-    uncertain=None,
-    **option_overrides,
+    camera_names: Sequence[str] | None = None,
+    progress: Callable[[int, int, str], Any] | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    uncertain: Uncertainty | dict[str, Any] | str | None = None,
+    **option_overrides: Any,
 ) -> dict:
     """Silhouettes from one video per camera (``footage/video.py``: layout, timing rule) -> a capture.
 

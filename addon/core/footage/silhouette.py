@@ -59,7 +59,9 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -88,7 +90,7 @@ class ExtractOptions:
     undistort: bool = False  # undistort silhouettes, write cameras without distortion
     debug_dir: str | None = None
 
-    def check(self):
+    def check(self) -> ExtractOptions:
         t = self.threshold
         if isinstance(t, str):
             if t not in THRESHOLD_MODES:
@@ -308,7 +310,9 @@ def refine_boundary(mask: np.ndarray, diff: np.ndarray, radius: int, floor: floa
     return out
 
 
-def clean_mask(raw: np.ndarray, opts: ExtractOptions, diff: np.ndarray | None = None, floor: float = 0.0):
+def clean_mask(
+    raw: np.ndarray, opts: ExtractOptions, diff: np.ndarray | None = None, floor: float = 0.0
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
     """Opening, closing, largest component, hole filling, boundary refinement (needs ``diff``).
     Returns (final, steps dict, info dict)."""
     import cv2
@@ -362,7 +366,9 @@ class CameraResult:
     warnings: list
 
 
-def camera_thresholds(diffs, noise_sample, opts: ExtractOptions, name: str):
+def camera_thresholds(
+    diffs: Sequence[np.ndarray], noise_sample: np.ndarray | None, opts: ExtractOptions, name: str
+) -> dict[str, Any]:
     """The camera's threshold and the statistics behind it (a dict)."""
     pooled = np.concatenate([_sample(d, 200_000 // max(1, len(diffs)) + 1, i) for i, d in enumerate(diffs)])
     otsu = otsu_threshold(pooled)
@@ -392,12 +398,12 @@ def camera_thresholds(diffs, noise_sample, opts: ExtractOptions, name: str):
 
 
 def extract_camera(
-    backgrounds,
-    frames,
+    backgrounds: np.ndarray | Sequence[np.ndarray],
+    frames: Sequence[np.ndarray],
     options: ExtractOptions | None = None,
     name: str = "cam",
-    frame_names=None,
-    shape=None,
+    frame_names: Sequence[str] | None = None,
+    shape: tuple[int, int] | None = None,
     debug_dir: str | None = None,
 ) -> CameraResult:
     """Silhouettes of one camera from in-memory images (what the Blender operator can call).

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import simd as _simd_ir
 from . import simd_plain
@@ -626,7 +627,7 @@ class Prepared:
             first, self.sp_i, self.sp_j, self.struct_creation, self.h_spring, self.h_pa, self.h_la, self.h_pb, self.h_lb
         )
 
-    def manipulation(self, offsets):
+    def manipulation(self, offsets: ArrayLike | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Each candidate's pin targets (P, n_frames + 1, H, 3), rest lengths (P, S), rest angles (P, B)
         and ``avg_spring_len + FLT_EPSILON`` (P,), float32, for handle offsets (P, H, 3) [m] (None: the
         plan's own handles for every candidate). An offset moves a handle's whole trajectory, its
@@ -653,7 +654,7 @@ class Prepared:
             avg[p] = F32(a + FLT_EPS)
         return targets, restlen, restang, avg
 
-    def lane_params(self, rows, avg_eps=None) -> np.ndarray:
+    def lane_params(self, rows: ArrayLike, avg_eps: ArrayLike | None = None) -> np.ndarray:
         """float32 lane parameters from rows of FLOAT_SETTINGS values, computed as Blender does
         (``avg_eps``: per row, for candidates with their own rest shape; default the plan's)."""
         from .blender import FLOAT_SETTINGS
@@ -682,7 +683,7 @@ class Prepared:
         P[:, P_CB] = P[:, P_KB] * col["bending_damping"]
         return P
 
-    def run(self, rows, offsets=None):
+    def run(self, rows: ArrayLike, offsets: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Simulate the candidates ``rows`` (with handle ``offsets`` (P, H, 3) [m], see
         ``manipulation``): (frames kept (P, K, V, 3) float32, codes, CG iterations).
 
@@ -750,7 +751,7 @@ class Prepared:
         )
         return out[:n], codes[:n], its[:n]
 
-    def sample(self, out, frames=None):
+    def sample(self, out: np.ndarray, frames: ArrayLike | None = None) -> np.ndarray:
         """Positions (P, F, V, 3) float64 from the kept frames: at the capture times, or at
         ``frames`` (P, F) fractional frame numbers from the start frame (a candidate's own reading
         of the capture times, e.g. shifted by its time offset), linear between whole frames."""
