@@ -530,8 +530,14 @@ def test_kill_9_at_random_moments_leaves_a_resumable_checkpoint(cap, tmp_path):
             cmd.append("--resume")
             resumed += 1
         p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        # a random moment inside the run (however fast this machine is): the first attempt is killed
-        time.sleep(rnd.uniform(0.6, 0.9) * whole if not killed else rnd.uniform(0.2, 1.0) * whole)
+        # a random moment inside the run (however fast this machine is, and however its load changes):
+        # the first attempt is killed once its first checkpoint is on disk, a random moment after that
+        if not killed:
+            while p.poll() is None and not os.path.exists(ck):
+                time.sleep(0.02)
+            time.sleep(rnd.uniform(0.0, 0.2) * whole)
+        else:
+            time.sleep(rnd.uniform(0.2, 1.0) * whole)
         if p.poll() is None:
             p.send_signal(signal.SIGKILL)
             killed += 1
