@@ -75,7 +75,7 @@ def _floats(s, what="--times"):
 def _res(s):
     if not s:
         return None
-    from ..core.fitting.job import check_resolution
+    from ..core.fitting.config import check_resolution
 
     try:
         h, w = (int(x) for x in s.lower().split("x"))

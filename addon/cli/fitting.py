@@ -182,7 +182,7 @@ def fit_config(a, cap):
 def search_options(items):
     """``--search NAME=VALUE`` (repeatable) -> FitConfig's search options; values are numbers or
     true/false (checked with the config: ``FitConfig.checked``)."""
-    from ..core.fitting.job import SEARCH_OPTIONS
+    from ..core.fitting.config import SEARCH_OPTIONS
 
     out = {}
     for item in items:

@@ -11,7 +11,8 @@ A job stops (``stop_reason``) when the optimiser has converged by its own criter
 ("target"), it is cancelled ("cancelled") or it failed ("error": e.g. every candidate exploded).
 
 The checkpoint (what the job is a fit of, its optimiser and stages; resumed only by the same fit)
-is ``checkpoint.py``'s; the result (``FitResult``) is ``result.py``'s.
+is ``checkpoint.py``'s; the result (``FitResult``) is ``result.py``'s; the configuration (``FitConfig``) is
+``config.py``'s.
 
 The model is the paper's sheet (default) or Blender's cloth (``FitConfig.model``); what is searched
 for each lives in ``parameters.py``. Identifiability (SPEC 2): the motion depends on ratios to the
@@ -27,7 +28,6 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,214 +40,14 @@ from ..physics.scenario import Uncertainty
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from . import checkpoint
 from .checkpoint import STOP_REASONS, capture_hash, identity_diff, read_checkpoint, silhouettes_hash  # noqa: F401 (re-exported)  # noqa: F401 (re-exported for the CLI and tests)
+from .config import SEARCH_OPTIONS, FitConfig, check_resolution  # noqa: F401 (re-exported)
 from .objective import SilhouetteObjective
-from .optimise import FIT_OPTIMIZERS, canonical_name, make_optimizer
+from .optimise import canonical_name, make_optimizer
 from .parameters import ManipulationParameters, PaperParameters, SceneParameters, declared_model, make_parameters
 from .quality import Ladder
 from .result import FitResult, job_result
 from .result import finite_or_none as _finite
 from .space import SearchSpace
-
-_CMA = ("cma-es", "cma-portfolio")
-# FitConfig's optimiser options: field -> (the optimiser's keyword, the optimisers it applies to). None (the
-# default) leaves the optimiser as it has always been built; only options that are set enter the fit's identity.
-SEARCH_OPTIONS = {
-    "sigma0": ("sigma0", _CMA),
-    "cma_active": ("active", _CMA),
-    "tolx": ("tolx", FIT_OPTIMIZERS),
-    "tolfun_per_image": ("tolfun", FIT_OPTIMIZERS),
-    "ga_eps": ("eps", ("spx-mgg",)),
-    "ga_stall": ("stall_evaluations", ("spx-mgg",)),
-    "portfolio_runs": ("runs", ("cma-portfolio",)),
-    "portfolio_explore": ("explore", ("cma-portfolio",)),
-    "portfolio_polish": ("polish", ("cma-portfolio",)),
-    "portfolio_polish_sigma": ("polish_sigma", ("cma-portfolio",)),
-    "portfolio_max_polishes": ("max_polishes", ("cma-portfolio",)),
-    "portfolio_refine_until": ("refine_until", ("cma-portfolio",)),
-}
-
-
-@dataclass
-class FitConfig:
-    train_cameras: list | None = None  # camera indices (None = all)
-    train_times: list | None = None  # frame times (None = all of the capture's)
-    optimizer: str = D.DEFAULT_OPTIMIZER
-    seed: int = 0
-    max_evaluations: int = D.FIT_EVALUATIONS
-    target_error: float | None = None  # stop when E_all per image falls below this
-    resolution: list | None = None  # (H, W) to fit at: silhouettes resampled, cameras rescaled
-    cloth_mass: float | None = None  # kg, total; m = cloth_mass / n_vertices
-    bounds: dict | None = None  # per free name (low, high); None = the model's defaults
-    backend: str = "auto"
-    population: int | None = None
-    children: int | None = None
-    model: object = None  # "paper", "blender" or a model dict; None = the capture's, else paper
-    fps: float | None = None  # blender: the scene frame rate the settings are for (24)
-    quality: int | None = None  # blender: solver steps per frame (5, or the warm start's)
-    bending_model: str | None = None  # blender: ANGULAR (default) or LINEAR
-    free: list | None = None  # blender: settings to search (default parameters.BLENDER_FREE)
-    fixed: dict | None = None  # blender: settings held at given values
-    init: str | None = None  # a result JSON to start from (warm start)
-    evaluator: str = "core"  # where candidates are simulated: "core" or "blender" (a .blend's own
-    # solver in worker processes: addon.farm, handed to FitJob)
-    blend: str | None = None  # blender: the scene file, its cloth object, the frame of t = 0
-    blend_object: str | None = None
-    frame_zero: float | None = None
-    workers: int | None = None  # blender: worker processes (default: the cores)
-    address: str | None = None  # blender: a running Ray cluster ("auto", "ray://host:port")
-    executor: str = "auto"  # blender: "ray", "process" (no Ray) or "auto"
-    restarts: int | None = None  # cma-es: IPOP restarts after convergence (population doubled each);
-    # None = the model's default (paper 0, blender BLENDER_FIT_RESTARTS)
-    uncertain: object = None  # the manipulation's unknowns to estimate: None = the capture's
-    # 'uncertain' block; "none" = nothing; "time_offset=S,handles=M" or an
-    # object {time_offset, handles} (physics/scenario.Uncertainty)
-    # the optimiser's own settings (SEARCH_OPTIONS; None = the default it has always had)
-    sigma0: float | None = None  # cma-es, cma-portfolio: first step (unit cube; 0.3, from --init WARM_START_SIGMA)
-    cma_active: bool | None = None  # cma-es, cma-portfolio: active CMA (default: cma-es off, cma-portfolio on)
-    tolx: float | None = None  # unit-cube step (GA: population spread) = converged (D.FIT_TOLX)
-    tolfun_per_image: float | None = (
-        None  # spread of recent bests per training image = converged (D.FIT_TOLFUN_PER_IMAGE)
-    )
-    ga_eps: float | None = None  # spx-mgg: simplex expansion (sqrt(n + 2))
-    ga_stall: int | None = None  # spx-mgg: evaluations without improvement = stagnated (D.FIT_GA_STALL)
-    portfolio_runs: int | None = None  # cma-portfolio: CMA-ES runs at the start (4)
-    portfolio_explore: float | None = None  # cma-portfolio: budget share of successive halving (0.5)
-    portfolio_polish: str | None = None  # cma-portfolio: "cma" (active CMA-ES) or "coord" (coordinate polish)
-    portfolio_polish_sigma: float | None = None  # cma-portfolio: a polish's first step (0.05)
-    portfolio_max_polishes: int | None = None  # cma-portfolio: polishes before it stops (20)
-    portfolio_refine_until: float | None = None  # cma-portfolio: budget share after which refining gives way (1.0)
-
-    @classmethod
-    def from_dict(cls, d):
-        if not isinstance(d, dict):
-            raise ClothFitError(f"fit config: expected an object, got {type(d).__name__}")
-        known = {f for f in cls.__dataclass_fields__}
-        bad = set(d) - known
-        if bad:
-            raise ClothFitError(f"fit config: unknown keys {sorted(bad)}")
-        return cls(**d).checked()
-
-    def checked(self) -> FitConfig:
-        """The config with every value checked (one-line ClothFitError naming the first bad one)."""
-
-        def intval(name, lo, hi=10**12, none_ok=True):
-            v = getattr(self, name)
-            if v is None and none_ok:
-                return
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
-                raise ClothFitError(f"fit config: {name} must be an integer in {lo}..{hi}, got {v!r}")
-            setattr(self, name, int(v))
-
-        def numval(name, lo, hi=math.inf, none_ok=True):
-            v = getattr(self, name)
-            if v is None and none_ok:
-                return
-            if (
-                isinstance(v, bool)
-                or not isinstance(v, (int, float, np.number))
-                or not math.isfinite(v)
-                or not lo <= v <= hi
-            ):
-                raise ClothFitError(f"fit config: {name} must be a finite number in [{lo}, {hi}], got {v!r}")
-
-        def intlist(name):
-            v = getattr(self, name)
-            if v is not None and (
-                not isinstance(v, (list, tuple))
-                or not all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in v)
-            ):
-                raise ClothFitError(f"fit config: {name} must be a list of integers, got {v!r}")
-
-        intval("seed", 0, 2**63 - 1, none_ok=False)
-        intval("max_evaluations", 1, none_ok=False)
-        intval("population", 2, 10**6)
-        intval("children", 1, 10**6)
-        intval("restarts", 0, 20)
-        if self.quality != "auto":
-            intval("quality", 1, 80)
-        numval("target_error", 0.0)
-        numval("cloth_mass", 1e-12)
-        numval("fps", 1e-3, 1e4)
-        intlist("train_cameras")
-        tt = self.train_times
-        if tt is not None and (
-            not isinstance(tt, (list, tuple))
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in tt)
-        ):
-            raise ClothFitError(f"fit config: train_times must be a list of finite numbers, got {tt!r}")
-        if not isinstance(self.optimizer, str):
-            raise ClothFitError(f"fit config: optimizer must be a name, got {self.optimizer!r}")
-        if canonical_name(self.optimizer) not in FIT_OPTIMIZERS:
-            raise ClothFitError(
-                f"fit config: optimizer {self.optimizer!r} is a polish, not a fit's search: choose one "
-                f"of {', '.join(FIT_OPTIMIZERS)}"
-            )
-        if self.resolution is not None:
-            check_resolution(self.resolution, "fit config: resolution")
-        if self.backend not in ("auto", "numba", "numpy"):
-            raise ClothFitError(f"fit config: unknown backend {self.backend!r} (numba, numpy, auto)")
-        for name in ("bounds", "fixed"):
-            v = getattr(self, name)
-            if v is not None and not isinstance(v, dict):
-                raise ClothFitError(f"fit config: {name} must be an object, got {v!r}")
-        if self.free is not None and (
-            not isinstance(self.free, (list, tuple)) or not all(isinstance(x, str) for x in self.free)
-        ):
-            raise ClothFitError(f"fit config: free must be a list of setting names, got {self.free!r}")
-        for name in ("bending_model", "init"):
-            v = getattr(self, name)
-            if v is not None and not isinstance(v, str):
-                raise ClothFitError(f"fit config: {name} must be a string, got {v!r}")
-        if self.uncertain is not None and not isinstance(self.uncertain, (str, dict)):
-            raise ClothFitError(
-                f"fit config: uncertain must be 'none', 'time_offset=S,handles=M' or an object, got {self.uncertain!r}"
-            )
-        if self.model is not None and not isinstance(self.model, (str, dict)):
-            raise ClothFitError(f"fit config: model must be a name or a model object, got {self.model!r}")
-        for name, lo, hi in (
-            ("sigma0", 1e-9, 10.0),
-            ("tolx", 0.0, 1.0),
-            ("tolfun_per_image", 0.0, math.inf),
-            ("ga_eps", 1e-9, 1e6),
-            ("portfolio_explore", 0.0, 1.0),
-            ("portfolio_polish_sigma", 1e-9, 10.0),
-            ("portfolio_refine_until", 0.0, 1.0),
-        ):
-            numval(name, lo, hi)
-        intval("ga_stall", 1)
-        intval("portfolio_runs", 1, 64)
-        intval("portfolio_max_polishes", 1, 10**6)
-        if self.cma_active is not None and not isinstance(self.cma_active, bool):
-            raise ClothFitError(f"fit config: cma_active must be true or false, got {self.cma_active!r}")
-        if self.portfolio_polish not in (None, "cma", "coord"):
-            raise ClothFitError(f"fit config: portfolio_polish must be 'cma' or 'coord', got {self.portfolio_polish!r}")
-        opt = canonical_name(self.optimizer)
-        for name, (_, optimizers) in SEARCH_OPTIONS.items():
-            if getattr(self, name) is not None and opt not in optimizers:
-                raise ClothFitError(f"fit config: {name} is a setting of {' and '.join(optimizers)}, not of {opt}")
-        return self
-
-    def search_options(self) -> dict:
-        """The optimiser options this config sets (SEARCH_OPTIONS not None): a fit's identity holds them,
-        so a checkpoint is resumed only with the same ones (and one from before they existed, without)."""
-        return {name: getattr(self, name) for name in SEARCH_OPTIONS if getattr(self, name) is not None}
-
-
-def check_resolution(res, what="resolution"):
-    """(H, W) as two positive integers within the size limits."""
-    try:
-        h, w = res
-        ok = all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in (h, w))
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
-        raise ClothFitError(f"{what} {res!r} must be two integers (height, width)")
-    h, w = int(h), int(w)
-    if not (0 < h <= D.MAX_IMAGE_SIDE and 0 < w <= D.MAX_IMAGE_SIDE and h * w <= D.MAX_FIT_PIXELS):
-        raise ClothFitError(
-            f"{what} {h}x{w} must be positive, at most {D.MAX_IMAGE_SIDE} per side and {D.MAX_FIT_PIXELS} pixels in all"
-        )
-    return [h, w]
 
 
 def load_observed(capture, cams, fidx, resolution=None):

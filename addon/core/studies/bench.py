@@ -174,6 +174,78 @@ def bench_default_fit(tmp, echo=print, max_evaluations=None):
     return out
 
 
+def _backend_rates(out, sc, cams, obs, P):
+    """Candidate evaluations per second (and the simulation's alone) on each backend, into ``out[backend]``."""
+    backends = ["numba", "numpy"] if jit.available() else ["numpy"]
+    for be in backends:
+        obj = SilhouetteObjective(sc, cams, obs, backend=be)
+        Pb = P if be == "numba" else P[:4]
+        r, rc = _rate(lambda: obj(Pb), len(Pb), min_time=3.0 if be == "numba" else 1.0)  # noqa: B023 (called at once)
+        s, sc_ms = _rate(lambda: simulate(sc, Pb, backend=be), len(Pb), min_time=1.5)  # noqa: B023
+        out[be] = {
+            "evals_per_s": r,
+            "cpu_ms_per_eval": rc,
+            "sim_only_per_s": s,
+            "sim_cpu_ms_per_eval": sc_ms,
+            "silhouette_share_of_cpu_pct": max(0.0, 100.0 * (1 - sc_ms / rc)),
+            "ratio_to_target": r / TARGET_EVALS_PER_S,
+        }
+        print(
+            f"[{be}] candidate evaluations/s: {r:.1f} (target {TARGET_EVALS_PER_S:.0f}, ratio {r / TARGET_EVALS_PER_S:.2f}); "
+            f"CPU per evaluation {rc:.1f} ms (simulation {sc_ms:.1f} ms, silhouettes "
+            f"{out[be]['silhouette_share_of_cpu_pct']:.0f} %); simulation alone {s:.1f}/s",
+            flush=True,
+        )
+
+
+def _bench_fit(out, cap, train, evals):
+    """The timed 16-camera fit and what one checkpoint of it costs, into ``out``; the peak memory (MB) or None."""
+    t0 = time.perf_counter()
+    job = FitJob(
+        cap,
+        FitConfig(
+            train_cameras=train, train_times=D.TRAIN_TIMES, optimizer=DEFAULT_OPTIMIZER, max_evaluations=evals, seed=0
+        ),
+    )
+    job.run()
+    wall = time.perf_counter() - t0
+    try:
+        import resource
+
+        peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
+    except (ImportError, OSError):
+        peak_mb = None
+    out["peak_memory_mb"] = peak_mb
+    out["fit"] = {
+        "optimizer": DEFAULT_OPTIMIZER,
+        "evaluations": job.evaluations,
+        "wall_s": wall,
+        "evals_per_s": job.evaluations / wall,
+        "ratio_to_target": wall / TARGET_FIT_S,
+        "best_E_sil_pct": 100 * job.best_error / job.objective.n_images,
+    }
+    print(
+        f"16-camera fit ({DEFAULT_OPTIMIZER}, {job.evaluations} evaluations): {wall:.1f} s wall "
+        f"(target {TARGET_FIT_S:.0f} s, ratio {wall / TARGET_FIT_S:.2f}), best training E_sil "
+        f"{out['fit']['best_E_sil_pct']:.3f} %",
+        flush=True,
+    )
+    with tempfile.TemporaryDirectory() as td:  # what one checkpoint costs (written at most every 2 s)
+        ck = os.path.join(td, "fit.checkpoint.json")
+        t0 = time.perf_counter()
+        for _ in range(20):
+            job.save_checkpoint(ck)
+        out["checkpoint_ms"] = 1000 * (time.perf_counter() - t0) / 20
+        out["checkpoint_bytes"] = os.path.getsize(ck)
+    out["fit"]["stop_reason"] = job.stop_reason
+    print(
+        f"checkpoint: {out['checkpoint_ms']:.1f} ms per write ({out['checkpoint_bytes']} bytes, after "
+        f"{job.generation} generations; written at most every {D.CHECKPOINT_INTERVAL_S:g} s by the CLI)",
+        flush=True,
+    )
+    return peak_mb
+
+
 def run_bench(json_path, quick=False, only_blender_workers=False, only_default_fit=False, blender_workers=None):
     """The speed figures, written to ``json_path``. ``blender_workers(tmp) -> dict``: the figures of
     Blender's solver on workers (``farm.bench.bench_blender_workers``, passed in by the CLI: the farm
@@ -218,26 +290,7 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
         "workload": "16 cameras x 15 shapes at 480x640, settle 0.5 s + 1.5 s of motion, 705 springs",
         "targets": {"evals_per_s": TARGET_EVALS_PER_S, "fit_seconds": TARGET_FIT_S},
     }
-    backends = ["numba", "numpy"] if jit.available() else ["numpy"]
-    for be in backends:
-        obj = SilhouetteObjective(sc, cams, obs, backend=be)
-        Pb = P if be == "numba" else P[:4]
-        r, rc = _rate(lambda: obj(Pb), len(Pb), min_time=3.0 if be == "numba" else 1.0)
-        s, sc_ms = _rate(lambda: simulate(sc, Pb, backend=be), len(Pb), min_time=1.5)
-        out[be] = {
-            "evals_per_s": r,
-            "cpu_ms_per_eval": rc,
-            "sim_only_per_s": s,
-            "sim_cpu_ms_per_eval": sc_ms,
-            "silhouette_share_of_cpu_pct": max(0.0, 100.0 * (1 - sc_ms / rc)),
-            "ratio_to_target": r / TARGET_EVALS_PER_S,
-        }
-        print(
-            f"[{be}] candidate evaluations/s: {r:.1f} (target {TARGET_EVALS_PER_S:.0f}, ratio {r / TARGET_EVALS_PER_S:.2f}); "
-            f"CPU per evaluation {rc:.1f} ms (simulation {sc_ms:.1f} ms, silhouettes "
-            f"{out[be]['silhouette_share_of_cpu_pct']:.0f} %); simulation alone {s:.1f}/s",
-            flush=True,
-        )
+    _backend_rates(out, sc, cams, obs, P)
     X = simulate(sc, [gt]).positions[0]
     t0 = time.perf_counter()
     n = 0
@@ -248,49 +301,7 @@ def run_bench(json_path, quick=False, only_blender_workers=False, only_default_f
     out["numpy_full_frame_silhouette_ms"] = 1000 * (time.perf_counter() - t0) / n
     print(f"numpy full-frame silhouette (480x640): {out['numpy_full_frame_silhouette_ms']:.2f} ms", flush=True)
     evals = S["evals"]
-    t0 = time.perf_counter()
-    job = FitJob(
-        cap,
-        FitConfig(
-            train_cameras=train, train_times=D.TRAIN_TIMES, optimizer=DEFAULT_OPTIMIZER, max_evaluations=evals, seed=0
-        ),
-    )
-    job.run()
-    wall = time.perf_counter() - t0
-    try:
-        import resource
-
-        peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
-    except (ImportError, OSError):
-        peak_mb = None
-    out["peak_memory_mb"] = peak_mb
-    out["fit"] = {
-        "optimizer": DEFAULT_OPTIMIZER,
-        "evaluations": job.evaluations,
-        "wall_s": wall,
-        "evals_per_s": job.evaluations / wall,
-        "ratio_to_target": wall / TARGET_FIT_S,
-        "best_E_sil_pct": 100 * job.best_error / job.objective.n_images,
-    }
-    print(
-        f"16-camera fit ({DEFAULT_OPTIMIZER}, {job.evaluations} evaluations): {wall:.1f} s wall "
-        f"(target {TARGET_FIT_S:.0f} s, ratio {wall / TARGET_FIT_S:.2f}), best training E_sil "
-        f"{out['fit']['best_E_sil_pct']:.3f} %",
-        flush=True,
-    )
-    with tempfile.TemporaryDirectory() as td:  # what one checkpoint costs (written at most every 2 s)
-        ck = os.path.join(td, "fit.checkpoint.json")
-        t0 = time.perf_counter()
-        for _ in range(20):
-            job.save_checkpoint(ck)
-        out["checkpoint_ms"] = 1000 * (time.perf_counter() - t0) / 20
-        out["checkpoint_bytes"] = os.path.getsize(ck)
-    out["fit"]["stop_reason"] = job.stop_reason
-    print(
-        f"checkpoint: {out['checkpoint_ms']:.1f} ms per write ({out['checkpoint_bytes']} bytes, after "
-        f"{job.generation} generations; written at most every {D.CHECKPOINT_INTERVAL_S:g} s by the CLI)",
-        flush=True,
-    )
+    peak_mb = _bench_fit(out, cap, train, evals)
     if peak_mb is not None:
         print(
             f"peak memory of the whole bench process (capture, 240 observed silhouettes, numba): {peak_mb:.0f} MB",
