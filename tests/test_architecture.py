@@ -124,3 +124,31 @@ def test_module_and_function_sizes():
                 if length > MAX_FUNCTION_LINES and not decorators & set(NUMBA_DECORATORS):
                     big_functions.append(f"{name}.{node.name}: {length} lines")
     assert not big_modules and not big_functions, big_modules + big_functions
+
+
+def test_public_core_functions_have_type_hints():
+    """Every public function of the core (module level and public methods of public classes; numba
+    kernels excepted) annotates each parameter and its return."""
+    missing = []
+    for name, path in _modules():
+        if not name.startswith("core"):
+            continue
+
+        def visit(body, public=True, name=name):
+            for node in body:
+                if isinstance(node, ast.ClassDef):
+                    visit(node.body, public and not node.name.startswith("_"), name)
+                elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    if node.name.startswith("_") or not public:
+                        continue
+                    decorators = {ast.unparse(d).split("(")[0].split(".")[-1].lstrip("_") for d in node.decorator_list}
+                    if decorators & set(NUMBA_DECORATORS):
+                        continue
+                    a = node.args
+                    args = [x for x in a.posonlyargs + a.args + a.kwonlyargs if x.arg not in ("self", "cls")]
+                    args += [x for x in (a.vararg, a.kwarg) if x is not None]
+                    if node.returns is None or any(x.annotation is None for x in args):
+                        missing.append(f"{name}.{node.name}")
+
+        visit(ast.parse(open(path, encoding="utf-8").read()).body)
+    assert not missing, missing

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -83,7 +84,7 @@ class FitConfig:
     portfolio_refine_until: float | None = None  # cma-portfolio: budget share after which refining gives way (1.0)
 
     @classmethod
-    def from_dict(cls, d):
+    def from_dict(cls, d: Any) -> FitConfig:
         if not isinstance(d, dict):
             raise ClothFitError(f"fit config: expected an object, got {type(d).__name__}")
         known = {f for f in cls.__dataclass_fields__}
@@ -198,7 +199,7 @@ class FitConfig:
         return {name: getattr(self, name) for name in SEARCH_OPTIONS if getattr(self, name) is not None}
 
 
-def check_resolution(res, what="resolution"):
+def check_resolution(res: Any, what: str = "resolution") -> tuple[int, int]:
     """(H, W) as two positive integers within the size limits."""
     try:
         h, w = res

@@ -27,9 +27,13 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import time
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
@@ -49,8 +53,14 @@ from .result import FitResult, job_result
 from .result import finite_or_none as _finite
 from .space import SearchSpace
 
+if TYPE_CHECKING:
+    from ..observation.camera import Camera
+    from ..observation.capture import Capture
 
-def load_observed(capture, cams, fidx, resolution=None):
+
+def load_observed(
+    capture: Capture, cams: Sequence[int], fidx: Sequence[int], resolution: Sequence[int] | None = None
+) -> tuple[list[Camera], list[list[np.ndarray]], list[list[np.ndarray | None]]]:
     """Cameras, observed silhouettes and ignore masks ``[cam][frame]`` of a capture, at ``resolution``."""
     cameras = [capture.cameras[c] for c in cams]
     observed, ignore = capture.load_observations(cams, fidx)
@@ -355,11 +365,11 @@ class FitJob:
         return checkpoint.identity(self)
 
     # ------------------------------------------------------------- mapping
-    def to_params(self, X):
+    def to_params(self, X: ArrayLike) -> np.ndarray:
         """Free vectors -> the model's parameter rows (paper: (P, 4) rows of m, k, l, d)."""
         return self.par.rows(np.atleast_2d(X)[:, : self.npar])
 
-    def evaluate(self, X, objective=None):
+    def evaluate(self, X: ArrayLike, objective: SilhouetteObjective | None = None) -> np.ndarray:
         """Training error (sum of E_sil over the training images) of candidates ``X`` (search space)."""
         obj = objective or self.objective
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
@@ -370,21 +380,21 @@ class FitJob:
 
     # ---------------------------------------------------------------- state
     @property
-    def evaluations(self):
+    def evaluations(self) -> int:
         return int(self.done_evals + (self.opt.evaluations if self.stage in ("search", "rung") else 0))
 
     @property
-    def generation(self):
+    def generation(self) -> int:
         return int(
             sum(r["generations"] for r in self.records)
             + (self.opt.generation if self.stage in ("search", "rung") else 0)
         )
 
     @property
-    def progress(self):
+    def progress(self) -> float:
         return 1.0 if self.finished else min(1.0, self.evaluations / max(1, self.config.max_evaluations))
 
-    def chosen_quality(self):
+    def chosen_quality(self) -> int | None:
         if self.ladder is None:
             return None
         return self.ladder.chosen() if self.ladder.tried else self.start_quality
@@ -400,16 +410,16 @@ class FitJob:
         return float("inf"), None
 
     @property
-    def best_error(self):
+    def best_error(self) -> float:
         """Best E_all found so far (sum over the training images) at the chosen quality."""
         return self._best()[0]
 
     @property
-    def best_x(self):
+    def best_x(self) -> np.ndarray | None:
         return self._best()[1]
 
     @property
-    def best_params(self):
+    def best_params(self) -> dict[str, float] | None:
         """The best parameters so far: paper m, k, l, d; Blender the ClothSettings values."""
         x = self.best_x
         if x is None:
@@ -559,7 +569,7 @@ class FitJob:
             self.save_checkpoint(self.checkpoint)
         return not self.finished
 
-    def run(self, callback=None):
+    def run(self, callback: Callable[[FitJob], Any] | None = None) -> FitResult:
         try:
             while self.step():
                 if callback is not None and callback(self):
@@ -584,7 +594,7 @@ class FitJob:
         except ClothFitError as e:  # never a reason to lose the result
             self.final = {"error": str(e)}
 
-    def cancel(self):
+    def cancel(self) -> None:
         """Stop; the best result so far is kept (and written to the checkpoint)."""
         self.cancelled = True
         if not self.finished:
@@ -595,7 +605,7 @@ class FitJob:
         if self.checkpoint:
             self.save_checkpoint(self.checkpoint)
 
-    def fail(self, message: str):
+    def fail(self, message: str) -> None:
         """Stop because of an error; the best so far is kept (and written to the checkpoint)."""
         self.error = str(message)
         self.stop_reason = "error"
@@ -642,27 +652,32 @@ class FitJob:
         """The result so far (``result.FitResult``; ``to_json()`` is what the result file holds)."""
         return job_result(self, isinstance(self.par, PaperParameters))
 
-    def save_result(self, path):
+    def save_result(self, path: str | os.PathLike) -> None:
         self.result().save(path)
 
     def checkpoint_dict(self) -> dict:
         return checkpoint.checkpoint_dict(self)
 
-    def save_checkpoint(self, path):
+    def save_checkpoint(self, path: str | os.PathLike) -> None:
         checkpoint.write_checkpoint(path, self.checkpoint_dict())
         self._last_save = time.monotonic()
 
     @classmethod
     def resume(
-        cls, path, capture=None, config: FitConfig | None = None, checkpoint_interval: float = 0.0, evaluator=None
-    ):
+        cls,
+        path: str | os.PathLike,
+        capture: Capture | None = None,
+        config: FitConfig | None = None,
+        checkpoint_interval: float = 0.0,
+        evaluator: Any = None,
+    ) -> FitJob:
         """Continue a job from its checkpoint (``checkpoint.resume``: a checkpoint of another fit is refused
         naming the differing fields; only the budget and the target may differ). ``evaluator``: the workers
         of a Blender-scene fit."""
         return checkpoint.resume(cls, FitConfig, path, capture, config, checkpoint_interval, evaluator)
 
 
-def joint_space(par_space, manip):
+def joint_space(par_space: SearchSpace, manip: ManipulationParameters | None) -> SearchSpace:
     """The cloth's search space followed by the manipulation's unknowns (linear, zero = as declared)."""
     if manip is None:
         return par_space
@@ -673,7 +688,7 @@ def joint_space(par_space, manip):
     return SearchSpace(names, bounds, logs)
 
 
-def atomic_json(path, obj):
+def atomic_json(path: str | os.PathLike, obj: Any) -> None:
     """Results: strict JSON (no NaN), written atomically (``jsonio.write_json``)."""
     write_json(path, obj, strict=True)
 

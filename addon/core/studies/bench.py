@@ -13,6 +13,8 @@ import os
 import platform
 import tempfile
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -115,7 +117,7 @@ def _bench_blender_model(tmp, quick, paper_rate):
     return res
 
 
-def bench_default_fit(tmp, echo=print, max_evaluations=None):
+def bench_default_fit(tmp: str, echo: Callable[..., Any] = print, max_evaluations: int | None = None) -> dict[str, Any]:
     """Issue 20's time to answer: the default fit of a 21 x 21 blender-model cloth (1 s settle + 1.5 s
     at 24 fps, 25 cm), 4 training cameras, 15 training frames at 480 x 640, the quality chosen by the
     fit (the capture declares none) and the manipulation's unknowns estimated (time offset 50 ms,
@@ -246,7 +248,13 @@ def _bench_fit(out, cap, train, evals):
     return peak_mb
 
 
-def run_bench(json_path, quick=False, only_blender_workers=False, only_default_fit=False, blender_workers=None):
+def run_bench(
+    json_path: str | os.PathLike,
+    quick: bool = False,
+    only_blender_workers: bool = False,
+    only_default_fit: bool = False,
+    blender_workers: Callable[[str], dict[str, Any]] | None = None,
+) -> dict[str, Any]:
     """The speed figures, written to ``json_path``. ``blender_workers(tmp) -> dict``: the figures of
     Blender's solver on workers (``farm.bench.bench_blender_workers``, passed in by the CLI: the farm
     is a layer above the core); without it they are reported as skipped."""
