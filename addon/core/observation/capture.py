@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import ClothFitError
+from ..jsonio import dumps, loads
 from ..physics.scenario import Scenario, Uncertainty
 from ..safeio import atomic_write
 from .camera import Camera, load_cameras, save_cameras
@@ -594,14 +595,6 @@ def read_shapes(path: str, frame_times: ArrayLike | None = None, n_vertices: int
 # ========================================================================= writing
 
 
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"{type(o).__name__} is not JSON serialisable")
-
-
 def write_capture(
     root: str | os.PathLike,
     cameras: Iterable[Camera],
@@ -651,10 +644,10 @@ def write_capture(
             f"{where}: silhouettes pattern {cap.pattern!r} must end with .png (silhouettes are written as lossless PNG)"
         )
     try:
-        text = json.dumps(cap.to_dict(), indent=1, default=_json_default, allow_nan=False)
+        text = dumps(cap.to_dict(), strict=True)
     except (TypeError, ValueError) as e:
         raise ClothFitError(f"{where}: meta is not JSON serialisable ({e})") from None
-    cap.meta = json.loads(text)["meta"]  # what a reader will get back
+    cap.meta = loads(text)["meta"]  # what a reader will get back
 
     ign_arrays = ignore if ignore is not None and ignore is not True else None
     if silhouettes is not None:
