@@ -67,6 +67,12 @@ def _imports():
     return graph, anywhere
 
 
+def _numba_kernel(node):
+    """A function under a numba decorator (``@njit(...)``, ``@numba.jit``, our ``@_intrinsic``)."""
+    names = {ast.unparse(d).split("(")[0].split(".")[-1].lstrip("_") for d in node.decorator_list}
+    return bool(names & set(NUMBA_DECORATORS))
+
+
 def _layer(name):
     return LAYERS.get(name.split(".")[0]) if name else None
 
@@ -120,8 +126,7 @@ def test_module_and_function_sizes():
         for node in ast.walk(ast.parse(text)):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 length = node.end_lineno - node.lineno + 1
-                decorators = {ast.unparse(d).split("(")[0].split(".")[-1].lstrip("_") for d in node.decorator_list}
-                if length > MAX_FUNCTION_LINES and not decorators & set(NUMBA_DECORATORS):
+                if length > MAX_FUNCTION_LINES and not _numba_kernel(node):
                     big_functions.append(f"{name}.{node.name}: {length} lines")
     assert not big_modules and not big_functions, big_modules + big_functions
 
@@ -141,8 +146,7 @@ def test_public_core_functions_have_type_hints():
                 elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                     if node.name.startswith("_") or not public:
                         continue
-                    decorators = {ast.unparse(d).split("(")[0].split(".")[-1].lstrip("_") for d in node.decorator_list}
-                    if decorators & set(NUMBA_DECORATORS):
+                    if _numba_kernel(node):
                         continue
                     a = node.args
                     args = [x for x in a.posonlyargs + a.args + a.kwonlyargs if x.arg not in ("self", "cls")]
