@@ -136,6 +136,12 @@ SOURCES = {
         "what": "issue 20 item 3: the exact-model capture's truth perturbed group by group (train and held-out "
         "error), and a CMA-ES run started 5 % from the truth (about 2 CPU min)",
     },
+    "search_oracle": {
+        "argv": ["{py}", "tools/search_ab.py", "synth:fresh", "--oracle", "{out}", "--samples", "128"],
+        "cost": "expensive",
+        "what": "issue 20 item 3: 128 points 1e-7, 1e-5 and 1e-3 (relative) round the truth of the fresh exact-model "
+        "capture, and the best of n by training error: what a search that came that close could keep (about 1 CPU min)",
+    },
     "search_tune": {
         "argv": [
             "{py}",

@@ -292,6 +292,44 @@ def local_start(b, rel=0.05, sigma=0.02, budget=1000, seed=0):
     return {"relative": rel, "sigma0": sigma, "budget": budget, "trace": trace}
 
 
+def oracle(b, samples=128, seed=5, relative=(1e-7, 1e-5, 1e-3), best_of=(1, 4, 16, 64)):
+    """What even a search that knew the truth could reach: ``samples`` points round the truth (every
+    setting off by +-rel, random signs), their held-out ratios, how often they are within 1.2x and
+    1.5x, the correlation of their training and held-out errors (the trajectory's jitter is the same
+    motion seen by every camera, so the training error sees it), and the held-out ratio of the best
+    of ``n`` of them by *training* error (disjoint groups; median and share <= 1.2x): a search must
+    come that close and then keep its luckiest point."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for rel in relative:
+        X = b.truth[None] * (1 + rel * rng.choice([-1.0, 1.0], size=(samples, b.truth.size)))
+        tr = b.job.objective(b.job.par.rows(X)) / b.job.objective.n_images * 100
+        ratio = b.hjob.objective(b.job.par.rows(X)) / b.hjob.objective.n_images * 100 / b.floor
+        sel = []
+        for n in best_of:
+            picked = np.array([ratio[i : i + n][np.argmin(tr[i : i + n])] for i in range(0, samples - n + 1, n)])
+            sel.append(
+                {
+                    "n": n,
+                    "groups": int(picked.size),
+                    "median_ratio": float(np.median(picked)),
+                    "within_1_2": float(np.mean(picked <= 1.2)),
+                }
+            )
+        out.append(
+            {
+                "relative": rel,
+                "samples": samples,
+                "median_ratio": float(np.median(ratio)),
+                "within_1_2": float(np.mean(ratio <= 1.2)),
+                "within_1_5": float(np.mean(ratio <= 1.5)),
+                "train_heldout_corr": float(np.corrcoef(tr, ratio)[0, 1]),
+                "best_of": sel,
+            }
+        )
+    return {"capture": b.path, "floor_pct": b.floor, "train_floor_pct": b.train_floor, "rows": out}
+
+
 def summary(rows):
     """Per (capture, strategy): seeds, median / best / worst ratio, seeds <= 1.2x, mean CPU."""
     groups = {}
@@ -370,7 +408,18 @@ def main(argv=None):
         help="JSONL files of earlier runs of this tool: a fit with the same capture name, strategy, "
         "seed and budget is taken from them instead of run again (the fits are deterministic)",
     )
+    ap.add_argument(
+        "--oracle",
+        help="instead of fits: points round the truth and the best of n by training error "
+        "(what a search that came that close could keep), written as JSON here",
+    )
+    ap.add_argument("--samples", type=int, default=128, help="with --oracle: points per distance")
     a = ap.parse_args(argv)
+    if a.oracle:
+        from clothfit.core.safeio import atomic_json
+
+        atomic_json(a.oracle, {"captures": [oracle(Bench(capture_path(c)), a.samples) for c in a.captures]})
+        return
     if a.landscape:
         from clothfit.core.safeio import atomic_json
 
