@@ -41,6 +41,36 @@ def test_core_blender_model_moves_like_blenders_cloth(name, settings):
     assert r["blender_cg_iterations"] is None or r["blender_cg_iterations"] > 0
 
 
+def _slack_scenario(n=9, hold=0.8, settle=0.5, after=0.5):
+    """The agreement sheet held with slack, as hands hold a cloth: its corners at ``hold`` of its size."""
+    from clothfit.core.physics.scenario import Handle, Scenario
+
+    sc = agreement.agreement_scenario(n, settle=settle, after=after)
+    c = sc.grid.rest.mean(0)
+    hs = [
+        Handle(h.vertex, h.times, c + hold * (h.positions - c) * np.array([1.0, 1.0, 0.0]), h.release_time)
+        for h in sc.handles
+    ]
+    return Scenario(sc.grid, hs, sc.frame_times, sc.settle_time, sc.gravity)
+
+
+def test_slack_hold_keeps_the_flat_rest_shape_and_blender_agrees():
+    """Corners held closer than the cloth's size: the rest shape (every rest length) is the flat
+    sheet's, the handles come to their held places during the first half of the settle, and Blender
+    built from that plan (keyed hooks) moves like the core to the bit."""
+    sc = _slack_scenario()
+    net, plan = BlenderModel(24).plan(sc)
+    flat = B.Network.from_grid(sc.grid)
+    assert np.array_equal(net.rest, sc.grid.rest) and np.allclose(net.struct_len, flat.struct_len)
+    held = np.array([h.positions[0] for h in sc.handles])
+    assert np.allclose(plan.targets[0], sc.grid.rest[plan.handle_vertices])
+    ramp_end = round(plan.settle_frames * 0.5)
+    assert np.allclose(plan.targets[ramp_end:, 1:], held[None, 1:])  # the held (unreleased) ones stay there
+    assert np.all(np.diff(plan.ramp) >= 0) and plan.ramp[0] == 0 and plan.ramp[ramp_end] == 1
+    r = agreement.compare(bpy.context.scene, sc, {})
+    assert r["max_mm"] < 0.01, r
+
+
 def test_the_comparison_sees_a_wrong_setting():
     """Blender's cloth with a different stiffness than the core's is reported far away."""
     scene = bpy.context.scene
@@ -170,6 +200,27 @@ def test_numpy_reference_tracks_the_kernel():
         b = m.simulate(sc, B.settings_row(s), backend="numpy").positions[0]
         d = np.linalg.norm(a - b, axis=-1) * 1000
         assert d.mean() < 0.3 and d.max() < 5.0, (st, d.mean(), d.max())
+
+
+def test_numpy_reference_tracks_the_kernel_on_a_slack_hold_with_offsets():
+    """Held with slack and with handle offsets (a fit of uncertain pins): the kernel's candidates and
+    the reference's moved scenarios ramp the same way (the offset moves the held place only)."""
+    pytest.importorskip("numba")
+    from clothfit.core.physics.scenario import Offsets
+
+    sc = _slack_scenario(after=0.3)
+    s = B.check_settings({"time_scale": B.physical_time_scale(24)})
+    m = BlenderModel(24)
+    rows = np.repeat(B.settings_row(s)[None], 2, 0)
+    off = np.zeros((2, 4, 3))
+    off[1] = [[0.003, 0, 0], [0, -0.002, 0.001], [0, 0, 0], [-0.001, 0.001, 0]]
+    o = Offsets(np.zeros(2), off)
+    a = m.simulate(sc, rows, backend="numba", offsets=o).positions
+    b = m.simulate(sc, rows, backend="numpy", offsets=o).positions
+    d = np.linalg.norm(a - b, axis=-1) * 1000
+    assert d.mean() < 0.3 and d.max() < 5.0, (d.mean(), d.max())
+    moved = np.linalg.norm(a[1] - a[0], axis=-1) * 1000
+    assert moved.max() > 1.0  # the offsets are not vacuous
 
 
 def test_vertex_mass_scales_out():

@@ -16,6 +16,7 @@ from __future__ import annotations
 import time
 
 import bpy
+import mathutils
 import numpy as np
 
 from ..core.errors import ClothFitError
@@ -88,10 +89,9 @@ def add_pins(scene, obj, plan: B.FramePlan, frame_start: int, name_prefix="cloth
         hook.vertex_indices_set([v])
         hook.falloff_type = "NONE"
         hook.strength = 1.0
-        # the hook moves the vertex by the empty's displacement from its first-frame place
-        m = np.eye(4)
-        m[:3, 3] = -T[0, k]
-        hook.matrix_inverse = [list(r) for r in m]
+        # the hook moves the vertex by the empty's displacement from its first-frame place (a Matrix:
+        # a nested list is read column by column, which put the translation in the bottom row)
+        hook.matrix_inverse = mathutils.Matrix.Translation([-float(c) for c in T[0, k]])
         added.append(hook.name)
     # handles released (or re-pinned) over time: one group and one keyed mix per weight track
     tracks = {}

@@ -330,6 +330,22 @@ def settle_note(settle_time: float, fps: float) -> str | None:
     )
 
 
+def settle_ramp(settle_frames: int, n_frames: int) -> np.ndarray | None:
+    """(n_frames + 1,) the handles' way from the flat cloth to their held positions: 0 at the start
+    frame, rising smoothly (smoothstep) to 1 over the first ``SETTLE_RAMP_FRACTION`` of the settle,
+    then 1; None without a settle (the handles are where they are held from the start frame on).
+
+    The cloth's rest shape, and with it every spring's rest length, is its first frame (Blender's
+    rule): a flat sheet of the declared size. Hands hold a cloth with slack (its corners closer than
+    its size), so putting the handles there at the start frame would drag their vertices across the
+    sheet and build the slack into the rest lengths; the ramp brings them there while it settles."""
+    if settle_frames <= 0:
+        return None
+    n_ramp = max(int(round(settle_frames * D.SETTLE_RAMP_FRACTION)), 1)
+    s = np.clip(np.arange(n_frames + 1, dtype=np.float64) / n_ramp, 0.0, 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
 @dataclass
 class FramePlan:
     """A scenario on Blender's timeline: frame ``frame_start`` is the first (rest) frame, the
@@ -352,6 +368,9 @@ class FramePlan:
     hi: np.ndarray
     w: np.ndarray  # weight of hi
     between: int  # capture times that fall between frames
+    # (n_frames + 1,) how far each handle has come from its vertex's place on the flat cloth to its
+    # held position (0 at the start frame, 1 from the end of the settle's ramp on); None: 1 throughout
+    ramp: np.ndarray | None = None
 
     @property
     def release_frame(self) -> int:  # relative to the start frame
@@ -374,13 +393,16 @@ class FramePlan:
         hs = scenario.handles
         hv = np.array([h.vertex for h in hs], dtype=np.int64)
         t = (np.arange(n_frames + 1) - sf) / fps
+        ramp = settle_ramp(sf, n_frames)
+        rest = scenario.grid.rest
         targets = np.zeros((n_frames + 1, len(hs), 3))
         weights = np.zeros((n_frames + 1, len(hs)))
         for k, h in enumerate(hs):
-            targets[:, k] = h.position(t)
+            held_at = h.position(t)
+            targets[:, k] = held_at if ramp is None else rest[h.vertex] + ramp[:, None] * (held_at - rest[h.vertex])
             held = h.held(t) | (t < 0)
             weights[:, k] = np.where(held, getattr(h, "weight", 1.0), 0.0)
-        return cls(float(fps), sf, n_frames, hv, targets, weights, lo, hi, w, int((~exact).sum()))
+        return cls(float(fps), sf, n_frames, hv, targets, weights, lo, hi, w, int((~exact).sum()), ramp)
 
     @property
     def settle_time(self) -> float:

@@ -630,9 +630,11 @@ class Prepared:
     def manipulation(self, offsets: ArrayLike | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Each candidate's pin targets (P, n_frames + 1, H, 3), rest lengths (P, S), rest angles (P, B)
         and ``avg_spring_len + FLT_EPSILON`` (P,), float32, for handle offsets (P, H, 3) [m] (None: the
-        plan's own handles for every candidate). An offset moves a handle's whole trajectory, its
-        position in the first frame included, so the candidate's rest shape is that of a Blender mesh
-        built with the handles there (Blender's rest lengths are the first frame's)."""
+        plan's own handles for every candidate). An offset moves the handle's held positions; with a
+        settle ramp (``blender.settle_ramp``) the handle comes there from the flat cloth as the plan's
+        own does, so the rest shape stays the flat sheet; without one it moves the first frame too, and
+        the candidate's rest shape is that of a Blender mesh built with the handles there (Blender's
+        rest lengths are the first frame's)."""
         if offsets is None:
             return None
         offsets = np.asarray(offsets, dtype=np.float64)
@@ -641,13 +643,15 @@ class Prepared:
         if offsets.shape != (P, H, 3):
             raise ValueError(f"handle offsets must be (P, {H}, 3), got {offsets.shape}")
         base = np.asarray(self.plan.targets, dtype=np.float64)
+        ramp = self.plan.ramp
+        gain = np.ones(base.shape[0]) if ramp is None else np.asarray(ramp, dtype=np.float64)
         targets = np.empty((P,) + base.shape, dtype=np.float32)
         restlen = np.empty((P, self.restlen.size), dtype=np.float32)
         restang = np.empty((P, self.restang.size), dtype=np.float32)
         avg = np.empty(P, dtype=np.float32)
         first = np.asarray(self.net.rest, dtype=np.float64).copy()
         for p in range(P):
-            t = base + offsets[p][None]
+            t = base + gain[:, None, None] * offsets[p][None]
             targets[p] = t
             first[self.hv] = t[0]
             restlen[p], a, restang[p] = self._setup(np.ascontiguousarray(first, dtype=np.float32))
