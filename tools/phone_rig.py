@@ -509,6 +509,9 @@ RELEASED = "right"
 # line cannot buckle: its corner would only sag in its plane)
 CLIP_Y = {"third": 0.010, "two-thirds": -0.010}
 FPS = 30.0
+# the clips were put on long before the filming starts: the truth settles a full second (the clips come from
+# the flat cloth to the rod in its first half), so nothing moves before the release
+TRUTH_SETTLE = 1.0
 TRUTH_FPS = 150.0  # the truth's Blender frame rate (quality 1)
 BEFORE = 0.1  # s filmed before the release
 CLICK_SIGMA = 0.5  # px: a person's click on a zoomed frame
@@ -592,7 +595,7 @@ def cloth_truth(seed: int, frames: int):
         verts[name] = v
         pos = grid.rest[v] + [0.0, CLIP_Y.get(name, 0.0), 0.0]
         handles.append(Handle(v, [0.0], pos[None], t_release if name == RELEASED else None))
-    scen = Scenario(grid, handles, times)
+    scen = Scenario(grid, handles, times, TRUTH_SETTLE)
     mass = CLOTH_GSM * CLOTH_W * CLOTH_H
     settings = true_settings(mass / grid.n_vertices)
     fine = dict(settings, quality=1, time_scale=B.physical_time_scale(TRUTH_FPS))

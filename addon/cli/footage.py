@@ -746,7 +746,7 @@ def _add_handles(sub):
     s.add_argument(
         "--settle",
         type=float,
-        default=D.SETTLE_TIME,
+        default=D.FOOTAGE_SETTLE_TIME,
         help="seconds of settling before t = 0 written into the scenario (default: %(default)s)",
     )
 

@@ -39,7 +39,7 @@ class HandleOptions:
     departure_k: float = D.HANDLE_DEPARTURE_K
     max_pin_offset: float = D.HANDLE_MAX_PIN_OFFSET_M
     smooth: int = D.HANDLE_SMOOTH_FRAMES
-    settle_time: float = D.SETTLE_TIME
+    settle_time: float = D.FOOTAGE_SETTLE_TIME
 
     def check(self) -> HandleOptions:
         for nm in (

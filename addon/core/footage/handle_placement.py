@@ -236,6 +236,7 @@ def assign_vertices(
     if float(place.residuals_m.max(initial=0.0)) > 0.5 * grid.spacing:
         warnings.append(
             f"the placed cloth misses the clips by up to {place.residuals_m.max() * 1000:.1f} mm (more than "
-            f"half a grid cell): the rest lengths near them are distorted; check the cloth size and 'at'"
+            f"half a grid cell): the model's clips pull the cloth there while it settles, which a real cloth of that size would "
+            f"not need; check the cloth size and 'at'"
         )
     return place, vertices
