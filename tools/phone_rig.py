@@ -431,6 +431,10 @@ def run_calibrate(a) -> dict:
                 "rotation_deg": CB.rotation_angle_deg(e.R @ t.R.T),
                 "gravity_deg": math.degrees(math.acos(max(-1.0, min(1.0, float(up_true @ up_est))))),
                 "rms_px": rep["rms_px"],
+                # the spread calibrate reports (its views' first-order covariance): the error to expect
+                "rotation_sd_deg": rep.get("rotation_sd_deg"),
+                "tilt_sd_deg": rep.get("tilt_sd_deg"),
+                "principal_point_sd_px": rep.get("principal_point_sd_px"),
                 "views_used": rep["views_used"],
                 "views_rendered": len(views[t.name]),
                 "dist_true": t.dist.tolist(),
@@ -955,12 +959,14 @@ def run_e2e(a) -> dict:
     cal = []
     for e in load_cameras(P["cams"]):
         t = truth_cams[e.name]
+        rep = next((c for c in calib["cameras"] if c["name"] == e.name), {})
         cal.append(
             {
                 "camera": e.name,
                 "focal_pct": float(100 * abs(e.K[0, 0] / t.K[0, 0] - 1)),
                 "centre_mm": float(1000 * np.linalg.norm(e.center - t.center)),
                 "rotation_deg": CB.rotation_angle_deg(e.R @ t.R.T),
+                "rotation_sd_deg": rep.get("rotation_sd_deg"),
             }
         )
     out = {
