@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -448,7 +448,7 @@ class ManipulationParameters:
         }
 
 
-def release_instants(model, scenario: Scenario, time_offset_s: float | None, uncertainty_s: float | None) -> list:
+def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None, uncertainty_s: float | None) -> list:
     """Where a fit puts each released handle's release on the capture's clock: the instant the model's
     cloth starts to fall (``model.release_instant``: Blender's cloth lets go at the last held frame, so
     up to a frame before the declared time) plus the fitted ``time_offset_s`` (true time = capture
