@@ -815,6 +815,8 @@ def handle_error_sources(cams, est_cams, marks: dict, truth_w, vertices: dict, s
             ("clicks_calibrated_mm", est, clicks),
         ):
             out[key][h["name"]] = 1000.0 * float(np.linalg.norm(triangulate(cs, pts).X - Xt))
+    for key in ("clicks_true_cameras_mm", "true_points_calibrated_mm", "clicks_calibrated_mm"):
+        out[key.replace("_mm", "_worst_mm")] = max(out[key].values())
     rng = np.random.default_rng([seed, 15])
     worst = []
     for _ in range(draws):
