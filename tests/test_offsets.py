@@ -122,4 +122,5 @@ def test_release_instants_put_the_models_release_on_the_capture_clock():
     assert r["declared_s"] == 0.1 and r["model_s"] == pytest.approx(3 / 30) and r["capture_s"] == pytest.approx(0.12)
     assert r["uncertainty_s"] == 0.004 and r["vertex"] == sc.handles[r["handle"]].vertex
     assert release_instants(BlenderModel(30.0, 5), sc, None, None) == []
+    assert release_instants(object(), sc, 0.02, None) == []  # a model that does not say when it lets go
     assert release_instants(PaperModel(), sc, -0.01, None)[0]["capture_s"] == pytest.approx(0.09)

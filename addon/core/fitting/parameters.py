@@ -452,15 +452,16 @@ def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None
     """Where a fit puts each released handle's release on the capture's clock: the instant the model's
     cloth starts to fall (``model.release_instant``: Blender's cloth lets go at the last held frame, so
     up to a frame before the declared time) plus the fitted ``time_offset_s`` (true time = capture
-    time - offset). Empty when nothing is released or the offset was not estimated (None)."""
-    if time_offset_s is None:
+    time - offset). Empty when nothing is released, the offset was not estimated (None) or the model
+    does not say when its cloth lets go (a user's own scene: its pins are its own)."""
+    at = getattr(model, "release_instant", None)
+    if time_offset_s is None or at is None:
         return []
     out = []
     for k, h in enumerate(scenario.handles):
         if h.release_time is None:
             continue
-        at = getattr(model, "release_instant", None)
-        m = float(at(h.release_time)) if at is not None else float(h.release_time)
+        m = float(at(h.release_time))
         out.append(
             {
                 "handle": k,
