@@ -32,7 +32,8 @@ distortion, then sensor noise and a JPEG), in a child process: this driver never
 compared with the true ones, in the calibration's own world frame (the board at the first moment:
 origin at the chessboard's centre, Z out of its face): focal length error [%], camera centre error
 [mm], rotation error [deg], the reprojection RMS [px] and the gravity direction error [deg] (the
-angle between each calibrated camera's world up and the scene's true up, seen from that camera).
+angle between each calibrated camera's world up and the scene's true up, seen from that camera), beside
+the spread calibrate reports for each camera (``rotation_sd_deg``, ``tilt_sd_deg``: what its views leave).
 
 Everything random comes from ``--seed``: a seed not run before is a rig, a lens set and a set of
 board poses nobody has seen. The table is level, so the flat board's normal is the true up.
