@@ -8,7 +8,7 @@ from clothfit.core.errors import ClothFitError
 from clothfit.core.fitting.parameters import ManipulationParameters, fitted_scenario
 from clothfit.core.physics import blender as B
 from clothfit.core.physics.models import BlenderModel, PaperModel
-from clothfit.core.physics.scenario import ClothGrid, Offsets, Scenario, Uncertainty, paper_scenario
+from clothfit.core.physics.scenario import ClothGrid, Handle, Offsets, Scenario, Uncertainty, paper_scenario
 
 
 def _scenario():
@@ -89,3 +89,38 @@ def test_manipulation_parameters_coordinates_and_the_fitted_scenario():
     bad = dict(d, handles=d["handles"][:2])
     with pytest.raises(ClothFitError, match="2 fitted handles for a scenario with 4"):
         fitted_scenario(sc, bad)
+
+
+def _released_at(sc, t_release):
+    hs = [Handle(h.vertex, h.times, h.positions, t_release if h.release_time is not None else None) for h in sc.handles]
+    return Scenario(sc.grid, hs, sc.frame_times, sc.settle_time, sc.gravity)
+
+
+def test_blender_release_instant_is_where_the_cloth_starts_to_fall():
+    """Blender's cloth pins per frame: every declared release inside a frame interval falls as one
+    declared at the interval's start (``release_instant``), and one declared just before that start
+    falls a frame earlier: the simulation, not the formula, is the truth here."""
+    sc = _scenario()
+    model = BlenderModel(24.0, 2)
+    row = B.settings_row(dict(B.DEFAULTS, time_scale=B.physical_time_scale(24.0)))[None]
+    fall = {}
+    for tr in (2.3 / 24, 2.0 / 24, 2.97 / 24, 1.98 / 24):
+        fall[tr] = model.simulate(_released_at(sc, tr), row).positions[0]
+        assert model.release_instant(tr) == pytest.approx(2.0 / 24 if tr >= 2.0 / 24 else 1.0 / 24)
+    np.testing.assert_array_equal(fall[2.3 / 24], fall[2.0 / 24])
+    np.testing.assert_array_equal(fall[2.97 / 24], fall[2.0 / 24])
+    assert np.abs(fall[1.98 / 24] - fall[2.0 / 24]).max() > 1e-4
+    assert model.release_instant(-0.01) == pytest.approx(-1.0 / 24)  # released while settling: the step into t = 0
+    assert PaperModel().release_instant(2.3 / 24) == 2.3 / 24
+
+
+def test_release_instants_put_the_models_release_on_the_capture_clock():
+    from clothfit.core.fitting.parameters import release_instants
+
+    sc = _released_at(_scenario(), 0.1)
+    (r,) = release_instants(BlenderModel(30.0, 5), sc, 0.02, 0.004)
+    assert r["declared_s"] == 0.1 and r["model_s"] == pytest.approx(3 / 30) and r["capture_s"] == pytest.approx(0.12)
+    assert r["uncertainty_s"] == 0.004 and r["vertex"] == sc.handles[r["handle"]].vertex
+    assert release_instants(BlenderModel(30.0, 5), sc, None, None) == []
+    assert release_instants(object(), sc, 0.02, None) == []  # a model that does not say when it lets go
+    assert release_instants(PaperModel(), sc, -0.01, None)[0]["capture_s"] == pytest.approx(0.09)

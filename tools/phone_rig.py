@@ -14,10 +14,12 @@ settings the pipeline is not told. Then, through the CLI as a user runs it on th
 (true image points + 0.5 px), the size and the mass only: ``calibrate``, ``handles``, ``extract``,
 ``fit --model blender`` (3 free settings, ``--uncertain none``), ``export-blender-cloth``; and the same
 fit on the same silhouettes given the true cameras and manipulation. Compared: the calibration, the clips
-(mm), the release frame and instant, each fit's settings replayed under the true manipulation against
-the true cloth (mean vertex distance, mm) and their ratio (goal <= 2); with ``--uncertain-evals`` also the
-fit that estimates the capture's uncertain block (time offset, clip offsets) and the release instant it
-implies (goal: within a third of a frame).
+(mm; and what that error is made of: the clicks alone, the calibration alone, the floor 0.5 px clicks
+leave with perfect cameras), the release frame and instant, each fit's settings replayed under the true
+manipulation against the true cloth (mean vertex distance, mm) and their ratio (goal <= 2); with
+``--uncertain-evals`` also the fit that estimates the capture's uncertain block (time offset, clip offsets)
+and the release instant it implies (goal: within a third of a frame): the fit's ``release_instants``, where
+its model's cloth starts to fall (Blender's cloth lets go at the last held frame) plus the fitted offset.
 
 ``calibrate``: four phone-like cameras stand round a table (portrait 1080 x 1920 scaled by
 ``--scale``, different focal lengths and lens distortion, principal points off centre), a printed
@@ -30,7 +32,8 @@ distortion, then sensor noise and a JPEG), in a child process: this driver never
 compared with the true ones, in the calibration's own world frame (the board at the first moment:
 origin at the chessboard's centre, Z out of its face): focal length error [%], camera centre error
 [mm], rotation error [deg], the reprojection RMS [px] and the gravity direction error [deg] (the
-angle between each calibrated camera's world up and the scene's true up, seen from that camera).
+angle between each calibrated camera's world up and the scene's true up, seen from that camera), beside
+the spread calibrate reports for each camera (``rotation_sd_deg``, ``tilt_sd_deg``: what its views leave).
 
 Everything random comes from ``--seed``: a seed not run before is a rig, a lens set and a set of
 board poses nobody has seen. The table is level, so the flat board's normal is the true up.
@@ -431,6 +434,10 @@ def run_calibrate(a) -> dict:
                 "rotation_deg": CB.rotation_angle_deg(e.R @ t.R.T),
                 "gravity_deg": math.degrees(math.acos(max(-1.0, min(1.0, float(up_true @ up_est))))),
                 "rms_px": rep["rms_px"],
+                # the spread calibrate reports (its views' first-order covariance): the error to expect
+                "rotation_sd_deg": rep.get("rotation_sd_deg"),
+                "tilt_sd_deg": rep.get("tilt_sd_deg"),
+                "principal_point_sd_px": rep.get("principal_point_sd_px"),
                 "views_used": rep["views_used"],
                 "views_rendered": len(views[t.name]),
                 "dist_true": t.dist.tolist(),
@@ -789,6 +796,49 @@ def replay_error_mm(settings: dict, tr: dict) -> dict:
     }
 
 
+def handle_error_sources(cams, est_cams, marks: dict, truth_w, vertices: dict, seed: int, draws: int = 400) -> dict:
+    """What the clips' 3-D error is made of (``cams``: the true cameras in the calibration's world frame,
+    ``est_cams``: the calibrated ones, by name; ``truth_w``: the true points in that frame): per clip the
+    triangulation of the clicks by the true cameras (the click noise alone), of the true image points by
+    the calibrated cameras (the calibration alone) and of the clicks by the calibrated cameras (both, without
+    tracking); and the click noise's floor: over ``draws`` draws of CLICK_SIGMA px clicks on the true image
+    points, triangulated by the true cameras, the median of the worst clip and how often it is within the
+    1 mm goal."""
+    from clothfit.core.footage.handle_triangulate import triangulate
+
+    names = [c.name for c in cams]
+    est = [est_cams[n] for n in names]
+    out = {"clicks_true_cameras_mm": {}, "true_points_calibrated_mm": {}, "clicks_calibrated_mm": {}}
+    for h in marks["handles"]:
+        Xt = truth_w[vertices[h["name"]]]
+        clicks = [np.asarray(h["marks"][n], float) for n in names]
+        true_px = [c.project(Xt) for c in cams]
+        for key, cs, pts in (
+            ("clicks_true_cameras_mm", cams, clicks),
+            ("true_points_calibrated_mm", est, true_px),
+            ("clicks_calibrated_mm", est, clicks),
+        ):
+            out[key][h["name"]] = 1000.0 * float(np.linalg.norm(triangulate(cs, pts).X - Xt))
+    for key in ("clicks_true_cameras_mm", "true_points_calibrated_mm", "clicks_calibrated_mm"):
+        out[key.replace("_mm", "_worst_mm")] = max(out[key].values())
+    rng = np.random.default_rng([seed, 15])
+    worst = []
+    for _ in range(draws):
+        e = []
+        for v in vertices.values():
+            Xt = truth_w[v]
+            pts = [c.project(Xt) + rng.normal(0, CLICK_SIGMA, 2) for c in cams]
+            e.append(1000.0 * float(np.linalg.norm(triangulate(cams, pts).X - Xt)))
+        worst.append(max(e))
+    out["click_floor"] = {
+        "draws": draws,
+        "click_sigma_px": CLICK_SIGMA,
+        "worst_clip_median_mm": float(np.median(worst)),
+        "worst_clip_within_1mm_fraction": float(np.mean(np.asarray(worst) <= 1.0)),
+    }
+    return out
+
+
 def run_e2e(a) -> dict:
     from clothfit.core.observation.camera import save_cameras
     from clothfit.core.physics.scenario import Scenario
@@ -958,12 +1008,14 @@ def run_e2e(a) -> dict:
     cal = []
     for e in load_cameras(P["cams"]):
         t = truth_cams[e.name]
+        rep = next((c for c in calib["cameras"] if c["name"] == e.name), {})
         cal.append(
             {
                 "camera": e.name,
                 "focal_pct": float(100 * abs(e.K[0, 0] / t.K[0, 0] - 1)),
                 "centre_mm": float(1000 * np.linalg.norm(e.center - t.center)),
                 "rotation_deg": CB.rotation_angle_deg(e.R @ t.R.T),
+                "rotation_sd_deg": rep.get("rotation_sd_deg"),
             }
         )
     out = {
@@ -985,6 +1037,14 @@ def run_e2e(a) -> dict:
         },
         "handles_mm": handle_mm,
         "handles_max_mm": max(handle_mm.values()),
+        "handles_error_sources": handle_error_sources(
+            list(truth_cams.values()),
+            {e.name: e for e in load_cameras(P["cams"])},
+            marks,
+            truth_w,
+            tr["vertices"],
+            a.seed,
+        ),
         "release_frame": rel_rep["release_frame"],
         "true_release_frame": true_frame,
         "release_frame_exact": rel_rep["release_frame"] == true_frame,
@@ -1023,8 +1083,13 @@ def run_e2e(a) -> dict:
             "uncertain_block": sdoc.get("uncertain"),
         }
         out["shape_ratio_uncertain"] = rep_u["mean_mm"] / oracle["mean_mm"]
-        if t_off is not None:  # true time = capture time - t_off: the release shows in the frames t_off later
-            out["release_time_error_frames_fit"] = (rel_h.release_time + t_off - tr["release_time"]) / period
+        # the fit's release on the capture's clock (fitting.parameters.release_instants): the instant its model's
+        # cloth starts to fall (Blender's cloth lets go at the last held frame, up to a frame before the declared
+        # time) plus the fitted offset (true time = capture time - t_off)
+        inst = next((r for r in res_u.get("release_instants") or [] if r["vertex"] == rel_h.vertex), None)
+        if inst is not None:
+            out["fit"]["uncertain"]["release_instant"] = inst
+            out["release_time_error_frames_fit"] = (inst["capture_s"] - tr["release_time"]) / period
     out["goals"] = {
         "shape_ratio_le_2": out["shape_ratio"] <= E2E_GOALS["shape_ratio"],
         "release_frame_exact": out["release_frame_exact"],
@@ -1101,6 +1166,12 @@ def format_e2e(o: dict) -> str:
             f"{c['centre_mm']:.2f} mm, rotation {c['rotation_deg']:.3f} deg",
             f"handles: worst {o['handles_max_mm']:.2f} mm; release frame {o['release_frame']} (true "
             f"{o['true_release_frame']}), release time off by {o['release_time_error_frames_handles']:+.3f} frame",
+            "handles, what the error is made of (worst clip): the clicks by the true cameras "
+            f"{max(o['handles_error_sources']['clicks_true_cameras_mm'].values()):.2f} mm, the true points by the "
+            f"calibrated cameras {max(o['handles_error_sources']['true_points_calibrated_mm'].values()):.2f} mm; "
+            f"{CLICK_SIGMA:g} px clicks alone: worst clip median "
+            f"{o['handles_error_sources']['click_floor']['worst_clip_median_mm']:.2f} mm, within 1 mm in "
+            f"{100 * o['handles_error_sources']['click_floor']['worst_clip_within_1mm_fraction']:.0f} % of draws",
             f"fit (end to end):  {f['e2e']['settings']}  replay {f['e2e']['replay']['mean_mm']:.3f} mm",
             f"fit (truth given): {f['truth_given']['settings']}  replay {f['truth_given']['replay']['mean_mm']:.3f} mm",
             f"shape error ratio {o['shape_ratio']:.2f} (goal <= 2)",

@@ -443,7 +443,9 @@ def cmd_calibrate(a):
     for c in res.report["cameras"]:
         print(
             f"{c['name']:<12} RMS {c['rms_px']:.3f} px  views {c['views_used']} ({c['views_shared']} shared)  "
-            f"fx {c['fx']:.1f}  centre {[round(x, 3) for x in c['centre_m']]} m"
+            f"fx {c['fx']:.1f}  centre {[round(x, 3) for x in c['centre_m']]} m  (spread: rotation "
+            f"{c['rotation_sd_deg']:.2f} deg, centre {c['centre_sd_mm']:.1f} mm, principal point "
+            f"{c['principal_point_sd_px']:.1f} px)"
         )
     print(
         f"overall RMS {res.report['rms_px']:.3f} px over {res.report['corners']} corners, "

@@ -47,7 +47,14 @@ from .checkpoint import STOP_REASONS, capture_hash, identity_diff, read_checkpoi
 from .config import SEARCH_OPTIONS, FitConfig, check_resolution  # noqa: F401 (re-exported)
 from .objective import SilhouetteObjective
 from .optimise import canonical_name, make_optimizer
-from .parameters import ManipulationParameters, PaperParameters, SceneParameters, declared_model, make_parameters
+from .parameters import (
+    ManipulationParameters,
+    PaperParameters,
+    SceneParameters,
+    declared_model,
+    make_parameters,
+    release_instants,
+)
 from .quality import Ladder
 from .result import FitResult, job_result
 from .result import finite_or_none as _finite
@@ -641,6 +648,11 @@ class FitJob:
             and not self.profile["time_offset_s"]["separated"]
         ):
             d["time_offset_s"] = None
+        rel = release_instants(
+            self.par.model, self.capture.scenario, d.get("time_offset_s"), d.get("time_offset_uncertainty_s")
+        )
+        if rel:
+            d["release_instants"] = rel
         if self.profile is None:
             notes.append("uncertainties not estimated (the fit stopped before its profile)")
         d["manipulation_profile"] = self.profile

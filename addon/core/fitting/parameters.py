@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -446,3 +446,30 @@ class ManipulationParameters:
             "uncertain": self.uncertainty.to_dict(),
             "handles": handles,
         }
+
+
+def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None, uncertainty_s: float | None) -> list:
+    """Where a fit puts each released handle's release on the capture's clock: the instant the model's
+    cloth starts to fall (``model.release_instant``: Blender's cloth lets go at the last held frame, so
+    up to a frame before the declared time) plus the fitted ``time_offset_s`` (true time = capture
+    time - offset). Empty when nothing is released, the offset was not estimated (None) or the model
+    does not say when its cloth lets go (a user's own scene: its pins are its own)."""
+    at = getattr(model, "release_instant", None)
+    if time_offset_s is None or at is None:
+        return []
+    out = []
+    for k, h in enumerate(scenario.handles):
+        if h.release_time is None:
+            continue
+        m = float(at(h.release_time))
+        out.append(
+            {
+                "handle": k,
+                "vertex": int(h.vertex),
+                "declared_s": float(h.release_time),
+                "model_s": m,
+                "capture_s": m + float(time_offset_s),
+                "uncertainty_s": uncertainty_s,
+            }
+        )
+    return out

@@ -13,7 +13,8 @@ Keys (see README's fit result): ``format``/``version``; what was fitted (``captu
 ``model``); the search (``optimizer``, ``seed``, ``evaluations``, ``generations``, ``stop_reason``,
 ``stages``, ``history``...); the answer (paper: ``params``, ``identifiable``; Blender:
 ``blender_cloth``, ``blender_scene``); the errors (``best_E_sil_mean_pct``, ``floor``...); the
-fitted manipulation (``time_offset_s``, ``handles``, ``manipulation_profile``, ``manipulation_note``).
+fitted manipulation (``time_offset_s``, ``handles``, ``release_instants``: each released handle's
+release on the capture's clock, ``manipulation_profile``, ``manipulation_note``).
 """
 
 from __future__ import annotations

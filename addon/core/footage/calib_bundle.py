@@ -238,3 +238,66 @@ def bundle_adjust(
     for k, m in enumerate(prob.moments):
         out_board[m] = (rodrigues(brd[k, :3])[0], brd[k, 3:].copy())
     return out_intr, out_cam, out_board, res.fun.reshape(-1, 2), prob, res
+
+
+# ======================================================================= uncertainty
+
+
+def _world_cameras(prob: Problem, x: np.ndarray, world_index: int, centre: np.ndarray) -> np.ndarray:
+    """Per camera ``[R (9), centre (3), f, cx, cy]`` in the world of the board at ``world_index`` (no up
+    correction): camera <- reference (``Rc, tc``), reference <- board (``Rb, tb``), board -> world (FLIP)."""
+    fx, fy, cx, cy, _, ext, brd = _unpack(prob, x)
+    Rc, tc = rodrigues(ext[:, :3]), ext[:, 3:]
+    Rb, tb = rodrigues(brd[world_index, :3][None])[0], brd[world_index, 3:]
+    flip = np.diag([1.0, -1.0, -1.0])
+    out = []
+    for ci in range(len(prob.cams)):
+        R = Rc[ci] @ Rb @ flip
+        c_ref = -Rc[ci].T @ tc[ci]
+        c_w = flip @ (Rb.T @ (c_ref - tb) - centre)
+        out.append(np.concatenate([R.ravel(), c_w, [0.5 * (fx[ci] + fy[ci]), cx[ci], cy[ci]]]))
+    return np.asarray(out)
+
+
+def camera_uncertainty(prob: Problem, res: OptimizeResult, world_index: int, board: Board) -> list[dict]:
+    """Per camera the standard deviations its fit leaves (first order: the Gauss-Newton covariance
+    ``s^2 (J^T J)^-1`` of the last adjustment, ``s`` the residuals' RMS per degree of freedom),
+    carried to the world of the board at ``world_index`` (before any up correction): ``rotation_sd_deg``
+    (RMS rotation angle), ``tilt_sd_deg`` (of the world's up seen from the camera: the gravity error),
+    ``centre_sd_mm``, ``focal_sd_pct``, ``principal_point_sd_px``. What the views can pin down: a
+    principal point the views leave loose turns the camera with it."""
+    J = res.jac.toarray() if hasattr(res.jac, "toarray") else np.asarray(res.jac)
+    m, n = J.shape
+    s2 = float(np.sum(res.fun**2)) / max(m - n, 1)
+    C = s2 * np.linalg.pinv(J.T @ J)
+    x0 = res.x
+    centre = board.centre()
+    base = _world_cameras(prob, x0, world_index, centre)
+    ncam = base.shape[0]
+    G = np.zeros((ncam, 9, n))  # per camera: rotation (3), centre (3), f, cx, cy against x
+    step = 1e-7 * np.maximum(np.abs(x0), 1.0)
+    for i in range(n):
+        xp = x0.copy()
+        xp[i] += step[i]
+        w = _world_cameras(prob, xp, world_index, centre)
+        for ci in range(ncam):
+            dR = w[ci, :9].reshape(3, 3) @ base[ci, :9].reshape(3, 3).T
+            # the small rotation's vector (the skew part: Rodrigues rounds a 1e-7 rad turn to zero)
+            G[ci, :3, i] = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]]) / step[i]
+            G[ci, 3:, i] = (w[ci, 9:] - base[ci, 9:]) / step[i]
+    out = []
+    for ci in range(ncam):
+        S = G[ci] @ C @ G[ci].T
+        up = base[ci, :9].reshape(3, 3)[:, 2]  # the world's Z in the camera's axes
+        P = np.eye(3) - np.outer(up, up)
+        f = base[ci, 12]
+        out.append(
+            {
+                "rotation_sd_deg": float(np.degrees(np.sqrt(max(np.trace(S[:3, :3]), 0.0)))),
+                "tilt_sd_deg": float(np.degrees(np.sqrt(max(np.trace(P @ S[:3, :3] @ P), 0.0)))),
+                "centre_sd_mm": float(1000.0 * np.sqrt(max(np.trace(S[3:6, 3:6]), 0.0))),
+                "focal_sd_pct": float(100.0 * np.sqrt(max(S[6, 6], 0.0)) / f),
+                "principal_point_sd_px": float(np.sqrt(max(S[7, 7] + S[8, 8], 0.0))),
+            }
+        )
+    return out

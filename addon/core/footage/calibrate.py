@@ -49,7 +49,7 @@ from ..observation.camera import Camera
 
 # calibrate.X names that addon/cli.py, tests/test_calibrate.py and tools/phone_rig.py use
 from .calib_board import Board, _natural_key, make_board, parse_board  # noqa: E402,F401
-from .calib_bundle import bundle_adjust
+from .calib_bundle import bundle_adjust, camera_uncertainty
 from .calib_detect import (
     Detections,
     Detector,  # noqa: E402,F401
@@ -167,6 +167,9 @@ def calibrate_views(board: Board, det: Detections, opts: Options, log: Callable[
     for m, (Rb, tb) in board_pose.items():  # board -> world
         board_world[m] = (R_w @ Rb, R_w @ tb + t_w)
     report = _report(board, det, views, prob, resid, cams_out, frame, dropped_views, rejected, opts, status)
+    # what the views leave loose, per camera (first order, the last adjustment's covariance)
+    for row, unc in zip(report["cameras"], camera_uncertainty(prob, status, prob.moments.index(world), board)):
+        row.update(unc)
     return Result(cams_out, report, board_world)
 
 

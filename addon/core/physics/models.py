@@ -54,6 +54,11 @@ class PaperModel:
     def to_dict(self) -> dict:
         return {"name": self.name}
 
+    def release_instant(self, release_time: float) -> float:
+        """When this model's cloth starts to fall for a handle declared released at ``release_time``:
+        the sheet's steps meet the release time exactly (``paper.py``), so at that time."""
+        return float(release_time)
+
     def simulate(
         self,
         scenario: Scenario,
@@ -94,6 +99,20 @@ class BlenderModel:
 
     def settings(self, row: ArrayLike) -> dict:
         return B.row_settings(row, self.quality, self.bending_model)
+
+    def release_instant(self, release_time: float) -> float:
+        """When this model's cloth starts to fall for a handle declared released at ``release_time``:
+        Blender pins per frame (``blender.FramePlan``: pinned during the step into every frame at or
+        before the release time, frames at multiples of 1/fps from t = 0), so the fall starts at the
+        last held frame, up to one frame before the declared instant. A fit's ``time_offset_s`` moves
+        that frame against the capture's clock: it is how the fit places the release between frames."""
+        t = float(release_time)
+        j = max(math.floor(t * self.fps), -1)
+        while (j + 1) / self.fps <= t:  # the frames' own test (t_frame <= release_time), against rounding
+            j += 1
+        while j >= 0 and j / self.fps > t:
+            j -= 1
+        return j / self.fps
 
     def plan(self, scenario: Scenario) -> tuple[B.Network, B.FramePlan]:
         """(network, frame plan) of a scenario, built once per scenario object."""
