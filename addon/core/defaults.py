@@ -33,8 +33,8 @@ SETTLE_TIME = 0.5  # seconds of settling under gravity with all handles held, be
 FOOTAGE_SETTLE_TIME = 1.0
 # the blender model's handles go from the flat cloth to their held positions over this share of the settle
 # (physics/blender.settle_ramp): the rest shape stays the flat sheet; the rest of the settle lets it come to
-# rest. Issue 20: a continuum cloth held with slack fitted to 32.5 % held-out with the handles put there at
-# the start frame (slack built into the rest lengths) and to 3.0 % with this ramp (docs/issue20_goals.md)
+# rest. Issue 20: a continuum cloth held with slack fitted to 32.4 % held-out with the handles put there at
+# the start frame (slack built into the rest lengths) and to 3.1 % with this ramp (docs/issue20_goals.md)
 SETTLE_RAMP_FRACTION = 0.5
 SETTLE_DAMPING_RATE = 40.0  # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
 EXPLODE_FACTOR = 10.0  # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded
