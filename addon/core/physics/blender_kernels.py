@@ -650,12 +650,16 @@ class Prepared:
         restang = np.empty((P, self.restang.size), dtype=np.float32)
         avg = np.empty(P, dtype=np.float32)
         first = np.asarray(self.net.rest, dtype=np.float64).copy()
+        moves_first = bool(gain[0] != 0.0)  # with a settle ramp the first frame, and the rest shape, is the plan's
         for p in range(P):
             t = base + gain[:, None, None] * offsets[p][None]
             targets[p] = t
-            first[self.hv] = t[0]
-            restlen[p], a, restang[p] = self._setup(np.ascontiguousarray(first, dtype=np.float32))
-            avg[p] = F32(a + FLT_EPS)
+            if moves_first:
+                first[self.hv] = t[0]
+                restlen[p], a, restang[p] = self._setup(np.ascontiguousarray(first, dtype=np.float32))
+                avg[p] = F32(a + FLT_EPS)
+            else:
+                restlen[p], restang[p], avg[p] = self.restlen, self.restang, self.avg_eps
         return targets, restlen, restang, avg
 
     def lane_params(self, rows: ArrayLike, avg_eps: ArrayLike | None = None) -> np.ndarray:
