@@ -654,6 +654,24 @@ SOURCES = {
         "what": "issue 18 end to end: phones -> calibrate, handles, extract, fit, export-blender-cloth on Cycles "
         "renders, against the same fit given the true cameras and manipulation",
     },
+    "phone_rig_sensitivity": {
+        "argv": [
+            "{py}",
+            "tools/phone_rig.py",
+            "sensitivity",
+            "--seed",
+            "7",
+            "--frames",
+            "15",
+            "--e2e",
+            "out/phone_rig/e2e_s7",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "issue 18: the true settings replayed under the clips phone_rig_e2e measured, and under clips moved "
+        "by 1 mm per axis: how far the clips alone move the cloth (needs that run's folder)",
+    },
     "blender_scene_fit": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
         "output": "out/scene_fit/summary.json",

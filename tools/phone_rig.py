@@ -1189,6 +1189,89 @@ def format_e2e(o: dict) -> str:
     )
 
 
+def run_sensitivity(a) -> dict:
+    """How much the clips' positions alone move the cloth: the TRUE settings (at the fits' frame rate and
+    quality) replayed under (1) the true manipulation, (2) the clips as an e2e run measured them (``--e2e``:
+    its scenario.json, in the calibration's world frame) and (3) ``--draws`` draws of clips moved by
+    ``--sigma-mm`` per axis round the true ones; each against the true cloth (mean vertex distance [mm])."""
+    from clothfit.core.observation.metrics import shape_error_mm
+    from clothfit.core.physics import blender as B
+    from clothfit.core.physics.models import BlenderModel
+    from clothfit.core.physics.scenario import Handle, Scenario
+
+    tr = cloth_truth(a.seed, a.frames)
+    scen = tr["scenario"]
+    s = dict(true_settings(CLOTH_GSM * CLOTH_W * CLOTH_H / scen.grid.n_vertices), quality=a.quality)
+    model = BlenderModel(FPS, s["quality"], s["bending_model"])
+    row = B.settings_row(s)[None]
+
+    def replay(sc, truth):
+        se = shape_error_mm(model.simulate(sc, row).positions[0], truth)
+        after = tr["times"] > tr["release_time"]
+        return {"mean_mm": float(se.mean()), "before_release_mm": float(se[~after].mean()), "end_mm": float(se[-1])}
+
+    def moved(sc, d):
+        hs = [
+            Handle(h.vertex, list(h.times), np.asarray(h.positions) + dk, h.release_time)
+            for h, dk in zip(sc.handles, d)
+        ]
+        return Scenario(sc.grid, hs, sc.frame_times, sc.settle_time)
+
+    out = {
+        "seed": a.seed,
+        "frames": a.frames,
+        "quality": a.quality,
+        "true_manipulation": replay(scen, tr["positions"]),
+        "sigma_mm": a.sigma_mm,
+    }
+    rng = np.random.default_rng([a.seed, 21])
+    draws = []
+    for _ in range(a.draws):
+        d = rng.normal(0.0, a.sigma_mm / 1000.0, (len(scen.handles), 3))
+        r = replay(moved(scen, d), tr["positions"])
+        r["clip_error_mm"] = (1000 * np.linalg.norm(d, axis=1)).tolist()
+        draws.append(r)
+    out["clips_moved"] = draws
+    out["clips_moved_mean_mm"] = float(np.mean([r["mean_mm"] for r in draws]))
+    if a.e2e:
+        with open(os.path.join(a.e2e, "spec.json")) as f:
+            spec = json.load(f)
+        with open(os.path.join(a.e2e, "scenario.json")) as f:
+            meas = Scenario.from_dict(json.load(f)["scenario"])
+        board = CB.parse_board(spec["board"])
+        pose0 = tuple(np.asarray(v, dtype=np.float64) for v in spec["poses"][0])
+        truth_w = np.stack([world_from_scene(board, pose0, x) for x in tr["positions"]])
+        clips = [world_from_scene(board, pose0, np.asarray(h.positions[0])[None])[0] for h in scen.handles]
+        out["measured_clips"] = replay(meas, truth_w)
+        out["measured_clip_error_mm"] = [
+            1000 * float(np.linalg.norm(np.asarray(h.positions[0]) - c)) for h, c in zip(meas.handles, clips)
+        ]
+        true_at = [Handle(h.vertex, [0.0], c[None], h.release_time) for h, c in zip(meas.handles, clips)]
+        out["measured_placement_true_clips"] = replay(
+            Scenario(meas.grid, true_at, meas.frame_times, meas.settle_time), truth_w
+        )
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(out, f, indent=1)
+    t = out["true_manipulation"]
+    print(f"true settings, true clips: {t['mean_mm']:.2f} mm (the model's own floor at quality {a.quality})")
+    if a.e2e:
+        m = out["measured_clips"]
+        print(
+            f"true settings, the clips as measured ({', '.join(f'{e:.2f}' for e in out['measured_clip_error_mm'])} mm "
+            f"off): {m['mean_mm']:.2f} mm (before the release {m['before_release_mm']:.2f}, last frame {m['end_mm']:.2f})"
+        )
+        print(
+            f"true settings, the measured placement with the true clips: {out['measured_placement_true_clips']['mean_mm']:.2f} mm"
+        )
+    each = ", ".join(f"{r['mean_mm']:.2f}" for r in draws)
+    print(
+        f"true settings, clips moved by {a.sigma_mm:g} mm per axis ({a.draws} draws): mean "
+        f"{out['clips_moved_mean_mm']:.2f} mm ({each})"
+    )
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -1261,6 +1344,18 @@ def main(argv=None):
     )
     e.add_argument("--verbose", action="store_true", help="show Blender's output")
     e.add_argument("--json", help="write the comparison here")
+    sv = sub.add_parser(
+        "sensitivity",
+        help="the true settings replayed under the clips as measured and under clips moved by a small error: "
+        "how far the clips alone move the cloth",
+    )
+    sv.add_argument("--seed", type=int, default=0, help="the rig's seed (the truth, as e2e) (default: %(default)s)")
+    sv.add_argument("--frames", type=int, default=18, help="frames filmed at 30 fps (default: %(default)s)")
+    sv.add_argument("--quality", type=int, default=5, help="the fits' Blender quality (default: %(default)s)")
+    sv.add_argument("--sigma-mm", type=float, default=1.0, help="clip error per axis [mm] (default: %(default)s)")
+    sv.add_argument("--draws", type=int, default=8, help="draws of clip errors (default: %(default)s)")
+    sv.add_argument("--e2e", help="an e2e run's folder (same seed): also the clips it measured")
+    sv.add_argument("--json", help="write the figures here")
     r = sub.add_parser("_render", help="(internal) the child process that renders with bpy")
     r2 = sub.add_parser("_render_e2e", help="(internal) the child process that renders the end-to-end rig")
     r2.add_argument("--spec", required=True)
@@ -1274,6 +1369,9 @@ def main(argv=None):
         return 0
     if a.cmd == "e2e":
         run_e2e(a)
+        return 0
+    if a.cmd == "sensitivity":
+        run_sensitivity(a)
         return 0
     if a.cmd == "calibrate":
         run_calibrate(a)
