@@ -68,19 +68,7 @@ def _probes(job, x, f0):
             out.append(("quality", f"the error still fell at the highest quality tried ({top})", 0.0))
     if lad is None and job.evaluator is None and getattr(job.par.model, "name", "") == "blender":
         q = job.par.model.quality
-        from ..physics.models import BlenderModel
-
-        cameras, observed, ignore, names = job._images
-        obj = SilhouetteObjective(
-            job.scenario,
-            cameras,
-            observed,
-            backend=job.config.backend,
-            names=names,
-            model=BlenderModel(job.par.model.fps, min(80, 2 * q), job.par.model.bending_model),
-            ignore=ignore,
-        )
-        f = float(job.evaluate(x[None], objective=obj)[0])
+        f = float(job.evaluate(x[None], objective=job.objective_at(min(80, 2 * q)))[0])
         out.append(("quality", f"quality {min(80, 2 * q)} instead of {q}", f / f0))
     if job.evaluator is None and getattr(job.par.model, "name", "") == "blender":
         X = np.atleast_2d(x)

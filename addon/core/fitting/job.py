@@ -348,23 +348,26 @@ class FitJob:
             self.evaluator.quality = int(quality)
             self.par.fixed["quality"] = int(quality)
             return
-        if quality not in self._objectives:
-            if quality == self.start_quality and not self._objectives:
-                self._objectives[quality] = self.objective
-            else:
-                cameras, observed, ignore, names = self._images
-                self._objectives[quality] = SilhouetteObjective(
-                    self.scenario,
-                    cameras,
-                    observed,
-                    backend=self.config.backend,
-                    names=names,
-                    model=self._model_at(quality),
-                    ignore=ignore,
-                )
-        self.objective = self._objectives[quality]
+        if quality == self.start_quality and not self._objectives:
+            self._objectives[quality] = self.objective
+        self.objective = self.objective_at(quality)
         self.par.model = self.objective.model
         self.par.fixed["quality"] = int(quality)
+
+    def objective_at(self, quality) -> SilhouetteObjective:
+        """The training objective simulated at ``quality`` (kept once built; not made the running one)."""
+        if quality not in self._objectives:
+            cameras, observed, ignore, names = self._images
+            self._objectives[quality] = SilhouetteObjective(
+                self.scenario,
+                cameras,
+                observed,
+                backend=self.config.backend,
+                names=names,
+                model=self._model_at(quality),
+                ignore=ignore,
+            )
+        return self._objectives[quality]
 
     # ------------------------------------------------------------- identity
     def identity(self) -> dict:
