@@ -1,6 +1,6 @@
 # Silhouette Cloth Fit: every command sets up its own environment first.
 #   make demo   - the paper scenario on the built-in lab18 rig: Blender-rendered observations, fit,
-#                 overlays and the pictures of the README's "The demo" under out/demo, Table 1 in out/
+#                 overlays and the pictures of docs/demo.md (and the README's first picture) under out/demo, Table 1 in out/
 #   make test   - the whole test suite (pure core + Blender layer through the bpy module)
 #   make lint   - ruff check and ruff format --check (pyproject.toml [tool.ruff])
 #   make bench  - speed figures (out/bench.json)
