@@ -176,6 +176,27 @@ SOURCES = {
         "5 % noise, tension 25 shear 8), held-out error over the floor, seeds 0-9 where run: the fits are those of "
         "the rows file (written by this tool; drop --only-reused to run the missing ones, about 2 CPU min each)",
     },
+    "search_ab_damped": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            "synth:damped",
+            "--strategies",
+            "baseline,staged",
+            "--seeds",
+            "0-9",
+            "--reuse",
+            "docs/figures/search_ab_damped_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: the strong settings first ('staged') against today's search on an exact-model capture "
+        "whose every setting is off Blender's defaults (tension 15, compression 9, dampings 12 / 2 / 1.5), seeds 0-9 "
+        "where run: the fits of the rows file (drop --only-reused to run the missing ones, about 2 CPU min each)",
+    },
     "blender_scene_warm": {
         "argv": [
             "{py}",

@@ -252,7 +252,9 @@ def _search_args(s):
     s.add_argument(
         "--optimizer",
         default=D.DEFAULT_OPTIMIZER,
-        help="cma-es or spx-mgg, the paper's real-coded GA (default: %(default)s)",
+        help="cma-es, spx-mgg (the paper's real-coded GA), cma-portfolio, or cma-staged (Blender's cloth: "
+        "tension, shear, bending and air damping first, then every setting; docs/search.md) "
+        "(default: %(default)s)",
     )
     s.add_argument("--seed", type=int, default=0, help="random seed of the optimiser (default: %(default)s)")
     s.add_argument(

@@ -174,6 +174,10 @@ QUALITY_RUNG_FRACTION = 0.07  # each rung: a warm-started CMA-ES run of 7 % of t
 QUALITY_RUNGS_RESERVED = 4  # the budget kept for rungs (4 x 7 % = 28 %): one down, up to three up (5 -> 8 -> 12 -> 18)
 QUALITY_CLEARLY_BETTER = 0.10  # climbing continues while a rung fits > 10 % better than every lower one
 SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
+STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the strong settings alone (1200 of 2500)
+STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best
+STAGED_STRONG = ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping")  # what the
+# silhouettes see most (docs/search.md, The landscape): searched first, the other settings held at their defaults
 PROFILE_STEP = 0.1  # the manipulation's uncertainty: the objective at +-10 % of each bound around the best
 PROFILE_RISE = 0.01  # uncertainty = the offset at which the training error rises by 1 % (a quadratic
 # through the three points); flat or concave = the fit cannot separate it

@@ -14,7 +14,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from .optimise import FIT_OPTIMIZERS, canonical_name
 
-_CMA = ("cma-es", "cma-portfolio")
+_CMA = ("cma-es", "cma-portfolio", "cma-staged")
 # FitConfig's optimiser options: field -> (the optimiser's keyword, the optimisers it applies to). None (the
 # default) leaves the optimiser as it has always been built; only options that are set enter the fit's identity.
 SEARCH_OPTIONS = {

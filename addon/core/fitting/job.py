@@ -263,7 +263,7 @@ class FitJob:
 
     def _optimizer_kw(self, warm_x=None):
         cfg = self.config
-        is_cma = self.optimizer_name in ("cma-es", "cma-portfolio")
+        is_cma = self.optimizer_name in ("cma-es", "cma-portfolio", "cma-staged")
         tolfun = (
             D.FIT_TOLFUN_PER_IMAGE if cfg.tolfun_per_image is None else cfg.tolfun_per_image
         ) * self.objective.n_images
@@ -282,6 +282,8 @@ class FitJob:
                 kw["sigma0"] = D.WARM_START_SIGMA
         paper = isinstance(self.par, PaperParameters)
         n = self.space.n
+        if self.optimizer_name == "cma-staged" and warm_x is None:
+            kw.update(self._staged_kw())
         if self.optimizer_name == "cma-portfolio" and warm_x is None:  # docs/search.md: runs share the budget
             kw["budget"] = max(1, self.search_budget())
             kw["popsize"] = cfg.population if cfg.population is not None else 4 + int(3 * math.log(n))
@@ -308,6 +310,21 @@ class FitJob:
             kw[key] = value
         if cfg.sigma0 is not None and warm_x is None:
             kw["sigma0"] = cfg.sigma0
+        return kw
+
+    def _staged_kw(self) -> dict:
+        """cma-staged: the settings the silhouettes see most (``STAGED_STRONG``) and the manipulation's
+        unknowns first, every other setting held where the fit starts (Blender's defaults at this
+        mass, or the warm start's); the main search's budget."""
+        par = self.par
+        names = list(self.space.names)
+        free = list(getattr(par, "free", []))
+        strong = [n for n in D.STAGED_STRONG if n in free]
+        kw = {"budget": max(1, self.search_budget())}
+        if strong and hasattr(par, "_coord") and hasattr(par, "fixed"):
+            kw["first"] = strong + names[self.npar :]
+            if par.initial is None:
+                kw["hold"] = {n: par._coord(n, par.fixed[n]) for n in free if n not in strong}
         return kw
 
     def search_budget(self) -> int:

@@ -18,7 +18,8 @@ The optimisers, one per module, each with ``ask`` / ``tell`` / ``stopped`` and a
 * :mod:`.ga`: :class:`SPXMGG` ("spx-mgg"), the paper's GA;
 * :mod:`.evolution_strategy`: :class:`CMAES` ("cma-es"), with active CMA and IPOP restarts;
 * :mod:`.portfolio`: :class:`CMAPortfolio` ("cma-portfolio");
-* :mod:`.polish`: :class:`CoordinatePolish` ("coord-polish").
+* :mod:`.polish`: :class:`CoordinatePolish` ("coord-polish");
+* :mod:`.staged`: :class:`StagedCMA` ("cma-staged"), the strong settings first.
 
 This module only names them: :data:`OPTIMIZERS`, :data:`FIT_OPTIMIZERS`, :func:`make_optimizer`,
 :func:`optimizer_from_state`.
@@ -34,10 +35,22 @@ from .ga import SPXMGG
 from .polish import CoordinatePolish
 from .portfolio import CMAPortfolio
 from .space import SearchSpace
+from .staged import StagedCMA
 from .steppable import Optimizer
 
-OPTIMIZERS = {"spx-mgg": SPXMGG, "cma-es": CMAES, "cma-portfolio": CMAPortfolio, "coord-polish": CoordinatePolish}
-FIT_OPTIMIZERS = ("cma-es", "spx-mgg", "cma-portfolio")  # the searches a fit may run (coord-polish is a polish)
+OPTIMIZERS = {
+    "spx-mgg": SPXMGG,
+    "cma-es": CMAES,
+    "cma-portfolio": CMAPortfolio,
+    "coord-polish": CoordinatePolish,
+    "cma-staged": StagedCMA,
+}
+FIT_OPTIMIZERS = (
+    "cma-es",
+    "spx-mgg",
+    "cma-portfolio",
+    "cma-staged",
+)  # the searches a fit may run (coord-polish is a polish)
 ALIASES = {
     "spx-mgg": "spx-mgg",
     "spx_mgg": "spx-mgg",
@@ -52,6 +65,9 @@ ALIASES = {
     "portfolio": "cma-portfolio",
     "coord-polish": "coord-polish",
     "coord_polish": "coord-polish",
+    "cma-staged": "cma-staged",
+    "cma_staged": "cma-staged",
+    "staged": "cma-staged",
 }
 
 

@@ -1,0 +1,272 @@
+"""The strong settings first ("cma-staged").
+
+:class:`StagedCMA` runs CMA-ES (IPOP restarts) over a subset of the coordinates, ``first``, with
+every other coordinate held at ``hold``, for ``first_fraction`` of ``budget`` evaluations (or until
+that run stops by its own criteria); then CMA-ES over every coordinate from the best point found,
+with step ``second_sigma``. On Blender's cloth the silhouettes see tension, shear, bending and air
+damping far more than compression and the structural dampings (docs/search.md, *The landscape*):
+a search over all eight at once spends its budget in the directions it cannot see, while the four
+it can see are found within a fraction of the budget on their own (docs/search.md, *Strong settings
+first*, has the A/B). Same ask/tell and exact-resume contract as the other optimisers.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .. import defaults as D
+from ..errors import ClothFitError
+from .evolution_strategy import CMA_STOPS, CMAES
+from .space import (
+    SearchSpace,
+    _active,
+    _array,
+    _field,
+    _flag,
+    _integer,
+    _num,
+    _number,
+    _rng_state_from_json,
+    reflect_unit,
+    sanitize_fitness,
+)
+from .steppable import Optimizer
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+
+class StagedCMA(Optimizer):
+    """CMA-ES over ``first`` (the others held), then over everything from the best point.
+
+    ``first``: names of the space searched in the first stage (default: all of them); ``hold``:
+    name -> value (real units) of coordinates held during the first stage (default: the mean of
+    ``initial``, else the middle of the unit cube). ``popsize``: the second stage's population
+    (the first stage's is Hansen's 4 + 3 ln k for its k coordinates); ``sigma0``, ``restarts``,
+    ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
+    ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
+    """
+
+    name = "cma-staged"
+
+    def __init__(
+        self,
+        space: SearchSpace,
+        seed=None,
+        initial=None,
+        popsize=None,
+        sigma0: float = 0.3,
+        tolx: float = 1e-11,
+        tolfun: float = 1e-11,
+        active: bool = False,
+        restarts: int = 4,
+        first=None,
+        hold: dict | None = None,
+        first_fraction: float = D.STAGED_FIRST_FRACTION,
+        budget: int | None = None,
+        second_sigma: float = D.STAGED_SECOND_SIGMA,
+    ):
+        super().__init__(space, seed, initial)
+        w = "cma-staged"
+        names = list(space.names)
+        first = names if first is None else [str(n) for n in first]
+        if first_fraction == 0.0:
+            first = names  # no first stage: one CMA-ES run over everything
+        unknown = [n for n in first if n not in names]
+        if unknown or not first:
+            raise ClothFitError(f"{w}: 'first' must name coordinates of the search ({', '.join(names)}), got {first}")
+        self.first = [n for n in names if n in set(first)]
+        self.popsize = _integer(D.CMA_POPSIZE if popsize is None else popsize, f"{w}: popsize", 2)
+        self.sigma0 = _number(sigma0, f"{w}: sigma0 (unit cube)", 0.0, 10.0, lo_open=True)
+        self.second_sigma = _number(second_sigma, f"{w}: second_sigma (unit cube)", 0.0, 10.0, lo_open=True)
+        self.tolx = _number(tolx, f"{w}: tolx")
+        self.tolfun = _number(tolfun, f"{w}: tolfun")
+        self.active = _flag(active, f"{w}: active")
+        self.restarts = _integer(restarts, f"{w}: restarts", 0, 100)
+        self.first_fraction = _number(first_fraction, f"{w}: first_fraction", 0.0, 1.0)
+        self.budget = _integer(D.FIT_EVALUATIONS if budget is None else budget, f"{w}: budget")
+        u = self._initial_u.mean(axis=0) if len(self._initial_u) else np.full(space.n, 0.5)
+        x = space.decode(u)
+        for n, v in (hold or {}).items():
+            if n not in names:
+                raise ClothFitError(f"{w}: 'hold' names {n!r}, not a coordinate of the search")
+            x[names.index(n)] = float(v)
+        self.hold_u = np.clip(space.encode(x), 0.0, 1.0)
+        self.stage = 1
+        self._stopped = False
+        sub = self._subspace()
+        init = [space.decode(self.hold_u)[self._idx]] if len(self._initial_u) else None
+        k = sub.n if len(self.first) < space.n else None
+        self.children = [self._child(sub, self.popsize if k is None else 4 + int(3 * np.log(k)), self.sigma0, init)]
+
+    @property
+    def _idx(self) -> list:
+        return [self.space.names.index(n) for n in self.first]
+
+    def _subspace(self) -> SearchSpace:
+        b, lg = self.space.bounds, self.space.log_scaled
+        return SearchSpace(self.first, {n: b[n] for n in self.first}, {n: lg[n] for n in self.first})
+
+    def _child(self, space, popsize, sigma, initial):
+        return CMAES(
+            space,
+            seed=int(self.rng.integers(0, 2**63 - 1)),
+            initial=initial,
+            popsize=popsize,
+            sigma0=sigma,
+            restarts=self.restarts,
+            tolx=self.tolx,
+            tolfun=self.tolfun,
+            active=self.active,
+        )
+
+    @property
+    def stopped(self) -> bool:
+        return self._stopped
+
+    @property
+    def stop_reason(self):
+        return self.children[-1].stop_reason
+
+    @property
+    def run_popsize(self) -> int:
+        return self.children[-1].run_popsize
+
+    def phase_info(self) -> str:
+        return f"stage {self.stage} ({', '.join(self.first) if self.stage == 1 else 'all'})"
+
+    def ask(self) -> np.ndarray:
+        if self._stopped:
+            raise ClothFitError("cma-staged: ask() after it has stopped")
+        c = self.children[-1]
+        Xc = c.ask()
+        if self.stage == 2 or len(self.first) == self.space.n:
+            return Xc
+        X = np.repeat(self.space.decode(self.hold_u)[None], len(Xc), 0)
+        X[:, self._idx] = Xc
+        return X
+
+    def tell(self, X: ArrayLike, f: ArrayLike) -> None:
+        c = self.children[-1]
+        if c._pending is None:
+            raise ClothFitError("tell() called without a pending ask()")
+        sub_u = reflect_unit(c._pending)
+        if self.stage == 1 and len(self.first) < self.space.n:
+            U = np.repeat(self.hold_u[None], len(sub_u), 0)
+            U[:, self._idx] = sub_u
+        else:
+            U = sub_u
+        self._check_told(X, U)
+        f = sanitize_fitness(f, len(U))
+        A = np.asarray(X, dtype=np.float64)
+        c.tell(A[:, self._idx] if (self.stage == 1 and len(self.first) < self.space.n) else A, f)
+        self._record(U, f)
+        if self.stage == 1 and len(self.first) < self.space.n:
+            if c.stopped or c.evaluations >= self.first_fraction * self.budget:
+                self.stage = 2
+                self.children.append(
+                    self._child(self.space, self.popsize, self.second_sigma, [self.space.decode(self._best_u)])
+                    if self._best_u is not None
+                    else self._child(self.space, self.popsize, self.sigma0, None)
+                )
+        elif c.stopped:
+            self._stopped = True
+
+    STATE_KEYS = (
+        "popsize",
+        "sigma0",
+        "second_sigma",
+        "tolx",
+        "tolfun",
+        "active",
+        "restarts",
+        "first",
+        "first_fraction",
+        "budget",
+        "hold_u",
+        "stage",
+        "stopped",
+        "children",
+        "rng",
+        "initial_u",
+    )
+
+    def state_dict(self) -> dict:
+        d = self._base_state()
+        d.update(
+            {
+                "popsize": self.popsize,
+                "sigma0": self.sigma0,
+                "second_sigma": self.second_sigma,
+                "tolx": self.tolx,
+                "tolfun": self.tolfun,
+                "active": self.active,
+                "restarts": self.restarts,
+                "first": list(self.first),
+                "first_fraction": self.first_fraction,
+                "budget": self.budget,
+                "hold_u": self.hold_u.tolist(),
+                "stage": self.stage,
+                "stopped": self._stopped,
+                "children": [c.state_dict() for c in self.children],
+                "rng": self.rng.bit_generator.state,
+                "initial_u": self._initial_u.tolist(),
+            }
+        )
+        return d
+
+    @classmethod
+    def from_state(cls, d: dict) -> StagedCMA:
+        w = cls.name
+        space = cls._check_state(d, w, cls.STATE_KEYS)
+        n = space.n
+        opt = cls.__new__(cls)
+        Optimizer.__init__(opt, space, d["seed"], None)
+        opt.popsize = _num(d, "popsize", w, int, 2, 10**6)
+        opt.sigma0 = _number(_num(d, "sigma0", w, float), f"checkpoint: {w} 'sigma0'", 0.0, 10.0, lo_open=True)
+        opt.second_sigma = _number(
+            _num(d, "second_sigma", w, float), f"checkpoint: {w} 'second_sigma'", 0.0, 10.0, lo_open=True
+        )
+        opt.tolx = _num(d, "tolx", w, float, 0.0)
+        opt.tolfun = _num(d, "tolfun", w, float, 0.0)
+        opt.active = _active(d, w)
+        opt.restarts = _num(d, "restarts", w, int, 0, 100)
+        first = _field(d, "first", w)
+        if (
+            not isinstance(first, list)
+            or not first
+            or any(not isinstance(x, str) or x not in space.names for x in first)
+            or first != [x for x in space.names if x in set(first)]
+        ):
+            raise ClothFitError(f"checkpoint: {w} 'first' must list coordinates of the search in order")
+        opt.first = list(first)
+        opt.first_fraction = _num(d, "first_fraction", w, float, 0.0, 1.0)
+        opt.budget = _num(d, "budget", w, int, 1, 10**12)
+        opt._load_base(d)
+        opt.hold_u = _array(d, "hold_u", w, (n,))
+        if np.any(opt.hold_u < 0.0) or np.any(opt.hold_u > 1.0):
+            raise ClothFitError(f"checkpoint: {w} 'hold_u' must lie in the unit cube")
+        opt.stage = _num(d, "stage", w, int, 1, 2)
+        st = _field(d, "stopped", w)
+        if not isinstance(st, bool):
+            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
+        opt._stopped = st
+        kids = _field(d, "children", w)
+        if not isinstance(kids, list) or len(kids) != opt.stage or any(not isinstance(k, dict) for k in kids):
+            raise ClothFitError(f"checkpoint: {w} 'children' must hold one CMA-ES state per stage")
+        opt.children = []
+        for i, k in enumerate(kids):
+            if k.get("algorithm") != "cma-es":
+                raise ClothFitError(f"checkpoint: {w} 'children' hold a state of the wrong algorithm")
+            c = CMAES.from_state(k)
+            want = opt._subspace() if (i == 0 and len(opt.first) < n) else space
+            if c.space.state_dict() != want.state_dict():
+                raise ClothFitError(f"checkpoint: {w} 'children' hold a run of another search space")
+            if c.stop_reason is not None and c.stop_reason not in CMA_STOPS:
+                raise ClothFitError(f"checkpoint: {w} 'children' hold an unknown stop criterion")
+            opt.children.append(c)
+        opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
+        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        return opt

@@ -1,0 +1,149 @@
+"""Tests of the strong-settings-first search (addon/core/fitting/staged.py StagedCMA): its two stages,
+the held coordinates, exact JSON resume in either stage, bad checkpoints, and FitJob's wiring."""
+
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import json
+
+import numpy as np
+import pytest
+from clothfit.core import defaults as D
+from clothfit.core.errors import ClothFitError
+from clothfit.core.fitting.optimise import make_optimizer, optimizer_from_state
+from clothfit.core.fitting.space import SearchSpace
+from clothfit.core.fitting.staged import StagedCMA
+
+
+def space(n=5):
+    return SearchSpace(
+        [f"x{i}" for i in range(n)], {f"x{i}": (-5.0, 5.0) for i in range(n)}, {f"x{i}": False for i in range(n)}
+    )
+
+
+def strong_weak(X):
+    """x0, x1 matter a lot (minimum at 1.5, -2), x2..x4 a little (minimum at 2)."""
+    X = np.atleast_2d(X)
+    return 10 * ((X[:, 0] - 1.5) ** 2 + (X[:, 1] + 2.0) ** 2) + 0.01 * np.sum((X[:, 2:] - 2.0) ** 2, axis=1)
+
+
+def test_first_stage_holds_the_others_then_searches_everything():
+    assert type(make_optimizer("staged", space(), seed=0)) is StagedCMA
+    opt = StagedCMA(space(), seed=3, first=["x1", "x0"], hold={"x2": 0.5, "x3": -1.0}, budget=600, tolfun=1e-12)
+    assert opt.first == ["x0", "x1"]  # in the space's order
+    stage1 = []
+    while opt.stage == 1:
+        X = opt.ask()
+        assert X.shape[1] == 5
+        # held: x2, x3 at the given values, x4 at the middle of its range
+        assert np.allclose(X[:, 2], 0.5) and np.allclose(X[:, 3], -1.0) and np.allclose(X[:, 4], 0.0)
+        stage1.append(len(X))
+        opt.tell(X, strong_weak(X))
+    # the first stage spends its share (one generation over at most)
+    assert D.STAGED_FIRST_FRACTION * 600 <= sum(stage1) < D.STAGED_FIRST_FRACTION * 600 + 10
+    assert abs(opt.best_x[0] - 1.5) < 0.01 and abs(opt.best_x[1] + 2.0) < 0.01
+    # the second stage starts at the first's best point, with the small step, over all five
+    c2 = opt.children[-1]
+    assert c2.space.n == 5 and np.allclose(c2.mean, opt.space.encode(opt.best_x), atol=1e-9)
+    moved = False
+    while opt.evaluations < 3000 and not opt.stopped:
+        X = opt.ask()
+        moved |= bool(np.any(np.abs(X[:, 2] - 0.5) > 1e-6))
+        opt.tell(X, strong_weak(X))
+    assert moved and abs(opt.best_x[2] - 2.0) < 0.3
+
+
+def test_no_first_stage_is_plain_cma_over_everything():
+    opt = StagedCMA(space(), seed=1, first=["x0"], first_fraction=0.0)
+    assert opt.first == list(opt.space.names) and opt.stage == 1
+    X = opt.ask()
+    assert len(X) == opt.popsize and not np.allclose(X[:, 4], X[0, 4])
+
+
+# 6 per generation over 2 coordinates, the switch after 144 evaluations (24 generations): checkpointed in
+# the first stage, with the batch whose tell switches pending, and in the second
+@pytest.mark.parametrize("cut", [7, 23, 60])
+def test_resume_is_exact_in_either_stage(cut):
+    def make():
+        return StagedCMA(space(), seed=5, first=["x0", "x1"], hold={"x4": 1.0}, budget=300)
+
+    a = make()
+    for _ in range(cut):
+        X = a.ask()
+        a.tell(X, strong_weak(X))
+    X = a.ask()  # checkpointed between ask and tell
+    state = json.loads(json.dumps(a.state_dict(), allow_nan=False))
+    b = optimizer_from_state(state)
+    assert type(b) is StagedCMA and b.stage == a.stage
+    for _ in range(25):
+        Xb = b.ask() if _ else X
+        assert np.array_equal(Xb, X)
+        a.tell(X, strong_weak(X))
+        b.tell(Xb, strong_weak(Xb))
+        X = a.ask()
+    assert a.best_f == b.best_f and a.evaluations == b.evaluations
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        (lambda d: d.update(first=["nope"]), "'first'"),
+        (lambda d: d.update(stage=3), "'stage'"),
+        (lambda d: d.update(hold_u=[2.0] * 5), "'hold_u'"),
+        (lambda d: d.update(children=[]), "'children'"),
+        (lambda d: d["children"][0].update(algorithm="spx-mgg"), "wrong algorithm"),
+    ],
+)
+def test_corrupt_state_is_one_line_error(change, match):
+    opt = StagedCMA(space(), seed=2, first=["x0", "x1"])
+    X = opt.ask()
+    opt.tell(X, strong_weak(X))
+    d = json.loads(json.dumps(opt.state_dict()))
+    change(d)
+    with pytest.raises(ClothFitError, match=match):
+        optimizer_from_state(d)
+
+
+def test_bad_arguments_are_one_line_errors():
+    with pytest.raises(ClothFitError, match="'first'"):
+        StagedCMA(space(), first=["y"])
+    with pytest.raises(ClothFitError, match="'hold'"):
+        StagedCMA(space(), first=["x0"], hold={"y": 1.0})
+
+
+def test_fitjob_searches_the_strong_settings_first(tmp_path):
+    """FitJob with --optimizer cma-staged: the four strong settings first, the others at the defaults
+    the fit would have fixed them at; a checkpoint resumes it."""
+    from clothfit.core.fitting.job import FitConfig, FitJob
+    from clothfit.core.observation.synth import synth_capture
+
+    synth_capture(
+        str(tmp_path / "cap"),
+        {"tension_stiffness": 15.0, "shear_stiffness": 5.0},
+        model={"name": "blender", "fps": 24, "quality": 5},
+        rig="ring8",
+        resolution=(45, 60),
+        noise=0.0,
+    )
+    from clothfit.core.observation.capture import load_capture
+
+    cap = load_capture(str(tmp_path / "cap"))
+    ck = str(tmp_path / "fit.json.checkpoint.json")
+    cfg = FitConfig(optimizer="cma-staged", max_evaluations=40, train_cameras=[0, 2, 4, 6], train_times=[0.3, 0.6])
+    look = FitJob(cap, cfg)
+    opt = look.opt
+    assert isinstance(opt, StagedCMA)
+    assert opt.first == [n for n in look.space.names if n in D.STAGED_STRONG]
+    held = [n for n in look.space.names if n not in D.STAGED_STRONG]
+    assert held
+    X = opt.ask()
+    for n in held:
+        k = look.space.names.index(n)
+        assert np.allclose(X[:, k], look.par._coord(n, look.par.fixed[n]))
+    job = FitJob(cap, cfg, checkpoint=ck)
+    job.run()
+    assert job.evaluations >= 40 and job.best_x is not None
+    again = FitJob.resume(ck, cap, cfg)
+    assert isinstance(again.opt, StagedCMA) and again.evaluations == job.evaluations
