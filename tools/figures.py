@@ -267,6 +267,12 @@ SOURCES = {
         "what": "issue 20's goals measured through the CLI on fresh captures (exact model, offsets, continuum, "
         "collider, time); each goal also alone: tools/issue20_goals.py GOAL --json FILE",
     },
+    "issue20_search": {
+        "argv": ["{py}", "tools/issue20_goals.py", "search", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 20's search goal over seeds 0-4 with today's search and with --optimizer cma-staged, and the "
+        "offsets goal with cma-staged (about 25 min)",
+    },
     "cross_simulator": {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json",

@@ -954,6 +954,14 @@ def main(argv=None):
             )
         if g in ("continuum", "all"):
             s.add_argument("--materials", default=None, help="continuum: comma list (default: cotton,silk)")
+    se = sub.add_parser(
+        "search",
+        help="the search goal over 5 seeds, today's search and --optimizer cma-staged, and the offsets goal with "
+        "cma-staged: exact --optimizer cma-staged --seeds 0-4, offsets --optimizer cma-staged, exact --seeds 0-4",
+    )
+    se.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
+    se.add_argument("--json", default="out/issue20/goals_search.json", help="rows merged into this JSON")
+    se.add_argument("--remake", action="store_true", help="make the goals' captures again")
     t = sub.add_parser("table", help="print a goals JSON as the Markdown table")
     t.add_argument("json")
     c = sub.add_parser("_collider", help=argparse.SUPPRESS)
@@ -969,6 +977,12 @@ def main(argv=None):
         _collider_child(a)
         return 0
     os.makedirs(os.path.join(a.out, "fits"), exist_ok=True)
+    if a.cmd == "search":
+        steps = (("exact", "cma-staged", "0-4"), ("offsets", "cma-staged", "0"), ("exact", None, "0-4"))
+        for g, opt, seeds in steps:
+            argv = [g, "--out", a.out, "--json", a.json, "--seeds", seeds] + (["--optimizer", opt] if opt else [])
+            main(argv + (["--remake"] if a.remake else []))
+        return 0
     run = Runner(os.path.join(a.out, "goals.log"))
     before = not has_uncertain_option()  # the lead's issue-20 features (fit --uncertain, ...) not in yet
     for g in GOALS if a.cmd == "all" else (a.cmd,):
