@@ -182,7 +182,7 @@ SOURCES = {
             "tools/search_ab.py",
             "synth:damped",
             "--strategies",
-            "baseline,staged",
+            "baseline,staged,staged-recipe",
             "--seeds",
             "0-9",
             "--reuse",
