@@ -146,6 +146,12 @@ def capture_path(spec):
     return out
 
 
+def capture_key(spec):
+    """A capture's name for --reuse: the folder's name, ``synth:NAME`` and out/search_ab/NAME alike."""
+    spec = spec.split(":", 1)[1] if spec.startswith("synth:") else spec
+    return os.path.basename(spec.rstrip("/"))
+
+
 def parse_seeds(spec):
     out = []
     for part in spec.split(","):
@@ -507,15 +513,13 @@ def main(argv=None):
             for line in open(p):
                 if line.strip():
                     r = json.loads(line)
-                    old[
-                        (os.path.basename(r["capture"].rstrip("/")), r["strategy"], r["seed"], r.get("budget", BUDGET))
-                    ] = r
+                    old[(capture_key(r["capture"]), r["strategy"], r["seed"], r.get("budget", BUDGET))] = r
         for spec in a.captures:
             if a.only_reused:
                 cap = spec.split(":", 1)[1] if spec.startswith("synth:") else spec
                 for strat in a.strategies.split(","):
                     for seed in parse_seeds(a.seeds):
-                        key = (os.path.basename(cap.rstrip("/")), strat, seed, a.budget)
+                        key = (capture_key(cap), strat, seed, a.budget)
                         if key in old:
                             rows.append(dict(old[key], capture=spec, reused=True))
                 continue
@@ -528,7 +532,7 @@ def main(argv=None):
             )
             for strat in a.strategies.split(","):
                 for seed in parse_seeds(a.seeds):
-                    key = (os.path.basename(cap.rstrip("/")), strat, seed, a.budget)
+                    key = (capture_key(cap), strat, seed, a.budget)
                     if key in old:
                         r = dict(old[key], capture=spec, reused=True)
                     else:
