@@ -371,7 +371,7 @@ class FitJob:
         self.par.model = self.objective.model
         self.par.fixed["quality"] = int(quality)
 
-    def objective_at(self, quality) -> SilhouetteObjective:
+    def objective_at(self, quality: int | None) -> SilhouetteObjective:
         """The training objective simulated at ``quality`` (kept once built; not made the running one)."""
         if quality not in self._objectives:
             cameras, observed, ignore, names = self._images

@@ -127,7 +127,7 @@ class StagedCMA(Optimizer):
         return self._stopped
 
     @property
-    def stop_reason(self):
+    def stop_reason(self) -> str | None:
         return self.children[-1].stop_reason
 
     @property
