@@ -39,6 +39,7 @@ from .space import (
     SearchSpace,
     _active,
     _array,
+    _bool,
     _field,
     _flag,
     _float_to_json,
@@ -333,10 +334,7 @@ class CMAES(Optimizer):
         if not isinstance(rs, list) or len(rs) > opt.restarts + 1 or any(r not in CMA_STOPS for r in rs):
             raise ClothFitError(f"checkpoint: {w} 'run_stops' must be a list of stop criteria")
         opt.run_stops = list(rs)
-        st = _field(d, "stopped", w)
-        if not isinstance(st, bool):
-            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
-        opt._stopped = st
+        opt._stopped = _bool(d, "stopped", w)
         opt.mean = _array(d, "mean", w, (n,))
         if np.abs(opt.mean).max() > 1e6:
             raise ClothFitError(f"checkpoint: {w} 'mean' is absurdly far from the unit cube")

@@ -11,7 +11,7 @@ from ..errors import ClothFitError
 from .space import (
     SearchSpace,
     _array,
-    _field,
+    _bool,
     _float_from_json,
     _float_to_json,
     _num,
@@ -168,8 +168,5 @@ class CoordinatePolish(Optimizer):
         if opt._pending is not None and (opt._pending.min() < 0 or opt._pending.max() > 1):
             raise ClothFitError(f"checkpoint: {w} 'pending' must lie in the unit cube")
         opt.stop_reason = _stop_reason(d, w, ("tolx",))
-        st = _field(d, "stopped", w)
-        if not isinstance(st, bool):
-            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
-        opt._stopped = st
+        opt._stopped = _bool(d, "stopped", w)
         return opt

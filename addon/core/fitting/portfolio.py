@@ -22,12 +22,14 @@ from .space import (
     SearchSpace,
     _active,
     _array,
+    _bool,
     _field,
     _flag,
     _integer,
     _num,
     _number,
     _rng_state_from_json,
+    _step,
     _stop_reason,
     reflect_unit,
     sanitize_fitness,
@@ -295,10 +297,8 @@ class CMAPortfolio(Optimizer):
         opt = cls.__new__(cls)
         Optimizer.__init__(opt, space, d["seed"], None)
         opt.popsize = _num(d, "popsize", w, int, 2, 10**6)
-        opt.sigma0 = _number(_num(d, "sigma0", w, float), f"checkpoint: {w} 'sigma0'", 0.0, 10.0, lo_open=True)
-        opt.polish_sigma = _number(
-            _num(d, "polish_sigma", w, float), f"checkpoint: {w} 'polish_sigma'", 0.0, 10.0, lo_open=True
-        )
+        opt.sigma0 = _step(d, "sigma0", w)
+        opt.polish_sigma = _step(d, "polish_sigma", w)
         opt.tolx = _num(d, "tolx", w, float, 0.0)
         opt.tolfun = _num(d, "tolfun", w, float, 0.0)
         opt.active = _active(d, w)
@@ -323,10 +323,7 @@ class CMAPortfolio(Optimizer):
         if not isinstance(rs, list) or len(rs) > 100 or any(r not in CMA_STOPS for r in rs):
             raise ClothFitError(f"checkpoint: {w} 'run_stops' must be a list of stop criteria")
         opt.run_stops = list(rs)
-        st = _field(d, "stopped", w)
-        if not isinstance(st, bool):
-            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
-        opt._stopped = st
+        opt._stopped = _bool(d, "stopped", w)
         kids = _field(d, "children", w)
         if not isinstance(kids, list) or not opt.runs <= len(kids) <= opt.runs + opt.max_polishes:
             raise ClothFitError(f"checkpoint: {w} 'children' must be a list of CMA-ES states")

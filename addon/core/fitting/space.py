@@ -161,6 +161,19 @@ def _stop_reason(d, where, allowed):
     return v
 
 
+def _bool(d, key, where):
+    """A checkpoint's required true/false field ``key``."""
+    v = _field(d, key, where)
+    if not isinstance(v, bool):
+        raise ClothFitError(f"checkpoint: {where} '{key}' must be true or false")
+    return v
+
+
+def _step(d, key, where):
+    """A checkpoint's CMA-ES step ``key`` (unit cube): a number in (0, 10]."""
+    return _number(_num(d, key, where, float), f"checkpoint: {where} '{key}'", 0.0, 10.0, lo_open=True)
+
+
 def _active(d, where):
     v = d.get("active", False)  # older checkpoints: plain CMA-ES
     if not isinstance(v, bool):

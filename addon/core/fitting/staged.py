@@ -23,12 +23,14 @@ from .space import (
     SearchSpace,
     _active,
     _array,
+    _bool,
     _field,
     _flag,
     _integer,
     _num,
     _number,
     _rng_state_from_json,
+    _step,
     reflect_unit,
     sanitize_fitness,
 )
@@ -225,10 +227,8 @@ class StagedCMA(Optimizer):
         opt = cls.__new__(cls)
         Optimizer.__init__(opt, space, d["seed"], None)
         opt.popsize = _num(d, "popsize", w, int, 2, 10**6)
-        opt.sigma0 = _number(_num(d, "sigma0", w, float), f"checkpoint: {w} 'sigma0'", 0.0, 10.0, lo_open=True)
-        opt.second_sigma = _number(
-            _num(d, "second_sigma", w, float), f"checkpoint: {w} 'second_sigma'", 0.0, 10.0, lo_open=True
-        )
+        opt.sigma0 = _step(d, "sigma0", w)
+        opt.second_sigma = _step(d, "second_sigma", w)
         opt.tolx = _num(d, "tolx", w, float, 0.0)
         opt.tolfun = _num(d, "tolfun", w, float, 0.0)
         opt.active = _active(d, w)
@@ -249,10 +249,7 @@ class StagedCMA(Optimizer):
         if np.any(opt.hold_u < 0.0) or np.any(opt.hold_u > 1.0):
             raise ClothFitError(f"checkpoint: {w} 'hold_u' must lie in the unit cube")
         opt.stage = _num(d, "stage", w, int, 1, 2)
-        st = _field(d, "stopped", w)
-        if not isinstance(st, bool):
-            raise ClothFitError(f"checkpoint: {w} 'stopped' must be true or false")
-        opt._stopped = st
+        opt._stopped = _bool(d, "stopped", w)
         kids = _field(d, "children", w)
         if not isinstance(kids, list) or len(kids) != opt.stage or any(not isinstance(k, dict) for k in kids):
             raise ClothFitError(f"checkpoint: {w} 'children' must hold one CMA-ES state per stage")
