@@ -104,6 +104,11 @@ class StagedCMA(Optimizer):
         self.children = [self._child(sub, self.popsize if k is None else 4 + int(3 * np.log(k)), self.sigma0, init)]
 
     @property
+    def _staging(self) -> bool:
+        """In the first stage, over a proper subset (the others held)."""
+        return self.stage == 1 and len(self.first) < self.space.n
+
+    @property
     def _idx(self) -> list:
         return [self.space.names.index(n) for n in self.first]
 
@@ -144,7 +149,7 @@ class StagedCMA(Optimizer):
             raise ClothFitError("cma-staged: ask() after it has stopped")
         c = self.children[-1]
         Xc = c.ask()
-        if self.stage == 2 or len(self.first) == self.space.n:
+        if not self._staging:
             return Xc
         X = np.repeat(self.space.decode(self.hold_u)[None], len(Xc), 0)
         X[:, self._idx] = Xc
@@ -154,18 +159,17 @@ class StagedCMA(Optimizer):
         c = self.children[-1]
         if c._pending is None:
             raise ClothFitError("tell() called without a pending ask()")
-        sub_u = reflect_unit(c._pending)
-        if self.stage == 1 and len(self.first) < self.space.n:
-            U = np.repeat(self.hold_u[None], len(sub_u), 0)
-            U[:, self._idx] = sub_u
-        else:
-            U = sub_u
+        staging = self._staging
+        U = reflect_unit(c._pending)
+        if staging:
+            U_sub, U = U, np.repeat(self.hold_u[None], len(U), 0)
+            U[:, self._idx] = U_sub
         self._check_told(X, U)
         f = sanitize_fitness(f, len(U))
         A = np.asarray(X, dtype=np.float64)
-        c.tell(A[:, self._idx] if (self.stage == 1 and len(self.first) < self.space.n) else A, f)
+        c.tell(A[:, self._idx] if staging else A, f)
         self._record(U, f)
-        if self.stage == 1 and len(self.first) < self.space.n:
+        if staging:
             if c.stopped or c.evaluations >= self.first_fraction * self.budget:
                 self.stage = 2
                 self.children.append(
