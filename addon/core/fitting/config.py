@@ -14,12 +14,12 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from .optimise import FIT_OPTIMIZERS, canonical_name
 
-_CMA = ("cma-es", "cma-portfolio", "cma-staged")
+CMA_OPTIMIZERS = ("cma-es", "cma-portfolio", "cma-staged")  # the CMA-ES searches (step, active, restarts)
 # FitConfig's optimiser options: field -> (the optimiser's keyword, the optimisers it applies to). None (the
 # default) leaves the optimiser as it has always been built; only options that are set enter the fit's identity.
 SEARCH_OPTIONS = {
-    "sigma0": ("sigma0", _CMA),
-    "cma_active": ("active", _CMA),
+    "sigma0": ("sigma0", CMA_OPTIMIZERS),
+    "cma_active": ("active", CMA_OPTIMIZERS),
     "tolx": ("tolx", FIT_OPTIMIZERS),
     "tolfun_per_image": ("tolfun", FIT_OPTIMIZERS),
     "ga_eps": ("eps", ("spx-mgg",)),

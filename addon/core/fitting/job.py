@@ -44,7 +44,7 @@ from ..physics.scenario import Uncertainty
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from . import checkpoint
 from .checkpoint import STOP_REASONS, capture_hash, identity_diff, read_checkpoint, silhouettes_hash  # noqa: F401 (re-exported)  # noqa: F401 (re-exported for the CLI and tests)
-from .config import SEARCH_OPTIONS, FitConfig, check_resolution  # noqa: F401 (re-exported)
+from .config import CMA_OPTIMIZERS, SEARCH_OPTIONS, FitConfig, check_resolution  # noqa: F401 (re-exported)
 from .objective import SilhouetteObjective
 from .optimise import canonical_name, make_optimizer
 from .parameters import (
@@ -263,7 +263,7 @@ class FitJob:
 
     def _optimizer_kw(self, warm_x=None):
         cfg = self.config
-        is_cma = self.optimizer_name in ("cma-es", "cma-portfolio", "cma-staged")
+        is_cma = self.optimizer_name in CMA_OPTIMIZERS
         tolfun = (
             D.FIT_TOLFUN_PER_IMAGE if cfg.tolfun_per_image is None else cfg.tolfun_per_image
         ) * self.objective.n_images
