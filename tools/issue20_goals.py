@@ -486,7 +486,7 @@ def _search_args(a, seed):
 
 
 def goal_exact(a, run):
-    seeds = parse_seed_list(a.seeds)
+    seeds = parse_seeds(a.seeds)
     if len(seeds) > 1:
         rows, ratios = [], []
         for sd in seeds:
@@ -510,15 +510,19 @@ def goal_exact(a, run):
     return [r], {}
 
 
-def parse_seed_list(spec):
+def parse_seeds(spec):
+    """Seeds as ``0-4`` or ``0,3,5`` (also tools/search_ab.py's ``--seeds``); anything else is a one-line error."""
     out = []
-    for part in str(spec).split(","):
-        if "-" in part:
-            lo, hi = part.split("-")
-            out += list(range(int(lo), int(hi) + 1))
-        elif part.strip():
-            out.append(int(part))
-    return out or [0]
+    try:
+        for part in str(spec).split(","):
+            if "-" in part:
+                lo, hi = part.split("-")
+                out += list(range(int(lo), int(hi) + 1))
+            else:
+                out.append(int(part))
+    except ValueError:
+        raise SystemExit(f"--seeds {spec!r}: not seeds such as 0-4 or 0,3,5") from None
+    return out
 
 
 def _exact_one(a, run, seed):
@@ -575,7 +579,7 @@ def goal_offsets(a, run):
 
     shift = read_json(os.path.join(cap, "capture.json"), "capture")["meta"]["issue20_shift"]
     feature = has_uncertain_option()
-    seeds = parse_seed_list(a.seeds)
+    seeds = parse_seeds(a.seeds)
     if len(seeds) > 1:
         raise SystemExit("offsets: one seed at a time (--seeds N)")
     extra, tag = _search_args(a, seeds[0])
@@ -989,7 +993,7 @@ def main(argv=None):
         at = commits()  # the code the goal runs (taken before it runs)
         rows, extra = RUNNERS[g](a, run)
         label = "before" if before else "after"
-        if getattr(a, "optimizer", None) or parse_seed_list(getattr(a, "seeds", "0")) != [0]:
+        if getattr(a, "optimizer", None) or parse_seeds(getattr(a, "seeds", "0")) != [0]:
             label += f" ({', '.join(x for x in (getattr(a, 'optimizer', None), 'seeds ' + a.seeds) if x)})"
         merge_rows(a.json, g, rows, dict(at, **extra), label)
     with open(a.json) as f:

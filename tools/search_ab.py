@@ -39,6 +39,7 @@ from clothfit.core.fitting.job import FitConfig, FitJob  # noqa: E402
 from clothfit.core.fitting.optimise import make_optimizer  # noqa: E402
 from clothfit.core.observation.camera import select_training  # noqa: E402
 from clothfit.core.observation.capture import load_capture  # noqa: E402
+from issue20_goals import parse_seeds  # noqa: E402  (tools/: the one seed-list parser)
 
 BUDGET = D.FIT_EVALUATIONS
 
@@ -150,17 +151,6 @@ def capture_key(spec):
     """A capture's name for --reuse: the folder's name, ``synth:NAME`` and out/search_ab/NAME alike."""
     spec = spec.split(":", 1)[1] if spec.startswith("synth:") else spec
     return os.path.basename(spec.rstrip("/"))
-
-
-def parse_seeds(spec):
-    out = []
-    for part in spec.split(","):
-        if "-" in part:
-            a, b = part.split("-")
-            out += list(range(int(a), int(b) + 1))
-        else:
-            out.append(int(part))
-    return out
 
 
 class Bench:
