@@ -776,22 +776,25 @@ def _fit_args(capture, out, a, uncertain=False, evals=None):
     return args
 
 
-def replay_error_mm(settings: dict, tr: dict) -> dict:
-    """The recovered settings replayed under the TRUE manipulation (the core's Blender model): mean vertex
-    distance to the true cloth [mm], over all frames and after the release."""
+def replay_error_mm(settings: dict, tr: dict, scenario=None, truth=None) -> dict:
+    """Settings replayed under the TRUE manipulation (the core's Blender model), or under ``scenario``:
+    mean vertex distance to the true cloth (``truth``: its positions in the scenario's frame) [mm], over
+    all frames, before and after the release, the worst and the last frame."""
     from clothfit.core.observation.metrics import shape_error_mm
     from clothfit.core.physics import blender as B
     from clothfit.core.physics.models import BlenderModel
 
     s = B.check_settings({k: v for k, v in settings.items() if k in B.DEFAULTS}, "replay")
     model = BlenderModel(FPS, s["quality"], s["bending_model"])
-    sim = model.simulate(tr["scenario"], B.settings_row(s)[None])
-    se = shape_error_mm(sim.positions[0], tr["positions"])
+    sim = model.simulate(tr["scenario"] if scenario is None else scenario, B.settings_row(s)[None])
+    se = shape_error_mm(sim.positions[0], tr["positions"] if truth is None else truth)
     after = tr["times"] > tr["release_time"]
     return {
         "mean_mm": float(se.mean()),
+        "before_release_mm": float(se[~after].mean()),
         "after_release_mm": float(se[after].mean()),
         "max_frame_mm": float(se.max()),
+        "end_mm": float(se[-1]),
         "per_frame_mm": se.tolist(),
     }
 
@@ -1194,21 +1197,15 @@ def run_sensitivity(a) -> dict:
     quality) replayed under (1) the true manipulation, (2) the clips as an e2e run measured them (``--e2e``:
     its scenario.json, in the calibration's world frame) and (3) ``--draws`` draws of clips moved by
     ``--sigma-mm`` per axis round the true ones; each against the true cloth (mean vertex distance [mm])."""
-    from clothfit.core.observation.metrics import shape_error_mm
-    from clothfit.core.physics import blender as B
-    from clothfit.core.physics.models import BlenderModel
     from clothfit.core.physics.scenario import Handle, Scenario
 
     tr = cloth_truth(a.seed, a.frames)
     scen = tr["scenario"]
     s = dict(true_settings(CLOTH_GSM * CLOTH_W * CLOTH_H / scen.grid.n_vertices), quality=a.quality)
-    model = BlenderModel(FPS, s["quality"], s["bending_model"])
-    row = B.settings_row(s)[None]
 
     def replay(sc, truth):
-        se = shape_error_mm(model.simulate(sc, row).positions[0], truth)
-        after = tr["times"] > tr["release_time"]
-        return {"mean_mm": float(se.mean()), "before_release_mm": float(se[~after].mean()), "end_mm": float(se[-1])}
+        r = replay_error_mm(s, tr, sc, truth)
+        return {k: r[k] for k in ("mean_mm", "before_release_mm", "end_mm")}
 
     def moved(sc, d):
         hs = [
