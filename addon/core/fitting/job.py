@@ -48,6 +48,7 @@ from .config import CMA_OPTIMIZERS, SEARCH_OPTIONS, FitConfig, check_resolution 
 from .objective import SilhouetteObjective
 from .optimise import canonical_name, make_optimizer
 from .parameters import (
+    BlenderParameters,
     ManipulationParameters,
     PaperParameters,
     SceneParameters,
@@ -317,11 +318,13 @@ class FitJob:
         unknowns first, every other setting held where the fit starts (Blender's defaults at this
         mass, or the warm start's); the main search's budget."""
         par = self.par
-        names = list(self.space.names)
-        free = list(getattr(par, "free", []))
-        strong = [n for n in D.STAGED_STRONG if n in free]
         kw = {"budget": max(1, self.search_budget())}
-        if strong and hasattr(par, "_coord") and hasattr(par, "fixed"):
+        if not isinstance(par, BlenderParameters):  # the paper's model: one CMA-ES run over everything
+            return kw
+        names = list(self.space.names)
+        free = list(par.free)
+        strong = [n for n in D.STAGED_STRONG if n in free]
+        if strong:
             kw["first"] = strong + names[self.npar :]
             if par.initial is None:
                 kw["hold"] = {n: par._coord(n, par.fixed[n]) for n in free if n not in strong}
