@@ -55,6 +55,24 @@ def test_first_stage_holds_the_others_then_searches_everything():
     assert moved and abs(opt.best_x[2] - 2.0) < 0.3
 
 
+def test_a_tied_coordinate_follows_its_leader_in_the_first_stage_only():
+    opt = StagedCMA(space(), seed=4, first=["x0", "x1"], tie={"x3": "x0"}, budget=200)
+    assert opt.tie == {"x3": "x0"}
+    while opt.stage == 1:
+        X = opt.ask()
+        assert np.array_equal(X[:, 3], X[:, 0]) and np.ptp(X[:, 3]) > 0  # follows x0, not held
+        assert np.allclose(X[:, 4], 0.0)
+        opt.tell(X, strong_weak(X))
+    for _ in range(5):
+        X = opt.ask()
+        assert not np.allclose(X[:, 3], X[:, 0])  # free in the second stage
+        opt.tell(X, strong_weak(X))
+    # a state without 'tie' (written before it existed) resumes with none
+    d = json.loads(json.dumps(StagedCMA(space(), seed=4, first=["x0"]).state_dict()))
+    del d["tie"]
+    assert optimizer_from_state(d).tie == {}
+
+
 def test_no_first_stage_is_plain_cma_over_everything():
     opt = StagedCMA(space(), seed=1, first=["x0"], first_fraction=0.0)
     assert opt.first == list(opt.space.names) and opt.stage == 1
@@ -67,7 +85,7 @@ def test_no_first_stage_is_plain_cma_over_everything():
 @pytest.mark.parametrize("cut", [7, 23, 60])
 def test_resume_is_exact_in_either_stage(cut):
     def make():
-        return StagedCMA(space(), seed=5, first=["x0", "x1"], hold={"x4": 1.0}, budget=300)
+        return StagedCMA(space(), seed=5, first=["x0", "x1"], hold={"x4": 1.0}, tie={"x2": "x1"}, budget=300)
 
     a = make()
     for _ in range(cut):
@@ -93,6 +111,7 @@ def test_resume_is_exact_in_either_stage(cut):
         (lambda d: d.update(stage=3), "'stage'"),
         (lambda d: d.update(hold_u=[2.0] * 5), "'hold_u'"),
         (lambda d: d.update(children=[]), "'children'"),
+        (lambda d: d.update(tie={"x0": "x1"}), "'tie'"),
         (lambda d: d["children"][0].update(algorithm="spx-mgg"), "wrong algorithm"),
     ],
 )
@@ -111,6 +130,9 @@ def test_bad_arguments_are_one_line_errors():
         StagedCMA(space(), first=["y"])
     with pytest.raises(ClothFitError, match="'hold'"):
         StagedCMA(space(), first=["x0"], hold={"y": 1.0})
+    for tie in ({"x2": "x3"}, {"x0": "x0"}, {"y": "x0"}, ["x2"]):  # the leader must be searched, the follower held
+        with pytest.raises(ClothFitError, match="'tie'"):
+            StagedCMA(space(), first=["x0"], tie=tie)
 
 
 def test_fitjob_searches_the_strong_settings_first(tmp_path):
@@ -139,9 +161,15 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     held = [n for n in look.space.names if n not in D.STAGED_STRONG]
     assert held
     X = opt.ask()
+    names = look.space.names
+    assert opt.tie == {"compression_stiffness": "tension_stiffness"}  # D.STAGED_TIE
     for n in held:
-        k = look.space.names.index(n)
-        assert np.allclose(X[:, k], look.par._coord(n, look.par.fixed[n]))
+        k = names.index(n)
+        if n in opt.tie:  # compression follows tension
+            assert np.allclose(X[:, k], X[:, names.index(opt.tie[n])])
+            assert np.ptp(X[:, k]) > 0
+        else:
+            assert np.allclose(X[:, k], look.par._coord(n, look.par.fixed[n]))
     job = FitJob(cap, cfg, checkpoint=ck)
     job.run()
     assert job.evaluations >= 40 and job.best_x is not None

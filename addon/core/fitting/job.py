@@ -328,6 +328,9 @@ class FitJob:
             kw["first"] = strong + names[self.npar :]
             if par.initial is None:
                 kw["hold"] = {n: par._coord(n, par.fixed[n]) for n in free if n not in strong}
+                kw["tie"] = {
+                    f: lead for f, lead in D.STAGED_TIE.items() if f in free and f not in strong and lead in strong
+                }
         return kw
 
     def search_budget(self) -> int:

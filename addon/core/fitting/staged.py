@@ -49,6 +49,9 @@ class StagedCMA(Optimizer):
     (the first stage's is Hansen's 4 + 3 ln k for its k coordinates); ``sigma0``, ``restarts``,
     ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
     ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
+    ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
+    to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
+    Blender's defaults); in the second stage they are free like every other.
     """
 
     name = "cma-staged"
@@ -69,6 +72,7 @@ class StagedCMA(Optimizer):
         first_fraction: float = D.STAGED_FIRST_FRACTION,
         budget: int | None = None,
         second_sigma: float = D.STAGED_SECOND_SIGMA,
+        tie: dict | None = None,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -96,12 +100,40 @@ class StagedCMA(Optimizer):
                 raise ClothFitError(f"{w}: 'hold' names {n!r}, not a coordinate of the search")
             x[names.index(n)] = float(v)
         self.hold_u = np.clip(space.encode(x), 0.0, 1.0)
+        self.tie = self._check_tie(tie or {}, names, self.first, w)
         self.stage = 1
         self._stopped = False
         sub = self._subspace()
         init = [space.decode(self.hold_u)[self._idx]] if len(self._initial_u) else None
         k = sub.n if len(self.first) < space.n else None
         self.children = [self._child(sub, self.popsize if k is None else 4 + int(3 * np.log(k)), self.sigma0, init)]
+
+    @staticmethod
+    def _check_tie(tie, names, first, w):
+        if not isinstance(tie, dict):
+            raise ClothFitError(f"{w}: 'tie' must map a held coordinate to a searched one")
+        out = {}
+        for f, lead in tie.items():
+            if f not in names or f in first or lead not in first:
+                raise ClothFitError(
+                    f"{w}: 'tie' {f!r} -> {lead!r} must map a held coordinate to one searched in the first stage"
+                )
+            out[str(f)] = str(lead)
+        return {f: out[f] for f in names if f in out}  # in the space's order
+
+    def _full_u(self, U_sub):
+        """The first stage's points in the whole unit cube: held coordinates at ``hold_u``, tied ones at
+        their leader's value."""
+        U = np.repeat(self.hold_u[None], len(U_sub), 0)
+        U[:, self._idx] = U_sub
+        if self.tie:
+            names = self.space.names
+            X = self.space.decode(U)
+            for f, lead in self.tie.items():
+                X[:, names.index(f)] = X[:, names.index(lead)]
+            U = np.clip(self.space.encode(self.space.clip(X)), 0.0, 1.0)
+            U[:, self._idx] = U_sub  # the searched coordinates exactly as the child has them
+        return U
 
     @property
     def _staging(self) -> bool:
@@ -151,7 +183,7 @@ class StagedCMA(Optimizer):
         Xc = c.ask()
         if not self._staging:
             return Xc
-        X = np.repeat(self.space.decode(self.hold_u)[None], len(Xc), 0)
+        X = self.space.decode(self._full_u(reflect_unit(c._pending)))
         X[:, self._idx] = Xc
         return X
 
@@ -162,8 +194,7 @@ class StagedCMA(Optimizer):
         staging = self._staging
         U = reflect_unit(c._pending)
         if staging:
-            U_sub, U = U, np.repeat(self.hold_u[None], len(U), 0)
-            U[:, self._idx] = U_sub
+            U = self._full_u(U)
         self._check_told(X, U)
         f = sanitize_fitness(f, len(U))
         A = np.asarray(X, dtype=np.float64)
@@ -192,6 +223,7 @@ class StagedCMA(Optimizer):
         "first_fraction",
         "budget",
         "hold_u",
+        "tie",
         "stage",
         "stopped",
         "children",
@@ -214,6 +246,7 @@ class StagedCMA(Optimizer):
                 "first_fraction": self.first_fraction,
                 "budget": self.budget,
                 "hold_u": self.hold_u.tolist(),
+                "tie": dict(self.tie),
                 "stage": self.stage,
                 "stopped": self._stopped,
                 "children": [c.state_dict() for c in self.children],
@@ -252,6 +285,8 @@ class StagedCMA(Optimizer):
         opt.hold_u = _array(d, "hold_u", w, (n,))
         if np.any(opt.hold_u < 0.0) or np.any(opt.hold_u > 1.0):
             raise ClothFitError(f"checkpoint: {w} 'hold_u' must lie in the unit cube")
+        # 'tie' came after the first checkpoints of this search: none there
+        opt.tie = cls._check_tie(d.get("tie", {}), list(space.names), opt.first, f"checkpoint: {w}")
         opt.stage = _num(d, "stage", w, int, 1, 2)
         opt._stopped = _bool(d, "stopped", w)
         kids = _field(d, "children", w)
