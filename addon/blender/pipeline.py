@@ -60,7 +60,7 @@ def add_arguments(ap: argparse.ArgumentParser, blend_default=None):
     ap.add_argument(
         "--optimizer",
         default=None,
-        choices=["spx-mgg", "cma-es"],
+        choices=["auto", "spx-mgg", "cma-es", "cma-staged"],
         help="default: the project's default optimiser (core/defaults.py)",
     )
     ap.add_argument("--seed", type=int, default=0, help="random seed of the fit (default: %(default)s)")

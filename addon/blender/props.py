@@ -22,8 +22,14 @@ from ..core import defaults as D
 from ..core.footage.extract import ExtractOptions
 
 OPTIMIZERS = [
+    ("auto", "Auto", f"{D.BLENDER_OPTIMIZER} on Blender's cloth, {D.DEFAULT_OPTIMIZER} on the paper's sheet"),
     ("spx-mgg", "SPX + MGG", "Real-coded GA: simplex crossover, minimal generation gap (the paper's)"),
     ("cma-es", "CMA-ES", "Covariance matrix adaptation evolution strategy"),
+    (
+        "cma-staged",
+        "CMA-ES, strong first",
+        "Blender's cloth: tension, shear, bending and air first, then every setting",
+    ),
 ]
 RESOLUTIONS = [
     ("FULL", "Full", "Fit at the capture's resolution"),
@@ -378,7 +384,7 @@ class ClothFitProperties(bpy.types.PropertyGroup):
         description="Capture times the fit compares",
     )
     optimizer: EnumProperty(
-        name="Optimiser", items=OPTIMIZERS, default=D.DEFAULT_OPTIMIZER, description="Search method of the fit"
+        name="Optimiser", items=OPTIMIZERS, default=D.FIT_OPTIMIZER, description="Search method of the fit"
     )
     seed: IntProperty(name="Seed", default=0, min=0, description="Seed of the optimiser (same seed, same fit)")
     max_evaluations: IntProperty(

@@ -251,10 +251,10 @@ def _search_args(s):
     """Options of fit and fit-many: the optimiser and the fit's budget and scale."""
     s.add_argument(
         "--optimizer",
-        default=D.DEFAULT_OPTIMIZER,
-        help="cma-es, spx-mgg (the paper's real-coded GA), cma-portfolio, or cma-staged (Blender's cloth: "
-        "tension, shear, bending and air damping first, then every setting; docs/search.md) "
-        "(default: %(default)s)",
+        default=D.FIT_OPTIMIZER,
+        help="cma-es, spx-mgg (the paper's real-coded GA), cma-portfolio, cma-staged (Blender's cloth: "
+        "tension, shear, bending and air damping first, then every setting; docs/search.md), or auto "
+        f"({D.BLENDER_OPTIMIZER} on Blender's cloth, {D.DEFAULT_OPTIMIZER} on the paper's sheet) (default: %(default)s)",
     )
     s.add_argument("--seed", type=int, default=0, help="random seed of the optimiser (default: %(default)s)")
     s.add_argument(

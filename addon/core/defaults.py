@@ -86,6 +86,10 @@ FIT_GA_CHILDREN = 5 * N_FREE
 CMA_POPSIZE = 4 + int(3 * math.log(N_FREE))
 FIT_EVALUATIONS = 2500  # default evaluation budget of one fit
 DEFAULT_OPTIMIZER = "cma-es"  # measured faster than SPX+MGG on this problem (README, `paper --only optimizers`)
+# a fit's default search, "auto": BLENDER_OPTIMIZER on Blender's cloth (the core model or a .blend's own solver),
+# DEFAULT_OPTIMIZER on the paper's mass-spring sheet (docs/search.md, "Strong settings first")
+FIT_OPTIMIZER = "auto"
+BLENDER_OPTIMIZER = "cma-staged"
 
 # --- when a fit has converged (README, "Fits: stopping"). Tolerances far below what silhouettes resolve: a step of
 # 1e-5 of the unit search cube is a 0.005 % change of k/m over its two decades; 1e-6 of E_sil per image is a

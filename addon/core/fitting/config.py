@@ -33,11 +33,19 @@ SEARCH_OPTIONS = {
 }
 
 
+def resolve_optimizer(name: str, blender: bool) -> str:
+    """The fit's search: ``name`` itself (canonical), or for "auto" ``D.BLENDER_OPTIMIZER`` on Blender's
+    cloth (``blender``) and ``D.DEFAULT_OPTIMIZER`` on the paper's sheet."""
+    if str(name).strip().lower() == "auto":
+        return D.BLENDER_OPTIMIZER if blender else D.DEFAULT_OPTIMIZER
+    return canonical_name(name)
+
+
 @dataclass
 class FitConfig:
     train_cameras: list | None = None  # camera indices (None = all)
     train_times: list | None = None  # frame times (None = all of the capture's)
-    optimizer: str = D.DEFAULT_OPTIMIZER
+    optimizer: str = D.FIT_OPTIMIZER  # "auto": resolve_optimizer
     seed: int = 0
     max_evaluations: int = D.FIT_EVALUATIONS
     target_error: float | None = None  # stop when E_all per image falls below this
@@ -143,7 +151,7 @@ class FitConfig:
             raise ClothFitError(f"fit config: train_times must be a list of finite numbers, got {tt!r}")
         if not isinstance(self.optimizer, str):
             raise ClothFitError(f"fit config: optimizer must be a name, got {self.optimizer!r}")
-        if canonical_name(self.optimizer) not in FIT_OPTIMIZERS:
+        if self.optimizer != "auto" and canonical_name(self.optimizer) not in FIT_OPTIMIZERS:
             raise ClothFitError(
                 f"fit config: optimizer {self.optimizer!r} is a polish, not a fit's search: choose one "
                 f"of {', '.join(FIT_OPTIMIZERS)}"
@@ -187,7 +195,7 @@ class FitConfig:
             raise ClothFitError(f"fit config: cma_active must be true or false, got {self.cma_active!r}")
         if self.portfolio_polish not in (None, "cma", "coord"):
             raise ClothFitError(f"fit config: portfolio_polish must be 'cma' or 'coord', got {self.portfolio_polish!r}")
-        opt = canonical_name(self.optimizer)
+        opt = "cma-es" if self.optimizer == "auto" else canonical_name(self.optimizer)  # auto: a CMA-ES either way
         for name, (_, optimizers) in SEARCH_OPTIONS.items():
             if getattr(self, name) is not None and opt not in optimizers:
                 raise ClothFitError(f"fit config: {name} is a setting of {' and '.join(optimizers)}, not of {opt}")

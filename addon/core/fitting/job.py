@@ -44,9 +44,15 @@ from ..physics.scenario import Uncertainty
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from . import checkpoint
 from .checkpoint import STOP_REASONS, capture_hash, identity_diff, read_checkpoint, silhouettes_hash  # noqa: F401 (re-exported)  # noqa: F401 (re-exported for the CLI and tests)
-from .config import CMA_OPTIMIZERS, SEARCH_OPTIONS, FitConfig, check_resolution  # noqa: F401 (re-exported)
+from .config import (  # noqa: F401 (re-exported)
+    CMA_OPTIMIZERS,
+    SEARCH_OPTIONS,
+    FitConfig,
+    check_resolution,
+    resolve_optimizer,
+)
 from .objective import SilhouetteObjective
-from .optimise import canonical_name, make_optimizer
+from .optimise import make_optimizer
 from .parameters import (
     BlenderParameters,
     ManipulationParameters,
@@ -149,7 +155,7 @@ class FitJob:
         self.manip, self.manip_note = self._manipulation(capture, cfg, evaluator)
         self.npar = self.par.space.n
         self.space = joint_space(self.par.space, self.manip)
-        self.optimizer_name = canonical_name(cfg.optimizer)
+        self.optimizer_name = resolve_optimizer(cfg.optimizer, isinstance(self.par, BlenderParameters))
         self.ladder = self._ladder(capture, cfg, evaluator)
         self.start_quality = None if self.ladder is None else self.ladder.start
         reserved = 0

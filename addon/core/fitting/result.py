@@ -217,7 +217,7 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
         "capture": os.path.abspath(job.capture.root),
         "capture_hash": job.capture_hash,
         "silhouettes_hash": job.silhouettes_hash,
-        "optimizer": job.config.optimizer,
+        "optimizer": job.optimizer_name,
         "seed": job.config.seed,
         "train_cameras": [job.capture.cameras[c].name for c in job.train_cameras],
         "train_camera_indices": job.train_cameras,
