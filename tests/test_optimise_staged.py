@@ -178,15 +178,18 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     # the fit's default ("auto") on Blender's cloth is this search, and the result names it
     auto = FitJob(cap, FitConfig(max_evaluations=40, train_cameras=[0, 2, 4, 6], train_times=[0.3, 0.6]))
     assert isinstance(auto.opt, StagedCMA) and auto.optimizer_name == "cma-staged"
+    # only strong settings free: nothing to stage, so the default is CMA-ES
+    few = FitJob(cap, FitConfig(max_evaluations=40, train_cameras=[0, 2], free=["tension_stiffness", "air_damping"]))
+    assert few.optimizer_name == "cma-es"
 
 
 def test_the_fit_default_is_staged_on_blenders_cloth_and_cma_es_on_the_papers():
     from clothfit.core.fitting.config import FitConfig, resolve_optimizer
 
     assert FitConfig().optimizer == D.FIT_OPTIMIZER == "auto"
-    assert resolve_optimizer("auto", blender=True) == D.BLENDER_OPTIMIZER == "cma-staged"
-    assert resolve_optimizer("auto", blender=False) == D.DEFAULT_OPTIMIZER == "cma-es"
-    assert resolve_optimizer("CMA", blender=True) == "cma-es"  # a named search is kept
+    assert resolve_optimizer("auto", stageable=True) == D.BLENDER_OPTIMIZER == "cma-staged"
+    assert resolve_optimizer("auto", stageable=False) == D.DEFAULT_OPTIMIZER == "cma-es"
+    assert resolve_optimizer("CMA", stageable=True) == "cma-es"  # a named search is kept
     with pytest.raises(ClothFitError, match="unknown optimiser 'nope'"):
         FitConfig(optimizer="nope").checked()
     FitConfig(optimizer="auto", cma_active=True).checked()  # auto is a CMA-ES either way

@@ -182,7 +182,7 @@ SOURCES = {
             "tools/search_ab.py",
             "synth:damped",
             "--strategies",
-            "baseline,staged,staged-recipe",
+            "baseline,staged,staged-first,staged-recipe",
             "--seeds",
             "0-9",
             "--reuse",
@@ -270,8 +270,8 @@ SOURCES = {
     "issue20_search": {
         "argv": ["{py}", "tools/issue20_goals.py", "search", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's search goal over seeds 0-4 with today's search and with --optimizer cma-staged, and the "
-        "offsets goal with cma-staged (about 25 min)",
+        "what": "issue 20's search goal over seeds 0-4 with the fit's default search (cma-staged) and with cma-es, "
+        "the default before it, and the offsets goal with cma-es (about 25 min)",
     },
     "cross_simulator": {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],

@@ -960,8 +960,9 @@ def main(argv=None):
             s.add_argument("--materials", default=None, help="continuum: comma list (default: cotton,silk)")
     se = sub.add_parser(
         "search",
-        help="the search goal over 5 seeds, today's search and --optimizer cma-staged, and the offsets goal with "
-        "cma-staged: exact --optimizer cma-staged --seeds 0-4, offsets --optimizer cma-staged, exact --seeds 0-4",
+        help="the search goal over 5 seeds with the fit's default search (cma-staged on this model) and with the "
+        "one before it (cma-es), and the offsets goal with cma-es: exact --seeds 0-4, exact --optimizer cma-es "
+        "--seeds 0-4, offsets --optimizer cma-es",
     )
     se.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
     se.add_argument("--json", default="out/issue20/goals_search.json", help="rows merged into this JSON")
@@ -982,7 +983,7 @@ def main(argv=None):
         return 0
     os.makedirs(os.path.join(a.out, "fits"), exist_ok=True)
     if a.cmd == "search":
-        steps = (("exact", "cma-staged", "0-4"), ("offsets", "cma-staged", "0"), ("exact", None, "0-4"))
+        steps = (("exact", None, "0-4"), ("exact", "cma-es", "0-4"), ("offsets", "cma-es", "0"))
         for g, opt, seeds in steps:
             argv = [g, "--out", a.out, "--json", a.json, "--seeds", seeds] + (["--optimizer", opt] if opt else [])
             main(argv + (["--remake"] if a.remake else []))

@@ -22,7 +22,7 @@ from ..core import defaults as D
 from ..core.footage.extract import ExtractOptions
 
 OPTIMIZERS = [
-    ("auto", "Auto", f"{D.BLENDER_OPTIMIZER} on Blender's cloth, {D.DEFAULT_OPTIMIZER} on the paper's sheet"),
+    ("auto", "Auto", f"{D.BLENDER_OPTIMIZER} on Blender's cloth with weak settings free, else {D.DEFAULT_OPTIMIZER}"),
     ("spx-mgg", "SPX + MGG", "Real-coded GA: simplex crossover, minimal generation gap (the paper's)"),
     ("cma-es", "CMA-ES", "Covariance matrix adaptation evolution strategy"),
     (

@@ -254,7 +254,8 @@ def _search_args(s):
         default=D.FIT_OPTIMIZER,
         help="cma-es, spx-mgg (the paper's real-coded GA), cma-portfolio, cma-staged (Blender's cloth: "
         "tension, shear, bending and air damping first, then every setting; docs/search.md), or auto "
-        f"({D.BLENDER_OPTIMIZER} on Blender's cloth, {D.DEFAULT_OPTIMIZER} on the paper's sheet) (default: %(default)s)",
+        f"({D.BLENDER_OPTIMIZER} on Blender's cloth when weak settings are free too, else {D.DEFAULT_OPTIMIZER}) "
+        "(default: %(default)s)",
     )
     s.add_argument("--seed", type=int, default=0, help="random seed of the optimiser (default: %(default)s)")
     s.add_argument(

@@ -86,8 +86,8 @@ FIT_GA_CHILDREN = 5 * N_FREE
 CMA_POPSIZE = 4 + int(3 * math.log(N_FREE))
 FIT_EVALUATIONS = 2500  # default evaluation budget of one fit
 DEFAULT_OPTIMIZER = "cma-es"  # measured faster than SPX+MGG on this problem (README, `paper --only optimizers`)
-# a fit's default search, "auto": BLENDER_OPTIMIZER on Blender's cloth (the core model or a .blend's own solver),
-# DEFAULT_OPTIMIZER on the paper's mass-spring sheet (docs/search.md, "Strong settings first")
+# a fit's default search, "auto": BLENDER_OPTIMIZER on Blender's cloth (the core model or a .blend's own solver)
+# when settings outside STAGED_STRONG are free too, else DEFAULT_OPTIMIZER (docs/search.md, "Strong settings first")
 FIT_OPTIMIZER = "auto"
 BLENDER_OPTIMIZER = "cma-staged"
 

@@ -33,11 +33,13 @@ SEARCH_OPTIONS = {
 }
 
 
-def resolve_optimizer(name: str, blender: bool) -> str:
-    """The fit's search: ``name`` itself (canonical), or for "auto" ``D.BLENDER_OPTIMIZER`` on Blender's
-    cloth (``blender``) and ``D.DEFAULT_OPTIMIZER`` on the paper's sheet."""
+def resolve_optimizer(name: str, stageable: bool) -> str:
+    """The fit's search: ``name`` itself (canonical), or for "auto" ``D.BLENDER_OPTIMIZER`` where it has
+    something to stage (``stageable``: Blender's cloth with free settings both in and outside
+    ``D.STAGED_STRONG``) and ``D.DEFAULT_OPTIMIZER`` elsewhere (the paper's sheet, or only strong
+    settings free, where the staged search would be one CMA-ES run with another random stream)."""
     if str(name).strip().lower() == "auto":
-        return D.BLENDER_OPTIMIZER if blender else D.DEFAULT_OPTIMIZER
+        return D.BLENDER_OPTIMIZER if stageable else D.DEFAULT_OPTIMIZER
     return canonical_name(name)
 
 

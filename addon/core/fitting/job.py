@@ -155,7 +155,9 @@ class FitJob:
         self.manip, self.manip_note = self._manipulation(capture, cfg, evaluator)
         self.npar = self.par.space.n
         self.space = joint_space(self.par.space, self.manip)
-        self.optimizer_name = resolve_optimizer(cfg.optimizer, isinstance(self.par, BlenderParameters))
+        strong = [n in D.STAGED_STRONG for n in getattr(self.par, "free", ())]
+        stageable = isinstance(self.par, BlenderParameters) and any(strong) and not all(strong)
+        self.optimizer_name = resolve_optimizer(cfg.optimizer, stageable)
         self.ladder = self._ladder(capture, cfg, evaluator)
         self.start_quality = None if self.ladder is None else self.ladder.start
         reserved = 0
