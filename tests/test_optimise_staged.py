@@ -193,34 +193,3 @@ def test_the_fit_default_is_staged_on_blenders_cloth_and_cma_es_on_the_papers():
     with pytest.raises(ClothFitError, match="unknown optimiser 'nope'"):
         FitConfig(optimizer="nope").checked()
     FitConfig(optimizer="auto", cma_active=True).checked()  # auto is a CMA-ES either way
-
-
-def test_a_first_stage_run_that_stalls_is_restarted_from_a_random_point():
-    """No progress of stall_rel over `stall` evaluations ends the run ("stall"), the next with the same
-    population from elsewhere; a run that improves is left alone; the rule resumes exactly."""
-    flat = StagedCMA(space(), seed=6, first=["x0", "x1"], budget=1000, stall=60, tolfun=0.0, tolx=0.0)
-    child = flat.children[0]
-    lam, means = child.run_popsize, [child.mean.copy()]
-    while flat.stage == 1 and not child.run_stops:
-        X = flat.ask()
-        flat.tell(X, np.ones(len(X)))  # nothing ever improves
-    assert child.run_stops == ["stall"] and child.run_popsize == lam
-    assert 60 <= child.evaluations <= 60 + 2 * lam and not np.allclose(child.mean, means[0])
-    # a smooth problem: the run is ended only once it has converged (its minimum here is 1.12)
-    good = StagedCMA(space(), seed=6, first=["x0", "x1"], budget=2000, stall=60, tolfun=0.0, tolx=0.0)
-    while good.stage == 1 and not good.children[0].run_stops:
-        X = good.ask()
-        good.tell(X, strong_weak(X) + 1.0)
-    assert good.children[0].run_stops == ["stall"] and good.best_f < 1.12 * 1.01
-    # resume in the middle of a stall count: the same restarts at the same evaluations
-    a = StagedCMA(space(), seed=8, first=["x0", "x1"], budget=1000, stall=30, tolfun=0.0, tolx=0.0)
-    for _ in range(4):
-        X = a.ask()
-        a.tell(X, np.ones(len(X)))
-    b = optimizer_from_state(json.loads(json.dumps(a.state_dict(), allow_nan=False)))
-    for _ in range(20):
-        Xa, Xb = a.ask(), b.ask()
-        assert np.array_equal(Xa, Xb)
-        a.tell(Xa, np.ones(len(Xa)))
-        b.tell(Xb, np.ones(len(Xb)))
-    assert a.children[0].run_stops == b.children[0].run_stops and "stall" in a.children[0].run_stops

@@ -182,8 +182,6 @@ STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the stro
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best
 STAGED_STRONG = ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping")  # what the
 # silhouettes see most (docs/search.md, The landscape): searched first, the other settings held at their defaults
-STAGED_STALL = 200  # cma-staged's first stage: a run whose best has not improved by STAGED_STALL_REL in this
-STAGED_STALL_REL = 0.01  # many evaluations is ended and restarted from a random point (same population)
 STAGED_TIE = {"compression_stiffness": "tension_stiffness"}  # cma-staged's first stage: compression follows
 # tension (as in Blender's defaults and its presets) rather than staying at 15 whatever tension is
 PROFILE_STEP = 0.1  # the manipulation's uncertainty: the objective at +-10 % of each bound around the best

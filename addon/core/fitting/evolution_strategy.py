@@ -56,16 +56,7 @@ from .steppable import Optimizer
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-CMA_STOPS = (
-    "tolx",
-    "tolfun",
-    "tolstagnation",
-    "conditioncov",
-    "noeffectcoord",
-    "noeffectaxis",
-    "tolupsigma",
-    "stall",  # ended by its caller (end_run): cma-staged's first stage, no progress for a while
-)
+CMA_STOPS = ("tolx", "tolfun", "tolstagnation", "conditioncov", "noeffectcoord", "noeffectaxis", "tolupsigma")
 
 
 class CMAES(Optimizer):
@@ -223,22 +214,13 @@ class CMAES(Optimizer):
         del self.run_bests[: -2 * self.stag_window]
         reason = self._run_stop()
         if reason is not None:
-            self.end_run(reason)
-
-    def end_run(self, reason: str, grow: bool = True) -> None:
-        """End this run (``reason``, one of ``CMA_STOPS``): the next IPOP restart from a random mean
-        (twice the population, or the same with ``grow`` False), or stop if none is left."""
-        if reason not in CMA_STOPS:
-            raise ClothFitError(f"cma-es: unknown stop criterion {reason!r}")
-        if self._pending is not None:
-            raise ClothFitError("cma-es: end_run() with candidates asked and not told")
-        self.run_stops.append(reason)
-        self.stop_reason = reason
-        if self.restarts_done < self.restarts:  # IPOP: twice the population, a new random mean
-            self.restarts_done += 1
-            self._start_run(self.rng.random(self.space.n), 2 * self.lam if grow else self.lam)
-        else:
-            self._stopped = True
+            self.run_stops.append(reason)
+            self.stop_reason = reason
+            if self.restarts_done < self.restarts:  # IPOP: twice the population, a new random mean
+                self.restarts_done += 1
+                self._start_run(self.rng.random(n), 2 * self.lam)
+            else:
+                self._stopped = True
 
     def _run_stop(self):
         n = self.space.n

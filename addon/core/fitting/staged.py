@@ -52,11 +52,6 @@ class StagedCMA(Optimizer):
     ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
     Blender's defaults); in the second stage they are free like every other.
-    ``stall``, ``stall_rel``: in the first stage, a run whose best has not improved by ``stall_rel``
-    (relative) over ``stall`` evaluations is ended and the next started from a random point (an
-    IPOP restart with the same population): on Blender's cloth a first run lands in a wrong basin
-    (bending near zero, shear too high) about as often as in the right one, and sits there for the
-    rest of the stage (docs/search.md). 0 turns it off.
     """
 
     name = "cma-staged"
@@ -78,8 +73,6 @@ class StagedCMA(Optimizer):
         budget: int | None = None,
         second_sigma: float = D.STAGED_SECOND_SIGMA,
         tie: dict | None = None,
-        stall: int = D.STAGED_STALL,
-        stall_rel: float = D.STAGED_STALL_REL,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -108,9 +101,6 @@ class StagedCMA(Optimizer):
             x[names.index(n)] = float(v)
         self.hold_u = np.clip(space.encode(x), 0.0, 1.0)
         self.tie = self._check_tie(tie or {}, names, self.first, w)
-        self.stall = _integer(stall, f"{w}: stall", 0)
-        self.stall_rel = _number(stall_rel, f"{w}: stall_rel", 0.0, 1.0)
-        self.stall_best, self.stall_at = float("inf"), 0  # the run's best that counted, and when
         self.stage = 1
         self._stopped = False
         sub = self._subspace()
@@ -211,7 +201,6 @@ class StagedCMA(Optimizer):
         c.tell(A[:, self._idx] if staging else A, f)
         self._record(U, f)
         if staging:
-            self._stall_check(c, f)
             if c.stopped or c.evaluations >= self.first_fraction * self.budget:
                 self.stage = 2
                 self.children.append(
@@ -221,20 +210,6 @@ class StagedCMA(Optimizer):
                 )
         elif c.stopped:
             self._stopped = True
-
-    def _stall_check(self, c, f):
-        """The first stage's stall rule (``stall``, ``stall_rel``); a run that ended on its own resets it."""
-        if not self.stall or c.stopped:
-            return
-        if c.run_generation == 0:  # a new run began with this tell (IPOP)
-            self.stall_best, self.stall_at = float("inf"), c.evaluations
-            return
-        fin = f[np.isfinite(f)]
-        if fin.size and fin.min() < self.stall_best * (1.0 - self.stall_rel):
-            self.stall_best, self.stall_at = float(fin.min()), c.evaluations
-        elif c.evaluations - self.stall_at >= self.stall:
-            c.end_run("stall", grow=False)
-            self.stall_best, self.stall_at = float("inf"), c.evaluations
 
     STATE_KEYS = (
         "popsize",
@@ -249,10 +224,6 @@ class StagedCMA(Optimizer):
         "budget",
         "hold_u",
         "tie",
-        "stall",
-        "stall_rel",
-        "stall_best",
-        "stall_at",
         "stage",
         "stopped",
         "children",
@@ -276,10 +247,6 @@ class StagedCMA(Optimizer):
                 "budget": self.budget,
                 "hold_u": self.hold_u.tolist(),
                 "tie": dict(self.tie),
-                "stall": self.stall,
-                "stall_rel": self.stall_rel,
-                "stall_best": None if not np.isfinite(self.stall_best) else self.stall_best,
-                "stall_at": self.stall_at,
                 "stage": self.stage,
                 "stopped": self._stopped,
                 "children": [c.state_dict() for c in self.children],
@@ -320,15 +287,6 @@ class StagedCMA(Optimizer):
             raise ClothFitError(f"checkpoint: {w} 'hold_u' must lie in the unit cube")
         # 'tie' came after the first checkpoints of this search: none there
         opt.tie = cls._check_tie(d.get("tie", {}), list(space.names), opt.first, f"checkpoint: {w}")
-        # the stall rule came after the first checkpoints of this search: off there
-        if "stall" in d:
-            opt.stall = _num(d, "stall", w, int, 0, 10**12)
-            opt.stall_rel = _num(d, "stall_rel", w, float, 0.0, 1.0)
-            sb = _num(d, "stall_best", w, float, allow_none=True)
-            opt.stall_best = float("inf") if sb is None else sb
-            opt.stall_at = _num(d, "stall_at", w, int, 0, 10**12)
-        else:
-            opt.stall, opt.stall_rel, opt.stall_best, opt.stall_at = 0, 0.0, float("inf"), 0
         opt.stage = _num(d, "stage", w, int, 1, 2)
         opt._stopped = _bool(d, "stopped", w)
         kids = _field(d, "children", w)
