@@ -62,8 +62,8 @@ STRATEGIES = {
     # `--optimizer cma-staged` (StagedCMA, set up as FitJob sets it up)
     "staged": ("cma-staged", {"restarts": 4}),
     # cma-staged as first recorded: compression held at Blender's default in the first stage instead of
-    # following tension (D.STAGED_TIE), and no restart of a first-stage run that stalls (D.STAGED_STALL)
-    "staged-first": ("cma-staged", {"restarts": 4, "stall": 0}),
+    # following tension (D.STAGED_TIE)
+    "staged-first": ("cma-staged", {"restarts": 4}),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
