@@ -161,7 +161,7 @@ SOURCES = {
             "tools/search_ab.py",
             "synth:fresh",
             "--strategies",
-            "baseline,active32",
+            "baseline,active32,staged",
             "--seeds",
             "0-9",
             "--reuse",
