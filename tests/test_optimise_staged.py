@@ -125,6 +125,21 @@ def test_corrupt_state_is_one_line_error(change, match):
         optimizer_from_state(d)
 
 
+def test_a_held_value_outside_the_range_is_held_at_its_bound():
+    """A scene's own settings may hold 0 where the search is log-scaled (a damping): held at the bound."""
+    logspace = SearchSpace(["a", "b"], {"a": (0.1, 10.0), "b": (0.01, 1.0)}, {"a": True, "b": True})
+    opt = StagedCMA(logspace, seed=0, first=["a"], hold={"b": 0.0})
+    X = opt.ask()
+    assert np.allclose(X[:, 1], 0.01)
+
+
+def test_first_popsize_sets_the_first_stages_population():
+    opt = StagedCMA(space(), seed=0, first=["x0", "x1"], first_popsize=6, popsize=9)
+    assert len(opt.ask()) == 6 and opt.popsize == 9
+    with pytest.raises(ClothFitError, match="first_popsize"):
+        StagedCMA(space(), first=["x0"], first_popsize=1)
+
+
 def test_bad_arguments_are_one_line_errors():
     with pytest.raises(ClothFitError, match="'first'"):
         StagedCMA(space(), first=["y"])

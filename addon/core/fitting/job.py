@@ -327,6 +327,8 @@ class FitJob:
         mass, or the warm start's); the main search's budget."""
         par = self.par
         kw = {"budget": max(1, self.search_budget())}
+        if self.config.population is not None:  # the user's population, in both stages
+            kw["first_popsize"] = self.config.population
         if not isinstance(par, BlenderParameters):  # the paper's model: one CMA-ES run over everything
             return kw
         names = list(self.space.names)

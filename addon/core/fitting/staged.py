@@ -46,7 +46,7 @@ class StagedCMA(Optimizer):
     ``first``: names of the space searched in the first stage (default: all of them); ``hold``:
     name -> value (real units) of coordinates held during the first stage (default: the mean of
     ``initial``, else the middle of the unit cube). ``popsize``: the second stage's population
-    (the first stage's is Hansen's 4 + 3 ln k for its k coordinates); ``sigma0``, ``restarts``,
+    (the first stage's is ``first_popsize``, by default Hansen's 4 + 3 ln k for its k coordinates); ``sigma0``, ``restarts``,
     ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
     ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
     ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
@@ -73,6 +73,7 @@ class StagedCMA(Optimizer):
         budget: int | None = None,
         second_sigma: float = D.STAGED_SECOND_SIGMA,
         tie: dict | None = None,
+        first_popsize: int | None = None,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -99,14 +100,20 @@ class StagedCMA(Optimizer):
             if n not in names:
                 raise ClothFitError(f"{w}: 'hold' names {n!r}, not a coordinate of the search")
             x[names.index(n)] = float(v)
-        self.hold_u = np.clip(space.encode(x), 0.0, 1.0)
+        self.hold_u = np.clip(
+            space.encode(space.clip(x)), 0.0, 1.0
+        )  # a held value outside the range (a scene's 0) at its bound
         self.tie = self._check_tie(tie or {}, names, self.first, w)
         self.stage = 1
         self._stopped = False
         sub = self._subspace()
         init = [space.decode(self.hold_u)[self._idx]] if len(self._initial_u) else None
         k = sub.n if len(self.first) < space.n else None
-        self.children = [self._child(sub, self.popsize if k is None else 4 + int(3 * np.log(k)), self.sigma0, init)]
+        if first_popsize is not None:
+            lam1 = _integer(first_popsize, f"{w}: first_popsize", 2)
+        else:
+            lam1 = self.popsize if k is None else 4 + int(3 * np.log(k))
+        self.children = [self._child(sub, lam1, self.sigma0, init)]
 
     @staticmethod
     def _check_tie(tie, names, first, w):
