@@ -64,12 +64,11 @@ STRATEGIES = {
     # the same with compression following tension in the first stage instead of held at Blender's default
     # (StagedCMA's 'tie'; tried as the default and not kept)
     "staged-tie": ("cma-staged", {"restarts": 4}),
-    # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over STRONG
+    # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
     "staged-recipe": ("staged-recipe", {}),
 }
-STRONG = D.STAGED_STRONG
 STAGED_FIRST = D.STAGED_FIRST_FRACTION
 STAGED_SIGMA = D.STAGED_SECOND_SIGMA
 
@@ -200,11 +199,10 @@ class Bench:
         return make_optimizer(name, self.job.space, seed=seed, **kw)
 
     def _staged(self, seed, budget):
-        """The ``staged`` strategy: (optimiser of the last stage, evaluations of both, best x in the full
-        space, its training objective value)."""
+        """The ``staged-recipe`` strategy: (the second fit's optimiser, the first fit's evaluations)."""
         cap = self.job.capture
         free = list(self.job.par.free)
-        strong = [n for n in STRONG if n in free]
+        strong = self.job._strong_free()
         job1 = FitJob(
             cap, FitConfig(train_cameras=self.job.train_cameras, train_times=list(D.TRAIN_TIMES), free=strong)
         )

@@ -182,10 +182,6 @@ STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the stro
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best
 STAGED_STRONG = ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping")  # what the
 # silhouettes see most (docs/search.md, The landscape): searched first, the other settings held at their defaults
-# cma-staged's first stage: coordinates that follow another instead of being held (follower -> leader). Off:
-# compression following tension won on the goal's capture (compression equal to tension) and lost on two
-# others, one of them with compression equal to tension too (docs/search.md, "Strong settings first")
-STAGED_TIE: dict = {}
 PROFILE_STEP = 0.1  # the manipulation's uncertainty: the objective at +-10 % of each bound around the best
 PROFILE_RISE = 0.01  # uncertainty = the offset at which the training error rises by 1 % (a quadratic
 # through the three points); flat or concave = the fit cannot separate it

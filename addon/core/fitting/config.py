@@ -153,7 +153,8 @@ class FitConfig:
             raise ClothFitError(f"fit config: train_times must be a list of finite numbers, got {tt!r}")
         if not isinstance(self.optimizer, str):
             raise ClothFitError(f"fit config: optimizer must be a name, got {self.optimizer!r}")
-        if self.optimizer != "auto" and canonical_name(self.optimizer) not in FIT_OPTIMIZERS:
+        opt = resolve_optimizer(self.optimizer, stageable=True)  # "auto" is a CMA-ES search either way
+        if opt not in FIT_OPTIMIZERS:
             raise ClothFitError(
                 f"fit config: optimizer {self.optimizer!r} is a polish, not a fit's search: choose one "
                 f"of {', '.join(FIT_OPTIMIZERS)}"
@@ -197,10 +198,10 @@ class FitConfig:
             raise ClothFitError(f"fit config: cma_active must be true or false, got {self.cma_active!r}")
         if self.portfolio_polish not in (None, "cma", "coord"):
             raise ClothFitError(f"fit config: portfolio_polish must be 'cma' or 'coord', got {self.portfolio_polish!r}")
-        opt = "cma-es" if self.optimizer == "auto" else canonical_name(self.optimizer)  # auto: a CMA-ES either way
         for name, (_, optimizers) in SEARCH_OPTIONS.items():
             if getattr(self, name) is not None and opt not in optimizers:
-                raise ClothFitError(f"fit config: {name} is a setting of {' and '.join(optimizers)}, not of {opt}")
+                shown = "auto (a CMA-ES search)" if str(self.optimizer).strip().lower() == "auto" else opt
+                raise ClothFitError(f"fit config: {name} is a setting of {' and '.join(optimizers)}, not of {shown}")
         return self
 
     def search_options(self) -> dict:

@@ -155,8 +155,8 @@ class FitJob:
         self.manip, self.manip_note = self._manipulation(capture, cfg, evaluator)
         self.npar = self.par.space.n
         self.space = joint_space(self.par.space, self.manip)
-        strong = [n in D.STAGED_STRONG for n in getattr(self.par, "free", ())]
-        stageable = isinstance(self.par, BlenderParameters) and any(strong) and not all(strong)
+        strong = self._strong_free()
+        stageable = 0 < len(strong) < len(getattr(self.par, "free", ()))
         self.optimizer_name = resolve_optimizer(cfg.optimizer, stageable)
         self.ladder = self._ladder(capture, cfg, evaluator)
         self.start_quality = None if self.ladder is None else self.ladder.start
@@ -329,19 +329,18 @@ class FitJob:
         kw = {"budget": max(1, self.search_budget())}
         if self.config.population is not None:  # the user's population, in both stages
             kw["first_popsize"] = self.config.population
-        if not isinstance(par, BlenderParameters):  # the paper's model: one CMA-ES run over everything
-            return kw
-        names = list(self.space.names)
-        free = list(par.free)
-        strong = [n for n in D.STAGED_STRONG if n in free]
+        strong = self._strong_free()
         if strong:
-            kw["first"] = strong + names[self.npar :]
+            kw["first"] = strong + list(self.space.names)[self.npar :]
             if par.initial is None:
-                kw["hold"] = {n: par._coord(n, par.fixed[n]) for n in free if n not in strong}
-                kw["tie"] = {
-                    f: lead for f, lead in D.STAGED_TIE.items() if f in free and f not in strong and lead in strong
-                }
+                kw["hold"] = {n: par._coord(n, par.fixed[n]) for n in par.free if n not in strong}
         return kw
+
+    def _strong_free(self) -> list:
+        """The free settings of Blender's cloth among ``D.STAGED_STRONG`` (none on the paper's sheet)."""
+        if not isinstance(self.par, BlenderParameters):
+            return []
+        return [n for n in D.STAGED_STRONG if n in self.par.free]
 
     def search_budget(self) -> int:
         """The main search's share of the budget (the rest is kept for the ladder and the profile)."""

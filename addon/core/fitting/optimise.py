@@ -45,12 +45,8 @@ OPTIMIZERS = {
     "coord-polish": CoordinatePolish,
     "cma-staged": StagedCMA,
 }
-FIT_OPTIMIZERS = (
-    "cma-es",
-    "spx-mgg",
-    "cma-portfolio",
-    "cma-staged",
-)  # the searches a fit may run (coord-polish is a polish)
+# the searches a fit may run (coord-polish is a polish)
+FIT_OPTIMIZERS = ("cma-es", "spx-mgg", "cma-portfolio", "cma-staged")
 ALIASES = {
     "spx-mgg": "spx-mgg",
     "spx_mgg": "spx-mgg",

@@ -46,12 +46,13 @@ class StagedCMA(Optimizer):
     ``first``: names of the space searched in the first stage (default: all of them); ``hold``:
     name -> value (real units) of coordinates held during the first stage (default: the mean of
     ``initial``, else the middle of the unit cube). ``popsize``: the second stage's population
-    (the first stage's is ``first_popsize``, by default Hansen's 4 + 3 ln k for its k coordinates); ``sigma0``, ``restarts``,
-    ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
+    (the first stage's is ``first_popsize``, by default Hansen's 4 + 3 ln k for its k coordinates);
+    ``sigma0``, ``restarts``, ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
     ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
     ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
-    Blender's defaults); in the second stage they are free like every other.
+    Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
+    stage they are free like every other.
     """
 
     name = "cma-staged"
@@ -100,9 +101,8 @@ class StagedCMA(Optimizer):
             if n not in names:
                 raise ClothFitError(f"{w}: 'hold' names {n!r}, not a coordinate of the search")
             x[names.index(n)] = float(v)
-        self.hold_u = np.clip(
-            space.encode(space.clip(x)), 0.0, 1.0
-        )  # a held value outside the range (a scene's 0) at its bound
+        # a held value outside the search range (a scene's zero damping) is held at its bound
+        self.hold_u = np.clip(space.encode(space.clip(x)), 0.0, 1.0)
         self.tie = self._check_tie(tie or {}, names, self.first, w)
         self.stage = 1
         self._stopped = False
