@@ -31,7 +31,16 @@ def strong_weak(X):
 
 def test_first_stage_holds_the_others_then_searches_everything():
     assert type(make_optimizer("staged", space(), seed=0)) is StagedCMA
-    opt = StagedCMA(space(), seed=3, first=["x1", "x0"], hold={"x2": 0.5, "x3": -1.0}, budget=600, tolfun=1e-12)
+    opt = StagedCMA(
+        space(),
+        seed=3,
+        first=["x1", "x0"],
+        hold={"x2": 0.5, "x3": -1.0},
+        budget=600,
+        tolfun=1e-12,
+        race=1,
+        scan_points=0,
+    )
     assert opt.first == ["x0", "x1"]  # in the space's order
     stage1 = []
     while opt.stage == 1:
@@ -56,7 +65,7 @@ def test_first_stage_holds_the_others_then_searches_everything():
 
 
 def test_a_tied_coordinate_follows_its_leader_in_the_first_stage_only():
-    opt = StagedCMA(space(), seed=4, first=["x0", "x1"], tie={"x3": "x0"}, budget=200)
+    opt = StagedCMA(space(), seed=4, first=["x0", "x1"], tie={"x3": "x0"}, budget=200, scan_points=0)
     assert opt.tie == {"x3": "x0"}
     while opt.stage == 1:
         X = opt.ask()
@@ -82,7 +91,7 @@ def test_no_first_stage_is_plain_cma_over_everything():
 
 # 6 per generation over 2 coordinates, the switch after 144 evaluations (24 generations): checkpointed in
 # the first stage, with the batch whose tell switches pending, and in the second
-@pytest.mark.parametrize("cut", [7, 23, 60])
+@pytest.mark.parametrize("cut", [7, 23, 26, 27, 60])
 def test_resume_is_exact_in_either_stage(cut):
     def make():
         return StagedCMA(space(), seed=5, first=["x0", "x1"], hold={"x4": 1.0}, tie={"x2": "x1"}, budget=300)
@@ -104,6 +113,68 @@ def test_resume_is_exact_in_either_stage(cut):
     assert a.best_f == b.best_f and a.evaluations == b.evaluations
 
 
+def needle(X):
+    """x0 a smooth bowl (minimum at 1.5); x1 a plateau with a narrow valley at 3.2 (0.6 wide), like
+    Blender's bending seen in silhouettes; x2..x4 weak."""
+    X = np.atleast_2d(X)
+    valley = np.clip(np.abs(X[:, 1] - 3.2) / 0.3, 0.0, 1.0)
+    return (X[:, 0] - 1.5) ** 2 + 5 * valley + 0.01 * np.sum((X[:, 2:] - 2.0) ** 2, axis=1)
+
+
+def test_between_the_stages_each_first_coordinate_is_scanned_across_its_range():
+    opt = StagedCMA(space(), seed=1, first=["x0", "x1"], budget=400, scan_points=20)
+    while not opt.scanning:
+        X = opt.ask()
+        opt.tell(X, needle(X))
+    assert opt.stage == 1 and opt.scan_left == ["x0", "x1"] and "scan of x0" in opt.phase_info()
+    best = opt.best_x.copy()
+    for name in ("x0", "x1"):
+        j = int(name[1])
+        X = opt.ask()
+        assert np.array_equal(opt.ask(), X)  # asked again before its tell: the same batch
+        # one coordinate at 20 values evenly across its range [-5, 5], the others at the best point
+        assert X.shape == (20, 5) and np.allclose(X[:, j], -5 + 10 * (np.arange(20) + 0.5) / 20)
+        others = [i for i in range(5) if i != j]
+        assert np.allclose(X[:, others], opt.best_x[others])
+        opt.tell(X, needle(X))
+    # the scan found the needle's valley that CMA-ES steps on the plateau cannot see (x1 = 3.25 is on the
+    # grid), then the second stage starts from there
+    assert not opt.scanning and opt.stage == 2 and abs(opt.best_x[1] - 3.2) < 0.3
+    assert opt.best_f <= needle(best)[0]
+    assert np.allclose(opt.children[-1].ask().mean(axis=0)[1], 3.2, atol=0.6)
+    # no scan (scan_points=0) goes straight to the second stage
+    plain = StagedCMA(space(), seed=1, first=["x0", "x1"], budget=400, scan_points=0)
+    while plain.stage == 1:
+        X = plain.ask()
+        assert not plain.scanning
+        plain.tell(X, needle(X))
+
+
+def test_the_first_stage_races_runs_then_the_best_goes_on_alone():
+    opt = StagedCMA(space(), seed=6, first=["x0", "x1"], budget=1000, race=3, race_evals=60)
+    assert opt.racing and len(opt.children) == 3 and opt.race_evals == 60
+    starts = [tuple(np.round(c.ask()[0], 6)) for c in opt.children]  # each run its own first point
+    assert len(set(starts)) == 3
+    opt = StagedCMA(space(), seed=6, first=["x0", "x1"], budget=1000, race=3, race_evals=60)
+    seen = []
+    while opt.racing:
+        seen.append(opt.turn)
+        X = opt.ask()
+        assert "race" in opt.phase_info()
+        opt.tell(X, strong_weak(X))
+    # the runs took turns, one generation each, and each had its 60 evaluations (one generation over)
+    assert seen[:6] == [0, 1, 2, 0, 1, 2] and 180 <= opt.evaluations < 180 + 3 * 6
+    assert len(opt.children) == 1 and opt.stage == 1
+    # the run that goes on is the one with the best point so far
+    assert opt.children[0].best_f == opt.best_f
+    # the race is part of the first stage's share: a small budget shortens each run
+    small = StagedCMA(space(), seed=6, first=["x0", "x1"], budget=200, race=3, race_evals=250)
+    assert small.race_evals == int(D.STAGED_FIRST_FRACTION * 200) // 4
+    # one run (race=1) and no first stage race no more
+    assert not StagedCMA(space(), seed=6, first=["x0", "x1"], race=1).racing
+    assert not StagedCMA(space(), seed=6, first=["x0"], first_fraction=0.0).racing
+
+
 @pytest.mark.parametrize(
     "change, match",
     [
@@ -111,6 +182,10 @@ def test_resume_is_exact_in_either_stage(cut):
         (lambda d: d.update(stage=3), "'stage'"),
         (lambda d: d.update(hold_u=[2.0] * 5), "'hold_u'"),
         (lambda d: d.update(children=[]), "'children'"),
+        (lambda d: d.update(turn=7), "'turn'"),
+        (lambda d: d.update(racing=True, stage=2), "'children'"),
+        (lambda d: d.update(scan_left=["x4"]), "'scan_left'"),
+        (lambda d: d.update(scan_pending=[[0.5] * 5] * 24), "'scan_pending'"),
         (lambda d: d.update(tie={"x0": "x1"}), "'tie'"),
         (lambda d: d["children"][0].update(algorithm="spx-mgg"), "wrong algorithm"),
     ],
@@ -188,6 +263,25 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     # the fit's default ("auto") on Blender's cloth is this search, and the result names it
     auto = FitJob(cap, FitConfig(max_evaluations=40, train_cameras=[0, 2, 4, 6], train_times=[0.3, 0.6]))
     assert isinstance(auto.opt, StagedCMA) and auto.optimizer_name == "cma-staged"
+    # a capture's uncertain manipulation: its time offset is searched with the strong settings, the
+    # handles' offsets wait for the second stage at the declared positions (zero offset)
+    unc = FitJob(
+        cap,
+        FitConfig(
+            optimizer="cma-staged",
+            max_evaluations=40,
+            train_cameras=[0, 2, 4, 6],
+            train_times=[0.3, 0.6],
+            uncertain="time_offset=0.02,handles=0.003",
+        ),
+    )
+    names = list(unc.space.names)
+    assert "time_offset_s" in names and any(n.startswith("handle") for n in names)
+    assert unc.opt.first == [n for n in names if n in D.STAGED_STRONG] + ["time_offset_s"]
+    X = unc.opt.ask()
+    for k, n in enumerate(names):
+        if n.startswith("handle"):
+            assert np.allclose(X[:, k], 0.0)
     # only strong settings free: nothing to stage, so the default is CMA-ES
     few = FitJob(cap, FitConfig(max_evaluations=40, train_cameras=[0, 2], free=["tension_stiffness", "air_damping"]))
     assert few.optimizer_name == "cma-es"

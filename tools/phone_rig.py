@@ -115,9 +115,10 @@ def _rot(axis, deg):
     return cv2.Rodrigues(a / np.linalg.norm(a) * math.radians(deg))[0]
 
 
-def board_poses(board: CB.Board, cams: list, n: int, seed: int) -> list:
+def board_poses(board: CB.Board, cams: list, n: int, seed: int, close: int = 0) -> list:
     """(R, t) board -> scene: flat on the table (z = 0 is the table top) at moment 0, then ``n`` poses
-    held up, each turned towards a point between two neighbouring phones, tilted and rolled."""
+    held up, each turned towards a point between two neighbouring phones, tilted and rolled; then
+    ``close`` poses before each phone (:func:`close_poses`)."""
     rng = np.random.default_rng([seed, 2])
     c = board.centre()
     R0 = _rot([0, 0, 1], rng.uniform(-30, 30)) @ FLIP  # printed face up
@@ -138,7 +139,36 @@ def board_poses(board: CB.Board, cams: list, n: int, seed: int) -> list:
             @ _rot([0, 0, 1], rng.uniform(-45, 45))
         )
         poses.append((R, centre - R @ c))
-    return poses
+    return poses + close_poses(board, cams, close, seed)
+
+
+def close_poses(board: CB.Board, cams: list, k: int, seed: int) -> list:
+    """``k`` poses per phone after the others, as a calibration guide asks for each camera's lens: the
+    board held before that phone, filling about 60-80 % of the image's width, tilted 15-35 degrees away
+    from facing it (about a random axis) and moved round the image, so that its corners visit the
+    image's edges, where the distortion and the principal point show. Never below the table top."""
+    rng = np.random.default_rng([seed, 4])
+    c = board.centre()
+    out = []
+    for cam in cams:
+        fx = cam.K[0, 0]
+        for _ in range(k):
+            for _try in range(50):
+                fill = rng.uniform(0.6, 0.8)
+                d = board.size_m[0] * fx / (fill * cam.width)  # the board's width over fill of the image's
+                # where its middle lands in the image: within the middle 40 % x 50 %
+                u = cam.K[0, 2] + rng.uniform(-0.2, 0.2) * cam.width
+                v = cam.K[1, 2] + rng.uniform(-0.25, 0.25) * cam.height
+                ray = cam.R.T @ np.linalg.solve(cam.K, [u, v, 1.0])
+                centre = cam.center + d * ray / np.linalg.norm(ray)
+                Rc, _ = look_at(cam.center, centre)
+                axis = np.array([math.cos(a := rng.uniform(0, 2 * math.pi)), math.sin(a), 0.0])
+                R = Rc.T @ _rot(axis, rng.uniform(15, 35)) @ _rot([0, 0, 1], rng.uniform(-30, 30))
+                t = centre - R @ c
+                if (board.corners() @ R.T + t)[:, 2].min() > 0.02 and visible(cam, board, (R, t), min_inside=0.9):
+                    out.append((R, t))
+                    break
+    return out
 
 
 def visible(cam: Camera, board: CB.Board, pose, min_cos: float = 0.3, min_inside: float = 0.6) -> bool:
@@ -321,6 +351,9 @@ def render_views(spec_path: str):
         maps = RF.distortion_maps(cam, margin_px)
         os.makedirs(os.path.join(out, cam.name), exist_ok=True)
         for k in spec["views"][cam.name]:
+            path = os.path.join(out, cam.name, f"m{k:03d}.jpg")
+            if spec.get("keep") and os.path.isfile(path):
+                continue  # rendered by a run before (--keep-renders)
             R, t = (np.asarray(a) for a in spec["poses"][k])
             M = np.eye(4)
             M[:3, :3], M[:3, 3] = R, t
@@ -329,7 +362,7 @@ def render_views(spec_path: str):
             pin = RF.render_pinhole(scene, cam_obj, cam, margin_px, os.path.join(tmp, "pin.png"))
             times.append(time.time() - t0)
             frame = RF.add_sensor_noise(RF.distort_image(pin, maps), rng, spec["read_noise"], spec["shot_noise"])
-            cv2.imwrite(os.path.join(out, cam.name, f"m{k:03d}.jpg"), frame, [cv2.IMWRITE_JPEG_QUALITY, 95])
+            cv2.imwrite(path, frame, [cv2.IMWRITE_JPEG_QUALITY, 95])
             print(f"[render] {cam.name} m{k:03d}: {times[-1]:.1f} s", flush=True)
     with open(os.path.join(os.path.dirname(spec_path), "render_times.json"), "w") as f:
         json.dump({"seconds": times}, f)
@@ -348,7 +381,7 @@ def _load1():
 def run_calibrate(a) -> dict:
     board = CB.parse_board(BOARD)
     cams = phone_cameras(a.seed, a.scale)
-    poses = board_poses(board, cams, a.poses, a.seed)
+    poses = board_poses(board, cams, a.poses, a.seed, a.close)
     views = {c.name: [k for k, p in enumerate(poses) if visible(c, board, p)] for c in cams}
     missing = [c for c, v in views.items() if 0 not in v]
     if missing:
@@ -367,6 +400,7 @@ def run_calibrate(a) -> dict:
         "cameras": [c.to_dict() for c in cams],
         "views": views,
         "poses": [[R.tolist(), t.tolist()] for R, t in poses],
+        "keep": bool(a.keep_renders),
     }
     spec_path = os.path.join(a.out, "spec.json")
     with open(spec_path, "w") as f:
@@ -375,7 +409,7 @@ def run_calibrate(a) -> dict:
     t0 = time.time()
     cpu0 = os.times()
     if not a.skip_render:
-        if os.path.isdir(images):
+        if os.path.isdir(images) and not a.keep_renders:
             import shutil
 
             shutil.rmtree(images)
@@ -848,7 +882,7 @@ def run_e2e(a) -> dict:
 
     board = CB.parse_board(BOARD)
     cams = front_cameras(a.seed, a.scale, a.cameras)
-    poses = board_poses(board, cams, a.poses, a.seed)
+    poses = board_poses(board, cams, a.poses, a.seed, a.close)
     views = {c.name: [k for k, p in enumerate(poses) if visible(c, board, p)] for c in cams}
     tr = cloth_truth(a.seed, a.frames)
     os.makedirs(a.out, exist_ok=True)
@@ -1284,6 +1318,12 @@ def main(argv=None):
     c.add_argument(
         "--poses", type=int, default=24, help="board poses held up after the flat one (default: %(default)s)"
     )
+    c.add_argument(
+        "--close",
+        type=int,
+        default=4,
+        help="board poses held close before each phone, for its lens (default: %(default)s)",
+    )
     c.add_argument("--samples", type=int, default=16, help="Cycles samples per pixel (default: %(default)s)")
     c.add_argument("--no-denoise", action="store_true", help="no OpenImageDenoise pass")
     c.add_argument(
@@ -1293,6 +1333,11 @@ def main(argv=None):
         "--shot-noise", type=float, default=0.04, help="shot noise variance per grey level (default: %(default)s)"
     )
     c.add_argument("--skip-render", action="store_true", help="reuse the images of a previous run with the same seed")
+    c.add_argument(
+        "--keep-renders",
+        action="store_true",
+        help="render only the images a previous run with the same seed did not write",
+    )
     c.add_argument("--json", help="write the comparison here")
     e = sub.add_parser(
         "e2e",
@@ -1313,6 +1358,12 @@ def main(argv=None):
     e.add_argument("--cameras", type=int, default=4, help="phones (default: %(default)s)")
     e.add_argument(
         "--poses", type=int, default=12, help="board poses held up after the flat one (default: %(default)s)"
+    )
+    e.add_argument(
+        "--close",
+        type=int,
+        default=0,
+        help="board poses held close before each phone, for its lens (default: %(default)s)",
     )
     e.add_argument("--frames", type=int, default=18, help="frames filmed at 30 fps (default: %(default)s)")
     e.add_argument("--samples", type=int, default=4, help="Cycles samples per pixel (default: %(default)s)")

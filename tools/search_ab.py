@@ -61,6 +61,12 @@ STRATEGIES = {
     # the settings the silhouettes see most first (docs/search.md, "Strong settings first"): the fit's
     # `--optimizer cma-staged` (StagedCMA, set up as FitJob sets it up)
     "staged": ("cma-staged", {"restarts": 4}),
+    # the same with three first-stage runs raced, 250 evaluations each, the best going on (StagedCMA's
+    # 'race'; tried and not kept: docs/search.md)
+    "staged-race3": ("cma-staged", {"restarts": 4, "race": 3, "race_evals": 250, "scan_points": 0}),
+    # the same with each strong setting scanned at 24 values across its range between the stages
+    # (StagedCMA's 'scan_points'; tried and not kept: docs/search.md)
+    "staged-scan": ("cma-staged", {"restarts": 4, "race": 1, "scan_points": 24}),
     # the same with compression following tension in the first stage instead of held at Blender's default
     # (StagedCMA's 'tie'; tried as the default and not kept)
     "staged-tie": ("cma-staged", {"restarts": 4}),

@@ -180,6 +180,13 @@ QUALITY_CLEARLY_BETTER = 0.10  # climbing continues while a rung fits > 10 % bet
 SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
 STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the strong settings alone (1200 of 2500)
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best
+STAGED_FIRST_UNKNOWNS = ("time_offset_s",)  # cma-staged: the manipulation's unknowns searched with the strong
+# settings (the time offset moves every frame's shape); a handle's few-mm offset waits for the second stage
+STAGED_RACE = 1  # cma-staged: first-stage runs raced (1 = no race: tried with 3 and not kept, docs/search.md)
+STAGED_RACE_EVALS = 250  # cma-staged: evaluations each raced run gets before the best goes on alone
+STAGED_RACE_START = (0.15, 0.85)  # cma-staged: the raced runs' random starts, within this part of the unit cube
+STAGED_SCAN_POINTS = 0  # cma-staged: between the stages, each first-stage coordinate tried at this many values
+# across its range, the others at the best point (0 = no scan: tried with 24 and not kept, docs/search.md)
 STAGED_STRONG = ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping")  # what the
 # silhouettes see most (docs/search.md, The landscape): searched first, the other settings held at their defaults
 PROFILE_STEP = 0.1  # the manipulation's uncertainty: the objective at +-10 % of each bound around the best

@@ -323,7 +323,8 @@ class FitJob:
 
     def _staged_kw(self) -> dict:
         """cma-staged: the settings the silhouettes see most (``STAGED_STRONG``) and the manipulation's
-        unknowns first, every other setting held where the fit starts (Blender's defaults at this
+        strong unknown (``STAGED_FIRST_UNKNOWNS``: its time offset) first, every other setting (and the
+        handles' offsets, at the declared positions) held where the fit starts (Blender's defaults at this
         mass, or the warm start's); the main search's budget."""
         par = self.par
         kw = {"budget": max(1, self.search_budget())}
@@ -331,7 +332,7 @@ class FitJob:
             kw["first_popsize"] = self.config.population
         strong = self._strong_free()
         if strong:
-            kw["first"] = strong + list(self.space.names)[self.npar :]
+            kw["first"] = strong + [n for n in list(self.space.names)[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]
             if par.initial is None:
                 kw["hold"] = {n: par._coord(n, par.fixed[n]) for n in par.free if n not in strong}
         return kw

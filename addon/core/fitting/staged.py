@@ -49,7 +49,12 @@ class StagedCMA(Optimizer):
     (the first stage's is ``first_popsize``, by default Hansen's 4 + 3 ln k for its k coordinates);
     ``sigma0``, ``restarts``, ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
     ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
-    ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
+    ``race``: first-stage runs raced (default 1: none), the others from random points of the strong
+    settings' cube, each given ``race_evals`` (at most a (race + 1)-th of the first stage) before the
+    one with the best point goes on alone. ``scan_points``: between the stages, each first-stage
+    coordinate tried at that many values evenly across its range, the others at the best point
+    (default 0: none). Both tried against the bending valley that first stages miss and not kept
+    (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
     Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
     stage they are free like every other.
@@ -75,6 +80,9 @@ class StagedCMA(Optimizer):
         second_sigma: float = D.STAGED_SECOND_SIGMA,
         tie: dict | None = None,
         first_popsize: int | None = None,
+        race: int = D.STAGED_RACE,
+        race_evals: int = D.STAGED_RACE_EVALS,
+        scan_points: int = D.STAGED_SCAN_POINTS,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -113,7 +121,23 @@ class StagedCMA(Optimizer):
             lam1 = _integer(first_popsize, f"{w}: first_popsize", 2)
         else:
             lam1 = self.popsize if k is None else 4 + int(3 * np.log(k))
+        self.race = _integer(race, f"{w}: race", 1, 100)
+        # each raced run gets at most a (race + 1)-th of the first stage: the winner as much again at least
+        share = int(self.first_fraction * self.budget) // (self.race + 1)
+        self.race_evals = max(1, min(_integer(race_evals, f"{w}: race_evals", 1), share))
         self.children = [self._child(sub, lam1, self.sigma0, init)]
+        # the race (off by default): more first-stage runs from random points of the strong settings'
+        # cube, each given race_evals before the best one goes on alone (docs/search.md, "The race")
+        self.racing = self._staging and self.race > 1
+        if self.racing:
+            for _ in range(self.race - 1):
+                u0 = self.rng.uniform(D.STAGED_RACE_START[0], D.STAGED_RACE_START[1], sub.n)
+                self.children.append(self._child(sub, lam1, self.sigma0, [sub.decode(u0)]))
+        self.turn = 0
+        self.scan_points = _integer(scan_points, f"{w}: scan_points", 0, 10000)
+        self.scan_left: list = []  # the first stage's coordinates still to scan (between the stages)
+        self.scanned = False
+        self._scan_pending = None
 
     @staticmethod
     def _check_tie(tie, names, first, w):
@@ -173,20 +197,69 @@ class StagedCMA(Optimizer):
         return self._stopped
 
     @property
+    def _current(self) -> CMAES:
+        return self.children[self.turn] if self.racing else self.children[-1]
+
+    @property
     def stop_reason(self) -> str | None:
-        return self.children[-1].stop_reason
+        return self._current.stop_reason
 
     @property
     def run_popsize(self) -> int:
-        return self.children[-1].run_popsize
+        return self._current.run_popsize
+
+    @property
+    def scanning(self) -> bool:
+        """Between the stages: scanning the first stage's coordinates one at a time."""
+        return bool(self.scan_left)
 
     def phase_info(self) -> str:
-        return f"stage {self.stage} ({', '.join(self.first) if self.stage == 1 else 'all'})"
+        if self.scanning:
+            return f"scan of {self.scan_left[0]} ({self.scan_points} points across its range)"
+        race = f", race: run {self.turn + 1} of {len(self.children)}" if self.racing else ""
+        return f"stage {self.stage} ({', '.join(self.first) if self.stage == 1 else 'all'}{race})"
+
+    def _next_turn(self) -> None:
+        """Racing: the run with the fewest evaluations asks next; once each has had ``race_evals`` (or
+        stopped), the one with the best point goes on alone."""
+        live = [i for i, c in enumerate(self.children) if not c.stopped and c.evaluations < self.race_evals]
+        if live:
+            self.turn = min(live, key=lambda i: (self.children[i].evaluations, i))
+            return
+        best = min(range(len(self.children)), key=lambda i: (self.children[i].best_f, i))
+        self.children = [self.children[best]]
+        self.racing = False
+        self.turn = 0
+
+    def _scan_batch(self) -> np.ndarray:
+        """The best point so far with one first-stage coordinate at ``scan_points`` values evenly across
+        its range (in the unit cube: log-scaled settings at even ratios)."""
+        idx = self._idx
+        U_sub = np.repeat(self._best_u[idx][None], self.scan_points, 0)
+        U_sub[:, self.first.index(self.scan_left[0])] = (np.arange(self.scan_points) + 0.5) / self.scan_points
+        return self._full_u(U_sub)  # held coordinates held, tied ones following, as in the first stage
+
+    def _end_first_stage(self) -> None:
+        """The scan, if any, then the second stage from the best point."""
+        if self.scan_points and self._best_u is not None and not self.scanned:
+            self.scanned = True
+            self.scan_left = list(self.first)
+            return
+        self.stage = 2
+        self.children.append(
+            self._child(self.space, self.popsize, self.second_sigma, [self.space.decode(self._best_u)])
+            if self._best_u is not None
+            else self._child(self.space, self.popsize, self.sigma0, None)
+        )
 
     def ask(self) -> np.ndarray:
         if self._stopped:
             raise ClothFitError("cma-staged: ask() after it has stopped")
-        c = self.children[-1]
+        if self.scanning:
+            if self._scan_pending is None:
+                self._scan_pending = self._scan_batch()
+            return self.space.decode(self._scan_pending)
+        c = self._current
         Xc = c.ask()
         if not self._staging:
             return Xc
@@ -195,7 +268,18 @@ class StagedCMA(Optimizer):
         return X
 
     def tell(self, X: ArrayLike, f: ArrayLike) -> None:
-        c = self.children[-1]
+        if self.scanning:
+            U = self._scan_pending
+            if U is None:
+                raise ClothFitError("tell() called without a pending ask()")
+            self._check_told(X, U)
+            self._record(U, sanitize_fitness(f, len(U)))
+            self._scan_pending = None
+            self.scan_left.pop(0)
+            if not self.scan_left:
+                self._end_first_stage()
+            return
+        c = self._current
         if c._pending is None:
             raise ClothFitError("tell() called without a pending ask()")
         staging = self._staging
@@ -207,14 +291,12 @@ class StagedCMA(Optimizer):
         A = np.asarray(X, dtype=np.float64)
         c.tell(A[:, self._idx] if staging else A, f)
         self._record(U, f)
-        if staging:
-            if c.stopped or c.evaluations >= self.first_fraction * self.budget:
-                self.stage = 2
-                self.children.append(
-                    self._child(self.space, self.popsize, self.second_sigma, [self.space.decode(self._best_u)])
-                    if self._best_u is not None
-                    else self._child(self.space, self.popsize, self.sigma0, None)
-                )
+        if self.racing:
+            self._next_turn()
+        if staging and not self.racing:
+            c = self.children[-1]
+            if c.stopped or self.evaluations >= self.first_fraction * self.budget:
+                self._end_first_stage()
         elif c.stopped:
             self._stopped = True
 
@@ -231,6 +313,14 @@ class StagedCMA(Optimizer):
         "budget",
         "hold_u",
         "tie",
+        "race",
+        "race_evals",
+        "racing",
+        "turn",
+        "scan_points",
+        "scan_left",
+        "scanned",
+        "scan_pending",
         "stage",
         "stopped",
         "children",
@@ -254,6 +344,14 @@ class StagedCMA(Optimizer):
                 "budget": self.budget,
                 "hold_u": self.hold_u.tolist(),
                 "tie": dict(self.tie),
+                "race": self.race,
+                "race_evals": self.race_evals,
+                "racing": self.racing,
+                "turn": self.turn,
+                "scan_points": self.scan_points,
+                "scan_left": list(self.scan_left),
+                "scanned": self.scanned,
+                "scan_pending": None if self._scan_pending is None else self._scan_pending.tolist(),
                 "stage": self.stage,
                 "stopped": self._stopped,
                 "children": [c.state_dict() for c in self.children],
@@ -296,15 +394,42 @@ class StagedCMA(Optimizer):
         opt.tie = cls._check_tie(d.get("tie", {}), list(space.names), opt.first, f"checkpoint: {w}")
         opt.stage = _num(d, "stage", w, int, 1, 2)
         opt._stopped = _bool(d, "stopped", w)
+        # the race came after the first checkpoints of this search: none there
+        opt.race = _num(d, "race", w, int, 1, 100) if "race" in d else 1
+        opt.race_evals = _num(d, "race_evals", w, int, 1, 10**12) if "race_evals" in d else D.STAGED_RACE_EVALS
+        opt.racing = _bool(d, "racing", w) if "racing" in d else False
         kids = _field(d, "children", w)
-        if not isinstance(kids, list) or len(kids) != opt.stage or any(not isinstance(k, dict) for k in kids):
-            raise ClothFitError(f"checkpoint: {w} 'children' must hold one CMA-ES state per stage")
+        n_kids = opt.race if opt.racing else opt.stage
+        if (
+            (opt.racing and opt.stage != 1)
+            or not isinstance(kids, list)
+            or len(kids) != n_kids
+            or any(not isinstance(k, dict) for k in kids)
+        ):
+            raise ClothFitError(f"checkpoint: {w} 'children' must hold one CMA-ES state per stage (per run racing)")
+        opt.turn = _num(d, "turn", w, int, 0, len(kids) - 1) if "turn" in d else 0
+        # the scan between the stages came after the race: none in older checkpoints
+        opt.scan_points = _num(d, "scan_points", w, int, 0, 10000) if "scan_points" in d else 0
+        opt.scanned = _bool(d, "scanned", w) if "scanned" in d else False
+        left = d.get("scan_left", [])
+        if (
+            not isinstance(left, list)
+            or any(x not in opt.first for x in left)
+            or (left and (opt.stage != 1 or not opt.scanned or opt.racing))
+        ):
+            raise ClothFitError(f"checkpoint: {w} 'scan_left' must list first-stage coordinates, while scanning")
+        opt.scan_left = list(left)
+        opt._scan_pending = (
+            _array(d, "scan_pending", w, (opt.scan_points, n), allow_none=True) if "scan_pending" in d else None
+        )
+        if opt._scan_pending is not None and not opt.scan_left:
+            raise ClothFitError(f"checkpoint: {w} 'scan_pending' without a scan under way")
         opt.children = []
         for i, k in enumerate(kids):
             if k.get("algorithm") != "cma-es":
                 raise ClothFitError(f"checkpoint: {w} 'children' hold a state of the wrong algorithm")
             c = CMAES.from_state(k)
-            want = opt._subspace() if (i == 0 and len(opt.first) < n) else space
+            want = opt._subspace() if (opt.stage == 1 or i == 0) and len(opt.first) < n else space
             if c.space.state_dict() != want.state_dict():
                 raise ClothFitError(f"checkpoint: {w} 'children' hold a run of another search space")
             if c.stop_reason is not None and c.stop_reason not in CMA_STOPS:
