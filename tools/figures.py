@@ -136,6 +136,14 @@ SOURCES = {
         "what": "issue 20 item 3: the exact-model capture's truth perturbed group by group (train and held-out "
         "error), and a CMA-ES run started 5 % from the truth (about 2 CPU min)",
     },
+    "search_slice": {
+        "argv": ["{py}", "tools/search_ab.py", "synth:default", "synth:fresh", "--slice", "{out}"],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: the first stage's slice of two exact-model captures: training error over bending x "
+        "air damping (16 x 16 across their ranges), tension and shear at the truth and 0.01 of the unit cube off "
+        "(about 1 CPU min)",
+    },
     "search_oracle": {
         "argv": ["{py}", "tools/search_ab.py", "synth:fresh", "--oracle", "{out}", "--samples", "128"],
         "cost": "expensive",
@@ -781,6 +789,36 @@ SOURCES = {
         "cost": "expensive",
         "what": "issue 18 end to end as docs/phone_rig.md now asks: the e2e rig of seed 7 with the board also held "
         "close before each phone (4 poses)",
+    },
+    "phone_rig_e2e_s8": {
+        "argv": [
+            "{py}",
+            "tools/phone_rig.py",
+            "e2e",
+            "--out",
+            "out/phone_rig/e2e_s8",
+            "--seed",
+            "8",
+            "--scale",
+            "0.75",
+            "--poses",
+            "10",
+            "--close",
+            "4",
+            "--frames",
+            "15",
+            "--samples",
+            "4",
+            "--evals",
+            "2500",
+            "--uncertain-evals",
+            "2500",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "issue 18 end to end on a rig not seen before (seed 8) at 810 x 1440 (0.75 of a phone's video), the "
+        "board held close before each phone as docs/phone_rig.md asks",
     },
     "phone_rig_sensitivity": {
         "argv": [

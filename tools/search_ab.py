@@ -320,6 +320,59 @@ def landscape(b, samples=4, seed=1):
     }
 
 
+SLICE_AXES = ("bending_stiffness", "air_damping")  # the grid's rows and columns
+SLICE_AT = ("tension_stiffness", "shear_stiffness")  # held at the truth, or moved by --slice-shift
+
+
+def slice_grid(b, n=16, shifts=(0.0, 0.01)):
+    """The first stage's slice as cma-staged searches it (the weak settings held where it holds them):
+    the training error over an n x n grid of bending x air damping across their whole (log) ranges,
+    with tension and shear at the truth, then both moved by each of ``shifts`` (unit cube). Where the
+    truth's basin is, how wide, and whether it survives a small error in the strong settings."""
+    sp = b.job.space
+    opt = b.make("staged", 0)
+    names = list(sp.names)
+    ib, ia = (names.index(x) for x in SLICE_AXES)
+    it, ish = (names.index(x) for x in SLICE_AT)
+    ut = sp.encode(b.truth)
+    g = (np.arange(n) + 0.5) / n
+    obj = b.job.objective
+    out = []
+    for d in shifts:
+        U = np.repeat(opt.hold_u[None], n * n, 0)
+        U[:, it], U[:, ish] = ut[it] + d, ut[ish] + d
+        B, A = np.meshgrid(g, g, indexing="ij")
+        U[:, ib], U[:, ia] = B.ravel(), A.ravel()
+        F = (obj(b.job.par.rows(sp.decode(U))) / obj.n_images * 100).reshape(n, n)
+        i, j = np.unravel_index(int(np.argmin(F)), F.shape)
+        moved = sp.decode(np.where(np.isin(np.arange(sp.n), [it, ish]), ut + d, ut))
+        out.append(
+            {
+                "shift_u": d,
+                "tension_rel": float(moved[it] / b.truth[it] - 1),
+                "shear_rel": float(moved[ish] / b.truth[ish] - 1),
+                "train_pct": F.round(4).tolist(),
+                "min_pct": float(F[i, j]),
+                "min_at_u": [float(g[i]), float(g[j])],
+                "plateau_pct": float(np.median(F[: n // 2, : n // 2])),
+                "row_at_truth_bending_pct": F[int(np.argmin(np.abs(g - ut[ib])))].round(4).tolist(),
+                "col_at_truth_air_pct": F[:, int(np.argmin(np.abs(g - ut[ia])))].round(4).tolist(),
+            }
+        )
+    u = opt.hold_u.copy()
+    u[opt._idx] = ut[opt._idx]
+    return {
+        "capture": b.path,
+        "axes": list(SLICE_AXES),
+        "grid_u": g.tolist(),
+        "truth_u": [float(ut[ib]), float(ut[ia])],
+        "held_u": {nm: float(opt.hold_u[k]) for k, nm in enumerate(names) if nm not in opt.first},
+        "truth_strong_held_weak_train_pct": b.train(sp.decode(u)),
+        "train_floor_pct": b.train_floor,
+        "slices": out,
+    }
+
+
 def local_start(b, rel=0.05, sigma=0.02, budget=1000, seed=0):
     """A CMA-ES run (active, popsize 10) started in the truth's own basin: every setting off by
     +-rel, step ``sigma``: does the search converge to the truth once it is close?"""
@@ -485,11 +538,21 @@ def main(argv=None):
         "(what a search that came that close could keep), written as JSON here",
     )
     ap.add_argument("--samples", type=int, default=128, help="with --oracle: points per distance")
+    ap.add_argument(
+        "--slice",
+        help="instead of fits: the first stage's slice (bending x air damping over their ranges, tension and "
+        "shear at the truth and moved by 0.01 of the unit cube), written as JSON here",
+    )
     a = ap.parse_args(argv)
     if a.oracle:
         from clothfit.core.safeio import atomic_json
 
         atomic_json(a.oracle, {"captures": [oracle(Bench(capture_path(c)), a.samples) for c in a.captures]})
+        return
+    if a.slice:
+        from clothfit.core.safeio import atomic_json
+
+        atomic_json(a.slice, {"captures": [slice_grid(Bench(capture_path(c))) for c in a.captures]})
         return
     if a.landscape:
         from clothfit.core.safeio import atomic_json
