@@ -155,7 +155,11 @@ class CMAES(Optimizer):
         if self._pending is None:
             B, Dv = self._eig()
             Z = self.rng.standard_normal((self.lam, self.space.n))
-            G = self.mean + self.sigma * (Z @ (B * Dv).T)
+            # the symmetric square root of C (B D B^T), not B D: both sample N(0, C), but the eigenvectors of
+            # a C with near-equal eigenvalues turn on its last bits (which differ between CPUs: NumPy's
+            # AVX-512 exp and log), while B D B^T is a smooth function of C, so a seed gives the same fit on
+            # every machine (docs/search.md, "The same fit on every machine")
+            G = self.mean + self.sigma * (Z @ ((B * Dv) @ B.T).T)
             k = min(len(self._inject), self.lam)
             if k:
                 G[:k] = self._inject[:k]
