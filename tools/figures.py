@@ -144,6 +144,13 @@ SOURCES = {
         "air damping (16 x 16 across their ranges), tension and shear at the truth and 0.01 of the unit cube off "
         "(about 1 CPU min)",
     },
+    "same_fit": {
+        "argv": ["{py}", "tools/same_fit.py", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "a seed's fit natively and with NumPy's AVX-512 kernels switched off (as on a CPU without them): the "
+        "same fit? (about 1 CPU min)",
+    },
     "search_oracle": {
         "argv": ["{py}", "tools/search_ab.py", "synth:fresh", "--oracle", "{out}", "--samples", "128"],
         "cost": "expensive",
