@@ -39,8 +39,7 @@ def _cli(args, env=None):
         [sys.executable, "-m", "clothfit", *args],
         cwd=ROOT,
         env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
+        capture_output=True,
         text=True,
     )
     if r.returncode != 0:
