@@ -2,9 +2,11 @@
 cloth and their profile, the errors beside the images' noise floor; checkpoints across stages."""
 
 import json
+import math
 
 import numpy as np
 import pytest
+from clothfit.core import defaults as D
 from clothfit.core.errors import ClothFitError
 from clothfit.core.fitting.evaluate import evaluate
 from clothfit.core.fitting.job import FitConfig, FitJob
@@ -109,7 +111,14 @@ def test_the_time_offset_is_estimated_with_the_cloth(caps):
     # true time = capture time - time_offset_s: the truth was read SHIFT earlier -> +SHIFT
     assert abs(r["time_offset_s"] - SHIFT) < 0.004, r["time_offset_s"]
     assert r["time_offset_uncertainty_s"] is not None and r["time_offset_uncertainty_s"] < 0.02
-    assert r["manipulation_profile"]["time_offset_s"]["separated"]
+    p = r["manipulation_profile"]["time_offset_s"]
+    assert p["separated"]
+    # the profile is centred on the mean of the best point's jitter (not on the luckiest draw, the best), and
+    # a rise within twice the jitter's spread tells nothing
+    assert p["E_jitter_sd"] >= 0 and p["E_centre"] is not None
+    assert p["rise"] == pytest.approx(max(D.PROFILE_RISE * p["E_centre"], D.PROFILE_JITTER_SIGMAS * p["E_jitter_sd"]))
+    a = (p["E_plus"] + p["E_minus"] - 2 * p["E_centre"]) / (2 * p["step"] ** 2)
+    assert p["uncertainty"] == pytest.approx(math.sqrt(p["rise"] / a))
     fl = r["floor"]
     assert fl["heldout_cameras"] == [cap.cameras[c].name for c in (1, 3, 5, 7)]
     # evaluate replays the fitted manipulation: the same training error as the fit found

@@ -191,6 +191,11 @@ STAGED_STRONG = ("tension_stiffness", "shear_stiffness", "bending_stiffness", "a
 # silhouettes see most (docs/search.md, The landscape): searched first, the other settings held at their defaults
 PROFILE_STEP = 0.1  # the manipulation's uncertainty: the objective at +-10 % of each bound around the best
 PROFILE_RISE = 0.01  # uncertainty = the offset at which the training error rises by 1 % (a quadratic
-# through the three points); flat or concave = the fit cannot separate it
+# through the three points) or by PROFILE_JITTER_SIGMAS of its jitter, whichever is more; flat or concave =
+# the fit cannot separate it
+PROFILE_JITTER = 8  # the profile's centre: the mean of this many evaluations at the best point moved by
+PROFILE_JITTER_RELATIVE = 1e-7  # this much (relative; offsets: of their bound), random signs
+PROFILE_JITTER_SEED = 20  # the signs' generator (the profile is part of a seeded, resumable fit)
+PROFILE_JITTER_SIGMAS = 2.0  # a rise smaller than this many standard deviations of the jitter tells nothing
 MIN_FRAMES_FOR_TIME_OFFSET = 2  # a time offset needs >= 2 training frames after the release: one frame's shape is
 # matched as well by a stiffer cloth read earlier as by a softer one read later
