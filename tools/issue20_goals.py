@@ -191,12 +191,13 @@ class Runner:
         self.log = log
         os.makedirs(os.path.dirname(os.path.abspath(log)), exist_ok=True)
 
-    def __call__(self, argv, parse=True):
+    def __call__(self, argv, parse=True, env=None):
+        """``env``: the child's environment (default: this one's)."""
         argv = [sys.executable, "-m", "clothfit", *argv] if argv[0] != sys.executable else list(argv)
         load = load_text()
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        p = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True)
+        p = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, env=env)
         wall = time.perf_counter() - t0
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)

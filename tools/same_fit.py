@@ -18,11 +18,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
-import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TOOLS = os.path.dirname(os.path.abspath(__file__))
+if TOOLS not in sys.path:
+    sys.path.insert(0, TOOLS)
+
+from issue20_goals import Runner  # noqa: E402  (tools/: the one runner of the CLI in a subprocess)
 
 CAPTURE = ["--model", "blender", "--rig", "lab18", "--resolution", "120x160", "--noise", "0.05", "--seed", "3"]
 
@@ -34,22 +37,8 @@ def avx512_features() -> list:
     return [k for k, v in __cpu_features__.items() if v and k.startswith("AVX512")]
 
 
-def _cli(args, env=None):
-    r = subprocess.run(
-        [sys.executable, "-m", "clothfit", *args],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-    )
-    if r.returncode != 0:
-        raise SystemExit(f"error: clothfit {' '.join(args)} exited with {r.returncode}: {r.stderr.strip()[-400:]}")
-    return json.loads(r.stdout)
-
-
-def fit_once(capture, out, evals, seed, env):
-    t0, c0 = time.time(), os.times()
-    _cli(
+def fit_once(run, capture, out, evals, seed, env):
+    _, info = run(
         [
             "fit",
             capture,
@@ -64,9 +53,8 @@ def fit_once(capture, out, evals, seed, env):
             "--force",
             "--quiet",
         ],
-        env,
+        env=env,
     )
-    c1 = os.times()
     with open(out) as f:
         res = json.load(f)
     return {
@@ -74,8 +62,9 @@ def fit_once(capture, out, evals, seed, env):
         "evaluations": res["evaluations"],
         "optimizer": res["optimizer"],
         "settings": {k: v for k, v in res["blender_cloth"].items() if isinstance(v, float)},
-        "wall_s": time.time() - t0,
-        "cpu_s": (c1.children_user + c1.children_system) - (c0.children_user + c0.children_system),
+        "wall_s": info["wall_s"],
+        "cpu_s": info["cpu_s"],
+        "load": info["load"],
     }
 
 
@@ -87,14 +76,15 @@ def main(argv=None):
     ap.add_argument("--json", help="write the comparison here")
     a = ap.parse_args(argv)
     out = os.path.join(ROOT, a.out)
+    run = Runner(os.path.join(out, "same_fit.log"))  # the CLI in a subprocess, logged and timed
     capture = os.path.join(out, "capture")
     if not os.path.isfile(os.path.join(capture, "capture.json")):
-        _cli(["synth", "--out", capture, *CAPTURE])
+        run(["synth", "--out", capture, *CAPTURE])
     feats = avx512_features()
-    runs = {"native": fit_once(capture, os.path.join(out, "native.json"), a.evals, a.seed, None)}
+    runs = {"native": fit_once(run, capture, os.path.join(out, "native.json"), a.evals, a.seed, None)}
     env = dict(os.environ, NPY_DISABLE_CPU_FEATURES=" ".join(feats))
     if feats:
-        runs["without_avx512"] = fit_once(capture, os.path.join(out, "without_avx512.json"), a.evals, a.seed, env)
+        runs["without_avx512"] = fit_once(run, capture, os.path.join(out, "without_avx512.json"), a.evals, a.seed, env)
     doc = {"avx512_here": bool(feats), "disabled": feats, "capture": CAPTURE, "evals": a.evals, "runs": runs}
     if feats:
         n, w = runs["native"], runs["without_avx512"]
