@@ -131,3 +131,26 @@ def test_merge_keeps_the_other_goals_rows(tmp_path):
     ]
     assert set(doc["runs"]) == {"exact (before)", "time (before)", "time (after)"}
     assert doc["runs"]["time (before)"]["commit"]
+
+
+def test_every_goal_reads_the_options_its_subcommand_and_all_define(tmp_path, monkeypatch):
+    """``all`` runs every goal with its own namespace: an option a goal reads (exact's and offsets' --seeds and
+    --optimizer) must be defined on ``all`` too, or ``all`` stops at that goal."""
+    seen = {}
+
+    def fake(goal):
+        def run(a, _run):
+            seen[goal] = (a.seeds, a.optimizer) if goal in ("exact", "offsets") else a.out
+            return [], {}
+
+        return run
+
+    for g in G.GOALS:
+        monkeypatch.setitem(G.RUNNERS, g, fake(g))
+    out = str(tmp_path / "goals")
+    assert G.main(["all", "--out", out, "--json", str(tmp_path / "all.json")]) == 0
+    assert set(seen) == set(G.GOALS)
+    assert seen["exact"] == ("0", None) and seen["offsets"] == ("0", None)
+    seen.clear()
+    G.main(["offsets", "--out", out, "--json", str(tmp_path / "one.json"), "--seeds", "3", "--optimizer", "cma-es"])
+    assert seen == {"offsets": ("3", "cma-es")}

@@ -947,7 +947,7 @@ def main(argv=None):
             "--json", default="out/issue20/goals.json", help="rows merged into this JSON (default: %(default)s)"
         )
         s.add_argument("--remake", action="store_true", help="make the goal's capture again")
-        if g in ("exact", "offsets"):
+        if g in ("exact", "offsets", "all"):  # all: both goals' fits with these
             s.add_argument(
                 "--optimizer", help="the fit's --optimizer (default: the fit's own); its rows are labelled with it"
             )
