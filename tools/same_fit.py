@@ -82,8 +82,8 @@ def main(argv=None):
         run(["synth", "--out", capture, *CAPTURE])
     feats = avx512_features()
     runs = {"native": fit_once(run, capture, os.path.join(out, "native.json"), a.evals, a.seed, None)}
-    env = dict(os.environ, NPY_DISABLE_CPU_FEATURES=" ".join(feats))
     if feats:
+        env = dict(os.environ, NPY_DISABLE_CPU_FEATURES=" ".join(feats))
         runs["without_avx512"] = fit_once(run, capture, os.path.join(out, "without_avx512.json"), a.evals, a.seed, env)
     doc = {"avx512_here": bool(feats), "disabled": feats, "capture": CAPTURE, "evals": a.evals, "runs": runs}
     if feats:
