@@ -827,6 +827,36 @@ SOURCES = {
         "what": "issue 18 end to end on a rig not seen before (seed 8) at 810 x 1440 (0.75 of a phone's video), the "
         "board held close before each phone as docs/phone_rig.md asks",
     },
+    "phone_rig_e2e_s9": {
+        "argv": [
+            "{py}",
+            "tools/phone_rig.py",
+            "e2e",
+            "--out",
+            "out/phone_rig/e2e_s9",
+            "--seed",
+            "9",
+            "--scale",
+            "0.75",
+            "--poses",
+            "10",
+            "--close",
+            "4",
+            "--frames",
+            "15",
+            "--samples",
+            "4",
+            "--evals",
+            "2500",
+            "--uncertain-evals",
+            "2500",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "issue 18 end to end on a rig not seen before (seed 9, a second) at 810 x 1440 (0.75 of a phone's video), the "
+        "board held close before each phone as docs/phone_rig.md asks",
+    },
     "phone_rig_sensitivity": {
         "argv": [
             "{py}",
