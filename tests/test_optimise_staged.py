@@ -89,12 +89,24 @@ def test_no_first_stage_is_plain_cma_over_everything():
     assert len(X) == opt.popsize and not np.allclose(X[:, 4], X[0, 4])
 
 
-# 6 per generation over 2 coordinates, the switch after 144 evaluations (24 generations): checkpointed in
-# the first stage, with the batch whose tell switches pending, and in the second
-@pytest.mark.parametrize("cut", [7, 23, 26, 27, 60])
+# 6 per generation over 2 coordinates: the first run converges and a second starts at the 22nd tell (132
+# evaluations), the second stage at the 36th (216, the first stage's share of 300): checkpointed in the
+# first run, with the batch whose tell starts the second run pending, in the second run, with the batch
+# whose tell switches stages pending, and in the second stage
+@pytest.mark.parametrize("cut", [7, 21, 22, 35, 36, 60])
 def test_resume_is_exact_in_either_stage(cut):
     def make():
-        return StagedCMA(space(), seed=5, first=["x0", "x1"], hold={"x4": 1.0}, tie={"x2": "x1"}, budget=300)
+        return StagedCMA(
+            space(),
+            seed=5,
+            first=["x0", "x1"],
+            hold={"x4": 1.0},
+            tie={"x2": "x1"},
+            budget=300,
+            first_restart_step=0.005,
+            first_fraction=0.72,
+            first_explore=0.56,
+        )
 
     a = make()
     for _ in range(cut):
@@ -103,7 +115,7 @@ def test_resume_is_exact_in_either_stage(cut):
     X = a.ask()  # checkpointed between ask and tell
     state = json.loads(json.dumps(a.state_dict(), allow_nan=False))
     b = optimizer_from_state(state)
-    assert type(b) is StagedCMA and b.stage == a.stage
+    assert type(b) is StagedCMA and b.stage == a.stage and b.first_runs == a.first_runs == (1 if cut < 22 else 2)
     for _ in range(25):
         Xb = b.ask() if _ else X
         assert np.array_equal(Xb, X)
@@ -111,6 +123,54 @@ def test_resume_is_exact_in_either_stage(cut):
         b.tell(Xb, strong_weak(Xb))
         X = a.ask()
     assert a.best_f == b.best_f and a.evaluations == b.evaluations
+
+
+def test_a_converged_first_run_starts_again_where_the_first_began():
+    """A first-stage run whose every step is below first_restart_step has settled in its basin: another
+    starts at the same point with the same step and a new random stream, until the first stage's share is
+    spent; the second stage starts from the best point of them all. With first_restart_step 0, one run."""
+    start = np.array([1.0, -1.0, 0.0, 0.0, 0.0])
+    runs_again = {"first_restart_step": 0.05, "first_fraction": 0.72, "first_explore": 0.56}
+    opt = StagedCMA(space(), seed=2, first=["x0", "x1"], initial=[start], budget=1000, **runs_again)
+    assert opt.first_runs == 1 and D.STAGED_FIRST_RESTART_STEP == 0.0  # one run unless asked
+    seeds = [opt.children[-1].seed]
+    ended = []  # (best value, evaluations) of each converged run, as it converged
+    while opt.stage == 1:
+        runs, c = opt.first_runs, opt.children[-1]
+        X = opt.ask()
+        opt.tell(X, strong_weak(X))
+        if opt.first_runs > runs:
+            ended.append((c.best_f, c.evaluations))
+        if opt.first_runs > runs and opt.stage == 1:
+            c = opt.children[-1]
+            assert len(opt.children) == 1 and c.evaluations == 0
+            # where the first began (the initial point's x0, x1), at the first step, with a new stream
+            assert np.allclose(c.space.decode(c.mean), start[:2]) and c.sigma == opt.sigma0
+            assert c.seed not in seeds and f"run {opt.first_runs}" in opt.phase_info()
+            seeds.append(c.seed)
+    assert opt.first_runs >= 3 and len(seeds) == opt.first_runs
+    assert 720 <= opt.evaluations < 720 + 10
+    # past first_explore of the budget no run starts again; the best converged run went on (unless the run
+    # under way then was better), to the end of the first stage
+    went_on = opt.children[0]
+    kept_f, kept_evals = min(ended)
+    assert went_on.best_f <= kept_f and went_on.best_f == opt.best_f
+    assert went_on.seed in seeds and (went_on.evaluations > kept_evals or went_on.seed == seeds[-1])
+    assert opt.first_best_run is None
+    assert np.allclose(opt.children[-1].mean, opt.space.encode(opt.best_x), atol=1e-9)
+    one = StagedCMA(space(), seed=2, first=["x0", "x1"], initial=[start], budget=1000)
+    while one.stage == 1:
+        X = one.ask()
+        one.tell(X, strong_weak(X))
+    assert one.first_runs == 1
+    # a checkpoint written before runs again existed resumes with one run
+    d = json.loads(json.dumps(StagedCMA(space(), seed=4, first=["x0"]).state_dict()))
+    for key in ("first_restart_step", "first_init", "first_popsize", "first_runs", "first_explore", "first_best_run"):
+        del d[key]
+    old = optimizer_from_state(d)
+    assert old.first_restart_step == 0.0 and old.first_runs == 1
+    with pytest.raises(ClothFitError, match="first_restart_step"):
+        StagedCMA(space(), first=["x0"], first_restart_step=-1.0)
 
 
 def needle(X):
@@ -187,6 +247,9 @@ def test_the_first_stage_races_runs_then_the_best_goes_on_alone():
         (lambda d: d.update(scan_left=["x4"]), "'scan_left'"),
         (lambda d: d.update(scan_pending=[[0.5] * 5] * 24), "'scan_pending'"),
         (lambda d: d.update(tie={"x0": "x1"}), "'tie'"),
+        (lambda d: d.update(first_init=[0.5] * 3), "'first_init'"),
+        (lambda d: d.update(first_runs=0), "'first_runs'"),
+        (lambda d: d.update(first_best_run={"algorithm": "spx-mgg"}), "'first_best_run'"),
         (lambda d: d["children"][0].update(algorithm="spx-mgg"), "wrong algorithm"),
     ],
 )
@@ -258,6 +321,23 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     job = FitJob(cap, cfg, checkpoint=ck)
     job.run()
     assert job.evaluations >= 40 and job.best_x is not None
+    # runs again is off by default, and reaches the search through --search (FitConfig's options)
+    assert opt.first_restart_step == 0.0 and opt.first_fraction == D.STAGED_FIRST_FRACTION
+    again = FitConfig(
+        optimizer="auto",
+        max_evaluations=40,
+        train_cameras=[0, 2],
+        train_times=[0.3],
+        staged_restart_step=0.005,
+        staged_first_fraction=0.72,
+        staged_explore=0.56,
+    )
+    o = FitJob(cap, again).opt
+    assert isinstance(o, StagedCMA) and (o.first_restart_step, o.first_fraction, o.first_explore) == (0.005, 0.72, 0.56)
+    with pytest.raises(ClothFitError, match="staged_restart_step is a setting of cma-staged"):
+        FitConfig(optimizer="cma-es", staged_restart_step=0.005).checked()
+    with pytest.raises(ClothFitError, match="staged_explore"):
+        FitConfig(staged_explore=2.0).checked()
     again = FitJob.resume(ck, cap, cfg)
     assert isinstance(again.opt, StagedCMA) and again.evaluations == job.evaluations
     # the fit's default ("auto") on Blender's cloth is this search, and the result names it

@@ -274,7 +274,8 @@ def _search_args(s):
         default=[],
         metavar="NAME=VALUE",
         help="an optimiser setting, repeatable: sigma0, cma_active (true/false), tolx, tolfun_per_image, "
-        "ga_eps, ga_stall, portfolio_runs, ... (FitConfig's search options; default: the optimiser's)",
+        "ga_eps, ga_stall, portfolio_runs, staged_restart_step, ... (FitConfig's search options; default: the "
+        "optimiser's)",
     )
     s.add_argument(
         "--uncertain",

@@ -179,6 +179,11 @@ QUALITY_RUNGS_RESERVED = 4  # the budget kept for rungs (4 x 7 % = 28 %): one do
 QUALITY_CLEARLY_BETTER = 0.10  # climbing continues while a rung fits > 10 % better than every lower one
 SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
 STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the strong settings alone (1200 of 2500)
+STAGED_FIRST_RESTART_STEP = 0.0  # cma-staged: a first-stage run whose every step is below this (unit cube) has
+# converged and another starts where the first began (0: one run; "runs again", tried and not kept at 0.005:
+# docs/search.md)
+STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only within this share of the budget;
+# then the run with the best point goes on to the end of the first stage's share
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best
 STAGED_FIRST_UNKNOWNS = ("time_offset_s",)  # cma-staged: the manipulation's unknowns searched with the strong
 # settings (the time offset moves every frame's shape); a handle's few-mm offset waits for the second stage

@@ -30,6 +30,9 @@ SEARCH_OPTIONS = {
     "portfolio_polish_sigma": ("polish_sigma", ("cma-portfolio",)),
     "portfolio_max_polishes": ("max_polishes", ("cma-portfolio",)),
     "portfolio_refine_until": ("refine_until", ("cma-portfolio",)),
+    "staged_first_fraction": ("first_fraction", ("cma-staged",)),
+    "staged_restart_step": ("first_restart_step", ("cma-staged",)),
+    "staged_explore": ("first_explore", ("cma-staged",)),
 }
 
 
@@ -92,6 +95,11 @@ class FitConfig:
     portfolio_polish_sigma: float | None = None  # cma-portfolio: a polish's first step (0.05)
     portfolio_max_polishes: int | None = None  # cma-portfolio: polishes before it stops (20)
     portfolio_refine_until: float | None = None  # cma-portfolio: budget share after which refining gives way (1.0)
+    staged_first_fraction: float | None = None  # cma-staged: budget share of the first stage (D.STAGED_FIRST_FRACTION)
+    staged_restart_step: float | None = (
+        None  # cma-staged: a first-stage run converged below this step runs again (0: off)
+    )
+    staged_explore: float | None = None  # cma-staged, runs again: budget share in which runs start again (0.36)
 
     @classmethod
     def from_dict(cls, d: Any) -> FitConfig:
@@ -189,6 +197,9 @@ class FitConfig:
             ("portfolio_explore", 0.0, 1.0),
             ("portfolio_polish_sigma", 1e-9, 10.0),
             ("portfolio_refine_until", 0.0, 1.0),
+            ("staged_first_fraction", 0.0, 1.0),
+            ("staged_restart_step", 0.0, 1.0),
+            ("staged_explore", 0.0, 1.0),
         ):
             numval(name, lo, hi)
         intval("ga_stall", 1)

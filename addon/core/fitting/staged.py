@@ -26,6 +26,7 @@ from .space import (
     _bool,
     _field,
     _flag,
+    _float_from_json,
     _integer,
     _num,
     _number,
@@ -53,7 +54,12 @@ class StagedCMA(Optimizer):
     settings' cube, each given ``race_evals`` (at most a (race + 1)-th of the first stage) before the
     one with the best point goes on alone. ``scan_points``: between the stages, each first-stage
     coordinate tried at that many values evenly across its range, the others at the best point
-    (default 0: none). Both tried against the bending valley that first stages miss and not kept
+    (default 0: none). ``first_restart_step``: a first-stage run whose every coordinate's step (sigma
+    times the root of its variance, unit cube) is below this has converged, and another run starts
+    where the first began (``initial``, else the middle), same step and population, new random
+    stream, while the evaluations are within ``first_explore`` of ``budget``; then the run with the
+    best point (kept as it stood when it converged) goes on to the end of the first stage's share, and
+    the second stage starts from the best point of them all (0: one run, as before). Race and scan were both tried against the bending valley that first stages miss and not kept
     (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
     Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
@@ -83,6 +89,8 @@ class StagedCMA(Optimizer):
         race: int = D.STAGED_RACE,
         race_evals: int = D.STAGED_RACE_EVALS,
         scan_points: int = D.STAGED_SCAN_POINTS,
+        first_restart_step: float = D.STAGED_FIRST_RESTART_STEP,
+        first_explore: float = D.STAGED_FIRST_EXPLORE,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -125,6 +133,12 @@ class StagedCMA(Optimizer):
         # each raced run gets at most a (race + 1)-th of the first stage: the winner as much again at least
         share = int(self.first_fraction * self.budget) // (self.race + 1)
         self.race_evals = max(1, min(_integer(race_evals, f"{w}: race_evals", 1), share))
+        self.first_restart_step = _number(first_restart_step, f"{w}: first_restart_step (unit cube)", 0.0, 1.0)
+        self.first_init = None if init is None else [float(v) for v in init[0]]  # where each first-stage run starts
+        self.first_popsize = lam1
+        self.first_runs = 1
+        self.first_explore = _number(first_explore, f"{w}: first_explore", 0.0, 1.0)
+        self.first_best_run = None  # the converged run with the best point so far (its CMA-ES state)
         self.children = [self._child(sub, lam1, self.sigma0, init)]
         # the race (off by default): more first-stage runs from random points of the strong settings'
         # cube, each given race_evals before the best one goes on alone (docs/search.md, "The race")
@@ -217,7 +231,8 @@ class StagedCMA(Optimizer):
         if self.scanning:
             return f"scan of {self.scan_left[0]} ({self.scan_points} points across its range)"
         race = f", race: run {self.turn + 1} of {len(self.children)}" if self.racing else ""
-        return f"stage {self.stage} ({', '.join(self.first) if self.stage == 1 else 'all'}{race})"
+        run = f", run {self.first_runs}" if self.stage == 1 and self.first_runs > 1 else ""
+        return f"stage {self.stage} ({', '.join(self.first) if self.stage == 1 else 'all'}{race}{run})"
 
     def _next_turn(self) -> None:
         """Racing: the run with the fewest evaluations asks next; once each has had ``race_evals`` (or
@@ -230,6 +245,11 @@ class StagedCMA(Optimizer):
         self.children = [self.children[best]]
         self.racing = False
         self.turn = 0
+
+    def _converged(self, c: CMAES) -> bool:
+        """A first-stage run (not racing) whose every coordinate's step is below ``first_restart_step``."""
+        step = self.first_restart_step
+        return bool(step > 0 and np.all(c.sigma * np.sqrt(np.diag(c.C)) < step))
 
     def _scan_batch(self) -> np.ndarray:
         """The best point so far with one first-stage coordinate at ``scan_points`` values evenly across
@@ -297,6 +317,20 @@ class StagedCMA(Optimizer):
             c = self.children[-1]
             if c.stopped or self.evaluations >= self.first_fraction * self.budget:
                 self._end_first_stage()
+            elif self.evaluations < self.first_explore * self.budget:
+                if self._converged(c):
+                    # another run from where the first began, with a new random stream: the first stage's
+                    # runs settle early, each in one of a few basins (docs/search.md, "Runs again")
+                    if self.first_best_run is None or c.best_f < _float_from_json(self.first_best_run["best_f"]):
+                        self.first_best_run = c.state_dict()
+                    self.first_runs += 1
+                    init = None if self.first_init is None else [np.array(self.first_init)]
+                    self.children[-1] = self._child(self._subspace(), self.first_popsize, self.sigma0, init)
+            elif self.first_best_run is not None:
+                # the runs are over: the one with the best point goes on, to the end of the first stage
+                if _float_from_json(self.first_best_run["best_f"]) < c.best_f:
+                    self.children[-1] = CMAES.from_state(self.first_best_run)
+                self.first_best_run = None
         elif c.stopped:
             self._stopped = True
 
@@ -321,6 +355,12 @@ class StagedCMA(Optimizer):
         "scan_left",
         "scanned",
         "scan_pending",
+        "first_restart_step",
+        "first_init",
+        "first_popsize",
+        "first_runs",
+        "first_explore",
+        "first_best_run",
         "stage",
         "stopped",
         "children",
@@ -352,6 +392,12 @@ class StagedCMA(Optimizer):
                 "scan_left": list(self.scan_left),
                 "scanned": self.scanned,
                 "scan_pending": None if self._scan_pending is None else self._scan_pending.tolist(),
+                "first_restart_step": self.first_restart_step,
+                "first_init": self.first_init,
+                "first_popsize": self.first_popsize,
+                "first_runs": self.first_runs,
+                "first_explore": self.first_explore,
+                "first_best_run": self.first_best_run,
                 "stage": self.stage,
                 "stopped": self._stopped,
                 "children": [c.state_dict() for c in self.children],
@@ -424,6 +470,27 @@ class StagedCMA(Optimizer):
         )
         if opt._scan_pending is not None and not opt.scan_left:
             raise ClothFitError(f"checkpoint: {w} 'scan_pending' without a scan under way")
+        # runs again in the first stage came after the scan: one run (none again) in older checkpoints
+        opt.first_restart_step = _num(d, "first_restart_step", w, float, 0.0, 1.0) if "first_restart_step" in d else 0.0
+        opt.first_runs = _num(d, "first_runs", w, int, 1, 10**9) if "first_runs" in d else 1
+        opt.first_popsize = _num(d, "first_popsize", w, int, 2, 10**6) if "first_popsize" in d else opt.popsize
+        init = d.get("first_init")
+        m = len(opt.first)
+        if init is not None and (
+            not isinstance(init, list) or len(init) != m or not all(isinstance(v, (int, float)) for v in init)
+        ):
+            raise ClothFitError(
+                f"checkpoint: {w} 'first_init' must be null or a point of the first stage's {m} coordinates"
+            )
+        opt.first_init = None if init is None else [float(v) for v in init]
+        opt.first_explore = _num(d, "first_explore", w, float, 0.0, 1.0) if "first_explore" in d else 0.0
+        kept = d.get("first_best_run")
+        if kept is not None:
+            if not isinstance(kept, dict) or kept.get("algorithm") != "cma-es":
+                raise ClothFitError(f"checkpoint: {w} 'first_best_run' must be null or a CMA-ES state")
+            if CMAES.from_state(kept).space.state_dict() != opt._subspace().state_dict():
+                raise ClothFitError(f"checkpoint: {w} 'first_best_run' holds a run of another search space")
+        opt.first_best_run = kept
         opt.children = []
         for i, k in enumerate(kids):
             if k.get("algorithm") != "cma-es":
