@@ -144,6 +144,51 @@ SOURCES = {
         "air damping (16 x 16 across their ranges), tension and shear at the truth and 0.01 of the unit cube off "
         "(about 1 CPU min)",
     },
+    "search_runs": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            "out/issue20/exact",
+            "synth:fresh",
+            "synth:damped",
+            "synth:soft",
+            "synth:stiff",
+            "--strategies",
+            "staged-one,staged-rs,staged,staged-pop24",
+            "--seeds",
+            "0-4",
+            "--reuse",
+            "docs/figures/search_runs_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: runs again in the first stage (the default 'staged') against one run (the default "
+        "before, 'staged-one') and runs again without the best going on ('staged-rs'), seeds 0-4 on five exact-model "
+        "captures (the goal's, made by tools/issue20_goals.py exact; fresh, damped, and a soft and a stiff cloth away "
+        "from the search's centre): the fits of the rows file (drop --only-reused to run the missing ones, about "
+        "1 CPU min each)",
+    },
+    "search_profile": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            "out/issue20/exact",
+            "synth:fresh",
+            "--profile",
+            "{out}",
+            "--profile-evals",
+            "64,96",
+            "--seeds",
+            "0-1",
+        ],
+        "cost": "expensive",
+        "rtol": 0,
+        "what": "issue 20 item 3: a first stage by profile over bending (tried, not kept) on two exact-model captures, "
+        "64 and 96 evaluations per bending value, seeds 0-1 (about 6 CPU min)",
+    },
     "same_fit": {
         "argv": ["{py}", "tools/same_fit.py", "--json", "{out}"],
         "cost": "cheap",

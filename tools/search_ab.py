@@ -70,6 +70,26 @@ STRATEGIES = {
     # the same with compression following tension in the first stage instead of held at Blender's default
     # (StagedCMA's 'tie'; tried as the default and not kept)
     "staged-tie": ("cma-staged", {"restarts": 4}),
+    # runs again (StagedCMA's 'first_restart_step'; tried and not kept: docs/search.md, "Runs again"): each
+    # first-stage run that has converged is followed by another from the same start with a new random
+    # stream, until 56 % of the budget; then the best run goes on to 72 %, the first stage's larger share
+    "staged-runs": (
+        "cma-staged",
+        {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 0.56},
+    ),
+    # the same, the runs going on to the end of the 72 % and the best not going on
+    "staged-rs": (
+        "cma-staged",
+        {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 1.0},
+    ),
+    # runs again within the first stage's own share: runs until 36 % of the budget, the best going on to 48 %
+    "staged-rs48": (
+        "cma-staged",
+        {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.48, "first_explore": 0.36},
+    ),
+    # one run with a larger first-stage population (24 instead of Hansen's 8 for the strong four): more of
+    # each generation lands in the bending valley before the mean settles (tried, not kept)
+    "staged-pop24": ("cma-staged", {"restarts": 4, "first_popsize": 24}),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
@@ -100,6 +120,36 @@ SYNTH = {
                 "tension_damping": 12,
                 "shear_damping": 2,
                 "bending_damping": 1.5,
+            }
+        ),
+    ],
+    # the strong settings away from the middle of the search's cube, where every first-stage run starts
+    # (the three above have bending within 0.03 of it): a soft cloth (bending 0.3 of the cube) and a stiff one (0.7)
+    "soft": [
+        "--seed",
+        "11",
+        "--params",
+        json.dumps(
+            {
+                "tension_stiffness": 40,
+                "compression_stiffness": 40,
+                "shear_stiffness": 15,
+                "bending_stiffness": 0.05,
+                "air_damping": 0.3,
+            }
+        ),
+    ],
+    "stiff": [
+        "--seed",
+        "13",
+        "--params",
+        json.dumps(
+            {
+                "tension_stiffness": 80,
+                "compression_stiffness": 80,
+                "shear_stiffness": 30,
+                "bending_stiffness": 10,
+                "air_damping": 2.0,
             }
         ),
     ],
@@ -275,6 +325,7 @@ class Bench:
             "best_x": [float(v) for v in xb],
             "truth_x": [float(v) for v in self.truth],
             "load": os.getloadavg()[0],
+            "first_runs": getattr(opt, "first_runs", None),
         }
 
 
@@ -416,6 +467,80 @@ def local_start(b, rel=0.05, sigma=0.02, budget=1000, seed=0):
     return {"relative": rel, "sigma0": sigma, "budget": budget, "trace": trace}
 
 
+PROFILE_AXIS = "bending_stiffness"  # the profile's axis: the strong setting whose valley first stages miss
+PROFILE_INNER = ("tension_stiffness", "shear_stiffness", "air_damping")  # searched at each of its values
+
+
+def _sub_run(b, u_full, idx, sigma, evals, seed):
+    """CMA-ES over the coordinates ``idx`` of the whole unit-cube point ``u_full`` (the others held),
+    ``evals`` evaluations from it with step ``sigma``: (the best whole point, its training error %)."""
+    from clothfit.core.fitting.evolution_strategy import CMAES
+    from clothfit.core.fitting.space import SearchSpace
+
+    sp, obj = b.job.space, b.job.objective
+    nm = [sp.names[i] for i in idx]
+    sub = SearchSpace(nm, {n: sp.bounds[n] for n in nm}, {n: sp.log_scaled[n] for n in nm})
+    o = CMAES(
+        sub, seed=seed, initial=[sub.decode(u_full[idx])], sigma0=sigma, popsize=8, restarts=0, tolx=1e-11, tolfun=1e-11
+    )
+    while o.evaluations < evals:
+        X = o.ask()
+        U = np.repeat(u_full[None], len(X), 0)
+        U[:, idx] = sub.encode(X)
+        o.tell(X, obj(b.job.par.rows(sp.decode(U))))
+    u = u_full.copy()
+    u[idx] = sub.encode(o.best_x)
+    return u, float(o.best_f / obj.n_images * 100)
+
+
+def profile_start(b, seed=0, points=16, per=64, top=2, refine=300, final=400):
+    """A first stage by profile (tried, not kept: docs/search.md): bending held at ``points`` values
+    evenly across its (log) range, stiff to soft, and at each the other strong settings (tension,
+    shear, air damping) searched for ``per`` evaluations from the previous value's best (the weak
+    settings held where cma-staged holds them); the ``top`` lowest values searched again for
+    ``refine`` evaluations in all at their bending; then the four from the best with a step of 0.03
+    for ``final``. Does the profile's lowest point sit in the truth's bending valley?"""
+    sp = b.job.space
+    names = list(sp.names)
+    u0 = b.make("staged", 0).hold_u.copy()
+    ib = names.index(PROFILE_AXIS)
+    inner = [names.index(n) for n in PROFILE_INNER]
+    strong = sorted(inner + [ib])
+    ut = sp.encode(b.truth)
+    c0 = time.process_time()
+    cur, prof = u0.copy(), []
+    for g in ((np.arange(points) + 0.5) / points)[::-1]:
+        cur = cur.copy()
+        cur[ib] = g
+        cur, f = _sub_run(b, cur, inner, 0.1, per, seed)
+        prof.append({"bending_u": float(g), "train_pct": f, "inner_u": cur[inner].round(4).tolist()})
+    order = sorted(range(points), key=lambda i: prof[i]["train_pct"])[:top]
+    best = None
+    for i in order:
+        u = u0.copy()
+        u[ib] = prof[i]["bending_u"]
+        u[inner] = prof[i]["inner_u"]
+        u, f = _sub_run(b, u, inner, 0.05, refine // top, seed)
+        prof[i]["refined_pct"] = f
+        if best is None or f < best[0]:
+            best = (f, u)
+    u, f = _sub_run(b, best[1], strong, 0.03, final, seed)
+    return {
+        "capture": b.path,
+        "seed": seed,
+        "points": points,
+        "per_point": per,
+        "evaluations": points * per + (refine // top) * top + final,
+        "truth_u": {names[i]: float(ut[i]) for i in strong},
+        "profile": prof,
+        "end_u": {names[i]: float(u[i]) for i in strong},
+        "train_pct": f,
+        "train_floor_pct": b.train_floor,
+        "ratio": b.held(sp.decode(u)) / b.floor,
+        "cpu_s": time.process_time() - c0,
+    }
+
+
 def oracle(b, samples=128, seed=5, relative=(1e-7, 1e-5, 1e-3), best_of=(1, 4, 16, 64)):
     """What even a search that knew the truth could reach: ``samples`` points round the truth (every
     setting off by +-rel, random signs), their held-out ratios, how often they are within 1.2x and
@@ -543,7 +668,32 @@ def main(argv=None):
         help="instead of fits: the first stage's slice (bending x air damping over their ranges, tension and "
         "shear at the truth and moved by 0.01 of the unit cube), written as JSON here",
     )
+    ap.add_argument(
+        "--profile",
+        help="instead of fits: a first stage by profile over bending (tried, not kept), per capture and "
+        "seed, written as JSON here",
+    )
+    ap.add_argument(
+        "--profile-evals", default="64", help="with --profile: evaluations per bending value (a list: each)"
+    )
     a = ap.parse_args(argv)
+    if a.profile:
+        from clothfit.core.safeio import atomic_json
+
+        out = []
+        for c in a.captures:
+            b = Bench(capture_path(c))
+            for per in [int(v) for v in a.profile_evals.split(",")]:
+                for seed in parse_seeds(a.seeds):
+                    r = profile_start(b, seed=seed, per=per)
+                    print(
+                        f"{c} per {per} seed {seed}: train {r['train_pct']:.3f} % held-out {r['ratio']:.2f}x",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+                    out.append(r)
+        atomic_json(a.profile, {"runs": out})
+        return
     if a.oracle:
         from clothfit.core.safeio import atomic_json
 
