@@ -480,6 +480,9 @@ def _search_args(a, seed):
     if getattr(a, "optimizer", None):
         args += ["--optimizer", a.optimizer]
         tag += f"_{a.optimizer}"
+    for item in getattr(a, "search", None) or []:  # an optimiser setting (fit --search NAME=VALUE)
+        args += ["--search", item]
+        tag += "_" + item.replace("=", "").replace(".", "p")
     if seed:
         args += ["--seed", str(seed)]
         tag += f"_s{seed}"
@@ -952,6 +955,13 @@ def main(argv=None):
                 "--optimizer", help="the fit's --optimizer (default: the fit's own); its rows are labelled with it"
             )
             s.add_argument(
+                "--search",
+                action="append",
+                default=[],
+                metavar="NAME=VALUE",
+                help="the fit's --search (repeatable); its rows are labelled with it",
+            )
+            s.add_argument(
                 "--seeds",
                 default="0",
                 help="the fit's --seed; exact: a list such as 0-4 gives a row per seed and the count above "
@@ -995,8 +1005,8 @@ def main(argv=None):
         at = commits()  # the code the goal runs (taken before it runs)
         rows, extra = RUNNERS[g](a, run)
         label = "before" if before else "after"
-        if getattr(a, "optimizer", None) or parse_seeds(getattr(a, "seeds", "0")) != [0]:
-            label += f" ({', '.join(x for x in (getattr(a, 'optimizer', None), 'seeds ' + a.seeds) if x)})"
+        if getattr(a, "optimizer", None) or getattr(a, "search", None) or parse_seeds(getattr(a, "seeds", "0")) != [0]:
+            label += f" ({', '.join(x for x in (getattr(a, 'optimizer', None), *(getattr(a, 'search', None) or []), 'seeds ' + a.seeds) if x)})"
         merge_rows(a.json, g, rows, dict(at, **extra), label)
     with open(a.json) as f:
         print(format_table(json.load(f)))
