@@ -333,6 +333,24 @@ SOURCES = {
         "what": "issue 20's search goal over seeds 0-4 with the fit's default search (cma-staged) and with cma-es, "
         "the default before it, and the offsets goal with cma-es (about 25 min)",
     },
+    "issue20_offsets_runs": {
+        "argv": [
+            "{py}",
+            "tools/issue20_goals.py",
+            "offsets",
+            "--search",
+            "staged_restart_step=0.005",
+            "--search",
+            "staged_first_fraction=0.72",
+            "--search",
+            "staged_explore=0.56",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "issue 20's offsets goal with runs again in the first stage (tried, not kept; docs/search.md), one fit "
+        "(about 3 min)",
+    },
     "cross_simulator": {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json",
