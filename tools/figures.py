@@ -52,10 +52,32 @@ TIMING = (
     "*init*",
 )
 
+
 # name -> source. ``argv``: the command ({out} = the JSON it writes, {py} = this Python);
 # ``output``: the file the command writes (default {out}); ``cost``: "cheap" (seconds to a few
 # minutes: ``rerun`` runs it) or "expensive"; ``rtol``/``atol``: rerun tolerance of the
 # deterministic figures (a fit with a fixed seed gives the same numbers: 0); ``what``: one line.
+def _phone_rig(cmd, out, seed, scale, poses, close=None):
+    """The command line of a phone-rig rehearsal (tools/phone_rig.py): ``calibrate`` (the board's renders
+    alone) or ``e2e`` (the whole session: 15 frames, both fits at 2500 evaluations), 4 Cycles samples."""
+    argv = ["{py}", "tools/phone_rig.py", cmd, "--out", f"out/phone_rig/{out}", "--seed", str(seed)]
+    argv += ["--scale", scale, "--poses", str(poses)] + ([] if close is None else ["--close", str(close)])
+    if cmd == "e2e":
+        argv += ["--frames", "15", "--samples", "4", "--evals", "2500", "--uncertain-evals", "2500"]
+    else:
+        argv += ["--samples", "4"]
+    return argv + ["--json", "{out}"]
+
+
+def _offsets_with(*search):
+    """The command line of issue 20's offsets goal with the fit's ``--search`` settings."""
+    return (
+        ["{py}", "tools/issue20_goals.py", "offsets"]
+        + [x for s in search for x in ("--search", s)]
+        + ["--json", "{out}"]
+    )
+
+
 SOURCES = {
     "demo": {
         "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
@@ -334,33 +356,13 @@ SOURCES = {
         "the default before it, and the offsets goal with cma-es (about 25 min)",
     },
     "issue20_offsets_runs": {
-        "argv": [
-            "{py}",
-            "tools/issue20_goals.py",
-            "offsets",
-            "--search",
-            "staged_restart_step=0.005",
-            "--search",
-            "staged_first_fraction=0.72",
-            "--search",
-            "staged_explore=0.56",
-            "--json",
-            "{out}",
-        ],
+        "argv": _offsets_with("staged_restart_step=0.005", "staged_first_fraction=0.72", "staged_explore=0.56"),
         "cost": "expensive",
         "what": "issue 20's offsets goal with runs again in the first stage (tried, not kept; docs/search.md), one fit "
         "(about 3 min)",
     },
     "issue20_offsets_rs48": {
-        "argv": [
-            "{py}",
-            "tools/issue20_goals.py",
-            "offsets",
-            "--search",
-            "staged_restart_step=0.005",
-            "--json",
-            "{out}",
-        ],
+        "argv": _offsets_with("staged_restart_step=0.005"),
         "cost": "expensive",
         "what": "issue 20's offsets goal with runs again within the first stage's own share (staged-rs48; tried, not "
         "kept; docs/search.md), one fit (about 3 min)",
@@ -724,212 +726,46 @@ SOURCES = {
         "what": "fits that stop by themselves: CMA-ES and SPX + MGG on a small capture, budget 100,000",
     },
     "phone_rig_calib_s101": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "calibrate",
-            "--out",
-            "out/phone_rig/calib_s101",
-            "--seed",
-            "101",
-            "--scale",
-            "0.375",
-            "--poses",
-            "14",
-            "--close",
-            "0",
-            "--samples",
-            "4",
-            "--json",
-            "{out}",
-        ],
+        "argv": _phone_rig("calibrate", "calib_s101", 101, "0.375", 14, close=0),
         "cost": "expensive",
         "what": "issue 18: clothfit calibrate on Cycles renders of a ChArUco board before 4 phones (seed 101), against "
         "the true cameras",
     },
     "phone_rig_calib_s202": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "calibrate",
-            "--out",
-            "out/phone_rig/calib_s202",
-            "--seed",
-            "202",
-            "--scale",
-            "0.375",
-            "--poses",
-            "14",
-            "--close",
-            "4",
-            "--samples",
-            "4",
-            "--json",
-            "{out}",
-        ],
+        "argv": _phone_rig("calibrate", "calib_s202", 202, "0.375", 14, close=4),
         "cost": "expensive",
         "what": "issue 18: calibrate as docs/phone_rig.md now asks (the board also held close before each phone, 4 poses), seed 202, 405 x 720",
     },
     "phone_rig_calib_s303": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "calibrate",
-            "--out",
-            "out/phone_rig/calib_s303",
-            "--seed",
-            "303",
-            "--scale",
-            "0.75",
-            "--poses",
-            "14",
-            "--close",
-            "4",
-            "--samples",
-            "4",
-            "--json",
-            "{out}",
-        ],
+        "argv": _phone_rig("calibrate", "calib_s303", 303, "0.75", 14, close=4),
         "cost": "expensive",
         "what": "issue 18: calibrate as docs/phone_rig.md now asks (4 close poses per phone), seed 303, at 810 x 1440 (0.75 of a phone's video)",
     },
     "phone_rig_calib_s404": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "calibrate",
-            "--out",
-            "out/phone_rig/calib_s404",
-            "--seed",
-            "404",
-            "--scale",
-            "0.75",
-            "--poses",
-            "14",
-            "--close",
-            "4",
-            "--samples",
-            "4",
-            "--json",
-            "{out}",
-        ],
+        "argv": _phone_rig("calibrate", "calib_s404", 404, "0.75", 14, close=4),
         "cost": "expensive",
         "what": "issue 18: calibrate as docs/phone_rig.md now asks (4 close poses per phone), seed 404, at 810 x 1440 (0.75 of a phone's video)",
     },
     "phone_rig_e2e": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "e2e",
-            "--out",
-            "out/phone_rig/e2e_s7",
-            "--seed",
-            "7",
-            "--scale",
-            "0.3",
-            "--poses",
-            "10",
-            "--frames",
-            "15",
-            "--samples",
-            "4",
-            "--evals",
-            "2500",
-            "--uncertain-evals",
-            "2500",
-            "--json",
-            "{out}",
-        ],
+        "argv": _phone_rig("e2e", "e2e_s7", 7, "0.3", 10),
         "cost": "expensive",
         "what": "issue 18 end to end: phones -> calibrate, handles, extract, fit, export-blender-cloth on Cycles "
         "renders, against the same fit given the true cameras and manipulation",
     },
     "phone_rig_e2e_close": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "e2e",
-            "--out",
-            "out/phone_rig/e2e_s7c",
-            "--seed",
-            "7",
-            "--scale",
-            "0.3",
-            "--poses",
-            "10",
-            "--close",
-            "4",
-            "--frames",
-            "15",
-            "--samples",
-            "4",
-            "--evals",
-            "2500",
-            "--uncertain-evals",
-            "2500",
-            "--json",
-            "{out}",
-        ],
+        "argv": _phone_rig("e2e", "e2e_s7c", 7, "0.3", 10, close=4),
         "cost": "expensive",
         "what": "issue 18 end to end as docs/phone_rig.md now asks: the e2e rig of seed 7 with the board also held "
         "close before each phone (4 poses)",
     },
     "phone_rig_e2e_s8": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "e2e",
-            "--out",
-            "out/phone_rig/e2e_s8",
-            "--seed",
-            "8",
-            "--scale",
-            "0.75",
-            "--poses",
-            "10",
-            "--close",
-            "4",
-            "--frames",
-            "15",
-            "--samples",
-            "4",
-            "--evals",
-            "2500",
-            "--uncertain-evals",
-            "2500",
-            "--json",
-            "{out}",
-        ],
+        "argv": _phone_rig("e2e", "e2e_s8", 8, "0.75", 10, close=4),
         "cost": "expensive",
         "what": "issue 18 end to end on a rig not seen before (seed 8) at 810 x 1440 (0.75 of a phone's video), the "
         "board held close before each phone as docs/phone_rig.md asks",
     },
     "phone_rig_e2e_s9": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "e2e",
-            "--out",
-            "out/phone_rig/e2e_s9",
-            "--seed",
-            "9",
-            "--scale",
-            "0.75",
-            "--poses",
-            "10",
-            "--close",
-            "4",
-            "--frames",
-            "15",
-            "--samples",
-            "4",
-            "--evals",
-            "2500",
-            "--uncertain-evals",
-            "2500",
-            "--json",
-            "{out}",
-        ],
+        "argv": _phone_rig("e2e", "e2e_s9", 9, "0.75", 10, close=4),
         "cost": "expensive",
         "what": "issue 18 end to end on a rig not seen before (seed 9, a second) at 810 x 1440 (0.75 of a phone's video), the "
         "board held close before each phone as docs/phone_rig.md asks",
