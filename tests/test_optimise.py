@@ -68,6 +68,17 @@ def test_space_round_trip_linear_and_log():
     np.testing.assert_allclose(lin.encode([[1.0, 2.5], [3.0, 2.0]]), [[0.5, 0.25], [1.0, 0.0]])
 
 
+def test_space_subspace_keeps_bounds_and_scaling_of_the_names_given():
+    sp = SearchSpace(
+        ["a", "b", "c"], {"a": (0.1, 10.0), "b": (-1.0, 1.0), "c": (1.0, 100.0)}, {"a": True, "b": False, "c": True}
+    )
+    sub = sp.subspace(["c", "a"])
+    assert sub.names == ["c", "a"] and sub.bounds == {"c": (1.0, 100.0), "a": (0.1, 10.0)}
+    assert sub.log_scaled == {"c": True, "a": True}
+    x = np.array([[5.0, 0.3, 20.0]])
+    np.testing.assert_allclose(sub.encode(x[:, [2, 0]]), sp.encode(x)[:, [2, 0]])
+
+
 def test_space_decode_clips_and_clip():
     sp = SearchSpace(["a", "b"], {"a": (1e-3, 1e3), "b": (0.0, 1.0)}, {"a": True})
     X = sp.decode([[-0.5, 1.5]])

@@ -165,7 +165,7 @@ def test_a_converged_first_run_starts_again_where_the_first_began():
     assert one.first_runs == 1
     # a checkpoint written before runs again existed resumes with one run
     d = json.loads(json.dumps(StagedCMA(space(), seed=4, first=["x0"]).state_dict()))
-    for key in ("first_restart_step", "first_init", "first_popsize", "first_runs", "first_explore", "first_best_run"):
+    for key in ("first_restart_step", "first_init", "first_runs", "first_explore", "first_best_run"):
         del d[key]
     old = optimizer_from_state(d)
     assert old.first_restart_step == 0.0 and old.first_runs == 1

@@ -475,11 +475,9 @@ def _sub_run(b, u_full, idx, sigma, evals, seed):
     """CMA-ES over the coordinates ``idx`` of the whole unit-cube point ``u_full`` (the others held),
     ``evals`` evaluations from it with step ``sigma``: (the best whole point, its training error %)."""
     from clothfit.core.fitting.evolution_strategy import CMAES
-    from clothfit.core.fitting.space import SearchSpace
 
     sp, obj = b.job.space, b.job.objective
-    nm = [sp.names[i] for i in idx]
-    sub = SearchSpace(nm, {n: sp.bounds[n] for n in nm}, {n: sp.log_scaled[n] for n in nm})
+    sub = sp.subspace([sp.names[i] for i in idx])
     o = CMAES(
         sub, seed=seed, initial=[sub.decode(u_full[idx])], sigma0=sigma, popsize=8, restarts=0, tolx=1e-11, tolfun=1e-11
     )

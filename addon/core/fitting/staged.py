@@ -135,7 +135,6 @@ class StagedCMA(Optimizer):
         self.race_evals = max(1, min(_integer(race_evals, f"{w}: race_evals", 1), share))
         self.first_restart_step = _number(first_restart_step, f"{w}: first_restart_step (unit cube)", 0.0, 1.0)
         self.first_init = None if init is None else [float(v) for v in init[0]]  # where each first-stage run starts
-        self.first_popsize = lam1
         self.first_runs = 1
         self.first_explore = _number(first_explore, f"{w}: first_explore", 0.0, 1.0)
         self.first_best_run = None  # the converged run with the best point so far (its CMA-ES state)
@@ -190,8 +189,7 @@ class StagedCMA(Optimizer):
         return [self.space.names.index(n) for n in self.first]
 
     def _subspace(self) -> SearchSpace:
-        b, lg = self.space.bounds, self.space.log_scaled
-        return SearchSpace(self.first, {n: b[n] for n in self.first}, {n: lg[n] for n in self.first})
+        return self.space.subspace(self.first)
 
     def _child(self, space, popsize, sigma, initial):
         return CMAES(
@@ -325,7 +323,7 @@ class StagedCMA(Optimizer):
                         self.first_best_run = c.state_dict()
                     self.first_runs += 1
                     init = None if self.first_init is None else [np.array(self.first_init)]
-                    self.children[-1] = self._child(self._subspace(), self.first_popsize, self.sigma0, init)
+                    self.children[-1] = self._child(self._subspace(), c.popsize, self.sigma0, init)
             elif self.first_best_run is not None:
                 # the runs are over: the one with the best point goes on, to the end of the first stage
                 if _float_from_json(self.first_best_run["best_f"]) < c.best_f:
@@ -357,7 +355,6 @@ class StagedCMA(Optimizer):
         "scan_pending",
         "first_restart_step",
         "first_init",
-        "first_popsize",
         "first_runs",
         "first_explore",
         "first_best_run",
@@ -394,7 +391,6 @@ class StagedCMA(Optimizer):
                 "scan_pending": None if self._scan_pending is None else self._scan_pending.tolist(),
                 "first_restart_step": self.first_restart_step,
                 "first_init": self.first_init,
-                "first_popsize": self.first_popsize,
                 "first_runs": self.first_runs,
                 "first_explore": self.first_explore,
                 "first_best_run": self.first_best_run,
@@ -473,16 +469,8 @@ class StagedCMA(Optimizer):
         # runs again in the first stage came after the scan: one run (none again) in older checkpoints
         opt.first_restart_step = _num(d, "first_restart_step", w, float, 0.0, 1.0) if "first_restart_step" in d else 0.0
         opt.first_runs = _num(d, "first_runs", w, int, 1, 10**9) if "first_runs" in d else 1
-        opt.first_popsize = _num(d, "first_popsize", w, int, 2, 10**6) if "first_popsize" in d else opt.popsize
-        init = d.get("first_init")
-        m = len(opt.first)
-        if init is not None and (
-            not isinstance(init, list) or len(init) != m or not all(isinstance(v, (int, float)) for v in init)
-        ):
-            raise ClothFitError(
-                f"checkpoint: {w} 'first_init' must be null or a point of the first stage's {m} coordinates"
-            )
-        opt.first_init = None if init is None else [float(v) for v in init]
+        init = _array(d, "first_init", w, (len(opt.first),), allow_none=True) if "first_init" in d else None
+        opt.first_init = None if init is None else init.tolist()
         opt.first_explore = _num(d, "first_explore", w, float, 0.0, 1.0) if "first_explore" in d else 0.0
         kept = d.get("first_best_run")
         if kept is not None:
