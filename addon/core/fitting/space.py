@@ -321,7 +321,7 @@ class SearchSpace:
             raise ClothFitError(f"parameter values: missing {missing}")
         return np.array([float(values[n]) for n in self.names])
 
-    def subspace(self, names) -> SearchSpace:
+    def subspace(self, names: list[str]) -> SearchSpace:
         """The space of ``names`` alone (in that order), with their bounds and scaling."""
         b, lg = self.bounds, self.log_scaled
         return SearchSpace(list(names), {n: b[n] for n in names}, {n: lg[n] for n in names})
