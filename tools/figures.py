@@ -367,6 +367,20 @@ SOURCES = {
         "what": "issue 20's offsets goal with runs again within the first stage's own share (staged-rs48; tried, not "
         "kept; docs/search.md), one fit (about 3 min)",
     },
+    "issue20_continuum_rs48": {
+        "argv": [
+            "{py}",
+            "tools/issue20_goals.py",
+            "continuum",
+            "--search",
+            "staged_restart_step=0.005",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "issue 20's continuum goal (cotton and silk from Warp) with runs again within the first stage's own "
+        "share (staged-rs48; tried, not kept; docs/search.md), one fit each (about 7 min)",
+    },
     "cross_simulator": {
         "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json",

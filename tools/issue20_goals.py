@@ -697,9 +697,11 @@ def goal_continuum(a, run):
         c = load_capture(cap)
         even, odd = CT.even_odd(c)
         _, held = select_training(c.cameras, TRAIN_CAMERAS)
-        res = _p(a, "fits", f"continuum_{m}.json")
+        extra, tag = _search_args(a, parse_seeds(getattr(a, "seeds", "0"))[0])
+        res = _p(a, "fits", f"continuum_{m}{tag}.json")
         fit, frun = run(
             ["fit", cap, "--model", "blender", "--cameras", f"n:{TRAIN_CAMERAS}", "--out", res, "--force", "--quiet"]
+            + extra
         )
         ev, _ = run(
             ["evaluate", cap, "--params", res, "--cameras", f"heldout:{TRAIN_CAMERAS}", "--times", CT.times_arg(odd)]
@@ -950,7 +952,7 @@ def main(argv=None):
             "--json", default="out/issue20/goals.json", help="rows merged into this JSON (default: %(default)s)"
         )
         s.add_argument("--remake", action="store_true", help="make the goal's capture again")
-        if g in ("exact", "offsets", "all"):  # all: both goals' fits with these
+        if g in ("exact", "offsets", "continuum", "all"):  # all: these goals' fits with these
             s.add_argument(
                 "--optimizer", help="the fit's --optimizer (default: the fit's own); its rows are labelled with it"
             )
