@@ -802,6 +802,18 @@ SOURCES = {
         "what": "issue 18: the true settings replayed under the clips phone_rig_e2e measured, and under clips moved "
         "by 1 mm per axis: how far the clips alone move the cloth (needs that run's folder)",
     },
+    "phone_rig_spread_s8": {
+        "argv": ["{py}", "tools/phone_rig.py", "spread", "--e2e", "out/phone_rig/e2e_s8", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 18: the seed 8 rig's three fits over fit seeds 0-4, and the true settings scored with the "
+        "clips as measured and at their true points (needs phone_rig_e2e_s8's folder; about 20 min)",
+    },
+    "phone_rig_spread_s9": {
+        "argv": ["{py}", "tools/phone_rig.py", "spread", "--e2e", "out/phone_rig/e2e_s9", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 18: the seed 9 rig's three fits over fit seeds 0-4, and the true settings scored with the "
+        "clips as measured and at their true points (needs phone_rig_e2e_s9's folder; about 20 min)",
+    },
     "blender_scene_fit": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
         "output": "out/scene_fit/summary.json",

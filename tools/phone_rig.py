@@ -1303,6 +1303,133 @@ def run_sensitivity(a) -> dict:
     return out
 
 
+def _true_clips_capture(e2e: str, truth_w, dest: str) -> str:
+    """A copy of an e2e run's capture (the calibrated cameras, the measured placement and release) whose
+    clips are put at the true points (``truth_w``: the true cloth at frame 0 in the calibration's frame)."""
+    import shutil
+
+    if os.path.isdir(dest):
+        shutil.rmtree(dest)
+    shutil.copytree(os.path.join(e2e, "capture"), dest)
+    path = os.path.join(dest, "capture.json")
+    with open(path) as f:
+        doc = json.load(f)
+    for h in doc["scenario"]["handles"]:
+        h["positions"] = [truth_w[h["vertex"]].tolist() for _ in h["positions"]]
+    with open(path, "w") as f:
+        json.dump(doc, f, indent=1)
+    return dest
+
+
+def run_spread(a) -> dict:
+    """The shape goal over fit seeds, on an e2e run's folder (its renders, capture and capture_true; nothing is
+    rendered): for each ``--fit-seeds`` seed the three fits of ``e2e`` (told the clips are exact; with the
+    capture's uncertain block; given the truth), each replayed under the true manipulation, and the ratios of
+    the same seed; which fit the best training error of the seeds would keep. Then where the end-to-end
+    fit's error comes from: the TRUE settings scored on the end-to-end capture (the clips as measured), on
+    the same capture with the clips put at their true points, and on the capture given the truth."""
+    from clothfit.core.physics.scenario import Scenario
+    from issue20_goals import parse_seeds
+
+    e2e = a.e2e
+    for need in ("spec.json", "capture", "capture_true", "fit.json", "scenario.json"):
+        if not os.path.exists(os.path.join(e2e, need)):
+            raise SystemExit(f"{e2e}: no {need}; run `tools/phone_rig.py e2e --out {e2e}` first")
+    with open(os.path.join(e2e, "spec.json")) as f:
+        spec = json.load(f)
+    seed = int(spec["seed"])
+    frames = len(Scenario.from_dict(spec["scenario"]).frame_times)
+    tr = cloth_truth(seed, frames)
+    board = CB.parse_board(spec["board"])
+    pose0 = tuple(np.asarray(v, dtype=np.float64) for v in spec["poses"][0])
+    truth_w = world_from_scene(board, pose0, tr["positions"][0])
+    work = os.path.join(e2e, "spread")
+    os.makedirs(work, exist_ok=True)
+    log = os.path.join(work, "commands.log")
+    if os.path.exists(log):
+        os.remove(log)
+    with open(os.path.join(e2e, "scenario.json")) as f:
+        meas = Scenario.from_dict(json.load(f)["scenario"])
+    clip_mm = [1000 * float(np.linalg.norm(np.asarray(h.positions[0]) - truth_w[h.vertex])) for h in meas.handles]
+    # the true settings in a result file the CLI scores (the first fit's, its free settings set to the truth)
+    with open(os.path.join(e2e, "fit.json")) as f:
+        doc = json.load(f)
+    doc["blender_cloth"].update({k: tr["settings"][k] for k in FREE})
+    true_params = os.path.join(work, "true_settings.json")
+    with open(true_params, "w") as f:
+        json.dump(doc, f, indent=1)
+    true_clips = _true_clips_capture(e2e, truth_w, os.path.join(work, "capture_true_clips"))
+    scored = {}
+    for key, cap in (
+        ("measured_clips", os.path.join(e2e, "capture")),
+        ("true_clips", true_clips),
+        ("truth_given", os.path.join(e2e, "capture_true")),
+    ):
+        r, _ = _cli(["evaluate", cap, "--params", true_params], log, f"evaluate ({key})")
+        scored[key] = r["silhouette_error_pct"]
+    kinds = (("e2e", "capture", False), ("uncertain", "capture", True), ("truth_given", "capture_true", False))
+    runs = []
+    for fs in parse_seeds(a.fit_seeds):
+        fa = argparse.Namespace(evals=a.evals, fit_seed=fs, resolution=None)
+        row = {"fit_seed": fs}
+        for kind, cap, unc in kinds:
+            res = os.path.join(work, f"{kind}_{fs}.json")
+            fit, secs = _cli(_fit_args(os.path.join(e2e, cap), res, fa, unc), log, f"fit {kind} (seed {fs})")
+            cloth, _ = _cli(["export-blender-cloth", res], log, "export-blender-cloth")
+            row[kind] = {
+                "E_sil_pct": fit.get("best_E_sil_mean_pct"),
+                "settings": {k: cloth["blender_cloth"][k] for k in FREE},
+                "replay_mm": replay_error_mm(cloth["blender_cloth"], tr)["mean_mm"],
+                "seconds": secs,
+            }
+        for kind in ("e2e", "uncertain"):
+            row[f"ratio_{kind}"] = row[kind]["replay_mm"] / row["truth_given"]["replay_mm"]
+        runs.append(row)
+        print(
+            f"seed {fs}: e2e {row['e2e']['replay_mm']:.2f} mm, uncertain {row['uncertain']['replay_mm']:.2f} mm, "
+            f"given the truth {row['truth_given']['replay_mm']:.2f} mm: ratios {row['ratio_e2e']:.2f}, "
+            f"{row['ratio_uncertain']:.2f}",
+            flush=True,
+        )
+    summary = {}
+    for kind in ("e2e", "uncertain"):
+        ratios = [r[f"ratio_{kind}"] for r in runs]
+        kept = min(runs, key=lambda r: r[kind]["E_sil_pct"])  # what the best training error of the seeds keeps
+        given = min(runs, key=lambda r: r["truth_given"]["E_sil_pct"])
+        summary[kind] = {
+            "ratios": ratios,
+            "median_ratio": float(np.median(ratios)),
+            "within_2": int(sum(x <= 2.0 for x in ratios)),
+            "best_by_training_seed": kept["fit_seed"],
+            "best_by_training_ratio": kept[kind]["replay_mm"] / given["truth_given"]["replay_mm"],
+        }
+    out = {
+        "seed": seed,
+        "e2e": e2e,
+        "evaluations": a.evals,
+        "fit_seeds": [r["fit_seed"] for r in runs],
+        "clip_error_mm": clip_mm,
+        "true_settings_E_sil_pct": scored,
+        "runs": runs,
+        "summary": summary,
+    }
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(out, f, indent=1)
+    print(
+        f"true settings scored: clips as measured ({', '.join(f'{e:.2f}' for e in clip_mm)} mm off) "
+        f"{scored['measured_clips']:.2f} %, the same capture with the true clips {scored['true_clips']:.2f} %, "
+        f"given the truth {scored['truth_given']:.2f} %"
+    )
+    for kind, s in summary.items():
+        print(
+            f"{kind}: ratios {', '.join(f'{x:.2f}' for x in s['ratios'])} (median {s['median_ratio']:.2f}, "
+            f"{s['within_2']} of {len(runs)} within 2); the best training error keeps seed "
+            f"{s['best_by_training_seed']}: {s['best_by_training_ratio']:.2f}"
+        )
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -1404,6 +1531,15 @@ def main(argv=None):
     sv.add_argument("--draws", type=int, default=8, help="draws of clip errors (default: %(default)s)")
     sv.add_argument("--e2e", help="an e2e run's folder (same seed): also the clips it measured")
     sv.add_argument("--json", help="write the figures here")
+    sp = sub.add_parser(
+        "spread",
+        help="on an e2e run's folder (nothing rendered): the three fits over several seeds, and the true settings "
+        "scored with the clips as measured and at their true points",
+    )
+    sp.add_argument("--e2e", required=True, help="the e2e run's folder")
+    sp.add_argument("--fit-seeds", default="0-4", help="the fits' seeds, e.g. 0-4 or 0,2 (default: %(default)s)")
+    sp.add_argument("--evals", type=int, default=2500, help="each fit's budget (default: %(default)s)")
+    sp.add_argument("--json", help="write the figures here")
     r = sub.add_parser("_render", help="(internal) the child process that renders with bpy")
     r2 = sub.add_parser("_render_e2e", help="(internal) the child process that renders the end-to-end rig")
     r2.add_argument("--spec", required=True)
@@ -1417,6 +1553,9 @@ def main(argv=None):
         return 0
     if a.cmd == "e2e":
         run_e2e(a)
+        return 0
+    if a.cmd == "spread":
+        run_spread(a)
         return 0
     if a.cmd == "sensitivity":
         run_sensitivity(a)
