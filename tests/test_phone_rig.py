@@ -94,9 +94,11 @@ def test_phone_rig_end_to_end_small(tmp_path):
     assert r["fit"]["truth_given"]["replay"]["mean_mm"] < ORACLE_MM, r["fit"]
     assert r["shape_ratio_uncertain"] < RATIO, r["fit"]
     assert r["shape_ratio"] < RATIO_EXACT, r["fit"]  # the fit told the clips are exact (see above)
-    # the spread over fit seeds on that folder (nothing rendered again): a row per seed with the three fits,
-    # and the true settings scored better with the clips at their true points than as measured (the clips
-    # are off by up to HANDLES_MM here: the end-to-end fit's own error comes from them)
+    # the spread over fit seeds on that folder (nothing rendered again): a row per seed with the three fits;
+    # the true settings score best on the capture given the truth (true cameras and clips). With the
+    # calibrated cameras, the true clips need not beat the measured ones: on this small rig (cameras
+    # millimetres off) they score 9.12 % against 8.92 %, on the recorded 810 x 1440 rigs lower
+    # (docs/phone_rig.md)
     sj = str(tmp_path / "spread.json")
     assert PR.main(["spread", "--e2e", out, "--fit-seeds", "0", "--evals", "40", "--json", sj]) == 0
     s = json.load(open(sj))
@@ -105,5 +107,5 @@ def test_phone_rig_end_to_end_small(tmp_path):
     assert {"e2e", "uncertain", "truth_given"} <= set(row)
     assert row["ratio_e2e"] == pytest.approx(row["e2e"]["replay_mm"] / row["truth_given"]["replay_mm"])
     sc = s["true_settings_E_sil_pct"]
-    assert sc["true_clips"] < sc["measured_clips"], sc
+    assert sc["truth_given"] < min(sc["true_clips"], sc["measured_clips"]), sc
     assert max(s["clip_error_mm"]) == pytest.approx(r["handles_max_mm"], rel=1e-6)

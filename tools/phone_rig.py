@@ -262,31 +262,7 @@ def _room(engine: str, samples: int, denoise: bool):
     import bpy
     import render_footage as RF
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = samples
-    scene.cycles.use_adaptive_sampling = False
-    scene.cycles.use_denoising = bool(denoise)
-    if denoise:
-        scene.cycles.denoiser = "OPENIMAGEDENOISE"
-    scene.cycles.max_bounces = 3
-    scene.cycles.diffuse_bounces = 2
-    scene.cycles.glossy_bounces = 1
-    scene.cycles.transmission_bounces = 0
-    scene.cycles.transparent_max_bounces = 0
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-    scene.render.dither_intensity = 0.0
-    scene.render.image_settings.file_format = "PNG"
-    scene.render.image_settings.color_mode = "RGB"
-    scene.render.image_settings.color_depth = "8"
-    world = bpy.data.worlds.new("Room")
-    world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.30, 0.30, 0.32, 1)
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
-    scene.world = world
+    scene = RF.empty_scene("CYCLES", samples, denoise, world_name="Room")
     bpy.ops.mesh.primitive_plane_add(size=1.8, location=(0, 0, 0))
     bpy.context.object.name = "Table"
     bpy.context.object.data.materials.append(RF._table_material())

@@ -201,9 +201,10 @@ def _wall_material():
     return mat
 
 
-def build_scene(grid, engine="CYCLES", samples=8, denoise=True):
-    """A factory-empty scene with the room, the lights and the cloth mesh (rest shape). Returns
-    (scene, cloth object)."""
+def empty_scene(engine="CYCLES", samples=8, denoise=True, world_name="Footage World"):
+    """A factory-empty scene set to render as the footage is rendered (also tools/phone_rig.py's room): the
+    engine (Cycles on the CPU, fixed samples, optional OpenImageDenoise; or Eevee), the Standard view
+    transform without dither, 8-bit RGB PNG, a grey world."""
     import bpy
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -233,12 +234,20 @@ def build_scene(grid, engine="CYCLES", samples=8, denoise=True):
     scene.render.image_settings.file_format = "PNG"
     scene.render.image_settings.color_mode = "RGB"
     scene.render.image_settings.color_depth = "8"
-
-    world = bpy.data.worlds.new("Footage World")
+    world = bpy.data.worlds.new(world_name)
     world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.30, 0.30, 0.32, 1)
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
     scene.world = world
+    return scene
+
+
+def build_scene(grid, engine="CYCLES", samples=8, denoise=True):
+    """A factory-empty scene with the room, the lights and the cloth mesh (rest shape). Returns
+    (scene, cloth object)."""
+    import bpy
+
+    scene = empty_scene(engine, samples, denoise)
 
     # table top and a room around the rig (walls 1.1 m away, floor below the table)
     bpy.ops.mesh.primitive_plane_add(size=1.6, location=(0, 0, TABLE_Z))
