@@ -112,7 +112,7 @@ def test_the_time_offset_is_estimated_with_the_cloth(caps):
     assert abs(r["time_offset_s"] - SHIFT) < 0.004, r["time_offset_s"]
     assert r["time_offset_uncertainty_s"] is not None and r["time_offset_uncertainty_s"] < 0.02
     p = r["manipulation_profile"]["time_offset_s"]
-    assert p["separated"]
+    assert p["separated"] and r["at_bound"] == []  # well inside its declared 50 ms
     # the profile is centred on the mean of the best point's jitter (not on the luckiest draw, the best), and
     # a rise within twice the jitter's spread tells nothing
     assert p["E_jitter_sd"] >= 0 and p["E_centre"] is not None
@@ -126,6 +126,20 @@ def test_the_time_offset_is_estimated_with_the_cloth(caps):
     assert ev["silhouette_error_pct"] == pytest.approx(r["best_E_sil_mean_pct"], rel=1e-6)
     without = evaluate(cap, dict(r, time_offset_s=0.0), cameras=[0, 2, 4, 6])
     assert without["silhouette_error_pct"] > 2 * ev["silhouette_error_pct"]
+
+
+def test_an_offset_at_the_edge_of_its_declared_bound_is_said(caps):
+    # the capture declares its clock good to 8 ms, but it is 20 ms off: the fit ends against the bound (within a
+    # profile step of it, the error still falling outward) and says so instead of calling it inseparable
+    cap, _ = caps
+    cfg = FitConfig(
+        free=FREE, fixed=FIXED, max_evaluations=300, seed=1, train_cameras=[0, 2, 4, 6], uncertain="time_offset=0.008"
+    )
+    r = FitJob(cap, cfg).run()
+    assert r["time_offset_s"] >= (D.MANIP_AT_BOUND_SHARE - D.PROFILE_STEP) * 0.008, r["time_offset_s"]
+    assert r["at_bound"] == ["time_offset_s"]
+    assert "at the edge of the capture's declared bound: time_offset_s +" in r["manipulation_note"]
+    assert "wider --uncertain" in r["manipulation_note"]
 
 
 def test_one_frame_cannot_separate_a_time_offset(caps):

@@ -86,6 +86,10 @@ def test_manipulation_parameters_coordinates_and_the_fitted_scenario():
     for h, r in zip(back.handles, ref.handles):
         np.testing.assert_allclose(h.positions, r.positions)
     assert fitted_scenario(sc, {}) is sc
+    # at the edge of the bound: |value| >= 95 % of it (either sign)
+    edge = np.array([-0.049, 0.001, 0.0, -0.0048, 0.0, 0.0, 0.0019])
+    assert mp.at_bound(edge) == ["time_offset_s", "handle0_z", "handle2_z"]
+    assert mp.at_bound(m) == [] and mp.at_bound(edge, share=0.99) == []
     bad = dict(d, handles=d["handles"][:2])
     with pytest.raises(ClothFitError, match="2 fitted handles for a scenario with 4"):
         fitted_scenario(sc, bad)

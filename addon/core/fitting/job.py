@@ -686,9 +686,24 @@ class FitJob:
         m = np.array(x[self.npar :], dtype=np.float64)
         spread = None
         notes = [self.manip_note] if self.manip_note else []
+        prof = self.profile or {}
+
+        def falls_outward(n):  # the profile's error still falls beyond the bound, on the value's side
+            p = prof.get(n)
+            if p is None:
+                return True
+            out = p["E_plus"] if m[self.manip.names.index(n)] > 0 else p["E_minus"]
+            return None not in (out, p["E_centre"], p["rise"]) and out < p["E_centre"] - p["rise"]
+
+        # at the edge of its declared bound: a separated offset there, or one within a profile step of it whose
+        # error still falls outward (a slope the profile cannot call a valley: the capture is further off than
+        # it declares, and the search stopped against the bound)
+        at = self.manip.at_bound(m)
+        near = self.manip.at_bound(m, D.MANIP_AT_BOUND_SHARE - D.PROFILE_STEP)
+        edge = [n for n in near if (n in at and (prof.get(n) or {}).get("separated", True)) or falls_outward(n)]
         if self.profile is not None:
             spread = [self.profile[n]["uncertainty"] for n in self.manip.names]
-            flat = [n for n in self.manip.names if not self.profile[n]["separated"]]
+            flat = [n for n in self.manip.names if not self.profile[n]["separated"] and n not in edge]
             for n in flat:
                 m[self.manip.names.index(n)] = 0.0
             if flat:
@@ -697,10 +712,23 @@ class FitJob:
                     f"{', '.join(flat)}; the capture's own value kept, not reported"
                 )
         d = self.manip.describe(m, self.capture.scenario, spread)
+        d["at_bound"] = edge
+        if edge:
+
+            def shown(n):
+                v, b = m[self.manip.names.index(n)], self.manip.bounds[n][1]
+                unit = "ms" if n == "time_offset_s" else "mm"
+                return f"{n} {1e3 * v:+.2f} {unit} (bound {1e3 * b:.2f} {unit})"
+
+            notes.append(
+                f"at the edge of the capture's declared bound: {', '.join(shown(n) for n in edge)}; the "
+                f"manipulation may be further off than the capture declares: fit again with a wider --uncertain"
+            )
         if (
             self.profile is not None
             and "time_offset_s" in self.manip.names
             and not self.profile["time_offset_s"]["separated"]
+            and "time_offset_s" not in edge
         ):
             d["time_offset_s"] = None
         rel = release_instants(

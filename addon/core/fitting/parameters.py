@@ -425,6 +425,12 @@ class ManipulationParameters:
             h[:, k, a] = M[:, self.names.index(nm)]
         return Offsets(t, h)
 
+    def at_bound(self, m: ArrayLike, share: float = D.MANIP_AT_BOUND_SHARE) -> list[str]:
+        """The unknowns whose fitted value ``m`` (coordinates in ``names`` order) lies at the edge of its
+        declared bound (``|value| >= share * bound``): the capture may be further off than it declares."""
+        m = np.asarray(m, dtype=np.float64).reshape(-1)
+        return [n for n, v in zip(self.names, m) if abs(v) >= share * self.bounds[n][1]]
+
     def describe(self, m: ArrayLike, scenario: Scenario, spread: Sequence[float] | None = None) -> dict:
         """The fitted manipulation for a result: ``time_offset_s`` and ``handles`` (the capture's
         scenario format, moved), each with its uncertainty (``spread``: per coordinate, e.g. the

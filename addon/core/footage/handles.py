@@ -183,7 +183,7 @@ def measure_handles(
         b = max(D.HANDLE_BOUND_K * row["sd_mm"] / 1000.0, D.HANDLE_BOUND_FLOOR_M)
         if b > MAX_HANDLE_OFFSET_M:
             raise ClothFitError(
-                f"handle '{marks[k].name}': its position is uncertain by {b * 1000:.0f} mm (3 sigma), "
+                f"handle '{marks[k].name}': its position is uncertain by {b * 1000:.0f} mm ({D.HANDLE_BOUND_K:g} sigma), "
                 f"more than the {MAX_HANDLE_OFFSET_M * 1000:g} mm a capture may declare: mark it in "
                 f"cameras seeing it from more different directions"
             )
