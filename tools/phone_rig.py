@@ -1343,14 +1343,24 @@ def run_spread(a) -> dict:
     ):
         r, _ = _cli(["evaluate", cap, "--params", true_params], log, f"evaluate ({key})")
         scored[key] = r["silhouette_error_pct"]
-    kinds = (("e2e", "capture", False), ("uncertain", "capture", True), ("truth_given", "capture_true", False))
+    asked = a.kinds.split(",")
+    if "truth_given" not in asked or not set(asked) <= {"e2e", "uncertain", "truth_given"}:
+        raise SystemExit(f"--kinds {a.kinds!r}: a comma list of e2e, uncertain, truth_given, with truth_given")
+    kinds = [
+        k
+        for k in (("e2e", "capture", False), ("uncertain", "capture", True), ("truth_given", "capture_true", False))
+        if k[0] in asked
+    ]
     runs = []
     for fs in parse_seeds(a.fit_seeds):
         fa = argparse.Namespace(evals=a.evals, fit_seed=fs, resolution=None)
         row = {"fit_seed": fs}
         for kind, cap, unc in kinds:
             res = os.path.join(work, f"{kind}_{fs}.json")
-            fit, secs = _cli(_fit_args(os.path.join(e2e, cap), res, fa, unc), log, f"fit {kind} (seed {fs})")
+            args = _fit_args(os.path.join(e2e, cap), res, fa, unc)
+            if unc and a.uncertain:  # the uncertain block's bounds overridden (fit --uncertain)
+                args += ["--uncertain", a.uncertain]
+            fit, secs = _cli(args, log, f"fit {kind} (seed {fs})")
             cloth, _ = _cli(["export-blender-cloth", res], log, "export-blender-cloth")
             row[kind] = {
                 "E_sil_pct": fit.get("best_E_sil_mean_pct"),
@@ -1358,17 +1368,18 @@ def run_spread(a) -> dict:
                 "replay_mm": replay_error_mm(cloth["blender_cloth"], tr)["mean_mm"],
                 "seconds": secs,
             }
-        for kind in ("e2e", "uncertain"):
+        fitted = [k for k, _, _ in kinds if k != "truth_given"]
+        for kind in fitted:
             row[f"ratio_{kind}"] = row[kind]["replay_mm"] / row["truth_given"]["replay_mm"]
         runs.append(row)
         print(
-            f"seed {fs}: e2e {row['e2e']['replay_mm']:.2f} mm, uncertain {row['uncertain']['replay_mm']:.2f} mm, "
-            f"given the truth {row['truth_given']['replay_mm']:.2f} mm: ratios {row['ratio_e2e']:.2f}, "
-            f"{row['ratio_uncertain']:.2f}",
+            f"seed {fs}: "
+            + ", ".join(f"{k} {row[k]['replay_mm']:.2f} mm (ratio {row[f'ratio_{k}']:.2f})" for k in fitted)
+            + f", given the truth {row['truth_given']['replay_mm']:.2f} mm",
             flush=True,
         )
     summary = {}
-    for kind in ("e2e", "uncertain"):
+    for kind in fitted:
         ratios = [r[f"ratio_{kind}"] for r in runs]
         kept = min(runs, key=lambda r: r[kind]["E_sil_pct"])  # what the best training error of the seeds keeps
         given = min(runs, key=lambda r: r["truth_given"]["E_sil_pct"])
@@ -1383,6 +1394,7 @@ def run_spread(a) -> dict:
         "seed": seed,
         "e2e": e2e,
         "evaluations": a.evals,
+        "uncertain": a.uncertain,
         "fit_seeds": [r["fit_seed"] for r in runs],
         "clip_error_mm": clip_mm,
         "true_settings_E_sil_pct": scored,
@@ -1515,6 +1527,12 @@ def main(argv=None):
     sp.add_argument("--e2e", required=True, help="the e2e run's folder")
     sp.add_argument("--fit-seeds", default="0-4", help="the fits' seeds, e.g. 0-4 or 0,2 (default: %(default)s)")
     sp.add_argument("--evals", type=int, default=2500, help="each fit's budget (default: %(default)s)")
+    sp.add_argument(
+        "--kinds",
+        default="e2e,uncertain,truth_given",
+        help="the fits to run, truth_given among them (default: %(default)s)",
+    )
+    sp.add_argument("--uncertain", help="the uncertain fits' bounds instead of the capture's: fit --uncertain TEXT")
     sp.add_argument("--json", help="write the figures here")
     r = sub.add_parser("_render", help="(internal) the child process that renders with bpy")
     r2 = sub.add_parser("_render_e2e", help="(internal) the child process that renders the end-to-end rig")
