@@ -789,8 +789,8 @@ SOURCES = {
     "phone_rig_e2e_s10": {
         "argv": _phone_rig("e2e", "e2e_s10", 10, "0.75", 10, close=4),
         "cost": "expensive",
-        "what": "issue 18 end to end on a third rig at 810 x 1440 not seen before (seed 10), after the handles' "
-        "uncertain bound became 1.5 sigma (chosen on the seed 8 and 9 rigs)",
+        "what": "issue 18 end to end on a third rig at 810 x 1440 not seen before (seed 10; about 65 min of renders "
+        "on an idle 2-core machine)",
     },
     "phone_rig_sensitivity": {
         "argv": [
