@@ -72,6 +72,28 @@ TEXTURE_PX_PER_SQUARE = 96  # the print as Blender's texture
 # ============================================================================ the rig
 
 
+def _phone(rng, fx: float, W: int, H: int, R, t, name: str) -> Camera:
+    """A phone's camera at pose ``R, t``: focal ``fx`` [px], its principal point up to 1 % off centre and its
+    lens' radial and tangential distortion drawn from ``rng`` (in this order)."""
+    K = intrinsics(
+        fx,
+        W,
+        H,
+        cx=(W - 1) / 2 + rng.uniform(-0.01, 0.01) * W,
+        cy=(H - 1) / 2 + rng.uniform(-0.01, 0.01) * H,
+    )
+    dist = np.array(
+        [
+            rng.uniform(-0.10, 0.02),
+            rng.uniform(-0.02, 0.08),
+            rng.uniform(-1e-3, 1e-3),
+            rng.uniform(-1e-3, 1e-3),
+            0.0,
+        ]
+    )
+    return Camera(K, R, t, W, H, name=name, dist=dist)
+
+
 def phone_cameras(seed: int, scale: float, n: int = 4) -> list:
     """``n`` portrait phones round the table: azimuths spread with jitter, 0.55-0.75 m from the middle,
     28-42 degrees above the table top, aimed at the middle 15 cm up; focal lengths from a wide main camera
@@ -88,23 +110,7 @@ def phone_cameras(seed: int, scale: float, n: int = 4) -> list:
         eye = np.array([r * math.cos(el) * math.cos(az), r * math.cos(el) * math.sin(az), r * math.sin(el)])
         target = np.array([rng.uniform(-0.04, 0.04), rng.uniform(-0.04, 0.04), 0.15])
         R, t = look_at(eye, target)
-        K = intrinsics(
-            focal[i] * W,
-            W,
-            H,
-            cx=(W - 1) / 2 + rng.uniform(-0.01, 0.01) * W,
-            cy=(H - 1) / 2 + rng.uniform(-0.01, 0.01) * H,
-        )
-        dist = np.array(
-            [
-                rng.uniform(-0.10, 0.02),
-                rng.uniform(-0.02, 0.08),
-                rng.uniform(-1e-3, 1e-3),
-                rng.uniform(-1e-3, 1e-3),
-                0.0,
-            ]
-        )
-        cams.append(Camera(K, R, t, W, H, name=f"phone{i}", dist=dist))
+        cams.append(_phone(rng, focal[i] * W, W, H, R, t, f"phone{i}"))
     return cams
 
 
@@ -554,23 +560,7 @@ def front_cameras(seed: int, scale: float, n: int = 4) -> list:
         r = rng.uniform(0.55, 0.70)
         eye = np.array([r * math.cos(a), r * math.sin(a), rng.uniform(0.30, 0.45)])
         R, t = look_at(eye, [rng.uniform(-0.02, 0.02), 0.0, 0.22])
-        K = intrinsics(
-            focal[i] * W,
-            W,
-            H,
-            cx=(W - 1) / 2 + rng.uniform(-0.01, 0.01) * W,
-            cy=(H - 1) / 2 + rng.uniform(-0.01, 0.01) * H,
-        )
-        dist = np.array(
-            [
-                rng.uniform(-0.10, 0.02),
-                rng.uniform(-0.02, 0.08),
-                rng.uniform(-1e-3, 1e-3),
-                rng.uniform(-1e-3, 1e-3),
-                0.0,
-            ]
-        )
-        cams.append(Camera(K, R, t, W, H, name=f"phone{i}", dist=dist))
+        cams.append(_phone(rng, focal[i] * W, W, H, R, t, f"phone{i}"))
     return cams
 
 
