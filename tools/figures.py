@@ -840,6 +840,24 @@ SOURCES = {
         "what": "issue 18: the seed 9 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
         "(the capture's: 1.3-1.5 mm), beside the fit given the truth (needs phone_rig_e2e_s9's folder; about 15 min)",
     },
+    "phone_rig_spread_s8_box07": {
+        "argv": [
+            "{py}",
+            "tools/phone_rig.py",
+            "spread",
+            "--e2e",
+            "out/phone_rig/e2e_s8",
+            "--kinds",
+            "uncertain,truth_given",
+            "--uncertain",
+            "time_offset=0.033333,handles=0.0007",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "issue 18: the seed 8 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
+        "(the capture's: 1.7-1.8 mm), beside the fit given the truth (needs phone_rig_e2e_s8's folder; about 15 min)",
+    },
     "blender_scene_fit": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
         "output": "out/scene_fit/summary.json",
