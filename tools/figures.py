@@ -71,6 +71,15 @@ def _phone_rig(cmd, out, seed, scale, poses, close=None):
     return argv + ["--json", "{out}"]
 
 
+def _spread(rig, box=None):
+    """The command line of ``tools/phone_rig.py spread`` on a recorded phone rig's folder; ``box`` [m]: the
+    uncertain fit alone (beside the fit given the truth) with every clip's box at that size."""
+    argv = ["{py}", "tools/phone_rig.py", "spread", "--e2e", f"out/phone_rig/e2e_s{rig}"]
+    if box is not None:
+        argv += ["--kinds", "uncertain,truth_given", "--uncertain", f"time_offset=0.033333,handles={box:g}"]
+    return argv + ["--json", "{out}"]
+
+
 def _offsets_with(*search):
     """The command line of issue 20's offsets goal with the fit's ``--search`` settings."""
     return (
@@ -811,49 +820,25 @@ SOURCES = {
         "by 1 mm per axis: how far the clips alone move the cloth (needs that run's folder)",
     },
     "phone_rig_spread_s8": {
-        "argv": ["{py}", "tools/phone_rig.py", "spread", "--e2e", "out/phone_rig/e2e_s8", "--json", "{out}"],
+        "argv": _spread(8),
         "cost": "expensive",
         "what": "issue 18: the seed 8 rig's three fits over fit seeds 0-4, and the true settings scored with the "
         "clips as measured and at their true points (needs phone_rig_e2e_s8's folder; about 20 min)",
     },
     "phone_rig_spread_s9": {
-        "argv": ["{py}", "tools/phone_rig.py", "spread", "--e2e", "out/phone_rig/e2e_s9", "--json", "{out}"],
+        "argv": _spread(9),
         "cost": "expensive",
         "what": "issue 18: the seed 9 rig's three fits over fit seeds 0-4, and the true settings scored with the "
         "clips as measured and at their true points (needs phone_rig_e2e_s9's folder; about 20 min)",
     },
     "phone_rig_spread_s9_box07": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "spread",
-            "--e2e",
-            "out/phone_rig/e2e_s9",
-            "--kinds",
-            "uncertain,truth_given",
-            "--uncertain",
-            "time_offset=0.033333,handles=0.0007",
-            "--json",
-            "{out}",
-        ],
+        "argv": _spread(9, box=0.0007),
         "cost": "expensive",
         "what": "issue 18: the seed 9 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
         "(the capture's: 1.3-1.5 mm), beside the fit given the truth (needs phone_rig_e2e_s9's folder; about 15 min)",
     },
     "phone_rig_spread_s8_box07": {
-        "argv": [
-            "{py}",
-            "tools/phone_rig.py",
-            "spread",
-            "--e2e",
-            "out/phone_rig/e2e_s8",
-            "--kinds",
-            "uncertain,truth_given",
-            "--uncertain",
-            "time_offset=0.033333,handles=0.0007",
-            "--json",
-            "{out}",
-        ],
+        "argv": _spread(8, box=0.0007),
         "cost": "expensive",
         "what": "issue 18: the seed 8 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
         "(the capture's: 1.7-1.8 mm), beside the fit given the truth (needs phone_rig_e2e_s8's folder; about 15 min)",

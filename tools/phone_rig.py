@@ -1298,6 +1298,9 @@ def run_spread(a) -> dict:
     from issue20_goals import parse_seeds
 
     e2e = a.e2e
+    asked = a.kinds.split(",")
+    if "truth_given" not in asked or not set(asked) <= {"e2e", "uncertain", "truth_given"}:
+        raise SystemExit(f"--kinds {a.kinds!r}: a comma list of e2e, uncertain, truth_given, with truth_given")
     for need in ("spec.json", "capture", "capture_true", "fit.json", "scenario.json"):
         if not os.path.exists(os.path.join(e2e, need)):
             raise SystemExit(f"{e2e}: no {need}; run `tools/phone_rig.py e2e --out {e2e}` first")
@@ -1333,9 +1336,6 @@ def run_spread(a) -> dict:
     ):
         r, _ = _cli(["evaluate", cap, "--params", true_params], log, f"evaluate ({key})")
         scored[key] = r["silhouette_error_pct"]
-    asked = a.kinds.split(",")
-    if "truth_given" not in asked or not set(asked) <= {"e2e", "uncertain", "truth_given"}:
-        raise SystemExit(f"--kinds {a.kinds!r}: a comma list of e2e, uncertain, truth_given, with truth_given")
     kinds = [
         k
         for k in (("e2e", "capture", False), ("uncertain", "capture", True), ("truth_given", "capture_true", False))
@@ -1369,10 +1369,10 @@ def run_spread(a) -> dict:
             flush=True,
         )
     summary = {}
+    given = min(runs, key=lambda r: r["truth_given"]["E_sil_pct"])  # the truth-given fit the same rule keeps
     for kind in fitted:
         ratios = [r[f"ratio_{kind}"] for r in runs]
         kept = min(runs, key=lambda r: r[kind]["E_sil_pct"])  # what the best training error of the seeds keeps
-        given = min(runs, key=lambda r: r["truth_given"]["E_sil_pct"])
         summary[kind] = {
             "ratios": ratios,
             "median_ratio": float(np.median(ratios)),

@@ -691,7 +691,7 @@ class FitJob:
         def falls_outward(n):  # the profile's error still falls beyond the bound, on the value's side
             p = prof.get(n)
             if p is None:
-                return True
+                return False  # no profile: only the value itself, at the bound, tells
             out = p["E_plus"] if m[self.manip.names.index(n)] > 0 else p["E_minus"]
             return None not in (out, p["E_centre"], p["rise"]) and out < p["E_centre"] - p["rise"]
 
