@@ -142,6 +142,36 @@ def test_an_offset_at_the_edge_of_its_declared_bound_is_said(caps):
     assert "wider --uncertain" in r["manipulation_note"]
 
 
+def test_the_profile_polishes_the_offsets_first_and_resumes_exactly(caps, tmp_path):
+    # a search stopped on a small budget leaves the time offset short of its valley: the polish rounds before the
+    # profile step it (the settings held) while a step lowers the error, halving the step when none does; the
+    # result is the polished point, no profile step is then below it (unless the rounds ran out), and a checkpoint
+    # taken in the middle of the polish resumes to the same answer
+    cap, _ = caps
+    cfg = dict(
+        free=FREE, fixed=FIXED, max_evaluations=120, seed=3, train_cameras=[0, 2, 4, 6], uncertain="time_offset=0.05"
+    )
+    job = FitJob(cap, FitConfig(**cfg))
+    while job.stage != "profile":
+        job.step()
+    searched = job.best_error
+    while job.stage == "profile" and job.polish_rounds == 0:
+        job.step()
+    ck = str(tmp_path / "ck.json")
+    job.save_checkpoint(ck)  # one round done
+    r = job.run()
+    assert job.polish_rounds >= 2, "this search should stop short of the time offset's valley"
+    assert r["best_E_all"] < searched
+    p = r["manipulation_profile"]["time_offset_s"]
+    assert job.polish_rounds == D.PROFILE_POLISH_ROUNDS or min(p["E_plus"], p["E_minus"]) >= p["E_best"]
+    assert p["E_best"] == pytest.approx(r["best_E_all"])
+    assert evaluate(cap, r, cameras=[0, 2, 4, 6])["silhouette_error_pct"] == pytest.approx(r["best_E_sil_mean_pct"])
+    assert r["evaluations"] <= cfg["max_evaluations"]
+    again = FitJob.resume(ck, capture=cap, config=FitConfig(**cfg)).run()
+    assert again["best_E_all"] == r["best_E_all"] and again["time_offset_s"] == r["time_offset_s"]
+    assert again["manipulation_profile"] == r["manipulation_profile"]
+
+
 def test_one_frame_cannot_separate_a_time_offset(caps):
     cap, _ = caps
     job = FitJob(

@@ -612,6 +612,7 @@ def goal_offsets(a, run):
         "time_offset_s": full.get("time_offset_s"),
         "time_offset_uncertainty_s": full.get("time_offset_uncertainty_s"),
         "handles": full.get("handles"),
+        "not_separated": full.get("not_separated"),
         "true_settings_on_declared_setup_pct": declared["silhouette_error_pct"],
         "floor": "the true settings on the unshifted capture (the true set-up), scored the same way",
         "times": "train / test: the paper's times plus the 20 ms the release was marked early",

@@ -311,13 +311,19 @@ def _fit_report(r):
     if "time_offset_s" in r or r.get("manipulation_note"):
         t = r.get("time_offset_s")
         u = r.get("time_offset_uncertainty_s")
+        flat = set(r.get("not_separated") or [])  # kept for the replay, not measurements
         if t is not None:
-            print(f"time offset {1000 * t:+.1f} ms" + (f" (+-{1000 * u:.1f} ms)" if u else ""), file=sys.stderr)
+            tail = " (not separated)" if "time_offset_s" in flat else f" (+-{1000 * u:.1f} ms)" if u else ""
+            print(f"time offset {1000 * t:+.1f} ms{tail}", file=sys.stderr)
         for k, h in enumerate(r.get("handles") or []):
             if h.get("offset_bound_m"):
+                shown = [
+                    f"{1000 * v:+.2f}" + ("?" if f"handle{k}_{ax}" in flat else "")
+                    for v, ax in zip(h["offset_m"], "xyz")
+                ]
                 print(
-                    f"handle {k} (vertex {h['vertex']}) moved by "
-                    f"{', '.join(f'{1000 * v:+.2f}' for v in h['offset_m'])} mm",
+                    f"handle {k} (vertex {h['vertex']}) moved by {', '.join(shown)} mm"
+                    + (" (?: not separated)" if "?" in "".join(shown) else ""),
                     file=sys.stderr,
                 )
         if r.get("manipulation_note"):

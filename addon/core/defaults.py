@@ -202,6 +202,12 @@ PROFILE_STEP = 0.1  # the manipulation's uncertainty: the objective at +-10 % of
 PROFILE_RISE = 0.01  # uncertainty = the offset at which the training error rises by 1 % (a quadratic
 # through the three points) or by PROFILE_JITTER_SIGMAS of its jitter, whichever is more; flat or concave =
 # the fit cannot separate it
+PROFILE_POLISH_ROUNDS = 6  # before the profile, up to this many rounds of a pattern step on the manipulation's
+# unknowns (the settings held): each offset +-PROFILE_STEP of its bound, the improving steps taken together, the step
+# halved when none helps; a search that stopped on its budget can leave the offsets a step short, and the profile
+# then sees a lower error than the best (docs/real_captures.md). Each round 2 k + 1 evaluations for k unknowns,
+# reserved from the search's share
+PROFILE_POLISH_FINEST = 0.25  # the polish's finest step, in profile steps
 PROFILE_JITTER = 8  # the profile's centre: the mean of this many evaluations at the best point moved by
 PROFILE_JITTER_RELATIVE = 1e-7  # this much (relative; offsets: of their bound), random signs
 PROFILE_JITTER_SEED = 20  # the signs' generator (the profile is part of a seeded, resumable fit)

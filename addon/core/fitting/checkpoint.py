@@ -147,6 +147,8 @@ def stages_state(job: FitJob) -> dict[str, Any]:
         "search_stop": job.search_stop,
         "ladder": None if job.ladder is None else job.ladder.state_dict(),
         "profile": job.profile,
+        "polish_rounds": job.polish_rounds,
+        "polish_scale": job.polish_scale,
         "start_f": job.start_f,
     }
 
@@ -181,8 +183,13 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
         "profile",
         "start_f",
     }
-    if set(st) != keys:
-        raise bad(f"fields {sorted(set(st) ^ keys)}")
+    later = {"polish_rounds", "polish_scale"}  # the profile's polish came later: none in older checkpoints
+    if set(st) - later != keys:
+        raise bad(f"fields {sorted((set(st) - later) ^ keys)}")
+    if not is_int(st.get("polish_rounds", 0)) or not (
+        is_num(st.get("polish_scale", 1.0)) and 0 < st.get("polish_scale", 1.0) <= 1
+    ):
+        raise bad("polish_rounds or polish_scale")
     if st["stage"] not in ("search", "rung", "profile", "done"):
         raise bad(f"stage {st['stage']!r}")
     if not is_q(st["stage_quality"]) or not is_int(st["stage_end"]) or not is_int(st["done_evals"]):
@@ -255,6 +262,8 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
     job.history_prev = [list(e) for e in hp]
     job.search_stop = st["search_stop"]
     job.profile = prof
+    job.polish_rounds = st.get("polish_rounds", 0)
+    job.polish_scale = float(st.get("polish_scale", 1.0))
     job.start_f = None if st["start_f"] is None else float(st["start_f"])
     if ladder is not None:
         job.ladder = ladder
@@ -282,6 +291,8 @@ def reopen_search(job: FitJob) -> None:
     job.history_prev = []
     job.search_stop = None
     job.profile = None
+    job.polish_rounds = 0
+    job.polish_scale = 1.0
     job.stage = "search"
     job.stage_end = job.search_end
     if job.ladder is not None:

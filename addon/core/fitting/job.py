@@ -164,7 +164,8 @@ class FitJob:
         if self.ladder is not None:
             reserved = (D.QUALITY_RUNGS_RESERVED if not self.ladder.probe_only else 1) * self._rung_budget()
         if self.manip is not None:
-            reserved += 2 * self.manip.n + D.PROFILE_JITTER  # the profile: either side of each offset, and its centre
+            # the profile: either side of each offset, and its centre; before it, its polish rounds
+            reserved += 2 * self.manip.n + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * self.manip.n + 1)
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
@@ -176,6 +177,8 @@ class FitJob:
         self.history_prev = []
         self.search_stop = None
         self.profile = None
+        self.polish_rounds = 0  # the profile's polish rounds done (D.PROFILE_POLISH_ROUNDS)
+        self.polish_scale = 1.0  # their step, in profile steps (halved when no step helps)
         self.final = None
         self.start_x = self._start_point()
         self.start_f = None  # its training error, once evaluated (the fit never ends worse)
@@ -556,8 +559,38 @@ class FitJob:
             self.stage_quality = self.chosen_quality()
         self.stop_reason = self.search_stop or "budget"
 
+    def _polish_round(self, f0, x0, steps, lo, hi):
+        """One polish round before the profile: ``steps`` holds the best point with each offset moved either way
+        by the profile's step (kept within the bounds here). Where some of them beat the best, the improving
+        steps taken together (or the best single one, if better) become the best: returns (True, None), and
+        the profile waits for the next round. Else (False, their errors), the errors given back for the
+        profile when no step was cut at a bound (the same points), else None."""
+        k = self.manip.n
+        S = steps.copy()
+        S[:, self.npar :] = np.clip(S[:, self.npar :], lo, hi)
+        f = self.evaluate(S)
+        self.exploded += int(np.sum(~np.isfinite(f)))
+        self.done_evals += 2 * k
+        self.polish_rounds += 1
+        g = np.where(np.isfinite(f), f, np.inf)
+        if not np.min(g) < f0:
+            return False, (f if np.array_equal(S, steps) else None)
+        xc = x0.copy()
+        for i in range(k):
+            if min(g[2 * i], g[2 * i + 1]) < f0:
+                xc[self.npar + i] = S[2 * i if g[2 * i] < g[2 * i + 1] else 2 * i + 1, self.npar + i]
+        fc = float(self.evaluate(xc[None])[0])
+        self.done_evals += 1
+        j = int(np.argmin(g))
+        fb, xb = (fc, xc) if math.isfinite(fc) and fc < g[j] else (float(g[j]), S[j].copy())
+        self.best_by_quality[self.chosen_quality()] = [float(fb), np.asarray(xb, dtype=np.float64).tolist()]
+        self.history_prev.append([int(self.done_evals), float(fb)])
+        return True, None
+
     def _profile_step(self):
-        """The objective either side of the best offsets: each one's uncertainty. The centre is the mean of
+        """Polish rounds first (``_polish_round``: up to ``PROFILE_POLISH_ROUNDS``, one per call; a step of the
+        profile's size while one lowers the error, then halved down to ``PROFILE_POLISH_FINEST`` of it), then the objective either side of the best offsets: each one's
+        uncertainty. The centre is the mean of
         ``PROFILE_JITTER`` evaluations at the best point moved by a part in 10^7 (every coordinate): on
         Blender's float32 cloth that already changes the trajectory, and the best point itself is the
         luckiest of thousands of such draws, so a curvature measured from it is too steep. The uncertainty
@@ -566,6 +599,7 @@ class FitJob:
         objective's own jitter tells nothing."""
         f0, x0 = self._best()
         names = self.manip.names
+        lo = np.array([self.manip.bounds[n][0] for n in names])
         bounds = np.array([self.manip.bounds[n][1] for n in names])
         h = D.PROFILE_STEP * bounds
         k = len(names)
@@ -574,12 +608,26 @@ class FitJob:
         for i in range(k):
             X[2 * i, self.npar + i] += h[i]
             X[2 * i + 1, self.npar + i] -= h[i]
+        f_steps = None
+        if self.polish_rounds < D.PROFILE_POLISH_ROUNDS:
+            scale = self.polish_scale
+            steps = X[: 2 * k] if scale == 1.0 else x0 + scale * (X[: 2 * k] - x0)
+            moved, f_steps = self._polish_round(f0, x0, steps, lo, bounds)
+            if moved:
+                return
+            if scale > D.PROFILE_POLISH_FINEST:  # no step of this size helps: a finer one next round
+                self.polish_scale = scale / 2
+                return
+            f_steps = f_steps if scale == 1.0 else None  # the profile's own points only at the profile's step
         signs = np.random.default_rng(D.PROFILE_JITTER_SEED).choice([-1.0, 1.0], size=(J, len(x0)))
         tiny = np.concatenate([np.abs(x0[: self.npar]), bounds]) * D.PROFILE_JITTER_RELATIVE
         X[2 * k :] += signs * tiny
-        f = self.evaluate(X)
+        todo = X if f_steps is None else X[2 * k :]  # the steps' errors, when the last polish round has them
+        f = self.evaluate(todo)
         self.exploded += int(np.sum(~np.isfinite(f)))
-        self.done_evals += len(X)
+        self.done_evals += len(todo)
+        if f_steps is not None:
+            f = np.concatenate([f_steps, f])
         fj = f[2 * k :][np.isfinite(f[2 * k :])]
         centre = float(np.mean(fj)) if len(fj) else f0
         spread = float(np.std(fj, ddof=1)) if len(fj) > 1 else 0.0
@@ -700,19 +748,28 @@ class FitJob:
         # it declares, and the search stopped against the bound)
         at = self.manip.at_bound(m)
         near = self.manip.at_bound(m, D.MANIP_AT_BOUND_SHARE - D.PROFILE_STEP)
-        edge = [n for n in near if (n in at and (prof.get(n) or {}).get("separated", True)) or falls_outward(n)]
+        # exactly at its bound: only the polish puts an offset there (a step cut at the bound that lowered the error)
+        pressed = self.manip.at_bound(m, 1.0)
+        edge = [
+            n
+            for n in near
+            if (n in at and (prof.get(n) or {}).get("separated", True)) or n in pressed or falls_outward(n)
+        ]
+        flat = []
         if self.profile is not None:
             spread = [self.profile[n]["uncertainty"] for n in self.manip.names]
             flat = [n for n in self.manip.names if not self.profile[n]["separated"] and n not in edge]
-            for n in flat:
-                m[self.manip.names.index(n)] = 0.0
             if flat:
+                # the settings were fitted with these values: a replay with the capture's own (as this fit did
+                # before) scored other settings than the fit's, on the released corner often much worse
                 notes.append(
                     f"cannot be separated from the cloth's settings (the error is flat within the bound): "
-                    f"{', '.join(flat)}; the capture's own value kept, not reported"
+                    f"{', '.join(flat)}; the fitted value is kept for the replay (the settings were fitted with "
+                    f"it) but is not a measurement"
                 )
         d = self.manip.describe(m, self.capture.scenario, spread)
         d["at_bound"] = edge
+        d["not_separated"] = flat
         if edge:
 
             def shown(n):
@@ -724,13 +781,6 @@ class FitJob:
                 f"at the edge of the capture's declared bound: {', '.join(shown(n) for n in edge)}; the "
                 f"manipulation may be further off than the capture declares: fit again with a wider --uncertain"
             )
-        if (
-            self.profile is not None
-            and "time_offset_s" in self.manip.names
-            and not self.profile["time_offset_s"]["separated"]
-            and "time_offset_s" not in edge
-        ):
-            d["time_offset_s"] = None
         rel = release_instants(
             self.par.model, self.capture.scenario, d.get("time_offset_s"), d.get("time_offset_uncertainty_s")
         )
