@@ -71,12 +71,15 @@ def _phone_rig(cmd, out, seed, scale, poses, close=None):
     return argv + ["--json", "{out}"]
 
 
-def _spread(rig, box=None):
+def _spread(rig, box=None, uncertain_only=False):
     """The command line of ``tools/phone_rig.py spread`` on a recorded phone rig's folder; ``box`` [m]: the
-    uncertain fit alone (beside the fit given the truth) with every clip's box at that size."""
+    uncertain fit alone (beside the fit given the truth) with every clip's box at that size; ``uncertain_only``:
+    the uncertain fit alone (beside the fit given the truth) in the capture's own boxes."""
     argv = ["{py}", "tools/phone_rig.py", "spread", "--e2e", f"out/phone_rig/e2e_s{rig}"]
+    if box is not None or uncertain_only:
+        argv += ["--kinds", "uncertain,truth_given"]
     if box is not None:
-        argv += ["--kinds", "uncertain,truth_given", "--uncertain", f"time_offset=0.033333,handles={box:g}"]
+        argv += ["--uncertain", f"time_offset=0.033333,handles={box:g}"]
     return argv + ["--json", "{out}"]
 
 
@@ -842,6 +845,39 @@ SOURCES = {
         "cost": "expensive",
         "what": "issue 18: the seed 8 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
         "(the capture's: 1.7-1.8 mm), beside the fit given the truth (needs phone_rig_e2e_s8's folder; about 15 min)",
+    },
+    "phone_rig_spread_s10": {
+        "argv": _spread(10),
+        "cost": "expensive",
+        "what": "issue 18: the unseen seed 10 rig's three fits over fit seeds 0-4, and the true settings scored with "
+        "the clips as measured and at their true points (needs phone_rig_e2e_s10's folder; about 20 min)",
+    },
+    "phone_rig_spread_s10_box07": {
+        "argv": _spread(10, box=0.0007),
+        "cost": "expensive",
+        "what": "issue 18: the unseen seed 10 rig's uncertain fit over fit seeds 0-4 with every clip's box at the "
+        "0.7 mm chosen on the seed 8 and 9 rigs (the capture's: 1.6-1.7 mm), beside the fit given the truth (needs "
+        "phone_rig_e2e_s10's folder; about 15 min)",
+    },
+    "phone_rig_spread_s8_polish": {
+        "argv": _spread(8, uncertain_only=True),
+        "cost": "expensive",
+        "what": "issue 18: the seed 8 rig's uncertain fit over fit seeds 0-4 since the offsets' polish and the replay "
+        "at the fitted offsets (commit e0330c9), beside the fit given the truth (needs phone_rig_e2e_s8's folder; "
+        "about 12 min)",
+    },
+    "phone_rig_spread_s9_polish": {
+        "argv": _spread(9, uncertain_only=True),
+        "cost": "expensive",
+        "what": "issue 18: the seed 9 rig's uncertain fit over fit seeds 0-4 since the offsets' polish and the replay "
+        "at the fitted offsets (commit e0330c9), beside the fit given the truth (needs phone_rig_e2e_s9's folder; "
+        "about 12 min)",
+    },
+    "issue20_offsets_polish": {
+        "argv": _offsets_with(),
+        "cost": "expensive",
+        "what": "issue 20's offsets goal with the default fit since the offsets' polish and the replay at the fitted "
+        "offsets (commit e0330c9), one fit (about 2 min)",
     },
     "blender_scene_fit": {
         "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],

@@ -1312,7 +1312,7 @@ def run_spread(a) -> dict:
     board = CB.parse_board(spec["board"])
     pose0 = tuple(np.asarray(v, dtype=np.float64) for v in spec["poses"][0])
     truth_w = world_from_scene(board, pose0, tr["positions"][0])
-    work = os.path.join(e2e, "spread")
+    work = os.path.join(e2e, "spread" + (f"_{a.optimizer}" if a.optimizer else ""))  # another search: its own files
     os.makedirs(work, exist_ok=True)
     log = os.path.join(work, "commands.log")
     if os.path.exists(log):
@@ -1350,6 +1350,8 @@ def run_spread(a) -> dict:
             args = _fit_args(os.path.join(e2e, cap), res, fa, unc)
             if unc and a.uncertain:  # the uncertain block's bounds overridden (fit --uncertain)
                 args += ["--uncertain", a.uncertain]
+            if unc and a.optimizer:  # the uncertain fit's search (fit --optimizer)
+                args += ["--optimizer", a.optimizer]
             fit, secs = _cli(args, log, f"fit {kind} (seed {fs})")
             cloth, _ = _cli(["export-blender-cloth", res], log, "export-blender-cloth")
             row[kind] = {
@@ -1385,6 +1387,7 @@ def run_spread(a) -> dict:
         "e2e": e2e,
         "evaluations": a.evals,
         "uncertain": a.uncertain,
+        "optimizer": a.optimizer,
         "fit_seeds": [r["fit_seed"] for r in runs],
         "clip_error_mm": clip_mm,
         "true_settings_E_sil_pct": scored,
@@ -1523,6 +1526,7 @@ def main(argv=None):
         help="the fits to run, truth_given among them (default: %(default)s)",
     )
     sp.add_argument("--uncertain", help="the uncertain fits' bounds instead of the capture's: fit --uncertain TEXT")
+    sp.add_argument("--optimizer", help="the uncertain fits' search: fit --optimizer NAME (default: the fit's)")
     sp.add_argument("--json", help="write the figures here")
     r = sub.add_parser("_render", help="(internal) the child process that renders with bpy")
     r2 = sub.add_parser("_render_e2e", help="(internal) the child process that renders the end-to-end rig")
