@@ -71,15 +71,18 @@ def _phone_rig(cmd, out, seed, scale, poses, close=None):
     return argv + ["--json", "{out}"]
 
 
-def _spread(rig, box=None, uncertain_only=False):
+def _spread(rig, box=None, uncertain_only=False, optimizer=None):
     """The command line of ``tools/phone_rig.py spread`` on a recorded phone rig's folder; ``box`` [m]: the
     uncertain fit alone (beside the fit given the truth) with every clip's box at that size; ``uncertain_only``:
-    the uncertain fit alone (beside the fit given the truth) in the capture's own boxes."""
+    the uncertain fit alone (beside the fit given the truth) in the capture's own boxes; ``optimizer``: the
+    uncertain fit's search (alone, beside the fit given the truth)."""
     argv = ["{py}", "tools/phone_rig.py", "spread", "--e2e", f"out/phone_rig/e2e_s{rig}"]
-    if box is not None or uncertain_only:
+    if box is not None or uncertain_only or optimizer:
         argv += ["--kinds", "uncertain,truth_given"]
     if box is not None:
         argv += ["--uncertain", f"time_offset=0.033333,handles={box:g}"]
+    if optimizer:
+        argv += ["--optimizer", optimizer]
     return argv + ["--json", "{out}"]
 
 
@@ -872,6 +875,27 @@ SOURCES = {
         "what": "issue 18: the seed 9 rig's uncertain fit over fit seeds 0-4 since the offsets' polish and the replay "
         "at the fitted offsets (commit e0330c9), beside the fit given the truth (needs phone_rig_e2e_s9's folder; "
         "about 12 min)",
+    },
+    "phone_rig_spread_s8_staged": {
+        "argv": _spread(8, optimizer="cma-staged"),
+        "cost": "expensive",
+        "what": "issue 18: the seed 8 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
+        "the time offset first, the clips held where clicked; then everything), beside the fit given the truth "
+        "(needs phone_rig_e2e_s8's folder; about 12 min)",
+    },
+    "phone_rig_spread_s9_staged": {
+        "argv": _spread(9, optimizer="cma-staged"),
+        "cost": "expensive",
+        "what": "issue 18: the seed 9 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
+        "the time offset first, the clips held where clicked; then everything), beside the fit given the truth "
+        "(needs phone_rig_e2e_s9's folder; about 12 min)",
+    },
+    "phone_rig_spread_s10_staged": {
+        "argv": _spread(10, optimizer="cma-staged"),
+        "cost": "expensive",
+        "what": "issue 18: the seed 10 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
+        "the time offset first, the clips held where clicked; then everything), beside the fit given the truth "
+        "(needs phone_rig_e2e_s10's folder; about 12 min)",
     },
     "issue20_offsets_polish": {
         "argv": _offsets_with(),
