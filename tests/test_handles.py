@@ -16,6 +16,7 @@ import pytest
 sys.path.insert(0, os.path.dirname(__file__))
 import handles_support as S  # noqa: E402
 from clothfit.cli import main as cli  # noqa: E402
+from clothfit.core import defaults as D  # noqa: E402
 from clothfit.core.errors import ClothFitError  # noqa: E402
 from clothfit.core.footage import handles as HM  # noqa: E402
 from clothfit.core.observation.camera import Camera, intrinsics, look_at, save_cameras  # noqa: E402
@@ -189,11 +190,13 @@ def test_handles_end_to_end(tmp_path, capsys):
     assert abs(sc.grid.R[:, 2] @ [0, 0, 1]) < 0.01  # normal horizontal
     assert np.linalg.norm(sc.grid.rest[0] - tr["left"][0]) < 2e-3
     assert rep["cloth"]["placement_rms_mm"] < 1.5
-    # the uncertain block: per handle >= 1 mm and covering the actual error; time within a frame
+    # the uncertain block: the fit's box per handle (D.HANDLE_FIT_BOX_M, whatever the triangulation leaves), time
+    # within a frame; the triangulation's own 3 sigma, reported beside it, covers the actual error
     unc = Uncertainty.parse(doc["uncertain"], 3)
-    assert all(1e-3 <= b <= 5e-3 for b in unc.handles)
+    assert list(unc.handles) == [D.HANDLE_FIT_BOX_M] * 3
     assert 0.5 / FPS - 1e-6 <= unc.time_offset <= 1.0 / FPS + 1e-6
-    assert np.all(np.abs(right.positions[0] - tr["right"][0]) <= unc.handles[1])
+    assert np.all(np.abs(right.positions[0] - tr["right"][0]) <= by["right"]["uncertain_mm"] / 1000)
+    assert all(h["fit_box_mm"] == pytest.approx(1000 * D.HANDLE_FIT_BOX_M) for h in rep["handles"])
     for h in rep["handles"]:
         assert h["residual_rms_px"] < 1.0 and h["residual_rms_mm"] < 1.0 and h["track_frames"]
     assert by["left"]["drift_mm"] < 0.5

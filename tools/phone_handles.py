@@ -275,7 +275,8 @@ def measure(footage, clip_size=0.02):
             "residual_rms_px": r["residual_rms_px"],
             "residual_rms_mm": r["residual_rms_mm"],
             "sd_mm": r["sd_mm"],
-            "bound_mm": r["uncertain_mm"],
+            "bound_mm": r["uncertain_mm"],  # the triangulation's 3 sigma (the fit's box: fit_box_mm)
+            "fit_box_mm": r.get("fit_box_mm"),
             "vertex": r["vertex"],
             "true_vertex": tru["vertices"][r["name"]],
             "track_frames": min(r["track_frames"].values()),

@@ -180,15 +180,17 @@ def measure_handles(
     scen = Scenario(grid, handles, times, opts.settle_time)
     bounds = []
     for k, row in enumerate(rows):
-        b = max(D.HANDLE_BOUND_K * row["sd_mm"] / 1000.0, D.HANDLE_BOUND_FLOOR_M)
-        if b > MAX_HANDLE_OFFSET_M:
+        u = D.HANDLE_BOUND_K * row["sd_mm"] / 1000.0
+        if u > MAX_HANDLE_OFFSET_M:
             raise ClothFitError(
-                f"handle '{marks[k].name}': its position is uncertain by {b * 1000:.0f} mm ({D.HANDLE_BOUND_K:g} sigma), "
+                f"handle '{marks[k].name}': its position is uncertain by {u * 1000:.0f} mm ({D.HANDLE_BOUND_K:g} sigma), "
                 f"more than the {MAX_HANDLE_OFFSET_M * 1000:g} mm a capture may declare: mark it in "
                 f"cameras seeing it from more different directions"
             )
+        b = D.HANDLE_FIT_BOX_M  # the fit's box (defaults: wider ones overfit the clips)
         bounds.append(round(b, 6))
-        row["uncertain_mm"] = b * 1000.0
+        row["uncertain_mm"] = u * 1000.0  # what the triangulation leaves (3 sigma)
+        row["fit_box_mm"] = b * 1000.0
     rels = [r for r in rel_info if r is not None]
     period = float(np.median(np.diff(times))) if F > 1 else 0.0
     t_off = period if rels else 0.0  # the release frame is exact: the instant is within its frame interval
@@ -216,9 +218,11 @@ def measure_handles(
         "handles": rows,
         "uncertain": unc.to_dict(),
         "uncertain_rule": (
-            f"handles: {D.HANDLE_BOUND_K:g} x the largest standard deviation of the triangulated "
-            f"pin (pixel noise = the residual's estimate, at least {opts.mark_sigma:g} px), at "
-            f"least {D.HANDLE_BOUND_FLOOR_M * 1000:g} mm; time_offset: one frame period when a "
+            f"handles: {D.HANDLE_FIT_BOX_M * 1000:g} mm each (the fit's box: wider ones let it bend the "
+            f"clips to what the cloth model cannot draw; docs/phone_rig.md), whatever the triangulation "
+            f"leaves ({D.HANDLE_BOUND_K:g} x the largest standard deviation of the triangulated pin, pixel "
+            f"noise = the residual's estimate, at least {opts.mark_sigma:g} px: uncertain_mm); an offset "
+            f"against its box is reported by the fit; time_offset: one frame period when a "
             f"handle is released (its release time lies in the release frame's interval), else "
             f"0 (the handles are measured on the frames' own clock)"
         ),
@@ -519,7 +523,7 @@ def format_report(rep: dict) -> str:
         f"cloth {c['width']:g} x {c['height']:g} m as {c['nx']} x {c['ny']} vertices "
         f"({c['spacing_mm']:.1f} x {c['spacing_y_mm']:.1f} mm cells); placement: {c['placement']}; "
         f"its residual {c['placement_rms_mm']:.2f} mm RMS",
-        f"{'handle':<14} {'vertex':>11} {'res px':>7} {'res mm':>7} {'sd mm':>6} {'bound mm':>8} {'track':>6} "
+        f"{'handle':<14} {'vertex':>11} {'res px':>7} {'res mm':>7} {'sd mm':>6} {'3sd mm':>7} {'box mm':>6} {'track':>6} "
         f"{'release':>16}",
     ]
     for h in rep["handles"]:
@@ -530,7 +534,7 @@ def format_report(rep: dict) -> str:
         )
         lines.append(
             f"{h['name'][:14]:<14} {'r' + str(h['row']) + ' c' + str(h['column']):>11} {h['residual_rms_px']:7.2f} "
-            f"{h['residual_rms_mm']:7.2f} {h['sd_mm']:6.2f} {h['uncertain_mm']:8.2f} "
+            f"{h['residual_rms_mm']:7.2f} {h['sd_mm']:6.2f} {h['uncertain_mm']:7.2f} {h['fit_box_mm']:6.2f} "
             f"{h['tracked_3d_frames']:>6} {rel:>16}"
         )
     lines.append(f"uncertain: {rep['uncertain']}")
