@@ -807,6 +807,12 @@ SOURCES = {
         "what": "issue 18 end to end on a third rig at 810 x 1440 not seen before (seed 10; about 65 min of renders "
         "on an idle 2-core machine)",
     },
+    "phone_rig_e2e_s11": {
+        "argv": _phone_rig("e2e", "e2e_s11", 11, "0.75", 10, close=4),
+        "cost": "expensive",
+        "what": "issue 18 end to end on a fourth rig at 810 x 1440, not seen before, the first with the fit's 0.7 mm clip "
+        "box from the start (seed 11; about 65 min of renders on an idle 2-core machine)",
+    },
     "phone_rig_sensitivity": {
         "argv": [
             "{py}",
