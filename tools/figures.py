@@ -903,6 +903,12 @@ SOURCES = {
         "the time offset first, the clips held where clicked; then everything), beside the fit given the truth "
         "(needs phone_rig_e2e_s10's folder; about 12 min)",
     },
+    "phone_rig_spread_s11": {
+        "argv": _spread(11, uncertain_only=True),
+        "cost": "expensive",
+        "what": "issue 18: the unseen seed 11 rig's uncertain fit (in the capture's 0.7 mm clip boxes, the default) over "
+        "fit seeds 0-4, beside the fit given the truth (needs phone_rig_e2e_s11's folder; about 8 min)",
+    },
     "issue20_offsets_polish": {
         "argv": _offsets_with(),
         "cost": "expensive",
