@@ -317,13 +317,11 @@ def _fit_report(r):
             print(f"time offset {1000 * t:+.1f} ms{tail}", file=sys.stderr)
         for k, h in enumerate(r.get("handles") or []):
             if h.get("offset_bound_m"):
-                shown = [
-                    f"{1000 * v:+.2f}" + ("?" if f"handle{k}_{ax}" in flat else "")
-                    for v, ax in zip(h["offset_m"], "xyz")
-                ]
+                loose = [f"handle{k}_{ax}" in flat for ax in "xyz"]
+                shown = [f"{1000 * v:+.2f}" + ("?" if q else "") for v, q in zip(h["offset_m"], loose)]
                 print(
                     f"handle {k} (vertex {h['vertex']}) moved by {', '.join(shown)} mm"
-                    + (" (?: not separated)" if "?" in "".join(shown) else ""),
+                    + (" (?: not separated)" if any(loose) else ""),
                     file=sys.stderr,
                 )
         if r.get("manipulation_note"):

@@ -137,11 +137,11 @@ HANDLE_BOUND_K = 3.0  # a handle is uncertain by 3 sigma of its triangulated pos
 HANDLE_FIT_BOX_M = 0.0007  # ... but the fit searches each clip's offset within 0.7 mm of where it was triangulated.
 # Wider boxes (3 sigma, at least 1 mm: 1.3-1.8 mm on the 810 x 1440 phone rigs) let the 16-unknown fit bend the clips
 # to silhouettes the model cannot draw (the clips' own pixels): it ends below the truth's training error and replays
-# 2.5-3.4x the truth-given fit (medians over 5 seeds on 3 rigs); in 0.7 mm boxes 1.74-1.85x, 14 seeds of 15 within 2,
-# the size chosen on two rigs and then confirmed on a third not seen before (docs/phone_rig.md, "The clips' box").
-# A clip further off ends against its box, which the fit reports (at_bound): fit again with a wider --uncertain
-# Tried and not kept: 1.5 sigma and 0.5 mm (docs/phone_rig.md, "Where the error comes from": on the seed 9 rig
-# the fits in those boxes were no better than in the 3-sigma ones; the clip-offset search is a draw either way)
+# 2.5-3.4x the truth-given fit (medians over 5 seeds on 3 rigs); in 0.7 mm boxes 1.71-1.82x, 18 seeds of 20 within 2
+# on 4 rigs, the size chosen on two of them and then confirmed on two rendered after it (docs/phone_rig.md, "The
+# clips' box"). A clip further off ends against its box, which the fit reports (at_bound): fit again with a wider
+# --uncertain. Tried and not kept: a box per clip of 1.5 sigma and at least 0.5 mm (0.66-0.76 mm on the seed 9 rig:
+# 2.58-3.97x there; boxes hundredths of a millimetre apart send this search to different basins)
 MANIP_AT_BOUND_SHARE = 0.95  # a fitted time or handle offset at >= 95 % of its declared bound is reported at its edge,
 # and so is one within a profile step (PROFILE_STEP) of that whose error still falls outward
 HANDLE_MAX_PIN_OFFSET_M = 0.02  # a clip further than this from its vertex of the placed cloth: a wrong cloth size, 'at'

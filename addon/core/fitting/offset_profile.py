@@ -54,8 +54,8 @@ def polish_round(
 
 def profile_step(job: FitJob) -> None:
     """Polish rounds first (``polish_round``: up to ``PROFILE_POLISH_ROUNDS``, one per call; a step of the
-    profile's size while one lowers the error, then halved down to ``PROFILE_POLISH_FINEST`` of it), then the objective either side of the best offsets: each one's
-    uncertainty. The centre is the mean of
+    profile's size while one lowers the error, then halved down to ``PROFILE_POLISH_FINEST`` of it), then the
+    objective either side of the best offsets: each one's uncertainty. The centre is the mean of
     ``PROFILE_JITTER`` evaluations at the best point moved by a part in 10^7 (every coordinate): on
     Blender's float32 cloth that already changes the trajectory, and the best point itself is the
     luckiest of thousands of such draws, so a curvature measured from it is too steep. The uncertainty
