@@ -223,6 +223,25 @@ def test_a_declared_quality_is_kept(caps):
     assert job.ladder is None and job.par.model.quality == 8  # the capture's, under --model blender
 
 
+def test_a_capture_that_names_no_quality_leaves_the_fit_to_choose_it(caps, tmp_path):
+    """A capture whose model names its frame rate but no quality (as a real capture's does) is not read as
+    declaring Blender's default quality: the fit's ladder runs; one that names it keeps it."""
+    import shutil
+
+    _, cap = caps
+    root = tmp_path / "no_quality"
+    shutil.copytree(cap.root, root)
+    d = json.loads((root / "capture.json").read_text())
+    assert d["model"]["quality"] == 8
+    del d["model"]["quality"]
+    (root / "capture.json").write_text(json.dumps(d))
+    real = load_capture(str(root))
+    assert real.model == {"name": "blender", "fps": 24.0, "bending_model": d["model"]["bending_model"]}
+    job = FitJob(real, FitConfig(free=FREE, fixed=FIXED, max_evaluations=20))
+    assert job.ladder is not None and job.ladder.start == 5  # Blender's default quality, then the rungs
+    assert FitJob(cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=20)).ladder is None
+
+
 def test_a_fit_never_answers_worse_than_the_settings_it_was_given(caps, tmp_path):
     """A warm start (or a scene's own Cloth settings with --backend blender) is evaluated first and
     kept: a short search that finds nothing better answers with it."""

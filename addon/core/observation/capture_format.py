@@ -115,15 +115,21 @@ def _field_regex(component: str, camera: str | None = None) -> re.Pattern:
 
 
 def _check_model(model, where: str):
-    """The capture's optional ``model`` (the model a fit uses unless told otherwise), as a dict."""
+    """The capture's optional ``model`` (the model a fit uses unless told otherwise), as a dict of what it
+    declares, checked and in canonical form: a key it leaves out stays out, so a capture that names no
+    quality leaves the fit to choose one (its ladder) rather than reading the default quality as declared."""
     if model is None:
         return None
     from ..physics.models import get_model
 
     try:
-        return get_model(model).to_dict()
+        full = get_model(model).to_dict()
     except ClothFitError as e:
         raise ClothFitError(f"{where}: 'model': {e}") from None
+    if not isinstance(model, (dict, str)):
+        return full  # a model object declares all of itself
+    declared = {"name"} | (set(model) if isinstance(model, dict) else set())
+    return {k: v for k, v in full.items() if k in declared}
 
 
 def check_shapes(shapes: ArrayLike, n_frames: int, n_vertices: int, where: str) -> np.ndarray:
