@@ -366,6 +366,13 @@ SOURCES = {
         "what": "issue 20's goals measured through the CLI on fresh captures (exact model, offsets, continuum, "
         "collider, time); each goal also alone: tools/issue20_goals.py GOAL --json FILE",
     },
+    "issue20_time": {
+        "argv": ["{py}", "tools/issue20_goals.py", "time", "--diagnose", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 20's time goal as the issue asks it (a 21 x 21 quality-15 cloth at 480 x 640 whose capture "
+        "names no quality, release and pins declared with error and uncertain), then the same fit told the quality, "
+        "and the truth's capture with only its quality left out (about 8 min)",
+    },
     "issue20_search": {
         "argv": ["{py}", "tools/issue20_goals.py", "search", "--json", "{out}"],
         "cost": "expensive",
