@@ -373,6 +373,14 @@ SOURCES = {
         "names no quality, release and pins declared with error and uncertain), then the same fit told the quality, "
         "and the truth's capture with only its quality left out (about 8 min)",
     },
+    "issue20_time_quality": {
+        "argv": ["{py}", "tools/issue20_goals.py", "time_quality", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 1e-9,
+        "atol": 1e-12,
+        "what": "issue 20's time capture: its true settings simulated at each quality of the fit's ladder and at "
+        "the truth's own 15 (training E_sil on the true capture)",
+    },
     "issue20_search": {
         "argv": ["{py}", "tools/issue20_goals.py", "search", "--json", "{out}"],
         "cost": "expensive",

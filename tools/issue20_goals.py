@@ -1013,6 +1013,25 @@ def goal_time(a, run):
     return rows, {}
 
 
+def _truth_by_quality(a, run) -> dict:
+    """The time capture's true settings simulated at each quality of the fit's ladder and the truth's own, on
+    the true capture's training cameras and times: training E_sil (%) by quality."""
+    from clothfit.core import defaults as D
+    from clothfit.core.jsonio import read_json
+    from clothfit.core.safeio import atomic_json
+
+    true_cap = _p(a, "time21_true")
+    meta = read_json(os.path.join(true_cap, "capture.json"), "capture")["meta"]
+    out = {}
+    for q in sorted(set(D.QUALITY_LADDER) | {TIME["quality"]}):
+        path = _p(a, "fits", f"time21_truth_q{q}.json")
+        model = dict(meta["true_model"], quality=q)
+        atomic_json(path, {"model": model, "blender_cloth": dict(meta["true_blender_cloth"], quality=q)})
+        ev, _ = _heldout(run, true_cap, path, cameras=f"n:{TRAIN_CAMERAS}", times="train")
+        out[str(q)] = ev["silhouette_error_pct"]
+    return out
+
+
 RUNNERS = {
     "exact": goal_exact,
     "offsets": goal_offsets,
@@ -1066,6 +1085,14 @@ def main(argv=None):
     se.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
     se.add_argument("--json", default="out/issue20/goals_search.json", help="rows merged into this JSON")
     se.add_argument("--remake", action="store_true", help="make the goals' captures again")
+    tq = sub.add_parser(
+        "time_quality",
+        help="the time goal's true settings simulated at each quality of the fit's ladder and at the truth's own "
+        "(training E_sil %% on the true capture), as JSON",
+    )
+    tq.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
+    tq.add_argument("--json", required=True, help="write the figures here")
+    tq.add_argument("--remake", action="store_true", help="make the time goal's captures again")
     t = sub.add_parser("table", help="print a goals JSON as the Markdown table")
     t.add_argument("json")
     c = sub.add_parser("_collider", help=argparse.SUPPRESS)
@@ -1079,6 +1106,15 @@ def main(argv=None):
         return 0
     if a.cmd == "_collider":
         _collider_child(a)
+        return 0
+    if a.cmd == "time_quality":
+        from clothfit.core.safeio import atomic_json
+
+        os.makedirs(os.path.join(a.out, "fits"), exist_ok=True)
+        _time_captures(a)
+        by_q = _truth_by_quality(a, Runner(os.path.join(a.out, "goals.log")))
+        atomic_json(a.json, {"truth_quality": TIME["quality"], "train_E_sil_pct_by_quality": by_q})
+        print(json.dumps(by_q))
         return 0
     os.makedirs(os.path.join(a.out, "fits"), exist_ok=True)
     if a.cmd == "search":
