@@ -24,12 +24,20 @@ TIMES = [0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6]
 SHIFT = 0.02  # the true manipulation happens 20 ms later than the capture says
 
 
-def test_ladder_climbs_while_clearly_better_then_tries_one_below_and_chooses_the_lowest_close_one():
+def test_ladder_climbs_while_its_top_rung_is_the_choice_then_tries_one_below_and_chooses_the_lowest_close_one():
     lad = Ladder(5)
     assert lad.next() is None  # nothing tried at the start yet
     lad.record(5, 10.0)
     assert lad.next() == 8
-    lad.record(8, 7.0)  # clearly better: climb
+    lad.record(8, 9.2)  # 8 % better: 8 would be chosen, so the rung above it is tried
+    assert lad.chosen() == 8 and lad.next() == 12
+    lad = Ladder(5)
+    lad.record(5, 10.0)
+    lad.record(8, 9.7)  # within the 5 % tolerance: 5 stays the choice, no climb
+    assert lad.chosen() == 5 and lad.next() == 3
+    lad = Ladder(5)
+    lad.record(5, 10.0)
+    lad.record(8, 7.0)  # the choice: climb
     assert lad.next() == 12
     lad.record(12, 6.9)  # not clearly better than 8: stop climbing, one below the start
     assert lad.next() == 3

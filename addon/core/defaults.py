@@ -186,7 +186,9 @@ QUALITY_TOLERANCE = 0.05  # the lowest rung whose training error is within 5 % o
 QUALITY_RUNG_FRACTION = 0.07  # each rung: a warm-started CMA-ES run of 7 % of the budget (175 of 2500 evaluations:
 # 17 generations of 10, enough to re-settle a converged fit at a neighbouring quality)
 QUALITY_RUNGS_RESERVED = 4  # the budget kept for rungs (4 x 7 % = 28 %): one down, up to three up (5 -> 8 -> 12 -> 18)
-QUALITY_CLEARLY_BETTER = 0.10  # climbing continues while a rung fits > 10 % better than every lower one
+QUALITY_CLEARLY_BETTER = (
+    0.10  # a probe (or --backend blender's rung above the scene's quality) fits clearly better: > 10 %
+)
 SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
 STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the strong settings alone (1200 of 2500)
 STAGED_FIRST_RESTART_STEP = 0.0  # cma-staged: a first-stage run whose every step is below this (unit cube) has

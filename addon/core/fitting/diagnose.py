@@ -65,7 +65,14 @@ def _probes(job, x, f0):
     if lad is not None and lad.tried and not lad.probe_only:
         top = max(lad.tried)
         if job.chosen_quality() == top and lad.next() is None and top < max(lad.rungs):
-            out.append(("quality", f"the error still fell at the highest quality tried ({top})", 0.0))
+            up = lad._above(top)
+            out.append(
+                (
+                    "quality",
+                    f"the error still fell at the highest quality tried ({top}): refit with --quality {up}",
+                    0.0,
+                )
+            )
     if lad is None and job.evaluator is None and getattr(job.par.model, "name", "") == "blender":
         q = job.par.model.quality
         f = float(job.evaluate(x[None], objective=job.objective_at(min(80, 2 * q)))[0])

@@ -4,9 +4,12 @@ Blender's cloth takes ``quality`` solver steps per frame; too few, and a soft cl
 stiffer one; more cost time in proportion. Nobody knows the right value for a real cloth, so where
 the user did not fix it, the fit's main search runs at a start quality and then *rungs*: short
 CMA-ES runs at neighbouring qualities of ``QUALITY_LADDER``, each warm-started from the best so far.
-One rung below the start, then upwards while a rung fits clearly (``QUALITY_CLEARLY_BETTER``) better
-than every lower one. The choice is the lowest quality whose training error is within
-``QUALITY_TOLERANCE`` of the best tried: what the images can tell apart, at the least cost.
+One rung above the start, then upwards while the highest rung tried is the one the choice would take
+(it fits more than ``QUALITY_TOLERANCE`` better than every lower one), then one rung below the start.
+The choice is the lowest quality whose training error is within ``QUALITY_TOLERANCE`` of the best
+tried: what the images can tell apart, at the least cost. (Until 2026-11-26 the climb needed a rung
+``QUALITY_CLEARLY_BETTER``, 10 %, better: a rung 5 to 10 % better was chosen and the one above it never
+tried, while the fit's diagnosis blamed the quality.)
 
 ``Ladder`` is plain decisions on numbers (which quality next, which is chosen), kept apart from the
 job that runs the rungs, so it is tested on its own and its state is plain JSON in checkpoints.
@@ -66,7 +69,7 @@ class Ladder:
         if len(self.tried) == 1 and up is not None:  # first rung: one above the start
             return up
         lower = [e for q, e in self.tried.items() if q < top]
-        climbing = bool(lower) and self.tried[top] < (1.0 - self.clearly) * min(lower)
+        climbing = bool(lower) and self.chosen() == top  # the top rung is the choice: the one above may be better
         if climbing and up is not None:
             return up
         down = self._below(min(self.tried))
