@@ -381,6 +381,26 @@ SOURCES = {
         "what": "issue 20's time capture: its true settings simulated at each quality of the fit's ladder and at "
         "the truth's own 15 (training E_sil on the true capture)",
     },
+    "issue20_offsets_seeds": {
+        "argv": ["{py}", "tools/issue20_goals.py", "offsets", "--seeds", "0-2", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 20's offsets goal with the default fit over seeds 0-2 (one fit each, about 4 min)",
+    },
+    "issue20_offsets_e4000": {
+        "argv": [
+            "{py}",
+            "tools/issue20_goals.py",
+            "offsets",
+            "--seeds",
+            "0-2",
+            "--max-evaluations",
+            "4000",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "issue 20's offsets goal with 4000 evaluations instead of the default 2500, seeds 0-2 (about 6 min)",
+    },
     "issue20_search": {
         "argv": ["{py}", "tools/issue20_goals.py", "search", "--json", "{out}"],
         "cost": "expensive",

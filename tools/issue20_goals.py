@@ -500,6 +500,9 @@ def _search_args(a, seed):
     for item in getattr(a, "search", None) or []:  # an optimiser setting (fit --search NAME=VALUE)
         args += ["--search", item]
         tag += "_" + item.replace("=", "").replace(".", "p")
+    if getattr(a, "max_evaluations", None):
+        args += ["--max-evaluations", str(a.max_evaluations)]
+        tag += f"_e{a.max_evaluations}"
     if seed:
         args += ["--seed", str(seed)]
         tag += f"_s{seed}"
@@ -601,8 +604,12 @@ def goal_offsets(a, run):
     shift = read_json(os.path.join(cap, "capture.json"), "capture")["meta"]["issue20_shift"]
     feature = has_uncertain_option()
     seeds = parse_seeds(a.seeds)
-    if len(seeds) > 1:
-        raise SystemExit("offsets: one seed at a time (--seeds N)")
+    if len(seeds) > 1:  # a fit per seed, each seed's rows named by it
+        rows = []
+        for sd in seeds:
+            one, _ = goal_offsets(argparse.Namespace(**dict(vars(a), seeds=str(sd), remake=False)), run)
+            rows += [dict(r, capture=f"{r['capture']} [seed {sd}]") for r in one]
+        return rows, {}
     extra, tag = _search_args(a, seeds[0])
     res = _p(a, "fits", f"offsets{tag}.json")
     from clothfit.core import defaults as D
@@ -1068,6 +1075,8 @@ def main(argv=None):
                 help="the fit's --seed; exact: a list such as 0-4 gives a row per seed and the count above "
                 "1.2x (default: %(default)s)",
             )
+        if g == "offsets":
+            s.add_argument("--max-evaluations", type=int, help="the fit's --max-evaluations (default: the fit's own)")
         if g in ("continuum", "all"):
             s.add_argument("--materials", default=None, help="continuum: comma list (default: cotton,silk)")
         if g == "time":
@@ -1129,8 +1138,15 @@ def main(argv=None):
         at = commits()  # the code the goal runs (taken before it runs)
         rows, extra = RUNNERS[g](a, run)
         label = "before" if before else "after"
-        if getattr(a, "optimizer", None) or getattr(a, "search", None) or parse_seeds(getattr(a, "seeds", "0")) != [0]:
-            label += f" ({', '.join(x for x in (getattr(a, 'optimizer', None), *(getattr(a, 'search', None) or []), 'seeds ' + a.seeds) if x)})"
+        me = getattr(a, "max_evaluations", None)
+        if (
+            getattr(a, "optimizer", None)
+            or getattr(a, "search", None)
+            or me
+            or parse_seeds(getattr(a, "seeds", "0")) != [0]
+        ):
+            said = (getattr(a, "optimizer", None), *(getattr(a, "search", None) or []), me and f"{me} evaluations")
+            label += f" ({', '.join(x for x in (*said, 'seeds ' + a.seeds) if x)})"
         merge_rows(a.json, g, rows, dict(at, **extra), label)
     with open(a.json) as f:
         print(format_table(json.load(f)))
