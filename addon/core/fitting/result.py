@@ -14,7 +14,7 @@ Keys (see README's fit result): ``format``/``version``; what was fitted (``captu
 ``stages``, ``history``...); the answer (paper: ``params``, ``identifiable``; Blender:
 ``blender_cloth``, ``blender_scene``); the errors (``best_E_sil_mean_pct``, ``floor``...); the
 fitted manipulation (``time_offset_s``, ``handles``, ``release_instants``: each released handle's
-release on the capture's clock, ``manipulation_profile``, ``manipulation_note``).
+release on the capture's clock, ``manipulation_profile``, ``manipulation_note``, ``uncertainty_caveat``).
 """
 
 from __future__ import annotations
@@ -203,6 +203,26 @@ class FitResult(dict):
         return "\n".join(lines)
 
 
+def uncertainty_caveat(res: dict) -> str | None:
+    """When a fit with estimated offsets ends far above its floor: a line saying their uncertainties are
+    the curvature of the error at the fit's point, which in a wrong basin understates the error (issue 20's
+    offsets capture: a time offset stated +-4.6 ms, 6.4 ms off); else None."""
+    fl = res.get("floor") or {}
+    stated = res.get("time_offset_uncertainty_s") is not None or any(
+        u is not None
+        for h in (res.get("handles") or [])
+        if isinstance(h, dict)
+        for u in (h.get("offset_uncertainty_m") or [])
+    )
+    ratio = fl.get("heldout_ratio") if fl.get("heldout_ratio") is not None else fl.get("train_ratio")
+    if not (stated and fl.get("far_above") and ratio is not None):
+        return None
+    return (
+        f"the offsets' uncertainties are the error's curvature at the fitted point, and the fit ends {ratio:.1f}x "
+        f"above its floor: the true offsets may lie further off than they say"
+    )
+
+
 def job_result(job: FitJob, paper: bool) -> FitResult:
     """The result of ``job`` (a ``fitting.job.FitJob``) so far: what a fit writes. ``paper``: a fit of
     the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``)."""
@@ -259,6 +279,10 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
     res.update(job.manipulation())
     if job.final is not None:
         res["floor"] = job.final
+        caveat = uncertainty_caveat(res)
+        if caveat:
+            res["uncertainty_caveat"] = caveat
+            res["manipulation_note"] = "; ".join(x for x in (res.get("manipulation_note"), caveat) if x)
     if job.evaluator is not None:
         res["raster_backend"] = res["backend"]
         res.update(job.evaluator.describe())
