@@ -35,19 +35,39 @@ def test_ladder_climbs_while_its_top_rung_is_the_choice_then_tries_one_below_and
     lad.record(5, 10.0)
     lad.record(8, 9.7)  # within the 5 % tolerance: 5 stays the choice, no climb
     assert lad.chosen() == 5 and lad.next() == 3
+    lad.record(3, 20.0)
+    assert lad.next() is None and lad.chosen() == 5
     lad = Ladder(5)
     lad.record(5, 10.0)
     lad.record(8, 7.0)  # the choice: climb
     assert lad.next() == 12
-    lad.record(12, 6.9)  # not clearly better than 8: stop climbing, one below the start
-    assert lad.next() == 3
-    lad.record(3, 20.0)
+    lad.record(12, 6.9)  # within 5 % of 8: the climb stops at 8, above the start: refine between 8 and 12
+    assert lad.next() == 10  # their geometric mean (no rung below the start: the climb left it behind)
+    lad.record(10, 7.1)
     assert lad.next() is None
     assert lad.chosen() == 8  # 8 within 5 % of the best (12)
     back = Ladder.from_state(json.loads(json.dumps(lad.state_dict())))
-    assert back.tried == lad.tried and back.chosen() == 8
+    assert back.tried == lad.tried and back.chosen() == 8 and back.allows(10) and not back.allows(30)
     d = lad.describe(10)
-    assert [t["quality"] for t in d["tried"]] == [3, 5, 8, 12] and d["chosen"] == 8
+    assert [t["quality"] for t in d["tried"]] == [5, 8, 10, 12] and d["chosen"] == 8
+
+
+def test_ladder_refines_between_two_rungs_where_a_cloths_quality_lies_between_them():
+    """A quality-15 cloth (issue 20's time capture): 12 the best of the ladder's rungs, 18 worse; the refining
+    rung 15 is tried and, fitting best, chosen."""
+    lad = Ladder(5)
+    for q, e in ((5, 12.5), (8, 11.5), (12, 9.7), (18, 14.4)):
+        lad.record(q, e)
+        if q != 18:
+            assert lad.next() == {5: 8, 8: 12, 12: 18}[q]
+    assert lad.chosen() == 12 and lad.next() == 15
+    lad.record(15, 3.6)
+    assert lad.next() is None and lad.chosen() == 15
+    assert Ladder(5, max_rungs=3).next() is None  # nothing tried yet
+    short = Ladder(5, max_rungs=3)
+    for q, e in ((5, 12.5), (8, 11.5), (12, 9.7), (18, 14.4)):
+        short.record(q, e)
+    assert short.next() is None  # its rungs spent
 
 
 def test_ladder_probe_keeps_the_scenes_quality_and_advises():
@@ -223,6 +243,30 @@ def test_quality_ladder_runs_its_rungs_and_resumes_exactly_across_stages(caps, t
     r = again.run()
     assert r["quality_choice"] == qc and r["best_E_all"] == ref["best_E_all"]
     assert r["blender_cloth"] == ref["blender_cloth"]
+
+
+def test_a_staged_fits_rungs_resettle_its_strong_settings_first_and_resume_exactly(caps, tmp_path):
+    """With a setting outside the strong ones free, the fit is "cma-staged" and so is each rung: its first half
+    over the strong settings alone from the warm start; a fit stopped in such a rung resumes exactly."""
+    _, cap = caps
+    cfg = dict(free=FREE + ["compression_stiffness"], fixed=FIXED, max_evaluations=300, seed=3, quality="auto")
+    ref = FitJob(cap, FitConfig(**cfg)).run()
+    assert ref["optimizer"] == "cma-staged" and len(ref["quality_choice"]["tried"]) >= 2
+    ck = str(tmp_path / "ck.json")
+    job = FitJob(cap, FitConfig(**cfg), checkpoint=ck)
+    while job.stage != "rung":
+        job.step()
+    assert job.opt.name == "cma-staged" and job.opt.first == FREE  # tension and air: the strong ones free
+    x = job.opt.ask()
+    held = job.space.names.index("compression_stiffness")
+    assert np.all(x[:, held] == x[0, held])  # held at the warm start during the rung's first stage
+    job.opt = type(job.opt).from_state(job.opt.state_dict())  # the asked batch is not part of the state
+    job.step()
+    job.save_checkpoint(ck)
+    again = FitJob.resume(ck, capture=cap, config=FitConfig(**cfg))
+    assert again.stage == "rung" and again.evaluations == job.evaluations
+    r = again.run()
+    assert r["quality_choice"] == ref["quality_choice"] and r["best_E_all"] == ref["best_E_all"]
 
 
 def test_a_declared_quality_is_kept(caps):

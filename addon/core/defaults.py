@@ -185,7 +185,10 @@ QUALITY_TOLERANCE = 0.05  # the lowest rung whose training error is within 5 % o
 # cheaper solver for a difference of the size of one seed's luck (issue 20 A/B spreads)
 QUALITY_RUNG_FRACTION = 0.07  # each rung: a warm-started CMA-ES run of 7 % of the budget (175 of 2500 evaluations:
 # 17 generations of 10, enough to re-settle a converged fit at a neighbouring quality)
-QUALITY_RUNGS_RESERVED = 4  # the budget kept for rungs (4 x 7 % = 28 %): one down, up to three up (5 -> 8 -> 12 -> 18)
+QUALITY_RUNG_FIRST_FRACTION = 0.5  # cma-staged fits: a rung's first half re-settles the strong settings (and the
+# time offset) alone at the new quality, the rest held at the warm start; 0: one CMA-ES run over everything
+QUALITY_RUNGS_RESERVED = 4  # the budget kept for rungs (4 x 7 % = 28 %): up to three up (5 -> 8 -> 12 -> 18), then
+# one refining rung (15) or one down
 QUALITY_CLEARLY_BETTER = (
     0.10  # a probe (or --backend blender's rung above the scene's quality) fits clearly better: > 10 %
 )

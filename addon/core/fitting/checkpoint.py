@@ -247,10 +247,10 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
         not isinstance(st["ladder"], dict)
         or ladder.start != job.ladder.start
         or ladder.probe_only != job.ladder.probe_only
-        or any(q not in ladder.rungs for q in ladder.tried)
+        or any(not ladder.allows(q) for q in ladder.tried)
     ):
         raise bad("quality ladder")
-    if st["stage"] == "rung" and (ladder is None or st["stage_quality"] not in ladder.rungs):
+    if st["stage"] == "rung" and (ladder is None or not ladder.allows(st["stage_quality"])):
         raise bad("a rung outside the ladder")
     job.stage = st["stage"]
     job.stage_quality = st["stage_quality"]
@@ -267,7 +267,7 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
     job.start_f = None if st["start_f"] is None else float(st["start_f"])
     if ladder is not None:
         job.ladder = ladder
-    if job.stage_quality is not None and job.ladder is not None and job.stage_quality not in job.ladder.rungs:
+    if job.stage_quality is not None and job.ladder is not None and not job.ladder.allows(job.stage_quality):
         raise bad("stage_quality outside the ladder")
     if job.stage_quality is not None:
         job._activate(job.stage_quality)
@@ -378,8 +378,11 @@ def resume(
         _int_attr(opt, "children"),
         _int_attr(opt, "restarts"),
     )
-    n = 7 if main else 3  # a rung's optimiser is a warm-started CMA-ES of the same space
-    if mine[:n] != theirs[:n]:
+    if main:
+        same = mine == theirs
+    else:  # a rung's optimiser: a warm-started one of the same space (job.rung_optimizer_name)
+        same = opt.name == job.rung_optimizer_name() and mine[1:3] == theirs[1:3]
+    if not same:
         raise ClothFitError(
             f"checkpoint {path}: its optimiser state does not match its recorded fit "
             f"(optimiser, bounds, seed or population differ)"

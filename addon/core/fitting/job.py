@@ -354,8 +354,34 @@ class FitJob:
     def _main_optimizer(self):
         return make_optimizer(self.optimizer_name, self.space, self.config.seed, **self._optimizer_kw())
 
+    def rung_optimizer_name(self) -> str:
+        """A rung's optimiser: CMA-ES from the warm start (a local search whatever the main optimiser was),
+        in two stages like the main search's where that is "cma-staged" (``QUALITY_RUNG_FIRST_FRACTION``)."""
+        staged = self.optimizer_name == "cma-staged" and D.QUALITY_RUNG_FIRST_FRACTION > 0
+        return "cma-staged" if staged and self._strong_free() else "cma-es"
+
     def _rung_optimizer(self, x0):
-        # a rung is always CMA-ES: a warm start is a local search whatever the main optimiser was
+        if self.rung_optimizer_name() == "cma-staged":
+            # the strong settings (and the time offset) re-settle first at the new quality, the others held
+            # at the warm start; then every coordinate (docs/real_captures.md, "The quality the fit chooses")
+            kw = self._optimizer_kw(warm_x=x0)
+            names = list(self.space.names)
+            first = self._strong_free() + [n for n in names[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]
+            return make_optimizer(
+                "cma-staged",
+                self.space,
+                self.config.seed,
+                initial=kw["initial"],
+                sigma0=D.WARM_START_SIGMA,
+                second_sigma=D.STAGED_SECOND_SIGMA,
+                restarts=0,
+                tolx=kw["tolx"],
+                tolfun=kw["tolfun"],
+                first=first,
+                first_fraction=D.QUALITY_RUNG_FIRST_FRACTION,
+                budget=self._rung_budget(),
+                popsize=4 + int(3 * math.log(self.space.n)),
+            )
         kw = self._optimizer_kw(warm_x=x0)
         if self.optimizer_name == "cma-portfolio":
             kw.pop("budget", None)

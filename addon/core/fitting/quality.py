@@ -5,11 +5,16 @@ stiffer one; more cost time in proportion. Nobody knows the right value for a re
 the user did not fix it, the fit's main search runs at a start quality and then *rungs*: short
 CMA-ES runs at neighbouring qualities of ``QUALITY_LADDER``, each warm-started from the best so far.
 One rung above the start, then upwards while the highest rung tried is the one the choice would take
-(it fits more than ``QUALITY_TOLERANCE`` better than every lower one), then one rung below the start.
-The choice is the lowest quality whose training error is within ``QUALITY_TOLERANCE`` of the best
-tried: what the images can tell apart, at the least cost. (Until 2026-11-26 the climb needed a rung
-``QUALITY_CLEARLY_BETTER``, 10 %, better: a rung 5 to 10 % better was chosen and the one above it never
-tried, while the fit's diagnosis blamed the quality.)
+(it fits more than ``QUALITY_TOLERANCE`` better than every lower one). Where the climb took the choice
+above the start and stopped with the rung above the choice tried, one *refining* rung between the two
+(their geometric mean: 10 between 8 and 12, 15 between 12 and 18), for a cloth whose quality lies
+between two rungs; otherwise one rung below the start (below a start the climb left behind by more
+than the tolerance nothing would be chosen). The choice is the lowest quality whose training error is
+within ``QUALITY_TOLERANCE`` of the best tried: what the images can tell apart, at the least cost.
+In a "cma-staged" fit each rung is staged too (``FitJob._rung_optimizer``: the strong settings and the
+time offset first, from the warm start). Until 2026-11-26 the climb needed a rung
+``QUALITY_CLEARLY_BETTER`` (10 %) better, and there was no refining rung and no staged rung
+(docs/issue20_goals.md, the time goal).
 
 ``Ladder`` is plain decisions on numbers (which quality next, which is chosen), kept apart from the
 job that runs the rungs, so it is tested on its own and its state is plain JSON in checkpoints.
@@ -39,7 +44,7 @@ class Ladder:
         self.clearly = float(clearly)
         self.max_rungs = int(max_rungs)
         self.probe_only = bool(probe_only)  # --backend blender: try one rung up, keep the scene's quality
-        self.tried: dict[int, float] = {}
+        self.tried: dict[int, float] = {}  # the ladder's rungs, and refining rungs between two of them
         self.order: list[int] = []
 
     def record(self, quality: int, error: float) -> None:
@@ -57,6 +62,22 @@ class Ladder:
         i = self.rungs.index(q)
         return self.rungs[i - 1] if i > 0 else None
 
+    def allows(self, quality: int) -> bool:
+        """A quality this ladder may try: one of its rungs, or a refining rung between two of them."""
+        return self.rungs[0] <= int(quality) <= self.rungs[-1]
+
+    def _refining(self) -> int | None:
+        """Between the choice, climbed to above the start, and the rung above it (both tried, the latter
+        not chosen): their geometric mean (15 between 12 and 18), if it is a quality not yet tried."""
+        c = self.chosen()
+        if c <= self.start or c not in self.rungs:
+            return None
+        up = self._above(c)
+        if up is None or up not in self.tried:
+            return None
+        m = int(round((c * up) ** 0.5))
+        return m if c < m < up and m not in self.tried else None
+
     def next(self) -> int | None:
         """The next quality to try, or None when the ladder is done."""
         if self.start not in self.tried or len(self.order) - 1 >= self.max_rungs:
@@ -72,6 +93,8 @@ class Ladder:
         climbing = bool(lower) and self.chosen() == top  # the top rung is the choice: the one above may be better
         if climbing and up is not None:
             return up
+        if self.chosen() > self.start:  # climbed: refine between the choice and the rung above it
+            return self._refining()
         down = self._below(min(self.tried))
         if down is not None and min(self.tried) == self.start:  # one rung below the start, once
             return down
