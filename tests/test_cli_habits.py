@@ -380,3 +380,22 @@ def test_makefile_installs_the_development_requirements_and_the_package():
     assert "pip install --quiet -r requirements-dev.txt" in text and "-e ." in text
     with open(os.path.join(ROOT, ".ci", "run")) as f:
         assert "make test" in f.read()
+
+
+def test_a_list_of_times_that_starts_before_the_release_is_read_as_a_value_not_an_option():
+    """Frames before the release have negative times: ``--times -0.15,-0.05,0.1`` is the option's value (argparse
+    alone reads it as an unknown option), and a single negative number or an option's own ``=`` is left as it was."""
+    argv = ["fit", "cap", "--times", "-0.15,-0.05,0.1", "--seed", "-1", "--gravity=-9.8,0,0", "--quiet"]
+    assert cli.attach_number_lists(argv) == [
+        "fit",
+        "cap",
+        "--times=-0.15,-0.05,0.1",
+        "--seed",
+        "-1",
+        "--gravity=-9.8,0,0",
+        "--quiet",
+    ]
+    args = cli.build_parser().parse_args(cli.attach_number_lists(["fit", "cap", "--times", "-1e-1, 0.2", "--quiet"]))
+    assert args.times == "-1e-1, 0.2"
+    with pytest.raises(SystemExit), contextlib.redirect_stderr(io.StringIO()):
+        cli.build_parser().parse_args(["fit", "cap", "--times", "-0.15,0.1"])  # what argparse alone does

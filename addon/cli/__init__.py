@@ -15,6 +15,7 @@ one module per command family that registers its commands (``fitting``, ``studie
 from __future__ import annotations
 
 import os
+import re
 import sys
 
 from ..core.errors import ClothFitError
@@ -64,12 +65,28 @@ def build_parser():
     return p
 
 
+_NUMBER_LIST = re.compile(r"^-[0-9.]+(?:[eE][-+]?[0-9]+)?(?:,\s*-?[0-9.]+(?:[eE][-+]?[0-9]+)?)+$")
+
+
+def attach_number_lists(argv: list) -> list:
+    """``--times -0.15,-0.05,0.1`` -> ``--times=-0.15,-0.05,0.1``: argparse reads a value that starts with a
+    minus sign and is no single number as an option (frames before the release have negative times)."""
+    out = []
+    for a in argv:
+        prev = out[-1] if out else ""
+        if _NUMBER_LIST.match(a) and prev.startswith("--") and "=" not in prev:
+            out[-1] = f"{prev}={a}"
+        else:
+            out.append(a)
+    return out
+
+
 def main(argv=None):
     """Run a command (see ``EPILOG`` for stdout and the exit codes). Bad input: one line
     ``error: ...`` and exit code 2; a command line the parser rejects: its usage and exit code 64;
     any other failure: one line naming it and exit code 1 (the traceback only with the environment
     variable CLOTHFIT_DEBUG=1); Ctrl-C: one line and exit code 130."""
-    argv = sys.argv[1:] if argv is None else [str(x) for x in argv]
+    argv = attach_number_lists(sys.argv[1:] if argv is None else [str(x) for x in argv])
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as e:  # --help / --version (0) or a usage error (64)
