@@ -337,6 +337,12 @@ SOURCES = {
         "cost": "expensive",
         "what": "one-corner release onto a box: Blender fit from the scene's starting settings",
     },
+    "bench_default_fit": {
+        "argv": ["{py}", "-m", "clothfit", "bench", "--default-fit", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 20's time to answer as bench prints it: the default fit of a 21 x 21 cloth, 4 cameras x 15 "
+        "frames at 480 x 640, quality chosen, manipulation estimated (about 3 min)",
+    },
     "bench_blender_workers": {
         "argv": ["{py}", "-m", "clothfit", "bench", "--blender-workers", "--json", "{out}"],
         "cost": "expensive",
