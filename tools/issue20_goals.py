@@ -459,25 +459,31 @@ def shift_capture(true_root, out_root, early_s, pin_off_m, direction_seed, uncer
     return shift
 
 
-def make_time_capture(out):
-    """21 x 21 cloth, lab18 at 480 x 640, TIME settings at TIME's quality (synth_capture: the CLI's synth has
-    no grid option)."""
-    from clothfit.core import defaults as D
+def synth_spec(out, spec, scenario, model):
+    """``synth_capture`` of a goal's spec (settings, rig, noise, resolution, seed) on ``scenario``: for the
+    captures the CLI's synth cannot make."""
     from clothfit.core.observation.synth import synth_capture
-    from clothfit.core.physics.scenario import ClothGrid, paper_scenario
 
-    h, w = (int(x) for x in TIME["resolution"].split("x"))
-    sc = paper_scenario(ClothGrid(TIME["grid"], TIME["grid"], D.CLOTH_SIDE))
+    h, w = (int(x) for x in spec["resolution"].split("x"))
     synth_capture(
         out,
-        TIME["settings"],
-        rig=TIME["rig"],
-        noise=TIME["noise"],
+        spec["settings"],
+        rig=spec["rig"],
+        noise=spec["noise"],
         resolution=(h, w),
-        seed=TIME["seed"],
-        scenario=sc,
-        model={"name": "blender", "quality": TIME["quality"]},
+        seed=spec["seed"],
+        scenario=scenario,
+        model=model,
     )
+
+
+def make_time_capture(out):
+    """21 x 21 cloth, lab18 at 480 x 640, TIME settings at TIME's quality (the CLI's synth has no grid option)."""
+    from clothfit.core import defaults as D
+    from clothfit.core.physics.scenario import ClothGrid, paper_scenario
+
+    sc = paper_scenario(ClothGrid(TIME["grid"], TIME["grid"], D.CLOTH_SIDE))
+    synth_spec(out, TIME, sc, {"name": "blender", "quality": TIME["quality"]})
 
 
 # ============================================================================ goals
@@ -589,22 +595,11 @@ def _exact_one(a, run, seed):
 
 def make_hold_capture(out):
     """The offsets goal's capture (OFFSETS) with frames before the release too (``HOLD_TIMES``: the cloth
-    hanging from all four corners, as every video has it): synth_capture, the CLI's synth has no times option."""
+    hanging from all four corners, as every video has it): the CLI's synth has no times option."""
     from clothfit.core import defaults as D
-    from clothfit.core.observation.synth import synth_capture
     from clothfit.core.physics.scenario import paper_scenario
 
-    h, w = (int(x) for x in OFFSETS["resolution"].split("x"))
-    synth_capture(
-        out,
-        OFFSETS["settings"],
-        rig=OFFSETS["rig"],
-        noise=OFFSETS["noise"],
-        resolution=(h, w),
-        seed=OFFSETS["seed"],
-        scenario=paper_scenario(frame_times=list(HOLD_TIMES) + list(D.FRAME_TIMES)),
-        model="blender",
-    )
+    synth_spec(out, OFFSETS, paper_scenario(frame_times=list(HOLD_TIMES) + list(D.FRAME_TIMES)), "blender")
 
 
 def goal_offsets(a, run):
@@ -642,8 +637,8 @@ def goal_offsets(a, run):
     early = shift["release_marked_early_s"]
     train_true = (list(HOLD_TIMES) if hold else []) + list(D.TRAIN_TIMES)
     train, test = (",".join(f"{t:.9g}" for t in shifted_times(ts, early)) for ts in (train_true, D.TEST_TIMES))
-    fit, frun = run(  # --times=...: a list that starts with a negative time is not an option
-        ["fit", cap, "--cameras", f"n:{TRAIN_CAMERAS}", f"--times={train}", "--out", res, "--force", "--quiet"] + extra
+    fit, frun = run(
+        ["fit", cap, "--cameras", f"n:{TRAIN_CAMERAS}", "--times", train, "--out", res, "--force", "--quiet"] + extra
     )
     ev, _ = _heldout(run, cap, res, times=test)
     fl, _ = _heldout(run, true_cap)

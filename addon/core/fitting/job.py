@@ -361,10 +361,10 @@ class FitJob:
         return "cma-staged" if staged and self._strong_free() else "cma-es"
 
     def _rung_optimizer(self, x0):
+        kw = self._optimizer_kw(warm_x=x0)
         if self.rung_optimizer_name() == "cma-staged":
             # the strong settings (and the time offset) re-settle first at the new quality, the others held
             # at the warm start; then every coordinate (docs/real_captures.md, "The quality the fit chooses")
-            kw = self._optimizer_kw(warm_x=x0)
             names = list(self.space.names)
             first = self._strong_free() + [n for n in names[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]
             return make_optimizer(
@@ -382,7 +382,6 @@ class FitJob:
                 budget=self._rung_budget(),
                 popsize=4 + int(3 * math.log(self.space.n)),
             )
-        kw = self._optimizer_kw(warm_x=x0)
         if self.optimizer_name == "cma-portfolio":
             kw.pop("budget", None)
         if self.optimizer_name != "cma-es":

@@ -69,8 +69,8 @@ class Ladder:
     def _refining(self) -> int | None:
         """Between the choice, climbed to above the start, and the rung above it (both tried, the latter
         not chosen): their geometric mean (15 between 12 and 18), if it is a quality not yet tried."""
-        c = self.chosen()
-        if c <= self.start or c not in self.rungs:
+        c = self.chosen()  # above the start (next() asks only then)
+        if c not in self.rungs:
             return None
         up = self._above(c)
         if up is None or up not in self.tried:
