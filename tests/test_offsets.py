@@ -54,6 +54,22 @@ def test_blender_kernel_with_offsets_is_the_moved_scenario_exactly():
     assert np.abs(r.positions - a.positions[1:3]).mean() < 1e-4  # float64 reference against float32 (measured 1.6e-5 m)
 
 
+def test_spans_ending_within_one_frame_share_one_set_up_and_give_the_same_motion():
+    sc = _scenario()
+    m = BlenderModel(24, 3)
+    rows = np.repeat(B.settings_row(dict(B.DEFAULTS, time_scale=B.physical_time_scale(24)))[None], 2, 0)
+    ends = []
+    for t in (0.011, 0.013, 0.029, 0.045):  # the last frame (8/24 s) read up to 11-29 ms later: the next frame
+        off = Offsets(np.array([0.0, -t]), np.zeros((2, len(sc.handles), 3)))
+        a = m.simulate(sc, rows, "numba", offsets=off)
+        ref = m.simulate(sc.moved(-t), rows[1:], "numba")
+        assert np.array_equal(a.positions[1], ref.positions[0]), t
+        ends.append(m.spanning(sc, t).frame_times[-1])
+    assert ends[0] == ends[1] == ends[2] == 9 / 24 and ends[3] == 10 / 24
+    assert m.spanning(sc, 0.011) is m.spanning(sc, 0.017)  # one extended scenario, one kernel set-up
+    assert len(m._spans) == 2
+
+
 def test_paper_model_with_offsets_is_the_moved_scenario():
     sc = _scenario()
     n = 4

@@ -124,21 +124,28 @@ class BlenderModel:
             first[plan.handle_vertices] = plan.targets[0]
             net = B.Network.from_grid(scenario.grid, self.bending_model, first_frame=first)
             hit = (scenario, net, plan, {})
-            if len(self._cache) >= 4:  # a few scenarios (a fit's and its time-spanning one)
+            if len(self._cache) >= 8:  # a few scenarios (a fit's and its time-spanning ones)
                 self._cache.pop(next(iter(self._cache)))
             self._cache[key] = hit
         return hit[1], hit[2]
 
     def spanning(self, scenario: Scenario, span: float) -> Scenario:
         """The scenario with its frames extended by ``span`` seconds either way (within the settle):
-        what candidates that read the frames up to ``span`` s earlier or later need simulated."""
-        key = ("span", id(scenario), float(span))
+        what candidates that read the frames up to ``span`` s earlier or later need simulated. Its last
+        frame is the first whole frame at or after ``span`` past the scenario's last: the solver steps
+        whole frames, so every span ending within one frame simulates the same, and one extended
+        scenario (and one network and kernel set-up) serves them all."""
+        t = np.asarray(scenario.frame_times, dtype=np.float64)
+        k = math.ceil((t[-1] + float(span)) * self.fps - 1e-6)  # FramePlan's own tolerance for a whole frame
+        key = (id(scenario), k)
         hit = self._spans.get(key)
         if hit is None or hit[0] is not scenario:
-            t = scenario.frame_times
-            ext = np.concatenate([[max(t[0] - span, -scenario.settle_time)], t, [t[-1] + span]])
+            end = max(k / self.fps, float(t[-1]))
+            ext = np.concatenate([[max(t[0] - float(span), -scenario.settle_time)], t, [end]])
             hit = (scenario, scenario.with_frames(np.unique(ext)))
-            self._spans = {key: hit}
+            if len(self._spans) >= 4:  # a fit's spans end within a frame or two of its last frame
+                self._spans.pop(next(iter(self._spans)))
+            self._spans[key] = hit
         return hit[1]
 
     def check_rows(self, rows: ArrayLike) -> np.ndarray:
