@@ -210,6 +210,53 @@ SOURCES = {
         "from the search's centre): the fits of the rows file (drop --only-reused to run the missing ones, about "
         "1 CPU min each)",
     },
+    "search_pop16": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            "out/issue20/exact",
+            "synth:fresh",
+            "synth:damped",
+            "synth:soft",
+            "synth:stiff",
+            "--strategies",
+            "staged,staged-pop16,staged-pop16-3900",
+            "--seeds",
+            "0-4",
+            "--reuse",
+            "docs/figures/search_runs_rows.jsonl",
+            "docs/figures/search_pop16_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: populations of 16 in both stages (two whole batches of the kernel's 8 lanes, one per "
+        "core; tried, not kept) at the default's 2500 evaluations ('staged-pop16') and at about its wall time on two "
+        "cores ('staged-pop16-3900'), against the default ('staged', the rows of search_runs), seeds 0-4 on its five "
+        "captures: the fits of the rows files (drop --only-reused to run the missing ones)",
+    },
+    "search_pop16_wall": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            "out/issue20/exact",
+            "--strategies",
+            "staged,staged-pop16",
+            "--seeds",
+            "0",
+            "--reuse",
+            "docs/figures/search_pop16_wall_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: the default search and 'staged-pop16' one after the other on one machine (the goal's "
+        "capture, seed 0): CPU and wall time of the same 2500 evaluations (drop --only-reused to run them again)",
+    },
     "search_profile": {
         "argv": [
             "{py}",

@@ -90,12 +90,24 @@ STRATEGIES = {
     # one run with a larger first-stage population (24 instead of Hansen's 8 for the strong four): more of
     # each generation lands in the bending valley before the mean settles (tried, not kept)
     "staged-pop24": ("cma-staged", {"restarts": 4, "first_popsize": 24}),
+    # both stages' populations filled to whole batches of the kernel's lanes on two cores (16: two batches of
+    # simd.W = 8, one per core, so a generation costs the wall time of one batch): fewer, wider generations
+    "staged-pop16": ("cma-staged", {"restarts": 4, "first_popsize": 16, "popsize": 16}),
+    # the same at the default's wall time on two cores (3900 evaluations: run with --budget 3900)
+    "staged-pop16-3900": ("cma-staged", {"restarts": 4, "first_popsize": 16, "popsize": 16, "budget": 3900}),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
     "staged-recipe": ("staged-recipe", {}),
 }
 STAGED_FIRST = D.STAGED_FIRST_FRACTION
+
+
+def strategy_budget(strategy, budget):
+    """A fit's evaluations: the strategy's own where it names them (``staged-pop16-3900``), else ``budget``."""
+    return int(STRATEGIES[strategy][1].get("budget", budget)) if strategy in STRATEGIES else budget
+
+
 STAGED_SIGMA = D.STAGED_SECOND_SIGMA
 
 
@@ -249,7 +261,9 @@ class Bench:
         if name == "cma-portfolio":
             kw.setdefault("budget", BUDGET)
         if name == "cma-staged":
-            kw.update({k: v for k, v in self.job._staged_kw().items() if k != "budget"}, budget=BUDGET)
+            kw.update(
+                {k: v for k, v in self.job._staged_kw().items() if k != "budget"}, budget=kw.get("budget", BUDGET)
+            )
             if strategy == "staged-tie" and "compression_stiffness" in self.job.space.names:
                 kw["tie"] = {"compression_stiffness": "tension_stiffness"}
         return make_optimizer(name, self.job.space, seed=seed, **kw)
@@ -601,6 +615,8 @@ def summary(rows):
                 "median_train_pct": float(np.median([r["train_pct"] for r in rs])),
                 "mean_evals": float(np.mean([r["evals"] for r in rs])),
                 "mean_cpu_s": float(np.mean([r["cpu_s"] for r in rs])),
+                "mean_wall_s": float(np.mean([r["wall_s"] for r in rs])),
+                "mean_load": float(np.mean([r.get("load", float("nan")) for r in rs])),
             }
         )
     return out
@@ -729,7 +745,7 @@ def main(argv=None):
                 cap = spec.split(":", 1)[1] if spec.startswith("synth:") else spec
                 for strat in a.strategies.split(","):
                     for seed in parse_seeds(a.seeds):
-                        key = (capture_key(cap), strat, seed, a.budget)
+                        key = (capture_key(cap), strat, seed, strategy_budget(strat, a.budget))
                         if key in old:
                             rows.append(dict(old[key], capture=spec, reused=True))
                 continue
@@ -742,11 +758,12 @@ def main(argv=None):
             )
             for strat in a.strategies.split(","):
                 for seed in parse_seeds(a.seeds):
-                    key = (capture_key(cap), strat, seed, a.budget)
+                    budget = strategy_budget(strat, a.budget)
+                    key = (capture_key(cap), strat, seed, budget)
                     if key in old:
                         r = dict(old[key], capture=spec, reused=True)
                     else:
-                        r = dict(b.fit(strat, seed, a.budget, a.trace), capture=spec)
+                        r = dict(b.fit(strat, seed, budget, a.trace), capture=spec)
                     rows.append(r)
                     print(
                         json.dumps({k: v for k, v in r.items() if k not in ("best_x", "truth_x")}),
