@@ -341,3 +341,37 @@ def test_offsets_uncertainties_are_flagged_when_the_fit_ends_far_above_its_floor
     assert "4.5x" in uncertainty_caveat(handles)
     train_only = dict(res, floor={"far_above": True, "heldout_ratio": None, "train_ratio": 3.2})
     assert "3.2x" in uncertainty_caveat(train_only)
+
+
+def _ladder_job(tried):
+    """A finished fit's parts that the floor block's quality causes read: its ladder (``tried``: quality -> error, in
+    the order run) and no other probe (a paper-like model, the time offset estimated)."""
+    from types import SimpleNamespace
+
+    lad = Ladder(5)
+    for q, e in tried:
+        lad.record(q, e)
+    return SimpleNamespace(
+        ladder=lad,
+        chosen_quality=lad.chosen,
+        evaluator=None,
+        par=SimpleNamespace(model=SimpleNamespace(name="paper")),
+        manip=SimpleNamespace(names=["time_offset_s"]),
+    )
+
+
+def test_a_ladder_that_moved_far_from_its_start_says_to_search_at_its_choice():
+    from clothfit.core.fitting.diagnose import _probes
+
+    # the time goal's capture (a quality-15 truth, the set-up declared with error): rungs 8, 12, then 10 chosen,
+    # 42 % below the search at 5 they all started from
+    (hit,) = _probes(_ladder_job([(5, 12.49), (8, 8.13), (12, 7.76), (10, 7.27)]), None, 1.0)
+    assert hit[0] == "quality" and hit[2] == 0.0
+    assert "42 % better at quality 10 than the search at 5" in hit[1] and "--quality 10" in hit[1]
+    # a choice at the start, or near the start's error: nothing to say about the quality
+    assert _probes(_ladder_job([(5, 1.0), (8, 7.5), (3, 7.5)]), None, 1.0) == []
+    assert _probes(_ladder_job([(5, 1.0), (8, 0.8), (12, 0.9)]), None, 1.0) == []
+    # the error still falling at the top rung tried says to go higher first (both are said; that one sorts first)
+    both = _probes(_ladder_job([(5, 5.0), (8, 3.1), (12, 2.6), (18, 2.4), (27, 2.2)]), None, 1.0)
+    assert [c for c, _, _ in both] == ["quality"]  # 27 is the ladder's top: no rung above it to suggest
+    assert "--quality 27" in both[0][1]

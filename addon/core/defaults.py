@@ -192,6 +192,8 @@ QUALITY_RUNGS_RESERVED = 4  # the budget kept for rungs (4 x 7 % = 28 %): up to 
 QUALITY_CLEARLY_BETTER = (
     0.10  # a probe (or --backend blender's rung above the scene's quality) fits clearly better: > 10 %
 )
+QUALITY_BASIN_GAIN = 0.3  # a fit far above its floor whose ladder chose a quality fitting > 30 % better than the
+# start says to refit at that quality from the start (its rungs began in the start's basin: docs/issue20_goals.md)
 SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
 STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the strong settings alone (1200 of 2500)
 STAGED_FIRST_RESTART_STEP = 0.0  # cma-staged: a first-stage run whose every step is below this (unit cube) has

@@ -6,8 +6,10 @@ other frames where both exist), and puts each beside the floor estimated from th
 (``observation/floor.py``: no truth needed). A fit more than ``FLOOR_FAR_ABOVE`` times its floor says
 so, with the likely cause among those it can test by a few evaluations of the best settings:
 
-* **quality**: the ladder's error still fell at its highest rung, or (quality fixed) twice the
-  quality fits clearly better;
+* **quality**: the ladder's error still fell at its highest rung; or the rungs chose a quality that fits
+  far better (``QUALITY_BASIN_GAIN``) than the start, where the search ran and from whose settings every
+  rung began (a search at the chosen quality from the start may find another basin); or (quality fixed)
+  twice the quality fits clearly better;
 * **time scale**: Blender's default Speed Multiplier 1 (a user scene not set to real time) fits
   clearly better than the physical one;
 * **manipulation**: reading the capture half a frame earlier or later fits clearly better (the
@@ -70,6 +72,17 @@ def _probes(job, x, f0):
                 (
                     "quality",
                     f"the error still fell at the highest quality tried ({top}): refit with --quality {up}",
+                    0.0,
+                )
+            )
+        c, s = job.chosen_quality(), lad.start
+        if c != s and s in lad.tried and c in lad.tried and lad.tried[c] < (1.0 - D.QUALITY_BASIN_GAIN) * lad.tried[s]:
+            out.append(
+                (
+                    "quality",
+                    f"the rungs fitted {100 * (1 - lad.tried[c] / lad.tried[s]):.0f} % better at quality {c} than "
+                    f"the search at {s}, each starting from that search's settings, which may make up for the "
+                    f"coarser solver: refit with --quality {c}, a search at that quality from the start",
                     0.0,
                 )
             )
