@@ -426,6 +426,13 @@ SOURCES = {
         "names no quality, release and pins declared with error and uncertain), then the same fit told the quality, "
         "and the truth's capture with only its quality left out (about 8 min)",
     },
+    "issue20_time_refit": {
+        "argv": ["{py}", "tools/issue20_goals.py", "time", "--quality", "10,12", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "issue 20's time capture refitted as the floor block of its default fit advises (its ladder chose 10, "
+        "42 % below the search at 5): a search at quality 10 from the start, and at 12, the highest quality the "
+        "ladder tried (about 11 min)",
+    },
     "issue20_time_quality": {
         "argv": ["{py}", "tools/issue20_goals.py", "time_quality", "--json", "{out}"],
         "cost": "cheap",
