@@ -93,7 +93,7 @@ STRATEGIES = {
     # both stages' populations filled to whole batches of the kernel's lanes on two cores (16: two batches of
     # simd.W = 8, one per core, so a generation costs the wall time of one batch): fewer, wider generations
     "staged-pop16": ("cma-staged", {"restarts": 4, "first_popsize": 16, "popsize": 16}),
-    # the same at the default's wall time on two cores (3900 evaluations: run with --budget 3900)
+    # the same at about the default's wall time on two cores: 3900 evaluations, its own budget (strategy_budget)
     "staged-pop16-3900": ("cma-staged", {"restarts": 4, "first_popsize": 16, "popsize": 16, "budget": 3900}),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
@@ -101,14 +101,12 @@ STRATEGIES = {
     "staged-recipe": ("staged-recipe", {}),
 }
 STAGED_FIRST = D.STAGED_FIRST_FRACTION
+STAGED_SIGMA = D.STAGED_SECOND_SIGMA
 
 
 def strategy_budget(strategy, budget):
     """A fit's evaluations: the strategy's own where it names them (``staged-pop16-3900``), else ``budget``."""
     return int(STRATEGIES[strategy][1].get("budget", budget)) if strategy in STRATEGIES else budget
-
-
-STAGED_SIGMA = D.STAGED_SECOND_SIGMA
 
 
 # captures the tool makes itself (``synth:NAME``, under out/search_ab/NAME): the blender model on the
