@@ -93,8 +93,9 @@ def test_no_first_stage_is_plain_cma_over_everything():
 # evaluations), the second stage at the 36th (216, the first stage's share of 300): checkpointed in the
 # first run, with the batch whose tell starts the second run pending, in the second run, with the batch
 # whose tell switches stages pending, and in the second stage
+@pytest.mark.parametrize("warm", ["", "second", "tail"])
 @pytest.mark.parametrize("cut", [7, 21, 22, 35, 36, 60])
-def test_resume_is_exact_in_either_stage(cut):
+def test_resume_is_exact_in_either_stage(cut, warm):
     def make():
         return StagedCMA(
             space(),
@@ -106,6 +107,8 @@ def test_resume_is_exact_in_either_stage(cut):
             first_restart_step=0.005,
             first_fraction=0.72,
             first_explore=0.56,
+            second_warm=warm == "second",
+            warm_tail=0.2 if warm == "tail" else 0.0,  # from the 240th evaluation: the 41st tell
         )
 
     a = make()
@@ -123,6 +126,107 @@ def test_resume_is_exact_in_either_stage(cut):
         b.tell(Xb, strong_weak(Xb))
         X = a.ask()
     assert a.best_f == b.best_f and a.evaluations == b.evaluations
+    assert a.stage == b.stage == (1 if cut < 21 else 3 if warm == "tail" else 2)  # tail: the 60 cut is in it
+
+
+def test_a_warm_tail_runs_from_the_best_point_with_the_first_stages_steps():
+    """warm_tail: the last share of the budget a third run over everything from the best point so far,
+    its first covariance as a warm second stage's; the second stage before it as by default."""
+    opt = StagedCMA(space(), seed=3, first=["x0", "x1"], budget=600, warm_tail=0.25, second_sigma=0.05)
+    assert "stage 1" in opt.phase_info()
+    while opt.stage < 3:
+        if opt.stage == 2:
+            assert np.allclose(opt.children[-1].C[2:, 2:], np.eye(3), atol=0.5)  # the default second stage
+        X = opt.ask()
+        opt.tell(X, strong_weak(X))
+    assert 0.75 * 600 <= opt.evaluations < 0.75 * 600 + 10 and len(opt.children) == 3
+    first, tail = opt.children[0], opt.children[-1]
+    assert np.allclose(tail.mean, opt.space.encode(opt.best_x[None])[0])
+    assert np.allclose(tail.C[np.ix_([0, 1], [0, 1])] * tail.sigma**2, first.sigma**2 * first.C)
+    assert np.allclose(tail.C[2:, 2:], np.eye(3)) and "first stage's steps" in opt.phase_info()
+    b = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+    assert b.stage == 3 and len(b.children) == 3
+    before = opt.best_f
+    while opt.evaluations < 600 and not opt.stopped:
+        X = opt.ask()
+        opt.tell(X, strong_weak(X))
+    assert opt.best_f < before  # the tail found better points
+    with pytest.raises(ClothFitError, match="warm_tail"):
+        StagedCMA(space(), first=["x0"], warm_tail=1.5)
+
+
+def test_a_warm_second_stage_keeps_the_first_stages_steps_on_its_coordinates():
+    """second_warm: the second stage's first covariance is the first stage's run's (sigma^2 C, in units of
+    second_sigma) on the first stage's coordinates and the identity on the others, so its first samples
+    vary the strong ones by the steps they converged at and the held ones by second_sigma."""
+
+    def run(warm):
+        opt = StagedCMA(space(), seed=3, first=["x0", "x1"], budget=600, second_warm=warm, second_sigma=0.05)
+        while opt.stage == 1:
+            first = opt.children[-1]
+            X = opt.ask()
+            opt.tell(X, strong_weak(X))
+        return opt, first
+
+    opt, first = run(True)
+    c2 = opt.children[-1]
+    S1 = first.sigma**2 * first.C
+    assert np.sqrt(np.diag(S1)).max() < 0.05  # converged: steps below the second stage's
+    assert np.allclose(c2.C[np.ix_([0, 1], [0, 1])] * c2.sigma**2, S1)
+    assert np.allclose(c2.C[2:, 2:], np.eye(3)) and np.allclose(c2.C[:2, 2:], 0.0)
+    U = opt.space.encode(opt.ask())
+    spread = U.std(axis=0)
+    assert spread[:2].max() < 0.2 * spread[2:].min()
+    with pytest.raises(ClothFitError, match="only before the run's first generation"):
+        c2.shape_start(np.eye(5))  # asked already
+    from clothfit.core.fitting.evolution_strategy import CMAES
+
+    fresh = CMAES(space(), seed=0)
+    for bad, match in (
+        (np.eye(4), "symmetric 5 x 5"),
+        (-np.eye(5), "positive definite"),
+        (np.triu(np.ones((5, 5))), "symmetric"),
+    ):
+        with pytest.raises(ClothFitError, match=match):
+            fresh.shape_start(bad)
+    plain, _ = run(False)
+    assert np.allclose(plain.children[-1].C, np.eye(5))  # the default: one step for all
+    # a first-stage run that has just restarted (steps as large as its sigma0) is scaled down to second_sigma
+    opt = StagedCMA(space(), seed=3, first=["x0", "x1"], budget=600, second_warm=True, second_sigma=0.05)
+    C = opt._warm_covariance(opt.children[-1])
+    assert np.isclose(np.sqrt(np.diag(C)).max(), 1.0) and np.allclose(C[2:, 2:], np.eye(3))
+    # a checkpoint from before the option resumes without it
+    d = json.loads(json.dumps(opt.state_dict()))
+    del d["second_warm"]
+    assert optimizer_from_state(d).second_warm is False
+
+
+def test_a_stuck_warm_tail_runs_only_where_the_second_stage_found_nothing_better():
+    """warm_tail_stuck: the tail starts only if the second stage has not beaten the first stage's best
+    point by the tail's share; a second stage that improves goes on to the end as by default."""
+
+    def flat(X):  # only x0, x1 matter, in steps of 0.1: nothing beats the first stage's 0.0
+        X = np.atleast_2d(X)
+        return np.round(10 * ((X[:, 0] - 1.5) ** 2 + (X[:, 1] + 2.0) ** 2), 1)
+
+    def run(f):
+        opt = StagedCMA(space(), seed=3, first=["x0", "x1"], budget=600, warm_tail=0.3, warm_tail_stuck=True)
+        stages = set()
+        while opt.evaluations < 600 and not opt.stopped:
+            X = opt.ask()
+            opt.tell(X, f(X))
+            stages.add(opt.stage)
+        return opt, stages
+
+    opt, stages = run(flat)
+    assert stages == {1, 2, 3} and opt.first_best_f == 0.0 and opt.best_f == 0.0
+    opt, stages = run(strong_weak)
+    assert stages == {1, 2} and opt.best_f < opt.first_best_f  # improved: no tail
+    d = json.loads(json.dumps(opt.state_dict()))
+    assert optimizer_from_state(d).first_best_f == opt.first_best_f
+    del d["warm_tail_stuck"], d["first_best_f"]  # a checkpoint from before them
+    b = optimizer_from_state(d)
+    assert b.warm_tail_stuck is False and b.first_best_f is None
 
 
 def test_a_converged_first_run_starts_again_where_the_first_began():
@@ -239,7 +343,10 @@ def test_the_first_stage_races_runs_then_the_best_goes_on_alone():
     "change, match",
     [
         (lambda d: d.update(first=["nope"]), "'first'"),
-        (lambda d: d.update(stage=3), "'stage'"),
+        (lambda d: d.update(stage=4), "'stage'"),
+        (lambda d: d.update(stage=3), "'children'"),
+        (lambda d: d.update(warm_tail=2.0), "'warm_tail'"),
+        (lambda d: d.update(first_best_f="low"), "'first_best_f'"),
         (lambda d: d.update(hold_u=[2.0] * 5), "'hold_u'"),
         (lambda d: d.update(children=[]), "'children'"),
         (lambda d: d.update(turn=7), "'turn'"),
@@ -331,9 +438,13 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
         staged_restart_step=0.005,
         staged_first_fraction=0.72,
         staged_explore=0.56,
+        staged_second_warm=not D.STAGED_SECOND_WARM,
     )
     o = FitJob(cap, again).opt
     assert isinstance(o, StagedCMA) and (o.first_restart_step, o.first_fraction, o.first_explore) == (0.005, 0.72, 0.56)
+    assert opt.second_warm is D.STAGED_SECOND_WARM and o.second_warm is not D.STAGED_SECOND_WARM
+    with pytest.raises(ClothFitError, match="staged_second_warm must be true or false"):
+        FitConfig(staged_second_warm=1).checked()
     with pytest.raises(ClothFitError, match="staged_restart_step is a setting of cma-staged"):
         FitConfig(optimizer="cma-es", staged_restart_step=0.005).checked()
     with pytest.raises(ClothFitError, match="staged_explore"):

@@ -95,6 +95,32 @@ STRATEGIES = {
     "staged-pop16": ("cma-staged", {"restarts": 4, "first_popsize": 16, "popsize": 16}),
     # the same at about the default's wall time on two cores: 3900 evaluations, its own budget (strategy_budget)
     "staged-pop16-3900": ("cma-staged", {"restarts": 4, "first_popsize": 16, "popsize": 16, "budget": 3900}),
+    # the second stage keeps the steps the first stage's run converged at on the strong settings (its
+    # covariance) and starts the held ones at the usual step (StagedCMA's 'second_warm'), instead of one
+    # step of 0.05 for all, which throws the strong settings off their narrow valley
+    "staged-warm": ("cma-staged", {"restarts": 4, "second_warm": True}),
+    # the same after runs again in the first stage ("staged-runs" above)
+    "staged-runs-warm": (
+        "cma-staged",
+        {
+            "restarts": 4,
+            "first_restart_step": 0.005,
+            "first_fraction": 0.72,
+            "first_explore": 0.56,
+            "second_warm": True,
+        },
+    ),
+    # the default second stage, then the last 20 % of the budget a third run from the best point so far with
+    # the steps of 'staged-warm' (StagedCMA's 'warm_tail')
+    "staged-tail20": ("cma-staged", {"restarts": 4, "warm_tail": 0.2}),
+    # the same tail, but only where the second stage has found nothing better than the first stage's best point by
+    # then (StagedCMA's 'warm_tail_stuck'); from 68 % of the budget: 800 evaluations
+    "staged-stuck32": ("cma-staged", {"restarts": 4, "warm_tail": 0.32, "warm_tail_stuck": True}),
+    # runs again in the first stage ("staged-runs") with that tail
+    "staged-runs-tail20": (
+        "cma-staged",
+        {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 0.56, "warm_tail": 0.2},
+    ),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA

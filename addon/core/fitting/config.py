@@ -33,6 +33,9 @@ SEARCH_OPTIONS = {
     "staged_first_fraction": ("first_fraction", ("cma-staged",)),
     "staged_restart_step": ("first_restart_step", ("cma-staged",)),
     "staged_explore": ("first_explore", ("cma-staged",)),
+    "staged_second_warm": ("second_warm", ("cma-staged",)),
+    "staged_warm_tail": ("warm_tail", ("cma-staged",)),
+    "staged_warm_tail_stuck": ("warm_tail_stuck", ("cma-staged",)),
 }
 
 
@@ -100,6 +103,9 @@ class FitConfig:
         None  # cma-staged: a first-stage run converged below this step runs again (0: off)
     )
     staged_explore: float | None = None  # cma-staged, runs again: budget share in which runs start again (0.36)
+    staged_second_warm: bool | None = None  # cma-staged: the second stage keeps the first's steps
+    staged_warm_tail: float | None = None  # cma-staged: budget share of a third, warm run (D.STAGED_WARM_TAIL)
+    staged_warm_tail_stuck: bool | None = None  # cma-staged: that run only if the second stage found nothing better
 
     @classmethod
     def from_dict(cls, d: Any) -> FitConfig:
@@ -200,13 +206,15 @@ class FitConfig:
             ("staged_first_fraction", 0.0, 1.0),
             ("staged_restart_step", 0.0, 1.0),
             ("staged_explore", 0.0, 1.0),
+            ("staged_warm_tail", 0.0, 1.0),
         ):
             numval(name, lo, hi)
         intval("ga_stall", 1)
         intval("portfolio_runs", 1, 64)
         intval("portfolio_max_polishes", 1, 10**6)
-        if self.cma_active is not None and not isinstance(self.cma_active, bool):
-            raise ClothFitError(f"fit config: cma_active must be true or false, got {self.cma_active!r}")
+        for name in ("cma_active", "staged_second_warm", "staged_warm_tail_stuck"):
+            if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
+                raise ClothFitError(f"fit config: {name} must be true or false, got {getattr(self, name)!r}")
         if self.portfolio_polish not in (None, "cma", "coord"):
             raise ClothFitError(f"fit config: portfolio_polish must be 'cma' or 'coord', got {self.portfolio_polish!r}")
         for name, (_, optimizers) in SEARCH_OPTIONS.items():

@@ -137,6 +137,20 @@ class CMAES(Optimizer):
         self.run_bests = []  # generation bests of this run, the last 2 * stag_window
         self.last_fvals = []  # this generation's finite values (for tolfun)
 
+    def shape_start(self, C) -> None:
+        """This run's first covariance (n x n, symmetric positive definite, in units of ``sigma0``) instead
+        of the identity: a run that starts where another left off keeps the steps that run learned. Only
+        before the run's first generation; a restart (IPOP) starts from the identity again."""
+        n = self.space.n
+        C = np.asarray(C, dtype=np.float64)
+        if C.shape != (n, n) or not np.all(np.isfinite(C)) or not np.allclose(C, C.T):
+            raise ClothFitError(f"cma-es: a start covariance must be a finite symmetric {n} x {n} matrix")
+        if np.linalg.eigvalsh(C).min() <= 0:
+            raise ClothFitError("cma-es: a start covariance must be positive definite")
+        if self.run_generation or self._pending is not None:
+            raise ClothFitError("cma-es: a start covariance only before the run's first generation")
+        self.C = (C + C.T) / 2
+
     def _eig(self):
         d2, B = np.linalg.eigh(self.C)
         d2 = np.maximum(d2, 1e-300)

@@ -27,6 +27,7 @@ from .space import (
     _field,
     _flag,
     _float_from_json,
+    _float_to_json,
     _integer,
     _num,
     _number,
@@ -91,6 +92,9 @@ class StagedCMA(Optimizer):
         scan_points: int = D.STAGED_SCAN_POINTS,
         first_restart_step: float = D.STAGED_FIRST_RESTART_STEP,
         first_explore: float = D.STAGED_FIRST_EXPLORE,
+        second_warm: bool = D.STAGED_SECOND_WARM,
+        warm_tail: float = D.STAGED_WARM_TAIL,
+        warm_tail_stuck: bool = D.STAGED_WARM_TAIL_STUCK,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -138,6 +142,10 @@ class StagedCMA(Optimizer):
         self.first_runs = 1
         self.first_explore = _number(first_explore, f"{w}: first_explore", 0.0, 1.0)
         self.first_best_run = None  # the converged run with the best point so far (its CMA-ES state)
+        self.second_warm = _flag(second_warm, f"{w}: second_warm")
+        self.warm_tail = _number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
+        self.warm_tail_stuck = _flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
+        self.first_best_f = None  # the best value when the first stage ended (warm_tail_stuck compares with it)
         self.children = [self._child(sub, lam1, self.sigma0, init)]
         # the race (off by default): more first-stage runs from random points of the strong settings'
         # cube, each given race_evals before the best one goes on alone (docs/search.md, "The race")
@@ -230,7 +238,10 @@ class StagedCMA(Optimizer):
             return f"scan of {self.scan_left[0]} ({self.scan_points} points across its range)"
         race = f", race: run {self.turn + 1} of {len(self.children)}" if self.racing else ""
         run = f", run {self.first_runs}" if self.stage == 1 and self.first_runs > 1 else ""
-        return f"stage {self.stage} ({', '.join(self.first) if self.stage == 1 else 'all'}{race}{run})"
+        what = (
+            ", ".join(self.first) if self.stage == 1 else "all" if self.stage == 2 else "all, the first stage's steps"
+        )
+        return f"stage {self.stage} ({what}{race}{run})"
 
     def _next_turn(self) -> None:
         """Racing: the run with the fewest evaluations asks next; once each has had ``race_evals`` (or
@@ -264,11 +275,39 @@ class StagedCMA(Optimizer):
             self.scan_left = list(self.first)
             return
         self.stage = 2
+        self.first_best_f = None if self._best_u is None else float(self.best_f)
+        first = self.children[-1] if self.children else None
         self.children.append(
             self._child(self.space, self.popsize, self.second_sigma, [self.space.decode(self._best_u)])
             if self._best_u is not None
             else self._child(self.space, self.popsize, self.sigma0, None)
         )
+        if self.second_warm and first is not None and self._best_u is not None and len(self.first) < self.space.n:
+            self.children[-1].shape_start(self._warm_covariance(first))
+
+    def _start_tail(self) -> None:
+        """The third stage (``warm_tail``): a run over everything from the best point so far, the first
+        stage's coordinates at the steps its run converged at, the others at ``second_sigma``."""
+        self.stage = 3
+        self.children.append(
+            self._child(self.space, self.popsize, self.second_sigma, [self.space.decode(self._best_u)])
+        )
+        self.children[-1].shape_start(self._warm_covariance(self.children[0]))
+
+    def _warm_covariance(self, first: CMAES) -> np.ndarray:
+        """The second stage's first covariance (in units of ``second_sigma``): on the first stage's
+        coordinates the covariance its run ended with (sigma^2 C), scaled down where a step exceeds
+        ``second_sigma`` (a run that has just restarted); the identity on the others. The strong settings
+        are then varied by the steps at which their run converged, the held ones by ``second_sigma``, where
+        one step for all would throw the strong ones off the narrow valley they were found in."""
+        S = first.sigma**2 * first.C
+        top = float(np.sqrt(np.diag(S)).max())
+        if top > self.second_sigma:
+            S = S * (self.second_sigma / top) ** 2
+        C = np.eye(self.space.n)
+        idx = self._idx
+        C[np.ix_(idx, idx)] = S / self.second_sigma**2
+        return C
 
     def ask(self) -> np.ndarray:
         if self._stopped:
@@ -329,8 +368,21 @@ class StagedCMA(Optimizer):
                 if _float_from_json(self.first_best_run["best_f"]) < c.best_f:
                     self.children[-1] = CMAES.from_state(self.first_best_run)
                 self.first_best_run = None
+        elif self._tail_due(c):
+            self._start_tail()
         elif c.stopped:
             self._stopped = True
+
+    def _tail_due(self, c: CMAES) -> bool:
+        """The second stage gives way to the warm tail: its run has stopped or the tail's share is reached
+        (with ``warm_tail_stuck``, only if it has found nothing better than the first stage's best point; once
+        past the tail's start it keeps checking, so a stage that stops unimproved later gives way then)."""
+        if self.stage != 2 or self.warm_tail <= 0 or len(self.first) >= self.space.n or self._best_u is None:
+            return False
+        if not (c.stopped or self.evaluations >= (1.0 - self.warm_tail) * self.budget):
+            return False
+        # warm_tail_stuck: only where the second stage has not beaten the first stage's best point
+        return not self.warm_tail_stuck or self.first_best_f is None or not self.best_f < self.first_best_f
 
     STATE_KEYS = (
         "popsize",
@@ -358,6 +410,10 @@ class StagedCMA(Optimizer):
         "first_runs",
         "first_explore",
         "first_best_run",
+        "second_warm",
+        "warm_tail",
+        "warm_tail_stuck",
+        "first_best_f",
         "stage",
         "stopped",
         "children",
@@ -394,6 +450,10 @@ class StagedCMA(Optimizer):
                 "first_runs": self.first_runs,
                 "first_explore": self.first_explore,
                 "first_best_run": self.first_best_run,
+                "second_warm": self.second_warm,
+                "warm_tail": self.warm_tail,
+                "warm_tail_stuck": self.warm_tail_stuck,
+                "first_best_f": None if self.first_best_f is None else _float_to_json(self.first_best_f),
                 "stage": self.stage,
                 "stopped": self._stopped,
                 "children": [c.state_dict() for c in self.children],
@@ -434,7 +494,7 @@ class StagedCMA(Optimizer):
             raise ClothFitError(f"checkpoint: {w} 'hold_u' must lie in the unit cube")
         # 'tie' came after the first checkpoints of this search: none there
         opt.tie = cls._check_tie(d.get("tie", {}), list(space.names), opt.first, f"checkpoint: {w}")
-        opt.stage = _num(d, "stage", w, int, 1, 2)
+        opt.stage = _num(d, "stage", w, int, 1, 3)
         opt._stopped = _bool(d, "stopped", w)
         # the race came after the first checkpoints of this search: none there
         opt.race = _num(d, "race", w, int, 1, 100) if "race" in d else 1
@@ -479,6 +539,15 @@ class StagedCMA(Optimizer):
             if CMAES.from_state(kept).space.state_dict() != opt._subspace().state_dict():
                 raise ClothFitError(f"checkpoint: {w} 'first_best_run' holds a run of another search space")
         opt.first_best_run = kept
+        # the warm second stage came after runs again: a plain one in older checkpoints
+        opt.second_warm = _bool(d, "second_warm", w) if "second_warm" in d else False
+        opt.warm_tail = _num(d, "warm_tail", w, float, 0.0, 1.0) if "warm_tail" in d else 0.0
+        opt.warm_tail_stuck = _bool(d, "warm_tail_stuck", w) if "warm_tail_stuck" in d else False
+        fb = d.get("first_best_f")
+        if fb is not None and (isinstance(fb, bool) or not isinstance(fb, (int, float))):
+            raise ClothFitError(f"checkpoint: {w} 'first_best_f' must be a number or null")
+        # null: no first stage ended yet, or (past it) a first stage without a finite value
+        opt.first_best_f = _float_from_json(fb) if opt.stage >= 2 and "first_best_f" in d else None
         opt.children = []
         for i, k in enumerate(kids):
             if k.get("algorithm") != "cma-es":
