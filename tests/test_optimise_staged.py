@@ -109,6 +109,7 @@ def test_resume_is_exact_in_either_stage(cut, warm):
             first_explore=0.56,
             second_warm=warm == "second",
             warm_tail=0.2 if warm == "tail" else 0.0,  # from the 240th evaluation: the 41st tell
+            warm_tail_stuck=False,
         )
 
     a = make()
@@ -132,7 +133,9 @@ def test_resume_is_exact_in_either_stage(cut, warm):
 def test_a_warm_tail_runs_from_the_best_point_with_the_first_stages_steps():
     """warm_tail: the last share of the budget a third run over everything from the best point so far,
     its first covariance as a warm second stage's; the second stage before it as by default."""
-    opt = StagedCMA(space(), seed=3, first=["x0", "x1"], budget=600, warm_tail=0.25, second_sigma=0.05)
+    opt = StagedCMA(
+        space(), seed=3, first=["x0", "x1"], budget=600, warm_tail=0.25, warm_tail_stuck=False, second_sigma=0.05
+    )
     assert "stage 1" in opt.phase_info()
     while opt.stage < 3:
         if opt.stage == 2:
@@ -430,6 +433,10 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     assert job.evaluations >= 40 and job.best_x is not None
     # runs again is off by default, and reaches the search through --search (FitConfig's options)
     assert opt.first_restart_step == 0.0 and opt.first_fraction == D.STAGED_FIRST_FRACTION
+    # the warm tail, where the second stage finds nothing better (docs/search.md), in main searches, not in rungs
+    assert (opt.warm_tail, opt.warm_tail_stuck) == (D.STAGED_WARM_TAIL, D.STAGED_WARM_TAIL_STUCK) == (0.2, True)
+    rung = FitJob(cap, cfg)._rung_optimizer(look.space.decode(np.full(look.space.n, 0.5)))
+    assert not isinstance(rung, StagedCMA) or rung.warm_tail == 0.0
     again = FitConfig(
         optimizer="auto",
         max_evaluations=40,

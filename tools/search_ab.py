@@ -59,7 +59,7 @@ STRATEGIES = {
         {"runs": 1, "explore": 0.0, "popsize": 32, "active": True, "polish": "cma", "polish_sigma": 0.05},
     ),
     # the settings the silhouettes see most first (docs/search.md, "Strong settings first"): the fit's
-    # `--optimizer cma-staged` (StagedCMA, set up as FitJob sets it up)
+    # `--optimizer cma-staged` (StagedCMA, set up as FitJob sets it up) before its warm tail ("staged-stuck32")
     "staged": ("cma-staged", {"restarts": 4}),
     # the same with three first-stage runs raced, 250 evaluations each, the best going on (StagedCMA's
     # 'race'; tried and not kept: docs/search.md)
@@ -114,8 +114,10 @@ STRATEGIES = {
     # the steps of 'staged-warm' (StagedCMA's 'warm_tail')
     "staged-tail20": ("cma-staged", {"restarts": 4, "warm_tail": 0.2}),
     # the same tail, but only where the second stage has found nothing better than the first stage's best point by
-    # then (StagedCMA's 'warm_tail_stuck'); from 68 % of the budget: 800 evaluations
+    # then (StagedCMA's 'warm_tail_stuck'); from 68 % of the budget: 800 evaluations. The fit's default since
     "staged-stuck32": ("cma-staged", {"restarts": 4, "warm_tail": 0.32, "warm_tail_stuck": True}),
+    # the same from 80 % of the budget (500 evaluations), where the plain tail ('staged-tail20') helped the goal's capture
+    "staged-stuck20": ("cma-staged", {"restarts": 4, "warm_tail": 0.2, "warm_tail_stuck": True}),
     # runs again in the first stage ("staged-runs") with that tail
     "staged-runs-tail20": (
         "cma-staged",
@@ -288,6 +290,10 @@ class Bench:
             kw.update(
                 {k: v for k, v in self.job._staged_kw().items() if k != "budget"}, budget=kw.get("budget", BUDGET)
             )
+            # each preset is the search its rows were recorded with: the warm tail (the default since
+            # docs/search.md, "A warm tail") only where a preset names it
+            kw.setdefault("warm_tail", 0.0)
+            kw.setdefault("warm_tail_stuck", False)
             if strategy == "staged-tie" and "compression_stiffness" in self.job.space.names:
                 kw["tie"] = {"compression_stiffness": "tension_stiffness"}
         return make_optimizer(name, self.job.space, seed=seed, **kw)

@@ -204,10 +204,10 @@ STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only wit
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best
 STAGED_SECOND_WARM = False  # cma-staged: the second stage starts with the first stage's steps on its coordinates
 # (its covariance, at most STAGED_SECOND_SIGMA) and STAGED_SECOND_SIGMA on the others, not that step on all
-STAGED_WARM_TAIL = 0.0  # cma-staged: the last share of the budget a third run from the best point so far, with
-# the steps of a warm second stage (0 = none)
-STAGED_WARM_TAIL_STUCK = False  # cma-staged: the warm tail only where the second stage has not beaten the first
-# stage's best point by then
+STAGED_WARM_TAIL = 0.2  # cma-staged: the last share of the budget a third run from the best point so far, with
+# the steps of a warm second stage (0 = none; docs/search.md, "A warm tail")
+STAGED_WARM_TAIL_STUCK = True  # cma-staged: the warm tail only where the second stage has not beaten the first
+# stage's best point by then (elsewhere the second stage goes on to the end, as before)
 STAGED_FIRST_UNKNOWNS = ("time_offset_s",)  # cma-staged: the manipulation's unknowns searched with the strong
 # settings (the time offset moves every frame's shape); a handle's few-mm offset waits for the second stage
 STAGED_RACE = 1  # cma-staged: first-stage runs raced (1 = no race: tried with 3 and not kept, docs/search.md)

@@ -379,6 +379,7 @@ class FitJob:
                 tolfun=kw["tolfun"],
                 first=first,
                 first_fraction=D.QUALITY_RUNG_FIRST_FRACTION,
+                warm_tail=0.0,  # the main search's warm tail was A/B'd on main searches, not on rungs
                 budget=self._rung_budget(),
                 popsize=4 + int(3 * math.log(self.space.n)),
             )
