@@ -137,7 +137,7 @@ class CMAES(Optimizer):
         self.run_bests = []  # generation bests of this run, the last 2 * stag_window
         self.last_fvals = []  # this generation's finite values (for tolfun)
 
-    def shape_start(self, C) -> None:
+    def shape_start(self, C: ArrayLike) -> None:
         """This run's first covariance (n x n, symmetric positive definite, in units of ``sigma0``) instead
         of the identity: a run that starts where another left off keeps the steps that run learned. Only
         before the run's first generation; a restart (IPOP) starts from the identity again."""
