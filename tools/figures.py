@@ -233,6 +233,29 @@ SOURCES = {
         "cores ('staged-pop16-3900'), against the default ('staged', the rows of search_runs), seeds 0-4 on its five "
         "captures: the fits of the rows files (drop --only-reused to run the missing ones)",
     },
+    "search_warm": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            *SEARCH_RUNS_CAPTURES,
+            "--strategies",
+            "staged,staged-warm,staged-tail20,staged-stuck32,staged-stuck20,staged-runs-tail20",
+            "--seeds",
+            "0-4",
+            "--reuse",
+            "docs/figures/search_runs_rows.jsonl",
+            "docs/figures/search_warm_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: the second stage's first steps: warm (the first stage's covariance on the strong "
+        "settings), a warm tail for the last 20 % of the budget, and that tail only where the second stage has found "
+        "nothing better (from 68 % and from 80 %: the default since), against the default before ('staged', the rows "
+        "of search_runs); seeds 0-4 on its five captures where run (the rows file: drop --only-reused to run the rest)",
+    },
     "search_pop16_wall": {
         "argv": [
             "{py}",
