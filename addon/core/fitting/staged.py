@@ -3,7 +3,9 @@
 :class:`StagedCMA` runs CMA-ES (IPOP restarts) over a subset of the coordinates, ``first``, with
 every other coordinate held at ``hold``, for ``first_fraction`` of ``budget`` evaluations (or until
 that run stops by its own criteria); then CMA-ES over every coordinate from the best point found,
-with step ``second_sigma``. On Blender's cloth the silhouettes see tension, shear, bending and air
+with step ``second_sigma``; where that second stage has found nothing better than the first stage's
+best point by the last ``warm_tail`` of the budget, a third run from that point with the first stage's own
+steps (the default since docs/search.md, "A warm tail"). On Blender's cloth the silhouettes see tension, shear, bending and air
 damping far more than compression and the structural dampings (docs/search.md, *The landscape*):
 a search over all eight at once spends its budget in the directions it cannot see, while the four
 it can see are found within a fraction of the budget on their own (docs/search.md, *Strong settings
@@ -64,7 +66,11 @@ class StagedCMA(Optimizer):
     (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
     Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
-    stage they are free like every other.
+    stage they are free like every other. ``second_warm``: the second stage's first covariance is the first
+    stage's run's on its coordinates (at most ``second_sigma``) and ``second_sigma`` on the others, not
+    ``second_sigma`` on all (tried, not kept). ``warm_tail``: the last share of ``budget`` goes to a third run
+    from the best point with that covariance; with ``warm_tail_stuck`` only if the second stage has not beaten
+    the first stage's best point by then (the default: 0.2, on).
     """
 
     name = "cma-staged"
