@@ -134,7 +134,14 @@ def test_a_warm_tail_runs_from_the_best_point_with_the_first_stages_steps():
     """warm_tail: the last share of the budget a third run over everything from the best point so far,
     its first covariance as a warm second stage's; the second stage before it as by default."""
     opt = StagedCMA(
-        space(), seed=3, first=["x0", "x1"], budget=600, warm_tail=0.25, warm_tail_stuck=False, second_sigma=0.05
+        space(),
+        seed=3,
+        first=["x0", "x1"],
+        budget=600,
+        warm_tail=0.25,
+        warm_tail_stuck=False,
+        second_sigma=0.05,
+        first_restart_step=0.0,  # one first-stage run: this test is the tail's
     )
     assert "stage 1" in opt.phase_info()
     while opt.stage < 3:
@@ -213,7 +220,9 @@ def test_a_stuck_warm_tail_runs_only_where_the_second_stage_found_nothing_better
         return np.round(10 * ((X[:, 0] - 1.5) ** 2 + (X[:, 1] + 2.0) ** 2), 1)
 
     def run(f):
-        opt = StagedCMA(space(), seed=3, first=["x0", "x1"], budget=600, warm_tail=0.3, warm_tail_stuck=True)
+        opt = StagedCMA(
+            space(), seed=3, first=["x0", "x1"], budget=600, warm_tail=0.3, warm_tail_stuck=True, first_restart_step=0.0
+        )
         stages = set()
         while opt.evaluations < 600 and not opt.stopped:
             X = opt.ask()
@@ -239,7 +248,7 @@ def test_a_converged_first_run_starts_again_where_the_first_began():
     start = np.array([1.0, -1.0, 0.0, 0.0, 0.0])
     runs_again = {"first_restart_step": 0.05, "first_fraction": 0.72, "first_explore": 0.56}
     opt = StagedCMA(space(), seed=2, first=["x0", "x1"], initial=[start], budget=1000, **runs_again)
-    assert opt.first_runs == 1 and D.STAGED_FIRST_RESTART_STEP == 0.0  # one run unless asked
+    assert opt.first_runs == 1  # one run so far
     seeds = [opt.children[-1].seed]
     ended = []  # (best value, evaluations) of each converged run, as it converged
     while opt.stage == 1:
@@ -265,11 +274,12 @@ def test_a_converged_first_run_starts_again_where_the_first_began():
     assert went_on.seed in seeds and (went_on.evaluations > kept_evals or went_on.seed == seeds[-1])
     assert opt.first_best_run is None
     assert np.allclose(opt.children[-1].mean, opt.space.encode(opt.best_x), atol=1e-9)
-    one = StagedCMA(space(), seed=2, first=["x0", "x1"], initial=[start], budget=1000)
+    one = StagedCMA(space(), seed=2, first=["x0", "x1"], initial=[start], budget=1000, first_restart_step=0.0)
     while one.stage == 1:
         X = one.ask()
         one.tell(X, strong_weak(X))
-    assert one.first_runs == 1
+    assert one.first_runs == 1  # without runs again (the default's since: D.STAGED_FIRST_RESTART_STEP)
+    assert D.STAGED_FIRST_RESTART_STEP == 0.005
     # a checkpoint written before runs again existed resumes with one run
     d = json.loads(json.dumps(StagedCMA(space(), seed=4, first=["x0"]).state_dict()))
     for key in ("first_restart_step", "first_init", "first_runs", "first_explore", "first_best_run"):
@@ -431,24 +441,26 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     job = FitJob(cap, cfg, checkpoint=ck)
     job.run()
     assert job.evaluations >= 40 and job.best_x is not None
-    # runs again is off by default, and reaches the search through --search (FitConfig's options)
-    assert opt.first_restart_step == 0.0 and opt.first_fraction == D.STAGED_FIRST_FRACTION
-    # the warm tail, where the second stage finds nothing better (docs/search.md), in main searches, not in rungs
-    assert (opt.warm_tail, opt.warm_tail_stuck) == (D.STAGED_WARM_TAIL, D.STAGED_WARM_TAIL_STUCK) == (0.2, True)
+    # runs again and the warm tail in every fit (docs/search.md, "Runs again and the tail"), in main searches,
+    # not in rungs; --search reaches both (FitConfig's options)
+    assert (opt.first_restart_step, opt.first_fraction, opt.first_explore) == (0.005, 0.48, 0.36)
+    assert (opt.warm_tail, opt.warm_tail_stuck) == (D.STAGED_WARM_TAIL, D.STAGED_WARM_TAIL_STUCK) == (0.2, False)
     rung = FitJob(cap, cfg)._rung_optimizer(look.space.decode(np.full(look.space.n, 0.5)))
-    assert not isinstance(rung, StagedCMA) or rung.warm_tail == 0.0
+    assert not isinstance(rung, StagedCMA) or (rung.warm_tail, rung.first_restart_step) == (0.0, 0.0)
     again = FitConfig(
         optimizer="auto",
         max_evaluations=40,
         train_cameras=[0, 2],
         train_times=[0.3],
-        staged_restart_step=0.005,
+        staged_restart_step=0.0,
         staged_first_fraction=0.72,
         staged_explore=0.56,
         staged_second_warm=not D.STAGED_SECOND_WARM,
+        staged_warm_tail_stuck=True,
     )
     o = FitJob(cap, again).opt
-    assert isinstance(o, StagedCMA) and (o.first_restart_step, o.first_fraction, o.first_explore) == (0.005, 0.72, 0.56)
+    assert isinstance(o, StagedCMA) and (o.first_restart_step, o.first_fraction, o.first_explore) == (0.0, 0.72, 0.56)
+    assert o.warm_tail_stuck is True
     assert opt.second_warm is D.STAGED_SECOND_WARM and o.second_warm is not D.STAGED_SECOND_WARM
     with pytest.raises(ClothFitError, match="staged_second_warm must be true or false"):
         FitConfig(staged_second_warm=1).checked()

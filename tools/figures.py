@@ -256,6 +256,31 @@ SOURCES = {
         "nothing better (from 68 % and from 80 %: the default since), against the default before ('staged', the rows "
         "of search_runs); seeds 0-4 on its five captures where run (the rows file: drop --only-reused to run the rest)",
     },
+    "search_rs_tail": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            *SEARCH_RUNS_CAPTURES,
+            "--strategies",
+            "staged,staged-stuck20,staged-rs48,staged-rs48-stuck20,staged-rs48-tail20",
+            "--seeds",
+            "0-4",
+            "--reuse",
+            "docs/figures/search_runs_rows.jsonl",
+            "docs/figures/search_warm_rows.jsonl",
+            "docs/figures/search_rs_tail_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: runs again in the first stage's own share followed by the warm tail, only where the "
+        "second stage found nothing better ('staged-rs48-stuck20') and in every fit ('staged-rs48-tail20': the default "
+        "since), against the default before ('staged-stuck20', its missing rows those of 'staged', the same search "
+        "where its tail did not start), runs again alone ('staged-rs48') and one run ('staged'), seeds 0-4 on the five "
+        "captures of search_runs: the fits of the rows files (drop --only-reused to run the missing ones)",
+    },
     "search_pop16_wall": {
         "argv": [
             "{py}",

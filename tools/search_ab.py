@@ -123,6 +123,30 @@ STRATEGIES = {
         "cma-staged",
         {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 0.56, "warm_tail": 0.2},
     ),
+    # runs again within the first stage's own share ("staged-rs48") with the default's tail (only where the second
+    # stage has found nothing better by 80 % of the budget)
+    "staged-rs48-stuck20": (
+        "cma-staged",
+        {
+            "restarts": 4,
+            "first_restart_step": 0.005,
+            "first_fraction": 0.48,
+            "first_explore": 0.36,
+            "warm_tail": 0.2,
+            "warm_tail_stuck": True,
+        },
+    ),
+    # the same with the tail in every fit, wherever the second stage stands by 80 % of the budget
+    "staged-rs48-tail20": (
+        "cma-staged",
+        {
+            "restarts": 4,
+            "first_restart_step": 0.005,
+            "first_fraction": 0.48,
+            "first_explore": 0.36,
+            "warm_tail": 0.2,
+        },
+    ),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
@@ -290,10 +314,11 @@ class Bench:
             kw.update(
                 {k: v for k, v in self.job._staged_kw().items() if k != "budget"}, budget=kw.get("budget", BUDGET)
             )
-            # each preset is the search its rows were recorded with: the warm tail (the default since
-            # docs/search.md, "A warm tail") only where a preset names it
+            # each preset is the search its rows were recorded with: the warm tail and runs again (the default's
+            # since docs/search.md, "A warm tail" and "Runs again and the tail") only where a preset names them
             kw.setdefault("warm_tail", 0.0)
             kw.setdefault("warm_tail_stuck", False)
+            kw.setdefault("first_restart_step", 0.0)
             if strategy == "staged-tie" and "compression_stiffness" in self.job.space.names:
                 kw["tie"] = {"compression_stiffness": "tension_stiffness"}
         return make_optimizer(name, self.job.space, seed=seed, **kw)
@@ -336,10 +361,13 @@ class Bench:
         else:
             opt = self.make(strategy, seed)
         obj = self.job.objective
+        best_at_80 = None  # the best value when 80 % of the budget is spent (where the default's tail decides)
         while opt.evaluations + spent < budget and not opt.stopped:
             X = opt.ask()
             f = obj(self.job.par.rows(X))
             opt.tell(X, f)
+            if best_at_80 is None and opt.evaluations + spent >= 0.8 * budget:
+                best_at_80 = float(opt.best_f)
             if trace and opt.generation % 10 == 0:
                 print(
                     f"  gen {opt.generation} evals {opt.evaluations} best {opt.best_f / obj.n_images * 100:.3f}"
@@ -370,6 +398,11 @@ class Bench:
             "truth_x": [float(v) for v in self.truth],
             "load": os.getloadavg()[0],
             "first_runs": getattr(opt, "first_runs", None),
+            "first_best_pct": None
+            if getattr(opt, "first_best_f", None) is None
+            else opt.first_best_f / obj.n_images * 100,
+            "best_at_80_pct": None if best_at_80 is None else best_at_80 / obj.n_images * 100,
+            "stage": getattr(opt, "stage", None),
         }
 
 

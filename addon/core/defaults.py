@@ -196,9 +196,9 @@ QUALITY_BASIN_GAIN = 0.3  # a fit far above its floor whose ladder chose a quali
 # start says to refit at that quality from the start (its rungs began in the start's basin: docs/issue20_goals.md)
 SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
 STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the strong settings alone (1200 of 2500)
-STAGED_FIRST_RESTART_STEP = 0.0  # cma-staged: a first-stage run whose every step is below this (unit cube) has
-# converged and another starts where the first began (0: one run; "runs again", tried and not kept at 0.005:
-# docs/search.md)
+STAGED_FIRST_RESTART_STEP = 0.005  # cma-staged: a first-stage run whose every step is below this (unit cube) has
+# converged and another starts where the first began (0: one run; "runs again", with the warm tail the default
+# since docs/search.md, "Runs again and the tail")
 STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only within this share of the budget;
 # then the run with the best point goes on to the end of the first stage's share
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best
@@ -206,8 +206,9 @@ STAGED_SECOND_WARM = False  # cma-staged: the second stage starts with the first
 # (its covariance, at most STAGED_SECOND_SIGMA) and STAGED_SECOND_SIGMA on the others, not that step on all
 STAGED_WARM_TAIL = 0.2  # cma-staged: the last share of the budget a third run from the best point so far, with
 # the steps of a warm second stage (0 = none; docs/search.md, "A warm tail")
-STAGED_WARM_TAIL_STUCK = True  # cma-staged: the warm tail only where the second stage has not beaten the first
-# stage's best point by then (elsewhere the second stage goes on to the end, as before)
+STAGED_WARM_TAIL_STUCK = False  # cma-staged: the warm tail only where the second stage has not beaten the first
+# stage's best point by then (True: the default with one first-stage run; with runs again the tail runs in every
+# fit, docs/search.md, "Runs again and the tail")
 STAGED_FIRST_UNKNOWNS = ("time_offset_s",)  # cma-staged: the manipulation's unknowns searched with the strong
 # settings (the time offset moves every frame's shape); a handle's few-mm offset waits for the second stage
 STAGED_RACE = 1  # cma-staged: first-stage runs raced (1 = no race: tried with 3 and not kept, docs/search.md)

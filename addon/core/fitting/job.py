@@ -379,7 +379,8 @@ class FitJob:
                 tolfun=kw["tolfun"],
                 first=first,
                 first_fraction=D.QUALITY_RUNG_FIRST_FRACTION,
-                warm_tail=0.0,  # the main search's warm tail was A/B'd on main searches, not on rungs
+                warm_tail=0.0,  # the main search's warm tail and runs again were A/B'd on main searches, not on rungs
+                first_restart_step=0.0,
                 budget=self._rung_budget(),
                 popsize=4 + int(3 * math.log(self.space.n)),
             )
