@@ -253,8 +253,8 @@ SOURCES = {
         "rtol": 0,
         "what": "issue 20 item 3: the second stage's first steps: warm (the first stage's covariance on the strong "
         "settings), a warm tail for the last 20 % of the budget, and that tail only where the second stage has found "
-        "nothing better (from 68 % and from 80 %: the default since), against the default before ('staged', the rows "
-        "of search_runs); seeds 0-4 on its five captures where run (the rows file: drop --only-reused to run the rest)",
+        "nothing better (from 68 % and from 80 %: the default then, until search_rs_tail), against the default before "
+        "('staged', the rows of search_runs); seeds 0-4 on its five captures where run (the rows file: drop --only-reused to run the rest)",
     },
     "search_rs_tail": {
         "argv": [
