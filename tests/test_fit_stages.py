@@ -134,6 +134,11 @@ def test_the_time_offset_is_estimated_with_the_cloth(caps):
         ),
     )
     assert job.space.names == FREE + ["time_offset_s"]
+    # with the manipulation's unknowns the warm tail starts only where the second stage is stuck (it searches the
+    # handles too: docs/search.md, "Runs again and the tail"); without them in every fit
+    plain = FitJob(cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=500, seed=1, train_cameras=[0, 2, 4, 6]))
+    assert job._staged_kw()["warm_tail_stuck"] is D.STAGED_WARM_TAIL_STUCK_UNKNOWNS is True
+    assert "warm_tail_stuck" not in plain._staged_kw() and D.STAGED_WARM_TAIL_STUCK is False
     r = job.run()
     assert [s["stage"] for s in r["stages"]] == ["search"] and r["evaluations"] <= 500 + job.opt.popsize
     # true time = capture time - time_offset_s: the truth was read SHIFT earlier -> +SHIFT

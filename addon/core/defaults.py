@@ -209,6 +209,8 @@ STAGED_WARM_TAIL = 0.2  # cma-staged: the last share of the budget a third run f
 STAGED_WARM_TAIL_STUCK = False  # cma-staged: the warm tail only where the second stage has not beaten the first
 # stage's best point by then (True: the default with one first-stage run; with runs again the tail runs in every
 # fit, docs/search.md, "Runs again and the tail")
+STAGED_WARM_TAIL_STUCK_UNKNOWNS = True  # cma-staged: the same where the fit searches the manipulation's unknowns
+# (an uncertain block): its second stage searches the handles too and still improves by then (docs/search.md)
 STAGED_FIRST_UNKNOWNS = ("time_offset_s",)  # cma-staged: the manipulation's unknowns searched with the strong
 # settings (the time offset moves every frame's shape); a handle's few-mm offset waits for the second stage
 STAGED_RACE = 1  # cma-staged: first-stage runs raced (1 = no race: tried with 3 and not kept, docs/search.md)

@@ -335,6 +335,11 @@ class FitJob:
         if self.config.population is not None:  # the user's population, in both stages
             kw["first_popsize"] = self.config.population
         strong = self._strong_free()
+        if self.space.n > self.npar:
+            # the manipulation's unknowns: the second stage searches the handles' offsets too and still improves
+            # when the tail would start; there the tail only where it is stuck (docs/search.md, "Runs again and
+            # the tail")
+            kw["warm_tail_stuck"] = D.STAGED_WARM_TAIL_STUCK_UNKNOWNS
         if strong:
             kw["first"] = strong + [n for n in list(self.space.names)[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]
             if par.initial is None:
