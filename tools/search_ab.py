@@ -43,6 +43,8 @@ from issue20_goals import parse_seeds  # noqa: E402  (tools/: the one seed-list 
 
 BUDGET = D.FIT_EVALUATIONS
 
+# runs again within the first stage's own share (StagedCMA's first_restart_step, first_explore)
+RS48 = {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.48, "first_explore": 0.36}
 # name -> (optimiser, kwargs); popsize None = FitJob's 4 + 3 ln n; tolx/tolfun as FitJob sets them
 STRATEGIES = {
     "baseline": ("cma-es", {"restarts": 4}),
@@ -83,10 +85,7 @@ STRATEGIES = {
         {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 1.0},
     ),
     # runs again within the first stage's own share: runs until 36 % of the budget, the best going on to 48 %
-    "staged-rs48": (
-        "cma-staged",
-        {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.48, "first_explore": 0.36},
-    ),
+    "staged-rs48": ("cma-staged", RS48),
     # one run with a larger first-stage population (24 instead of Hansen's 8 for the strong four): more of
     # each generation lands in the bending valley before the mean settles (tried, not kept)
     "staged-pop24": ("cma-staged", {"restarts": 4, "first_popsize": 24}),
@@ -123,30 +122,12 @@ STRATEGIES = {
         "cma-staged",
         {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 0.56, "warm_tail": 0.2},
     ),
-    # runs again within the first stage's own share ("staged-rs48") with the default's tail (only where the second
-    # stage has found nothing better by 80 % of the budget)
-    "staged-rs48-stuck20": (
-        "cma-staged",
-        {
-            "restarts": 4,
-            "first_restart_step": 0.005,
-            "first_fraction": 0.48,
-            "first_explore": 0.36,
-            "warm_tail": 0.2,
-            "warm_tail_stuck": True,
-        },
-    ),
-    # the same with the tail in every fit, wherever the second stage stands by 80 % of the budget
-    "staged-rs48-tail20": (
-        "cma-staged",
-        {
-            "restarts": 4,
-            "first_restart_step": 0.005,
-            "first_fraction": 0.48,
-            "first_explore": 0.36,
-            "warm_tail": 0.2,
-        },
-    ),
+    # runs again within the first stage's own share ("staged-rs48") with the warm tail only where the second stage has
+    # found nothing better by 80 % of the budget
+    "staged-rs48-stuck20": ("cma-staged", dict(RS48, warm_tail=0.2, warm_tail_stuck=True)),
+    # the same with the tail in every fit, wherever the second stage stands by 80 % of the budget (the default since,
+    # where the fit searches no manipulation unknowns)
+    "staged-rs48-tail20": ("cma-staged", dict(RS48, warm_tail=0.2)),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
@@ -311,9 +292,9 @@ class Bench:
         if name == "cma-portfolio":
             kw.setdefault("budget", BUDGET)
         if name == "cma-staged":
-            kw.update(
-                {k: v for k, v in self.job._staged_kw().items() if k != "budget"}, budget=kw.get("budget", BUDGET)
-            )
+            # the capture's stages (first, hold, ...) as FitJob sets them; a preset's own settings win
+            kw = dict({k: v for k, v in self.job._staged_kw().items() if k != "budget"}, **kw)
+            kw["budget"] = kw.get("budget", BUDGET)
             # each preset is the search its rows were recorded with: the warm tail and runs again (the default's
             # since docs/search.md, "A warm tail" and "Runs again and the tail") only where a preset names them
             kw.setdefault("warm_tail", 0.0)
