@@ -61,7 +61,8 @@ STRATEGIES = {
         {"runs": 1, "explore": 0.0, "popsize": 32, "active": True, "polish": "cma", "polish_sigma": 0.05},
     ),
     # the settings the silhouettes see most first (docs/search.md, "Strong settings first"): the fit's
-    # `--optimizer cma-staged` (StagedCMA, set up as FitJob sets it up) before its warm tail ("staged-stuck32")
+    # `--optimizer cma-staged` (StagedCMA, set up as FitJob sets it up) before its warm tail and runs again
+    # ("staged-rs48-tail20")
     "staged": ("cma-staged", {"restarts": 4}),
     # the same with three first-stage runs raced, 250 evaluations each, the best going on (StagedCMA's
     # 'race'; tried and not kept: docs/search.md)
@@ -113,9 +114,10 @@ STRATEGIES = {
     # the steps of 'staged-warm' (StagedCMA's 'warm_tail')
     "staged-tail20": ("cma-staged", {"restarts": 4, "warm_tail": 0.2}),
     # the same tail, but only where the second stage has found nothing better than the first stage's best point by
-    # then (StagedCMA's 'warm_tail_stuck'); from 68 % of the budget: 800 evaluations. The fit's default since
+    # then (StagedCMA's 'warm_tail_stuck'); from 68 % of the budget: 800 evaluations
     "staged-stuck32": ("cma-staged", {"restarts": 4, "warm_tail": 0.32, "warm_tail_stuck": True}),
-    # the same from 80 % of the budget (500 evaluations), where the plain tail ('staged-tail20') helped the goal's capture
+    # the same from 80 % of the budget (500 evaluations), where the plain tail ('staged-tail20') helped the goal's
+    # capture: the fit's default until "staged-rs48-tail20"
     "staged-stuck20": ("cma-staged", {"restarts": 4, "warm_tail": 0.2, "warm_tail_stuck": True}),
     # runs again in the first stage ("staged-runs") with that tail
     "staged-runs-tail20": (
@@ -342,12 +344,13 @@ class Bench:
         else:
             opt = self.make(strategy, seed)
         obj = self.job.objective
-        best_at_80 = None  # the best value when 80 % of the budget is spent (where the default's tail decides)
+        tail_at = (1.0 - D.STAGED_WARM_TAIL) * budget  # where the default's tail starts (80 % of the budget)
+        best_at_80 = None  # the best value then
         while opt.evaluations + spent < budget and not opt.stopped:
             X = opt.ask()
             f = obj(self.job.par.rows(X))
             opt.tell(X, f)
-            if best_at_80 is None and opt.evaluations + spent >= 0.8 * budget:
+            if best_at_80 is None and opt.evaluations + spent >= tail_at:
                 best_at_80 = float(opt.best_f)
             if trace and opt.generation % 10 == 0:
                 print(

@@ -3,9 +3,10 @@
 :class:`StagedCMA` runs CMA-ES (IPOP restarts) over a subset of the coordinates, ``first``, with
 every other coordinate held at ``hold``, for ``first_fraction`` of ``budget`` evaluations (or until
 that run stops by its own criteria); then CMA-ES over every coordinate from the best point found,
-with step ``second_sigma``; where that second stage has found nothing better than the first stage's
-best point by the last ``warm_tail`` of the budget, a third run from that point with the first stage's own
-steps (the default since docs/search.md, "A warm tail"). On Blender's cloth the silhouettes see tension, shear, bending and air
+with step ``second_sigma``; for the last ``warm_tail`` of the budget a third run from the best point with
+the first stage's own steps (docs/search.md, "A warm tail"; with ``warm_tail_stuck`` only where the second
+stage has found nothing better than the first stage's best point by then, as FitJob sets it where the fit
+searches the manipulation's unknowns: "Runs again and the tail"). On Blender's cloth the silhouettes see tension, shear, bending and air
 damping far more than compression and the structural dampings (docs/search.md, *The landscape*):
 a search over all eight at once spends its budget in the directions it cannot see, while the four
 it can see are found within a fraction of the budget on their own (docs/search.md, *Strong settings
@@ -62,7 +63,8 @@ class StagedCMA(Optimizer):
     where the first began (``initial``, else the middle), same step and population, new random
     stream, while the evaluations are within ``first_explore`` of ``budget``; then the run with the
     best point (kept as it stood when it converged) goes on to the end of the first stage's share, and
-    the second stage starts from the best point of them all (0: one run, as before). Race and scan were both tried against the bending valley that first stages miss and not kept
+    the second stage starts from the best point of them all (0: one run, as before; the default 0.005, with
+    the warm tail: docs/search.md, "Runs again and the tail"). Race and scan were both tried against the bending valley that first stages miss and not kept
     (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
     Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
@@ -70,7 +72,8 @@ class StagedCMA(Optimizer):
     stage's run's on its coordinates (at most ``second_sigma``) and ``second_sigma`` on the others, not
     ``second_sigma`` on all (tried, not kept). ``warm_tail``: the last share of ``budget`` goes to a third run
     from the best point with that covariance; with ``warm_tail_stuck`` only if the second stage has not beaten
-    the first stage's best point by then (the default: 0.2, on).
+    the first stage's best point by then (the defaults: 0.2, off; FitJob turns it on where the fit searches the
+    manipulation's unknowns).
     """
 
     name = "cma-staged"
