@@ -99,6 +99,26 @@ def _offsets_with(*search):
 # (made by tools/issue20_goals.py exact), fresh, damped, and a soft and a stiff cloth away from the search's centre
 SEARCH_RUNS_CAPTURES = ["out/issue20/exact", "synth:fresh", "synth:damped", "synth:soft", "synth:stiff"]
 
+
+def _search_ab_reused(strategies, *rows):
+    """tools/search_ab.py's strategies x seeds 0-4 on the five captures of search_runs: the fits of the rows files
+    (drop --only-reused to run the missing ones)."""
+    return [
+        "{py}",
+        "tools/search_ab.py",
+        *SEARCH_RUNS_CAPTURES,
+        "--strategies",
+        strategies,
+        "--seeds",
+        "0-4",
+        "--reuse",
+        *rows,
+        "--only-reused",
+        "--json-summary",
+        "{out}",
+    ]
+
+
 SOURCES = {
     "demo": {
         "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
@@ -188,44 +208,25 @@ SOURCES = {
         "(about 1 CPU min)",
     },
     "search_runs": {
-        "argv": [
-            "{py}",
-            "tools/search_ab.py",
-            *SEARCH_RUNS_CAPTURES,
-            "--strategies",
+        "argv": _search_ab_reused(
             "staged,staged-runs,staged-rs,staged-rs48,staged-pop24",
-            "--seeds",
-            "0-4",
-            "--reuse",
             "docs/figures/search_runs_rows.jsonl",
-            "--only-reused",
-            "--json-summary",
-            "{out}",
-        ],
+        ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: runs again in the first stage ('staged-runs', 'staged-rs48'; tried, not kept) against "
+        "what": "issue 20 item 3: runs again in the first stage ('staged-runs', 'staged-rs48'; not kept then, 'staged-rs48' with "
+        "the warm tail the default since search_rs_tail) against "
         "one run (the default, 'staged'), and 'staged-rs' and 'staged-pop24' where run, seeds 0-4 on five exact-model "
         "captures (the goal's, made by tools/issue20_goals.py exact; fresh, damped, and a soft and a stiff cloth away "
         "from the search's centre): the fits of the rows file (drop --only-reused to run the missing ones, about "
         "1 CPU min each)",
     },
     "search_pop16": {
-        "argv": [
-            "{py}",
-            "tools/search_ab.py",
-            *SEARCH_RUNS_CAPTURES,
-            "--strategies",
+        "argv": _search_ab_reused(
             "staged,staged-pop16,staged-pop16-3900",
-            "--seeds",
-            "0-4",
-            "--reuse",
             "docs/figures/search_runs_rows.jsonl",
             "docs/figures/search_pop16_rows.jsonl",
-            "--only-reused",
-            "--json-summary",
-            "{out}",
-        ],
+        ),
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: populations of 16 in both stages (two whole batches of the kernel's 8 lanes, one per "
@@ -234,21 +235,11 @@ SOURCES = {
         "captures: the fits of the rows files (drop --only-reused to run the missing ones)",
     },
     "search_warm": {
-        "argv": [
-            "{py}",
-            "tools/search_ab.py",
-            *SEARCH_RUNS_CAPTURES,
-            "--strategies",
+        "argv": _search_ab_reused(
             "staged,staged-warm,staged-tail20,staged-stuck32,staged-stuck20,staged-runs-tail20",
-            "--seeds",
-            "0-4",
-            "--reuse",
             "docs/figures/search_runs_rows.jsonl",
             "docs/figures/search_warm_rows.jsonl",
-            "--only-reused",
-            "--json-summary",
-            "{out}",
-        ],
+        ),
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: the second stage's first steps: warm (the first stage's covariance on the strong "
@@ -257,22 +248,12 @@ SOURCES = {
         "('staged', the rows of search_runs); seeds 0-4 on its five captures where run (the rows file: drop --only-reused to run the rest)",
     },
     "search_rs_tail": {
-        "argv": [
-            "{py}",
-            "tools/search_ab.py",
-            *SEARCH_RUNS_CAPTURES,
-            "--strategies",
+        "argv": _search_ab_reused(
             "staged,staged-stuck20,staged-rs48,staged-rs48-stuck20,staged-rs48-tail20",
-            "--seeds",
-            "0-4",
-            "--reuse",
             "docs/figures/search_runs_rows.jsonl",
             "docs/figures/search_warm_rows.jsonl",
             "docs/figures/search_rs_tail_rows.jsonl",
-            "--only-reused",
-            "--json-summary",
-            "{out}",
-        ],
+        ),
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: runs again in the first stage's own share followed by the warm tail, only where the "
