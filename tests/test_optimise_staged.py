@@ -241,6 +241,50 @@ def test_a_stuck_warm_tail_runs_only_where_the_second_stage_found_nothing_better
     assert b.warm_tail_stuck is False and b.first_best_f is None
 
 
+def test_a_stalled_second_stage_gives_way_to_the_tail_early():
+    """warm_tail_stall: the tail starts as soon as the second stage gains less than warm_tail_stall_gain of its
+    best over warm_tail_stall of the budget (before the tail's own share); a second stage that still gains goes on
+    to the tail's share. The mark it measures from is checkpointed; older checkpoints have no stall rule."""
+
+    def flat(X):  # nothing beats the first stage's 0.0
+        X = np.atleast_2d(X)
+        return np.round(10 * ((X[:, 0] - 1.5) ** 2 + (X[:, 1] + 2.0) ** 2), 1)
+
+    def run(f, stall, stop_at=None):
+        opt = StagedCMA(
+            space(),
+            seed=3,
+            first=["x0", "x1"],
+            budget=600,
+            warm_tail=0.2,
+            warm_tail_stall=stall,
+            first_restart_step=0.0,
+        )
+        started = None
+        while opt.evaluations < (stop_at or 600) and not opt.stopped:
+            X = opt.ask()
+            opt.tell(X, f(X))
+            if started is None and opt.stage == 3:
+                started = opt.evaluations
+        return opt, started
+
+    opt, started = run(flat, 0.1)  # the second stage starts at 288: stalled after 60 more
+    assert 288 + 60 <= started < 288 + 60 + 20 and opt.best_f == 0.0
+    _, started = run(flat, 0.0)  # no stall rule: at the tail's share (80 %)
+    assert 480 <= started < 500
+    # a second stage that gains keeps going: strong_weak's weak settings, held in the first stage, gain more than 1 % per 60
+    _, started = run(strong_weak, 0.1)
+    assert started is not None and started >= 480
+    opt, _ = run(strong_weak, 0.1, stop_at=330)
+    assert opt.stage == 2 and opt.stall_mark is not None
+    d = json.loads(json.dumps(opt.state_dict()))
+    b = optimizer_from_state(d)
+    assert b.stall_mark == opt.stall_mark and (b.warm_tail_stall, b.warm_tail_stall_gain) == (0.1, 0.01)
+    del d["warm_tail_stall"], d["warm_tail_stall_gain"], d["stall_mark"]  # a checkpoint from before them
+    b = optimizer_from_state(d)
+    assert b.warm_tail_stall == 0.0 and b.stall_mark is None
+
+
 def test_a_converged_first_run_starts_again_where_the_first_began():
     """A first-stage run whose every step is below first_restart_step has settled in its basin: another
     starts at the same point with the same step and a new random stream, until the first stage's share is
@@ -360,6 +404,8 @@ def test_the_first_stage_races_runs_then_the_best_goes_on_alone():
         (lambda d: d.update(stage=3), "'children'"),
         (lambda d: d.update(warm_tail=2.0), "'warm_tail'"),
         (lambda d: d.update(first_best_f="low"), "'first_best_f'"),
+        (lambda d: d.update(stall_mark=[1, 2, 3]), "'stall_mark'"),
+        (lambda d: d.update(warm_tail_stall=-1), "'warm_tail_stall'"),
         (lambda d: d.update(hold_u=[2.0] * 5), "'hold_u'"),
         (lambda d: d.update(children=[]), "'children'"),
         (lambda d: d.update(turn=7), "'turn'"),

@@ -262,6 +262,19 @@ SOURCES = {
         "where its tail did not start), runs again alone ('staged-rs48') and one run ('staged'), seeds 0-4 on the five "
         "captures of search_runs: the fits of the rows files (drop --only-reused to run the missing ones)",
     },
+    "search_stall": {
+        "argv": _search_ab_reused(
+            "staged-rs48-tail20,staged-rs48-stall10",
+            "docs/figures/search_rs_tail_rows.jsonl",
+            "docs/figures/search_stall_rows.jsonl",
+        ),
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: the warm tail also started as soon as the second stage gains less than 1 % over 10 % "
+        "of the budget ('staged-rs48-stall10'; tried, not kept), against the default ('staged-rs48-tail20', the rows "
+        "of search_rs_tail), seeds 0-4 where run (the goal's capture): the fits of the rows files (drop --only-reused "
+        "to run the missing ones)",
+    },
     "search_pop16_wall": {
         "argv": [
             "{py}",

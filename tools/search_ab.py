@@ -130,6 +130,9 @@ STRATEGIES = {
     # the same with the tail in every fit, wherever the second stage stands by 80 % of the budget (the default since,
     # where the fit searches no manipulation unknowns)
     "staged-rs48-tail20": ("cma-staged", dict(RS48, warm_tail=0.2)),
+    # the same, the tail also starting as soon as the second stage has gained less than 1 % over 10 % of the budget
+    # (250 evaluations; StagedCMA's 'warm_tail_stall'): where the second stage is stuck the tail gets its share
+    "staged-rs48-stall10": ("cma-staged", dict(RS48, warm_tail=0.2, warm_tail_stall=0.1)),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
@@ -302,6 +305,7 @@ class Bench:
             kw.setdefault("warm_tail", 0.0)
             kw.setdefault("warm_tail_stuck", False)
             kw.setdefault("first_restart_step", 0.0)
+            kw.setdefault("warm_tail_stall", 0.0)
             if strategy == "staged-tie" and "compression_stiffness" in self.job.space.names:
                 kw["tie"] = {"compression_stiffness": "tension_stiffness"}
         return make_optimizer(name, self.job.space, seed=seed, **kw)
@@ -346,12 +350,15 @@ class Bench:
         obj = self.job.objective
         tail_at = (1.0 - D.STAGED_WARM_TAIL) * budget  # where the default's tail starts (80 % of the budget)
         best_at_80 = None  # the best value then
+        tail_started = None  # the evaluations when the warm tail started (its third stage), if it did
         while opt.evaluations + spent < budget and not opt.stopped:
             X = opt.ask()
             f = obj(self.job.par.rows(X))
             opt.tell(X, f)
             if best_at_80 is None and opt.evaluations + spent >= tail_at:
                 best_at_80 = float(opt.best_f)
+            if tail_started is None and getattr(opt, "stage", None) == 3:
+                tail_started = int(opt.evaluations) + int(spent)
             if trace and opt.generation % 10 == 0:
                 print(
                     f"  gen {opt.generation} evals {opt.evaluations} best {opt.best_f / obj.n_images * 100:.3f}"
@@ -387,6 +394,7 @@ class Bench:
             else opt.first_best_f / obj.n_images * 100,
             "best_at_80_pct": None if best_at_80 is None else best_at_80 / obj.n_images * 100,
             "stage": getattr(opt, "stage", None),
+            "tail_started": tail_started,
         }
 
 

@@ -211,6 +211,9 @@ STAGED_WARM_TAIL_STUCK = False  # cma-staged: the warm tail only where the secon
 # fit, docs/search.md, "Runs again and the tail")
 STAGED_WARM_TAIL_STUCK_UNKNOWNS = True  # cma-staged: the same where the fit searches the manipulation's unknowns
 # (an uncertain block): its second stage searches the handles too and still improves by then (docs/search.md)
+STAGED_WARM_TAIL_STALL = 0.0  # cma-staged: the warm tail also starts as soon as the second stage has gained less
+# than STAGED_WARM_TAIL_STALL_GAIN (relative) over this share of the budget (0 = only at the tail's share)
+STAGED_WARM_TAIL_STALL_GAIN = 0.01
 STAGED_FIRST_UNKNOWNS = ("time_offset_s",)  # cma-staged: the manipulation's unknowns searched with the strong
 # settings (the time offset moves every frame's shape); a handle's few-mm offset waits for the second stage
 STAGED_RACE = 1  # cma-staged: first-stage runs raced (1 = no race: tried with 3 and not kept, docs/search.md)

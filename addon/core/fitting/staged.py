@@ -73,7 +73,9 @@ class StagedCMA(Optimizer):
     ``second_sigma`` on all (tried, not kept). ``warm_tail``: the last share of ``budget`` goes to a third run
     from the best point with that covariance; with ``warm_tail_stuck`` only if the second stage has not beaten
     the first stage's best point by then (the defaults: 0.2, off; FitJob turns it on where the fit searches the
-    manipulation's unknowns).
+    manipulation's unknowns). ``warm_tail_stall``: the tail also starts as soon as the second stage has gained less
+    than ``warm_tail_stall_gain`` of its best value over that share of ``budget`` (default 0: tried, not kept,
+    docs/search.md, "A tail where the second stage stalls").
     """
 
     name = "cma-staged"
@@ -104,6 +106,8 @@ class StagedCMA(Optimizer):
         second_warm: bool = D.STAGED_SECOND_WARM,
         warm_tail: float = D.STAGED_WARM_TAIL,
         warm_tail_stuck: bool = D.STAGED_WARM_TAIL_STUCK,
+        warm_tail_stall: float = D.STAGED_WARM_TAIL_STALL,
+        warm_tail_stall_gain: float = D.STAGED_WARM_TAIL_STALL_GAIN,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -155,6 +159,9 @@ class StagedCMA(Optimizer):
         self.warm_tail = _number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
         self.warm_tail_stuck = _flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
         self.first_best_f = None  # the best value when the first stage ended (warm_tail_stuck compares with it)
+        self.warm_tail_stall = _number(warm_tail_stall, f"{w}: warm_tail_stall", 0.0, 1.0)
+        self.warm_tail_stall_gain = _number(warm_tail_stall_gain, f"{w}: warm_tail_stall_gain", 0.0, 1.0)
+        self.stall_mark = None  # the second stage's [evaluations, best value] its gain is measured from
         self.children = [self._child(sub, lam1, self.sigma0, init)]
         # the race (off by default): more first-stage runs from random points of the strong settings'
         # cube, each given race_evals before the best one goes on alone (docs/search.md, "The race")
@@ -285,6 +292,7 @@ class StagedCMA(Optimizer):
             return
         self.stage = 2
         self.first_best_f = None if self._best_u is None else float(self.best_f)
+        self.stall_mark = None if self._best_u is None else [int(self.evaluations), float(self.best_f)]
         first = self.children[-1] if self.children else None
         self.children.append(
             self._child(self.space, self.popsize, self.second_sigma, [self.space.decode(self._best_u)])
@@ -388,10 +396,25 @@ class StagedCMA(Optimizer):
         past the tail's start it keeps checking, so a stage that stops unimproved later gives way then)."""
         if self.stage != 2 or self.warm_tail <= 0 or len(self.first) >= self.space.n or self._best_u is None:
             return False
+        if self._stalled():
+            return True
         if not (c.stopped or self.evaluations >= (1.0 - self.warm_tail) * self.budget):
             return False
         # warm_tail_stuck: only where the second stage has not beaten the first stage's best point
         return not self.warm_tail_stuck or self.first_best_f is None or not self.best_f < self.first_best_f
+
+    def _stalled(self) -> bool:
+        """``warm_tail_stall``: the second stage has gained less than ``warm_tail_stall_gain`` of its best value
+        over the last ``warm_tail_stall`` of the budget (measured in windows from the stage's start)."""
+        if self.warm_tail_stall <= 0 or self.stall_mark is None:
+            return False
+        e0, f0 = self.stall_mark
+        if self.evaluations - e0 < self.warm_tail_stall * self.budget:
+            return False
+        if not self.best_f < f0 - self.warm_tail_stall_gain * abs(f0):
+            return True
+        self.stall_mark = [int(self.evaluations), float(self.best_f)]
+        return False
 
     STATE_KEYS = (
         "popsize",
@@ -422,6 +445,9 @@ class StagedCMA(Optimizer):
         "second_warm",
         "warm_tail",
         "warm_tail_stuck",
+        "warm_tail_stall",
+        "warm_tail_stall_gain",
+        "stall_mark",
         "first_best_f",
         "stage",
         "stopped",
@@ -462,6 +488,11 @@ class StagedCMA(Optimizer):
                 "second_warm": self.second_warm,
                 "warm_tail": self.warm_tail,
                 "warm_tail_stuck": self.warm_tail_stuck,
+                "warm_tail_stall": self.warm_tail_stall,
+                "warm_tail_stall_gain": self.warm_tail_stall_gain,
+                "stall_mark": None
+                if self.stall_mark is None
+                else [self.stall_mark[0], _float_to_json(self.stall_mark[1])],
                 "first_best_f": None if self.first_best_f is None else _float_to_json(self.first_best_f),
                 "stage": self.stage,
                 "stopped": self._stopped,
@@ -552,6 +583,25 @@ class StagedCMA(Optimizer):
         opt.second_warm = _bool(d, "second_warm", w) if "second_warm" in d else False
         opt.warm_tail = _num(d, "warm_tail", w, float, 0.0, 1.0) if "warm_tail" in d else 0.0
         opt.warm_tail_stuck = _bool(d, "warm_tail_stuck", w) if "warm_tail_stuck" in d else False
+        # the stalled second stage came after the stuck one: none in older checkpoints
+        opt.warm_tail_stall = _num(d, "warm_tail_stall", w, float, 0.0, 1.0) if "warm_tail_stall" in d else 0.0
+        opt.warm_tail_stall_gain = (
+            _num(d, "warm_tail_stall_gain", w, float, 0.0, 1.0)
+            if "warm_tail_stall_gain" in d
+            else D.STAGED_WARM_TAIL_STALL_GAIN
+        )
+        mark = d.get("stall_mark")
+        if mark is not None and (
+            not isinstance(mark, list)
+            or len(mark) != 2
+            or isinstance(mark[0], bool)
+            or not isinstance(mark[0], int)
+            or not 0 <= mark[0] <= opt.evaluations
+            or isinstance(mark[1], bool)
+            or not isinstance(mark[1], (int, float, str))
+        ):
+            raise ClothFitError(f"checkpoint: {w} 'stall_mark' must be null or [evaluations, value]")
+        opt.stall_mark = None if mark is None or opt.stage != 2 else [mark[0], _float_from_json(mark[1])]
         fb = d.get("first_best_f")
         if fb is not None and (isinstance(fb, bool) or not isinstance(fb, (int, float))):
             raise ClothFitError(f"checkpoint: {w} 'first_best_f' must be a number or null")
