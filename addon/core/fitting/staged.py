@@ -393,7 +393,8 @@ class StagedCMA(Optimizer):
     def _tail_due(self, c: CMAES) -> bool:
         """The second stage gives way to the warm tail: its run has stopped or the tail's share is reached
         (with ``warm_tail_stuck``, only if it has found nothing better than the first stage's best point; once
-        past the tail's start it keeps checking, so a stage that stops unimproved later gives way then)."""
+        past the tail's start it keeps checking, so a stage that stops unimproved later gives way then); with
+        ``warm_tail_stall``, also as soon as it stalls (``_stalled``), stuck or not."""
         if self.stage != 2 or self.warm_tail <= 0 or len(self.first) >= self.space.n or self._best_u is None:
             return False
         if self._stalled():
