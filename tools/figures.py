@@ -275,6 +275,19 @@ SOURCES = {
         "of search_rs_tail), seeds 0-4 where run (the goal's capture): the fits of the rows files (drop --only-reused "
         "to run the missing ones)",
     },
+    "search_step": {
+        "argv": _search_ab_reused(
+            "staged-rs48-tail20,staged-rs48-step02,staged-rs48-step01",
+            "docs/figures/search_rs_tail_rows.jsonl",
+            "docs/figures/search_step_rows.jsonl",
+        ),
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: runs again counting a first-stage run settled at steps below 0.02 ('staged-rs48-step02') "
+        "or 0.01 ('staged-rs48-step01') of the cube instead of the default's 0.005 (tried, not kept), against the "
+        "default ('staged-rs48-tail20', the rows of search_rs_tail), seeds 0-4 on the five captures of search_runs: "
+        "the fits of the rows files (drop --only-reused to run the missing ones)",
+    },
     "search_pop16_wall": {
         "argv": [
             "{py}",
