@@ -92,6 +92,12 @@ def test_no_first_stage_is_plain_cma_over_everything():
 # 6 per generation over 2 coordinates: the first run converges and a second starts at the 22nd tell (132
 # evaluations), the second stage at the 36th (216, the first stage's share of 300): checkpointed in the
 # first run, with the batch whose tell starts the second run pending, in the second run, with the batch
+def flat(X):
+    """Only x0, x1 matter, in steps of 0.1: once the first stage has found 0.0 nothing beats it."""
+    X = np.atleast_2d(X)
+    return np.round(10 * ((X[:, 0] - 1.5) ** 2 + (X[:, 1] + 2.0) ** 2), 1)
+
+
 # whose tell switches stages pending, and in the second stage
 @pytest.mark.parametrize("warm", ["", "second", "tail"])
 @pytest.mark.parametrize("cut", [7, 21, 22, 35, 36, 60])
@@ -215,10 +221,6 @@ def test_a_stuck_warm_tail_runs_only_where_the_second_stage_found_nothing_better
     """warm_tail_stuck: the tail starts only if the second stage has not beaten the first stage's best
     point by the tail's share; a second stage that improves goes on to the end as by default."""
 
-    def flat(X):  # only x0, x1 matter, in steps of 0.1: nothing beats the first stage's 0.0
-        X = np.atleast_2d(X)
-        return np.round(10 * ((X[:, 0] - 1.5) ** 2 + (X[:, 1] + 2.0) ** 2), 1)
-
     def run(f):
         opt = StagedCMA(
             space(), seed=3, first=["x0", "x1"], budget=600, warm_tail=0.3, warm_tail_stuck=True, first_restart_step=0.0
@@ -245,10 +247,6 @@ def test_a_stalled_second_stage_gives_way_to_the_tail_early():
     """warm_tail_stall: the tail starts as soon as the second stage gains less than warm_tail_stall_gain of its
     best over warm_tail_stall of the budget (before the tail's own share); a second stage that still gains goes on
     to the tail's share. The mark it measures from is checkpointed; older checkpoints have no stall rule."""
-
-    def flat(X):  # nothing beats the first stage's 0.0
-        X = np.atleast_2d(X)
-        return np.round(10 * ((X[:, 0] - 1.5) ** 2 + (X[:, 1] + 2.0) ** 2), 1)
 
     def run(f, stall, stop_at=None):
         opt = StagedCMA(
