@@ -89,15 +89,15 @@ def test_no_first_stage_is_plain_cma_over_everything():
     assert len(X) == opt.popsize and not np.allclose(X[:, 4], X[0, 4])
 
 
-# 6 per generation over 2 coordinates: the first run converges and a second starts at the 22nd tell (132
-# evaluations), the second stage at the 36th (216, the first stage's share of 300): checkpointed in the
-# first run, with the batch whose tell starts the second run pending, in the second run, with the batch
 def flat(X):
     """Only x0, x1 matter, in steps of 0.1: once the first stage has found 0.0 nothing beats it."""
     X = np.atleast_2d(X)
     return np.round(10 * ((X[:, 0] - 1.5) ** 2 + (X[:, 1] + 2.0) ** 2), 1)
 
 
+# 6 per generation over 2 coordinates: the first run converges and a second starts at the 22nd tell (132
+# evaluations), the second stage at the 36th (216, the first stage's share of 300): checkpointed in the
+# first run, with the batch whose tell starts the second run pending, in the second run, with the batch
 # whose tell switches stages pending, and in the second stage
 @pytest.mark.parametrize("warm", ["", "second", "tail"])
 @pytest.mark.parametrize("cut", [7, 21, 22, 35, 36, 60])
