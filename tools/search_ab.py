@@ -45,6 +45,8 @@ BUDGET = D.FIT_EVALUATIONS
 
 # runs again within the first stage's own share (StagedCMA's first_restart_step, first_explore)
 RS48 = {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.48, "first_explore": 0.36}
+# runs again in a larger first stage: runs until 56 % of the budget, the best going on to 72 % ("staged-runs")
+RUNS72 = {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 0.56}
 # name -> (optimiser, kwargs); popsize None = FitJob's 4 + 3 ln n; tolx/tolfun as FitJob sets them
 STRATEGIES = {
     "baseline": ("cma-es", {"restarts": 4}),
@@ -76,15 +78,9 @@ STRATEGIES = {
     # runs again (StagedCMA's 'first_restart_step'; tried and not kept: docs/search.md, "Runs again"): each
     # first-stage run that has converged is followed by another from the same start with a new random
     # stream, until 56 % of the budget; then the best run goes on to 72 %, the first stage's larger share
-    "staged-runs": (
-        "cma-staged",
-        {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 0.56},
-    ),
+    "staged-runs": ("cma-staged", RUNS72),
     # the same, the runs going on to the end of the 72 % and the best not going on
-    "staged-rs": (
-        "cma-staged",
-        {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 1.0},
-    ),
+    "staged-rs": ("cma-staged", dict(RUNS72, first_explore=1.0)),
     # runs again within the first stage's own share: runs until 36 % of the budget, the best going on to 48 %
     "staged-rs48": ("cma-staged", RS48),
     # one run with a larger first-stage population (24 instead of Hansen's 8 for the strong four): more of
@@ -100,16 +96,7 @@ STRATEGIES = {
     # step of 0.05 for all, which throws the strong settings off their narrow valley
     "staged-warm": ("cma-staged", {"restarts": 4, "second_warm": True}),
     # the same after runs again in the first stage ("staged-runs" above)
-    "staged-runs-warm": (
-        "cma-staged",
-        {
-            "restarts": 4,
-            "first_restart_step": 0.005,
-            "first_fraction": 0.72,
-            "first_explore": 0.56,
-            "second_warm": True,
-        },
-    ),
+    "staged-runs-warm": ("cma-staged", dict(RUNS72, second_warm=True)),
     # the default second stage, then the last 20 % of the budget a third run from the best point so far with
     # the steps of 'staged-warm' (StagedCMA's 'warm_tail')
     "staged-tail20": ("cma-staged", {"restarts": 4, "warm_tail": 0.2}),
@@ -120,10 +107,7 @@ STRATEGIES = {
     # capture: the fit's default until "staged-rs48-tail20"
     "staged-stuck20": ("cma-staged", {"restarts": 4, "warm_tail": 0.2, "warm_tail_stuck": True}),
     # runs again in the first stage ("staged-runs") with that tail
-    "staged-runs-tail20": (
-        "cma-staged",
-        {"restarts": 4, "first_restart_step": 0.005, "first_fraction": 0.72, "first_explore": 0.56, "warm_tail": 0.2},
-    ),
+    "staged-runs-tail20": ("cma-staged", dict(RUNS72, warm_tail=0.2)),
     # runs again within the first stage's own share ("staged-rs48") with the warm tail only where the second stage has
     # found nothing better by 80 % of the budget
     "staged-rs48-stuck20": ("cma-staged", dict(RS48, warm_tail=0.2, warm_tail_stuck=True)),
