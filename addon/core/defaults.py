@@ -196,9 +196,12 @@ QUALITY_BASIN_GAIN = 0.3  # a fit far above its floor whose ladder chose a quali
 # start says to refit at that quality from the start (its rungs began in the start's basin: docs/issue20_goals.md)
 SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
 STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the strong settings alone (1200 of 2500)
-STAGED_FIRST_RESTART_STEP = 0.005  # cma-staged: a first-stage run whose every step is below this (unit cube) has
+STAGED_FIRST_RESTART_STEP = 0.01  # cma-staged: a first-stage run whose every step is below this (unit cube) has
 # converged and another starts where the first began (0: one run; "runs again", with the warm tail the default
-# since docs/search.md, "Runs again and the tail")
+# since docs/search.md, "Runs again and the tail"; 0.01 since "Shorter runs again")
+STAGED_FIRST_RESTART_STEP_LADDER = 0.005  # the same where a quality ladder follows the main search (the fit chooses
+# the quality, or a scene fit probes one above): at 0.01 the time goal's fit took 178 s of its 180 and ended no
+# closer to its floor (docs/search.md, "Shorter runs again")
 STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only within this share of the budget;
 # then the run with the best point goes on to the end of the first stage's share
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best

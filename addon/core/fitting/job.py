@@ -340,6 +340,8 @@ class FitJob:
             # when the tail would start; there the tail only where it is stuck (docs/search.md, "Runs again and
             # the tail")
             kw["warm_tail_stuck"] = D.STAGED_WARM_TAIL_STUCK_UNKNOWNS
+        if self.ladder is not None:  # the rungs share the budget: shorter runs again cost time there (D's note)
+            kw["first_restart_step"] = D.STAGED_FIRST_RESTART_STEP_LADDER
         if strong:
             kw["first"] = strong + [n for n in list(self.space.names)[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]
             if par.initial is None:
