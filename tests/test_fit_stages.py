@@ -274,6 +274,23 @@ def test_a_staged_fits_rungs_resettle_its_strong_settings_first_and_resume_exact
     assert r["quality_choice"] == ref["quality_choice"] and r["best_E_all"] == ref["best_E_all"]
 
 
+def test_runs_again_settle_later_where_a_quality_ladder_follows(caps):
+    """A first-stage run counts as settled at steps below 0.01 of the cube; where a quality ladder follows the
+    main search, at 0.005 (at 0.01 the time goal's fit took 178 s of its 180: docs/search.md, "Shorter runs
+    again"); the user's --search staged_restart_step wins over either."""
+    _, cap = caps
+    cfg = dict(free=FREE + ["compression_stiffness"], fixed=FIXED, max_evaluations=300, seed=3)
+    told_quality = FitJob(cap, FitConfig(**cfg))
+    assert told_quality.ladder is None and told_quality.opt.name == "cma-staged"
+    assert told_quality.opt.first_restart_step == D.STAGED_FIRST_RESTART_STEP == 0.01
+    laddered = FitJob(cap, FitConfig(**cfg, quality="auto"))
+    assert laddered.ladder is not None and laddered.opt.name == "cma-staged"
+    assert laddered.opt.first_restart_step == D.STAGED_FIRST_RESTART_STEP_LADDER == 0.005
+    for q in (None, "auto"):
+        told = FitJob(cap, FitConfig(**cfg, quality=q, staged_restart_step=0.02))
+        assert told.opt.first_restart_step == 0.02
+
+
 def test_a_declared_quality_is_kept(caps):
     _, cap = caps
     job = FitJob(cap, FitConfig(free=FREE, fixed=FIXED, max_evaluations=20, model="blender"))

@@ -321,7 +321,6 @@ def test_a_converged_first_run_starts_again_where_the_first_began():
         X = one.ask()
         one.tell(X, strong_weak(X))
     assert one.first_runs == 1  # without runs again (the default's since: D.STAGED_FIRST_RESTART_STEP)
-    assert D.STAGED_FIRST_RESTART_STEP == 0.005
     # a checkpoint written before runs again existed resumes with one run
     d = json.loads(json.dumps(StagedCMA(space(), seed=4, first=["x0"]).state_dict()))
     for key in ("first_restart_step", "first_init", "first_runs", "first_explore", "first_best_run"):
@@ -485,9 +484,9 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     job = FitJob(cap, cfg, checkpoint=ck)
     job.run()
     assert job.evaluations >= 40 and job.best_x is not None
-    # runs again and the warm tail in every fit (docs/search.md, "Runs again and the tail"), in main searches,
-    # not in rungs; --search reaches both (FitConfig's options)
-    assert (opt.first_restart_step, opt.first_fraction, opt.first_explore) == (0.005, 0.48, 0.36)
+    # runs again (settled at 0.01 of the cube since "Shorter runs again") and the warm tail in every fit
+    # (docs/search.md, "Runs again and the tail"), in main searches, not in rungs; --search reaches both
+    assert (opt.first_restart_step, opt.first_fraction, opt.first_explore) == (0.01, 0.48, 0.36)
     assert (opt.warm_tail, opt.warm_tail_stuck) == (D.STAGED_WARM_TAIL, D.STAGED_WARM_TAIL_STUCK) == (0.2, False)
     rung = FitJob(cap, cfg)._rung_optimizer(look.space.decode(np.full(look.space.n, 0.5)))
     assert not isinstance(rung, StagedCMA) or (rung.warm_tail, rung.first_restart_step) == (0.0, 0.0)
