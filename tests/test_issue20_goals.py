@@ -154,3 +154,40 @@ def test_every_goal_reads_the_options_its_subcommand_and_all_define(tmp_path, mo
     seen.clear()
     G.main(["offsets", "--out", out, "--json", str(tmp_path / "one.json"), "--seeds", "3", "--optimizer", "cma-es"])
     assert seen == {"offsets": ("3", "cma-es")}
+
+
+def test_the_collider_and_time_goals_pass_the_search_asked_to_their_fit(tmp_path, monkeypatch):
+    """``collider`` and ``time`` take ``--search``, ``--optimizer`` and ``--seeds`` like the other goals, so a
+    candidate default is measured on them without changing the default; their fits' files are named by it."""
+    out = tmp_path / "goals"
+    os.makedirs(out / "collider" / "capture")
+    (out / "collider" / "capture" / "capture.json").write_text("{}")
+    for name in ("time21_true", "time21_real"):
+        os.makedirs(out / name)
+        (out / name / "capture.json").write_text(json.dumps({"meta": {"issue20_shift": {}}}))
+
+    class Fitted(Exception):
+        pass
+
+    fits = []
+
+    def runner(_log):
+        def run(argv, parse=True):
+            if argv[0] == "fit":
+                fits.append(argv)
+                raise Fitted
+            raise AssertionError(f"only the fit should run: {argv}")
+
+        return run
+
+    monkeypatch.setattr(G, "Runner", runner)
+    asked = ["--search", "staged_restart_step=0.01", "--seeds", "2", "--out", str(out)]
+    for goal in ("collider", "time"):
+        with pytest.raises(Fitted):
+            G.main([goal, *asked, "--json", str(tmp_path / "g.json")])
+    collider, time_fit = fits
+    for argv in fits:
+        i = argv.index("--search")
+        assert argv[i + 1] == "staged_restart_step=0.01" and argv[argv.index("--seed") + 1] == "2"
+    assert collider[collider.index("--out") + 1].endswith("collider_staged_restart_step0p01_s2.json")
+    assert time_fit[time_fit.index("--out") + 1].endswith("time21_real_staged_restart_step0p01_s2.json")

@@ -905,7 +905,8 @@ def goal_collider(a, run):
         run([sys.executable, me, "_collider", "build", "--out", a.out], parse=False)
         _collider_capture(a)
     blend = os.path.join(cdir, "user.blend")
-    res = _p(a, "fits", "collider.json")
+    extra, tag = _search_args(a, parse_seeds(getattr(a, "seeds", "0"))[0])
+    res = _p(a, "fits", f"collider{tag}.json")
     fit, frun = run(
         [
             "fit",
@@ -925,6 +926,7 @@ def goal_collider(a, run):
             "--force",
             "--quiet",
         ]
+        + extra
     )
     run([sys.executable, me, "_collider", "replay", "--out", a.out, "--result", res], parse=False)
     z = np.load(os.path.join(cdir, "replay.npz"))
@@ -1026,9 +1028,11 @@ def goal_time(a, run):
     # --quality: instead of the goal's fit, the fit told each quality in turn (a search at that quality from the
     # start, as the floor block advises where the ladder chose far from its start)
     told_q = [int(v) for v in str(a.quality).split(",")] if getattr(a, "quality", None) else [None]
+    search, tag = _search_args(a, parse_seeds(getattr(a, "seeds", "0"))[0])  # --optimizer, --search, --seeds
     for q in told_q:
-        name = f"time21_real_refit_q{q}.json" if q else "time21_real.json"
-        fit, frun, det = _time_fit(run, cap, _p(a, "fits", name), early, ["--quality", str(q)] if q else [])
+        name = f"time21_real_refit_q{q}{tag}.json" if q else f"time21_real{tag}.json"
+        extra = (["--quality", str(q)] if q else []) + search
+        fit, frun, det = _time_fit(run, cap, _p(a, "fits", name), early, extra)
         print(
             f"time{f' (told quality {q})' if q else ''}: {frun['wall_s']:.0f} s wall, {frun['cpu_s']:.0f} s CPU "
             f"({frun['load']}), {fit.get('evaluations')} evaluations, quality {det['quality_chosen']} "
@@ -1039,11 +1043,11 @@ def goal_time(a, run):
         rows.append(row("time", what + said, "wall_s", frun["wall_s"], frun, details=det))
     if getattr(a, "diagnose", False):  # what the fit gets when told one of the two it had to find
         told = [
-            ("told the quality", cap, "time21_real_q15.json", early, ["--quality", str(TIME["quality"])]),
-            ("told the set-up (no uncertain block)", qonly, "time21_noquality.json", 0.0, []),
+            ("told the quality", cap, f"time21_real_q15{tag}.json", early, ["--quality", str(TIME["quality"])]),
+            ("told the set-up (no uncertain block)", qonly, f"time21_noquality{tag}.json", 0.0, []),
         ]
         for label, c, name, e, extra in told:
-            f, fr, d = _time_fit(run, c, _p(a, "fits", name), e, extra)
+            f, fr, d = _time_fit(run, c, _p(a, "fits", name), e, extra + search)
             d["told"] = label
             print(
                 f"time, {label}: {fr['wall_s']:.0f} s wall, {fr['cpu_s']:.0f} s CPU ({fr['load']}), quality "
@@ -1092,7 +1096,7 @@ def main(argv=None):
             "--json", default="out/issue20/goals.json", help="rows merged into this JSON (default: %(default)s)"
         )
         s.add_argument("--remake", action="store_true", help="make the goal's capture again")
-        if g in ("exact", "offsets", "continuum", "all"):  # all: these goals' fits with these
+        if g in ("exact", "offsets", "continuum", "collider", "time", "all"):  # all: these goals' fits with these
             s.add_argument(
                 "--optimizer", help="the fit's --optimizer (default: the fit's own); its rows are labelled with it"
             )
