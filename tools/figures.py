@@ -492,6 +492,14 @@ SOURCES = {
         "what": "issue 20's time capture: its true settings simulated at each quality of the fit's ladder and at "
         "the truth's own 15 (training E_sil on the true capture)",
     },
+    "issue20_offsets_sensitivity": {
+        "argv": ["{py}", "tools/issue20_goals.py", "offsets_sensitivity", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 1e-6,
+        "atol": 1e-9,
+        "what": "issue 20's offsets capture: its truth scored as the goal scores a fit, the same with only the time "
+        "offset or one pin moved, and its jitter floor (16 points a part in 10^7 from the truth)",
+    },
     "issue20_offsets_seeds": {
         "argv": ["{py}", "tools/issue20_goals.py", "offsets", "--seeds", "0-2", "--json", "{out}"],
         "cost": "expensive",

@@ -602,8 +602,9 @@ def make_hold_capture(out):
     synth_spec(out, OFFSETS, paper_scenario(frame_times=list(HOLD_TIMES) + list(D.FRAME_TIMES)), "blender")
 
 
-def goal_offsets(a, run):
-    hold = bool(getattr(a, "hold_frames", False))
+def _offsets_captures(a, run, hold=False):
+    """The offsets goal's captures, made where missing (or with ``--remake``): the truth's and the copy a
+    fit sees (release marked early, pins off, the uncertain block); ``hold``: with frames before the release."""
     true_cap, cap = _p(a, "offsets_hold_true" if hold else "offsets_true"), _p(a, "offsets_hold" if hold else "offsets")
     if a.remake or not os.path.isfile(os.path.join(true_cap, "capture.json")):
         if hold:
@@ -619,6 +620,12 @@ def goal_offsets(a, run):
             OFFSETS["direction_seed"],
             OFFSETS["uncertain"],
         )
+    return true_cap, cap
+
+
+def goal_offsets(a, run):
+    hold = bool(getattr(a, "hold_frames", False))
+    true_cap, cap = _offsets_captures(a, run, hold)
     from clothfit.core.jsonio import read_json
 
     shift = read_json(os.path.join(cap, "capture.json"), "capture")["meta"]["issue20_shift"]
@@ -1058,6 +1065,108 @@ def goal_time(a, run):
     return rows, {}
 
 
+SENSITIVITY = {
+    "time_ms": (0.1, 0.25, 0.5, 1.0, 2.0, 3.0),
+    "pin_mm": (0.001, 0.01, 0.1, 0.25, 0.5, 1.0),
+    "direction_seed": 3,
+    "jitter": 16,  # points with every coordinate moved by a part in 10^7 (the manipulation's: of its bound)
+    "jitter_relative": 1e-7,
+    "jitter_seed": 5,
+}
+
+
+def offsets_sensitivity(a, run) -> dict:
+    """What the offsets goal's held-out 1.3x asks of the manipulation: its truth (the true settings, time
+    offset and pins on the declared capture) scored as the goal scores a fit (training: 4 cameras at the
+    training times; held-out: the other cameras at the test times, over the floor), then the same with only
+    the time offset moved (either way), or only one pin (a random direction per pin, ``SENSITIVITY``'s
+    seed, the same at every distance); and the capture's jitter floor: the held-out error of points a part
+    in 10^7 from the truth in every coordinate (Blender's float32 cloth makes each a different trajectory,
+    docs/search.md, "The landscape")."""
+    from clothfit.core import defaults as D
+    from clothfit.core.fitting.job import FitConfig, FitJob
+    from clothfit.core.observation.camera import select_training
+    from clothfit.core.observation.capture import load_capture
+
+    true_cap, cap = _offsets_captures(a, run)
+    c, t = load_capture(cap), load_capture(true_cap)
+    shift = c.meta["issue20_shift"]
+    early = shift["release_marked_early_s"]
+    train, held = select_training(c.cameras, TRAIN_CAMERAS)
+    job = FitJob(c, FitConfig(train_cameras=train, train_times=shifted_times(D.TRAIN_TIMES, early)))
+    hjob = FitJob(c, FitConfig(train_cameras=held, train_times=shifted_times(D.TEST_TIMES, early)))
+    tjob = FitJob(t, FitConfig(train_cameras=held, train_times=list(D.TEST_TIMES)))
+    names = list(job.space.names)
+    par = job.par
+    truth = t.meta["true_blender_cloth"]
+    x = np.zeros(len(names))
+    x[: job.npar] = [par._coord(n, truth[n]) for n in par.free]
+    floor = float(tjob.evaluate(x[None, : tjob.npar])[0]) / tjob.objective.n_images * 100
+    x[names.index("time_offset_s")] = shift["expected_time_offset_s"]
+    for k, off in enumerate(shift["expected_handle_offset_m"]):
+        for j, ax in enumerate("xyz"):
+            x[names.index(f"handle{k}_{ax}")] = off[j]
+
+    def score(X):
+        X = np.asarray(X)
+        tr = job.evaluate(X) / job.objective.n_images * 100
+        he = hjob.evaluate(X) / hjob.objective.n_images * 100
+        return [{"train_pct": float(a_), "heldout_ratio": float(b_ / floor)} for a_, b_ in zip(tr, he, strict=True)]
+
+    i = names.index("time_offset_s")
+    moves, what = [x], [("truth", None, None)]
+    for dt in SENSITIVITY["time_ms"]:
+        for sign in (1, -1):
+            y = x.copy()
+            y[i] += sign * dt / 1000
+            moves.append(y)
+            what.append(("time", sign * dt, None))
+    rng = np.random.default_rng(SENSITIVITY["direction_seed"])
+    vertices = [h.vertex for h in c.scenario.handles]
+    for k in range(len(shift["expected_handle_offset_m"])):
+        u = rng.normal(size=3)
+        u /= np.linalg.norm(u)
+        for d in SENSITIVITY["pin_mm"]:
+            y = x.copy()
+            for j, ax in enumerate("xyz"):
+                y[names.index(f"handle{k}_{ax}")] += d / 1000 * u[j]
+            moves.append(y)
+            what.append(("pin", d, k))
+    J, rel = SENSITIVITY["jitter"], SENSITIVITY["jitter_relative"]
+    bounds = np.array([job.manip.bounds[n][1] for n in names[job.npar :]])
+    tiny = np.concatenate([np.abs(x[: job.npar]), bounds]) * rel
+    signs = np.random.default_rng(SENSITIVITY["jitter_seed"]).choice([-1.0, 1.0], size=(J, len(x)))
+    moves += list(x + signs * tiny)
+    what += [("jitter", None, None)] * J
+    scores = score(moves)
+    out = {
+        "capture": cap,
+        "floor_pct": floor,
+        "truth": scores[0],
+        "time": [],
+        "pins": [],
+        "jitter": [],
+        "tolerances": {"heldout_ratio": 1.3, "time_ms": 3.0, "pin_mm": 0.5},
+        "sensitivity": SENSITIVITY,
+    }
+    for (kind, v, k), sc in zip(what[1:], scores[1:], strict=True):
+        if kind == "jitter":
+            out["jitter"].append(sc)
+        elif kind == "time":
+            out["time"].append(dict(sc, moved_ms=v))
+        else:
+            out["pins"].append(dict(sc, pin=k, vertex=int(vertices[k]), moved_mm=v))
+    jr = np.array([r["heldout_ratio"] for r in out["jitter"]])
+    out["jitter_floor"] = {
+        "median_ratio": float(np.median(jr)),
+        "min_ratio": float(jr.min()),
+        "max_ratio": float(jr.max()),
+        "within_1_3": int(np.sum(jr <= 1.3)),
+        "points": int(jr.size),
+    }
+    return out
+
+
 def _truth_by_quality(a, run) -> dict:
     """The time capture's true settings simulated at each quality of the fit's ladder and the truth's own, on
     the true capture's training cameras and times: training E_sil (%) by quality."""
@@ -1152,6 +1261,14 @@ def main(argv=None):
     tq.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
     tq.add_argument("--json", required=True, help="write the figures here")
     tq.add_argument("--remake", action="store_true", help="make the time goal's captures again")
+    os_ = sub.add_parser(
+        "offsets_sensitivity",
+        help="the offsets goal's truth, and the same with only its time offset or one pin moved: training and "
+        "held-out over the floor (what the held-out goal asks of the manipulation), as JSON",
+    )
+    os_.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
+    os_.add_argument("--json", required=True, help="write the figures here")
+    os_.add_argument("--remake", action="store_true", help="make the offsets goal's captures again")
     t = sub.add_parser("table", help="print a goals JSON as the Markdown table")
     t.add_argument("json")
     c = sub.add_parser("_collider", help=argparse.SUPPRESS)
@@ -1174,6 +1291,23 @@ def main(argv=None):
         by_q = _truth_by_quality(a, Runner(os.path.join(a.out, "goals.log")))
         atomic_json(a.json, {"truth_quality": TIME["quality"], "train_E_sil_pct_by_quality": by_q})
         print(json.dumps(by_q))
+        return 0
+    if a.cmd == "offsets_sensitivity":
+        from clothfit.core.safeio import atomic_json
+
+        os.makedirs(a.out, exist_ok=True)
+        out = offsets_sensitivity(a, Runner(os.path.join(a.out, "goals.log")))
+        atomic_json(a.json, out)
+        print(f"truth: held-out {out['truth']['heldout_ratio']:.3f}x its floor ({out['floor_pct']:.3f} %)")
+        jf = out["jitter_floor"]
+        print(
+            f"jitter floor: {jf['points']} points a part in 10^7 from the truth: held-out median "
+            f"{jf['median_ratio']:.2f}x ({jf['min_ratio']:.2f} to {jf['max_ratio']:.2f}x), {jf['within_1_3']} within 1.3x"
+        )
+        for r in out["time"]:
+            print(f"time {r['moved_ms']:+.2f} ms: held-out {r['heldout_ratio']:.2f}x")
+        for r in out["pins"]:
+            print(f"pin {r['pin']} (vertex {r['vertex']}) {r['moved_mm']:g} mm: held-out {r['heldout_ratio']:.2f}x")
         return 0
     os.makedirs(os.path.join(a.out, "fits"), exist_ok=True)
     if a.cmd == "search":
