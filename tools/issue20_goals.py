@@ -1156,6 +1156,14 @@ def offsets_sensitivity(a, run) -> dict:
             out["time"].append(dict(sc, moved_ms=v))
         else:
             out["pins"].append(dict(sc, pin=k, vertex=int(vertices[k]), moved_mm=v))
+    # the pixel's size at the cloth (the handles' centre at t = 0), median over the cameras and two directions
+    centre = np.mean([np.asarray(h.positions[0], dtype=np.float64) for h in c.scenario.handles], 0)
+    per_mm = [
+        np.linalg.norm(np.subtract(cam.project(centre[None] + 0.001 * e[None])[0], cam.project(centre[None])[0]))
+        for cam in c.cameras
+        for e in np.eye(3)[[0, 2]]
+    ]
+    out["pixel_mm"] = float(1 / np.median(per_mm))
     jr = np.array([r["heldout_ratio"] for r in out["jitter"]])
     out["jitter_floor"] = {
         "median_ratio": float(np.median(jr)),
