@@ -191,3 +191,31 @@ def test_the_collider_and_time_goals_pass_the_search_asked_to_their_fit(tmp_path
         assert argv[i + 1] == "staged_restart_step=0.01" and argv[argv.index("--seed") + 1] == "2"
     assert collider[collider.index("--out") + 1].endswith("collider_staged_restart_step0p01_s2.json")
     assert time_fit[time_fit.index("--out") + 1].endswith("time21_real_staged_restart_step0p01_s2.json")
+
+
+def test_offsets_sensitivity_scores_the_truth_at_its_floor_and_moves_one_thing_at_a_time(tmp_path, monkeypatch):
+    """The offsets capture's truth, scored as the goal scores a fit, is at its floor exactly (the declared
+    capture plus the expected offsets is the true set-up); the time offset or a pin moved costs more; the
+    jitter floor is the held-out error of points a part in 10^7 away (tools/issue20_goals.py
+    offsets_sensitivity, figure source issue20_offsets_sensitivity)."""
+    true_root, declared = str(tmp_path / "true"), str(tmp_path / "declared")
+    truth = {"tension_stiffness": 15.0, "shear_stiffness": 5.0, "bending_stiffness": 0.5, "air_damping": 1.0}
+    synth_capture(
+        true_root,
+        truth,
+        model={"name": "blender", "fps": 24, "quality": 5},
+        rig="lab18",
+        resolution=(48, 64),
+        scenario=small_scenario(),
+        seed=1,
+    )
+    G.shift_capture(true_root, declared, EARLY, OFF, 20, G.OFFSETS["uncertain"])
+    monkeypatch.setattr(G, "_offsets_captures", lambda a, run, hold=False: (true_root, declared))
+    monkeypatch.setattr(G, "SENSITIVITY", dict(G.SENSITIVITY, time_ms=(3.0,), pin_mm=(1.0,), jitter=3))
+    out = G.offsets_sensitivity(None, None, times=([0.1, 0.2], [0.15, 0.25]))
+    assert out["truth"]["heldout_ratio"] == pytest.approx(1.0, abs=1e-12) and out["floor_pct"] > 0
+    assert [r["moved_ms"] for r in out["time"]] == [3.0, -3.0]
+    assert [(r["pin"], r["moved_mm"]) for r in out["pins"]] == [(k, 1.0) for k in range(4)]
+    assert max(r["heldout_ratio"] for r in out["time"] + out["pins"]) > 1.0
+    assert out["jitter_floor"]["points"] == 3 and out["jitter_floor"]["min_ratio"] >= 0
+    assert 0 < out["pixel_mm"] < 100

@@ -1075,14 +1075,14 @@ SENSITIVITY = {
 }
 
 
-def offsets_sensitivity(a, run) -> dict:
+def offsets_sensitivity(a, run, times=None) -> dict:
     """What the offsets goal's held-out 1.3x asks of the manipulation: its truth (the true settings, time
     offset and pins on the declared capture) scored as the goal scores a fit (training: 4 cameras at the
     training times; held-out: the other cameras at the test times, over the floor), then the same with only
     the time offset moved (either way), or only one pin (a random direction per pin, ``SENSITIVITY``'s
     seed, the same at every distance); and the capture's jitter floor: the held-out error of points a part
     in 10^7 from the truth in every coordinate (Blender's float32 cloth makes each a different trajectory,
-    docs/search.md, "The landscape")."""
+    docs/search.md, "The landscape"). ``times``: (training, held-out) true times; default the paper's."""
     from clothfit.core import defaults as D
     from clothfit.core.fitting.job import FitConfig, FitJob
     from clothfit.core.observation.camera import select_training
@@ -1093,9 +1093,10 @@ def offsets_sensitivity(a, run) -> dict:
     shift = c.meta["issue20_shift"]
     early = shift["release_marked_early_s"]
     train, held = select_training(c.cameras, TRAIN_CAMERAS)
-    job = FitJob(c, FitConfig(train_cameras=train, train_times=shifted_times(D.TRAIN_TIMES, early)))
-    hjob = FitJob(c, FitConfig(train_cameras=held, train_times=shifted_times(D.TEST_TIMES, early)))
-    tjob = FitJob(t, FitConfig(train_cameras=held, train_times=list(D.TEST_TIMES)))
+    train_times, test_times = times or (D.TRAIN_TIMES, D.TEST_TIMES)
+    job = FitJob(c, FitConfig(train_cameras=train, train_times=shifted_times(train_times, early)))
+    hjob = FitJob(c, FitConfig(train_cameras=held, train_times=shifted_times(test_times, early)))
+    tjob = FitJob(t, FitConfig(train_cameras=held, train_times=list(test_times)))
     names = list(job.space.names)
     par = job.par
     truth = t.meta["true_blender_cloth"]
