@@ -1311,7 +1311,8 @@ def main(argv=None):
         jf = out["jitter_floor"]
         print(
             f"jitter floor: {jf['points']} points a part in 10^7 from the truth: held-out median "
-            f"{jf['median_ratio']:.2f}x ({jf['min_ratio']:.2f} to {jf['max_ratio']:.2f}x), {jf['within_1_3']} within 1.3x"
+            f"{jf['median_ratio']:.2f}x ({jf['min_ratio']:.2f} to {jf['max_ratio']:.2f}x), "
+            f"{jf['within_1_3']} within 1.3x"
         )
         for r in out["time"]:
             print(f"time {r['moved_ms']:+.2f} ms: held-out {r['heldout_ratio']:.2f}x")

@@ -111,17 +111,23 @@ STRATEGIES = {
     # runs again within the first stage's own share ("staged-rs48") with the warm tail only where the second stage has
     # found nothing better by 80 % of the budget
     "staged-rs48-stuck20": ("cma-staged", dict(RS48, warm_tail=0.2, warm_tail_stuck=True)),
-    # the same with the tail in every fit, wherever the second stage stands by 80 % of the budget (the default since,
-    # where the fit searches no manipulation unknowns)
+    # the same with the tail in every fit, wherever the second stage stands by 80 % of the budget (the default where
+    # the fit searches no manipulation unknowns, until runs again settled at 0.01: "staged-rs48-step01")
     "staged-rs48-tail20": ("cma-staged", dict(RS48, warm_tail=0.2)),
-    # the same, the tail also starting as soon as the second stage has gained less than 1 % over 10 % of the budget
+    # "staged-rs48-tail20", the tail also starting as soon as the second stage has gained less than 1 % over 10 %
+    # of the budget
     # (250 evaluations; StagedCMA's 'warm_tail_stall'): where the second stage is stuck the tail gets its share
     "staged-rs48-stall10": ("cma-staged", dict(RS48, warm_tail=0.2, warm_tail_stall=0.1)),
-    # the default with runs again counting a first-stage run as settled at steps below 0.02 instead of 0.005: shorter
-    # runs, so more of them within the 36 % (each a chance at the truth's basin), the best still going on to 48 %
+    # "staged-rs48-tail20" with runs again counting a first-stage run as settled at steps below 0.02 instead of
+    # 0.005: shorter runs, so more of them within the 36 % (each a chance at the truth's basin), the best still going
+    # on to 48 %
     "staged-rs48-step02": ("cma-staged", dict(RS48, first_restart_step=0.02, warm_tail=0.2)),
-    # the same at 0.01
+    # the same at 0.01 (the default since, where no quality ladder follows the main search: docs/search.md,
+    # "Shorter runs again")
     "staged-rs48-step01": ("cma-staged", dict(RS48, first_restart_step=0.01, warm_tail=0.2)),
+    # the same with the tail from 70 % of the budget instead of 80 %: more of the budget for the points near the
+    # truth among which the fit keeps its luckiest
+    "staged-rs48-step01-tail30": ("cma-staged", dict(RS48, first_restart_step=0.01, warm_tail=0.3)),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
