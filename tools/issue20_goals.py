@@ -1262,22 +1262,25 @@ def main(argv=None):
     se.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
     se.add_argument("--json", default="out/issue20/goals_search.json", help="rows merged into this JSON")
     se.add_argument("--remake", action="store_true", help="make the goals' captures again")
-    tq = sub.add_parser(
-        "time_quality",
-        help="the time goal's true settings simulated at each quality of the fit's ladder and at the truth's own "
-        "(training E_sil %% on the true capture), as JSON",
+    figures_only = (  # subcommands that write one JSON of figures (no goal rows)
+        (
+            "time_quality",
+            "the time goal's true settings simulated at each quality of the fit's ladder and at the truth's own "
+            "(training E_sil %% on the true capture), as JSON",
+            "the time goal's",
+        ),
+        (
+            "offsets_sensitivity",
+            "the offsets goal's truth, and the same with only its time offset or one pin moved: training and "
+            "held-out over the floor (what the held-out goal asks of the manipulation), as JSON",
+            "the offsets goal's",
+        ),
     )
-    tq.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
-    tq.add_argument("--json", required=True, help="write the figures here")
-    tq.add_argument("--remake", action="store_true", help="make the time goal's captures again")
-    os_ = sub.add_parser(
-        "offsets_sensitivity",
-        help="the offsets goal's truth, and the same with only its time offset or one pin moved: training and "
-        "held-out over the floor (what the held-out goal asks of the manipulation), as JSON",
-    )
-    os_.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
-    os_.add_argument("--json", required=True, help="write the figures here")
-    os_.add_argument("--remake", action="store_true", help="make the offsets goal's captures again")
+    for name, what, whose in figures_only:
+        f = sub.add_parser(name, help=what)
+        f.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
+        f.add_argument("--json", required=True, help="write the figures here")
+        f.add_argument("--remake", action="store_true", help=f"make {whose} captures again")
     t = sub.add_parser("table", help="print a goals JSON as the Markdown table")
     t.add_argument("json")
     c = sub.add_parser("_collider", help=argparse.SUPPRESS)
