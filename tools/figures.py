@@ -258,7 +258,7 @@ SOURCES = {
         "rtol": 0,
         "what": "issue 20 item 3: runs again in the first stage's own share followed by the warm tail, only where the "
         "second stage found nothing better ('staged-rs48-stuck20') and in every fit ('staged-rs48-tail20': the default "
-        "since), against the default before ('staged-stuck20', its missing rows those of 'staged', the same search "
+        "then), against the default before ('staged-stuck20', its missing rows those of 'staged', the same search "
         "where its tail did not start), runs again alone ('staged-rs48') and one run ('staged'), seeds 0-4 on the five "
         "captures of search_runs: the fits of the rows files (drop --only-reused to run the missing ones)",
     },
@@ -271,9 +271,9 @@ SOURCES = {
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: the warm tail also started as soon as the second stage gains less than 1 % over 10 % "
-        "of the budget ('staged-rs48-stall10'; tried, not kept), against the default ('staged-rs48-tail20', the rows "
-        "of search_rs_tail), seeds 0-4 where run (the goal's capture): the fits of the rows files (drop --only-reused "
-        "to run the missing ones)",
+        "of the budget ('staged-rs48-stall10'; tried, not kept), against the default then ('staged-rs48-tail20', the "
+        "rows of search_rs_tail), seeds 0-4 where run (the goal's capture): the fits of the rows files (drop "
+        "--only-reused to run the missing ones)",
     },
     "search_step": {
         "argv": _search_ab_reused(
@@ -284,9 +284,9 @@ SOURCES = {
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: runs again counting a first-stage run settled at steps below 0.02 ('staged-rs48-step02') "
-        "or 0.01 ('staged-rs48-step01') of the cube instead of the default's 0.005 (tried, not kept), against the "
-        "default ('staged-rs48-tail20', the rows of search_rs_tail), seeds 0-4 on the five captures of search_runs: "
-        "the fits of the rows files (drop --only-reused to run the missing ones)",
+        "or 0.01 ('staged-rs48-step01') of the cube instead of 0.005, the default then ('staged-rs48-tail20', the "
+        "rows of search_rs_tail; 0.01 the default since where no quality ladder follows), seeds 0-4 on the five "
+        "captures of search_runs: the fits of the rows files (drop --only-reused to run the missing ones)",
     },
     "search_pop16_wall": {
         "argv": [
