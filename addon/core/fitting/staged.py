@@ -63,8 +63,9 @@ class StagedCMA(Optimizer):
     where the first began (``initial``, else the middle), same step and population, new random
     stream, while the evaluations are within ``first_explore`` of ``budget``; then the run with the
     best point (kept as it stood when it converged) goes on to the end of the first stage's share, and
-    the second stage starts from the best point of them all (0: one run, as before; the default 0.005, with
-    the warm tail: docs/search.md, "Runs again and the tail"). Race and scan were both tried against the bending valley that first stages miss and not kept
+    the second stage starts from the best point of them all (0: one run, as before; the default 0.01, with
+    the warm tail: docs/search.md, "Runs again and the tail" and "Shorter runs again"; FitJob gives 0.005 where a
+    quality ladder follows). Race and scan were both tried against the bending valley that first stages miss and not kept
     (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
     Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
