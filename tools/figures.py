@@ -288,6 +288,30 @@ SOURCES = {
         "rows of search_rs_tail; 0.01 the default since where no quality ladder follows), seeds 0-4 on the five "
         "captures of search_runs: the fits of the rows files (drop --only-reused to run the missing ones)",
     },
+    "search_step10": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            "out/issue20/exact",
+            "--strategies",
+            "staged-rs48-tail20,staged-rs48-step01",
+            "--seeds",
+            "0-9",
+            "--reuse",
+            "docs/figures/search_rs_tail_rows.jsonl",
+            "docs/figures/search_step_rows.jsonl",
+            "docs/figures/search_step10_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: the default since (runs again settled at 0.01, 'staged-rs48-step01') against the "
+        "default before (0.005, 'staged-rs48-tail20') over ten seeds, 0-9, on the goal's capture: seeds 0-4 the rows "
+        "of search_step and search_rs_tail, seeds 5-9 those of search_step10_rows.jsonl (drop --only-reused to run "
+        "the missing ones)",
+    },
     "search_pop16_wall": {
         "argv": [
             "{py}",
