@@ -125,7 +125,13 @@ STRATEGIES = {
     # the same at 0.01 (the default since, where no quality ladder follows the main search: docs/search.md,
     # "Shorter runs again")
     "staged-rs48-step01": ("cma-staged", dict(RS48, first_restart_step=0.01, warm_tail=0.2)),
-    # the same with the tail from 70 % of the budget instead of 80 %: more of the budget for the points near the
+    # the same with each run after the first started at another bending (StagedCMA's 'first_restart_vary': 0.2, 0.8,
+    # 0.35, 0.65, 0.5 of its range in turn), the other strong settings where the first began
+    "staged-rs48-step01-bend": (
+        "cma-staged",
+        dict(RS48, first_restart_step=0.01, warm_tail=0.2, first_restart_vary="bending_stiffness"),
+    ),
+    # the "staged-rs48-step01" with the tail from 70 % of the budget instead of 80 %: more of the budget for the points near the
     # truth among which the fit keeps its luckiest
     "staged-rs48-step01-tail30": ("cma-staged", dict(RS48, first_restart_step=0.01, warm_tail=0.3)),
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG

@@ -202,6 +202,10 @@ STAGED_FIRST_RESTART_STEP = 0.01  # cma-staged: a first-stage run whose every st
 STAGED_FIRST_RESTART_STEP_LADDER = 0.005  # the same where a quality ladder follows the main search (the fit chooses
 # the quality, or a scene fit probes one above): at 0.01 the time goal's fit took 178 s of its 180 and ended no
 # closer to its floor (docs/search.md, "Shorter runs again")
+STAGED_FIRST_RESTART_VARY = None  # cma-staged, runs again: a first-stage coordinate each run after the first starts at
+# another of STAGED_FIRST_RESTART_LEVELS (unit cube), the others where the first began (None: all where it began;
+# "bending_stiffness" tried, docs/search.md, "Runs again at other bendings")
+STAGED_FIRST_RESTART_LEVELS = (0.2, 0.8, 0.35, 0.65, 0.5)
 STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only within this share of the budget;
 # then the run with the best point goes on to the end of the first stage's share
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best

@@ -45,6 +45,24 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 
+def _vary(name, levels, first, w) -> tuple:
+    """(coordinate, levels) of ``first_restart_vary``: None, or a first-stage coordinate, with one or more
+    levels in the unit cube; anything else is a one-line error."""
+    if name is None:
+        return None, tuple(D.STAGED_FIRST_RESTART_LEVELS)
+    if not isinstance(name, str) or name not in first:
+        raise ClothFitError(
+            f"{w}: first_restart_vary must name a first-stage coordinate ({', '.join(first)}), got {name!r}"
+        )
+    try:
+        lv = tuple(float(v) for v in levels)
+    except (TypeError, ValueError):
+        lv = ()
+    if not lv or not all(0.0 <= v <= 1.0 for v in lv):
+        raise ClothFitError(f"{w}: first_restart_levels must be one or more numbers in [0, 1], got {levels!r}")
+    return name, lv
+
+
 class StagedCMA(Optimizer):
     """CMA-ES over ``first`` (the others held), then over everything from the best point.
 
@@ -65,7 +83,10 @@ class StagedCMA(Optimizer):
     best point (kept as it stood when it converged) goes on to the end of the first stage's share, and
     the second stage starts from the best point of them all (0: one run, as before; the default 0.01, with
     the warm tail: docs/search.md, "Runs again and the tail" and "Shorter runs again"; FitJob gives 0.005 where a
-    quality ladder follows). Race and scan were both tried against the bending valley that first stages miss and not kept
+    quality ladder follows). ``first_restart_vary``: a first-stage coordinate that each run after the
+    first starts at another of ``first_restart_levels`` (unit cube, in turn), the others where the first began
+    (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
+    bendings"). Race and scan were both tried against the bending valley that first stages miss and not kept
     (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
     Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
@@ -104,6 +125,8 @@ class StagedCMA(Optimizer):
         scan_points: int = D.STAGED_SCAN_POINTS,
         first_restart_step: float = D.STAGED_FIRST_RESTART_STEP,
         first_explore: float = D.STAGED_FIRST_EXPLORE,
+        first_restart_vary: str | None = D.STAGED_FIRST_RESTART_VARY,
+        first_restart_levels=D.STAGED_FIRST_RESTART_LEVELS,
         second_warm: bool = D.STAGED_SECOND_WARM,
         warm_tail: float = D.STAGED_WARM_TAIL,
         warm_tail_stuck: bool = D.STAGED_WARM_TAIL_STUCK,
@@ -156,6 +179,9 @@ class StagedCMA(Optimizer):
         self.first_runs = 1
         self.first_explore = _number(first_explore, f"{w}: first_explore", 0.0, 1.0)
         self.first_best_run = None  # the converged run with the best point so far (its CMA-ES state)
+        self.first_restart_vary, self.first_restart_levels = _vary(
+            first_restart_vary, first_restart_levels, self.first, w
+        )
         self.second_warm = _flag(second_warm, f"{w}: second_warm")
         self.warm_tail = _number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
         self.warm_tail_stuck = _flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
@@ -380,6 +406,12 @@ class StagedCMA(Optimizer):
                         self.first_best_run = c.state_dict()
                     self.first_runs += 1
                     init = None if self.first_init is None else [np.array(self.first_init)]
+                    if self.first_restart_vary is not None:  # this run at another level of that coordinate
+                        sub = self._subspace()
+                        u = np.full(sub.n, 0.5) if init is None else sub.encode(init[0][None])[0]
+                        levels = self.first_restart_levels
+                        u[self.first.index(self.first_restart_vary)] = levels[(self.first_runs - 2) % len(levels)]
+                        init = [sub.decode(u[None])[0]]
                     self.children[-1] = self._child(self._subspace(), c.popsize, self.sigma0, init)
             elif self.first_best_run is not None:
                 # the runs are over: the one with the best point goes on, to the end of the first stage
@@ -444,6 +476,8 @@ class StagedCMA(Optimizer):
         "first_runs",
         "first_explore",
         "first_best_run",
+        "first_restart_vary",
+        "first_restart_levels",
         "second_warm",
         "warm_tail",
         "warm_tail_stuck",
@@ -487,6 +521,8 @@ class StagedCMA(Optimizer):
                 "first_runs": self.first_runs,
                 "first_explore": self.first_explore,
                 "first_best_run": self.first_best_run,
+                "first_restart_vary": self.first_restart_vary,
+                "first_restart_levels": list(self.first_restart_levels),
                 "second_warm": self.second_warm,
                 "warm_tail": self.warm_tail,
                 "warm_tail_stuck": self.warm_tail_stuck,
@@ -581,6 +617,13 @@ class StagedCMA(Optimizer):
             if CMAES.from_state(kept).space.state_dict() != opt._subspace().state_dict():
                 raise ClothFitError(f"checkpoint: {w} 'first_best_run' holds a run of another search space")
         opt.first_best_run = kept
+        # runs again at other levels of a coordinate came after the stall rule: all where the first began before
+        opt.first_restart_vary, opt.first_restart_levels = _vary(
+            d.get("first_restart_vary"),
+            d.get("first_restart_levels", D.STAGED_FIRST_RESTART_LEVELS),
+            opt.first,
+            f"checkpoint: {w}",
+        )
         # the warm second stage came after runs again: a plain one in older checkpoints
         opt.second_warm = _bool(d, "second_warm", w) if "second_warm" in d else False
         opt.warm_tail = _num(d, "warm_tail", w, float, 0.0, 1.0) if "warm_tail" in d else 0.0
