@@ -550,3 +550,42 @@ def test_the_fit_default_is_staged_on_blenders_cloth_and_cma_es_on_the_papers():
     with pytest.raises(ClothFitError, match="unknown optimiser 'nope'"):
         FitConfig(optimizer="nope").checked()
     FitConfig(optimizer="auto", cma_active=True).checked()  # auto is a CMA-ES either way
+
+
+def test_runs_again_can_start_each_at_another_level_of_one_coordinate():
+    """first_restart_vary: each run after the first starts where the first began but for that coordinate,
+    at first_restart_levels in turn (unit cube); the state resumes exactly; a name outside the first stage or
+    levels outside [0, 1] are one-line errors; older checkpoints resume with every run where the first began."""
+    start = np.array([1.0, -1.0, 0.0, 0.0, 0.0])
+    kw = dict(first=["x0", "x1"], initial=[start], budget=1000, first_restart_step=0.05, first_fraction=0.72)
+    opt = StagedCMA(space(), seed=2, first_explore=0.56, first_restart_vary="x1", first_restart_levels=(0.2, 0.9), **kw)
+    starts = []
+    while opt.stage == 1:
+        runs = opt.first_runs
+        X = opt.ask()
+        opt.tell(X, strong_weak(X))
+        if opt.first_runs > runs and opt.stage == 1:
+            c = opt.children[-1]
+            starts.append(c.space.encode(c.space.decode(c.mean)[None])[0])
+            copy = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+            Xa, Xb = opt.ask(), copy.ask()
+            assert np.array_equal(Xa, Xb)  # resumed exactly, mid-way through the runs
+            opt.tell(Xa, strong_weak(Xa))
+            copy.tell(Xb, strong_weak(Xb))
+    assert len(starts) >= 2
+    x0_where_it_began = opt._subspace().encode(start[None, :2])[0][0]
+    for k, u in enumerate(starts):
+        assert u[1] == pytest.approx((0.2, 0.9)[k % 2], abs=1e-12)  # x1 at the levels in turn
+        assert u[0] == pytest.approx(x0_where_it_began, abs=1e-12)  # x0 where the first run began
+    for bad, what in (
+        (dict(first_restart_vary="x3"), "first-stage coordinate"),
+        (dict(first_restart_vary="x1", first_restart_levels=(1.5,)), r"in \[0, 1\]"),
+    ):
+        with pytest.raises(ClothFitError, match=what):
+            StagedCMA(space(), seed=2, **dict(kw, **bad))
+    d = json.loads(json.dumps(StagedCMA(space(), seed=4, first=["x0"]).state_dict()))
+    del d["first_restart_vary"], d["first_restart_levels"]
+    assert optimizer_from_state(d).first_restart_vary is None
+    d["first_restart_vary"] = "x4"
+    with pytest.raises(ClothFitError, match="checkpoint"):
+        optimizer_from_state(d)
