@@ -312,6 +312,29 @@ SOURCES = {
         "of search_step and search_rs_tail, seeds 5-9 those of search_step10_rows.jsonl (drop --only-reused to run "
         "the missing ones)",
     },
+    "search_bend": {
+        "argv": [
+            "{py}",
+            "tools/search_ab.py",
+            *SEARCH_RUNS_CAPTURES,
+            "--strategies",
+            "staged-rs48-step01,staged-rs48-step01-bend",
+            "--seeds",
+            "0-9",
+            "--reuse",
+            "docs/figures/search_step_rows.jsonl",
+            "docs/figures/search_step10_rows.jsonl",
+            "docs/figures/search_bend_rows.jsonl",
+            "--only-reused",
+            "--json-summary",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20 item 3: runs again each started at another bending ('staged-rs48-step01-bend'; tried, not "
+        "kept) against the default ('staged-rs48-step01'), seeds 0-4 on the five captures of search_runs and 5-9 on "
+        "the goal's: the fits of the rows files (drop --only-reused to run the missing ones)",
+    },
     "search_pop16_wall": {
         "argv": [
             "{py}",
