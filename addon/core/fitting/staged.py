@@ -541,6 +541,31 @@ class StagedCMA(Optimizer):
         )
         return d
 
+    def _restore_runs_again(self, d: dict, w: str) -> None:
+        """from_state's part for runs again in the first stage (its fields, checked; older checkpoints: one run)."""
+        # runs again in the first stage came after the scan: one run (none again) in older checkpoints
+        self.first_restart_step = (
+            _num(d, "first_restart_step", w, float, 0.0, 1.0) if "first_restart_step" in d else 0.0
+        )
+        self.first_runs = _num(d, "first_runs", w, int, 1, 10**9) if "first_runs" in d else 1
+        init = _array(d, "first_init", w, (len(self.first),), allow_none=True) if "first_init" in d else None
+        self.first_init = None if init is None else init.tolist()
+        self.first_explore = _num(d, "first_explore", w, float, 0.0, 1.0) if "first_explore" in d else 0.0
+        kept = d.get("first_best_run")
+        if kept is not None:
+            if not isinstance(kept, dict) or kept.get("algorithm") != "cma-es":
+                raise ClothFitError(f"checkpoint: {w} 'first_best_run' must be null or a CMA-ES state")
+            if CMAES.from_state(kept).space.state_dict() != self._subspace().state_dict():
+                raise ClothFitError(f"checkpoint: {w} 'first_best_run' holds a run of another search space")
+        self.first_best_run = kept
+        # runs again at other levels of a coordinate came after the stall rule: all where the first began before
+        self.first_restart_vary, self.first_restart_levels = _vary(
+            d.get("first_restart_vary"),
+            d.get("first_restart_levels", D.STAGED_FIRST_RESTART_LEVELS),
+            self.first,
+            f"checkpoint: {w}",
+        )
+
     @classmethod
     def from_state(cls, d: dict) -> StagedCMA:
         w = cls.name
@@ -604,26 +629,7 @@ class StagedCMA(Optimizer):
         )
         if opt._scan_pending is not None and not opt.scan_left:
             raise ClothFitError(f"checkpoint: {w} 'scan_pending' without a scan under way")
-        # runs again in the first stage came after the scan: one run (none again) in older checkpoints
-        opt.first_restart_step = _num(d, "first_restart_step", w, float, 0.0, 1.0) if "first_restart_step" in d else 0.0
-        opt.first_runs = _num(d, "first_runs", w, int, 1, 10**9) if "first_runs" in d else 1
-        init = _array(d, "first_init", w, (len(opt.first),), allow_none=True) if "first_init" in d else None
-        opt.first_init = None if init is None else init.tolist()
-        opt.first_explore = _num(d, "first_explore", w, float, 0.0, 1.0) if "first_explore" in d else 0.0
-        kept = d.get("first_best_run")
-        if kept is not None:
-            if not isinstance(kept, dict) or kept.get("algorithm") != "cma-es":
-                raise ClothFitError(f"checkpoint: {w} 'first_best_run' must be null or a CMA-ES state")
-            if CMAES.from_state(kept).space.state_dict() != opt._subspace().state_dict():
-                raise ClothFitError(f"checkpoint: {w} 'first_best_run' holds a run of another search space")
-        opt.first_best_run = kept
-        # runs again at other levels of a coordinate came after the stall rule: all where the first began before
-        opt.first_restart_vary, opt.first_restart_levels = _vary(
-            d.get("first_restart_vary"),
-            d.get("first_restart_levels", D.STAGED_FIRST_RESTART_LEVELS),
-            opt.first,
-            f"checkpoint: {w}",
-        )
+        opt._restore_runs_again(d, w)
         # the warm second stage came after runs again: a plain one in older checkpoints
         opt.second_warm = _bool(d, "second_warm", w) if "second_warm" in d else False
         opt.warm_tail = _num(d, "warm_tail", w, float, 0.0, 1.0) if "warm_tail" in d else 0.0
