@@ -100,17 +100,17 @@ def _offsets_with(*search):
 SEARCH_RUNS_CAPTURES = ["out/issue20/exact", "synth:fresh", "synth:damped", "synth:soft", "synth:stiff"]
 
 
-def _search_ab_reused(strategies, *rows):
-    """tools/search_ab.py's strategies x seeds 0-4 on the five captures of search_runs: the fits of the rows files
-    (drop --only-reused to run the missing ones)."""
+def _search_ab_reused(strategies, *rows, captures=SEARCH_RUNS_CAPTURES, seeds="0-4"):
+    """tools/search_ab.py's strategies x ``seeds`` on ``captures`` (default: seeds 0-4 on the five captures of
+    search_runs): the fits of the rows files (drop --only-reused to run the missing ones)."""
     return [
         "{py}",
         "tools/search_ab.py",
-        *SEARCH_RUNS_CAPTURES,
+        *captures,
         "--strategies",
         strategies,
         "--seeds",
-        "0-4",
+        seeds,
         "--reuse",
         *rows,
         "--only-reused",
@@ -289,22 +289,14 @@ SOURCES = {
         "captures of search_runs: the fits of the rows files (drop --only-reused to run the missing ones)",
     },
     "search_step10": {
-        "argv": [
-            "{py}",
-            "tools/search_ab.py",
-            "out/issue20/exact",
-            "--strategies",
+        "argv": _search_ab_reused(
             "staged-rs48-tail20,staged-rs48-step01",
-            "--seeds",
-            "0-9",
-            "--reuse",
             "docs/figures/search_rs_tail_rows.jsonl",
             "docs/figures/search_step_rows.jsonl",
             "docs/figures/search_step10_rows.jsonl",
-            "--only-reused",
-            "--json-summary",
-            "{out}",
-        ],
+            captures=["out/issue20/exact"],
+            seeds="0-9",
+        ),
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: the default since (runs again settled at 0.01, 'staged-rs48-step01') against the "
@@ -313,22 +305,13 @@ SOURCES = {
         "the missing ones)",
     },
     "search_bend": {
-        "argv": [
-            "{py}",
-            "tools/search_ab.py",
-            *SEARCH_RUNS_CAPTURES,
-            "--strategies",
+        "argv": _search_ab_reused(
             "staged-rs48-step01,staged-rs48-step01-bend",
-            "--seeds",
-            "0-9",
-            "--reuse",
             "docs/figures/search_step_rows.jsonl",
             "docs/figures/search_step10_rows.jsonl",
             "docs/figures/search_bend_rows.jsonl",
-            "--only-reused",
-            "--json-summary",
-            "{out}",
-        ],
+            seeds="0-9",
+        ),
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: runs again each started at another bending ('staged-rs48-step01-bend'; tried, not "
