@@ -134,6 +134,12 @@ STRATEGIES = {
         "cma-staged",
         dict(STEP01, first_restart_vary="bending_stiffness"),
     ),
+    # the same, but the second run from where the first began (as the default's), only the third and later at other
+    # bendings (0.2, 0.8, 0.35, 0.65 of its range in turn): keep the default's second chance, add the others
+    "staged-rs48-step01-bendc": (
+        "cma-staged",
+        dict(STEP01, first_restart_vary="bending_stiffness", first_restart_levels=(0.5, 0.2, 0.8, 0.35, 0.65)),
+    ),
     # the "staged-rs48-step01" with the tail from 70 % of the budget instead of 80 %: more of the budget for the
     # points near the truth among which the fit keeps its luckiest
     "staged-rs48-step01-tail30": ("cma-staged", dict(STEP01, warm_tail=0.3)),
