@@ -140,12 +140,6 @@ STRATEGIES = {
         "cma-staged",
         dict(STEP01, first_restart_vary="bending_stiffness", first_restart_levels=(0.5, 0.2, 0.8, 0.35, 0.65)),
     ),
-    # a race of four first-stage runs, all from where the first begins (new random streams), 150 evaluations each,
-    # the best going on (then runs again as the default's): is the basin told apart that early?
-    "staged-rs48-step01-race4c": (
-        "cma-staged",
-        dict(STEP01, race=4, race_evals=150, race_from_start=True),
-    ),
     # the "staged-rs48-step01" with the tail from 70 % of the budget instead of 80 %: more of the budget for the
     # points near the truth among which the fit keeps its luckiest
     "staged-rs48-step01-tail30": ("cma-staged", dict(STEP01, warm_tail=0.3)),

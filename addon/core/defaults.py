@@ -226,7 +226,6 @@ STAGED_FIRST_UNKNOWNS = ("time_offset_s",)  # cma-staged: the manipulation's unk
 STAGED_RACE = 1  # cma-staged: first-stage runs raced (1 = no race: tried with 3 and not kept, docs/search.md)
 STAGED_RACE_EVALS = 250  # cma-staged: evaluations each raced run gets before the best goes on alone
 STAGED_RACE_START = (0.15, 0.85)  # cma-staged: the raced runs' random starts, within this part of the unit cube
-STAGED_RACE_FROM_START = False  # cma-staged: the raced runs start where the first does (new random streams) instead
 STAGED_SCAN_POINTS = 0  # cma-staged: between the stages, each first-stage coordinate tried at this many values
 # across its range, the others at the best point (0 = no scan: tried with 24 and not kept, docs/search.md)
 STAGED_STRONG = ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping")  # what the

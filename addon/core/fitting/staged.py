@@ -74,8 +74,7 @@ class StagedCMA(Optimizer):
     ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
     ``race``: first-stage runs raced (default 1: none), the others from random points of the strong
     settings' cube, each given ``race_evals`` (at most a (race + 1)-th of the first stage) before the
-    one with the best point goes on alone (``race_from_start``: all from where the first starts, each with its own
-    random stream). ``scan_points``: between the stages, each first-stage
+    one with the best point goes on alone. ``scan_points``: between the stages, each first-stage
     coordinate tried at that many values evenly across its range, the others at the best point
     (default 0: none). ``first_restart_step``: a first-stage run whose every coordinate's step (sigma
     times the root of its variance, unit cube) is below this has converged, and another run starts
@@ -123,7 +122,6 @@ class StagedCMA(Optimizer):
         first_popsize: int | None = None,
         race: int = D.STAGED_RACE,
         race_evals: int = D.STAGED_RACE_EVALS,
-        race_from_start: bool = D.STAGED_RACE_FROM_START,
         scan_points: int = D.STAGED_SCAN_POINTS,
         first_restart_step: float = D.STAGED_FIRST_RESTART_STEP,
         first_explore: float = D.STAGED_FIRST_EXPLORE,
@@ -196,10 +194,9 @@ class StagedCMA(Optimizer):
         # cube, each given race_evals before the best one goes on alone (docs/search.md, "The race")
         self.racing = self._staging and self.race > 1
         if self.racing:
-            from_start = _flag(race_from_start, f"{w}: race_from_start")
             for _ in range(self.race - 1):
                 u0 = self.rng.uniform(D.STAGED_RACE_START[0], D.STAGED_RACE_START[1], sub.n)
-                self.children.append(self._child(sub, lam1, self.sigma0, init if from_start else [sub.decode(u0)]))
+                self.children.append(self._child(sub, lam1, self.sigma0, [sub.decode(u0)]))
         self.turn = 0
         self.scan_points = _integer(scan_points, f"{w}: scan_points", 0, 10000)
         self.scan_left: list = []  # the first stage's coordinates still to scan (between the stages)
