@@ -315,8 +315,9 @@ SOURCES = {
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: runs again each started at another bending ('staged-rs48-step01-bend'; tried, not "
-        "kept) against the default ('staged-rs48-step01'), seeds 0-4 on the five captures of search_runs and 5-9 on "
-        "the goal's: the fits of the rows files (drop --only-reused to run the missing ones)",
+        "kept) against the default ('staged-rs48-step01'), seeds 0-9 on the five captures of search_runs (seeds 0-4 "
+        "of the default's from search_step, 5-9 of the goal's capture from search_step10): the fits of the rows files "
+        "(drop --only-reused to run the missing ones)",
     },
     "search_pop16_wall": {
         "argv": [
