@@ -219,3 +219,41 @@ def test_offsets_sensitivity_scores_the_truth_at_its_floor_and_moves_one_thing_a
     assert max(r["heldout_ratio"] for r in out["time"] + out["pins"]) > 1.0
     assert out["jitter_floor"]["points"] == 3 and out["jitter_floor"]["min_ratio"] >= 0
     assert 0 < out["pixel_mm"] < 100
+
+
+def test_offsets_coverage_counts_each_stated_offset_against_its_uncertainty(tmp_path):
+    """offsets_coverage (figure source issue20_offsets_coverage): each stated offset's error (fitted minus the shift
+    the capture was made with) over the uncertainty the fit states; an offset stated without one counted apart; the
+    other rows of a recording (time and pin errors) ignored."""
+
+    def fit(time_s, handles):
+        return {
+            "capture": "offsets [seed 0]",
+            "key": "heldout_ratio",
+            "value": 2.0,
+            "details": {
+                "shift": {"expected_time_offset_s": 0.02, "expected_handle_offset_m": [[0.001, 0.0, 0.0]]},
+                "time_offset_s": time_s[0],
+                "time_offset_uncertainty_s": time_s[1],
+                "handles": handles,
+            },
+        }
+
+    # time 1 ms off stated 2 ms: 0.5x; x 0.3 mm off stated 0.1 mm: 3x; y exact: 0x; z not separated
+    one = fit(
+        (0.021, 0.002), [{"vertex": 7, "offset_m": [0.0013, 0.0, 0.004], "offset_uncertainty_m": [1e-4, 1e-4, None]}]
+    )
+    rec = tmp_path / "rec.json"
+    rec.write_text(json.dumps({"data": {"rows": [one, {"key": "time_offset_error_ms", "value": 1.0}]}}))
+    out = G.offsets_coverage([str(rec)])
+    (f,) = out["fits"]
+    assert out["stated"] == f["stated"] == 3 and f["not_separated"] == ["vertex 7 z"] and out["not_separated"] == 1
+    ratios = {r["offset"]: r["error_over_stated"] for r in f["offsets"]}
+    assert ratios["time_offset"] == pytest.approx(0.5) and ratios["vertex 7 x"] == pytest.approx(3.0)
+    assert ratios["vertex 7 y"] == 0.0 and f["worst"]["offset"] == "vertex 7 x"
+    assert out["share_within_1"] == pytest.approx(2 / 3) and out["share_within_2"] == pytest.approx(2 / 3)
+    assert out["median_error_over_stated"] == pytest.approx(0.5) and out["max_error_over_stated"] == pytest.approx(3.0)
+    nothing = tmp_path / "none.json"
+    nothing.write_text(json.dumps({"data": {"rows": [fit((None, None), [])]}}))
+    with pytest.raises(SystemExit, match="no offsets fit with stated uncertainties"):
+        G.offsets_coverage([str(nothing)])

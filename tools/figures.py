@@ -531,6 +531,13 @@ SOURCES = {
         "what": "issue 20's offsets capture: its truth scored as the goal scores a fit, the same with only the time "
         "offset or one pin moved, and its jitter floor (16 points a part in 10^7 from the truth)",
     },
+    "issue20_offsets_coverage": {
+        "argv": ["{py}", "tools/issue20_goals.py", "offsets_coverage", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "issue 20's offsets fits (the recordings issue20_offsets_seeds and issue20_offsets_hold, no fit run): each "
+        "stated offset's error over the uncertainty the fit states, and the share within 1x and 2x",
+    },
     "issue20_offsets_seeds": {
         "argv": ["{py}", "tools/issue20_goals.py", "offsets", "--seeds", "0-2", "--json", "{out}"],
         "cost": "expensive",

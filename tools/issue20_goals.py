@@ -1204,6 +1204,74 @@ RUNNERS = {
 }
 
 
+COVERAGE_FROM = ("docs/figures/issue20_offsets_seeds.json", "docs/figures/issue20_offsets_hold.json")
+
+
+def offsets_coverage(paths=COVERAGE_FROM) -> dict:
+    """How far the offsets fits' stated uncertainties cover their errors: for every fit recorded in ``paths``
+    (figure recordings of ``offsets``), each stated offset (the time offset, each handle's x, y, z) as its error
+    (fitted - the shift the capture was made with) over the uncertainty the fit states; an offset stated without
+    one (not separated) is counted apart. A 1-sigma statement should hold about 68 % within 1x, 95 % within 2x."""
+    from clothfit.core.jsonio import read_json
+
+    fits, z = [], []
+    for path in paths:
+        for r in read_json(path, "figure recording")["data"]["rows"]:
+            if r.get("key") != "heldout_ratio":
+                continue
+            d = r["details"]
+            sh = d["shift"]
+            items = [
+                (
+                    "time_offset",
+                    d.get("time_offset_s"),
+                    sh["expected_time_offset_s"],
+                    d.get("time_offset_uncertainty_s"),
+                )
+            ]
+            for k, h in enumerate(d.get("handles") or []):
+                exp = sh["expected_handle_offset_m"][k]
+                unc = h.get("offset_uncertainty_m") or [None] * 3
+                for i, axis in enumerate("xyz"):
+                    items.append((f"vertex {h['vertex']} {axis}", (h.get("offset_m") or [None] * 3)[i], exp[i], unc[i]))
+            rows, unstated = [], []
+            for name, got, exp, unc in items:
+                if got is None:
+                    continue
+                if unc is None or not unc > 0:
+                    unstated.append(name)
+                    continue
+                rows.append({"offset": name, "error_over_stated": abs(float(got) - float(exp)) / float(unc)})
+            z += [x["error_over_stated"] for x in rows]
+            worst = max(rows, key=lambda x: x["error_over_stated"]) if rows else None
+            fits.append(
+                {
+                    "recording": path,
+                    "capture": r["capture"],
+                    "heldout_ratio": r["value"],
+                    "stated": len(rows),
+                    "not_separated": unstated,
+                    "within_1": sum(x["error_over_stated"] <= 1 for x in rows),
+                    "within_2": sum(x["error_over_stated"] <= 2 for x in rows),
+                    "worst": worst,
+                    "offsets": rows,
+                }
+            )
+    if not z:
+        raise SystemExit(f"offsets_coverage: no offsets fit with stated uncertainties in {', '.join(paths)}")
+    z = np.asarray(z)
+    return {
+        "recordings": list(paths),
+        "fits": fits,
+        "stated": int(z.size),
+        "not_separated": sum(len(f["not_separated"]) for f in fits),
+        "share_within_1": float(np.mean(z <= 1)),
+        "share_within_2": float(np.mean(z <= 2)),
+        "median_error_over_stated": float(np.median(z)),
+        "max_error_over_stated": float(z.max()),
+    }
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python tools/issue20_goals.py", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -1276,6 +1344,18 @@ def main(argv=None):
             "the offsets goal's",
         ),
     )
+    cov = sub.add_parser(
+        "offsets_coverage",
+        help="how far the recorded offsets fits' stated uncertainties cover their errors (no fit run), as JSON",
+    )
+    cov.add_argument("--json", required=True, help="write the figures here")
+    cov.add_argument(
+        "--from",
+        dest="recordings",
+        nargs="+",
+        default=list(COVERAGE_FROM),
+        help="figure recordings of `offsets` fits (default: %(default)s)",
+    )
     for name, what, whose in figures_only:
         f = sub.add_parser(name, help=what)
         f.add_argument("--out", default="out/issue20", help="folder of the captures and fits (default: %(default)s)")
@@ -1294,6 +1374,18 @@ def main(argv=None):
         return 0
     if a.cmd == "_collider":
         _collider_child(a)
+        return 0
+    if a.cmd == "offsets_coverage":
+        from clothfit.core.safeio import atomic_json
+
+        out = offsets_coverage(a.recordings)
+        atomic_json(a.json, out)
+        print(
+            f"{out['stated']} stated offsets over {len(out['fits'])} fits: {100 * out['share_within_1']:.0f} % within "
+            f"their uncertainty, {100 * out['share_within_2']:.0f} % within twice it (a 1-sigma statement: 68 %, 95 %); "
+            f"median error {out['median_error_over_stated']:.2f}x the stated, worst {out['max_error_over_stated']:.1f}x; "
+            f"{out['not_separated']} not separated"
+        )
         return 0
     if a.cmd == "time_quality":
         from clothfit.core.safeio import atomic_json
