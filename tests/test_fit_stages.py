@@ -349,14 +349,16 @@ def test_the_portfolio_runs_as_a_fit_and_a_polish_is_refused_as_one(caps, tmp_pa
         FitJob(cap, FitConfig(free=FREE, optimizer="coord-polish"))
 
 
-def test_offsets_uncertainties_are_flagged_when_the_fit_ends_far_above_its_floor():
+def test_offsets_uncertainties_are_qualified_and_flagged_when_the_fit_ends_far_above_its_floor():
     from clothfit.core.fitting.result import uncertainty_caveat
 
     far = {"far_above": True, "heldout_ratio": 4.47, "train_ratio": 3.2}
     res = {"time_offset_s": 0.0136, "time_offset_uncertainty_s": 0.0046, "handles": [], "floor": far}
     line = uncertainty_caveat(res)
     assert "4.5x above its floor" in line and "further off" in line
-    assert uncertainty_caveat(dict(res, floor=dict(far, far_above=False))) is None  # near its floor: no caveat
+    near = uncertainty_caveat(dict(res, floor=dict(far, far_above=False)))  # near its floor: what the figure is
+    assert "along each offset alone" in near and "further off" in near and "above its floor" not in near
+    assert "along each offset alone" in uncertainty_caveat(dict(res, floor=None))  # no floor block yet
     none_stated = {"time_offset_uncertainty_s": None, "handles": [{"offset_uncertainty_m": [None] * 3}], "floor": far}
     assert uncertainty_caveat(none_stated) is None  # nothing stated, nothing to qualify
     handles = dict(none_stated, handles=[{"offset_uncertainty_m": [None, 3e-4, None]}])

@@ -204,9 +204,11 @@ class FitResult(dict):
 
 
 def uncertainty_caveat(res: dict) -> str | None:
-    """When a fit with estimated offsets ends far above its floor: a line saying their uncertainties are
-    the curvature of the error at the fit's point, which in a wrong basin understates the error (issue 20's
-    offsets capture: a time offset stated +-4.6 ms, 6.4 ms off); else None."""
+    """What the offsets' stated uncertainties are, where a fit states any: the curvature of the error along each
+    offset alone at the fitted point, the settings held, so an offset that trades against the settings may lie
+    further off (how far, on issue 20's offsets fits: docs/real_captures.md, figure source issue20_offsets_coverage);
+    where the fit ends far above its floor, that it may sit in a wrong basin, where the curvature says even less.
+    None where none is stated."""
     fl = res.get("floor") or {}
     stated = res.get("time_offset_uncertainty_s") is not None or any(
         u is not None
@@ -214,12 +216,18 @@ def uncertainty_caveat(res: dict) -> str | None:
         if isinstance(h, dict)
         for u in (h.get("offset_uncertainty_m") or [])
     )
-    ratio = fl.get("heldout_ratio") if fl.get("heldout_ratio") is not None else fl.get("train_ratio")
-    if not (stated and fl.get("far_above") and ratio is not None):
+    if not stated:
         return None
+    ratio = fl.get("heldout_ratio") if fl.get("heldout_ratio") is not None else fl.get("train_ratio")
+    if fl.get("far_above") and ratio is not None:
+        return (
+            f"the offsets' uncertainties are the error's curvature at the fitted point, and the fit ends {ratio:.1f}x "
+            f"above its floor: the true offsets may lie further off than they say"
+        )
     return (
-        f"the offsets' uncertainties are the error's curvature at the fitted point, and the fit ends {ratio:.1f}x "
-        f"above its floor: the true offsets may lie further off than they say"
+        "the offsets' uncertainties are the error's curvature along each offset alone, the settings held at the "
+        "fitted point: an offset that trades against the settings (a released corner's height) may lie further off "
+        "than it says"
     )
 
 
