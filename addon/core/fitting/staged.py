@@ -406,13 +406,13 @@ class StagedCMA(Optimizer):
                         self.first_best_run = c.state_dict()
                     self.first_runs += 1
                     init = None if self.first_init is None else [np.array(self.first_init)]
+                    sub = self._subspace()
                     if self.first_restart_vary is not None:  # this run at another level of that coordinate
-                        sub = self._subspace()
                         u = np.full(sub.n, 0.5) if init is None else sub.encode(init[0][None])[0]
                         levels = self.first_restart_levels
                         u[self.first.index(self.first_restart_vary)] = levels[(self.first_runs - 2) % len(levels)]
                         init = [sub.decode(u[None])[0]]
-                    self.children[-1] = self._child(self._subspace(), c.popsize, self.sigma0, init)
+                    self.children[-1] = self._child(sub, c.popsize, self.sigma0, init)
             elif self.first_best_run is not None:
                 # the runs are over: the one with the best point goes on, to the end of the first stage
                 if _float_from_json(self.first_best_run["best_f"]) < c.best_f:
