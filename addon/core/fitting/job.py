@@ -51,6 +51,7 @@ from .config import (  # noqa: F401 (re-exported)
     check_resolution,
     resolve_optimizer,
 )
+from .intervals import interval_budget, interval_step, intervals_plan
 from .objective import SilhouetteObjective
 from .offset_profile import profile_step
 from .optimise import make_optimizer
@@ -60,13 +61,13 @@ from .parameters import (
     PaperParameters,
     SceneParameters,
     declared_model,
+    joint_space,
     make_parameters,
     release_instants,
 )
 from .quality import Ladder
 from .result import FitResult, job_result
 from .result import finite_or_none as _finite
-from .space import SearchSpace
 
 if TYPE_CHECKING:
     from ..observation.camera import Camera
@@ -167,6 +168,10 @@ class FitJob:
         if self.manip is not None:
             # the profile: either side of each offset, and its centre; before it, its polish rounds
             reserved += 2 * self.manip.n + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * self.manip.n + 1)
+        self.intervals = None  # the intervals stage's state (intervals.py), once it has begun
+        self.intervals_note = intervals_plan(self)
+        if self.intervals_note is None:
+            reserved += interval_budget(self.space.n)
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
@@ -545,7 +550,9 @@ class FitJob:
             self.stop_reason = "target"
         elif self.stage in ("search", "rung") and (self.opt.stopped or self.evaluations >= self.stage_end):
             self._next_stage()
-        elif self.stage == "done" or self.evaluations >= self.config.max_evaluations and self.stage != "profile":
+        elif self.stage == "done" or (
+            self.evaluations >= self.config.max_evaluations and self.stage not in ("profile", "intervals")
+        ):
             self._next_stage()
         self.finished = self.stop_reason is not None
 
@@ -588,11 +595,20 @@ class FitJob:
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
             return
+        if self.stage in ("search", "rung", "profile") and self.intervals_note is None and self.best_by_quality:
+            self.stage = "intervals"
+            self._activate(self.chosen_quality())
+            self.stage_quality = self.chosen_quality()
+            return
         self.stage = "done"
         if self.chosen_quality() is not None:
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
         self.stop_reason = self.search_stop or "budget"
+
+    def end_profile(self) -> None:
+        """The profile is over: the intervals stage next, or the end."""
+        self._next_stage()
 
     def _profile_step(self):
         """The "profile" stage's step: a polish round of the offsets or their profile (``offset_profile.profile_step``)."""
@@ -609,6 +625,9 @@ class FitJob:
         t0 = time.time()
         if self.stage == "profile":
             self._profile_step()
+        elif self.stage == "intervals":
+            if interval_step(self):
+                self.stage = "done"
         elif self.stage == "search" and self.start_x is not None and self.start_f is None:
             self._evaluate_start()
         elif self.stage in ("search", "rung"):
@@ -766,17 +785,6 @@ class FitJob:
         naming the differing fields; only the budget and the target may differ). ``evaluator``: the workers
         of a Blender-scene fit."""
         return checkpoint.resume(cls, FitConfig, path, capture, config, checkpoint_interval, evaluator)
-
-
-def joint_space(par_space: SearchSpace, manip: ManipulationParameters | None) -> SearchSpace:
-    """The cloth's search space followed by the manipulation's unknowns (linear, zero = as declared)."""
-    if manip is None:
-        return par_space
-    names = list(par_space.names) + list(manip.names)
-    bounds = {n: (float(lo), float(hi)) for n, lo, hi in zip(par_space.names, par_space.lo, par_space.hi)}
-    bounds.update(manip.bounds)
-    logs = {n: bool(v) for n, v in zip(par_space.names, par_space.log)}
-    return SearchSpace(names, bounds, logs)
 
 
 def atomic_json(path: str | os.PathLike, obj: Any) -> None:

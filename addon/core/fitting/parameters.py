@@ -134,6 +134,12 @@ class PaperParameters:
         r = self.rows(x)[0]
         return {"m": float(r[0]), "k": float(r[1]), "l": float(r[2]), "d": float(r[3])}
 
+    def reported(self, name: str, coord: float) -> tuple[str, float]:
+        """A search coordinate's value in the result's units: (k, d or l, value)."""
+        per = {"k_over_m": ("k", self.m), "d_over_m": ("d", self.m), "l_rel": ("l", self.spacing)}
+        out, scale = per[name]
+        return out, float(coord) * scale
+
     def describe(self, x: ArrayLike) -> dict:
         p = self.params(x)
         return {"model": self.model.to_dict(), "params": p, "identifiable": identifiable(p)}
@@ -206,6 +212,10 @@ class BlenderParameters:
 
     def _coord(self, name, value):
         return value / self.m if name in self.scaled else value
+
+    def reported(self, name: str, coord: float) -> tuple[str, float]:
+        """A search coordinate's value in the result's units (``blender_cloth``: Blender's, at the mass)."""
+        return name, float(coord) * self.m if name in self.scaled else float(coord)
 
     def rows(self, X: ArrayLike) -> np.ndarray:
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
@@ -479,3 +489,14 @@ def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None
             }
         )
     return out
+
+
+def joint_space(par_space: SearchSpace, manip: ManipulationParameters | None) -> SearchSpace:
+    """The cloth's search space followed by the manipulation's unknowns (linear, zero = as declared)."""
+    if manip is None:
+        return par_space
+    names = list(par_space.names) + list(manip.names)
+    bounds = {n: (float(lo), float(hi)) for n, lo, hi in zip(par_space.names, par_space.lo, par_space.hi)}
+    bounds.update(manip.bounds)
+    logs = {n: bool(v) for n, v in zip(par_space.names, par_space.log)}
+    return SearchSpace(names, bounds, logs)

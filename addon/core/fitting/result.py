@@ -285,6 +285,13 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
         if isinstance(res.get("blender_cloth"), dict):
             res["blender_cloth"]["quality"] = job.chosen_quality()
     res.update(job.manipulation())
+    st = job.intervals
+    if st is not None and st.get("result"):
+        res.update(st["result"])
+    else:
+        res["intervals"] = None
+        res["undetermined"] = None
+        res["intervals_note"] = job.intervals_note or "intervals not estimated: the fit stopped before them"
     if job.final is not None:
         res["floor"] = job.final
         caveat = uncertainty_caveat(res)
