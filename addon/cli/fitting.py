@@ -175,6 +175,7 @@ def fit_config(a, cap):
             restarts=a.restarts,
         )
     kw.update(quality="auto" if a.quality == "auto" else None, uncertain=a.uncertain)
+    kw.update(intervals=getattr(a, "intervals", True))
     kw.update(search_options(getattr(a, "search", None) or []))
     return FitConfig(**kw)
 
@@ -326,6 +327,8 @@ def _fit_report(r):
                 )
         if r.get("manipulation_note"):
             print(f"note: {r['manipulation_note']}", file=sys.stderr)
+    for line in interval_lines(r):
+        print(line, file=sys.stderr)
     fl = r.get("floor") or {}
     if fl.get("train_floor_pct") is not None:
         line = f"training E_sil {fl['train_E_sil_pct']:.3f} % (floor {fl['train_floor_pct']:.3f} %)"
@@ -334,6 +337,22 @@ def _fit_report(r):
         print(line, file=sys.stderr)
     if fl.get("warning"):
         print(f"warning: {fl['warning']}", file=sys.stderr)
+
+
+def interval_lines(r: dict) -> list[str]:
+    """The result's intervals for people: one line per free setting (value, 90 % interval, undetermined)."""
+    iv = r.get("intervals")
+    if not iv:
+        return [f"note: {r['intervals_note']}"] if r.get("intervals_note") else []
+    values = dict(r.get("params") or {}, **(r.get("blender_cloth") or {}))
+    und = set(r.get("undetermined") or [])
+    out = ["90 % intervals (the error's own noise; docs/intervals.md):"]
+    for n, (lo, hi) in iv.items():
+        if n not in values:
+            continue
+        mark = "  UNDETERMINED" if n in und else ""
+        out.append(f"  {n} {values[n]:.4g} [{lo:.4g}, {hi:.4g}]{mark}")
+    return out
 
 
 def cmd_fit_many(a):

@@ -213,6 +213,10 @@ class BlenderParameters:
     def _coord(self, name, value):
         return value / self.m if name in self.scaled else value
 
+    def coordinate(self, name: str, value: float) -> float:
+        """A setting's value in Blender's units -> its search coordinate (per unit mass where it scales)."""
+        return self._coord(name, value)
+
     def reported(self, name: str, coord: float) -> tuple[str, float]:
         """A search coordinate's value in the result's units (``blender_cloth``: Blender's, at the mass)."""
         return name, float(coord) * self.m if name in self.scaled else float(coord)
@@ -223,7 +227,8 @@ class BlenderParameters:
         R = np.repeat(base[None], len(X), 0)
         for k, n in enumerate(self.free):
             col = B.FLOAT_SETTINGS.index(n)
-            R[:, col] = X[:, k] * self.m if n in self.scaled else X[:, k]
+            v = X[:, k] * self.m if n in self.scaled else X[:, k]
+            R[:, col] = np.minimum(v, B.RANGES[n][1])  # a bound at Blender's limit, per unit mass and back: 1 ulp over
         return R
 
     def settings(self, x: ArrayLike) -> dict:
