@@ -157,3 +157,23 @@ def test_no_interval_where_the_budget_or_the_images_cannot_give_one(cap):
     assert one["intervals"] is None and "1 training image" in one["intervals_note"]
     off = fit(cap, intervals=False).run()
     assert off["intervals"] is None and "--no-intervals" in off["intervals_note"]
+
+
+def test_the_intervals_are_shown_to_people_and_the_undetermined_marked(cap, tmp_path):
+    import cv2
+    from clothfit.core.fitting.result import interval_lines
+    from clothfit.core.observation.overlay import capture_overlays
+
+    res = fit(cap).run()
+    res["undetermined"] = [FREE[0]]  # as a fit that could not tell it says
+    lines = interval_lines(res)
+    for n in FREE:
+        (line,) = [x for x in lines if x.startswith(n)]
+        lo, hi = res["intervals"][n]
+        assert f"[{lo:.4g}, {hi:.4g}]" in line
+        assert line.endswith("UNDETERMINED") == (n == FREE[0])
+    plain = capture_overlays(cap, res, tmp_path / "a", cameras=[0], times=[0.4])
+    shown = capture_overlays(cap, res, tmp_path / "b", cameras=[0], times=[0.4], legend=lines)
+    ha, hb = cv2.imread(plain[-1]).shape[0], cv2.imread(shown[-1]).shape[0]
+    assert hb >= ha + 18 * len(lines)
+    assert interval_lines({"intervals": None, "intervals_note": "why"}) == ["no intervals: why"]

@@ -8,6 +8,7 @@ import time
 
 from ..core import defaults as D
 from ..core.errors import ClothFitError
+from ..core.fitting.result import interval_lines
 from .common import (
     Interrupted,
     Text,
@@ -327,8 +328,8 @@ def _fit_report(r):
                 )
         if r.get("manipulation_note"):
             print(f"note: {r['manipulation_note']}", file=sys.stderr)
-    for line in interval_lines(r):
-        print(line, file=sys.stderr)
+    for k, line in enumerate(interval_lines(r)):
+        print(line if k == 0 else f"  {line}", file=sys.stderr)
     fl = r.get("floor") or {}
     if fl.get("train_floor_pct") is not None:
         line = f"training E_sil {fl['train_E_sil_pct']:.3f} % (floor {fl['train_floor_pct']:.3f} %)"
@@ -337,22 +338,6 @@ def _fit_report(r):
         print(line, file=sys.stderr)
     if fl.get("warning"):
         print(f"warning: {fl['warning']}", file=sys.stderr)
-
-
-def interval_lines(r: dict) -> list[str]:
-    """The result's intervals for people: one line per free setting (value, 90 % interval, undetermined)."""
-    iv = r.get("intervals")
-    if not iv:
-        return [f"note: {r['intervals_note']}"] if r.get("intervals_note") else []
-    values = dict(r.get("params") or {}, **(r.get("blender_cloth") or {}))
-    und = set(r.get("undetermined") or [])
-    out = ["90 % intervals (the error's own noise; docs/intervals.md):"]
-    for n, (lo, hi) in iv.items():
-        if n not in values:
-            continue
-        mark = "  UNDETERMINED" if n in und else ""
-        out.append(f"  {n} {values[n]:.4g} [{lo:.4g}, {hi:.4g}]{mark}")
-    return out
 
 
 def cmd_fit_many(a):
@@ -490,8 +475,9 @@ def cmd_overlay(a):
     floors = None
     if a.floor:
         floors = _capture_floor(cap, cams, times, None).per_image()
+    params = _params(a, _capture_truth(cap))
     paths = capture_overlays(
-        cap, _params(a, _capture_truth(cap)), a.out, cameras=cams, times=times, images=images, floors=floors
+        cap, params, a.out, cameras=cams, times=times, images=images, floors=floors, legend=interval_lines(params)
     )
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
     out = {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}
