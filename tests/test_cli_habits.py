@@ -207,6 +207,26 @@ def test_the_venvs_console_script_runs():
 # ------------------------------------------------------------------ stdout and exit codes
 
 
+def test_export_blender_cloth_says_what_is_wrong_with_the_file(tmp_path):
+    """A file that is no fit result is named as such, not read as the other model's parameters; a
+    paper-model fit is named as one."""
+    cases = [
+        ({"a": 1}, "not a fit result"),
+        ([1, 2], "expected a JSON object"),
+        ({"model": {"name": "paper"}, "params": {"m": 1e-5, "k": 10, "l": 0.006, "d": 1e-4}}, "paper-model fit"),
+    ]
+    for i, (content, needle) in enumerate(cases):
+        p = tmp_path / f"r{i}.json"
+        p.write_text(json.dumps(content))
+        rc, out, err = in_process("export-blender-cloth", p)
+        assert rc == 2 and out == "" and "Traceback" not in err, err
+        assert err.strip().startswith("error: ") and str(p) in err and needle in err, err
+        assert "'m'" not in err and "m, k, l, d)" not in err, err
+    (tmp_path / "text.json").write_text("garbage")
+    rc, out, err = in_process("export-blender-cloth", tmp_path / "text.json")
+    assert rc == 2 and "not valid JSON" in err, err
+
+
 def test_usage_errors_exit_64_bad_data_exits_2(tmp_path):
     for args, needle in (
         (["fit"], "required: capture"),

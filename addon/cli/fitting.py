@@ -375,18 +375,11 @@ def cmd_fit_many(a):
 
 
 def cmd_export_blender_cloth(a):
-    from ..core.jsonio import read_json
+    from ..core.fitting.result import FitResult
     from ..core.physics import blender as B
-    from ..core.physics.models import BlenderModel, model_and_row
 
-    res = read_json(a.result, "result")
-    model, row = model_and_row(res)
-    if not isinstance(model, BlenderModel):
-        raise ClothFitError(
-            f"result {a.result}: a {model.name}-model fit has no Blender cloth settings "
-            "(fit with --model blender, or warm-start one from it with --init)"
-        )
-    s = model.settings(row)
+    res = FitResult.from_json(a.result, "result")  # checked: says what the file is when it is no fit result
+    model, s = res.blender_settings()
     out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
     manip = {k: res[k] for k in ("time_offset_s", "handles") if res.get(k) is not None}
     if manip:  # the manipulation the fit estimated: where the pins go, when it lets go
