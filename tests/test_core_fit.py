@@ -204,6 +204,32 @@ def test_checkpoint_and_resume_continue_to_the_budget(capture, tmp_path):
         FitJob.resume(str(tmp_path / "missing.json"), capture=capture)
 
 
+def test_the_evaluation_budget_is_a_hard_cap_and_the_count_is_honest(capture, tmp_path):
+    """A budget that is no multiple of the population: the last generation is cut to what is left, every
+    candidate scored is counted, none more; resumed with a larger budget, the fit is the uninterrupted one."""
+    pop = FitJob(capture, _small_cfg()).opt.ask().shape[0]
+    budget = 2 * pop + 2
+    ck = str(tmp_path / "cut.checkpoint.json")
+    job = FitJob(capture, _small_cfg(max_evaluations=budget), checkpoint=ck)
+    scored = []
+    score = job.evaluate
+
+    # what the search scores (the report at the end scores the best again: not a candidate)
+    def counted(X, objective=None):
+        if not job.finished:
+            scored.append(len(X))
+        return score(X, objective)
+
+    job.evaluate = counted
+    r = job.run()
+    assert sum(scored) == r["evaluations"] == budget and r["stop_reason"] == "budget"
+    assert scored[-1] == budget % pop
+    ref = FitJob(capture, _small_cfg(max_evaluations=6 * pop)).run()
+    again = FitJob.resume(ck, capture=capture, config=_small_cfg(max_evaluations=6 * pop)).run()
+    assert again["evaluations"] == ref["evaluations"] == 6 * pop
+    assert again["params"] == ref["params"] and again["history"] == ref["history"]
+
+
 def test_cancel_keeps_the_best_so_far(capture, tmp_path):
     ck = str(tmp_path / "c.json")
     job = FitJob(capture, _small_cfg(max_evaluations=10_000), checkpoint=ck)

@@ -67,6 +67,7 @@ from .quality import Ladder
 from .result import FitResult, job_result
 from .result import finite_or_none as _finite
 from .space import SearchSpace
+from .steppable import ask_within
 
 if TYPE_CHECKING:
     from ..observation.camera import Camera
@@ -161,12 +162,15 @@ class FitJob:
         self.optimizer_name = resolve_optimizer(cfg.optimizer, stageable)
         self.ladder = self._ladder(capture, cfg, evaluator)
         self.start_quality = None if self.ladder is None else self.ladder.start
-        reserved = 0
+        reserved = self.profile_reserve = 0
         if self.ladder is not None:
             reserved = (D.QUALITY_RUNGS_RESERVED if not self.ladder.probe_only else 1) * self._rung_budget()
-        if self.manip is not None:
-            # the profile: either side of each offset, and its centre; before it, its polish rounds
-            reserved += 2 * self.manip.n + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * self.manip.n + 1)
+        if self.manip is not None:  # the profile: either side of each offset, its centre, its polish rounds
+            k = self.manip.n
+            self.profile_reserve = 2 * k + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * k + 1)
+            reserved += self.profile_reserve
+        if cfg.max_evaluations <= reserved:
+            raise ClothFitError(f"--max-evaluations {cfg.max_evaluations}: the fit keeps {reserved} after its search")
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
@@ -258,15 +262,18 @@ class FitJob:
             return None
         return np.concatenate([x, np.zeros(self.space.n - self.npar)])
 
-    def _evaluate_start(self):
-        f = float(self.evaluate(self.start_x[None])[0])
-        self.done_evals += 1
-        self.start_f = f if math.isfinite(f) else float("inf")
-        if math.isfinite(f):
-            q = self.stage_quality
-            have = self.best_by_quality.get(q)
-            if have is None or f < have[0]:
-                self.best_by_quality[q] = [f, self.start_x.tolist()]
+    def _score_aside(self, X) -> float:
+        """Score candidates outside the optimiser (the start point; a last batch cut to the budget):
+        counted, the best kept if it is the best so far. Returns their lowest error (inf if none)."""
+        f = self.evaluate(X) if len(X) else np.zeros(0)
+        self.done_evals += len(f)
+        self.exploded += int(np.sum(~np.isfinite(f)))
+        g = np.where(np.isfinite(f), f, np.inf)
+        i = int(np.argmin(g)) if len(g) else -1
+        have = self.best_by_quality.get(self.stage_quality)
+        if i >= 0 and math.isfinite(g[i]) and (have is None or g[i] < have[0]):
+            self.best_by_quality[self.stage_quality] = [float(g[i]), np.asarray(X[i], dtype=np.float64).tolist()]
+        return float(g[i]) if i >= 0 else math.inf
 
     def _rung_budget(self) -> int:
         frac = (
@@ -572,7 +579,7 @@ class FitJob:
     def _next_stage(self):
         """End the running stage; start a rung, the profile, or finish."""
         self._end_running()
-        left = self.config.max_evaluations - self.done_evals
+        left = self.config.max_evaluations - self.done_evals - self.profile_reserve  # the profile's kept
         if self.stage in ("search", "rung") and self.ladder is not None and self.best_by_quality:
             q = self.ladder.next()
             rung = self._rung_budget()
@@ -610,13 +617,17 @@ class FitJob:
         if self.stage == "profile":
             self._profile_step()
         elif self.stage == "search" and self.start_x is not None and self.start_f is None:
-            self._evaluate_start()
-        elif self.stage in ("search", "rung"):
-            X = self.opt.ask()
-            f = self.evaluate(X)
-            self.exploded += int(np.sum(~np.isfinite(f)))
-            self.opt.tell(X, f)
-            self._track()
+            self.start_f = self._score_aside(self.start_x[None])
+        elif self.stage in ("search", "rung"):  # never past the stage's budget: a hard cap
+            self.opt, X, whole = ask_within(self.opt, self.stage_end - self.evaluations)
+            if whole:
+                f = self.evaluate(X)
+                self.exploded += int(np.sum(~np.isfinite(f)))
+                self.opt.tell(X, f)
+                self._track()
+            else:  # the budget's last batch, cut to what is left: scored aside, and the stage ends
+                self._score_aside(X)
+                self.stage_end = self.evaluations
         self.elapsed += time.time() - t0
         self._update_stop()
         if self.finished:
