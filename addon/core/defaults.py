@@ -103,6 +103,8 @@ FIT_RESTARTS = 0  # CMA-ES IPOP restarts (each with twice the population), paper
 BLENDER_FIT_RESTARTS = 4  # the blender model's 8 free settings have local minima: restart until the budget
 FIT_EXPLODED_LIMIT = 100  # this many candidates, all exploded, and nothing finite: the fit is an error
 CHECKPOINT_INTERVAL_S = 2.0  # the CLI writes its checkpoint at most this often (and always at the end)
+PROGRESS_INTERVAL_S = 10.0  # a fit whose stderr is no terminal prints a progress line at least this often
+PROGRESS_BAR_REFRESH_S = 0.2  # on a terminal the progress bar is redrawn at most this often
 FLOOR_FAR_ABOVE = 3.0  # issue 20: a fit error more than 3x its images' noise floor (observation/floor.py) is
 # "far above" it; the estimate's calibration spread is +-25 % (docs/noise_floor.md),
 # so 3x is well clear of it
