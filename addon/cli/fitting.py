@@ -551,7 +551,9 @@ def _add_fit(sub):
     )
     _model_args(s)
     s.add_argument(
-        "--free", help="blender model: comma list of ClothSettings to search (default: see README, Identifiability)"
+        "--free",
+        help="blender model: comma list of ClothSettings to search (default: the stiffnesses (compression with ANGULAR bending only), the "
+        "tension, shear and bending damping and the air damping; why those: docs/models.md)",
     )
     s.add_argument(
         "--fixed",
