@@ -170,7 +170,8 @@ class FitJob:
             self.profile_reserve = 2 * k + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * k + 1)
             reserved += self.profile_reserve
         if cfg.max_evaluations <= reserved:
-            raise ClothFitError(f"--max-evaluations {cfg.max_evaluations}: the fit keeps {reserved} after its search")
+            msg = f"this fit keeps {reserved} evaluations after its search (quality rungs, manipulation profile)"
+            raise ClothFitError(f"--max-evaluations {cfg.max_evaluations} is too few: {msg}: give more")
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
