@@ -54,7 +54,7 @@ def main(argv=None):
     pics = None if a.no_pictures else os.path.abspath(a.pictures or os.path.join(out, "pictures"))
     print(
         "note: Blender's first render may print 'EGL Error (0x3009)' lines: its headless OpenGL start-up asking "
-        "for a newer OpenGL than the driver offers (harmless; README, 'The demo').",
+        "for a newer OpenGL than the driver offers (harmless; docs/demo.md).",
         flush=True,
     )
     t0 = time.perf_counter()

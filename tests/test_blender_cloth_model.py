@@ -1,7 +1,8 @@
 """The core's ``blender`` cloth model against Blender's own Cloth modifier (real bpy module), and
 the Blender-model fit's inputs and outputs.
 
-Measured figures on the 21 x 21 sheet: ``python -m clothfit blender-agreement`` (README table).
+Measured figures on the 21 x 21 sheet: ``python -m clothfit blender-agreement`` (docs/results.md,
+"Blender's cloth: agreement with Blender, identifiability").
 """
 
 import json

@@ -120,6 +120,58 @@ def test_loaded_capture_drives_the_simulation(small_capture):
     assert p.overlay_error < 0.05
 
 
+def test_a_capture_releasing_two_corners_is_kept_and_replayed_whole(tmp_path):
+    """A capture that lets two corners go, at different times: Load Capture keeps both releases,
+    Simulate frees each corner from its own release time on, and Blender's cloth replay (Apply Blender
+    Cloth) animates a release for each."""
+    from clothfit.blender import api
+    from clothfit.core.observation import camera as C
+    from clothfit.core.observation import synth
+    from clothfit.core.physics import blender as B
+    from clothfit.core.physics.scenario import Handle, paper_scenario
+
+    sc = paper_scenario(frame_times=[0.02, 0.1, 0.2])
+    c = sc.grid.corners()
+    when = {c[0]: 0.0, c[3]: 0.05}
+    sc.handles = [Handle(h.vertex, h.times, h.positions, when.get(h.vertex)) for h in sc.handles]
+    cams = [k.resized(30, 40) for k in C.load_rig("lab18")[:3]]
+    synth.synth_capture(str(tmp_path / "cap"), cameras=cams, scenario=sc, seed=1)
+    scene = bpy.context.scene
+    p = scene.clothfit
+    api.load_capture(scene, str(tmp_path / "cap"))
+    assert p.capture_releases == "corner 0 at 0 s, corner 3 at 0.05 s; 2 held"
+    assert bpy.ops.clothfit.build_cloth() == {"FINISHED"}
+    p.frame_times = "0.02, 0.1, 0.2"
+    out = api.simulate(scene)
+    assert sorted((h.vertex, h.release_time) for h in out["scenario"].handles if h.release_time is not None) == [
+        (c[0], 0.0),
+        (c[3], 0.05),
+    ]
+    keys = {kb.name: kb for kb in p.cloth_object.data.shape_keys.key_blocks}
+    rest = np.array([v.co[:] for v in keys["t=0.000"].data])
+
+    def moved(t, v):
+        return float(np.linalg.norm(np.array(keys[f"t={t:.3f}"].data[v].co[:]) - rest[v]))
+
+    assert moved(0.02, c[0]) > 1e-4 and moved(0.02, c[3]) < 1e-6  # the second still held before its release
+    assert moved(0.2, c[0]) > 1e-3 and moved(0.2, c[3]) > 1e-3  # both fall after theirs
+    assert moved(0.2, c[1]) < 1e-6 and moved(0.2, c[2]) < 1e-6
+    res = {
+        "model": {"name": "blender", "fps": 24.0, "quality": 5, "bending_model": "ANGULAR"},
+        "blender_cloth": B.check_settings({"quality": 5, "bending_model": "ANGULAR"}),
+        "blender_scene": {"fps": 24.0},
+    }
+    obj, _ = api.apply_blender_cloth(scene, None, result=res)
+    groups = {g.index: g.name for g in obj.vertex_groups}
+    freed = {}
+    for v in (c[0], c[3]):
+        names = [groups[e.group] for e in obj.data.vertices[v].groups if e.weight > 0]
+        freed[v] = [n for n in names if n.startswith("clothfit_pin_")]
+    assert len(freed[c[0]]) == 1 and len(freed[c[3]]) == 1 and freed[c[0]] != freed[c[3]]
+    mixes = [m for m in obj.modifiers if m.type == "VERTEX_WEIGHT_MIX"]
+    assert len(mixes) == 2
+
+
 def test_save_and_reload_keeps_all_properties(tmp_path):
     scene = bpy.context.scene
     p = small_settings(scene)

@@ -206,8 +206,8 @@ def _kill_procs_with(text):
 
 
 def test_fit_and_fit_many_on_a_running_cluster_by_address(scene, ray_fit, tmp_path):
-    """``--address HOST:PORT``: a Ray cluster started apart (``ray start --head`` on loopback, as the
-    README tells), the fit run from a directory outside the repository (its workers get ``addon``
+    """``--address HOST:PORT``: a Ray cluster started apart (``ray start --head`` on loopback, as
+    docs/ray.md tells), the fit run from a directory outside the repository (its workers get ``addon``
     through Ray's ``py_modules``, not through the repository's path); the same result as the fit
     on a local instance, and the cluster is left running for the next fit. ``fit-many --address``
     on the same cluster gives the local fit of the capture."""

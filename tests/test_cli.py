@@ -18,9 +18,10 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def run(*args, timeout=300):
+def run(*args, timeout=300, env_extra=None):
     env = dict(os.environ)
     env.pop("CLOTHFIT_PROGRESS", None)
+    env.update(env_extra or {})
     p = subprocess.run(
         [sys.executable, "-m", "clothfit", *[str(a) for a in args]],
         cwd=ROOT,
@@ -90,6 +91,49 @@ def fit_json(cap):
     with open(out) as f:
         assert json.load(f)["params"] == summary["params"]
     return out
+
+
+def _progress_lines(err, budget):
+    """The progress lines of a fit's stderr: (evaluations, {setting: value}) each."""
+    import re
+
+    got = []
+    for line in err.replace("\r", "\n").splitlines():
+        m = re.search(rf"(\d+)/{budget} evaluations, E_sil [\d.]+ %, .+ spent, .+ left: (.+)$", line)
+        if m:
+            words = m.group(2).split()
+            pairs = [(n, v) for n, v in zip(words[::2], words[1::2]) if re.fullmatch(r"-?[\d.]+(e[-+]\d+)?", v)]
+            got.append((int(m.group(1)), {n: float(v) for n, v in pairs}))  # (a bar's line may be cut)
+    return got
+
+
+@pytest.mark.parametrize("model", ["paper", "blender"])
+def test_a_fit_shows_its_progress_with_the_fitted_models_own_settings(cap, tmp_path, model):
+    """Where stderr is no terminal, a plain line at least every CLOTHFIT_PROGRESS_INTERVAL seconds (here
+    0: every generation); on a terminal (CLOTHFIT_PROGRESS=1 stands for one) a bar. Both name the settings
+    the fit searches, of the model it fits, and end at the budget."""
+    budget = 16
+    args = ["fit", cap, "--model", model, "--cameras", "n:2", "--times", "0.1,0.3", "--max-evaluations", budget]
+    rc, so, err = run(*args, "--out", tmp_path / "lines.json", env_extra={"CLOTHFIT_PROGRESS_INTERVAL": "0"})
+    assert rc == 0, err
+    r = json.loads((tmp_path / "lines.json").read_text())
+    names = {"k", "l", "d"} if model == "paper" else {n.replace("_stiffness", "") for n in r["free"]}
+    lines = _progress_lines(err, budget)
+    assert not [ln for ln in err.splitlines() if ln.startswith("[")] and len(lines) >= 2, err
+    assert all(set(s) == names for _, s in lines), (names, err)
+    assert [n for n, _ in lines] == sorted(n for n, _ in lines) and lines[-1][0] == r["evaluations"] <= budget
+    if model == "blender":
+        assert {"tension", "shear", "bending"} <= names
+    rc, so, err = run(*args, "--out", tmp_path / "bar.json", env_extra={"CLOTHFIT_PROGRESS": "1"})
+    assert rc == 0, err
+    bars = [ln for ln in err.splitlines() if ln.startswith("[") and "evaluations" in ln]  # (text mode reads \\r as \\n)
+    assert (
+        bars and bars[-1].startswith("[" + "#" * 12 + "]") and _progress_lines(err, budget)[-1][0] == r["evaluations"]
+    )
+    first = "k" if model == "paper" else r["free"][0].replace("_stiffness", "")
+    assert f"left: {first} " in bars[-1], err  # the settings by name, cut to the terminal's line
+    rc, so, err = run(*args, "--out", tmp_path / "quiet.json", "--quiet", env_extra={"CLOTHFIT_PROGRESS_INTERVAL": "0"})
+    assert rc == 0 and not _progress_lines(err, budget), err
 
 
 def test_fit_writes_a_result_with_params(fit_json, cap):

@@ -95,6 +95,44 @@ def test_every_option_of_every_command_has_help_and_shows_its_default():
         )
 
 
+def _headings(path):
+    """The headings of a Markdown page and their anchors (MkDocs: ``{ #id }`` or the slug)."""
+    names, anchors = set(), set()
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            m = re.match(r"#+\s+(.*?)\s*(\{\s*#([\w-]+)\s*\})?\s*$", line)
+            if m and not line.startswith("#!"):
+                names.add(m.group(1).replace("`", ""))
+                anchors.add(m.group(3) or re.sub(r"[^\w\s-]", "", m.group(1).lower()).strip().replace(" ", "-"))
+    return names, anchors
+
+
+def test_every_reference_in_the_help_texts_names_a_page_and_heading_that_exist():
+    """A help text that sends the reader somewhere (``README, 'Heading'``, ``docs/page.md``,
+    ``docs/page.md#anchor``, ``docs/page.md, 'Heading'``) names a page and heading that exist."""
+    parser = cli.build_parser()
+    commands, _ = _subcommands(parser)
+    texts = [parser.description or "", parser.epilog or ""]
+    for sub in commands.values():
+        texts += [sub.description or "", sub.epilog or ""] + [a.help or "" for a in sub._actions]
+    text = " ".join(" ".join(texts).split())
+    bad, seen = [], 0
+    for m in re.finditer(r"README(?:\.md)?(?:, ['\"]([^'\"]+)['\"])?", text):
+        seen += 1
+        if not m.group(1) or m.group(1).replace("`", "") not in _headings(os.path.join(ROOT, "README.md"))[0]:
+            bad.append(m.group(0))
+    for m in re.finditer(r"docs/([\w/]+\.md)(?:#([\w-]+))?(?:, ['\"]([^'\"]+)['\"])?", text):
+        seen += 1
+        page = os.path.join(ROOT, "docs", m.group(1))
+        if not os.path.isfile(page):
+            bad.append(m.group(0))
+            continue
+        names, anchors = _headings(page)
+        if (m.group(2) and m.group(2) not in anchors) or (m.group(3) and m.group(3).replace("`", "") not in names):
+            bad.append(m.group(0))
+    assert seen and not bad, bad
+
+
 def test_help_names_the_program_and_documents_stdout_and_exit_codes():
     r = run("blender", "--help")
     assert r.returncode == 0 and r.stdout.startswith("usage: clothfit blender"), r.stdout[:200]
@@ -205,6 +243,26 @@ def test_the_venvs_console_script_runs():
 
 
 # ------------------------------------------------------------------ stdout and exit codes
+
+
+def test_export_blender_cloth_says_what_is_wrong_with_the_file(tmp_path):
+    """A file that is no fit result is named as such, not read as the other model's parameters; a
+    paper-model fit is named as one."""
+    cases = [
+        ({"a": 1}, "not a fit result"),
+        ([1, 2], "expected a JSON object"),
+        ({"model": {"name": "paper"}, "params": {"m": 1e-5, "k": 10, "l": 0.006, "d": 1e-4}}, "paper-model fit"),
+    ]
+    for i, (content, needle) in enumerate(cases):
+        p = tmp_path / f"r{i}.json"
+        p.write_text(json.dumps(content))
+        rc, out, err = in_process("export-blender-cloth", p)
+        assert rc == 2 and out == "" and "Traceback" not in err, err
+        assert err.strip().startswith("error: ") and str(p) in err and needle in err, err
+        assert "'m'" not in err and "m, k, l, d)" not in err, err
+    (tmp_path / "text.json").write_text("garbage")
+    rc, out, err = in_process("export-blender-cloth", tmp_path / "text.json")
+    assert rc == 2 and "not valid JSON" in err, err
 
 
 def test_usage_errors_exit_64_bad_data_exits_2(tmp_path):

@@ -204,6 +204,58 @@ def test_checkpoint_and_resume_continue_to_the_budget(capture, tmp_path):
         FitJob.resume(str(tmp_path / "missing.json"), capture=capture)
 
 
+def test_the_evaluation_budget_is_a_hard_cap_and_the_count_is_honest(capture, tmp_path):
+    """A budget that is no multiple of the population: the last generation is cut to what is left, every
+    candidate scored is counted, none more; resumed with a larger budget, the fit is the uninterrupted one."""
+    pop = FitJob(capture, _small_cfg()).opt.ask().shape[0]
+    budget = 2 * pop + 2
+    ck = str(tmp_path / "cut.checkpoint.json")
+    job = FitJob(capture, _small_cfg(max_evaluations=budget), checkpoint=ck)
+    scored = []
+    score = job.evaluate
+
+    # what the search scores (the report at the end scores the best again: not a candidate)
+    def counted(X, objective=None):
+        if not job.finished:
+            scored.append(len(X))
+        return score(X, objective)
+
+    job.evaluate = counted
+    r = job.run()
+    assert sum(scored) == r["evaluations"] == budget and r["stop_reason"] == "budget"
+    assert scored[-1] == budget % pop
+    ref = FitJob(capture, _small_cfg(max_evaluations=6 * pop)).run()
+    again = FitJob.resume(ck, capture=capture, config=_small_cfg(max_evaluations=6 * pop)).run()
+    assert again["evaluations"] == ref["evaluations"] == 6 * pop
+    assert again["params"] == ref["params"] and again["history"] == ref["history"]
+    # a budget that cannot hold what the fit does after its search (the manipulation's profile) is refused
+    with pytest.raises(ClothFitError, match="--max-evaluations 5 is too few"):
+        FitJob(capture, _small_cfg(max_evaluations=5, uncertain={"time_offset": 0.02}))
+
+
+def test_a_fits_progress_lines_come_at_their_interval_and_name_the_settings(capture):
+    """The studies' fits (paper, bench) show their progress through ``run_shown``: lines prefixed with the
+    fit's label, the first after the first generation, then one per interval, and the last state at the
+    end; each names the paper model's free settings."""
+    from clothfit.core.fitting.progress import FitProgress, run_shown
+
+    pop = FitJob(capture, _small_cfg()).opt.ask().shape[0]
+    out, labels = [], []
+
+    def every_generation(label):
+        labels.append(label)
+        return FitProgress(out.append, False, interval=0.0, label=f"{label}: ")
+
+    r = run_shown(FitJob(capture, _small_cfg(max_evaluations=2 * pop)), every_generation, "table1, 4 cameras")
+    assert labels == ["table1, 4 cameras"] and r["evaluations"] == 2 * pop
+    assert all(x.startswith("table1, 4 cameras: ") and x.endswith("\n") for x in out) and len(out) >= 2
+    assert out[-1].startswith(f"table1, 4 cameras: {2 * pop}/{2 * pop} evaluations") and "left: k " in out[-1]
+    assert " l " in out[-1] and " d " in out[-1] and " m " not in out[-1]  # the mass is fixed, not searched
+    out.clear()
+    run_shown(FitJob(capture, _small_cfg(max_evaluations=3 * pop)), lambda label: FitProgress(out.append, False, 1e6))
+    assert len(out) == 2 and out[0].startswith(f"{pop}/{3 * pop} ") and out[1].startswith(f"{3 * pop}/{3 * pop} ")
+
+
 def test_cancel_keeps_the_best_so_far(capture, tmp_path):
     ck = str(tmp_path / "c.json")
     job = FitJob(capture, _small_cfg(max_evaluations=10_000), checkpoint=ck)

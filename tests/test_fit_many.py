@@ -30,7 +30,7 @@ def test_fit_many_equals_local_fits(caps, tmp_path, env):
         pytest.importorskip("ray")
     out = tmp_path / "fits"
     e = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST")}
-    e.update(env)
+    e.update(env, CLOTHFIT_PROGRESS_INTERVAL="0")  # each fit's progress lines: here one per generation
     r = subprocess.run(
         [
             sys.executable,
@@ -59,6 +59,10 @@ def test_fit_many_equals_local_fits(caps, tmp_path, env):
     assert f"2 fits on 2 {'process' if env else 'ray'} worker(s)" in r.stderr
     summary = json.loads(r.stdout)
     assert summary["workers"] == 2 and summary["executor"] == ("process" if env else "ray")
+    if env:  # the spawned workers share the driver's stderr (Ray's forwarding of it is Ray's)
+        for c in caps:
+            shown = [ln for ln in r.stderr.splitlines() if ln.startswith(f"{c}: ") and "/30 evaluations, E_sil" in ln]
+            assert shown and shown[-1].startswith(f"{c}: 30/30 evaluations") and "left: k " in shown[-1], r.stderr
     assert [f["out"] for f in summary["fits"]] == [
         str(out / f"{i:03d}_{os.path.basename(c)}.json") for i, c in enumerate(caps)
     ]

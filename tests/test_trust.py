@@ -293,8 +293,47 @@ def test_two_fits_to_the_same_out_do_not_share_files(cap, tmp_path):
                 pass
     assert not out.exists()
     assert fit("fit", cap.root, "--out", out, "--max-evaluations", 7, *FAST)[0] == 0
-    # writers use unique temporary names: none is left behind
+    # writers use unique temporary names: none is left behind, nor the fit's lock file
     assert not [p for p in os.listdir(tmp_path) if p.endswith(".tmp")]
+    assert not os.path.lexists(ck + ".lock")
+
+
+def test_the_lock_file_goes_when_its_holder_ends_by_an_error_too(tmp_path):
+    ck = str(tmp_path / "fit.json.checkpoint.json")
+    with pytest.raises(KeyboardInterrupt):
+        with safeio.exclusive_lock(ck):
+            assert os.path.isfile(ck + ".lock")
+            raise KeyboardInterrupt
+    assert not os.path.lexists(ck + ".lock")
+    with safeio.exclusive_lock(ck):  # and it can be taken again
+        pass
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_locker_whose_lock_file_was_removed_before_its_flock_locks_the_file_on_disk(tmp_path, monkeypatch):
+    """The race of removing lock files: a second fit opens the lock file, the first fit removes it and
+    ends, the second locks the removed file. It must lock the file on disk instead, so that a third fit
+    is still refused while the second runs."""
+    import fcntl
+
+    ck = str(tmp_path / "fit.json.checkpoint.json")
+    real = fcntl.flock
+    calls = []
+
+    def holder_leaves_first(fd, op):
+        if not calls:  # the first holder removes the file this locker opened, then lets go
+            os.unlink(ck + ".lock")
+        calls.append(fd)
+        return real(fd, op)
+
+    monkeypatch.setattr(fcntl, "flock", holder_leaves_first)
+    with safeio.exclusive_lock(ck):
+        monkeypatch.setattr(fcntl, "flock", real)
+        assert len(calls) == 2 and os.path.isfile(ck + ".lock")
+        with pytest.raises(ClothFitError, match="another fit"):
+            with safeio.exclusive_lock(ck):
+                pass
+    assert not os.path.lexists(ck + ".lock")
 
 
 def test_outputs_never_replace_inputs(cap, tmp_path):

@@ -189,7 +189,7 @@ def check_manifest(manifest=None, pins=None) -> list:
         for need in REQUIRED:
             if need in have and need in NO_FAST_PATH.get(p, ()):
                 problems.append(
-                    f"{p}: has {have[need]} but NO_FAST_PATH says it has none (update NO_FAST_PATH and the README)"
+                    f"{p}: has {have[need]} but NO_FAST_PATH says it has none (update NO_FAST_PATH and docs/extension.md)"
                 )
             if need not in have and need not in NO_FAST_PATH.get(p, ()):
                 problems.append(f"{p}: no {need} wheel")

@@ -235,7 +235,7 @@ def replay(out):
 
 
 def format_table(rows) -> str:
-    """The README's Markdown table of the rows of cross_simulator.json."""
+    """The Markdown table of the rows of cross_simulator.json (docs/results.md, its cross-simulator section)."""
     out = [
         "| material | model | train cams | held-out E_sil % (floor) | shape error mm | Blender replay mm | evals | s |",
         "|---|---|---|---|---|---|---|---|",

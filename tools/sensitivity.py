@@ -1,4 +1,4 @@
-"""How sensitive is the paper scenario's motion to the parameters? (README figures on chaos.)
+"""How sensitive is the paper scenario's motion to the parameters? (the figures on chaos: docs/figures_sources.md, sensitivity.)
 
     python tools/sensitivity.py [--json FILE]
 

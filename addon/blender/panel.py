@@ -48,6 +48,8 @@ def draw_cloth(layout, scene, p):
         col.prop(p, "cloth_height")
     else:
         layout.label(text="Cloth and handles from the capture")
+        if p.capture_releases:
+            layout.label(text=f"Released: {p.capture_releases}", icon="UNLOCKED")
     layout.operator("clothfit.build_cloth", icon="MESH_GRID")
     if p.cloth_object is not None:
         layout.label(text=f"Cloth: {p.cloth_object.name}", icon="OBJECT_DATA")

@@ -197,6 +197,11 @@ class ClothFitProperties(bpy.types.PropertyGroup):
         max=3,
         description="Corner released at t = 0 (0..3; the other three stay held)",
     )
+    capture_releases: StringProperty(
+        name="Releases",
+        default="",
+        description="The loaded capture's released handles and their times (all of them are replayed)",
+    )
     cloth_object: PointerProperty(name="Cloth", type=bpy.types.Object, description="The cloth mesh Build Cloth made")
     handles: CollectionProperty(
         name="Handles", type=ClothFitHandleLink, description="Empties manipulation: grid vertices linked to empties"

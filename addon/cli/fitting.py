@@ -27,38 +27,7 @@ from .common import (
     _sigint_deferred,
     _times,
 )
-
-
-class Progress:
-    """A one-line text progress bar on stderr."""
-
-    def __init__(self, enabled=True, width=30):
-        self.enabled = enabled and sys.stderr.isatty() or os.environ.get("CLOTHFIT_PROGRESS") == "1"
-        self.width = width
-        self.t0 = time.time()
-        self.last = 0
-
-    def __call__(self, job):
-        if not self.enabled:
-            return False
-        now = time.time()
-        if now - self.last < 0.2 and not job.finished:
-            return False
-        self.last = now
-        n = int(self.width * job.progress)
-        bp = job.best_params or {}
-        err = job.best_error / job.objective.n_images * 100 if job.best_params else float("nan")
-        sys.stderr.write(
-            f"\r[{'#' * n}{'.' * (self.width - n)}] gen {job.generation} evals {job.evaluations} "
-            f"E_sil {err:.3f}% k {bp.get('k', 0):.4g} l {bp.get('l', 0):.4g} d {bp.get('d', 0):.4g} "
-            f"{now - self.t0:.0f}s "
-        )
-        sys.stderr.flush()
-        return False
-
-    def done(self):
-        if self.enabled:
-            sys.stderr.write("\n")
+from .progress import fit_progress, progress_interval
 
 
 def cmd_synth(a):
@@ -251,7 +220,7 @@ def cmd_fit(a):
             if evaluator is not None:
                 evaluator.close()
             raise
-        bar = Progress(not a.quiet)
+        bar = fit_progress(job, a.quiet)
         try:
             job.run(callback=bar)
         except KeyboardInterrupt:
@@ -262,7 +231,8 @@ def cmd_fit(a):
             job.error = str(e)
             job.cancel()
         finally:
-            bar.done()
+            if bar is not None:
+                bar.done(job)
             with _sigint_deferred():
                 job.save_result(a.out)
             if evaluator is not None:
@@ -356,7 +326,8 @@ def cmd_fit_many(a):
     t0 = time.time()
     from ..farm.tasks import fit_many
 
-    results, kind, workers = fit_many(a.captures, configs, a.workers, a.address, a.executor)
+    every = None if a.quiet else progress_interval()
+    results, kind, workers = fit_many(a.captures, configs, a.workers, a.address, a.executor, every)
     wall = time.time() - t0
     from ..core.fitting.job import _atomic_json
 
@@ -379,18 +350,11 @@ def cmd_fit_many(a):
 
 
 def cmd_export_blender_cloth(a):
-    from ..core.jsonio import read_json
+    from ..core.fitting.result import FitResult
     from ..core.physics import blender as B
-    from ..core.physics.models import BlenderModel, model_and_row
 
-    res = read_json(a.result, "result")
-    model, row = model_and_row(res)
-    if not isinstance(model, BlenderModel):
-        raise ClothFitError(
-            f"result {a.result}: a {model.name}-model fit has no Blender cloth settings "
-            "(fit with --model blender, or warm-start one from it with --init)"
-        )
-    s = model.settings(row)
+    res = FitResult.from_json(a.result, "result")  # checked: says what the file is when it is no fit result
+    model, s = res.blender_settings()
     out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
     manip = {k: res[k] for k in ("time_offset_s", "handles") if res.get(k) is not None}
     if manip:  # the manipulation the fit estimated: where the pins go, when it lets go
@@ -587,11 +551,14 @@ def _add_fit(sub):
     s.add_argument(
         "--quiet",
         action="store_true",
-        help="no progress bar on stderr (shown on a terminal, or with CLOTHFIT_PROGRESS=1)",
+        help="no progress on stderr (a bar on a terminal or with CLOTHFIT_PROGRESS=1, else a line "
+        f"every {D.PROGRESS_INTERVAL_S:g} s)",
     )
     _model_args(s)
     s.add_argument(
-        "--free", help="blender model: comma list of ClothSettings to search (default: see README, Identifiability)"
+        "--free",
+        help="blender model: comma list of ClothSettings to search (default: the stiffnesses (compression with ANGULAR bending only), the "
+        "tension, shear and bending damping and the air damping; why those: docs/models.md)",
     )
     s.add_argument(
         "--fixed",
@@ -625,6 +592,11 @@ def _add_fit_many(sub):
     _search_args(s)
     _farm_args(s, "the fits")
     _model_args(s)
+    s.add_argument(
+        "--quiet",
+        action="store_true",
+        help=f"no progress lines on stderr (each fit: a line every {D.PROGRESS_INTERVAL_S:g} s, named by its capture)",
+    )
 
 
 def _add_scoring(sub):

@@ -5,6 +5,7 @@ from __future__ import annotations
 from ..core import defaults as D
 from ..core.errors import ClothFitError
 from .common import Text, _command, _farm_args, _floats, _names, _res
+from .progress import study_progress
 
 
 def cmd_paper(a):
@@ -24,6 +25,7 @@ def cmd_paper(a):
         population=a.population,
         children=a.children,
         rig=a.rig,
+        progress=study_progress(),
     )
 
 
@@ -75,6 +77,7 @@ def cmd_bench(a):
         only_blender_workers=a.blender_workers,
         only_default_fit=a.default_fit,
         blender_workers=bench_blender_workers,
+        progress=study_progress(),
     )
 
 

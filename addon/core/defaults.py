@@ -78,20 +78,22 @@ N_FREE = 3
 # SPX + MGG sizes. The optimiser's own defaults are the textbook values, population 20n and 10n children
 # (robust on hard test functions such as Rosenbrock). A cloth fit uses population 7n with 5n children:
 # on this problem they reached 0.5 % mean E_sil in a median 1371 evaluations where the textbook sizes
-# never got below 1 % in 2000 (README, "Optimisers").
+# never got below 1 % in 2000 (docs/results.md, "Optimisers: SPX + MGG against CMA-ES").
 GA_POPULATION_TEXTBOOK = GA_POPULATION = 20 * N_FREE
 GA_CHILDREN_TEXTBOOK = GA_CHILDREN = 10 * N_FREE
 FIT_GA_POPULATION = 7 * N_FREE
 FIT_GA_CHILDREN = 5 * N_FREE
 CMA_POPSIZE = 4 + int(3 * math.log(N_FREE))
 FIT_EVALUATIONS = 2500  # default evaluation budget of one fit
-DEFAULT_OPTIMIZER = "cma-es"  # measured faster than SPX+MGG on this problem (README, `paper --only optimizers`)
+DEFAULT_OPTIMIZER = (
+    "cma-es"  # measured faster than SPX+MGG on this problem (docs/results.md, `paper --only optimizers`)
+)
 # a fit's default search, "auto": BLENDER_OPTIMIZER on Blender's cloth (the core model or a .blend's own solver)
 # when settings outside STAGED_STRONG are free too, else DEFAULT_OPTIMIZER (docs/search.md, "Strong settings first")
 FIT_OPTIMIZER = "auto"
 BLENDER_OPTIMIZER = "cma-staged"
 
-# --- when a fit has converged (README, "Fits: stopping"). Tolerances far below what silhouettes resolve: a step of
+# --- when a fit has converged (docs/cli.md, "Fits: stopping, checkpoints, --resume"). Tolerances far below what silhouettes resolve: a step of
 # 1e-5 of the unit search cube is a 0.005 % change of k/m over its two decades; 1e-6 of E_sil per image is a
 # five-hundredth of one pixel of a 2000-pixel silhouette, far below the noise floor (about 0.2 % per image).
 # Measured on the paper protocol (Table 1): 623-714 evaluations per fit, every row on its noise floor; with
@@ -103,6 +105,8 @@ FIT_RESTARTS = 0  # CMA-ES IPOP restarts (each with twice the population), paper
 BLENDER_FIT_RESTARTS = 4  # the blender model's 8 free settings have local minima: restart until the budget
 FIT_EXPLODED_LIMIT = 100  # this many candidates, all exploded, and nothing finite: the fit is an error
 CHECKPOINT_INTERVAL_S = 2.0  # the CLI writes its checkpoint at most this often (and always at the end)
+PROGRESS_INTERVAL_S = 10.0  # a fit whose stderr is no terminal prints a progress line at least this often
+PROGRESS_BAR_REFRESH_S = 0.2  # on a terminal the progress bar is redrawn at most this often
 FLOOR_FAR_ABOVE = 3.0  # issue 20: a fit error more than 3x its images' noise floor (observation/floor.py) is
 # "far above" it; the estimate's calibration spread is +-25 % (docs/noise_floor.md),
 # so 3x is well clear of it

@@ -71,26 +71,55 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> None:
 @contextlib.contextmanager
 def exclusive_lock(path: str | os.PathLike) -> Iterator[None]:
     """Hold an exclusive advisory lock on ``path + '.lock'`` (POSIX ``flock``; released when the
-    process ends, even by kill -9). Another holder -> ClothFitError at once."""
+    process ends, even by kill -9). Another holder -> ClothFitError at once. The lock file is removed
+    when the block ends (normally, by an error or by Ctrl-C): unlinked while the lock is still held,
+    and a locker that finds the file it locked no longer on disk (removed by the holder it waited
+    behind) locks the new one instead, so two holders never hold two different files."""
     lock_path = os.fspath(path) + ".lock"
     try:
         import fcntl
     except ImportError:  # Windows: no advisory lock; the unique temp files still keep files whole
         yield
         return
+    fd = _locked_fd(lock_path, path, fcntl)
+    try:
+        yield
+    finally:
+        try:
+            if _same_file(fd, lock_path):
+                os.unlink(lock_path)
+        except OSError:
+            pass
+        os.close(fd)
+
+
+def _same_file(fd: int, path: str) -> bool:
+    """Whether ``path`` still names the file open as ``fd`` (not removed, not replaced)."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return False
+    mine = os.fstat(fd)
+    return (st.st_dev, st.st_ino) == (mine.st_dev, mine.st_ino)
+
+
+def _locked_fd(lock_path: str, path: str | os.PathLike, fcntl: Any) -> int:
+    """Open and flock ``lock_path``; again if the file locked was removed meanwhile by its holder."""
     flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
-    try:
-        os.makedirs(os.path.dirname(os.path.abspath(lock_path)), exist_ok=True)
-        fd = os.open(lock_path, flags, 0o644)
-    except OSError as e:
-        raise ClothFitError(f"cannot create the lock file {lock_path}: {e.strerror or e}") from None
-    try:
+    for _ in range(100):
+        try:
+            os.makedirs(os.path.dirname(os.path.abspath(lock_path)), exist_ok=True)
+            fd = os.open(lock_path, flags, 0o644)
+        except OSError as e:
+            raise ClothFitError(f"cannot create the lock file {lock_path}: {e.strerror or e}") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
+            os.close(fd)
             raise ClothFitError(
                 f"another fit is writing {path} (it holds {lock_path}): wait for it, or choose another --out"
             ) from None
-        yield
-    finally:
-        os.close(fd)
+        if _same_file(fd, lock_path):
+            return fd
+        os.close(fd)  # its holder removed it between our open and our flock: lock the file on disk now
+    raise ClothFitError(f"cannot lock {lock_path}: it keeps being removed and created again")

@@ -6,6 +6,7 @@ identical to local runs; the results come back to the driver, which writes them.
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 from ..core.location import qualified
@@ -17,23 +18,41 @@ RUNNER = qualified("farm.tasks:FitRunner")
 class FitRunner:
     """Worker side: one fit per call."""
 
-    def fit(self, capture_path, config: dict) -> dict:
+    def fit(self, capture_path, config: dict, progress: dict | None = None) -> dict:
+        """``progress``: {"interval": seconds, "label": text}: a progress line on this worker's stderr
+        at least that often, prefixed with the label (``core.fitting.progress``); None: quiet."""
         from ..core.fitting.job import FitConfig, FitJob
+        from ..core.fitting.progress import FitProgress
         from ..core.observation.capture import load_capture
 
         t0 = time.perf_counter()
         job = FitJob(load_capture(capture_path), FitConfig.from_dict(config))
-        res = job.run()
+        shown = None
+        if progress is not None:
+            shown = FitProgress(_write_stderr, False, float(progress["interval"]), f"{progress['label']}: ")
+        res = job.run(callback=shown)
+        if shown is not None:
+            shown.done(job)
         res["worker_pid"] = os.getpid()
         res["worker_wall_s"] = time.perf_counter() - t0
         return res
 
 
-def fit_many(captures, configs, workers=None, address=None, executor="auto"):
+def _write_stderr(text):
+    sys.stderr.write(text)
+    sys.stderr.flush()
+
+
+def fit_many(captures, configs, workers=None, address=None, executor="auto", progress_interval=None):
     """Fit every capture with its ``FitConfig`` dict on the workers: (results in order, executor kind,
-    number of workers)."""
+    number of workers). ``progress_interval``: seconds between each fit's progress lines on the
+    workers' stderr (None: none)."""
+    args = []
+    for c, cfg in zip(captures, configs):
+        shown = None if progress_interval is None else {"interval": progress_interval, "label": c}
+        args.append((os.path.abspath(c), dict(cfg), shown))
     with make_executor(RUNNER, (), workers, address, executor) as ex:
-        res = ex.map("fit", [(os.path.abspath(c), dict(cfg)) for c, cfg in zip(captures, configs)])
+        res = ex.map("fit", args)
         return res, ex.kind, ex.workers
 
 

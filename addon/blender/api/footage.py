@@ -265,14 +265,30 @@ def load_capture(scene, path=None):
     p.cloth_nx, p.cloth_side, p.cloth_height = g.nx, g.side, g.height
     p.settle_time = cap.scenario.settle_time
     p.frame_times = ", ".join(f"{t:g}" for t in cap.frame_times)
+    p.capture_releases = releases_text(cap.scenario)
     released = [h for h in cap.scenario.handles if h.release_time is not None]
-    if released and released[0].vertex in g.corners():
-        p.released_corner = g.corners().index(released[0].vertex)
+    if len(released) == 1 and released[0].vertex in g.corners() and released[0].release_time == 0.0:
+        p.released_corner = g.corners().index(released[0].vertex)  # the Paper manipulation can replay it
     p.capture_dir = cap.root  # the folder, also when ``path`` is its capture.json
     p.scenario_source = "CAPTURE"
     p["view_frame"] = min(p.view_frame, cap.n_frames - 1)
     show_observations(scene, p.view_frame, cap)
     return cap
+
+
+def releases_text(scenario) -> str:
+    """Every handle the capture lets go, with its time ("vertex 0 at 0 s, vertex 255 at 0.05 s"); the
+    capture's scenario, which Build Cloth, Simulate, Fit and Apply replay, keeps them all."""
+    g = scenario.grid
+    corners = g.corners()
+    parts = [
+        (f"corner {corners.index(h.vertex)}" if h.vertex in corners else f"vertex {h.vertex}")
+        + f" at {h.release_time:g} s"
+        for h in sorted(scenario.handles, key=lambda h: (h.release_time is None, h.release_time or 0.0, h.vertex))
+        if h.release_time is not None
+    ]
+    held = sum(h.release_time is None for h in scenario.handles)
+    return (", ".join(parts) if parts else "nothing released") + f"; {held} held"
 
 
 def _load_image(name, path):

@@ -29,7 +29,7 @@ import contextlib
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -52,7 +52,7 @@ from .config import (  # noqa: F401 (re-exported)
     resolve_optimizer,
 )
 from .intervals import interval_budget, interval_step, intervals_plan
-from .objective import SilhouetteObjective
+from .objective import SilhouetteObjective, load_observed  # noqa: F401 (re-exported)
 from .offset_profile import profile_step
 from .optimise import make_optimizer
 from .parameters import (
@@ -68,24 +68,10 @@ from .parameters import (
 from .quality import Ladder
 from .result import FitResult, job_result
 from .result import finite_or_none as _finite
+from .steppable import ask_within
 
 if TYPE_CHECKING:
-    from ..observation.camera import Camera
     from ..observation.capture import Capture
-
-
-def load_observed(
-    capture: Capture, cams: Sequence[int], fidx: Sequence[int], resolution: Sequence[int] | None = None
-) -> tuple[list[Camera], list[list[np.ndarray]], list[list[np.ndarray | None]]]:
-    """Cameras, observed silhouettes and ignore masks ``[cam][frame]`` of a capture, at ``resolution``."""
-    cameras = [capture.cameras[c] for c in cams]
-    observed, ignore = capture.load_observations(cams, fidx)
-    if resolution is not None:
-        h, w = check_resolution(resolution, "fit resolution")
-        cameras = [c.resized(h, w) for c in cameras]
-        observed = [[resample_silhouette(o, h, w) for o in oc] for oc in observed]
-        ignore = [[resample_ignore(g, h, w) for g in gc] for gc in ignore]
-    return cameras, observed, ignore
 
 
 class FitJob:
@@ -162,16 +148,20 @@ class FitJob:
         self.optimizer_name = resolve_optimizer(cfg.optimizer, stageable)
         self.ladder = self._ladder(capture, cfg, evaluator)
         self.start_quality = None if self.ladder is None else self.ladder.start
-        reserved = 0
+        reserved = self.profile_reserve = 0
         if self.ladder is not None:
             reserved = (D.QUALITY_RUNGS_RESERVED if not self.ladder.probe_only else 1) * self._rung_budget()
-        if self.manip is not None:
-            # the profile: either side of each offset, and its centre; before it, its polish rounds
-            reserved += 2 * self.manip.n + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * self.manip.n + 1)
+        if self.manip is not None:  # the profile: either side of each offset, its centre, its polish rounds
+            k = self.manip.n
+            self.profile_reserve = 2 * k + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * k + 1)
         self.intervals = None  # the intervals stage's state (intervals.py), once it has begun
         self.intervals_note = intervals_plan(self)
-        if self.intervals_note is None:
-            reserved += interval_budget(self.space.n)
+        if self.intervals_note is None:  # kept like the profile's: no rung eats into it
+            self.profile_reserve += interval_budget(self.space.n)
+        reserved += self.profile_reserve
+        if cfg.max_evaluations <= reserved:
+            msg = f"this fit keeps {reserved} evaluations after its search (quality rungs, manipulation profile, intervals)"
+            raise ClothFitError(f"--max-evaluations {cfg.max_evaluations} is too few: {msg}: give more")
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
@@ -263,15 +253,18 @@ class FitJob:
             return None
         return np.concatenate([x, np.zeros(self.space.n - self.npar)])
 
-    def _evaluate_start(self):
-        f = float(self.evaluate(self.start_x[None])[0])
-        self.done_evals += 1
-        self.start_f = f if math.isfinite(f) else float("inf")
-        if math.isfinite(f):
-            q = self.stage_quality
-            have = self.best_by_quality.get(q)
-            if have is None or f < have[0]:
-                self.best_by_quality[q] = [f, self.start_x.tolist()]
+    def _score_aside(self, X) -> float:
+        """Score candidates outside the optimiser (the start point; a last batch cut to the budget):
+        counted, the best kept if it is the best so far. Returns their lowest error (inf if none)."""
+        f = self.evaluate(X) if len(X) else np.zeros(0)
+        self.done_evals += len(f)
+        self.exploded += int(np.sum(~np.isfinite(f)))
+        g = np.where(np.isfinite(f), f, np.inf)
+        i = int(np.argmin(g)) if len(g) else -1
+        have = self.best_by_quality.get(self.stage_quality)
+        if i >= 0 and math.isfinite(g[i]) and (have is None or g[i] < have[0]):
+            self.best_by_quality[self.stage_quality] = [float(g[i]), np.asarray(X[i], dtype=np.float64).tolist()]
+        return float(g[i]) if i >= 0 else math.inf
 
     def _rung_budget(self) -> int:
         frac = (
@@ -579,7 +572,7 @@ class FitJob:
     def _next_stage(self):
         """End the running stage; start a rung, the profile, or finish."""
         self._end_running()
-        left = self.config.max_evaluations - self.done_evals
+        left = self.config.max_evaluations - self.done_evals - self.profile_reserve  # the profile's kept
         if self.stage in ("search", "rung") and self.ladder is not None and self.best_by_quality:
             q = self.ladder.next()
             rung = self._rung_budget()
@@ -629,13 +622,17 @@ class FitJob:
             if interval_step(self):
                 self.stage = "done"
         elif self.stage == "search" and self.start_x is not None and self.start_f is None:
-            self._evaluate_start()
-        elif self.stage in ("search", "rung"):
-            X = self.opt.ask()
-            f = self.evaluate(X)
-            self.exploded += int(np.sum(~np.isfinite(f)))
-            self.opt.tell(X, f)
-            self._track()
+            self.start_f = self._score_aside(self.start_x[None])
+        elif self.stage in ("search", "rung"):  # never past the stage's budget: a hard cap
+            self.opt, X, whole = ask_within(self.opt, self.stage_end - self.evaluations)
+            if whole:
+                f = self.evaluate(X)
+                self.exploded += int(np.sum(~np.isfinite(f)))
+                self.opt.tell(X, f)
+                self._track()
+            else:  # the budget's last batch, cut to what is left: scored aside, and the stage ends
+                self._score_aside(X)
+                self.stage_end = self.evaluations
         self.elapsed += time.time() - t0
         self._update_stop()
         if self.finished:

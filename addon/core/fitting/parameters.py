@@ -40,7 +40,7 @@ if TYPE_CHECKING:
 
 PAPER_FREE = ("k_over_m", "d_over_m", "l_rel")
 
-# Blender settings searched by default (see README, "Identifiability"); the rest stay fixed.
+# Blender settings searched by default (docs/models.md, "What is searched"); the rest stay fixed.
 BLENDER_FREE = {
     "ANGULAR": (
         "tension_stiffness",

@@ -8,7 +8,7 @@ key). ``FitResult`` is a ``dict`` underneath, so readers that index it (``res["b
 ``res.get("handles")``) and code that takes a plain result dict (``physics.scenario.fitted_scenario``,
 ``physics.models.model_and_row``) keep working; new code uses its properties and methods.
 
-Keys (see README's fit result): ``format``/``version``; what was fitted (``capture``,
+Keys (the reference: docs/api.md, "A fit: configuration and result"): ``format``/``version``; what was fitted (``capture``,
 ``capture_hash``, ``silhouettes_hash``, ``train_cameras``, ``train_times``, ``resolution``,
 ``model``); the search (``optimizer``, ``seed``, ``evaluations``, ``generations``, ``stop_reason``,
 ``stages``, ``history``...); the answer (paper: ``params``, ``identifiable``; Blender:

@@ -22,6 +22,7 @@ finiteness, ranges, a symmetric positive-definite covariance) and raises a one-l
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -244,3 +245,15 @@ class Optimizer:
         )
 
         return optimizer_from_state(d)
+
+
+def ask_within(opt: Optimizer, left: int) -> tuple[Optimizer, np.ndarray, bool]:
+    """The next batch of ``opt`` within ``left`` evaluations: ``(opt, X, True)`` when the whole batch
+    fits (tell ``opt`` its values as usual); else ``(opt as before the ask, X cut to its first
+    ``left`` rows, False)``: candidates to score for the best so far only, never told, so that an
+    optimiser continued later (a resume with a larger budget) asks the very same batch again."""
+    before = copy.deepcopy(opt)
+    X = opt.ask()
+    if len(X) <= left:
+        return opt, X, True
+    return before, X[: max(0, int(left))], False

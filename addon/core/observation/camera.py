@@ -346,7 +346,7 @@ def load_rig(name_or_path: str) -> list[Camera]:
 def spread_order(cameras: Sequence[Camera], first: int = 0) -> list[int]:
     """Order camera indices so that every prefix is spread around the rig.
 
-    Rule (documented in the README): start with camera ``first``; then repeatedly
+    Rule (documented in docs/cli.md, "Training cameras"): start with camera ``first``; then repeatedly
     add the camera whose viewing direction (unit vector from the rig's target
     towards the camera centre) has the largest minimum angle to the directions
     already chosen; ties go to the lower index. Training with ``n`` cameras uses

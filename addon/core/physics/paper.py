@@ -7,7 +7,7 @@ damping ``d`` [N s/m] (force ``-d v_i``). The equations of motion divided by ``m
 ``k/m``, ``d/m`` and ``l``: those are what silhouettes can identify (see ``identifiable``).
 
 
-Integrator (part of the model, documented in the README):
+Integrator (part of the model, docs/method.md#spec-2):
 
 * semi-implicit (symplectic) Euler with the viscous damping treated implicitly::
 

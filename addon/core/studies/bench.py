@@ -21,6 +21,7 @@ import numpy as np
 from .. import defaults as D
 from ..fitting.job import FitConfig, FitJob
 from ..fitting.objective import SilhouetteObjective
+from ..fitting.progress import run_shown
 from ..jsonio import read_json, write_json
 from ..observation.camera import select_training
 from ..observation.capture import load_capture
@@ -49,7 +50,7 @@ def _rate(fn, n_items, min_time=2.0):
             return reps * n_items / dt, 1000.0 * (time.process_time() - c0) / (reps * n_items)
 
 
-def _bench_blender_model(tmp, quick, paper_rate):
+def _bench_blender_model(tmp, quick, paper_rate, progress=None):
     """The ``blender`` cloth model on the same workload (16 cameras x 15 shapes at 480 x 640, the
     paper's 16 x 16 sheet, 0.5 s settling + 1.5 s at 24 fps, quality 5), and a 4-camera fit of a
     21 x 21 cloth with the default free set."""
@@ -99,7 +100,7 @@ def _bench_blender_model(tmp, quick, paper_rate):
             train_cameras=select_training(cap21.cameras, 4)[0], train_times=D.TRAIN_TIMES, max_evaluations=evals, seed=0
         ),
     )
-    job.run()
+    run_shown(job, progress, "blender model, 21 x 21, 4 cameras")
     wall = time.perf_counter() - t0
     res["fit_21x21_4cams"] = {
         "evaluations": job.evaluations,
@@ -117,7 +118,12 @@ def _bench_blender_model(tmp, quick, paper_rate):
     return res
 
 
-def bench_default_fit(tmp: str, echo: Callable[..., Any] = print, max_evaluations: int | None = None) -> dict[str, Any]:
+def bench_default_fit(
+    tmp: str,
+    echo: Callable[..., Any] = print,
+    max_evaluations: int | None = None,
+    progress: Callable[[str], Any] | None = None,
+) -> dict[str, Any]:
     """Issue 20's time to answer: the default fit of a 21 x 21 blender-model cloth (1 s settle + 1.5 s
     at 24 fps, 25 cm), 4 training cameras, 15 training frames at 480 x 640, the quality chosen by the
     fit (the capture declares none) and the manipulation's unknowns estimated (time offset 50 ms,
@@ -150,7 +156,7 @@ def bench_default_fit(tmp: str, echo: Callable[..., Any] = print, max_evaluation
             max_evaluations=max_evaluations or D.FIT_EVALUATIONS,
         ),
     )
-    r = job.run()
+    r = run_shown(job, progress, "default fit")
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     out = {
         "workload": "21 x 21 blender cloth, 4 cameras x 15 frames at 480 x 640, quality chosen, time offset and "
@@ -200,7 +206,7 @@ def _backend_rates(out, sc, cams, obs, P):
         )
 
 
-def _bench_fit(out, cap, train, evals):
+def _bench_fit(out, cap, train, evals, progress=None):
     """The timed 16-camera fit and what one checkpoint of it costs, into ``out``; the peak memory (MB) or None."""
     t0 = time.perf_counter()
     job = FitJob(
@@ -209,7 +215,7 @@ def _bench_fit(out, cap, train, evals):
             train_cameras=train, train_times=D.TRAIN_TIMES, optimizer=DEFAULT_OPTIMIZER, max_evaluations=evals, seed=0
         ),
     )
-    job.run()
+    run_shown(job, progress, "16-camera fit")
     wall = time.perf_counter() - t0
     try:
         import resource
@@ -254,6 +260,7 @@ def run_bench(
     only_blender_workers: bool = False,
     only_default_fit: bool = False,
     blender_workers: Callable[[str], dict[str, Any]] | None = None,
+    progress: Callable[[str], Any] | None = None,
 ) -> dict[str, Any]:
     """The speed figures, written to ``json_path``. ``blender_workers(tmp) -> dict``: the figures of
     Blender's solver on workers (``farm.bench.bench_blender_workers``, passed in by the CLI: the farm
@@ -264,7 +271,7 @@ def run_bench(
             return {"skipped": "Blender workers are measured by the CLI's bench (farm layer)"}
 
     if only_default_fit:
-        out = {"default_fit": bench_default_fit(tempfile.mkdtemp(prefix="clothfit_bench_"))}
+        out = {"default_fit": bench_default_fit(tempfile.mkdtemp(prefix="clothfit_bench_"), progress=progress)}
         write_json(json_path, out)
         return out
     if only_blender_workers:
@@ -309,7 +316,7 @@ def run_bench(
     out["numpy_full_frame_silhouette_ms"] = 1000 * (time.perf_counter() - t0) / n
     print(f"numpy full-frame silhouette (480x640): {out['numpy_full_frame_silhouette_ms']:.2f} ms", flush=True)
     evals = S["evals"]
-    peak_mb = _bench_fit(out, cap, train, evals)
+    peak_mb = _bench_fit(out, cap, train, evals, progress)
     if peak_mb is not None:
         print(
             f"peak memory of the whole bench process (capture, 240 observed silhouettes, numba): {peak_mb:.0f} MB",
@@ -322,7 +329,7 @@ def run_bench(
             flush=True,
         )
     if jit.available():
-        out["blender_model"] = _bench_blender_model(tmp, quick, out.get("numba", {}).get("evals_per_s"))
+        out["blender_model"] = _bench_blender_model(tmp, quick, out.get("numba", {}).get("evals_per_s"), progress)
     out["blender_workers"] = blender_workers(tmp)
     write_json(json_path, out)
     return out

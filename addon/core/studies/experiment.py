@@ -24,7 +24,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -33,6 +33,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..fitting.evaluate import evaluate
 from ..fitting.job import FitConfig, FitJob
+from ..fitting.progress import run_shown
 from ..observation.camera import select_training
 from ..observation.capture import Capture, load_capture
 from ..observation.raster import silhouette
@@ -78,6 +79,7 @@ def fit_and_score(
     seed: int,
     resolution: Sequence[int] | None = None,
     sizes: dict[str, int] | None = None,
+    progress: Callable[[str], Any] | None = None,
 ) -> tuple[dict[str, Any], list[int]]:
     train, held = select_training(train_cap.cameras, n_cams)
     t0 = time.time()
@@ -92,7 +94,7 @@ def fit_and_score(
             **(sizes or {}),
         ),
     )
-    res = job.run()
+    res = run_shown(job, progress, f"cameras {n_cams}, shapes {len(train_times)}, seed {seed}")
     ev = evaluate(test_cap, res["params"], cameras=held, times=D.TEST_TIMES)
     gt = test_cap.meta["true_params"]
     row = {
@@ -114,6 +116,21 @@ def fit_and_score(
     return row, held
 
 
+def _check_options(max_evaluations, population, children, truth_dt_safety):
+    """``run_paper``'s numbers, checked: one error naming the option at fault."""
+    for name, v, lo in (
+        ("max_evaluations", max_evaluations, 1),
+        ("population", population, 2),
+        ("children", children, 1),
+    ):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < lo):
+            raise ClothFitError(f"paper: {name} must be an integer >= {lo}, got {v!r}")
+    if truth_dt_safety is not None and not (
+        isinstance(truth_dt_safety, (int, float)) and math.isfinite(truth_dt_safety) and 0 < truth_dt_safety <= 1
+    ):
+        raise ClothFitError(f"paper: --truth-dt-safety must be a number in (0, 1], got {truth_dt_safety!r}")
+
+
 def run_paper(
     json_path: str | os.PathLike,
     quick: bool = False,
@@ -126,24 +143,17 @@ def run_paper(
     population: int | None = None,
     children: int | None = None,
     rig: str | None = None,
+    progress: Callable[[str], Any] | None = None,
 ) -> dict[str, Any]:
+    """``progress``: a maker of each fit's progress display (``fitting.progress.FitProgress``), or None."""
     S = dict(QUICK if quick else FULL)
-    for name, v, lo in (
-        ("max_evaluations", max_evaluations, 1),
-        ("population", population, 2),
-        ("children", children, 1),
-    ):
-        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < lo):
-            raise ClothFitError(f"paper: {name} must be an integer >= {lo}, got {v!r}")
-    if truth_dt_safety is not None and not (
-        isinstance(truth_dt_safety, (int, float)) and math.isfinite(truth_dt_safety) and 0 < truth_dt_safety <= 1
-    ):
-        raise ClothFitError(f"paper: --truth-dt-safety must be a number in (0, 1], got {truth_dt_safety!r}")
+    _check_options(max_evaluations, population, children, truth_dt_safety)
     if max_evaluations is not None:
         S["evals"] = max_evaluations
     optimizer = optimizer or DEFAULT_OPTIMIZER
     parts = set((only or "table1,fig8,table2,optimizers").split(","))
     sizes = {k: v for k, v in (("population", population), ("children", children)) if v is not None}
+    kw = {"sizes": sizes, "progress": progress}
     t_start = time.time()
     os.makedirs(out_dir, exist_ok=True)
     cap_path = os.path.join(out_dir, "capture_480x640")
@@ -171,7 +181,7 @@ def run_paper(
     if "table1" in parts:
         rows = []
         for n in D.TABLE1_CAMERAS:
-            row, held = fit_and_score(cap, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, sizes=sizes)
+            row, held = fit_and_score(cap, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, **kw)
             row["floor_noise_only_pct"] = noise_floor(cap, held, D.TEST_TIMES)
             fl = evaluate(cap, gt, cameras=held, times=D.TEST_TIMES)
             row["floor_true_params_pct"] = fl["silhouette_error_pct"]
@@ -197,7 +207,7 @@ def run_paper(
         rows = []
         for n in S["fig8_cameras"]:
             for N in D.FIG8_SHAPES:
-                row, _ = fit_and_score(cap, cap, n, D.TRAIN_TIMES[:N], optimizer, S["evals"], seed, sizes=sizes)
+                row, _ = fit_and_score(cap, cap, n, D.TRAIN_TIMES[:N], optimizer, S["evals"], seed, **kw)
                 rows.append(row)
                 _log(
                     f"fig8 cameras={n:2d} shapes={N:2d}: silhouette {row['silhouette_error_pct']:.3f} %, shape "
@@ -213,9 +223,7 @@ def run_paper(
             synth_capture(lp, seed=seed, resolution=res, truth_dt_safety=tds, rig=rig)
             low = load_capture(lp)
             for n in D.TABLE2_CAMERAS:
-                row, held = fit_and_score(
-                    low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res, sizes=sizes
-                )
+                row, held = fit_and_score(low, cap, n, D.TRAIN_TIMES, optimizer, S["evals"], seed, resolution=res, **kw)
                 row["floor_noise_only_pct"] = noise_floor(cap, held, D.TEST_TIMES)
                 rows.append(row)
                 _log(
@@ -226,7 +234,7 @@ def run_paper(
         _dump(json_path, out)
 
     if "optimizers" in parts:
-        out["optimizers"] = compare_optimizers(cap, S["opt_cameras"], S["opt_seeds"], S["opt_evals"])
+        out["optimizers"] = compare_optimizers(cap, S["opt_cameras"], S["opt_seeds"], S["opt_evals"], progress=progress)
         _dump(json_path, out)
 
     out["total_seconds"] = time.time() - t_start
@@ -236,7 +244,12 @@ def run_paper(
 
 
 def compare_optimizers(
-    cap: Capture, n_cams: int, seeds: int, evals: int, levels: Sequence[float] = (2.0, 1.0, 0.5)
+    cap: Capture,
+    n_cams: int,
+    seeds: int,
+    evals: int,
+    levels: Sequence[float] = (2.0, 1.0, 0.5),
+    progress: Callable[[str], Any] | None = None,
 ) -> dict[str, Any]:
     """Evaluations each optimiser needs to bring the mean training E_sil below ``levels`` [%]."""
     train, _ = select_training(cap.cameras, n_cams)
@@ -255,7 +268,7 @@ def compare_optimizers(
                 cap,
                 FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=100 + s, max_evaluations=evals, **kw),
             )
-            job.run()
+            run_shown(job, progress, f"{label}, seed {100 + s}")
             n_img = job.objective.n_images
             hist = [(e, 100 * f / n_img) for e, f in job.opt.history]
             reach = {}
