@@ -36,6 +36,11 @@ class QuadraticJob:
         self.s1, self.s2 = 0.05, 0.01
         self.best_x = np.array([0.4, 0.6, 0.5])
         self.best_error = 10.0
+        self.best_by_quality = {}
+        self.history_prev = []
+
+    def chosen_quality(self):
+        return None
 
     def error(self, X):
         a, b = X[:, 0], X[:, 1]
@@ -90,6 +95,16 @@ def test_more_noise_gives_wider_intervals():
         lo, hi = r["intervals"]["a"]
         widths.append(hi - lo)
     assert widths[1] > 1.5 * widths[0]
+
+
+def test_a_lower_point_found_by_the_stage_becomes_the_fits_best():
+    job = QuadraticJob()
+    job.best_x = np.array([0.4 + 2 * job.s1, 0.6 - 2 * job.s1, 0.5])  # a search that stopped two sds short
+    job.best_error = float(job.error(job.best_x[None])[0])
+    r = run_stage(job)
+    f, x = job.best_by_quality[None]
+    assert f < job.best_error and r["interval_method"]["improved_best"]["to"] == f
+    assert abs(x[0] - 0.4) < abs(job.best_x[0] - 0.4)
 
 
 def test_the_stage_stays_within_its_budget():

@@ -351,6 +351,25 @@ def summarise(job: FitJob, st: dict) -> dict:
 PHASES = {"jitter": _phase_jitter, "axes": _phase_axes, "sample": _phase_sample}
 
 
+def _keep_lowest(job, st):
+    """A point of the stage that scored lower than the fit's best becomes the fit's best (the search had not
+    quite settled there); the result says so."""
+    F = np.array([np.inf if v is None else v for v in st["F"]])
+    k = int(np.argmin(F)) if len(F) else -1
+    if k < 0 or not F[k] < st["f0"]:
+        return
+    x = job.space.decode(np.array(st["U"][k]))
+    job.best_by_quality[job.chosen_quality()] = [float(F[k]), x.tolist()]
+    job.history_prev.append([int(job.done_evals), float(F[k])])
+    res = st["result"]
+    res["interval_method"]["improved_best"] = {"from": st["f0"], "to": float(F[k])}
+    for i, name in enumerate(job.space.names):  # every interval holds the value the result now reports
+        rname, v = job.par.reported(name, float(x[i])) if i < job.npar else (name, float(x[i]))
+        lo, hi = res["intervals"][rname]
+        res["intervals"][rname] = [min(lo, v), max(hi, v)]
+        res["interval_method"]["details"][rname]["value"] = v
+
+
 def interval_step(job: FitJob) -> bool:
     """One batch of the intervals stage (``job.intervals`` holds its state); True once it is done."""
     if job.intervals is None:
@@ -358,4 +377,6 @@ def interval_step(job: FitJob) -> bool:
     st = job.intervals
     if st["phase"] != "done":
         PHASES[st["phase"]](job, st)
+        if st["phase"] == "done":
+            _keep_lowest(job, st)
     return st["phase"] == "done"
