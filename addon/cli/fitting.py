@@ -10,7 +10,6 @@ from ..core import defaults as D
 from ..core.errors import ClothFitError
 from .common import (
     Interrupted,
-    Text,
     _cams,
     _capture_truth,
     _command,
@@ -26,6 +25,7 @@ from .common import (
     _sigint_deferred,
     _times,
 )
+from .export import add_export
 
 
 class Progress:
@@ -374,44 +374,6 @@ def cmd_fit_many(a):
     return {"fits": fits, "workers": workers, "executor": kind, "wall_s": wall}
 
 
-def cmd_export_blender_cloth(a):
-    from ..core.jsonio import read_json
-    from ..core.physics import blender as B
-    from ..core.physics.models import BlenderModel, model_and_row
-
-    res = read_json(a.result, "result")
-    model, row = model_and_row(res)
-    if not isinstance(model, BlenderModel):
-        raise ClothFitError(
-            f"result {a.result}: a {model.name}-model fit has no Blender cloth settings "
-            "(fit with --model blender, or warm-start one from it with --init)"
-        )
-    s = model.settings(row)
-    out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
-    manip = {k: res[k] for k in ("time_offset_s", "handles") if res.get(k) is not None}
-    if manip:  # the manipulation the fit estimated: where the pins go, when it lets go
-        out["manipulation"] = manip
-    if a.python:  # the one command whose stdout is not JSON: Python, by request
-        lines = [
-            f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
-            "cloth = bpy.context.object.modifiers['Cloth'].settings",
-        ]
-        lines += [f"cloth.{k} = {s[k]!r}" for k in ("quality", "bending_model") + B.FLOAT_SETTINGS]
-        if manip.get("time_offset_s") is not None:
-            lines.append(
-                f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
-                f"happened at capture time + time_offset_s"
-            )
-        for h in manip.get("handles") or []:
-            if any(h.get("offset_m") or []):
-                lines.append(
-                    f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
-                    f"from the capture's measurement"
-                )
-        return Text("\n".join(lines))
-    return out
-
-
 def cmd_evaluate(a):
     from ..core.fitting.evaluate import evaluate
     from ..core.observation.capture import load_capture
@@ -624,15 +586,7 @@ def _add_fit_many(sub):
 
 def _add_scoring(sub):
     """``export-blender-cloth``, ``evaluate``, ``overlay``, ``floor``: reading a fit back."""
-    s = _command(
-        sub,
-        "export-blender-cloth",
-        cmd_export_blender_cloth,
-        "the Cloth modifier settings of a blender-model fit result",
-        "the settings as JSON (blender_cloth, blender_scene), or Python with --python",
-    )
-    s.add_argument("result", help="result JSON of a fit with --model blender")
-    s.add_argument("--python", action="store_true", help="print bpy assignments (Python) instead of JSON")
+    add_export(sub)
 
     s = _command(
         sub,
