@@ -319,9 +319,11 @@ def _farm_args(s, what, workers_help=None, address_help=None, executor_help=None
 
 
 def refuse_existing(path, force, what="--out"):
-    """Nothing a user made is replaced without --force: an existing file (or anything else at
-    ``path``) is refused in one line naming it, before anything is written."""
-    if path and os.path.lexists(path) and not force:
+    """Nothing a user made is replaced without --force: an existing file (or a folder that holds
+    files) is refused in one line naming it, before anything is written."""
+    if path and os.path.isdir(path):
+        refuse_filled_folder(path, force, what)
+    elif path and os.path.lexists(path) and not force:
         raise ClothFitError(f"{what} {path} exists: --force overwrites it")
 
 
@@ -340,7 +342,7 @@ def refuse_filled_folder(path, force, what="--out"):
 
 def force_arg(s, what="the output files"):
     """``--force``: replace what is there (a command refuses to overwrite without it)."""
-    s.add_argument("--force", action="store_true", help=f"replace {what} if they exist (default: refuse)")
+    s.add_argument("--force", action="store_true", help=f"overwrite {what} (without it an existing one is refused)")
 
 
 def _command(sub, name, fn, help, output):

@@ -66,12 +66,12 @@ def cmd_export_blender_cloth(a):
         f"({'; '.join(near['differences'])})"
     )
     if a.preset:
-        _write_text(a.preset, preset_text(s, model.fps, os.path.basename(a.result)))
+        _write_text(a.preset, preset_text(s, model.fps, a.result))
         print(f"wrote the preset {a.preset}: copy it into Blender's presets/cloth folder for the Cloth panel's menu")
         out["preset"] = a.preset
     text = None
     if a.python:  # the one command whose stdout is not JSON: Python, by request
-        text = blender_script(s, model.fps, a.object, os.path.basename(a.result), _manipulation_comments(manip, near))
+        text = blender_script(s, model.fps, a.object, a.result, _manipulation_comments(manip, near))
     if a.out:
         from ..core.safeio import json_text
 

@@ -24,6 +24,9 @@ from .common import (
     _selection_args,
     _sigint_deferred,
     _times,
+    force_arg,
+    refuse_existing,
+    refuse_filled_folder,
 )
 from .export import add_export
 
@@ -63,6 +66,7 @@ class Progress:
 def cmd_synth(a):
     from ..core.observation.synth import synth_capture
 
+    refuse_filled_folder(a.out, a.force)
     kw = {} if a.truth_dt_safety is None else {"truth_dt_safety": a.truth_dt_safety}
     spec = _model_spec(a)
     params = _params(a, {} if spec and spec["name"] == "blender" else None)
@@ -214,6 +218,8 @@ def cmd_fit(a):
     for path, what in ((a.out, "--out"), (ck, "checkpoint")):
         if os.path.isdir(path):
             raise ClothFitError(f"{what} {path} is a directory: give a file name")
+    if not a.resume and not a.force and os.path.lexists(a.out) and not os.path.lexists(ck):
+        raise ClothFitError(f"--out {a.out} exists (its checkpoint {ck} is gone): --force overwrites it")
     cap = load_capture(a.capture)
     _refuse_overwriting_inputs(a.out, cap, "--out")
     _refuse_overwriting_inputs(ck, cap, "--checkpoint")
@@ -336,6 +342,10 @@ def _fit_report(r):
         print(f"warning: {fl['warning']}", file=sys.stderr)
 
 
+def _fit_many_path(out_dir, i, capture):
+    return os.path.join(out_dir, f"{i:03d}_{os.path.basename(os.path.normpath(capture))}.json")
+
+
 def cmd_fit_many(a):
     from dataclasses import asdict
 
@@ -348,6 +358,9 @@ def cmd_fit_many(a):
         cap = load_capture(c)  # bad captures fail here, before any worker starts
         cfg = fit_config(a, cap).checked()  # a bad option fails here too, before any worker
         configs.append(asdict(cfg))
+    paths = [_fit_many_path(a.out_dir, i, c) for i, c in enumerate(a.captures)]
+    for path in paths:
+        refuse_existing(path, a.force, "result")
     os.makedirs(a.out_dir, exist_ok=True)
     t0 = time.time()
     from ..farm.tasks import fit_many
@@ -357,8 +370,7 @@ def cmd_fit_many(a):
     from ..core.fitting.job import _atomic_json
 
     fits = []
-    for i, (c, r) in enumerate(zip(a.captures, results)):
-        path = os.path.join(a.out_dir, f"{i:03d}_{os.path.basename(os.path.normpath(c))}.json")
+    for c, r, path in zip(a.captures, results, paths):
         _atomic_json(path, r)
         print(f"{c}: E_sil {r['best_E_sil_mean_pct']:.3f} % after {r['evaluations']} evaluations -> {path}")
         fits.append(
@@ -378,6 +390,7 @@ def cmd_evaluate(a):
     from ..core.fitting.evaluate import evaluate
     from ..core.observation.capture import load_capture
 
+    refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
     params = _params(a, _capture_truth(cap))
     r = evaluate(cap, params, cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
@@ -404,6 +417,7 @@ def _capture_floor(cap, cams, times, resolution):
 def cmd_floor(a):
     from ..core.observation.capture import load_capture
 
+    refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
     cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times), _res(a.resolution))
     d = cf.to_dict()
@@ -423,6 +437,7 @@ def cmd_overlay(a):
     from ..core.observation.capture import load_capture
     from ..core.observation.overlay import capture_overlays
 
+    refuse_filled_folder(a.out, a.force)
     cap = load_capture(a.capture)
     images = None
     if a.on_images:
@@ -452,7 +467,8 @@ def _add_synth(sub):
         "make a synthetic capture from ground-truth parameters",
         "the capture's cameras, frame times and image size as JSON",
     )
-    s.add_argument("--out", required=True, help="capture folder to write")
+    s.add_argument("--out", required=True, help="capture folder to write (new or empty unless --force)")
+    force_arg(s, "the files of a capture already in --out")
     s.add_argument(
         "--rig",
         default=D.DEFAULT_RIG,
@@ -522,7 +538,9 @@ def _add_fit(sub):
         help="continue the checkpoint; refused if it is of another fit (capture, cameras, times, "
         "resolution, optimiser, population, seed, bounds...); --max-evaluations may grow",
     )
-    again.add_argument("--force", action="store_true", help="replace an existing checkpoint instead of refusing")
+    again.add_argument(
+        "--force", action="store_true", help="replace an existing result (--out) and checkpoint instead of refusing"
+    )
     s.add_argument(
         "--backend",
         default="auto",
@@ -578,6 +596,7 @@ def _add_fit_many(sub):
         default="out/fits",
         help="folder for one result JSON per capture, NNN_<capture>.json (default: %(default)s)",
     )
+    force_arg(s, "result files already in --out-dir")
     _selection_args(s, "fit")
     _search_args(s)
     _farm_args(s, "the fits")
@@ -605,6 +624,7 @@ def _add_scoring(sub):
     _selection_args(s, "score")
     s.add_argument("--resolution", help="score at HxW [px] (default: the capture's)")
     s.add_argument("--json", help="also write the result to this file")
+    force_arg(s, "--json")
 
     s = _command(
         sub,
@@ -622,8 +642,10 @@ def _add_scoring(sub):
     s.add_argument(
         "--out",
         default="out/overlays",
-        help="folder for the images, <camera>/<frame>.png and contact_sheet.png (default: %(default)s)",
+        help="folder for the images, <camera>/<frame>.png and contact_sheet.png; new or empty unless --force "
+        "(default: %(default)s)",
     )
+    force_arg(s, "images already in --out")
     _selection_args(s, "draw")
     s.add_argument(
         "--on-images",
@@ -651,6 +673,7 @@ def _add_scoring(sub):
         help="for a fit at HxW [px]: the silhouettes area-resampled as the fitter does (default: the capture's)",
     )
     s.add_argument("--json", help="also write the result to this file")
+    force_arg(s, "--json")
 
 
 def register(sub):
