@@ -190,6 +190,7 @@ def cmd_extract(args):
             times = [float(t) for t in args.times.split(",") if t.strip()]
         except ValueError:
             raise ClothFitError(f"--times {args.times!r}: not a comma-separated list of numbers") from None
+    extract_options(args)  # a bad option is named before the folder is looked at
     refuse_filled_folder(args.out, getattr(args, "force", False))
     if args.videos:
         rep = _run_videos(args, times)
