@@ -38,9 +38,8 @@ def _write_text(path, text):
 
 
 def cmd_export_blender_cloth(a):
-    from ..core.jsonio import read_json
+    from ..core.fitting.result import FitResult
     from ..core.physics.cloth_presets import nearest_preset, preset_text
-    from ..core.physics.models import BlenderModel, model_and_row
 
     if a.object and not a.python:
         raise ClothFitError("--object names the object of the --python script: give --python too")
@@ -48,30 +47,21 @@ def cmd_export_blender_cloth(a):
         refuse_existing(path, a.force, what)
     if a.out and a.preset and os.path.realpath(a.out) == os.path.realpath(a.preset):
         raise ClothFitError(f"--out and --preset are the same file {a.out}")
-    res = read_json(a.result, "result")
-    model, row = model_and_row(res)
-    if not isinstance(model, BlenderModel):
-        raise ClothFitError(
-            f"result {a.result}: a {model.name}-model fit has no Blender cloth settings "
-            "(fit with --model blender, or warm-start one from it with --init)"
-        )
-    s = model.settings(row)
-    near = nearest_preset(s)
-    out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}, "nearest_preset": near}
-    manip = {k: res[k] for k in ("time_offset_s", "handles") if res.get(k) is not None}
-    if manip:  # the manipulation the fit estimated: where the pins go, when it lets go
-        out["manipulation"] = manip
+    out = FitResult.from_json(a.result, "result").blender_export()
+    s, fps = out["blender_cloth"], out["blender_scene"]["fps"]
+    near = out["nearest_preset"] = nearest_preset(s)
+    manip = out.get("manipulation") or {}
     print(
         f"nearest Blender preset: {near['name']}, typically {near['factor']:.2g}x apart "
         f"({'; '.join(near['differences'])})"
     )
     if a.preset:
-        _write_text(a.preset, preset_text(s, model.fps, a.result))
+        _write_text(a.preset, preset_text(s, fps, a.result))
         print(f"wrote the preset {a.preset}: copy it into Blender's presets/cloth folder for the Cloth panel's menu")
         out["preset"] = a.preset
     text = None
     if a.python:  # the one command whose stdout is not JSON: Python, by request
-        text = blender_script(s, model.fps, a.object, a.result, _manipulation_comments(manip, near))
+        text = blender_script(s, fps, a.object, a.result, _manipulation_comments(manip, near))
     if a.out:
         from ..core.safeio import json_text
 
