@@ -31,7 +31,7 @@ $(STAMP): requirements.txt requirements-dev.txt pyproject.toml
 
 demo: venv
 	$(PY) demo_blend/build_demo.py --out out/demo --blend out/demo/demo.blend
-	$(PY) -m clothfit paper --quick --json out/paper_quick.json --out out/paper_quick --only table1 >/dev/null
+	$(PY) -m clothfit paper --quick --json out/paper_quick.json --out out/paper_quick --only table1 --force >/dev/null
 	@echo "demo done: pictures in out/demo/pictures/ (first guess vs fit, error curve, parameters), figures in out/demo/summary.json, capture/fit/overlays in out/demo/capture, Table 1 in out/paper_quick.json"
 
 test: venv
@@ -42,10 +42,10 @@ lint: venv
 	$(PY) -m ruff format --check .
 
 bench: venv
-	$(PY) -m clothfit bench --json out/bench.json >/dev/null
+	$(PY) -m clothfit bench --json out/bench.json --force >/dev/null
 
 paper: venv
-	$(PY) -m clothfit paper --json out/paper.json --out out/paper >/dev/null
+	$(PY) -m clothfit paper --json out/paper.json --out out/paper --force >/dev/null
 
 extension: venv
 	$(PY) tools/build_extension.py

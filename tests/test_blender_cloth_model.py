@@ -376,6 +376,9 @@ def test_apply_blender_cloth_on_a_users_mesh_and_bad_cases(tmp_path):
     me.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [], [(0, 1, 2, 3)])
     obj = bpy.data.objects.new("user cloth", me)
     scene.collection.objects.link(obj)
+    with pytest.raises(ClothFitError, match="'user cloth' has no Cloth modifier"):
+        api.apply_blender_cloth(scene, obj, res)
+    obj.modifiers.new("Cloth", "CLOTH")
     with pytest.raises(ClothFitError, match="for 30 fps but the scene runs at 24 fps"):
         api.apply_blender_cloth(scene, obj, res, set_fps=False)
     _, msg = api.apply_blender_cloth(scene, obj, res)

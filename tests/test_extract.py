@@ -399,7 +399,9 @@ def test_cli_extract(tmp_path, capsys):
     assert "wrote capture" in io.err and json.loads(io.out)["frame_times"] == [0.1, 0.2, 0.3]
     assert load_capture(out, validate=True).n_frames == 3
     os.remove(os.path.join(root, "cam00", "background.png"))
-    assert cli(["extract", root, "-o", out]) == 2
+    assert cli(["extract", root, "-o", out]) == 2  # the capture it wrote: refused
+    assert "--force" in capsys.readouterr().err
+    assert cli(["extract", root, "-o", out, "--force"]) == 2
     assert "no background image" in capsys.readouterr().err
 
 

@@ -731,7 +731,7 @@ SOURCES = {
     "footage": {
         "steps": [
             ["{py}", "tools/render_footage.py", "render", "--out", "out/real/footage"],
-            ["{py}", "-m", "clothfit", "extract", "out/real/footage", "-o", "out/real/capture"],
+            ["{py}", "-m", "clothfit", "extract", "out/real/footage", "-o", "out/real/capture", "--force"],
             [
                 "{py}",
                 "tools/render_footage.py",
@@ -1235,6 +1235,8 @@ def run_source(name, out_path=None, log=None):
     """Run the source's command; returns (argv, seconds, load before, load after, started, output path)."""
     out_path = out_path or source_output(name)
     os.makedirs(os.path.dirname(out_path), exist_ok=True)
+    if os.path.isfile(out_path):  # the previous run's output: the command writes it anew (and refuses to replace it)
+        os.remove(out_path)
     argv = source_argv(name, out_path)
     started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     l0 = _load1()

@@ -386,6 +386,7 @@ def synth_cli(run, out, spec):
             str(spec["seed"]),
             "--params",
             json.dumps(spec["settings"]),
+            "--force",
         ]
     )
 

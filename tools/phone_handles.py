@@ -255,6 +255,7 @@ def measure(footage, clip_size=0.02):
             str(clip_size),
             "-o",
             out,
+            "--force",
         ]
     )
     secs = time.time() - t0

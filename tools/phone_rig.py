@@ -415,6 +415,7 @@ def run_calibrate(a) -> dict:
             BOARD,
             "--out",
             cams_json,
+            "--force",
             "--debug",
             os.path.join(a.out, "debug"),
         ],
@@ -935,6 +936,7 @@ def run_e2e(a) -> dict:
             BOARD,
             "--out",
             P["cams"],
+            "--force",
             "--debug",
             os.path.join(a.out, "calib_debug"),
         ],
@@ -953,12 +955,13 @@ def run_e2e(a) -> dict:
             P["cams"],
             "-o",
             P["scen"],
+            "--force",
         ],
         log,
         "handles",
     )
     _, secs["extract"] = _cli(
-        ["extract", footage, "-o", P["cap"], "--cameras", P["cams"], "--scenario", P["scen"]], log, "extract"
+        ["extract", footage, "-o", P["cap"], "--cameras", P["cams"], "--scenario", P["scen"], "--force"], log, "extract"
     )
     # the fit as the issue compares it: the manipulation handles measured taken as it is (the same search as
     # the fit given the truth: 3 settings, the same budget); then, with --uncertain-evals, the fit that also
@@ -981,7 +984,7 @@ def run_e2e(a) -> dict:
     with open(P["true_scen"], "w") as f:
         json.dump({"scenario": tr["scenario"].to_dict()}, f, indent=1)
     _, secs["extract_true"] = _cli(
-        ["extract", footage, "-o", P["true_cap"], "--cameras", P["true_cams"], "--scenario", P["true_scen"]],
+        ["extract", footage, "-o", P["true_cap"], "--cameras", P["true_cams"], "--scenario", P["true_scen"], "--force"],
         log,
         "extract (true)",
     )

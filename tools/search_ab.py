@@ -254,6 +254,7 @@ def capture_path(spec):
                 "240x320",
                 "--noise",
                 "0.05",
+                "--force",
             ]
             + SYNTH[name],
             cwd=ROOT,

@@ -191,6 +191,7 @@ def main(argv=None):
         ",".join(str(t) for t in truth["times"]),
         "--out",
         cap_dir,
+        "--force",
     ]
     if a.sync == "flash":
         args += [

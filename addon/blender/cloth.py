@@ -21,6 +21,7 @@ import numpy as np
 
 from ..core.errors import ClothFitError
 from ..core.physics import blender as B
+from .cloth_script import set_frame_rate
 from .scene import evaluated_positions, set_key_interpolation
 
 PIN_GROUP = "clothfit_pin"
@@ -29,11 +30,7 @@ CLOTH_MODIFIER = "Cloth (Cloth Fit)"
 
 def set_scene_fps(scene, fps: float):
     """Set the scene's frame rate to ``fps`` (fractional rates through fps_base)."""
-    if abs(fps - round(fps)) < 1e-9:
-        scene.render.fps, scene.render.fps_base = int(round(fps)), 1.0
-    else:
-        base = 1.001 if abs(fps * 1.001 - round(fps * 1.001)) < 1e-6 else round(fps) / fps
-        scene.render.fps, scene.render.fps_base = int(round(fps * base)), base
+    set_frame_rate(scene, fps)
 
 
 def scene_fps(scene) -> float:

@@ -25,7 +25,9 @@ from ..core.errors import ClothFitError
 from ..core.fitting.result import FitResult
 from ..core.jsonio import read_json
 from ..core.location import IMPORT_NAME, PACKAGE_PARENT
-from .cloth import apply_settings, cloth_modifier
+from ..core.physics.blender_settings import check_settings
+from .cloth import cloth_modifier, scene_fps
+from .cloth_script import ClothTargetError, apply_cloth_settings
 from .ops import _status, _ui_begin, _ui_end
 
 RESULT_KEY = "clothfit_scene_fit_result"  # object custom property: the last fit's result JSON
@@ -168,7 +170,9 @@ def _default_sigint():
 
 
 def apply_result(obj, result_path=None) -> dict:
-    """Write a scene fit's ``blender_cloth`` onto ``obj``'s Cloth modifier."""
+    """Write a scene fit's ``blender_cloth`` onto ``obj``'s Cloth modifier (found by type) and set the
+    scene's frame rate to the fit's, through ``cloth_script.apply_cloth_settings``: the function the
+    script of ``export-blender-cloth --python`` calls. Returns the settings."""
     cl = cloth_modifier(obj) if obj is not None else None
     if cl is None:
         raise ClothFitError(f"object '{getattr(obj, 'name', None)}' has no Cloth modifier")
@@ -178,7 +182,13 @@ def apply_result(obj, result_path=None) -> dict:
     res = FitResult.from_json(path, "fit result", need_parameters=False)
     if not res.is_blender:
         raise ClothFitError(f"fit result {path}: no blender_cloth (the fit never evaluated a candidate?)")
-    return apply_settings(cl, res.blender_cloth)
+    settings = check_settings(res.blender_cloth, f"fit result {path}")
+    fps = (res.get("blender_scene") or {}).get("fps") or (res.get("model") or {}).get("fps")
+    try:
+        apply_cloth_settings(settings, float(fps) if fps else scene_fps(bpy.context.scene), obj.name)
+    except ClothTargetError as e:
+        raise ClothFitError(str(e)) from None
+    return settings
 
 
 class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):

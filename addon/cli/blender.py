@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..core.errors import ClothFitError
-from .common import _command
+from .common import _command, force_arg, refuse_existing
 
 
 def cmd_blender(a):
@@ -17,6 +17,7 @@ def cmd_blender(a):
 def cmd_blender_agreement(a):
     if a.grid < 2 or a.grid > 200:
         raise ClothFitError(f"--grid {a.grid}: must be 2..200")
+    refuse_existing(a.json, a.force, "--json")
     import bpy
 
     from ..blender import agreement
@@ -72,3 +73,4 @@ def register(sub):
     )
     s.add_argument("--fps", type=float, default=24.0, help="scene frame rate [frames/s] (default: %(default)s)")
     s.add_argument("--json", help="also write every figure to this file")
+    force_arg(s, "--json")

@@ -324,6 +324,33 @@ def _farm_args(s, what, workers_help=None, address_help=None, executor_help=None
     )
 
 
+def refuse_existing(path, force, what="--out"):
+    """Nothing a user made is replaced without --force: an existing file (or a folder that holds
+    files) is refused in one line naming it, before anything is written."""
+    if path and os.path.isdir(path):
+        refuse_filled_folder(path, force, what)
+    elif path and os.path.lexists(path) and not force:
+        raise ClothFitError(f"{what} {path} exists: --force overwrites it")
+
+
+def refuse_filled_folder(path, force, what="--out"):
+    """A folder a command writes into must be new or empty unless --force (then files of the same
+    names are replaced, others kept)."""
+    if not path or force or not os.path.lexists(path):
+        return
+    if not os.path.isdir(path):
+        raise ClothFitError(f"{what} {path} exists and is not a folder: --force overwrites it")
+    names = sorted(os.listdir(path))
+    if names:
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        raise ClothFitError(f"{what} {path} already holds {len(names)} file(s) ({shown}): --force writes over them")
+
+
+def force_arg(s, what="the output files"):
+    """``--force``: replace what is there (a command refuses to overwrite without it)."""
+    s.add_argument("--force", action="store_true", help=f"overwrite {what} (without it an existing one is refused)")
+
+
 def _command(sub, name, fn, help, output):
     """One subcommand: ``help`` in the command list and as its description, ``output`` in its epilog."""
     s = sub.add_parser(

@@ -11,7 +11,6 @@ from ..core.errors import ClothFitError
 from ..core.fitting.result import interval_lines
 from .common import (
     Interrupted,
-    Text,
     _cams,
     _capture_truth,
     _command,
@@ -26,13 +25,18 @@ from .common import (
     _selection_args,
     _sigint_deferred,
     _times,
+    force_arg,
+    refuse_existing,
+    refuse_filled_folder,
 )
+from .export import add_export
 from .progress import fit_progress, progress_interval
 
 
 def cmd_synth(a):
     from ..core.observation.synth import synth_capture
 
+    refuse_filled_folder(a.out, a.force)
     kw = {} if a.truth_dt_safety is None else {"truth_dt_safety": a.truth_dt_safety}
     spec = _model_spec(a)
     params = _params(a, {} if spec and spec["name"] == "blender" else None)
@@ -185,6 +189,8 @@ def cmd_fit(a):
     for path, what in ((a.out, "--out"), (ck, "checkpoint")):
         if os.path.isdir(path):
             raise ClothFitError(f"{what} {path} is a directory: give a file name")
+    if not a.resume and not a.force and os.path.lexists(a.out) and not os.path.lexists(ck):
+        raise ClothFitError(f"--out {a.out} exists (its checkpoint {ck} is gone): --force overwrites it")
     cap = load_capture(a.capture)
     _refuse_overwriting_inputs(a.out, cap, "--out")
     _refuse_overwriting_inputs(ck, cap, "--checkpoint")
@@ -310,6 +316,10 @@ def _fit_report(r):
         print(f"warning: {fl['warning']}", file=sys.stderr)
 
 
+def _fit_many_path(out_dir, i, capture):
+    return os.path.join(out_dir, f"{i:03d}_{os.path.basename(os.path.normpath(capture))}.json")
+
+
 def cmd_fit_many(a):
     from dataclasses import asdict
 
@@ -322,6 +332,9 @@ def cmd_fit_many(a):
         cap = load_capture(c)  # bad captures fail here, before any worker starts
         cfg = fit_config(a, cap).checked()  # a bad option fails here too, before any worker
         configs.append(asdict(cfg))
+    paths = [_fit_many_path(a.out_dir, i, c) for i, c in enumerate(a.captures)]
+    for path in paths:
+        refuse_existing(path, a.force, "result")
     os.makedirs(a.out_dir, exist_ok=True)
     t0 = time.time()
     from ..farm.tasks import fit_many
@@ -332,8 +345,7 @@ def cmd_fit_many(a):
     from ..core.fitting.job import _atomic_json
 
     fits = []
-    for i, (c, r) in enumerate(zip(a.captures, results)):
-        path = os.path.join(a.out_dir, f"{i:03d}_{os.path.basename(os.path.normpath(c))}.json")
+    for c, r, path in zip(a.captures, results, paths):
         _atomic_json(path, r)
         print(f"{c}: E_sil {r['best_E_sil_mean_pct']:.3f} % after {r['evaluations']} evaluations -> {path}")
         fits.append(
@@ -349,41 +361,11 @@ def cmd_fit_many(a):
     return {"fits": fits, "workers": workers, "executor": kind, "wall_s": wall}
 
 
-def cmd_export_blender_cloth(a):
-    from ..core.fitting.result import FitResult
-    from ..core.physics import blender as B
-
-    res = FitResult.from_json(a.result, "result")  # checked: says what the file is when it is no fit result
-    model, s = res.blender_settings()
-    out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
-    manip = {k: res[k] for k in ("time_offset_s", "handles") if res.get(k) is not None}
-    if manip:  # the manipulation the fit estimated: where the pins go, when it lets go
-        out["manipulation"] = manip
-    if a.python:  # the one command whose stdout is not JSON: Python, by request
-        lines = [
-            f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
-            "cloth = bpy.context.object.modifiers['Cloth'].settings",
-        ]
-        lines += [f"cloth.{k} = {s[k]!r}" for k in ("quality", "bending_model") + B.FLOAT_SETTINGS]
-        if manip.get("time_offset_s") is not None:
-            lines.append(
-                f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
-                f"happened at capture time + time_offset_s"
-            )
-        for h in manip.get("handles") or []:
-            if any(h.get("offset_m") or []):
-                lines.append(
-                    f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
-                    f"from the capture's measurement"
-                )
-        return Text("\n".join(lines))
-    return out
-
-
 def cmd_evaluate(a):
     from ..core.fitting.evaluate import evaluate
     from ..core.observation.capture import load_capture
 
+    refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
     params = _params(a, _capture_truth(cap))
     r = evaluate(cap, params, cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
@@ -410,6 +392,7 @@ def _capture_floor(cap, cams, times, resolution):
 def cmd_floor(a):
     from ..core.observation.capture import load_capture
 
+    refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
     cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times), _res(a.resolution))
     d = cf.to_dict()
@@ -429,6 +412,7 @@ def cmd_overlay(a):
     from ..core.observation.capture import load_capture
     from ..core.observation.overlay import capture_overlays
 
+    refuse_filled_folder(a.out, a.force)
     cap = load_capture(a.capture)
     images = None
     if a.on_images:
@@ -459,7 +443,8 @@ def _add_synth(sub):
         "make a synthetic capture from ground-truth parameters",
         "the capture's cameras, frame times and image size as JSON",
     )
-    s.add_argument("--out", required=True, help="capture folder to write")
+    s.add_argument("--out", required=True, help="capture folder to write (new or empty unless --force)")
+    force_arg(s, "the files of a capture already in --out")
     s.add_argument(
         "--rig",
         default=D.DEFAULT_RIG,
@@ -529,7 +514,9 @@ def _add_fit(sub):
         help="continue the checkpoint; refused if it is of another fit (capture, cameras, times, "
         "resolution, optimiser, population, seed, bounds...); --max-evaluations may grow",
     )
-    again.add_argument("--force", action="store_true", help="replace an existing checkpoint instead of refusing")
+    again.add_argument(
+        "--force", action="store_true", help="replace an existing result (--out) and checkpoint instead of refusing"
+    )
     s.add_argument(
         "--backend",
         default="auto",
@@ -588,6 +575,7 @@ def _add_fit_many(sub):
         default="out/fits",
         help="folder for one result JSON per capture, NNN_<capture>.json (default: %(default)s)",
     )
+    force_arg(s, "result files already in --out-dir")
     _selection_args(s, "fit")
     _search_args(s)
     _farm_args(s, "the fits")
@@ -601,15 +589,7 @@ def _add_fit_many(sub):
 
 def _add_scoring(sub):
     """``export-blender-cloth``, ``evaluate``, ``overlay``, ``floor``: reading a fit back."""
-    s = _command(
-        sub,
-        "export-blender-cloth",
-        cmd_export_blender_cloth,
-        "the Cloth modifier settings of a blender-model fit result",
-        "the settings as JSON (blender_cloth, blender_scene), or Python with --python",
-    )
-    s.add_argument("result", help="result JSON of a fit with --model blender")
-    s.add_argument("--python", action="store_true", help="print bpy assignments (Python) instead of JSON")
+    add_export(sub)
 
     s = _command(
         sub,
@@ -628,6 +608,7 @@ def _add_scoring(sub):
     _selection_args(s, "score")
     s.add_argument("--resolution", help="score at HxW [px] (default: the capture's)")
     s.add_argument("--json", help="also write the result to this file")
+    force_arg(s, "--json")
 
     s = _command(
         sub,
@@ -645,8 +626,10 @@ def _add_scoring(sub):
     s.add_argument(
         "--out",
         default="out/overlays",
-        help="folder for the images, <camera>/<frame>.png and contact_sheet.png (default: %(default)s)",
+        help="folder for the images, <camera>/<frame>.png and contact_sheet.png; new or empty unless --force "
+        "(default: %(default)s)",
     )
+    force_arg(s, "images already in --out")
     _selection_args(s, "draw")
     s.add_argument(
         "--on-images",
@@ -674,6 +657,7 @@ def _add_scoring(sub):
         help="for a fit at HxW [px]: the silhouettes area-resampled as the fitter does (default: the capture's)",
     )
     s.add_argument("--json", help="also write the result to this file")
+    force_arg(s, "--json")
 
 
 def register(sub):

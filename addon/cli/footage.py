@@ -7,7 +7,7 @@ import sys
 
 from ..core import defaults as D
 from ..core.errors import ClothFitError
-from .common import _command, _floats, _pair
+from .common import _command, _floats, _pair, force_arg, refuse_existing, refuse_filled_folder
 
 
 def add_extract_arguments(parser):
@@ -38,7 +38,8 @@ def _extract_input_args(parser):
     parser.add_argument(
         "--flash-time", type=float, default=0.0, help="capture time [s] of the flash (default: %(default)s)"
     )
-    parser.add_argument("-o", "--out", required=True, help="capture folder to write")
+    parser.add_argument("-o", "--out", required=True, help="capture folder to write (new or empty unless --force)")
+    force_arg(parser, "the files of a capture already in --out")
     parser.add_argument(
         "--cameras",
         help="calibration: our cameras JSON, OpenCV YAML/JSON/XML file or folder, COLMAP "
@@ -189,6 +190,8 @@ def cmd_extract(args):
             times = [float(t) for t in args.times.split(",") if t.strip()]
         except ValueError:
             raise ClothFitError(f"--times {args.times!r}: not a comma-separated list of numbers") from None
+    extract_options(args)  # a bad option is named before the folder is looked at
+    refuse_filled_folder(args.out, getattr(args, "force", False))
     if args.videos:
         rep = _run_videos(args, times)
     else:
@@ -294,6 +297,7 @@ def add_cameras_arguments(p, cmd):
         )
     p.add_argument("--width", type=int, help="image width [px] when the OpenCV file has none")
     p.add_argument("--height", type=int, help="image height [px] when the OpenCV file has none")
+    force_arg(p, "--out")
     p.set_defaults(cameras_cmd=cmd)
     return p
 
@@ -303,6 +307,7 @@ def cmd_cameras(a):
     table of the cameras (for people) and returns ``{"command", "out", "cameras": [names]}``."""
     from ..core.footage.calib_io import _cameras_from_any, describe, export_cameras, import_cameras
 
+    refuse_existing(a.out, a.force)
     if a.cameras_cmd == "import-cameras":
         cams = import_cameras(a.src, a.format, a.width, a.height)
         export_cameras(cams, a.out, "json")
@@ -317,6 +322,7 @@ def cmd_cameras(a):
 def cmd_handles(a):
     from ..core.footage import handles as H
 
+    refuse_existing(a.out, a.force)
     size = _pair(a.size, "--size")
     grid = None
     if a.grid:
@@ -389,6 +395,8 @@ def cmd_calibrate(a):
         if a.folder:
             raise ClothFitError("--make-board writes a board to print: give no FOLDER")
         stem = os.path.splitext(a.out)[0] if a.out.lower().endswith((".png", ".pdf")) else a.out
+        for path in (stem + ".png", stem + ".pdf"):
+            refuse_existing(path, a.force, "board")
         r = CB.make_board(board, stem + ".png", stem + ".pdf", a.dpi, a.margin)
         print(
             f"wrote {r['png']} ({r['png_px'][0]} x {r['png_px'][1]} px at {r['png_dpi']:.1f} dpi) and {r['pdf']} "
@@ -398,6 +406,8 @@ def cmd_calibrate(a):
         return r
     if not a.folder:
         raise ClothFitError("calibrate needs FOLDER (one folder of images or one video per camera), or --make-board")
+    for path, what in ((a.out, "--out"), (a.export, "--export"), (a.report, "--report")):
+        refuse_existing(path, a.force, what)
     fixed = {}
     if a.intrinsics:
         from ..core.footage.calib_io import import_cameras
@@ -486,6 +496,7 @@ def _calibrate_board_args(s):
         required=True,
         help="cameras JSON to write (our format); with --make-board: the board's file name, .png and .pdf are written",
     )
+    force_arg(s, "--out, --export and --report (or the board's files)")
     s.add_argument(
         "--make-board",
         action="store_true",
@@ -673,6 +684,7 @@ def _add_handles(sub):
         "= along grid columns, 'at' u; height = rows, 'at' v)",
     )
     s.add_argument("-o", "--out", required=True, help="scenario JSON to write (scenario + uncertain + report)")
+    force_arg(s, "--out")
     s.add_argument(
         "--grid",
         help="vertices along the longer side (the other side's makes square cells), or "

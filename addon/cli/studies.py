@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from ..core import defaults as D
 from ..core.errors import ClothFitError
-from .common import Text, _command, _farm_args, _floats, _names, _res
+from .common import Text, _command, _farm_args, _floats, _names, _res, force_arg, refuse_existing
 from .progress import study_progress
 
 
 def cmd_paper(a):
     from ..core.studies.experiment import run_paper
 
+    refuse_existing(a.json, a.force, "--json")
     if a.workers is not None or a.address is not None:
         return _paper_parallel(a)
     return run_paper(
@@ -71,6 +72,7 @@ def cmd_bench(a):
     from ..core.studies.bench import run_bench
     from ..farm.bench import bench_blender_workers
 
+    refuse_existing(a.json, a.force, "--json")
     return run_bench(
         a.json,
         quick=a.quick,
@@ -84,6 +86,7 @@ def cmd_bench(a):
 def cmd_identifiability(a):
     from ..core.studies.identifiability import MATERIALS, run
 
+    refuse_existing(a.json, a.force, "--json")
     mats = _names(a.materials)
     bad = [m for m in mats or [] if m not in MATERIALS]
     if bad:
@@ -94,6 +97,7 @@ def cmd_identifiability(a):
 def cmd_occlusion(a):
     from ..core.studies.occlusion import run_occlusion
 
+    refuse_existing(a.json, a.force, "--json")
     return run_occlusion(
         a.json,
         out_dir=a.out,
@@ -131,6 +135,7 @@ def _add_paper(sub):
         "every table and figure as JSON (the same as --json)",
     )
     s.add_argument("--json", required=True, help="write the tables and every figure to this JSON file")
+    force_arg(s, "--json")
     s.add_argument(
         "--out", default="out/paper", help="folder for the captures, fits and overlays (default: %(default)s)"
     )
@@ -177,6 +182,7 @@ def _add_paper(sub):
 
     s = _command(sub, "bench", cmd_bench, "speed figures", "every figure as JSON (the same as --json)")
     s.add_argument("--json", required=True, help="write every figure to this JSON file")
+    force_arg(s, "--json")
     s.add_argument(
         "--quick",
         action="store_true",
@@ -207,6 +213,7 @@ def _add_others(sub):
     )
     s.add_argument("--materials", help="comma list: default, silk, denim (default: all)")
     s.add_argument("--json", help="also write the tables to this file")
+    force_arg(s, "--json")
 
     s = _command(
         sub,
@@ -216,6 +223,7 @@ def _add_others(sub):
         "the study's table as JSON (the same as --json)",
     )
     s.add_argument("--json", required=True, help="write the study to this JSON file")
+    force_arg(s, "--json")
     s.add_argument("--out", default="out/occlusion", help="where the three captures are written (default: %(default)s)")
     s.add_argument("--quick", action="store_true", help="240x320, 700 evaluations")
     s.add_argument(

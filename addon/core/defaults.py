@@ -45,6 +45,8 @@ MAX_STRAIN = 5.0  # a spring longer than (1 + MAX_STRAIN) * rest length = explod
 # per frame, not per second), 24 fps unless told
 BLENDER_FPS = 24
 WARM_START_SIGMA = 0.1  # CMA-ES step size (unit cube) when a fit starts from a given result (--init)
+PRESET_DISTANCE_FLOOR = 0.1  # the nearest of Blender's cloth presets (physics/cloth_presets.py): a setting per kg of
+# vertex mass below this counts as this (a preset's zero damping stays comparable)
 
 # --- capture (docs/method.md#spec-5): 30 shapes every 0.05 s, train on even tenths, test on the odd twentieths
 FRAME_TIMES = [round(0.05 * i, 2) for i in range(1, 31)]

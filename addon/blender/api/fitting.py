@@ -269,11 +269,15 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
     """A Blender-model fit result -> a Cloth modifier. On the scene's own cloth (or with no mesh
     active) a "Blender Cloth (fitted)" object is built beside it from the capture's scenario: the
     same mesh, pins and release as the fit, so Blender replays the fitted motion. On any other
-    mesh its Cloth modifier is added or updated (its own pin group is kept). The scene's frame rate
-    is set to the one the settings are for (``set_fps``), else a differing rate is an error.
-    Returns (object, message)."""
+    mesh its Cloth modifier (found by type; none is an error) gets the settings, its own pin group
+    kept, through ``cloth_script.apply_cloth_settings``, the function the script of
+    ``export-blender-cloth --python`` calls. The scene's frame rate is set to the one the settings
+    are for (``set_fps``), else a differing rate is an error. The message names the nearest of
+    Blender's own presets. Returns (object, message)."""
+    from ...core.physics.cloth_presets import nearest_preset
     from ...core.physics.models import BlenderModel
     from .. import cloth as BC
+    from ..cloth_script import ClothTargetError, apply_cloth_settings
 
     res = FitResult.from_json(result) if result is not None else load_result(scene)
     model, row = res.replay()
@@ -290,8 +294,9 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
                 f"the settings are for {model.fps:g} fps but the scene runs at {fps:g} fps: "
                 f"Blender's cloth moves per frame, so they would move it differently"
             )
-        BC.set_scene_fps(scene, model.fps)
         note = f"; scene frame rate set from {fps:g} to {model.fps:g} fps"
+    near = nearest_preset(settings)
+    note += f"; nearest Blender preset {near['name']} (typically {near['factor']:.2g}x apart)"
     own = None
     try:
         own = cloth_object(scene)
@@ -309,6 +314,7 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
                 f"; the fit read the footage {1000 * t_off:+.1f} ms off: the release is at capture time "
                 f"{1000 * t_off:+.1f} ms"
             )
+        BC.set_scene_fps(scene, model.fps)
         old = bpy.data.objects.get(BLENDER_CLOTH_NAME)
         if old is not None:
             me = old.data
@@ -322,9 +328,11 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
         )
     if obj.type != "MESH":
         raise ClothFitError(f"the active object '{obj.name}' is a {obj.type.lower()}, not a mesh")
-    cl = BC.cloth_modifier(obj) or obj.modifiers.new("Cloth", "CLOTH")
-    BC.apply_settings(cl, settings)
-    pins = cl.settings.vertex_group_mass
+    try:  # the function the script of `export-blender-cloth --python` calls
+        apply_cloth_settings(settings, model.fps, obj.name, scene=scene)
+    except ClothTargetError as e:
+        raise ClothFitError(str(e)) from None
+    pins = BC.cloth_modifier(obj).settings.vertex_group_mass
     return obj, (
         f"Cloth settings applied to '{obj.name}'"
         + (f" (pins: vertex group '{pins}')" if pins else " (no pin group set)")

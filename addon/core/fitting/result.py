@@ -178,30 +178,6 @@ class FitResult(dict):
             out["manipulation"] = self.manipulation
         return out
 
-    def blender_python(self) -> str:
-        """``export-blender-cloth --python``: Python lines that set a Cloth modifier's settings."""
-        from ..physics import blender as B
-
-        model, s = self.blender_settings()
-        manip = self.manipulation
-        lines = [
-            f"# Blender {model.fps:g} fps scene: set scene.render.fps / fps_base to match",
-            "cloth = bpy.context.object.modifiers['Cloth'].settings",
-        ]
-        lines += [f"cloth.{k} = {s[k]!r}" for k in ("quality", "bending_model") + B.FLOAT_SETTINGS]
-        if manip.get("time_offset_s") is not None:
-            lines.append(
-                f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
-                f"happened at capture time + time_offset_s"
-            )
-        for h in manip.get("handles") or []:
-            if any(h.get("offset_m") or []):
-                lines.append(
-                    f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
-                    f"from the capture's measurement"
-                )
-        return "\n".join(lines)
-
 
 def interval_lines(res: dict) -> list[str]:
     """A result's intervals for people, one line per free setting: value, 90 % interval, and UNDETERMINED where
