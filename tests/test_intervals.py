@@ -192,3 +192,25 @@ def test_the_intervals_are_shown_to_people_and_the_undetermined_marked(cap, tmp_
     ha, hb = cv2.imread(plain[-1]).shape[0], cv2.imread(shown[-1]).shape[0]
     assert hb >= ha + 18 * len(lines)
     assert interval_lines({"intervals": None, "intervals_note": "why"}) == ["no intervals: why"]
+
+
+def test_the_export_keeps_every_value_and_marks_the_undetermined(cap, tmp_path, capsys):
+    import json
+
+    from clothfit import cli
+
+    res = fit(cap).run()
+    res["undetermined"] = [FREE[0]]
+    path = tmp_path / "fit.json"
+    res.save(str(path))
+    assert cli.main(["export-blender-cloth", str(path)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["intervals"] == {n: res["intervals"][n] for n in FREE} and out["undetermined"] == [FREE[0]]
+    assert out["blender_cloth"][FREE[0]] == res["blender_cloth"][FREE[0]]  # the value kept
+    assert cli.main(["export-blender-cloth", str(path), "--python"]) == 0
+    script = capsys.readouterr().out
+    (line,) = [x for x in script.splitlines() if x.startswith(f"# {FREE[0]} ")]
+    assert line.endswith("UNDETERMINED")
+    preset = tmp_path / "fitted.py"
+    assert cli.main(["export-blender-cloth", str(path), "--preset", str(preset)]) == 0
+    assert f"# {FREE[1]} " in preset.read_text()

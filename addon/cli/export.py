@@ -38,7 +38,7 @@ def _write_text(path, text):
 
 
 def cmd_export_blender_cloth(a):
-    from ..core.fitting.result import FitResult
+    from ..core.fitting.result import FitResult, interval_comments
     from ..core.physics.cloth_presets import nearest_preset, preset_text
 
     if a.object and not a.python:
@@ -56,12 +56,13 @@ def cmd_export_blender_cloth(a):
         f"({'; '.join(near['differences'])})"
     )
     if a.preset:
-        _write_text(a.preset, preset_text(s, fps, a.result))
+        _write_text(a.preset, preset_text(s, fps, a.result, interval_comments(out)))
         print(f"wrote the preset {a.preset}: copy it into Blender's presets/cloth folder for the Cloth panel's menu")
         out["preset"] = a.preset
     text = None
     if a.python:  # the one command whose stdout is not JSON: Python, by request
-        text = blender_script(s, fps, a.object, a.result, _manipulation_comments(manip, near))
+        comments = _manipulation_comments(manip, near) + interval_comments(out)
+        text = blender_script(s, fps, a.object, a.result, comments)
     if a.out:
         from ..core.safeio import json_text
 

@@ -176,7 +176,15 @@ class FitResult(dict):
         out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
         if self.manipulation:
             out["manipulation"] = self.manipulation
+        if self.get("intervals"):  # how sure each setting is (fitting/intervals.py); undetermined ones keep values
+            out["intervals"] = {n: v for n, v in self["intervals"].items() if n in s}
+            out["undetermined"] = list(self.get("undetermined") or [])
         return out
+
+
+def interval_comments(res: dict) -> list[str]:
+    """``interval_lines`` as comment lines of a Python file (the export's script, a cloth preset)."""
+    return [f"# {line}" for line in interval_lines(res)]
 
 
 def interval_lines(res: dict) -> list[str]:

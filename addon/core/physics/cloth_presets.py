@@ -15,6 +15,7 @@ and the frame rate are not part of it: each result says its own.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from .. import defaults as D
 from ..errors import ClothFitError
@@ -106,10 +107,11 @@ def nearest_preset(settings: dict, n_named: int = 3) -> dict:
     }
 
 
-def preset_text(settings: dict, fps: float, source: str = "") -> str:
+def preset_text(settings: dict, fps: float, source: str = "", comments: Sequence[str] = ()) -> str:
     """``settings`` as a Blender cloth preset file: ``import bpy``, ``cloth = bpy.context.cloth``,
     then one ``cloth.settings.NAME = value`` line per setting (the format Blender's own *Add Cloth
-    Preset* writes). The frame rate the settings are for goes into a comment: a preset cannot set it."""
+    Preset* writes). The frame rate the settings are for goes into a comment: a preset cannot set it; so do
+    ``comments`` (comment lines: how sure each setting is)."""
     s = check_settings(settings, "fitted settings")
     if not (fps > 0 and math.isfinite(fps)):
         raise ClothFitError(f"frame rate {fps} must be a positive number")
@@ -119,6 +121,7 @@ def preset_text(settings: dict, fps: float, source: str = "") -> str:
         "",
         f"# fitted by Silhouette Cloth Fit{f' ({source})' if source else ''} for a {fps:g} fps scene: Blender's cloth",
         "# moves per frame, so set the scene's frame rate to it (Output Properties > Format > Frame Rate)",
+        *comments,
     ]
     lines += [f"cloth.settings.{n} = {s[n]!r}" for n in PRESET_FILE_SETTINGS]
     return "\n".join(lines) + "\n"
