@@ -545,6 +545,12 @@ SOURCES = {
         "lab18 at 120 x 160, 5 % noise, settings drawn within a factor 3 of Blender's defaults), each fitted with the "
         "default options and 4 training cameras; the truth's own error tells the fits in its basin apart (about 8 min)",
     },
+    "interval_coverage_check": {
+        "argv": ["{py}", "tools/interval_coverage.py", "--first", "6", "--captures", "6", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the same as interval_coverage on six other captures (cap06-cap11), none of which set the intervals' "
+        "calibration (about 8 min)",
+    },
     "issue20_offsets_seeds": {
         "argv": ["{py}", "tools/issue20_goals.py", "offsets", "--seeds", "0-2", "--json", "{out}"],
         "cost": "expensive",

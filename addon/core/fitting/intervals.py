@@ -167,7 +167,7 @@ def _phase_jitter(job, st):
     pix = st["pixel_threshold"]
     # a part in 10^6 of the error itself: the float32 simulation's rounding, below which nothing is measured
     st["threshold"] = max(D.INTERVAL_Z * math.sqrt(2.0) * st["sigma"], pix, 1e-6 * max(st["centre"] or 0.0, 1e-12))
-    st["temperature"] = st["threshold"] / D.INTERVAL_CHI2_HALF
+    st["temperature"] = D.INTERVAL_CALIBRATION * st["threshold"] / D.INTERVAL_CHI2_HALF
     st["phase"] = "axes"
 
 
