@@ -301,7 +301,11 @@ def cmd_fit(a):
 
 
 def _fit_report(r):
-    """The result's lines for people (stderr): quality chosen, manipulation, the floor and its warning."""
+    """The result's lines for people (stderr): frame rate, quality chosen, manipulation, the floor, its
+    warning and the verdict."""
+    scene = r.get("blender_scene") or {}
+    if scene.get("fps_source"):
+        print(f"frame rate {scene['fps']:g} fps ({scene['fps_source']})", file=sys.stderr)
     qc = r.get("quality_choice")
     if qc:
         tried = ", ".join(f"{t['quality']}: {t['train_E_sil_pct']:.3f} %" for t in qc["tried"])
@@ -334,6 +338,8 @@ def _fit_report(r):
         print(line, file=sys.stderr)
     if fl.get("warning"):
         print(f"warning: {fl['warning']}", file=sys.stderr)
+    if r.get("verdict"):
+        print(f"verdict: {r['verdict']}", file=sys.stderr)
 
 
 def cmd_fit_many(a):
@@ -368,8 +374,12 @@ def cmd_fit_many(a):
                 "best_E_sil_mean_pct": r["best_E_sil_mean_pct"],
                 "evaluations": r["evaluations"],
                 "stop_reason": r.get("stop_reason"),
+                "verdict_kind": r.get("verdict_kind"),
+                "verdict": r.get("verdict"),
             }
         )
+        if r.get("verdict"):
+            print(f"  verdict: {r['verdict']}", file=sys.stderr)
     print(f"{len(results)} fits on {workers} {kind} worker(s) in {wall:.1f} s")
     return {"fits": fits, "workers": workers, "executor": kind, "wall_s": wall}
 
@@ -425,11 +435,28 @@ def cmd_evaluate(a):
     if "shape_error_mm" in r:
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
     print(s)
+    if isinstance(params, dict) and params.get("floor"):  # a fit's result: its own verdict beside the new errors
+        from ..core.fitting.verdict import verdict
+
+        r["fit_verdict_kind"], r["fit_verdict"] = verdict(params)
+        print(f"the fit's verdict: {r['fit_verdict']}", file=sys.stderr)
     if a.json:
         from ..core.safeio import atomic_json
 
         atomic_json(a.json, r)
     return r
+
+
+def cmd_verdict(a):
+    from ..core.fitting.result import FitResult
+    from ..core.fitting.verdict import verdict
+
+    out = []
+    for path in a.results:
+        kind, line = verdict(FitResult.from_json(path, "fit result", need_parameters=False))
+        print(f"{path}: {line}", file=sys.stderr)
+        out.append({"result": path, "verdict_kind": kind, "verdict": line})
+    return {"verdicts": out}
 
 
 def _capture_floor(cap, cams, times, resolution):
@@ -633,6 +660,15 @@ def _add_scoring(sub):
     )
     s.add_argument("result", help="result JSON of a fit with --model blender")
     s.add_argument("--python", action="store_true", help="print bpy assignments (Python) instead of JSON")
+
+    s = _command(
+        sub,
+        "verdict",
+        cmd_verdict,
+        "the one-line verdict of fit results: at the floor, settings undetermined or at their bounds, far above it",
+        "one verdict per result (verdict_kind, verdict) as JSON",
+    )
+    s.add_argument("results", nargs="+", help="result JSON files of fits")
 
     s = _command(
         sub,

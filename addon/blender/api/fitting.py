@@ -125,6 +125,7 @@ def start_fit(scene, capture=None):
     name = RESULT_JSON if job.par.model.name == "paper" else RESULT_JSON_BLENDER
     sess = FitSession(scene, job, os.path.join(cap.root, name))
     p.fit_running = True
+    p.fit_verdict = p.fit_verdict_kind = ""
     p.fit_progress = 0.0
     p.fit_generation = p.fit_evaluations = 0
     p.fit_status = f"fitting {len(job.train_cameras)} cameras x {len(job.train_times)} times"
@@ -201,6 +202,8 @@ def finish_fit(session, cancelled=False):
     _publish(scene, job)
     job.save_result(session.result_path)
     p.result_path = session.result_path
+    res = job.result()
+    p.fit_verdict_kind, p.fit_verdict = res["verdict_kind"], res["verdict"]
     bp = job.best_params
     if job.error:
         p.fit_status = f"failed: {job.error}"

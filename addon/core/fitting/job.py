@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike
 from .. import defaults as D
 from ..errors import ClothFitError
 from ..jsonio import write_json
+from ..observation.coverage import refuse_full_silhouettes
 from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
 from ..physics.models import BlenderModel
 from ..physics.scenario import Uncertainty
@@ -79,6 +80,7 @@ def load_observed(
     """Cameras, observed silhouettes and ignore masks ``[cam][frame]`` of a capture, at ``resolution``."""
     cameras = [capture.cameras[c] for c in cams]
     observed, ignore = capture.load_observations(cams, fidx)
+    refuse_full_silhouettes(capture, cams, fidx, observed, ignore)
     if resolution is not None:
         h, w = check_resolution(resolution, "fit resolution")
         cameras = [c.resized(h, w) for c in cameras]
