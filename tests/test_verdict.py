@@ -220,6 +220,7 @@ def test_fit_ends_with_its_verdict_and_the_verdict_command_reads_it_back(caps, t
     assert rc == 0, err
     r = json.loads(out.read_text())
     assert r["verdict_kind"] in KINDS and f"verdict: {r['verdict']}" in err.splitlines()
+    assert json.loads(so)["verdict"] == r["verdict"]  # the summary on stdout has it too
     rc, so, err = _run("verdict", out, out)
     assert rc == 0, err
     assert json.loads(so)["verdicts"] == 2 * [

@@ -282,6 +282,8 @@ def cmd_fit(a):
             "quality_choice",
             "time_offset_s",
             "floor",
+            "verdict_kind",
+            "verdict",
         )
         if k in r
     }
