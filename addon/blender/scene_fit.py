@@ -25,6 +25,7 @@ from ..core.errors import ClothFitError
 from ..core.fitting.result import FitResult
 from ..core.jsonio import read_json
 from ..core.location import IMPORT_NAME, PACKAGE_PARENT
+from . import api
 from .cloth import apply_settings, cloth_modifier
 from .ops import _status, _ui_begin, _ui_end
 
@@ -217,11 +218,12 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
             cache_dir=cache_folder(context),
         )
 
-    def _report_result(self, res):
+    def _report_result(self, context, res):
         self.report(
             {"INFO"},
             f"Fitted {res.get('evaluations')} candidates: E_sil {res.get('best_E_sil_mean_pct') or 0:.3f} %"
-            f"{' (stopped: best so far)' if res.get('cancelled') else ''}; Apply Fitted Cloth writes them",
+            f"{' (stopped: best so far)' if res.get('cancelled') else ''}; Apply Fitted Cloth writes them; "
+            f"{api.show_verdict(context.scene, res)}",
         )
 
     def execute(self, context):
@@ -230,7 +232,7 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
         except (ClothFitError, OSError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        self._report_result(res)
+        self._report_result(context, res)
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -252,7 +254,7 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
         except ClothFitError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        self._report_result(res)
+        self._report_result(context, res)
         return {"FINISHED"}
 
     def cancel(self, context):
