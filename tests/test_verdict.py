@@ -238,3 +238,15 @@ def test_the_demo_ends_by_printing_its_fits_verdicts():
     recipe = text.split("\ndemo:", 1)[1].split("\n\n", 1)[0].strip().splitlines()
     assert "clothfit verdict" in recipe[-1] and "fit_result" in recipe[-1]
     assert not any("demo done" in line for line in recipe)
+
+
+def test_a_blender_model_fit_says_on_stderr_which_frame_rate_it_took(caps, tmp_path):
+    out = tmp_path / "blender.json"
+    args = ["--cameras", "0,2", "--times", "0.1,0.2", "--resolution", "60x80", "--max-evaluations", 8, "--quiet"]
+    rc, so, err = _run("fit", caps["clean"], "--model", "blender", "--out", out, *args)
+    assert rc == 0, err
+    assert json.loads(out.read_text())["blender_scene"] == {"fps": 20.0, "fps_source": "frame times"}
+    assert "frame rate 20 fps (frame times)" in err.splitlines()
+    rc, so, err = _run("fit", caps["clean"], "--model", "blender", "--fps", 30, "--out", tmp_path / "b30.json", *args)
+    assert rc == 0, err
+    assert "frame rate 30 fps (given)" in err.splitlines()

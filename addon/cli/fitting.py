@@ -249,6 +249,8 @@ def cmd_fit(a):
             if evaluator is not None:
                 evaluator.close()
             raise
+        if getattr(job.par, "fps_source", None):  # a blender-model fit: the scene frame rate its settings are for
+            print(f"frame rate {job.par.model.fps:g} fps ({job.par.fps_source})", file=sys.stderr)
         bar = Progress(not a.quiet)
         try:
             job.run(callback=bar)
@@ -303,11 +305,8 @@ def cmd_fit(a):
 
 
 def _fit_report(r):
-    """The result's lines for people (stderr): frame rate, quality chosen, manipulation, the floor, its
-    warning and the verdict."""
-    scene = r.get("blender_scene") or {}
-    if scene.get("fps_source"):
-        print(f"frame rate {scene['fps']:g} fps ({scene['fps_source']})", file=sys.stderr)
+    """The result's lines for people (stderr): quality chosen, manipulation, the floor, its warning and
+    the verdict."""
     qc = r.get("quality_choice")
     if qc:
         tried = ", ".join(f"{t['quality']}: {t['train_E_sil_pct']:.3f} %" for t in qc["tried"])
