@@ -32,7 +32,8 @@ $(STAMP): requirements.txt requirements-dev.txt pyproject.toml
 demo: venv
 	$(PY) demo_blend/build_demo.py --out out/demo --blend out/demo/demo.blend
 	$(PY) -m clothfit paper --quick --json out/paper_quick.json --out out/paper_quick --only table1 --force >/dev/null
-	@echo "demo done: pictures in out/demo/pictures/ (first guess vs fit, error curve, parameters), figures in out/demo/summary.json, capture/fit/overlays in out/demo/capture, Table 1 in out/paper_quick.json"
+	@echo "demo: pictures in out/demo/pictures/ (first guess vs fit, error curve, parameters), figures in out/demo/summary.json, capture/fit/overlays in out/demo/capture, Table 1 in out/paper_quick.json; the fits' verdicts:"
+	@$(PY) -m clothfit verdict out/demo/capture/fit_result*.json >/dev/null
 
 test: venv
 	$(PY) -m pytest -q tests

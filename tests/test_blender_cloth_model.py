@@ -298,7 +298,8 @@ def test_synth_fit_export_evaluate_round_trip(tmp_path, capsys):
     )
     r = json.loads(open(out).read())
     bc = r["blender_cloth"]
-    assert r["model"]["name"] == "blender" and r["blender_scene"] == {"fps": 24.0}
+    # synth declares the 24 fps its cloth was simulated at: the fit takes it (its frames are 0.05 s apart)
+    assert r["model"]["name"] == "blender" and r["blender_scene"] == {"fps": 24.0, "fps_source": "capture"}
     assert bc["tension_stiffness"] == pytest.approx(40.0, rel=0.1)
     assert bc["air_damping"] == pytest.approx(2.0, rel=0.3)
     assert bc["mass"] == pytest.approx(0.3) and "capture" in r["mass_source"]

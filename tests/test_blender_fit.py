@@ -55,6 +55,8 @@ def test_modal_steps_to_completion(small_capture, threaded):
     assert sess.timer is None and sess.worker is None
     res = json.loads((small_capture / "fit_result.json").read_text())
     assert res["finished"] and not res["cancelled"]
+    # the fit section shows the result's one-line verdict
+    assert p.fit_verdict == res["verdict"] and p.fit_verdict_kind == res["verdict_kind"] != "unfinished"
 
 
 @pytest.mark.parametrize("threaded", [False, True])
@@ -103,6 +105,7 @@ def test_run_fit_callback_cancel(small_capture):
     small_settings(bpy.context.scene, small_capture).max_evaluations = 10_000
     res, level, msg = api.run_fit(bpy.context.scene, callback=lambda s: s.job.generation >= 1)
     assert res["cancelled"] and level == "WARNING"
+    assert bpy.context.scene.clothfit.fit_verdict_kind == "unfinished"
 
 
 def test_escape_while_worker_runs_waits_and_keeps_its_generation(small_capture):

@@ -382,6 +382,8 @@ def test_panel_sections_draw(state, tmp_path):
     if state == "result":
         p.fit_has_result, p.fit_best_m, p.fit_best_k, p.fit_best_l, p.fit_best_d = True, 1e-5, 9.0, 0.0066, 1e-4
         p.result_path, p.overlay_dir = "/tmp/r.json", "/tmp/o"
+        p.fit_verdict_kind = "far_above"
+        p.fit_verdict = "far above the floor (training 5.0x): likely cause: bounds (k_over_m at its upper bound 1e+05)"
     drawn = []
     for _key, _label, func in panel.SECTIONS:
         for src in ("PRESET", "RING"):
@@ -398,6 +400,8 @@ def test_panel_sections_draw(state, tmp_path):
     assert expected <= ops_drawn
     if state == "result":
         assert any("k/m" in x for k, x in drawn if k == "label")
+        # the fit section shows the verdict, wrapped over labels
+        assert p.fit_verdict in " ".join(x for k, x in drawn if k == "label")
     if state == "empties":
         assert ("list", "CLOTHFIT_UL_handles") in drawn
         assert ("label", "r0 c15 (#15)") in drawn and ("prop", "release_time") in drawn

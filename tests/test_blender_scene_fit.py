@@ -401,6 +401,7 @@ def test_fit_this_cloth_operator_fits_in_its_own_process_and_apply_writes_the_se
     res = json.load(open(obj["clothfit_scene_fit_result"]))
     assert res["evaluations"] >= 6 and not res["cancelled"] and res["workers"] == 2
     assert res["backend"] == "blender" and res["executor"] == "process" and res["scene"]["object"] == "Cloth"
+    assert sc.clothfit.fit_verdict == res["verdict"] and res["blender_scene"]["fps_source"] == "the scene's (--blend)"
     before = obj.modifiers["Cloth (Cloth Fit)"].settings.tension_stiffness
     assert bpy.ops.clothfit.apply_scene_fit() == {"FINISHED"}
     cs = obj.modifiers["Cloth (Cloth Fit)"].settings

@@ -104,6 +104,8 @@ PLAIN_TEXT = {
     "rig_cameras_json",
     "fit_best_blender",
     "fit_status",
+    "fit_verdict",
+    "fit_verdict_kind",
 }
 
 

@@ -71,6 +71,8 @@ def test_fit_many_equals_local_fits(caps, tmp_path, env):
         local = FitJob(load_capture(c), FitConfig(train_times=TIMES, max_evaluations=30, seed=4)).run()
         assert got["params"] == local["params"] and got["best_E_all"] == local["best_E_all"]
         assert got["evaluations"] == local["evaluations"]
+        # each fit's one-line verdict, in the summary and on stderr
+        assert summary["fits"][i]["verdict"] == got["verdict"] and f"  verdict: {got['verdict']}" in r.stderr
 
 
 def test_fit_many_bad_capture_is_one_line(tmp_path):

@@ -180,12 +180,28 @@ def draw_fitting(layout, scene, p):
         layout.operator("clothfit.fit", icon="PLAY")
     if p.fit_status:
         layout.label(text=p.fit_status)
+    if p.fit_verdict and not p.fit_running:
+        draw_verdict(layout, p)
     obj = getattr(bpy.context, "active_object", None)
     if obj is not None and any(m.type == "CLOTH" for m in obj.modifiers):
         # the active cloth's own settings by Blender's solver (colliders and all), workers outside the UI
         row = layout.row(align=True)
         row.operator("clothfit.fit_scene_cloth", icon="MOD_CLOTH")
         row.operator("clothfit.apply_scene_fit", text="Apply", icon="CHECKMARK")
+
+
+VERDICT_ICONS = {"at_floor": "CHECKMARK", "far_above": "ERROR", "at_bound": "ERROR", "failed": "CANCEL"}
+
+
+def draw_verdict(layout, p, width=56):
+    """The finished fit's verdict (``core.fitting.verdict``), wrapped over a few lines of a box."""
+    import textwrap
+
+    box = layout.box()
+    lines = textwrap.wrap(p.fit_verdict, width) or [""]
+    box.label(text=lines[0], icon=VERDICT_ICONS.get(p.fit_verdict_kind, "INFO"))
+    for line in lines[1:]:
+        box.label(text=line)
 
 
 def draw_results(layout, scene, p):

@@ -472,6 +472,10 @@ class ClothFitProperties(bpy.types.PropertyGroup):
         name="Fitted Blender Cloth", default="", description="ClothSettings of the best Blender-model fit (JSON)"
     )
     fit_status: StringProperty(name="Status", default="", description="What the fit is doing or how it ended")
+    fit_verdict: StringProperty(
+        name="Verdict", default="", description="The finished fit in one line: at its floor, or why not"
+    )
+    fit_verdict_kind: StringProperty(name="Verdict kind", default="", description="at_floor, far_above, ...")
     result_path: StringProperty(
         name="Result",
         subtype="FILE_PATH",

@@ -26,6 +26,7 @@ from ..core.fitting.result import FitResult
 from ..core.jsonio import read_json
 from ..core.location import IMPORT_NAME, PACKAGE_PARENT
 from ..core.physics.blender_settings import check_settings
+from . import api
 from .cloth import cloth_modifier, scene_fps
 from .cloth_script import ClothTargetError, apply_cloth_settings
 from .ops import _status, _ui_begin, _ui_end
@@ -227,11 +228,12 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
             cache_dir=cache_folder(context),
         )
 
-    def _report_result(self, res):
+    def _report_result(self, context, res):
         self.report(
             {"INFO"},
             f"Fitted {res.get('evaluations')} candidates: E_sil {res.get('best_E_sil_mean_pct') or 0:.3f} %"
-            f"{' (stopped: best so far)' if res.get('cancelled') else ''}; Apply Fitted Cloth writes them",
+            f"{' (stopped: best so far)' if res.get('cancelled') else ''}; Apply Fitted Cloth writes them; "
+            f"{api.show_verdict(context.scene, res)}",
         )
 
     def execute(self, context):
@@ -240,7 +242,7 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
         except (ClothFitError, OSError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        self._report_result(res)
+        self._report_result(context, res)
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -262,7 +264,7 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
         except ClothFitError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        self._report_result(res)
+        self._report_result(context, res)
         return {"FINISHED"}
 
     def cancel(self, context):

@@ -215,7 +215,8 @@ def _model_args(s, default_text="the capture's, else paper"):
         "--fps",
         type=float,
         default=None,
-        help=f"blender model: scene frame rate [frames/s] the settings are for (default: {D.BLENDER_FPS})",
+        help="blender model: scene frame rate [frames/s] the settings are for (default: a fit takes the rate its "
+        f"capture declares, else the one its frame times are spaced at, else {D.BLENDER_FPS}; synth {D.BLENDER_FPS})",
     )
     s.add_argument(
         "--quality",

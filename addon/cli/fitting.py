@@ -226,6 +226,8 @@ def cmd_fit(a):
             if evaluator is not None:
                 evaluator.close()
             raise
+        if getattr(job.par, "fps_source", None):  # a blender-model fit: the scene frame rate its settings are for
+            print(f"frame rate {job.par.model.fps:g} fps ({job.par.fps_source})", file=sys.stderr)
         bar = fit_progress(job, a.quiet)
         try:
             job.run(callback=bar)
@@ -260,6 +262,8 @@ def cmd_fit(a):
             "quality_choice",
             "time_offset_s",
             "floor",
+            "verdict_kind",
+            "verdict",
         )
         if k in r
     }
@@ -279,7 +283,8 @@ def cmd_fit(a):
 
 
 def _fit_report(r):
-    """The result's lines for people (stderr): quality chosen, manipulation, the floor and its warning."""
+    """The result's lines for people (stderr): quality chosen, manipulation, the floor, its warning and
+    the verdict."""
     qc = r.get("quality_choice")
     if qc:
         tried = ", ".join(f"{t['quality']}: {t['train_E_sil_pct']:.3f} %" for t in qc["tried"])
@@ -314,6 +319,8 @@ def _fit_report(r):
         print(line, file=sys.stderr)
     if fl.get("warning"):
         print(f"warning: {fl['warning']}", file=sys.stderr)
+    if r.get("verdict"):
+        print(f"verdict: {r['verdict']}", file=sys.stderr)
 
 
 def _fit_many_path(out_dir, i, capture):
@@ -355,8 +362,12 @@ def cmd_fit_many(a):
                 "best_E_sil_mean_pct": r["best_E_sil_mean_pct"],
                 "evaluations": r["evaluations"],
                 "stop_reason": r.get("stop_reason"),
+                "verdict_kind": r.get("verdict_kind"),
+                "verdict": r.get("verdict"),
             }
         )
+        if r.get("verdict"):
+            print(f"  verdict: {r['verdict']}", file=sys.stderr)
     print(f"{len(results)} fits on {workers} {kind} worker(s) in {wall:.1f} s")
     return {"fits": fits, "workers": workers, "executor": kind, "wall_s": wall}
 
@@ -375,11 +386,28 @@ def cmd_evaluate(a):
     if "shape_error_mm" in r:
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
     print(s)
+    if isinstance(params, dict) and params.get("floor"):  # a fit's result: its own verdict beside the new errors
+        from ..core.fitting.verdict import verdict
+
+        r["fit_verdict_kind"], r["fit_verdict"] = verdict(params)
+        print(f"the fit's verdict: {r['fit_verdict']}", file=sys.stderr)
     if a.json:
         from ..core.safeio import atomic_json
 
         atomic_json(a.json, r)
     return r
+
+
+def cmd_verdict(a):
+    from ..core.fitting.result import FitResult
+    from ..core.fitting.verdict import verdict
+
+    out = []
+    for path in a.results:
+        kind, line = verdict(FitResult.from_json(path, "fit result", need_parameters=False))
+        print(f"{path}: {line}", file=sys.stderr)
+        out.append({"result": path, "verdict_kind": kind, "verdict": line})
+    return {"verdicts": out}
 
 
 def _capture_floor(cap, cams, times, resolution):
@@ -590,6 +618,15 @@ def _add_fit_many(sub):
 def _add_scoring(sub):
     """``export-blender-cloth``, ``evaluate``, ``overlay``, ``floor``: reading a fit back."""
     add_export(sub)
+
+    s = _command(
+        sub,
+        "verdict",
+        cmd_verdict,
+        "the one-line verdict of fit results: at the floor, settings undetermined or at their bounds, far above it",
+        "one verdict per result (verdict_kind, verdict) as JSON",
+    )
+    s.add_argument("results", nargs="+", help="result JSON files of fits")
 
     s = _command(
         sub,

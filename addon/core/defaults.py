@@ -112,6 +112,14 @@ PROGRESS_BAR_REFRESH_S = 0.2  # on a terminal the progress bar is redrawn at mos
 FLOOR_FAR_ABOVE = 3.0  # issue 20: a fit error more than 3x its images' noise floor (observation/floor.py) is
 # "far above" it; the estimate's calibration spread is +-25 % (docs/noise_floor.md),
 # so 3x is well clear of it
+FLOOR_ZERO_OF_RIM = 0.005  # a floor below 0.5 % of a one-pixel shift of the whole outline (the floor's rim) reads
+# as 0: noise-free or synthetic silhouettes at the fit's own resolution, where a ratio to it means nothing (`clothfit
+# floor` on the paper scenario, lab18 at 240 x 320, 4 cameras: 0.12 % noise-free, 5.0 % with 5 % boundary noise)
+SETTING_AT_BOUND_UNIT = 0.01  # a free setting within 1 % of its search range (log scale) of a bound ends at it,
+SETTING_AT_BOUND_RELATIVE = 0.02  # and so does one within 2 % of the bound's value (a narrow range)
+FPS_MIN_FRAMES = 3  # the frame rate read from a capture's frame times needs at least this many frames
+FPS_MAX_GAP_FRAMES = 10  # ... and every gap between frames a whole number of frame periods up to this many
+FPS_TOLERANCE = 0.02  # ... within this share of a period (float noise, a camera clock's jitter)
 MAX_FIT_PIXELS = 16_000_000  # largest fit resolution H x W (also at most MAX_IMAGE_SIDE per side)
 MAX_IMAGE_SIDE = 16384
 

@@ -42,6 +42,7 @@ from .fitting import (  # noqa: F401
     fit_tick,
     load_result,
     run_fit,
+    show_verdict,
     start_fit,
 )
 from .footage import (  # noqa: F401

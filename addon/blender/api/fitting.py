@@ -125,6 +125,7 @@ def start_fit(scene, capture=None):
     name = RESULT_JSON if job.par.model.name == "paper" else RESULT_JSON_BLENDER
     sess = FitSession(scene, job, os.path.join(cap.root, name))
     p.fit_running = True
+    p.fit_verdict = p.fit_verdict_kind = ""
     p.fit_progress = 0.0
     p.fit_generation = p.fit_evaluations = 0
     p.fit_status = f"fitting {len(job.train_cameras)} cameras x {len(job.train_times)} times"
@@ -201,6 +202,7 @@ def finish_fit(session, cancelled=False):
     _publish(scene, job)
     job.save_result(session.result_path)
     p.result_path = session.result_path
+    show_verdict(scene, job.result())
     bp = job.best_params
     if job.error:
         p.fit_status = f"failed: {job.error}"
@@ -214,6 +216,15 @@ def finish_fit(session, cancelled=False):
         return "WARNING", f"Fit cancelled at generation {job.generation}: {kept} kept ({session.result_path})"
     p.fit_status = f"finished: {kept}"
     return "INFO", f"Fit finished: {kept}; {_params_text(bp)} ({session.result_path})"
+
+
+def show_verdict(scene, result: dict) -> str:
+    """Put a fit result's one-line verdict (``core.fitting.verdict``) in the Fitting section; returns it."""
+    from ...core.fitting.verdict import verdict
+
+    p = props(scene)
+    p.fit_verdict_kind, p.fit_verdict = verdict(result)
+    return p.fit_verdict
 
 
 def run_fit(scene, callback=None):

@@ -64,7 +64,7 @@ class FitConfig:
     population: int | None = None
     children: int | None = None
     model: object = None  # "paper", "blender" or a model dict; None = the capture's, else paper
-    fps: float | None = None  # blender: the scene frame rate the settings are for (24)
+    fps: float | None = None  # blender: the scene frame rate the settings are for (None: parameters.scene_frame_rate)
     quality: int | None = None  # blender: solver steps per frame (5, or the warm start's)
     bending_model: str | None = None  # blender: ANGULAR (default) or LINEAR
     free: list | None = None  # blender: settings to search (default parameters.BLENDER_FREE)

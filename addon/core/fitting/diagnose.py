@@ -14,10 +14,15 @@ so, with the likely cause among those it can test by a few evaluations of the be
   clearly better than the physical one;
 * **manipulation**: reading the capture half a frame earlier or later fits clearly better (the
   release or the clock is off: declare ``uncertain``);
+* **bounds** (said before the probes): a free setting ended at its search bound (``verdict.settings_at_bound``),
+  so the bounds may exclude the cloth's values;
 * **search**: it stopped on its budget with its error still falling over its last fifth;
 * none of these: the search stopped in a local minimum, the cloth does not move like this
   simulator, or the observation has an error the floor estimate cannot see (a segmenter's bias):
   the result says which were tested and that it cannot tell these apart.
+
+A floor of (nearly) 0 (``FLOOR_ZERO_OF_RIM``: noise-free or synthetic silhouettes at the fit's resolution) gets no
+ratio: the warning says so and gives a one-pixel shift of the outline (``train_rim_pct``) to compare with instead.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from ..errors import ClothFitError
 from ..observation.floor import capture_floor
 from ..physics import blender as B
 from .objective import SilhouetteObjective
+from .verdict import settings_at_bound
 
 if TYPE_CHECKING:
     from .job import FitJob
@@ -145,6 +151,16 @@ def _still_improving(job):
     return None
 
 
+def _rim(cf) -> float:
+    """The ``E_sil`` of a one-pixel shift of the whole outline, averaged over a capture floor's images."""
+    return float(np.mean([[e.rim for e in row] for row in cf.images]))
+
+
+def _is_zero(cf) -> bool:
+    """A capture floor of (nearly) 0: below ``FLOOR_ZERO_OF_RIM`` of a one-pixel shift of the outline."""
+    return cf.floor <= D.FLOOR_ZERO_OF_RIM * _rim(cf)
+
+
 def report(job: FitJob) -> dict:
     """The result's ``floor`` block (see the module's text)."""
     x = job.best_x
@@ -157,11 +173,14 @@ def report(job: FitJob) -> dict:
     d = {
         "train_E_sil_pct": 100.0 * f0 / n,
         "train_floor_pct": 100.0 * tf.floor,
+        "train_rim_pct": 100.0 * _rim(tf),
         "threshold": D.FLOOR_FAR_ABOVE,
         "floor_basis": tf.basis,
         "floor_limits": tf.limits,
     }
-    d["train_ratio"] = d["train_E_sil_pct"] / d["train_floor_pct"] if tf.floor > 0 else None
+    # a floor of (nearly) 0: noise-free silhouettes at the fit's resolution, where a ratio to it means nothing
+    d["floor_zero"] = _is_zero(tf)
+    d["train_ratio"] = d["train_E_sil_pct"] / d["train_floor_pct"] if not d["floor_zero"] else None
     ho = _heldout(job)
     if ho is not None:
         cams, fidx = ho
@@ -174,10 +193,11 @@ def report(job: FitJob) -> dict:
                 heldout_n_frames=len(fidx),
                 heldout_E_sil_pct=100.0 * e if np.isfinite(e) else None,
                 heldout_floor_pct=100.0 * hf.floor,
+                heldout_rim_pct=100.0 * _rim(hf),
             )
             d["heldout_ratio"] = (
                 d["heldout_E_sil_pct"] / d["heldout_floor_pct"]
-                if hf.floor > 0 and d["heldout_E_sil_pct"] is not None
+                if not _is_zero(hf) and d["heldout_E_sil_pct"] is not None
                 else None
             )
         except ClothFitError as err:
@@ -186,6 +206,13 @@ def report(job: FitJob) -> dict:
     d["far_above"] = bool(ratios) and max(ratios) > D.FLOOR_FAR_ABOVE
     d["likely_cause"] = None
     d["warning"] = None
+    d["settings_at_bound"] = bound = settings_at_bound(job.par, x)
+    if d["floor_zero"]:
+        d["warning"] = (
+            f"the floor is 0 (noise-free or synthetic silhouettes): the ratio is not meaningful; compare training "
+            f"{d['train_E_sil_pct']:.2f} % with a one-pixel shift of the whole outline ({d['train_rim_pct']:.2f} %) "
+            f"or with the true settings' error (evaluate --params)"
+        )
     if d["far_above"]:
         probes = _probes(job, x, f0) if np.isfinite(f0) and f0 > 0 else []
         d["probes"] = [{"cause": c, "tried": w, "error_ratio": r} for c, w, r in probes]
@@ -193,7 +220,13 @@ def report(job: FitJob) -> dict:
         still = _still_improving(job)
         if not hits and still:
             hits = [(0.0, "search", still)]
-        if hits:
+        if bound:  # the search ended against its bounds: they may exclude the cloth, whatever the probes say
+            d["likely_cause"] = (
+                "bounds ("
+                + ", ".join(f"{k} at its {v['side']} bound {v['bound']:.4g}" for k, v in bound.items())
+                + ": the cloth's values may lie outside the search range: widen --bounds)"
+            )
+        elif hits:
             d["likely_cause"] = (
                 f"{hits[0][1]} ({hits[0][2]}: error x{hits[0][0]:.2f})"
                 if hits[0][0] > 0

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import ClothFitError
+from ..observation.coverage import refuse_full_silhouettes
 from ..observation.floor import resample_ignore, resample_silhouette
 from ..observation.raster import rasterize_window
 from ..physics import jit, paper_kernels
@@ -270,6 +271,7 @@ def load_observed(
     """Cameras, observed silhouettes and ignore masks ``[cam][frame]`` of a capture, at ``resolution``."""
     cameras = [capture.cameras[c] for c in cams]
     observed, ignore = capture.load_observations(cams, fidx)
+    refuse_full_silhouettes(capture, cams, fidx, observed, ignore)
     if resolution is not None:
         h, w = check_resolution(resolution, "fit resolution")
         cameras = [c.resized(h, w) for c in cameras]

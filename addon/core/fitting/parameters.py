@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
+from ..observation.frame_rate import frame_rate_from_times
 from ..physics import blender as B
 from ..physics.models import BlenderModel, PaperModel, get_model
 from ..physics.paper import identifiable
@@ -155,11 +156,9 @@ class BlenderParameters:
         spec = get_model(spec or "blender")  # the asked-for model (frame rate, quality, bending)
         init = load_init(cfg.init) if cfg.init else None
         base = dict(B.DEFAULTS, quality=spec.quality, bending_model=spec.bending_model)
-        fps = spec.fps
         if init is not None and init.get("blender_cloth"):
             base.update({k: v for k, v in init["blender_cloth"].items() if k in ("quality", "bending_model")})
-            fps = float((init.get("blender_scene") or {}).get("fps", fps))
-        fps = fps if cfg.fps is None else cfg.fps
+        fps, self.fps_source = scene_frame_rate(capture, cfg, init)
         quality = cfg.quality if cfg.quality not in (None, "auto") else base["quality"]
         bending = cfg.bending_model if cfg.bending_model is not None else base["bending_model"]
         self.model = BlenderModel(fps, quality, bending)
@@ -243,7 +242,7 @@ class BlenderParameters:
         return {
             "model": self.model.to_dict(),
             "blender_cloth": s,
-            "blender_scene": {"fps": self.model.fps},
+            "blender_scene": {"fps": self.model.fps, "fps_source": self.fps_source},
             "free": list(self.free),
             "per_unit_mass": per_mass,
         }
@@ -262,6 +261,7 @@ class SceneParameters(BlenderParameters):
 
     def __init__(self, capture, cfg, evaluator):
         self.model = evaluator
+        self.fps_source = "the scene's (--blend)"
         scene = B.check_settings(dict(evaluator.initial), f"Cloth settings of '{getattr(evaluator, 'object', '?')}'")
         bending = scene["bending_model"]
         m, src = point_mass(capture, cfg.cloth_mass, scene["mass"], evaluator.mesh.n_vertices)
@@ -324,6 +324,30 @@ class SceneParameters(BlenderParameters):
         )
         if self.init_note:
             self.note += "; " + self.init_note
+
+
+def scene_frame_rate(capture: Capture, cfg: FitConfig, init: dict | None = None) -> tuple[float, str]:
+    """(fps, where it came from) of the scene a Blender-cloth fit's settings are for: ``"given"`` (``cfg.fps``,
+    or a frame rate in ``cfg.model``: ``--fps``, the add-on's scene), ``"warm start"`` (the ``init`` result's
+    ``blender_scene``), ``"capture"`` (the capture's own ``model``: a synthetic capture declares the rate its
+    cloth was simulated at), ``"frame times"`` (the rate whose period divides every gap between the capture's
+    frame times: ``observation.frame_rate``), else ``"default (why the frame times could not tell)"``."""
+    if cfg.fps is not None:
+        return float(cfg.fps), "given"
+    m = cfg.model
+    given = m.get("fps") if isinstance(m, dict) else None if isinstance(m, str) else getattr(m, "fps", None)
+    if given is not None:
+        return float(given), "given"
+    warm = ((init or {}).get("blender_scene") or {}).get("fps") if (init or {}).get("blender_cloth") else None
+    if warm is not None:
+        return float(warm), "warm start"
+    cap = getattr(capture, "model", None)
+    if isinstance(cap, dict) and cap.get("fps") is not None:
+        return float(cap["fps"]), "capture"
+    fps, why = frame_rate_from_times(capture.frame_times)
+    if fps is None:
+        return float(D.BLENDER_FPS), f"default ({why})"
+    return fps, "frame times"
 
 
 def declared_model(capture: Capture, cfg: FitConfig) -> dict:

@@ -12,7 +12,9 @@ Keys (the reference: docs/api.md, "A fit: configuration and result"): ``format``
 ``capture_hash``, ``silhouettes_hash``, ``train_cameras``, ``train_times``, ``resolution``,
 ``model``); the search (``optimizer``, ``seed``, ``evaluations``, ``generations``, ``stop_reason``,
 ``stages``, ``history``...); the answer (paper: ``params``, ``identifiable``; Blender:
-``blender_cloth``, ``blender_scene``); the errors (``best_E_sil_mean_pct``, ``floor``...); the
+``blender_cloth``, ``blender_scene``: ``fps`` and ``fps_source``); ``settings_at_bound`` and ``at_bound``
+(the free settings, then the offsets, that ended at their bounds); the errors (``best_E_sil_mean_pct``,
+``floor``...) and the one-line ``verdict`` with its ``verdict_kind`` (``verdict.verdict``); the
 fitted manipulation (``time_offset_s``, ``handles``, ``release_instants``: each released handle's
 release on the capture's clock, ``manipulation_profile``, ``manipulation_note``, ``uncertainty_caveat``).
 """
@@ -26,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import ClothFitError
 from ..jsonio import read_json, write_json
 from ..physics.paper import Params, identifiable
+from .verdict import settings_at_bound, verdict
 
 if TYPE_CHECKING:
     import numpy as np
@@ -292,6 +295,9 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
         res["intervals"] = None
         res["undetermined"] = None
         res["intervals_note"] = job.intervals_note or "intervals not estimated: the fit stopped before them"
+    if bp:  # the free settings at their search bounds, then the offsets at theirs (manipulation's at_bound)
+        res["settings_at_bound"] = settings_at_bound(job.par, job.best_x)
+        res["at_bound"] = list(res["settings_at_bound"]) + list(res.get("at_bound") or [])
     if job.final is not None:
         res["floor"] = job.final
         caveat = uncertainty_caveat(res)
@@ -316,4 +322,5 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
             res["identifiable_error_pct"] = {
                 k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None) for k in est
             }
+    res["verdict_kind"], res["verdict"] = verdict(res)
     return FitResult(res)

@@ -305,6 +305,14 @@ class SearchSpace:
         X = np.where(self.log, np.exp(T), T)
         return np.clip(X, self.lo, self.hi)
 
+    def at_bound(self, x: ArrayLike, margin: float, relative: float = 0.0) -> dict[str, str]:
+        """{name: "lower" or "upper"} of the parameters of one real vector ``x`` that lie within ``margin``
+        (a share of the range, in the unit cube: log scale where log-scaled) of a bound, or, log-scaled ones,
+        within a factor ``1 + relative`` of it (a narrow range)."""
+        u = self.encode(self._rows(x, "at_bound").reshape(self.n))
+        m = np.maximum(margin, np.where(self.log, np.log1p(relative) / (self._thi - self._tlo), 0.0))
+        return {n: ("lower" if v <= 0.5 else "upper") for n, v, mk in zip(self.names, u, m) if v <= mk or v >= 1.0 - mk}
+
     def clip(self, X: ArrayLike) -> np.ndarray:
         """Real values clipped to the bounds."""
         return np.clip(self._rows(X, "clip"), self.lo, self.hi)
