@@ -6,6 +6,7 @@ import time
 import pytest
 from blender_support import bpy, factory, small_capture, small_settings  # noqa: F401
 from clothfit.blender import api, ops  # noqa: E402
+from clothfit.core.fitting.result import interval_lines
 
 pytestmark = pytest.mark.usefixtures("factory")
 
@@ -57,6 +58,7 @@ def test_modal_steps_to_completion(small_capture, threaded):
     assert res["finished"] and not res["cancelled"]
     # the fit section shows the result's one-line verdict
     assert p.fit_verdict == res["verdict"] and p.fit_verdict_kind == res["verdict_kind"] != "unfinished"
+    assert p.fit_intervals.split("\n") == interval_lines(res)  # and how sure each setting is (or why not)
 
 
 @pytest.mark.parametrize("threaded", [False, True])

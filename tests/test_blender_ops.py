@@ -384,6 +384,9 @@ def test_panel_sections_draw(state, tmp_path):
         p.result_path, p.overlay_dir = "/tmp/r.json", "/tmp/o"
         p.fit_verdict_kind = "far_above"
         p.fit_verdict = "far above the floor (training 5.0x): likely cause: bounds (k_over_m at its upper bound 1e+05)"
+        p.fit_intervals = (
+            "90 % intervals (from the error's own noise)\nk 9 [8.5, 9.6]\nd 0.0001 [1e-05, 0.001]  UNDETERMINED"
+        )
     drawn = []
     for _key, _label, func in panel.SECTIONS:
         for src in ("PRESET", "RING"):
@@ -402,6 +405,8 @@ def test_panel_sections_draw(state, tmp_path):
         assert any("k/m" in x for k, x in drawn if k == "label")
         # the fit section shows the verdict, wrapped over labels
         assert p.fit_verdict in " ".join(x for k, x in drawn if k == "label")
+        # and each setting's interval, one label each, the undetermined one flagged
+        assert {"k 9 [8.5, 9.6]", "d 0.0001 [1e-05, 0.001]  UNDETERMINED"} <= {x for k, x in drawn if k == "label"}
     if state == "empties":
         assert ("list", "CLOTHFIT_UL_handles") in drawn
         assert ("label", "r0 c15 (#15)") in drawn and ("prop", "release_time") in drawn

@@ -106,6 +106,8 @@ PLAIN_TEXT = {
     "fit_status",
     "fit_verdict",
     "fit_verdict_kind",
+    "fit_intervals",
+    "capture_releases",
 }
 
 

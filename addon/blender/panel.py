@@ -202,6 +202,10 @@ def draw_verdict(layout, p, width=56):
     box.label(text=lines[0], icon=VERDICT_ICONS.get(p.fit_verdict_kind, "INFO"))
     for line in lines[1:]:
         box.label(text=line)
+    if p.fit_intervals:  # how sure each setting is; the undetermined ones flagged
+        col = box.column(align=True)
+        for line in p.fit_intervals.split("\n"):
+            col.label(text=line, icon="ERROR" if line.endswith("UNDETERMINED") else "NONE")
 
 
 def draw_results(layout, scene, p):

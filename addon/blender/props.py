@@ -476,6 +476,11 @@ class ClothFitProperties(bpy.types.PropertyGroup):
         name="Verdict", default="", description="The finished fit in one line: at its floor, or why not"
     )
     fit_verdict_kind: StringProperty(name="Verdict kind", default="", description="at_floor, far_above, ...")
+    fit_intervals: StringProperty(
+        name="Intervals",
+        default="",
+        description="How sure each fitted setting is: value, 90 % interval, UNDETERMINED where the capture cannot tell it",
+    )
     result_path: StringProperty(
         name="Result",
         subtype="FILE_PATH",

@@ -219,11 +219,14 @@ def finish_fit(session, cancelled=False):
 
 
 def show_verdict(scene, result: dict) -> str:
-    """Put a fit result's one-line verdict (``core.fitting.verdict``) in the Fitting section; returns it."""
+    """Put a fit result's one-line verdict (``core.fitting.verdict``) and its settings' intervals
+    (``core.fitting.result.interval_lines``) in the Fitting section; returns the verdict."""
+    from ...core.fitting.result import interval_lines
     from ...core.fitting.verdict import verdict
 
     p = props(scene)
     p.fit_verdict_kind, p.fit_verdict = verdict(result)
+    p.fit_intervals = "\n".join(interval_lines(result))
     return p.fit_verdict
 
 
