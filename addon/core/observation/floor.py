@@ -361,17 +361,19 @@ def _model_counts(r, gl, m, rng):
     if big.size:
         valid &= ~(cv2.dilate(np.isin(lab, big).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
 
-    def votes(x):
-        return int(np.count_nonzero((x ^ majority3(x)) & valid))
+    base = (m ^ majority3(m)) & valid
 
-    vm = votes(m)
+    def new_votes(x):  # votes where the clean model casts none: a model's own features (folds the image lacks)
+        # do not subtract, so a wrong model can raise the floor but not lower it
+        return int(np.count_nonzero((x ^ majority3(x)) & valid & ~base))
+
     gain = flips = 0
     for _ in range(MODEL_DRAWS):
         mn = add_boundary_noise(m, MODEL_FLIP_RATE, rng)
-        gain += votes(mn) - vm
+        gain += new_votes(mn)
         flips += int(np.count_nonzero((mn ^ m) & valid))
     inner = inner_boundary(majority3(r))
-    return votes(r) - vm, gain, flips, int(np.count_nonzero(inner & valid)), int(np.count_nonzero(inner & known))
+    return new_votes(r), gain, flips, int(np.count_nonzero(inner & valid)), int(np.count_nonzero(inner & known))
 
 
 def _model_pooled(prepared, model, fs, names, seed):
