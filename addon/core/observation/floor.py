@@ -527,7 +527,9 @@ def pooled_floors(
     casts on this shape are measured on noisy copies of it (``seed``): the noise part no longer counts a
     curved outline's staircase as noise. Votes near a large model-image disagreement are left out, so a
     wrong model's shape does not lower the floor; when less than ``MODEL_AGREEMENT`` of the outline is
-    left, the image-only estimate is used and ``basis`` says why. For a fit at a lower resolution than
+    left, the image-only estimate is used and ``basis`` says why. A model that lacks folds the images
+    have raises its estimate: the image-only estimate (an upper bound on curved outlines) is used when
+    it is the lower one, and ``basis`` says so. For a fit at a lower resolution than
     the images, the resampling part stays that of the smooth proxy of the observed shape (the model's own
     resampling disagreement depends on its sub-pixel position: a wrong model lowered it by a third at
     60 x 80)."""
@@ -552,11 +554,22 @@ def pooled_floors(
             )
         out, share = _model_pooled(prepared, model, fs or prepared[0][0][0].shape, names, seed)
         if out is not None:
-            return out
+            alone = _image_only(prepared, fs, names, f" (below the model baseline's {100 * _mean(out[0]):.3f} %)")
+            return alone if _mean(alone[0]) < _mean(out[0]) else out
         note = (
             f" (the model's silhouettes agree with {100 * share:.0f} % of the outline, too little to serve as "
             "the baseline)"
         )
+    return _image_only(prepared, fs, names, note)
+
+
+def _mean(images):
+    return float(np.mean([[e.floor for e in row] for row in images]))
+
+
+def _image_only(prepared, fs, names, note):
+    """``pooled_floors`` from the images alone (``note`` appended to the basis)."""
+    C = len(prepared)
     counts = [[_counts(o, g) for o, g in row] for row in prepared]
     V = sum(k[0] for row in counts for k in row)
     S = sum(k[1] for row in counts for k in row)
