@@ -154,6 +154,8 @@ def test_the_time_offset_is_estimated_with_the_cloth(caps):
     assert p["uncertainty"] == pytest.approx(math.sqrt(p["rise"] / a))
     fl = r["floor"]
     assert fl["heldout_cameras"] == [cap.cameras[c].name for c in (1, 3, 5, 7)]
+    # the floors take the best candidate's silhouettes (its fitted offsets too) as their baseline
+    assert fl["floor_basis"].startswith("model baseline") and fl["heldout_floor_basis"].startswith("model baseline")
     # evaluate replays the fitted manipulation: the same training error as the fit found
     ev = evaluate(cap, r, cameras=[0, 2, 4, 6])
     assert ev["silhouette_error_pct"] == pytest.approx(r["best_E_sil_mean_pct"], rel=1e-6)

@@ -917,8 +917,9 @@ SOURCES = {
         ],
         "outputs": {"calibration": "out/floor_cal/calibration.json"},
         "cost": "expensive",
-        "what": "the noise-floor estimate against true floors on synthetic captures (both models, 4 resolutions, "
-        "5 noise levels, resampled fits); the photoreal part (--footage, --capture) is not recorded yet",
+        "what": "the noise-floor estimate (with the true and a wrong model as baseline, and from the images alone) "
+        "against the true settings' error as the fit sees it on synthetic captures (both models, 2 rigs, "
+        "4 resolutions, 5 noise levels, resampled fits); the photoreal part (--footage, --capture) is not recorded yet",
     },
     "blender_cloth": {
         "steps": [

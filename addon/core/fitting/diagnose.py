@@ -66,6 +66,16 @@ def _objective(job, cams, fidx):
     )
 
 
+def _model_silhouettes(job, x, obj):
+    """The best candidate's clean silhouettes as ``obj`` rasterises them (the floor's baseline:
+    ``capture_floor``'s ``model``), or None for a scene evaluator's fit or a candidate that explodes there."""
+    if job.evaluator is not None:
+        return None
+    X = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    off = None if job.manip is None else job.manip.offsets(X[:, job.npar :])
+    return obj.silhouettes(job.par.rows(X[:, : job.npar])[0], offsets=off)
+
+
 def _probes(job, x, f0):
     """[(cause, what, error ratio to the best)] of the tests that apply to this fit."""
     out = []
@@ -169,7 +179,7 @@ def report(job: FitJob) -> dict:
     cap, res = job.capture, job.config.resolution
     n = job.objective.n_images
     f0 = float(job.best_error)
-    tf = capture_floor(cap, job.train_cameras, job.train_frames, res)
+    tf = capture_floor(cap, job.train_cameras, job.train_frames, res, model=_model_silhouettes(job, x, job.objective))
     d = {
         "train_E_sil_pct": 100.0 * f0 / n,
         "train_floor_pct": 100.0 * tf.floor,
@@ -187,13 +197,14 @@ def report(job: FitJob) -> dict:
         try:
             obj = _objective(job, cams, fidx)
             e = float(job.evaluate(x[None], objective=obj)[0]) / obj.n_images
-            hf = capture_floor(cap, cams, fidx, res)
+            hf = capture_floor(cap, cams, fidx, res, model=_model_silhouettes(job, x, obj))
             d.update(
                 heldout_cameras=[cap.cameras[c].name for c in cams],
                 heldout_n_frames=len(fidx),
                 heldout_E_sil_pct=100.0 * e if np.isfinite(e) else None,
                 heldout_floor_pct=100.0 * hf.floor,
                 heldout_rim_pct=100.0 * _rim(hf),
+                heldout_floor_basis=hf.basis,
             )
             d["heldout_ratio"] = (
                 d["heldout_E_sil_pct"] / d["heldout_floor_pct"]

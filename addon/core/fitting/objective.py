@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 from ..errors import ClothFitError
 from ..observation.coverage import refuse_full_silhouettes
 from ..observation.floor import resample_ignore, resample_silhouette
-from ..observation.raster import rasterize_window
+from ..observation.raster import rasterize, rasterize_window
 from ..physics import jit, paper_kernels
 from ..physics.models import PaperModel, get_model
 from ..physics.paper import simulate_numpy
@@ -222,6 +222,22 @@ class SilhouetteObjective:
                         )
         esil[sim.exploded] = np.inf
         return esil, sim.exploded
+
+    def silhouettes(self, row: ArrayLike, offsets: Offsets | None = None) -> list[list[np.ndarray]] | None:
+        """The clean silhouettes ``[c][f]`` of one candidate (a parameter row of the model; ``offsets``
+        of one candidate) rasterised as this objective scores them, or None when it explodes."""
+        rows = np.asarray(row, dtype=np.float64).reshape(1, -1)
+        if offsets is None:
+            sim = self.model.simulate(self.scenario, rows, backend=self.backend)
+        else:
+            sim = self.model.simulate(self.scenario, rows, backend=self.backend, offsets=offsets)
+        if sim.exploded[0] or not np.all(np.isfinite(sim.positions[0])):
+            return None
+        X, tris = sim.positions[0], self.scenario.grid.triangles
+        return [
+            [rasterize(cam.project(X[f]), tris, cam.height, cam.width) for f in range(X.shape[0])]
+            for cam in self.cameras
+        ]
 
     @staticmethod
     def _esil_numpy(uv, tris, cam, obs, area, ignore=None):
