@@ -104,6 +104,7 @@ PLAIN_TEXT = {
     "rig_cameras_json",
     "fit_best_blender",
     "fit_status",
+    "capture_releases",
 }
 
 

@@ -169,9 +169,6 @@ class FitJob:
             k = self.manip.n
             self.profile_reserve = 2 * k + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * k + 1)
             reserved += self.profile_reserve
-        if cfg.max_evaluations <= reserved:
-            msg = f"this fit keeps {reserved} evaluations after its search (quality rungs, manipulation profile)"
-            raise ClothFitError(f"--max-evaluations {cfg.max_evaluations} is too few: {msg}: give more")
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
@@ -194,7 +191,7 @@ class FitJob:
         self.cancelled = False
         self.error = None
         self.stop_reason = None
-        self.exploded = 0
+        self.exploded = self.cut_batches = 0  # cut_batches: last batches cut to the budget (generations too)
 
     # ------------------------------------------------------------- set-up
     def _manipulation(self, capture, cfg, evaluator):
@@ -476,6 +473,7 @@ class FitJob:
     def generation(self) -> int:
         return int(
             sum(r["generations"] for r in self.records)
+            + self.cut_batches
             + (self.opt.generation if self.stage in ("search", "rung") else 0)
         )
 
@@ -619,8 +617,9 @@ class FitJob:
             self._profile_step()
         elif self.stage == "search" and self.start_x is not None and self.start_f is None:
             self.start_f = self._score_aside(self.start_x[None])
-        elif self.stage in ("search", "rung"):  # never past the stage's budget: a hard cap
-            self.opt, X, whole = ask_within(self.opt, self.stage_end - self.evaluations)
+        elif self.stage in ("search", "rung"):  # never past the stage's budget, once there is a best at all
+            left = self.stage_end - self.evaluations if self.best_x is not None else math.inf
+            self.opt, X, whole = ask_within(self.opt, left)
             if whole:
                 f = self.evaluate(X)
                 self.exploded += int(np.sum(~np.isfinite(f)))
@@ -628,7 +627,7 @@ class FitJob:
                 self._track()
             else:  # the budget's last batch, cut to what is left: scored aside, and the stage ends
                 self._score_aside(X)
-                self.stage_end = self.evaluations
+                self.stage_end, self.cut_batches = self.evaluations, self.cut_batches + 1
         self.elapsed += time.time() - t0
         self._update_stop()
         if self.finished:
