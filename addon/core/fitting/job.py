@@ -617,8 +617,9 @@ class FitJob:
             self._profile_step()
         elif self.stage == "search" and self.start_x is not None and self.start_f is None:
             self.start_f = self._score_aside(self.start_x[None])
-        elif self.stage in ("search", "rung"):  # never past the stage's budget, once there is a best at all
-            left = self.stage_end - self.evaluations if self.best_x is not None else math.inf
+        elif self.stage in ("search", "rung"):  # never past the stage's budget (unless it left none for a first best)
+            left = self.stage_end - self.evaluations
+            left = math.inf if left <= 0 and self.best_x is None else left
             self.opt, X, whole = ask_within(self.opt, left)
             if whole:
                 f = self.evaluate(X)
