@@ -538,6 +538,13 @@ SOURCES = {
         "what": "issue 20's offsets fits (the recordings issue20_offsets_seeds and issue20_offsets_hold, no fit run): each "
         "stated offset's error over the uncertainty the fit states, and the share within 1x and 2x",
     },
+    "interval_coverage": {
+        "argv": ["{py}", "tools/interval_coverage.py", "--captures", "6", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "how often a fit's 90 % intervals hold the truth: six synthetic captures of Blender's cloth (11 x 11, "
+        "lab18 at 120 x 160, 5 % noise, settings drawn within a factor 3 of Blender's defaults), each fitted with the "
+        "default options and 4 training cameras; the truth's own error tells the fits in its basin apart (about 8 min)",
+    },
     "issue20_offsets_seeds": {
         "argv": ["{py}", "tools/issue20_goals.py", "offsets", "--seeds", "0-2", "--json", "{out}"],
         "cost": "expensive",

@@ -285,6 +285,12 @@ def _search_args(s):
         "(default: the capture's 'uncertain' block)",
     )
     s.add_argument(
+        "--no-intervals",
+        dest="intervals",
+        action="store_false",
+        help="skip the last stage, each setting's 90 %% interval (a few hundred evaluations: docs/intervals.md)",
+    )
+    s.add_argument(
         "--resolution", help="fit at HxW [px], e.g. 120x160; silhouettes area-resampled (default: the capture's)"
     )
     s.add_argument(

@@ -8,6 +8,7 @@ import time
 
 from ..core import defaults as D
 from ..core.errors import ClothFitError
+from ..core.fitting.result import interval_lines
 from .common import (
     Interrupted,
     Text,
@@ -144,6 +145,7 @@ def fit_config(a, cap):
             restarts=a.restarts,
         )
     kw.update(quality="auto" if a.quality == "auto" else None, uncertain=a.uncertain)
+    kw.update(intervals=getattr(a, "intervals", True))
     kw.update(search_options(getattr(a, "search", None) or []))
     return FitConfig(**kw)
 
@@ -296,6 +298,8 @@ def _fit_report(r):
                 )
         if r.get("manipulation_note"):
             print(f"note: {r['manipulation_note']}", file=sys.stderr)
+    for k, line in enumerate(interval_lines(r)):
+        print(line if k == 0 else f"  {line}", file=sys.stderr)
     fl = r.get("floor") or {}
     if fl.get("train_floor_pct") is not None:
         line = f"training E_sil {fl['train_E_sil_pct']:.3f} % (floor {fl['train_floor_pct']:.3f} %)"
@@ -435,8 +439,9 @@ def cmd_overlay(a):
     floors = None
     if a.floor:
         floors = _capture_floor(cap, cams, times, None).per_image()
+    params = _params(a, _capture_truth(cap))
     paths = capture_overlays(
-        cap, _params(a, _capture_truth(cap)), a.out, cameras=cams, times=times, images=images, floors=floors
+        cap, params, a.out, cameras=cams, times=times, images=images, floors=floors, legend=interval_lines(params)
     )
     print(f"wrote {len(paths)} images under {a.out} (contact sheet: {paths[-1]})")
     out = {"out": a.out, "images": paths[:-1], "contact_sheet": paths[-1]}

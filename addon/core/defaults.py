@@ -250,3 +250,26 @@ PROFILE_JITTER_SEED = 20  # the signs' generator (the profile is part of a seede
 PROFILE_JITTER_SIGMAS = 2.0  # a rise smaller than this many standard deviations of the jitter tells nothing
 MIN_FRAMES_FOR_TIME_OFFSET = 2  # a time offset needs >= 2 training frames after the release: one frame's shape is
 # matched as well by a stiffer cloth read earlier as by a softer one read later
+
+# How sure each setting is (fitting/intervals.py, docs/intervals.md): a quadratic over every setting and offset
+# around the fit, its marginal extents checked on the error itself
+INTERVAL_LEVEL = 0.90  # two-sided: each end excludes 5 %
+INTERVAL_Z = 1.645  # the one-sided 95 % normal quantile: a rise of more than z sqrt(2) sigma is not jitter
+INTERVAL_JITTER = 16  # evaluations at the best point moved by a part in 10^7 (PROFILE_JITTER_RELATIVE): sigma
+INTERVAL_SEED = 38  # the stage's random signs and cloud (part of a seeded, resumable fit)
+INTERVAL_AXIS_STEP = 0.03  # the first step along each coordinate (unit cube), grown or shrunk by 3 until the
+INTERVAL_AXIS_ROUNDS = 4  # error rises by about the threshold, over at most this many rounds
+INTERVAL_AXIS_MAX = 0.5  # the largest step (unit cube)
+INTERVAL_AXIS_MIN = 1e-5  # the smallest step (unit cube)
+INTERVAL_ROUNDS = 6  # sampling rounds (each a Gaussian fitted to the weighted points so far)
+INTERVAL_ANNEAL = 3.0  # the first rounds' points are weighted at a temperature this many times hotter per round ...
+INTERVAL_HOT_ROUNDS = 3  # ... for this many rounds (27, 9, 3 times), then at the error's own
+INTERVAL_BATCH_PER_DIM = 3  # points per round: this many per coordinate ...
+INTERVAL_BATCH_MIN = 40  # ... and at least this many
+INTERVAL_WIDEN = 3.0  # each later round's covariance: the weighted points' times this (valleys are followed)
+INTERVAL_CHI2_HALF = 1.353  # chi2_1(0.90) / 2: the rise, in temperatures, at a 90 % marginal end (quadratic error)
+INTERVAL_BOUND_EDGE = 0.01  # an interval end within this of the unit cube's face reaches the search's bound
+INTERVAL_UNDETERMINED_FACTOR = 3.0  # an interval wider than this factor, or reaching a bound: undetermined
+INTERVAL_UNDETERMINED_SHARE = 0.5  # a setting on a linear scale: an interval over half its search range
+INTERVAL_MIN_IMAGES = 2  # training images below which no interval is estimated
+INTERVAL_BUDGET_FACTOR = 3  # intervals only where the budget is at least this many times what they need

@@ -14,6 +14,7 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
@@ -150,6 +151,7 @@ def stages_state(job: FitJob) -> dict[str, Any]:
         "polish_rounds": job.polish_rounds,
         "polish_scale": job.polish_scale,
         "start_f": job.start_f,
+        "intervals": job.intervals,
     }
 
 
@@ -170,27 +172,18 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
 
     if not isinstance(st, dict):
         raise bad("not an object")
-    keys = {
-        "stage",
-        "stage_quality",
-        "stage_end",
-        "done_evals",
-        "records",
-        "best_by_quality",
-        "history_prev",
-        "search_stop",
-        "ladder",
-        "profile",
-        "start_f",
-    }
-    later = {"polish_rounds", "polish_scale"}  # the profile's polish came later: none in older checkpoints
+    keys = set("stage stage_quality stage_end done_evals records best_by_quality history_prev search_stop".split())
+    keys |= {"ladder", "profile", "start_f"}
+    later = {"polish_rounds", "polish_scale", "intervals"}  # these came later: none in older checkpoints
     if set(st) - later != keys:
         raise bad(f"fields {sorted((set(st) - later) ^ keys)}")
     if not is_int(st.get("polish_rounds", 0)) or not (
         is_num(st.get("polish_scale", 1.0)) and 0 < st.get("polish_scale", 1.0) <= 1
     ):
         raise bad("polish_rounds or polish_scale")
-    if st["stage"] not in ("search", "rung", "profile", "done"):
+    if st["stage"] not in ("search", "rung", "profile", "intervals", "done") or (
+        st["stage"] == "intervals" and job.intervals_note is not None
+    ):
         raise bad(f"stage {st['stage']!r}")
     if not is_q(st["stage_quality"]) or not is_int(st["stage_end"]) or not is_int(st["done_evals"]):
         raise bad("stage_quality, stage_end or done_evals")
@@ -264,6 +257,7 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
     job.profile = prof
     job.polish_rounds = st.get("polish_rounds", 0)
     job.polish_scale = float(st.get("polish_scale", 1.0))
+    job.intervals = check_intervals_state(st.get("intervals"), job.space.n, bad)
     job.start_f = None if st["start_f"] is None else float(st["start_f"])
     if ladder is not None:
         job.ladder = ladder
@@ -271,6 +265,31 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
         raise bad("stage_quality outside the ladder")
     if job.stage_quality is not None:
         job._activate(job.stage_quality)
+
+
+def check_intervals_state(st: Any, n: int, bad: Callable[[str], ClothFitError]) -> dict | None:
+    """The intervals stage's saved state (``intervals.start``'s fields), checked: None, or the state."""
+    if st is None:
+        return None
+    phases = ("jitter", "axes", "sample", "done")
+    ok = (
+        isinstance(st, dict)
+        and st.get("phase") in phases
+        and isinstance(st.get("u0"), list)
+        and len(st["u0"]) == n
+        and isinstance(st.get("h"), list)
+        and len(st["h"]) == n
+        and isinstance(st.get("U"), list)
+        and isinstance(st.get("F"), list)
+        and len(st["U"]) == len(st["F"])
+        and all(isinstance(u, list) and len(u) == n for u in st["U"])
+        and all(v is None or (isinstance(v, (int, float)) and math.isfinite(v)) for v in st["F"])
+        and isinstance(st.get("round"), int)
+        and isinstance(st.get("props"), list)
+    )
+    if not ok:
+        raise bad("intervals")
+    return st
 
 
 def reopen_search(job: FitJob) -> None:
@@ -293,6 +312,7 @@ def reopen_search(job: FitJob) -> None:
     job.profile = None
     job.polish_rounds = 0
     job.polish_scale = 1.0
+    job.intervals = None
     job.stage = "search"
     job.stage_end = job.search_end
     if job.ladder is not None:

@@ -80,6 +80,7 @@ class FitConfig:
     executor: str = "auto"  # blender: "ray", "process" (no Ray) or "auto"
     restarts: int | None = None  # cma-es: IPOP restarts after convergence (population doubled each);
     # None = the model's default (paper 0, blender BLENDER_FIT_RESTARTS)
+    intervals: bool = True  # end with each setting's and offset's interval (fitting/intervals.py)
     uncertain: object = None  # the manipulation's unknowns to estimate: None = the capture's
     # 'uncertain' block; "none" = nothing; "time_offset=S,handles=M" or an
     # object {time_offset, handles} (physics/scenario.Uncertainty)

@@ -29,7 +29,7 @@ import contextlib
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -51,7 +51,8 @@ from .config import (  # noqa: F401 (re-exported)
     check_resolution,
     resolve_optimizer,
 )
-from .objective import SilhouetteObjective
+from .intervals import interval_budget, interval_step, intervals_plan
+from .objective import SilhouetteObjective, load_observed  # noqa: F401 (re-exported)
 from .offset_profile import profile_step
 from .optimise import make_optimizer
 from .parameters import (
@@ -60,32 +61,17 @@ from .parameters import (
     PaperParameters,
     SceneParameters,
     declared_model,
+    joint_space,
     make_parameters,
     release_instants,
 )
 from .quality import Ladder
 from .result import FitResult, job_result
 from .result import finite_or_none as _finite
-from .space import SearchSpace
 from .steppable import ask_within
 
 if TYPE_CHECKING:
-    from ..observation.camera import Camera
     from ..observation.capture import Capture
-
-
-def load_observed(
-    capture: Capture, cams: Sequence[int], fidx: Sequence[int], resolution: Sequence[int] | None = None
-) -> tuple[list[Camera], list[list[np.ndarray]], list[list[np.ndarray | None]]]:
-    """Cameras, observed silhouettes and ignore masks ``[cam][frame]`` of a capture, at ``resolution``."""
-    cameras = [capture.cameras[c] for c in cams]
-    observed, ignore = capture.load_observations(cams, fidx)
-    if resolution is not None:
-        h, w = check_resolution(resolution, "fit resolution")
-        cameras = [c.resized(h, w) for c in cameras]
-        observed = [[resample_silhouette(o, h, w) for o in oc] for oc in observed]
-        ignore = [[resample_ignore(g, h, w) for g in gc] for gc in ignore]
-    return cameras, observed, ignore
 
 
 class FitJob:
@@ -168,7 +154,11 @@ class FitJob:
         if self.manip is not None:  # the profile: either side of each offset, its centre, its polish rounds
             k = self.manip.n
             self.profile_reserve = 2 * k + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * k + 1)
-            reserved += self.profile_reserve
+        self.intervals = None  # the intervals stage's state (intervals.py), once it has begun
+        self.intervals_note = intervals_plan(self)
+        if self.intervals_note is None:  # kept like the profile's: no rung eats into it
+            self.profile_reserve += interval_budget(self.space.n)
+        reserved += self.profile_reserve
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
@@ -551,7 +541,9 @@ class FitJob:
             self.stop_reason = "target"
         elif self.stage in ("search", "rung") and (self.opt.stopped or self.evaluations >= self.stage_end):
             self._next_stage()
-        elif self.stage == "done" or self.evaluations >= self.config.max_evaluations and self.stage != "profile":
+        elif self.stage == "done" or (
+            self.evaluations >= self.config.max_evaluations and self.stage not in ("profile", "intervals")
+        ):
             self._next_stage()
         self.finished = self.stop_reason is not None
 
@@ -594,11 +586,20 @@ class FitJob:
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
             return
+        if self.stage in ("search", "rung", "profile") and self.intervals_note is None and self.best_by_quality:
+            self.stage = "intervals"
+            self._activate(self.chosen_quality())
+            self.stage_quality = self.chosen_quality()
+            return
         self.stage = "done"
         if self.chosen_quality() is not None:
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
         self.stop_reason = self.search_stop or "budget"
+
+    def end_profile(self) -> None:
+        """The profile is over: the intervals stage next, or the end."""
+        self._next_stage()
 
     def _profile_step(self):
         """The "profile" stage's step: a polish round of the offsets or their profile (``offset_profile.profile_step``)."""
@@ -615,6 +616,9 @@ class FitJob:
         t0 = time.time()
         if self.stage == "profile":
             self._profile_step()
+        elif self.stage == "intervals":
+            if interval_step(self):
+                self.stage = "done"
         elif self.stage == "search" and self.start_x is not None and self.start_f is None:
             self.start_f = self._score_aside(self.start_x[None])
         elif self.stage in ("search", "rung"):  # never past the stage's budget (unless it left none for a first best)
@@ -778,17 +782,6 @@ class FitJob:
         naming the differing fields; only the budget and the target may differ). ``evaluator``: the workers
         of a Blender-scene fit."""
         return checkpoint.resume(cls, FitConfig, path, capture, config, checkpoint_interval, evaluator)
-
-
-def joint_space(par_space: SearchSpace, manip: ManipulationParameters | None) -> SearchSpace:
-    """The cloth's search space followed by the manipulation's unknowns (linear, zero = as declared)."""
-    if manip is None:
-        return par_space
-    names = list(par_space.names) + list(manip.names)
-    bounds = {n: (float(lo), float(hi)) for n, lo, hi in zip(par_space.names, par_space.lo, par_space.hi)}
-    bounds.update(manip.bounds)
-    logs = {n: bool(v) for n, v in zip(par_space.names, par_space.log)}
-    return SearchSpace(names, bounds, logs)
 
 
 def atomic_json(path: str | os.PathLike, obj: Any) -> None:

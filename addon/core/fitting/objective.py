@@ -13,16 +13,25 @@ there is neither missing nor extra, and the normaliser is the observed area outs
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import ClothFitError
+from ..observation.floor import resample_ignore, resample_silhouette
 from ..observation.raster import rasterize_window
 from ..physics import jit, paper_kernels
 from ..physics.models import PaperModel, get_model
 from ..physics.paper import simulate_numpy
 from ..physics.scenario import Offsets
 from . import kernels
+from .config import check_resolution
+
+if TYPE_CHECKING:
+    from ..observation.camera import Camera
+    from ..observation.capture import Capture
 
 
 class SilhouetteObjective:
@@ -253,3 +262,17 @@ def _prefix_sums(images, C, F):
             pres.append(pre.ravel())
             o += pre.size
     return np.concatenate(pres), pofs, bbs
+
+
+def load_observed(
+    capture: Capture, cams: Sequence[int], fidx: Sequence[int], resolution: Sequence[int] | None = None
+) -> tuple[list[Camera], list[list[np.ndarray]], list[list[np.ndarray | None]]]:
+    """Cameras, observed silhouettes and ignore masks ``[cam][frame]`` of a capture, at ``resolution``."""
+    cameras = [capture.cameras[c] for c in cams]
+    observed, ignore = capture.load_observations(cams, fidx)
+    if resolution is not None:
+        h, w = check_resolution(resolution, "fit resolution")
+        cameras = [c.resized(h, w) for c in cameras]
+        observed = [[resample_silhouette(o, h, w) for o in oc] for oc in observed]
+        ignore = [[resample_ignore(g, h, w) for g in gc] for gc in ignore]
+    return cameras, observed, ignore

@@ -114,5 +114,4 @@ def profile_step(job: FitJob) -> None:
             "separated": unc is not None and unc < bounds[i],
         }
     job.profile = prof
-    job.stage = "done"
-    job.stop_reason = job.search_stop or "budget"
+    job.end_profile()

@@ -63,17 +63,20 @@ BLENDER_FREE = {
     ),
 }
 # search ranges in Blender's units *for a vertex mass of 0.3 kg* (Blender's default); scaled with the
-# fixed mass for the mass-scaled settings, then clipped to Blender's limits
+# fixed mass for the mass-scaled settings, then clipped to Blender's limits. Bending and air damping start
+# where a cloth still resists folding and air at all: Blender's own presets use bending 0.05 (silk) to 25
+# (rubber) and air damping 1; below 0.01 and 0.05 the searches found basins of a cloth with no bending or no
+# air (a stiffer shear making up for it) that fit the silhouettes worse than the truth (docs/intervals.md)
 BLENDER_BOUNDS_AT_DEFAULT_MASS = {
     "tension_stiffness": (0.5, 2000.0),
     "compression_stiffness": (0.5, 2000.0),
     "shear_stiffness": (0.05, 2000.0),
-    "bending_stiffness": (1e-3, 500.0),
+    "bending_stiffness": (1e-2, 500.0),
     "tension_damping": (1e-3, 50.0),
     "compression_damping": (1e-3, 50.0),
     "shear_damping": (1e-3, 50.0),
     "bending_damping": (1e-4, 50.0),
-    "air_damping": (1e-3, 10.0),
+    "air_damping": (5e-2, 10.0),
     "pin_stiffness": (1e-2, 50.0),
 }
 FITTABLE = tuple(BLENDER_BOUNDS_AT_DEFAULT_MASS)
@@ -133,6 +136,12 @@ class PaperParameters:
     def params(self, x: ArrayLike) -> dict[str, float]:
         r = self.rows(x)[0]
         return {"m": float(r[0]), "k": float(r[1]), "l": float(r[2]), "d": float(r[3])}
+
+    def reported(self, name: str, coord: float) -> tuple[str, float]:
+        """A search coordinate's value in the result's units: (k, d or l, value)."""
+        per = {"k_over_m": ("k", self.m), "d_over_m": ("d", self.m), "l_rel": ("l", self.spacing)}
+        out, scale = per[name]
+        return out, float(coord) * scale
 
     def describe(self, x: ArrayLike) -> dict:
         p = self.params(x)
@@ -207,13 +216,22 @@ class BlenderParameters:
     def _coord(self, name, value):
         return value / self.m if name in self.scaled else value
 
+    def coordinate(self, name: str, value: float) -> float:
+        """A setting's value in Blender's units -> its search coordinate (per unit mass where it scales)."""
+        return self._coord(name, value)
+
+    def reported(self, name: str, coord: float) -> tuple[str, float]:
+        """A search coordinate's value in the result's units (``blender_cloth``: Blender's, at the mass)."""
+        return name, float(coord) * self.m if name in self.scaled else float(coord)
+
     def rows(self, X: ArrayLike) -> np.ndarray:
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         base = B.settings_row(self.fixed)
         R = np.repeat(base[None], len(X), 0)
         for k, n in enumerate(self.free):
             col = B.FLOAT_SETTINGS.index(n)
-            R[:, col] = X[:, k] * self.m if n in self.scaled else X[:, k]
+            v = X[:, k] * self.m if n in self.scaled else X[:, k]
+            R[:, col] = np.minimum(v, B.RANGES[n][1])  # a bound at Blender's limit, per unit mass and back: 1 ulp over
         return R
 
     def settings(self, x: ArrayLike) -> dict:
@@ -479,3 +497,14 @@ def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None
             }
         )
     return out
+
+
+def joint_space(par_space: SearchSpace, manip: ManipulationParameters | None) -> SearchSpace:
+    """The cloth's search space followed by the manipulation's unknowns (linear, zero = as declared)."""
+    if manip is None:
+        return par_space
+    names = list(par_space.names) + list(manip.names)
+    bounds = {n: (float(lo), float(hi)) for n, lo, hi in zip(par_space.names, par_space.lo, par_space.hi)}
+    bounds.update(manip.bounds)
+    logs = {n: bool(v) for n, v in zip(par_space.names, par_space.log)}
+    return SearchSpace(names, bounds, logs)

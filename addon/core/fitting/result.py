@@ -203,6 +203,22 @@ class FitResult(dict):
         return "\n".join(lines)
 
 
+def interval_lines(res: dict) -> list[str]:
+    """A result's intervals for people, one line per free setting: value, 90 % interval, and UNDETERMINED where
+    the capture cannot tell it (the command line, the overlay's legend and the add-on's panel show these);
+    the note instead where the fit has none."""
+    iv = res.get("intervals")
+    if not iv:
+        return [f"no intervals: {res['intervals_note']}"] if res.get("intervals_note") else []
+    values = dict(res.get("params") or {}, **(res.get("blender_cloth") or {}))
+    und = set(res.get("undetermined") or [])
+    out = ["90 % intervals (from the error's own noise)"]
+    for n, (lo, hi) in iv.items():
+        if n in values:
+            out.append(f"{n} {values[n]:.4g} [{lo:.4g}, {hi:.4g}]" + ("  UNDETERMINED" if n in und else ""))
+    return out
+
+
 def uncertainty_caveat(res: dict) -> str | None:
     """What the offsets' stated uncertainties are, where a fit states any: the curvature of the error along each
     offset alone at the fitted point, the settings held, so an offset that trades against the settings may lie
@@ -285,6 +301,13 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
         if isinstance(res.get("blender_cloth"), dict):
             res["blender_cloth"]["quality"] = job.chosen_quality()
     res.update(job.manipulation())
+    st = job.intervals
+    if st is not None and st.get("result"):
+        res.update(st["result"])
+    else:
+        res["intervals"] = None
+        res["undetermined"] = None
+        res["intervals_note"] = job.intervals_note or "intervals not estimated: the fit stopped before them"
     if job.final is not None:
         res["floor"] = job.final
         caveat = uncertainty_caveat(res)

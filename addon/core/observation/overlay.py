@@ -157,6 +157,18 @@ def contact_sheet(images: Sequence[np.ndarray], cols: int = 6, tile_width: int =
     return np.concatenate(rows, 0)
 
 
+def legend_strip(lines: Sequence[str], width: int) -> np.ndarray:
+    """Text lines on a dark strip ``width`` px wide (RGB uint8): the contact sheet's legend."""
+    import cv2
+
+    h = 18 * len(lines) + 8
+    out = np.full((h, width, 3), 24, np.uint8)
+    for k, text in enumerate(lines):
+        colour = (255, 140, 60) if "UNDETERMINED" in text else (230, 230, 230)
+        cv2.putText(out, text, (6, 18 * k + 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv2.LINE_AA)
+    return out
+
+
 FLOOR_NEAR = 1.5  # E_sil / floor up to this: the image is at its floor (green)
 FLOOR_AT_RGB = (60, 190, 90)  # at its floor
 FLOOR_ABOVE_RGB = (240, 170, 30)  # above it, up to ``far`` x
@@ -305,6 +317,7 @@ def capture_overlays(
     images: Callable[[int, int], np.ndarray | None] | None = None,
     floors: ArrayLike | None = None,
     far: float = FAR_ABOVE,
+    legend: Sequence[str] | None = None,
 ) -> list[str]:
     """Write one overlay PNG per camera and frame plus a contact sheet; returns the list of paths.
     ``images(camera index, frame index)``: the camera's own picture of that frame (RGB uint8, e.g.
@@ -312,7 +325,8 @@ def capture_overlays(
     (``overlay_on_image``) instead of on black. ``floors``: the images' noise floors, (cameras, times)
     in the order drawn (``floor.capture_floor(...).per_image()``): then the contact sheet's tiles are
     framed and labelled by ``mark_floor`` and ``floor_sheet.png`` (``floor_sheet``) is written too,
-    second to last in the list (the per-image PNGs are unchanged)."""
+    second to last in the list (the per-image PNGs are unchanged). ``legend``: text lines drawn under the contact
+    sheet (a fit's settings with their intervals: ``fitting.result.interval_lines``)."""
     from ..physics.models import model_and_row
     from ..physics.scenario import fitted_scenario
     from .raster import silhouette
@@ -376,6 +390,9 @@ def capture_overlays(
         paths.append(fp)
     if sheet:
         sp = os.path.join(out_dir, sheet_name)
-        write_rgb(sp, contact_sheet(sheet))
+        img = contact_sheet(sheet)
+        if legend:
+            img = np.concatenate([img, legend_strip(legend, img.shape[1])], 0)
+        write_rgb(sp, img)
         paths.append(sp)
     return paths

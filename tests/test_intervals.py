@@ -1,0 +1,194 @@
+"""How sure each setting is: the intervals stage (marginal intervals from the error's own noise), on an
+error whose answer is known in closed form and on real fits of Blender's cloth."""
+
+import math
+
+import numpy as np
+import pytest
+from clothfit.core import defaults as D
+from clothfit.core.fitting import intervals
+from clothfit.core.fitting.job import FitConfig, FitJob
+from clothfit.core.fitting.space import SearchSpace
+from clothfit.core.observation.synth import synth_capture
+from clothfit.core.physics.scenario import ClothGrid, paper_scenario
+
+
+class _Par:
+    def reported(self, name, coord):
+        return name, float(coord)
+
+
+class QuadraticJob:
+    """What the stage needs of a fit, over a known error: a quadratic in (a, b) with a valley along
+    a + b = 1 (a and b trade against each other), c without any effect, and noise of a known size."""
+
+    def __init__(self, sigma=0.02, seed=0):
+        self.space = SearchSpace(["a", "b", "c"], {"a": (0.0, 1.0), "b": (0.0, 1.0), "c": (0.0, 1.0)})
+        self.npar = 3
+        self.par = _Par()
+        self.sigma = sigma
+        self.rng = np.random.default_rng(seed)
+        self.done_evals = 0
+        self.exploded = 0
+        self.intervals = None
+        # E = 10 + (a - 0.4)^2 / (2 s1^2) + (a + b - 1)^2 / (2 s2^2), in units of the temperature T
+        self.T = D.INTERVAL_Z * math.sqrt(2.0) * sigma / D.INTERVAL_CHI2_HALF
+        self.s1, self.s2 = 0.05, 0.01
+        self.best_x = np.array([0.4, 0.6, 0.5])
+        self.best_error = 10.0
+        self.best_by_quality = {}
+        self.history_prev = []
+
+    def chosen_quality(self):
+        return None
+
+    def error(self, X):
+        a, b = X[:, 0], X[:, 1]
+        q = (a - 0.4) ** 2 / (2 * self.s1**2) + (a + b - 1.0) ** 2 / (2 * self.s2**2)
+        return 10.0 + self.T * q
+
+    def evaluate(self, X):
+        X = np.atleast_2d(X)
+        return self.error(X) + self.sigma * self.rng.standard_normal(len(X))
+
+
+def run_stage(job):
+    steps = 0
+    while not intervals.interval_step(job):
+        steps += 1
+        assert steps < 100
+    return job.intervals["result"]
+
+
+def test_intervals_are_marginal_and_sized_by_the_errors_own_noise():
+    job = QuadraticJob()
+    r = run_stage(job)
+    z = 1.6449
+    # the 90 % marginal of exp(-E/T): a ~ N(0.4, s1), b = 1 - a + N(0, s2): sd(b) = sqrt(s1^2 + s2^2), at the
+    # temperature the stage measured (its jitter's sd from a few draws: the widths go with its square root)
+    scale = math.sqrt(r["interval_method"]["temperature"] / job.T)
+    half_a = z * job.s1 * scale
+    half_b = z * math.hypot(job.s1, job.s2) * scale
+    (alo, ahi), (blo, bhi) = r["intervals"]["a"], r["intervals"]["b"]
+    assert alo < 0.4 < ahi and blo < 0.6 < bhi
+    assert (ahi - alo) / 2 == pytest.approx(half_a, rel=0.35)
+    assert (bhi - blo) / 2 == pytest.approx(half_b, rel=0.35)
+    # the curvature along b with a held would give z * s2: five times narrower than the marginal
+    assert (bhi - blo) / 2 > 3 * z * job.s2 * scale
+    assert r["interval_method"]["jitter_sd"] == pytest.approx(job.sigma, rel=0.5)
+
+
+def test_a_setting_without_effect_is_undetermined_and_the_others_are_not():
+    job = QuadraticJob()
+    r = run_stage(job)
+    assert r["undetermined"] == ["c"]
+    assert r["intervals"]["c"] == pytest.approx([0.0, 1.0])
+    assert r["interval_method"]["details"]["c"]["flat"]
+
+
+def test_more_noise_gives_wider_intervals():
+    widths = []
+    for sigma in (0.01, 0.04):
+        job = QuadraticJob(sigma=sigma)
+        job.T = QuadraticJob(sigma=0.01).T  # the same error surface, only its noise grows
+        r = run_stage(job)
+        lo, hi = r["intervals"]["a"]
+        widths.append(hi - lo)
+    assert widths[1] > 1.5 * widths[0]
+
+
+def test_a_lower_point_found_by_the_stage_becomes_the_fits_best():
+    job = QuadraticJob()
+    job.best_x = np.array([0.4 + 2 * job.s1, 0.6 - 2 * job.s1, 0.5])  # a search that stopped two sds short
+    job.best_error = float(job.error(job.best_x[None])[0])
+    r = run_stage(job)
+    f, x = job.best_by_quality[None]
+    assert f < job.best_error and r["interval_method"]["improved_best"]["to"] == f
+    assert abs(x[0] - 0.4) < abs(job.best_x[0] - 0.4)
+
+
+def test_the_stage_stays_within_its_budget():
+    job = QuadraticJob()
+    run_stage(job)
+    assert job.done_evals <= intervals.interval_budget(3)
+
+
+@pytest.fixture(scope="module")
+def cap(tmp_path_factory):
+    root = tmp_path_factory.mktemp("icap") / "cap"
+    sc = paper_scenario(ClothGrid(7, 7, 0.1), frame_times=[0.1, 0.2, 0.3, 0.4, 0.6, 0.8])
+    truth = {"tension_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness": 0.2, "air_damping": 2.0}
+    return synth_capture(
+        str(root),
+        truth,
+        model={"name": "blender", "fps": 24},
+        rig="ring8",
+        resolution=(60, 80),
+        scenario=sc,
+        noise=0.05,
+    )
+
+
+FREE = ["tension_stiffness", "shear_stiffness", "air_damping"]
+
+
+def fit(cap, checkpoint=None, budget=1000, **kw):
+    cfg = FitConfig(model="blender", free=FREE, quality=5, max_evaluations=budget, train_cameras=[0, 2, 4, 6], **kw)
+    return FitJob(cap, cfg, checkpoint=checkpoint)
+
+
+def test_a_fit_ends_with_an_interval_for_every_free_setting_holding_its_value(cap):
+    job = fit(cap)
+    res = job.run()
+    assert res["evaluations"] <= 1000
+    assert set(res["intervals"]) == set(FREE)
+    for n in FREE:
+        lo, hi = res["intervals"][n]
+        assert 0 < lo <= res["blender_cloth"][n] <= hi
+    assert set(res["undetermined"]) <= set(FREE)
+    assert res["interval_method"]["level"] == 0.9
+
+
+def test_a_resumed_fit_reports_the_same_intervals(cap, tmp_path):
+    ck = str(tmp_path / "fit.ckpt.json")
+    whole = fit(cap).run()
+    job = fit(cap, checkpoint=ck)
+    while job.stage != "intervals" or (job.intervals or {}).get("phase") in (None, "jitter"):
+        job.step()
+    assert job.intervals["phase"] in ("axes", "sample")
+    job.save_checkpoint(ck)
+    resumed = FitJob.resume(ck, cap).run()
+    assert resumed["intervals"] == whole["intervals"]
+    assert resumed["undetermined"] == whole["undetermined"]
+
+
+def test_no_interval_where_the_budget_or_the_images_cannot_give_one(cap):
+    small = fit(cap, budget=200).run()
+    assert small["intervals"] is None and "budget of 200" in small["intervals_note"]
+    one = FitJob(
+        cap,
+        FitConfig(model="blender", free=FREE, quality=5, max_evaluations=1000, train_cameras=[0], train_times=[0.4]),
+    ).run()
+    assert one["intervals"] is None and "1 training image" in one["intervals_note"]
+    off = fit(cap, intervals=False).run()
+    assert off["intervals"] is None and "--no-intervals" in off["intervals_note"]
+
+
+def test_the_intervals_are_shown_to_people_and_the_undetermined_marked(cap, tmp_path):
+    import cv2
+    from clothfit.core.fitting.result import interval_lines
+    from clothfit.core.observation.overlay import capture_overlays
+
+    res = fit(cap).run()
+    res["undetermined"] = [FREE[0]]  # as a fit that could not tell it says
+    lines = interval_lines(res)
+    for n in FREE:
+        (line,) = [x for x in lines if x.startswith(n)]
+        lo, hi = res["intervals"][n]
+        assert f"[{lo:.4g}, {hi:.4g}]" in line
+        assert line.endswith("UNDETERMINED") == (n == FREE[0])
+    plain = capture_overlays(cap, res, tmp_path / "a", cameras=[0], times=[0.4])
+    shown = capture_overlays(cap, res, tmp_path / "b", cameras=[0], times=[0.4], legend=lines)
+    ha, hb = cv2.imread(plain[-1]).shape[0], cv2.imread(shown[-1]).shape[0]
+    assert hb >= ha + 18 * len(lines)
+    assert interval_lines({"intervals": None, "intervals_note": "why"}) == ["no intervals: why"]
