@@ -111,10 +111,10 @@ def test_warm_start_replaces_the_free_values_only(cap, tmp_path):
 
 def test_fitjob_runs_over_a_model_like_evaluator(cap):
     ev = CoreScene(cap)
-    job = FitJob(cap, FitConfig(evaluator="blender", max_evaluations=12, population=6, seed=1), evaluator=ev)
+    job = FitJob(cap, FitConfig(evaluator="blender", max_evaluations=13, population=6, seed=1), evaluator=ev)
     res = job.run()
     assert res["backend"] == "blender" and res["raster_backend"] in ("numba", "numpy")
-    # the scene's own settings first, then two generations of 6
+    # the scene's own settings first, then two generations of 6: the budget's 13
     assert res["evaluations"] == 13 and res["blender_evaluations"] == 13 and res["seconds"] >= 0
     assert res["best_E_sil_mean_pct"] <= res["start_E_sil_mean_pct"]
     assert res["blender_cloth"]["time_scale"] == 1.25

@@ -289,7 +289,8 @@ def _search_args(s):
         "--no-intervals",
         dest="intervals",
         action="store_false",
-        help="skip the last stage, each setting's 90 %% interval (a few hundred evaluations: docs/intervals.md)",
+        help="skip the last stage, each setting's 90 %% interval (a few hundred evaluations: docs/intervals.md; "
+        "intervals estimated: %(default)s)",
     )
     s.add_argument(
         "--resolution", help="fit at HxW [px], e.g. 120x160; silhouettes area-resampled (default: the capture's)"

@@ -159,9 +159,6 @@ class FitJob:
         if self.intervals_note is None:  # kept like the profile's: no rung eats into it
             self.profile_reserve += interval_budget(self.space.n)
         reserved += self.profile_reserve
-        if cfg.max_evaluations <= reserved:
-            msg = f"this fit keeps {reserved} evaluations after its search (quality rungs, manipulation profile, intervals)"
-            raise ClothFitError(f"--max-evaluations {cfg.max_evaluations} is too few: {msg}: give more")
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
         self.stage = "search"
@@ -184,7 +181,7 @@ class FitJob:
         self.cancelled = False
         self.error = None
         self.stop_reason = None
-        self.exploded = 0
+        self.exploded = self.cut_batches = 0  # cut_batches: last batches cut to the budget (generations too)
 
     # ------------------------------------------------------------- set-up
     def _manipulation(self, capture, cfg, evaluator):
@@ -466,6 +463,7 @@ class FitJob:
     def generation(self) -> int:
         return int(
             sum(r["generations"] for r in self.records)
+            + self.cut_batches
             + (self.opt.generation if self.stage in ("search", "rung") else 0)
         )
 
@@ -623,8 +621,10 @@ class FitJob:
                 self.stage = "done"
         elif self.stage == "search" and self.start_x is not None and self.start_f is None:
             self.start_f = self._score_aside(self.start_x[None])
-        elif self.stage in ("search", "rung"):  # never past the stage's budget: a hard cap
-            self.opt, X, whole = ask_within(self.opt, self.stage_end - self.evaluations)
+        elif self.stage in ("search", "rung"):  # never past the stage's budget (unless it left none for a first best)
+            left = self.stage_end - self.evaluations
+            left = math.inf if left <= 0 and self.best_x is None else left
+            self.opt, X, whole = ask_within(self.opt, left)
             if whole:
                 f = self.evaluate(X)
                 self.exploded += int(np.sum(~np.isfinite(f)))
@@ -632,7 +632,7 @@ class FitJob:
                 self._track()
             else:  # the budget's last batch, cut to what is left: scored aside, and the stage ends
                 self._score_aside(X)
-                self.stage_end = self.evaluations
+                self.stage_end, self.cut_batches = self.evaluations, self.cut_batches + 1
         self.elapsed += time.time() - t0
         self._update_stop()
         if self.finished:

@@ -150,7 +150,7 @@ def _rng_state_from_json(v, where):
         raise ClothFitError(f"checkpoint: {where} 'rng' must hold non-negative integers below 2**128")
     try:
         return _rng_from_state(v)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:  # (numpy: uinteger must fit its C type)
         raise ClothFitError(f"checkpoint: {where} 'rng' is invalid ({exc})") from None
 
 
