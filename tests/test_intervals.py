@@ -107,6 +107,16 @@ def test_a_lower_point_found_by_the_stage_becomes_the_fits_best():
     assert abs(x[0] - 0.4) < abs(job.best_x[0] - 0.4)
 
 
+def test_a_round_whose_every_point_fails_keeps_the_last_proposal():
+    job = QuadraticJob()
+    good = job.evaluate
+    job.evaluate = lambda X: np.where(np.abs(np.atleast_2d(X)[:, 0] - 0.4) < 1e-6, good(X), np.inf)
+    r = run_stage(job)  # only the jittered best point scores: no sampled point has a weight
+    means = [m for m, _ in job.intervals["props"]]
+    assert all(np.allclose(m, means[0]) for m in means)
+    assert r["intervals"]["a"][0] <= 0.4 <= r["intervals"]["a"][1]
+
+
 def test_the_stage_stays_within_its_budget():
     job = QuadraticJob()
     run_stage(job)

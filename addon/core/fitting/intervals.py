@@ -215,6 +215,9 @@ def _proposal(st):
     if not st["props"]:
         return u0, np.diag(h**2)
     U, w = _weighted(st, round_temperature(st, len(st["props"])))
+    if not np.sum(w) > 0:  # every point so far outside the bounds or failed: the last proposal again
+        mean, cov = st["props"][-1]
+        return np.array(mean), np.array(cov)
     Ua = U[:, act]
     mean = w @ Ua
     d = Ua - mean
