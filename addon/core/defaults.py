@@ -261,8 +261,8 @@ PROFILE_JITTER_SIGMAS = 2.0  # a rise smaller than this many standard deviations
 MIN_FRAMES_FOR_TIME_OFFSET = 2  # a time offset needs >= 2 training frames after the release: one frame's shape is
 # matched as well by a stiffer cloth read earlier as by a softer one read later
 
-# How sure each setting is (fitting/intervals.py, docs/intervals.md): a quadratic over every setting and offset
-# around the fit, its marginal extents checked on the error itself
+# How sure each setting is (fitting/intervals.py, docs/intervals.md): points sampled around the fit (every setting
+# and offset free), weighted by the error at a temperature set by its own jitter; each coordinate's weighted quantiles
 INTERVAL_LEVEL = 0.90  # two-sided: each end excludes 5 %
 INTERVAL_Z = 1.645  # the one-sided 95 % normal quantile: a rise of more than z sqrt(2) sigma is not jitter
 INTERVAL_JITTER = 16  # evaluations at the best point moved by a part in 10^7 (PROFILE_JITTER_RELATIVE): sigma

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .blender_settings import PRESETS, check_settings
+from .blender_settings import FLOAT_SETTINGS, PRESETS, check_settings
 
 COMPARED = (
     "tension_stiffness",
@@ -33,22 +33,7 @@ COMPARED = (
 )
 # the settings a preset file written here sets, in the order of Blender's own "Add Cloth Preset"
 # (bl_operators/presets.py, AddPresetCloth), then the two a fit also sets
-PRESET_FILE_SETTINGS = (
-    "quality",
-    "mass",
-    "air_damping",
-    "bending_model",
-    "tension_stiffness",
-    "compression_stiffness",
-    "shear_stiffness",
-    "bending_stiffness",
-    "tension_damping",
-    "compression_damping",
-    "shear_damping",
-    "bending_damping",
-    "pin_stiffness",
-    "time_scale",
-)
+PRESET_FILE_SETTINGS = ("quality", "mass", "air_damping", "bending_model") + FLOAT_SETTINGS[2:]
 
 
 def preset_name(key: str) -> str:
