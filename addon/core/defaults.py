@@ -54,6 +54,28 @@ TRAIN_TIMES = [round(0.10 * i, 2) for i in range(1, 16)]
 TEST_TIMES = [round(0.05 + 0.10 * i, 2) for i in range(15)]
 RELEASED_CORNER = 0  # vertex index of the corner released at t = 0
 NOISE_FRACTION = 0.05  # fraction of boundary pixels flipped
+
+# --- synthetic handlings (physics/handling.py, `synth --handling`): how the hands move the cloth after the settle.
+# "release" is the paper's (above); the others move held corners along keyed paths from t = 0
+HANDLINGS = ("release", "wave", "lift", "apart")
+HANDLING = "release"
+HANDLING_KEY_STEP = 1.0 / 48.0  # s between a path's keys (piecewise linear between them: a 2 cm wave at 1.5 Hz
+# strays from its sine by at most 0.1 mm)
+WAVE_CORNER = 0  # index in ClothGrid.corners() of the corner waved; the other three are held still
+WAVE_AMPLITUDE = 0.02  # m: the corner goes this far up and down (a fifth of the 10 cm cloth)
+WAVE_FREQUENCY = 1.5  # Hz
+WAVE_DIRECTION = (0.0, 0.0, 1.0)  # up and down; (1, 0, 0) waves it sideways
+# lift and apart: the cloth hangs from two hands holding the two corners of one edge (corners 0 and 1 of
+# ClothGrid.corners(): the row y = -side_y/2); the other corners are free from the start, so the settle is longer
+# (the sheet swings down from flat to hanging; with the ground truths a vertex still moves by at most 0.4 mm
+# (paper) and 2.6 mm (blender) in the last 0.05 s before t = 0, against 1.6 and 13 mm after a 1 s settle)
+TWO_HAND_CORNERS = (0, 1)
+TWO_HAND_SETTLE_TIME = 1.5
+LIFT_HEIGHT = 0.10  # m: both hands go up this far and down again (smoothly: a raised cosine)
+LIFT_DURATION = 1.0  # s from t = 0 up and back down
+APART_HOLD = 0.7  # the hands start this share of the cloth's width apart (the edge slack between them)
+APART_SPREAD = 1.0  # and move apart to this share (the edge taut) and back (a raised cosine)
+APART_DURATION = 1.0  # s
 IMAGE_H, IMAGE_W = 480, 640
 DEFAULT_RIG = "lab18"
 TABLE1_CAMERAS = [1, 2, 4, 8, 16]
