@@ -15,9 +15,10 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from ..physics import blender as B
+from ..physics.handling import handling_scenario
 from ..physics.models import BlenderModel, PaperModel, get_model, simulate
 from ..physics.paper import Params
-from ..physics.scenario import Scenario, paper_scenario
+from ..physics.scenario import Scenario
 from .camera import Camera, load_rig
 from .capture import Capture, write_capture
 from .metrics import add_boundary_noise
@@ -40,12 +41,14 @@ def synth_capture(
     cameras: Sequence[Camera] | None = None,
     truth_dt_safety: float = D.TRUTH_DT_SAFETY,
     model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None,
+    handling: str | None = None,
 ) -> Capture:
     """Simulate ``params`` on ``scenario`` (default: the paper's) with ``model`` (default: the paper's
     sheet, ``params`` = m, k, l, d, default the ground truth; ``"blender"`` or a Blender model dict:
     ``params`` = ClothSettings values, missing ones Blender's defaults, ``time_scale`` the real-time
     one for the model's frame rate) and write a capture with ``noise`` boundary noise to ``root``.
-    Returns the Capture."""
+    ``handling``: a named handling (``physics.handling``, default ``release``: the paper's) for the
+    default scenario; not with ``scenario``. Returns the Capture."""
     if (
         isinstance(truth_dt_safety, bool)
         or not isinstance(truth_dt_safety, (int, float))
@@ -57,7 +60,9 @@ def synth_capture(
         )
     if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not (0 <= noise <= 1):
         raise ClothFitError(f"synth: noise must be a fraction in [0, 1], got {noise!r}")
-    scenario = scenario or paper_scenario()
+    if handling is not None and scenario is not None:
+        raise ClothFitError("synth: give a scenario or a handling, not both")
+    scenario = scenario or handling_scenario(handling or D.HANDLING)
     model = get_model(model)
     if isinstance(model, BlenderModel):
         given = dict(params or {})
@@ -103,6 +108,8 @@ def synth_capture(
         "seed": seed,
         "rig": rig if cameras is None else "custom",
     }
+    if handling not in (None, "release"):  # the paper's release writes the capture it always wrote
+        meta["handling"] = handling
     return write_capture(
         root,
         cams,
