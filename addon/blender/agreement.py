@@ -78,11 +78,7 @@ def compare(scene, scenario: Scenario, settings: dict, fps: float = 24.0, frame_
     try:
         blender, t_blender, iters = BC.simulate_frames(scene, obj, plan.n_frames, frame_start)
     finally:
-        me = obj.data
-        import bpy
-
-        bpy.data.objects.remove(obj, do_unlink=True)
-        bpy.data.meshes.remove(me)
+        BC.remove_cloth_object(obj)
     d = np.linalg.norm(core[0].astype(np.float64) - blender, axis=-1) * 1000.0
     after = d[plan.release_frame :]
     return {

@@ -177,6 +177,20 @@ def simulate_frames(scene, obj, n_frames: int, frame_start: int | None = None):
     return np.array(out), secs, (float(np.mean(its)) if its else None)
 
 
+def remove_cloth_object(obj):
+    """Remove a cloth object ``build_cloth_object`` made: the object, its mesh when nothing else uses
+    it, and the keyed empties its hooks follow (``add_pins``) when no other object hooks them."""
+    empties = [m.object for m in obj.modifiers if m.type == "HOOK" and m.object is not None]
+    me = obj.data
+    bpy.data.objects.remove(obj, do_unlink=True)
+    if me is not None and me.users == 0:
+        bpy.data.meshes.remove(me)
+    for emp in empties:
+        hooked = any(m.type == "HOOK" and m.object == emp for o in bpy.data.objects for m in o.modifiers)
+        if not hooked:
+            bpy.data.objects.remove(emp, do_unlink=True)
+
+
 def free_cache(obj):
     cl = cloth_modifier(obj)
     if cl is not None:
@@ -199,7 +213,5 @@ def replay(scene, scenario, settings: dict, fps: float, frame_start: int = 1):
     try:
         frames, _, _ = simulate_frames(scene, obj, plan.n_frames, frame_start)
     finally:
-        me = obj.data
-        bpy.data.objects.remove(obj, do_unlink=True)
-        bpy.data.meshes.remove(me)
+        remove_cloth_object(obj)
     return plan.sample(frames)

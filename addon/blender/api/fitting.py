@@ -331,10 +331,7 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
         BC.set_scene_fps(scene, model.fps)
         old = bpy.data.objects.get(BLENDER_CLOTH_NAME)
         if old is not None:
-            me = old.data
-            bpy.data.objects.remove(old, do_unlink=True)
-            if me is not None and me.users == 0:
-                bpy.data.meshes.remove(me)
+            BC.remove_cloth_object(old)
         new = BC.build_cloth_object(scene, net, plan, settings, name=BLENDER_CLOTH_NAME, frame_start=scene.frame_start)
         return new, (
             f"Built '{new.name}' with the fitted Cloth settings, pins and release of the scenario "

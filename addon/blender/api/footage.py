@@ -277,18 +277,29 @@ def load_capture(scene, path=None):
 
 
 def releases_text(scenario) -> str:
-    """Every handle the capture lets go, with its time ("vertex 0 at 0 s, vertex 255 at 0.05 s"); the
-    capture's scenario, which Build Cloth, Simulate, Fit and Apply replay, keeps them all."""
+    """Every handle the capture lets go, with its time ("vertex 0 at 0 s, vertex 255 at 0.05 s"), and
+    the handles that move along a path ("...; 4 held; corner 0 moving"); the capture's scenario, which
+    Build Cloth, Simulate, Fit and Apply replay, keeps them all."""
+    from ...core.physics.handling import moving_handles
+
     g = scenario.grid
     corners = g.corners()
+
+    def name(v):
+        return f"corner {corners.index(v)}" if v in corners else f"vertex {v}"
+
     parts = [
-        (f"corner {corners.index(h.vertex)}" if h.vertex in corners else f"vertex {h.vertex}")
-        + f" at {h.release_time:g} s"
+        f"{name(h.vertex)} at {h.release_time:g} s"
         for h in sorted(scenario.handles, key=lambda h: (h.release_time is None, h.release_time or 0.0, h.vertex))
         if h.release_time is not None
     ]
     held = sum(h.release_time is None for h in scenario.handles)
-    return (", ".join(parts) if parts else "nothing released") + f"; {held} held"
+    moving = [name(v) for v in moving_handles(scenario)]
+    return (
+        (", ".join(parts) if parts else "nothing released")
+        + f"; {held} held"
+        + (f"; {', '.join(moving)} moving" if moving else "")
+    )
 
 
 def _load_image(name, path):
