@@ -11,14 +11,14 @@ import pytest
 from clothfit import cli
 from clothfit.core import defaults as D
 from clothfit.core.errors import ClothFitError
-from clothfit.core.fitting.parameters import fitted_scenario
+from clothfit.core.fitting.parameters import ManipulationParameters, fitted_scenario
 from clothfit.core.observation import camera as C
 from clothfit.core.observation.capture import load_capture
 from clothfit.core.observation.synth import synth_capture
 from clothfit.core.physics import blender as B
 from clothfit.core.physics.handling import handling_scenario, moving_handles, two_hands
 from clothfit.core.physics.models import BlenderModel, PaperModel
-from clothfit.core.physics.scenario import ClothGrid, Handle, Offsets, Scenario, paper_scenario
+from clothfit.core.physics.scenario import ClothGrid, Handle, Offsets, Scenario, Uncertainty, paper_scenario
 
 FPS = 24.0
 
@@ -215,3 +215,41 @@ def test_synth_handlings_write_captures_whose_paths_the_truth_follows(tmp_path, 
         assert json.loads(capsys.readouterr().out)["handling"] == name
         c = load_capture(str(out))
         assert moving_handles(c.scenario) == list(two_hands(c.scenario.grid)) and c.meta["handling"] == name
+
+
+def test_a_fitted_manipulation_describes_the_whole_moved_path():
+    """What a result writes of a fitted handle offset on a keyed handle: every key moved by it, the key
+    times and the release as declared; read back it is the scenario the fit scored."""
+    sc = _keyed()
+    mp = ManipulationParameters(Uncertainty.parse({"time_offset": 0.1, "handles": [0.005, 0, 0, 0]}, 4), sc)
+    m = np.array([0.03, 0.001, -0.002, 0.0025])
+    d = mp.describe(m, sc)
+    h = d["handles"][0]
+    np.testing.assert_allclose(np.asarray(h["positions"]) - sc.handles[0].positions, [[0.001, -0.002, 0.0025]] * 2)
+    assert h["times"] == sc.handles[0].times.tolist() and h["release_time"] == RELEASE
+    back = fitted_scenario(sc, d)
+    ref = sc.moved(0.03, mp.offsets(m).handles[0])
+    np.testing.assert_allclose(back.handles[0].position(TIMES), ref.handles[0].position(TIMES))
+    np.testing.assert_allclose(back.frame_times, ref.frame_times)
+
+
+def test_a_tiny_fit_of_a_waved_capture_reports_the_moved_path_and_evaluate_scores_it_the_same(tmp_path, capsys):
+    """End to end on a capture whose corner is waved: a fit with uncertain handles writes each fitted
+    handle as the capture's whole path moved by its offset, and ``evaluate`` with that result scores
+    the training images as the fit did (the same moved path simulated again)."""
+    cap = tmp_path / "wave"
+    assert cli.main(["synth", "--out", str(cap), "--handling", "wave", "--resolution", "60x80"]) == 0
+    res = tmp_path / "fit.json"
+    args = ["--cameras", "n:2", "--times", "0.1,0.3,0.5,0.7"]
+    assert cli.main(["fit", str(cap), *args, "--max-evaluations", "30", "--uncertain", "handles=0.003",
+                     "--no-intervals", "--out", str(res)]) == 0  # fmt: skip
+    capsys.readouterr()
+    r = json.loads(res.read_text())
+    declared = load_capture(str(cap)).scenario.handles
+    for d, h in zip(r["handles"], declared):
+        assert d["times"] == h.times.tolist()
+        np.testing.assert_allclose(np.asarray(d["positions"]) - h.positions, np.tile(d["offset_m"], (len(h.times), 1)))
+    assert any(np.any(d["offset_m"]) for d in r["handles"]) and len(r["handles"][0]["times"]) > 10
+    assert cli.main(["evaluate", str(cap), "--params", str(res), *args]) == 0
+    ev = json.loads(capsys.readouterr().out)
+    assert abs(ev["silhouette_error_pct"] - r["best_E_sil_mean_pct"]) < 1e-6 * max(1.0, r["best_E_sil_mean_pct"])
