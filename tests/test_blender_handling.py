@@ -88,3 +88,20 @@ def test_replays_leave_no_hook_empties_behind(tmp_path):
     empties = [o for o in bpy.data.objects if o.type == "EMPTY" and o.name.startswith("clothfit_handle")]
     hooked = {m.object.name for m in obj.modifiers if m.type == "HOOK"}
     assert {o.name for o in empties} == hooked and len(hooked) == len(moving_handles(sc)) == 1
+
+
+@pytest.mark.parametrize("handling", ["wave", "lift", "apart"])
+def test_blenders_cloth_moves_like_the_core_blender_model_under_every_handling(handling):
+    """The hands' paths of every synthetic handling (the two-hand ones held with slack, hanging from an
+    edge) on Blender's own cloth: every vertex of every frame within 0.01 mm of the core's blender model,
+    as the still-corner cross-checks (tests/test_blender_cloth_model.py); the hands did move."""
+    from clothfit.blender import agreement
+    from clothfit.core.physics.scenario import Scenario
+
+    sc = handling_scenario(handling, grid=ClothGrid(9, 9, D.CLOTH_SIDE), frame_times=np.arange(1, 19) / FPS)
+    sc = Scenario(sc.grid, sc.handles, sc.frame_times, 0.5, sc.gravity)
+    for settings in ({}, dict(agreement.PRESETS["silk"])):
+        r = agreement.compare(bpy.context.scene, sc, settings)
+        assert r["max_mm"] < 0.01, (handling, settings, r)
+    moved = max(np.ptp(h.position(sc.frame_times), axis=0).max() for h in sc.handles)
+    assert moved > 0.01
