@@ -253,3 +253,23 @@ def test_a_tiny_fit_of_a_waved_capture_reports_the_moved_path_and_evaluate_score
     assert cli.main(["evaluate", str(cap), "--params", str(res), *args]) == 0
     ev = json.loads(capsys.readouterr().out)
     assert abs(ev["silhouette_error_pct"] - r["best_E_sil_mean_pct"]) < 1e-6 * max(1.0, r["best_E_sil_mean_pct"])
+
+
+def test_the_exported_script_says_which_pins_move_along_a_path(tmp_path, capsys):
+    """The script of ``export-blender-cloth --python`` sets Cloth settings only: for a fit whose
+    manipulation moves a pin along a path it says so in a comment, and says nothing of a pin held still."""
+    sc = handling_scenario("wave", frame_times=np.arange(1, 7) / FPS)
+    res = {
+        "model": {"name": "blender", "fps": FPS, "quality": 5, "bending_model": "ANGULAR"},
+        "blender_cloth": B.check_settings({"time_scale": B.physical_time_scale(FPS)}),
+        "blender_scene": {"fps": FPS},
+        "handles": [dict(h.to_dict(), offset_m=[0.0, 0.0, 0.0]) for h in sc.handles],
+    }
+    p = tmp_path / "r.json"
+    p.write_text(json.dumps(res))
+    assert cli.main(["export-blender-cloth", str(p), "--python"]) == 0
+    text = capsys.readouterr().out
+    waved = sc.grid.corners()[D.WAVE_CORNER]
+    moving = [line for line in text.splitlines() if "moves along a path" in line]
+    assert len(moving) == 1 and f"vertex {waved}:" in moving[0], moving
+    compile(text, "script", "exec")  # still a whole Python script

@@ -85,6 +85,13 @@ def _manipulation_comments(manip, near):
                 f"# pin at vertex {h['vertex']}: moved by {[round(v * 1000, 2) for v in h['offset_m']]} mm "
                 f"from the capture's measurement"
             )
+        times, pos = h.get("times") or [], h.get("positions") or []
+        if len(times) > 1 and len(pos) == len(times) and any(p != pos[0] for p in pos):
+            lines.append(
+                f"# pin at vertex {h['vertex']}: moves along a path ({len(times)} keys, {times[0]:g} to "
+                f"{times[-1]:g} s; the result's manipulation.handles): this script sets the settings only, so "
+                f"drive your cloth's pin along it (e.g. a Hook to a keyed empty, as Apply Blender Cloth does)"
+            )
     return lines
 
 
