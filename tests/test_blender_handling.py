@@ -105,3 +105,23 @@ def test_blenders_cloth_moves_like_the_core_blender_model_under_every_handling(h
         assert r["max_mm"] < 0.01, (handling, settings, r)
     moved = max(np.ptp(h.position(sc.frame_times), axis=0).max() for h in sc.handles)
     assert moved > 0.01
+
+
+def test_blender_agreement_runs_under_a_handling():
+    """``blender-agreement --handling lift``: the same comparison with the hands on the lift's paths
+    (the header says so); Blender's cloth and the core's agree to 0.01 mm. Without it, the scenario is
+    the one it always compared: four corners held, one released."""
+    from clothfit import cli
+    from clothfit.blender import agreement
+    from clothfit.core.physics.scenario import paper_scenario
+
+    lines = []
+    rows = agreement.run(7, 0.25, 0.5, FPS, cases=[("default", {})], echo=lines.append, handling="lift")
+    assert "lifted and lowered" in lines[0] and rows[0]["max_mm"] < 0.01
+    assert len(moving_handles(agreement.agreement_scenario(7, 0.25, 0.5, FPS, "lift"))) == 2
+    sc = agreement.agreement_scenario(7)
+    ref = paper_scenario(ClothGrid(7, 7, 0.10), frame_times=sc.frame_times)
+    assert sc.to_dict() == dict(ref.to_dict(), settle_time=1.0)
+    assert cli.build_parser().parse_args(["blender-agreement", "--handling", "wave"]).handling == "wave"
+    with pytest.raises(SystemExit):
+        cli.build_parser().parse_args(["blender-agreement", "--handling", "shake"])

@@ -1,6 +1,6 @@
 """The core's ``blender`` cloth model against Blender's own Cloth modifier, vertex by vertex.
 
-    clothfit blender-agreement [--grid 21] [--settle 1.0] [--after 1.5] [--fps 24] [--json FILE]
+    clothfit blender-agreement [--grid 21] [--settle 1.0] [--after 1.5] [--fps 24] [--handling release] [--json FILE]
 
 The same cloth (a 10 cm sheet, ``--grid`` x ``--grid`` vertices, hung from its four corners),
 pins, release (one corner let go after ``--settle`` seconds) and settings are simulated by the
@@ -8,7 +8,8 @@ core (``core.physics.blender_kernels``) and by Blender (``blender.cloth``: a mes
 network's edge order, pin group, Cloth modifier); every frame's vertices are compared. Prints
 the mean and max distance [mm] over every vertex of every frame per case: Blender's default
 cloth, its presets (silk: soft, little bending; cotton; denim; leather; rubber), the linear
-bending model, and qualities from 2 to 15. Needs the bpy module.
+bending model, and qualities from 2 to 15. ``--handling`` moves the hands along a synthetic handling's
+paths instead of releasing a corner (``physics.handling``). Needs the bpy module.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ import numpy as np
 from ..core.errors import ClothFitError
 from ..core.physics import blender as B
 from ..core.physics.blender_kernels import Prepared
+from ..core.physics.handling import handling_scenario
 from ..core.physics.models import BlenderModel
-from ..core.physics.scenario import ClothGrid, Scenario, paper_scenario
+from ..core.physics.scenario import ClothGrid, Scenario
 
 PRESETS = B.PRESETS
 
@@ -43,12 +45,15 @@ CASES = [
 ]
 
 
-def agreement_scenario(n: int = 21, settle: float = 1.0, after: float = 1.5, fps: float = 24.0) -> Scenario:
-    """A 10 cm sheet of ``n`` x ``n`` vertices hung from its corners; one corner released after
-    ``settle`` seconds; frame times every frame for ``after`` seconds."""
+def agreement_scenario(
+    n: int = 21, settle: float = 1.0, after: float = 1.5, fps: float = 24.0, handling: str = "release"
+) -> Scenario:
+    """A 10 cm sheet of ``n`` x ``n`` vertices settled for ``settle`` seconds, then handled for
+    ``after`` seconds (frame times every frame): by default hung from its corners and one corner
+    released; another of ``defaults.HANDLINGS`` moves the hands along paths (``physics.handling``)."""
     grid = ClothGrid(n, n, 0.10)
     times = np.arange(1, int(round(after * fps)) + 1) / fps
-    sc = paper_scenario(grid, frame_times=times)
+    sc = handling_scenario(handling, grid, times)
     return Scenario(sc.grid, sc.handles, sc.frame_times, settle, sc.gravity)
 
 
@@ -96,16 +101,24 @@ def compare(scene, scenario: Scenario, settings: dict, fps: float = 24.0, frame_
     }
 
 
-def run(n=21, settle=1.0, after=1.5, fps=24.0, cases=None, echo=print) -> list:
+HANDLING_TEXT = {
+    "release": "hung by its corners, {settle:g} s settle, one corner released, {after:g} s after",
+    "wave": "hung by its corners, {settle:g} s settle, one corner waved for {after:g} s",
+    "lift": "hanging from two hands, {settle:g} s settle, lifted and lowered for {after:g} s",
+    "apart": "hanging from two hands, {settle:g} s settle, the hands moving apart and back for {after:g} s",
+}
+
+
+def run(n=21, settle=1.0, after=1.5, fps=24.0, cases=None, echo=print, handling="release") -> list:
     import bpy
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
-    scenario = agreement_scenario(n, settle, after, fps)
+    scenario = agreement_scenario(n, settle, after, fps, handling)
     rows = []
     echo(
-        f"{n} x {n} sheet, 10 cm, hung by its corners, {settle:g} s settle, one corner released, {after:g} s "
-        f"after, {fps:g} fps: core blender model vs Blender {bpy.app.version_string}"
+        f"{n} x {n} sheet, 10 cm, {HANDLING_TEXT[handling].format(settle=settle, after=after)}, "
+        f"{fps:g} fps: core blender model vs Blender {bpy.app.version_string}"
     )
     echo(
         f"{'case':40s} {'q':>3s} {'mean mm':>9s} {'max mm':>9s} {'equal frames':>13s} {'core s':>7s} {'Blender s':>9s}"

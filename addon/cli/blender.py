@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..core import defaults as D
 from ..core.errors import ClothFitError
 from .common import _command, force_arg, refuse_existing
 
@@ -28,7 +29,8 @@ def cmd_blender_agreement(a):
         "after_s": a.after,
         "fps": a.fps,
         "blender": bpy.app.version_string,
-        "cases": agreement.run(a.grid, a.settle, a.after, a.fps),
+        "handling": a.handling,
+        "cases": agreement.run(a.grid, a.settle, a.after, a.fps, handling=a.handling),
     }
     if a.json:
         from ..core.safeio import atomic_json
@@ -66,11 +68,19 @@ def register(sub):
         "--settle",
         type=float,
         default=1.0,
-        help="seconds hung by four corners before the release (default: %(default)s)",
+        help="seconds of settling before t = 0: hung by four corners (hanging from two hands for --handling lift "
+        "and apart) (default: %(default)s)",
     )
     s.add_argument(
         "--after", type=float, default=1.5, help="seconds simulated after the release (default: %(default)s)"
     )
     s.add_argument("--fps", type=float, default=24.0, help="scene frame rate [frames/s] (default: %(default)s)")
+    s.add_argument(
+        "--handling",
+        choices=D.HANDLINGS,
+        default="release",
+        help="release: one corner let go after the settle; wave, lift, apart: the hands move along the paths "
+        "of synth --handling instead (default: %(default)s)",
+    )
     s.add_argument("--json", help="also write every figure to this file")
     force_arg(s, "--json")
