@@ -118,6 +118,17 @@ def _checkpoint_summary(ck):
 
 
 def fit_config(a, cap):
+    """The FitConfig of ``fit`` and ``fit-many`` (``cap``: a capture, or the takes of a fit of several: each
+    take's cameras and times chosen in it)."""
+    if isinstance(cap, (list, tuple)):
+        cfg = _fit_config(a, cap[0])
+        cfg.train_cameras = [_cams(c, a.cameras) for c in cap]
+        cfg.train_times = [_times(a.times, c) for c in cap]
+        return cfg
+    return _fit_config(a, cap)
+
+
+def _fit_config(a, cap):
     """The FitConfig of ``fit`` and ``fit-many`` from their parsed options (one rule for both; not yet
     checked: ``fit`` adds its backend first). An option the command does not declare keeps FitConfig's
     default. ``--max-evaluations``: not given = D.FIT_EVALUATIONS; any number given is the budget as it
@@ -126,7 +137,7 @@ def fit_config(a, cap):
 
     kw = dict(
         train_cameras=_cams(cap, a.cameras),
-        train_times=_times(a.times),
+        train_times=_times(a.times, cap),
         optimizer=a.optimizer,
         seed=a.seed,
         max_evaluations=D.FIT_EVALUATIONS if a.max_evaluations is None else a.max_evaluations,
@@ -191,9 +202,11 @@ def cmd_fit(a):
             raise ClothFitError(f"{what} {path} is a directory: give a file name")
     if not a.resume and not a.force and os.path.lexists(a.out) and not os.path.lexists(ck):
         raise ClothFitError(f"--out {a.out} exists (its checkpoint {ck} is gone): --force overwrites it")
-    cap = load_capture(a.capture)
-    _refuse_overwriting_inputs(a.out, cap, "--out")
-    _refuse_overwriting_inputs(ck, cap, "--checkpoint")
+    caps = [load_capture(c) for c in a.captures]
+    for c in caps:
+        _refuse_overwriting_inputs(a.out, c, "--out")
+        _refuse_overwriting_inputs(ck, c, "--checkpoint")
+    cap = caps[0] if len(caps) == 1 else caps
     cfg = fit_config(a, cap)
     for k, v in _backend_args(a).items():
         setattr(cfg, k, v)
@@ -228,6 +241,8 @@ def cmd_fit(a):
             raise
         if getattr(job.par, "fps_source", None):  # a blender-model fit: the scene frame rate its settings are for
             print(f"frame rate {job.par.model.fps:g} fps ({job.par.fps_source})", file=sys.stderr)
+            for t in job.takes[1:]:
+                print(f"  take {t.name}: {t.fps:g} fps ({t.fps_source})", file=sys.stderr)
         bar = fit_progress(job, a.quiet)
         try:
             job.run(callback=bar)
@@ -282,6 +297,28 @@ def cmd_fit(a):
     return summary
 
 
+def _manipulation_report(r, pad=""):
+    """The fitted manipulation's lines for people (stderr), each after ``pad``."""
+    if "time_offset_s" in r or r.get("manipulation_note"):
+        t = r.get("time_offset_s")
+        u = r.get("time_offset_uncertainty_s")
+        flat = set(r.get("not_separated") or [])  # kept for the replay, not measurements
+        if t is not None:
+            tail = " (not separated)" if "time_offset_s" in flat else f" (+-{1000 * u:.1f} ms)" if u else ""
+            print(f"{pad}time offset {1000 * t:+.1f} ms{tail}", file=sys.stderr)
+        for k, h in enumerate(r.get("handles") or []):
+            if h.get("offset_bound_m"):
+                loose = [f"handle{k}_{ax}" in flat for ax in "xyz"]
+                shown = [f"{1000 * v:+.2f}" + ("?" if q else "") for v, q in zip(h["offset_m"], loose)]
+                print(
+                    f"{pad}handle {k} (vertex {h['vertex']}) moved by {', '.join(shown)} mm"
+                    + (" (?: not separated)" if any(loose) else ""),
+                    file=sys.stderr,
+                )
+        if r.get("manipulation_note"):
+            print(f"{pad}note: {r['manipulation_note']}", file=sys.stderr)
+
+
 def _fit_report(r):
     """The result's lines for people (stderr): quality chosen, manipulation, the floor, its warning and
     the verdict."""
@@ -291,24 +328,18 @@ def _fit_report(r):
         print(f"quality {qc['chosen']} ({qc['rule']}; tried {tried})", file=sys.stderr)
         if qc.get("advice"):
             print(f"note: {qc['advice']}", file=sys.stderr)
-    if "time_offset_s" in r or r.get("manipulation_note"):
-        t = r.get("time_offset_s")
-        u = r.get("time_offset_uncertainty_s")
-        flat = set(r.get("not_separated") or [])  # kept for the replay, not measurements
-        if t is not None:
-            tail = " (not separated)" if "time_offset_s" in flat else f" (+-{1000 * u:.1f} ms)" if u else ""
-            print(f"time offset {1000 * t:+.1f} ms{tail}", file=sys.stderr)
-        for k, h in enumerate(r.get("handles") or []):
-            if h.get("offset_bound_m"):
-                loose = [f"handle{k}_{ax}" in flat for ax in "xyz"]
-                shown = [f"{1000 * v:+.2f}" + ("?" if q else "") for v, q in zip(h["offset_m"], loose)]
-                print(
-                    f"handle {k} (vertex {h['vertex']}) moved by {', '.join(shown)} mm"
-                    + (" (?: not separated)" if any(loose) else ""),
-                    file=sys.stderr,
-                )
-        if r.get("manipulation_note"):
-            print(f"note: {r['manipulation_note']}", file=sys.stderr)
+    _manipulation_report(r)
+    for e in r.get("takes") or []:  # several takes: each take's own errors, verdict and manipulation
+        fl = e.get("floor") or {}
+        line = f"take {e['take']}"
+        if fl.get("train_floor_pct") is not None:
+            line += f": training {fl['train_E_sil_pct']:.3f} % (floor {fl['train_floor_pct']:.3f} %)"
+        if fl.get("heldout_E_sil_pct") is not None:
+            line += f", held-out {fl['heldout_E_sil_pct']:.3f} % (floor {fl['heldout_floor_pct']:.3f} %)"
+        print(line, file=sys.stderr)
+        _manipulation_report(e, "  ")
+        if e.get("verdict"):
+            print(f"  verdict: {e['verdict']}", file=sys.stderr)
     for k, line in enumerate(interval_lines(r)):
         print(line if k == 0 else f"  {line}", file=sys.stderr)
     fl = r.get("floor") or {}
@@ -379,7 +410,7 @@ def cmd_evaluate(a):
     refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
     params = _params(a, _capture_truth(cap))
-    r = evaluate(cap, params, cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
+    r = evaluate(cap, params, cameras=_cams(cap, a.cameras), times=_times(a.times, cap), resolution=_res(a.resolution))
     if r["exploded"]:
         raise ClothFitError(f"the {r['model']['name']} model with these parameters explodes: no silhouette to score")
     s = f"silhouette error {r['silhouette_error_pct']:.3f} % over {len(r['cameras'])} cameras x {len(r['times'])} frames"
@@ -422,7 +453,7 @@ def cmd_floor(a):
 
     refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
-    cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times), _res(a.resolution))
+    cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times, cap), _res(a.resolution))
     d = cf.to_dict()
     print(
         f"noise floor {100 * d['floor']:.3f} % E_sil per image (median {100 * d['floor_median']:.3f} %; "
@@ -447,7 +478,7 @@ def cmd_overlay(a):
         from ..core.footage.extract import footage_images
 
         images = footage_images(cap)
-    cams, times = _cams(cap, a.cameras), _times(a.times)
+    cams, times = _cams(cap, a.cameras), _times(a.times, cap)
     floors = None
     if a.floor:
         floors = _capture_floor(cap, cams, times, None).per_image()
@@ -511,7 +542,13 @@ def _add_fit(sub):
         "fit the model to a capture",
         "a summary of the fit as JSON (params, errors, evaluations, stop_reason, out); the whole result is in --out",
     )
-    s.add_argument("capture", help="capture folder (capture.json, cameras.json, silhouettes)")
+    s.add_argument(
+        "captures",
+        nargs="+",
+        metavar="TAKE",
+        help="capture folder (capture.json, cameras.json, silhouettes); several: takes of one cloth, fitted "
+        "together (one set of settings; each take its own cameras, frame rate and manipulation's unknowns)",
+    )
     s.add_argument("--out", default="out/fit.json", help="result JSON to write (default: %(default)s)")
     _selection_args(s, "fit")
     _search_args(s)

@@ -1,4 +1,9 @@
-"""Scores of a parameter set on a capture: silhouette error per image, shape error where known."""
+"""Scores of a parameter set on a capture: silhouette error per image, shape error where known.
+
+A fit's result scores any take of the cloth (``for_take``): a take the fit saw with the manipulation it fitted
+there (its time offset, its handles' offsets); a take it never saw with that take's own declared handles and
+release, the fitted settings, and the take's own frame rate (Blender's cloth: its real-time Speed Multiplier,
+the same cloth in physical time)."""
 
 from __future__ import annotations
 
@@ -8,11 +13,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import ClothFitError
+from ..observation.frame_rate import frame_rate_from_times
 from ..observation.metrics import shape_error_mm
-from ..physics.models import model_and_row
+from ..physics.models import BlenderModel, model_and_row
 from ..physics.scenario import fitted_scenario
+from .checkpoint import capture_hash
 from .job import load_observed
 from .objective import SilhouetteObjective
+from .takes import time_scaled
 
 if TYPE_CHECKING:
     from ..observation.capture import Capture
@@ -31,7 +39,11 @@ def evaluate(
     result (its model is used), paper m, k, l, d, or ClothSettings values (the capture's model).
     Pixels the capture marks as unknown (ignore masks / ignore labels) are left out of the error
     (``objective``)."""
+    params, manipulation, fps = for_take(capture, params)
     model, row = model_and_row(params, getattr(capture, "model", None))
+    if isinstance(model, BlenderModel) and fps is not None and abs(fps - model.fps) > 1e-9 * fps:
+        row = time_scaled(row[None], model.fps / fps)[0]
+        model = BlenderModel(fps, model.quality, model.bending_model)
     cams = list(range(len(capture.cameras))) if cameras is None else [int(c) for c in cameras]
     if not cams:
         raise ClothFitError("evaluate: no camera selected")
@@ -46,6 +58,7 @@ def evaluate(
         "model": model.to_dict(),
         "cameras": [capture.cameras[c].name for c in cams],
         "times": tt,
+        "manipulation": manipulation,
         "exploded": bool(exploded[0]),
         "silhouette_error_pct": float(100 * esil[0].mean()),
         "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
@@ -61,3 +74,35 @@ def evaluate(
         out["shape_error_mm"] = float(se.mean())
         out["shape_error_mm_per_time"] = se.tolist()
     return out
+
+
+UNSEEN = (
+    "declared: a take the fit never saw (its own handles and release, the fitted settings; its unknowns not fitted)"
+)
+MANIPULATION_KEYS = ("time_offset_s", "handles")
+
+
+def capture_rate(capture: Capture) -> float | None:
+    """A capture's frame rate: its model's, else read from its frame times (None when they do not say)."""
+    m = getattr(capture, "model", None)
+    if isinstance(m, dict) and m.get("fps"):
+        return float(m["fps"])
+    return frame_rate_from_times(capture.frame_times)[0]
+
+
+def for_take(capture: Capture, params: Any) -> tuple[Any, str, float | None]:
+    """(the parameters to replay on ``capture``, how its manipulation is read, the frame rate to simulate it at
+    or None for the parameters' own). A fit's result (of one take or several) replays a take it fitted with the
+    manipulation it fitted there at that take's rate; any other take with the take's own declared manipulation
+    at the take's own rate. Anything else (bare settings, paper m, k, l, d) is replayed as it is."""
+    if not isinstance(params, dict) or "capture_hash" not in params:
+        return params, "declared", None
+    h = capture_hash(capture)
+    base = {k: v for k, v in params.items() if k not in MANIPULATION_KEYS and k != "takes"}
+    for e in params.get("takes") or []:
+        if isinstance(e, dict) and e.get("capture_hash") == h:
+            base.update({k: e[k] for k in MANIPULATION_KEYS if k in e})
+            return base, f"fitted: take {e.get('take')} of the fit", e.get("fps")
+    if not params.get("takes") and params["capture_hash"] == h:
+        return params, "fitted" if any(k in params for k in MANIPULATION_KEYS) else "declared", None
+    return base, UNSEEN, capture_rate(capture)
