@@ -417,6 +417,7 @@ def cmd_evaluate(a):
     if "shape_error_mm" in r:
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
     print(s)
+    print(f"manipulation: {r['manipulation']}", file=sys.stderr)
     if isinstance(params, dict) and params.get("floor"):  # a fit's result: its own verdict beside the new errors
         from ..core.fitting.verdict import verdict
 
@@ -482,7 +483,10 @@ def cmd_overlay(a):
     floors = None
     if a.floor:
         floors = _capture_floor(cap, cams, times, None).per_image()
-    params = _params(a, _capture_truth(cap))
+    from ..core.fitting.evaluate import for_take
+
+    params, how = for_take(cap, _params(a, _capture_truth(cap)))
+    print(f"manipulation: {how}", file=sys.stderr)
     paths = capture_overlays(
         cap, params, a.out, cameras=cams, times=times, images=images, floors=floors, legend=interval_lines(params)
     )

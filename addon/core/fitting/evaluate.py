@@ -15,12 +15,11 @@ import numpy as np
 from ..errors import ClothFitError
 from ..observation.frame_rate import frame_rate_from_times
 from ..observation.metrics import shape_error_mm
-from ..physics.models import BlenderModel, model_and_row
+from ..physics.models import model_and_row
 from ..physics.scenario import fitted_scenario
 from .checkpoint import capture_hash
 from .job import load_observed
 from .objective import SilhouetteObjective
-from .takes import time_scaled
 
 if TYPE_CHECKING:
     from ..observation.capture import Capture
@@ -39,11 +38,8 @@ def evaluate(
     result (its model is used), paper m, k, l, d, or ClothSettings values (the capture's model).
     Pixels the capture marks as unknown (ignore masks / ignore labels) are left out of the error
     (``objective``)."""
-    params, manipulation, fps = for_take(capture, params)
+    params, manipulation = for_take(capture, params)
     model, row = model_and_row(params, getattr(capture, "model", None))
-    if isinstance(model, BlenderModel) and fps is not None and abs(fps - model.fps) > 1e-9 * fps:
-        row = time_scaled(row[None], model.fps / fps)[0]
-        model = BlenderModel(fps, model.quality, model.bending_model)
     cams = list(range(len(capture.cameras))) if cameras is None else [int(c) for c in cameras]
     if not cams:
         raise ClothFitError("evaluate: no camera selected")
@@ -90,19 +86,35 @@ def capture_rate(capture: Capture) -> float | None:
     return frame_rate_from_times(capture.frame_times)[0]
 
 
-def for_take(capture: Capture, params: Any) -> tuple[Any, str, float | None]:
-    """(the parameters to replay on ``capture``, how its manipulation is read, the frame rate to simulate it at
-    or None for the parameters' own). A fit's result (of one take or several) replays a take it fitted with the
-    manipulation it fitted there at that take's rate; any other take with the take's own declared manipulation
-    at the take's own rate. Anything else (bare settings, paper m, k, l, d) is replayed as it is."""
+def for_take(capture: Capture, params: Any) -> tuple[Any, str]:
+    """(the parameters that replay ``params`` on ``capture``, how its manipulation is read). A fit's result (of
+    one take or several) replays a take it fitted with the manipulation it fitted there, at that take's frame
+    rate; any other take with the take's own declared manipulation, at the take's own frame rate (Blender's
+    cloth: the Speed Multiplier scaled with it, the same cloth in physical time). Anything else (bare settings,
+    paper m, k, l, d) is replayed as it is."""
     if not isinstance(params, dict) or "capture_hash" not in params:
-        return params, "declared", None
+        return params, "declared"
     h = capture_hash(capture)
     base = {k: v for k, v in params.items() if k not in MANIPULATION_KEYS and k != "takes"}
     for e in params.get("takes") or []:
         if isinstance(e, dict) and e.get("capture_hash") == h:
             base.update({k: e[k] for k in MANIPULATION_KEYS if k in e})
-            return base, f"fitted: take {e.get('take')} of the fit", e.get("fps")
+            return at_rate(base, e.get("fps")), f"fitted: take {e.get('take')} of the fit"
     if not params.get("takes") and params["capture_hash"] == h:
-        return params, "fitted" if any(k in params for k in MANIPULATION_KEYS) else "declared", None
-    return base, UNSEEN, capture_rate(capture)
+        return params, "fitted" if any(k in params for k in MANIPULATION_KEYS) else "declared"
+    return at_rate(base, capture_rate(capture)), UNSEEN
+
+
+def at_rate(params: dict, fps: float | None) -> dict:
+    """A Blender-cloth result moved to a scene at ``fps`` (its Speed Multiplier times its own rate over ``fps``:
+    the same cloth in physical time); as it is for another model, no rate, or its own rate."""
+    bc, scene = params.get("blender_cloth"), params.get("blender_scene") or {}
+    own = scene.get("fps")
+    if not isinstance(bc, dict) or not fps or not own or abs(float(own) - fps) <= 1e-9 * fps:
+        return params
+    out = dict(params, blender_scene=dict(scene, fps=float(fps)))
+    if "time_scale" in bc:
+        out["blender_cloth"] = dict(bc, time_scale=float(bc["time_scale"]) * float(own) / fps)
+    if isinstance(params.get("model"), dict):
+        out["model"] = dict(params["model"], fps=float(fps))
+    return out
