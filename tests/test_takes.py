@@ -196,3 +196,28 @@ def test_the_command_line_fits_two_takes_and_scores_each(takes, tmp_path):
     )
     assert ev.returncode == 0, ev.stderr
     assert json.load(open(tmp_path / "ev.json"))["manipulation"] == "fitted: take two_corners of the fit"
+
+
+def test_an_unseen_takes_declared_unknowns_are_fitted_with_the_settings_held_when_asked(takes, tmp_path):
+    import shutil
+
+    from clothfit.core.fitting.evaluate import FITTED_HERE
+    from clothfit.core.observation.capture import load_capture
+
+    one, two = takes
+    late = tmp_path / "late_clock"
+    shutil.copytree(two.root, late)
+    d = json.load(open(late / "capture.json"))
+    for h in d["scenario"]["handles"]:  # the clock read 25 ms late: the release declared after it happened
+        if h.get("release_time") is not None:
+            h["release_time"] = 0.025
+    d["uncertain"] = {"time_offset": 0.04, "handles": 0.0}
+    json.dump(d, open(late / "capture.json", "w"))
+    cap = load_capture(str(late))
+    res = FitJob([one], _cfg(max_evaluations=30)).run().to_json()
+    plain = evaluate(cap, res, cameras=[1, 3, 5])
+    fitted = evaluate(cap, res, cameras=[1, 3, 5], fit_unknowns=60)
+    assert plain["manipulation"] == UNSEEN and plain["time_offset_s"] is None
+    assert fitted["manipulation"] == FITTED_HERE
+    assert fitted["silhouette_error_pct"] <= plain["silhouette_error_pct"]
+    assert fitted["time_offset_s"] != 0.0

@@ -410,7 +410,14 @@ def cmd_evaluate(a):
     refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
     params = _params(a, _capture_truth(cap))
-    r = evaluate(cap, params, cameras=_cams(cap, a.cameras), times=_times(a.times, cap), resolution=_res(a.resolution))
+    r = evaluate(
+        cap,
+        params,
+        cameras=_cams(cap, a.cameras),
+        times=_times(a.times, cap),
+        resolution=_res(a.resolution),
+        fit_unknowns=a.fit_unknowns,
+    )
     if r["exploded"]:
         raise ClothFitError(f"the {r['model']['name']} model with these parameters explodes: no silhouette to score")
     s = f"silhouette error {r['silhouette_error_pct']:.3f} % over {len(r['cameras'])} cameras x {len(r['times'])} frames"
@@ -685,6 +692,17 @@ def _add_scoring(sub):
     )
     _selection_args(s, "score")
     s.add_argument("--resolution", help="score at HxW [px] (default: the capture's)")
+    s.add_argument(
+        "--fit-unknowns",
+        type=int,
+        nargs="?",
+        const=D.HELD_UNKNOWNS_EVALUATIONS,
+        default=0,
+        metavar="N",
+        help="a take the result never saw: fit the unknowns its capture declares (time offset, handle offsets) on "
+        f"the images scored, the settings held, in N evaluations (default N: {D.HELD_UNKNOWNS_EVALUATIONS}; "
+        "without the option: its declared manipulation as it is)",
+    )
     s.add_argument("--json", help="also write the result to this file")
     force_arg(s, "--json")
 

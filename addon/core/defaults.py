@@ -287,3 +287,8 @@ INTERVAL_UNDETERMINED_FACTOR = 3.0  # an interval wider than this factor, or rea
 INTERVAL_UNDETERMINED_SHARE = 0.5  # a setting on a linear scale: an interval over half its search range
 INTERVAL_MIN_IMAGES = 2  # training images below which no interval is estimated
 INTERVAL_BUDGET_FACTOR = 3  # intervals only where the budget is at least this many times what they need
+
+# evaluate --fit-unknowns: a take a fit never saw has its declared unknowns (time offset, handle offsets) fitted with
+# the settings held, CMA-ES over the unknowns alone (docs/takes.md, "Hold one take out")
+HELD_UNKNOWNS_EVALUATIONS = 150  # its budget when --fit-unknowns is given without a number
+HELD_UNKNOWNS_SIGMA = 0.25  # its first step, in the unit cube of the declared bounds

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .. import defaults as D
 from ..errors import ClothFitError
 from ..observation.frame_rate import frame_rate_from_times
 from ..observation.metrics import shape_error_mm
@@ -20,6 +21,9 @@ from ..physics.scenario import fitted_scenario
 from .checkpoint import capture_hash
 from .job import load_observed
 from .objective import SilhouetteObjective
+from .optimise import make_optimizer
+from .parameters import ManipulationParameters
+from .space import SearchSpace
 
 if TYPE_CHECKING:
     from ..observation.capture import Capture
@@ -32,12 +36,15 @@ def evaluate(
     times: Iterable[float] | None = None,
     resolution: Sequence[int] | None = None,
     backend: str = "auto",
+    fit_unknowns: int = 0,
 ) -> dict:
     """Mean ``E_sil x 100`` over the images of ``cameras`` (indices) at ``times`` and, if the capture
     has ground-truth shapes, the mean vertex distance [mm] per shape and overall. ``params``: a fit
     result (its model is used), paper m, k, l, d, or ClothSettings values (the capture's model).
     Pixels the capture marks as unknown (ignore masks / ignore labels) are left out of the error
-    (``objective``)."""
+    (``objective``). ``fit_unknowns``: a take the result never saw has the unknowns its capture declares
+    (``uncertain``) fitted on these same images with the settings held, in that many evaluations
+    (``held_unknowns``; 0: its declared manipulation as it is)."""
     params, manipulation = for_take(capture, params)
     model, row = model_and_row(params, getattr(capture, "model", None))
     cams = list(range(len(capture.cameras))) if cameras is None else [int(c) for c in cameras]
@@ -46,8 +53,13 @@ def evaluate(
     times = list(capture.frame_times) if times is None else list(times)
     fidx = [capture.frame_index(t) for t in times]
     tt = [float(capture.frame_times[i]) for i in fidx]
-    sc = fitted_scenario(capture.scenario.with_frames(tt), params)  # a result's estimated manipulation
     camobjs, observed, ignore = load_observed(capture, cams, fidx, resolution)
+    if fit_unknowns and manipulation == UNSEEN:
+        unknowns = held_unknowns(capture, model, row, camobjs, observed, ignore, tt, backend, fit_unknowns)
+        if unknowns is not None:
+            params = dict(params, **unknowns)
+            manipulation = FITTED_HERE
+    sc = fitted_scenario(capture.scenario.with_frames(tt), params)  # a result's estimated manipulation
     obj = SilhouetteObjective(sc, camobjs, observed, backend=backend, model=model, ignore=ignore)
     esil, exploded = obj.per_image(row[None])
     out = {
@@ -55,6 +67,7 @@ def evaluate(
         "cameras": [capture.cameras[c].name for c in cams],
         "times": tt,
         "manipulation": manipulation,
+        "time_offset_s": params.get("time_offset_s") if isinstance(params, dict) else None,
         "exploded": bool(exploded[0]),
         "silhouette_error_pct": float(100 * esil[0].mean()),
         "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
@@ -75,7 +88,47 @@ def evaluate(
 UNSEEN = (
     "declared: a take the fit never saw (its own handles and release, the fitted settings; its unknowns not fitted)"
 )
+FITTED_HERE = (
+    "fitted here: a take the fit never saw, its declared unknowns fitted on these same images with the settings "
+    "held (an optimistic score: score other cameras or frames for a fair one)"
+)
 MANIPULATION_KEYS = ("time_offset_s", "handles")
+
+
+def held_unknowns(
+    capture: Capture,
+    model: Any,
+    row: np.ndarray,
+    cameras: Sequence[Any],
+    observed: Sequence[Sequence[np.ndarray]],
+    ignore: Sequence[Sequence[np.ndarray | None]],
+    times: Sequence[float],
+    backend: str,
+    budget: int,
+    seed: int = 0,
+) -> dict | None:
+    """The manipulation's unknowns ``capture`` declares (``uncertain``: time offset, handle offsets), fitted
+    on the given images with the parameter ``row`` held (CMA-ES over the unknowns alone, ``budget``
+    evaluations): ``{"time_offset_s", "handles"}`` as a result holds them, or None when it declares none."""
+    if capture.uncertain is None or not capture.uncertain.active:
+        return None
+    sc = capture.scenario.with_frames(list(times))
+    manip = ManipulationParameters(capture.uncertain, sc)
+    obj = SilhouetteObjective(sc, cameras, observed, backend=backend, model=model, ignore=ignore)
+    space = SearchSpace(manip.names, manip.bounds, {n: False for n in manip.names})
+
+    def score(M):
+        return obj(np.repeat(np.asarray(row)[None], len(M), 0), offsets=manip.offsets(M))
+
+    best_m, best_f = np.zeros(manip.n), float(score(np.zeros((1, manip.n)))[0])  # as declared: never worse
+    opt = make_optimizer("cma-es", space, seed, initial=[best_m], sigma0=D.HELD_UNKNOWNS_SIGMA, restarts=0)
+    while opt.evaluations + 1 < budget and not opt.stopped:
+        M = opt.ask()
+        opt.tell(M, score(M))
+    if opt.best_x is not None and opt.best_f < best_f:
+        best_m = np.asarray(opt.best_x, dtype=np.float64)
+    d = manip.describe(best_m, capture.scenario)
+    return {"time_offset_s": d["time_offset_s"], "handles": d["handles"]}
 
 
 def capture_rate(capture: Capture) -> float | None:
