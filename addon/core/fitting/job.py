@@ -14,6 +14,9 @@ The checkpoint (what the job is a fit of, its optimiser and stages; resumed only
 is ``checkpoint.py``'s; the result (``FitResult``) is ``result.py``'s; the configuration (``FitConfig``) is
 ``config.py``'s.
 
+A fit is of one take (a capture) or of several takes of one cloth (``takes.py``): one set of settings shared
+by every take, each take its own cameras, frames, frame rate and manipulation's unknowns.
+
 The model is the paper's sheet (default) or Blender's cloth (``FitConfig.model``); what is searched
 for each lives in ``parameters.py``. Identifiability (SPEC 2): the motion depends on ratios to the
 mass only, so the job fixes the mass from the cloth mass (``FitConfig.cloth_mass``, else the
