@@ -221,3 +221,9 @@ def test_an_unseen_takes_declared_unknowns_are_fitted_with_the_settings_held_whe
     assert fitted["manipulation"] == FITTED_HERE
     assert fitted["silhouette_error_pct"] <= plain["silhouette_error_pct"]
     assert fitted["time_offset_s"] != 0.0
+
+
+def test_no_selection_means_every_camera_and_frame_of_every_take(takes):
+    job = FitJob(list(takes), _cfg(train_cameras=[None, [1, 3]], train_times=[None, None]))
+    assert job.takes[0].train_cameras == list(range(8)) and job.takes[1].train_cameras == [1, 3]
+    assert [len(t.train_times) for t in job.takes] == [6, 7]

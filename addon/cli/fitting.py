@@ -122,8 +122,9 @@ def fit_config(a, cap):
     take's cameras and times chosen in it)."""
     if isinstance(cap, (list, tuple)):
         cfg = _fit_config(a, cap[0])
-        cfg.train_cameras = [_cams(c, a.cameras) for c in cap]
-        cfg.train_times = [_times(a.times, c) for c in cap]
+        cams, times = [_cams(c, a.cameras) for c in cap], [_times(a.times, c) for c in cap]
+        cfg.train_cameras = None if all(c is None for c in cams) else cams
+        cfg.train_times = None if all(t is None for t in times) else times
         return cfg
     return _fit_config(a, cap)
 

@@ -142,7 +142,8 @@ class FitConfig:
                 raise ClothFitError(f"fit config: {name} must be a finite number in [{lo}, {hi}], got {v!r}")
 
         def per_take(v):  # a list per take (several takes), or one list for every take
-            return list(v) if isinstance(v, (list, tuple)) and any(isinstance(x, (list, tuple)) for x in v) else [v]
+            nested = isinstance(v, (list, tuple)) and any(x is None or isinstance(x, (list, tuple)) for x in v)
+            return list(v) if nested else [v]
 
         def intlist(name):
             for v in per_take(getattr(self, name)):

@@ -42,7 +42,7 @@ TAKE_SEP = ":"  # between a take's name and its unknown's: "one_corner:time_offs
 def selection(value: Any, k: int, n_takes: int, what: str) -> list | None:
     """Take ``k``'s share of a config's ``train_cameras`` or ``train_times``: a list per take (a list of lists,
     one per take), or one list (or None) for every take."""
-    if value is None or not any(isinstance(v, (list, tuple)) for v in value):
+    if value is None or not any(v is None or isinstance(v, (list, tuple)) for v in value):
         return None if value is None else list(value)
     if len(value) != n_takes or not all(v is None or isinstance(v, (list, tuple)) for v in value):
         raise ClothFitError(f"fit config: {what} must be one list, or one list per take ({n_takes}), got {value!r}")
