@@ -74,6 +74,7 @@ from .takes import (
     Take,
     TakesManipulation,
     TakesObjective,
+    candidate_errors,
     combined_hash,
     manipulation_result,
     selection,
@@ -448,12 +449,7 @@ class FitJob:
 
     def evaluate(self, X: ArrayLike, objective: SilhouetteObjective | None = None) -> np.ndarray:
         """Training error (sum of E_sil over the training images) of candidates ``X`` (search space)."""
-        obj = objective or self.objective
-        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-        rows = self.par.rows(X[:, : self.npar])
-        if self.manip is None:
-            return obj(rows)
-        return obj(rows, offsets=self.manip.offsets(X[:, self.npar :]))
+        return candidate_errors(self, X, objective)
 
     # ---------------------------------------------------------------- state
     @property

@@ -278,12 +278,18 @@ class TakeView:
         return self.job.take_objective(self.k, quality)
 
     def evaluate(self, X: ArrayLike, objective: SilhouetteObjective | None = None) -> np.ndarray:
-        obj = objective or self.objective
-        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-        rows = self.par.rows(X[:, : self.npar])
-        if self.manip is None:
-            return obj(rows)
-        return obj(rows, offsets=self.manip.offsets(X[:, self.npar :]))
+        return candidate_errors(self, X, objective)
+
+
+def candidate_errors(fit: Any, X: ArrayLike, objective: Any = None) -> np.ndarray:
+    """The training error of candidates ``X`` (``fit``'s search space: settings, then the manipulation's
+    unknowns) by ``objective`` (default ``fit.objective``): ``fit`` is a ``FitJob`` or a ``TakeView``."""
+    obj = objective or fit.objective
+    X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+    rows = fit.par.rows(X[:, : fit.npar])
+    if fit.manip is None:
+        return obj(rows)
+    return obj(rows, offsets=fit.manip.offsets(X[:, fit.npar :]))
 
 
 def manipulation_result(fit: Any) -> dict:
