@@ -737,7 +737,7 @@ def _add_scoring(sub):
         "--floor",
         action="store_true",
         help="estimate each image's noise floor (see the floor command), frame the contact sheet's tiles "
-        "by E_sil / floor (green at it, amber above, red more than 3x) and write floor_sheet.png",
+        "by E_sil / floor (green at it, amber above, red more than 2x) and write floor_sheet.png",
     )
 
     s = _command(
