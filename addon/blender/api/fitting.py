@@ -298,19 +298,15 @@ def apply_fit(scene, result=None):
 def take_settings(res: FitResult, entry: dict | None):
     """(BlenderModel, ClothSettings values) of a Blender-model fit for one of its takes (``entry``, an item of
     its ``takes``; None: the fit's own): the same cloth at the take's frame rate, its Speed Multiplier scaled
-    as the fit scaled it for that take (``core.fitting.takes.time_scaled``). A paper-model fit is an error."""
-    from ...core.fitting.takes import time_scaled
-    from ...core.physics.models import BlenderModel
+    as the fit scaled it for that take (``core.fitting.evaluate.at_rate``). A paper-model fit is an error."""
+    from ...core.fitting.evaluate import at_rate
+    from ...core.physics.models import BlenderModel, model_and_row
 
-    model, row = res.replay()
+    model, row = model_and_row(at_rate(dict(res), (entry or {}).get("fps")))
     if not isinstance(model, BlenderModel):
         raise ClothFitError(
             "the fit result is a paper-model fit: it has no Blender cloth settings (fit with the Blender Cloth model)"
         )
-    fps = float((entry or {}).get("fps") or model.fps)
-    if abs(fps - model.fps) > 1e-9 * fps:
-        row = time_scaled(row[None], model.fps / fps)[0]
-        model = BlenderModel(fps, model.quality, model.bending_model)
     return model, model.settings(row)
 
 
