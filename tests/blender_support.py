@@ -83,3 +83,54 @@ def run_error(op, **kw):
     assert "Traceback" not in msg, msg
     assert msg.startswith("Error: "), msg
     return msg
+
+
+ICONS = {i.identifier for i in bpy.types.UILayout.bl_rna.functions["prop"].parameters["icon"].enum_items}
+
+
+class FakeLayout:
+    """Records what a panel draws; checks every property, operator, list and icon it names exists."""
+
+    def __init__(self, log):
+        self.log = log
+        self.use_property_split = False
+        self.enabled = True
+
+    @staticmethod
+    def _icon(kw):
+        assert kw.get("icon", "NONE") in ICONS, kw["icon"]
+
+    def prop(self, data, name, **kw):
+        assert name in data.bl_rna.properties, name
+        self._icon(kw)
+        self.log.append(("prop", name))
+
+    def operator(self, idname, **kw):
+        mod, op = idname.split(".")
+        getattr(getattr(bpy.ops, mod), op).get_rna_type()
+        self._icon(kw)
+        self.log.append(("operator", idname))
+
+    def label(self, text="", **kw):
+        self._icon(kw)
+        self.log.append(("label", text))
+
+    def template_list(self, listtype, list_id, data, propname, active_data, active_propname, **kw):
+        ul = getattr(bpy.types, listtype)
+        assert propname in data.bl_rna.properties and active_propname in active_data.bl_rna.properties
+        params = [q.identifier for q in ul.bl_rna.functions["draw_item"].parameters]
+        assert params[-2:] == ["index", "flt_flag"]
+        for i, item in enumerate(getattr(data, propname)):  # draw the rows as Blender does: every argument
+            ul.draw_item(None, bpy.context, self, data, item, 0, active_data, active_propname, i, 0)
+        self.log.append(("list", listtype))
+
+    def prop_search(self, data, name, search_data, search_name, **kw):
+        assert name in data.bl_rna.properties and search_name in search_data.bl_rna.properties, name
+        assert getattr(search_data.bl_rna.properties[search_name], "type", "") == "COLLECTION", search_name
+        self._icon(kw)
+        self.log.append(("prop", name))
+
+    def row(self, **kw):
+        return self
+
+    column = box = row

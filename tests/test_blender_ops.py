@@ -7,7 +7,7 @@ import shutil
 import clothfit  # noqa: E402
 import numpy as np
 import pytest
-from blender_support import bpy, factory, run_error, small_capture, small_settings  # noqa: F401
+from blender_support import FakeLayout, bpy, factory, run_error, small_capture, small_settings  # noqa: F401
 from clothfit.blender import registration  # noqa: E402
 from clothfit.blender import scene as S  # noqa: E402
 
@@ -27,6 +27,8 @@ OPERATORS = [
     "export_cameras",
     "add_handle_empty",
     "remove_handle",
+    "add_take",
+    "remove_take",
 ]
 
 
@@ -319,51 +321,6 @@ def test_bad_frame_times_and_unstable_parameters(tmp_path):
     p.k = 1e6
     p.m = 1e-9
     assert "simulation needs more than" in run_error("simulate") or "unstable" in run_error("simulate")
-
-
-ICONS = {i.identifier for i in bpy.types.UILayout.bl_rna.functions["prop"].parameters["icon"].enum_items}
-
-
-class FakeLayout:
-    """Records what a panel draws; checks every property, operator, list and icon it names exists."""
-
-    def __init__(self, log):
-        self.log = log
-        self.use_property_split = False
-        self.enabled = True
-
-    @staticmethod
-    def _icon(kw):
-        assert kw.get("icon", "NONE") in ICONS, kw["icon"]
-
-    def prop(self, data, name, **kw):
-        assert name in data.bl_rna.properties, name
-        self._icon(kw)
-        self.log.append(("prop", name))
-
-    def operator(self, idname, **kw):
-        mod, op = idname.split(".")
-        getattr(getattr(bpy.ops, mod), op).get_rna_type()
-        self._icon(kw)
-        self.log.append(("operator", idname))
-
-    def label(self, text="", **kw):
-        self._icon(kw)
-        self.log.append(("label", text))
-
-    def template_list(self, listtype, list_id, data, propname, active_data, active_propname, **kw):
-        ul = getattr(bpy.types, listtype)
-        assert propname in data.bl_rna.properties and active_propname in active_data.bl_rna.properties
-        params = [q.identifier for q in ul.bl_rna.functions["draw_item"].parameters]
-        assert params[-2:] == ["index", "flt_flag"]
-        for i, item in enumerate(getattr(data, propname)):  # draw the rows as Blender does: every argument
-            ul.draw_item(None, bpy.context, self, data, item, 0, active_data, active_propname, i, 0)
-        self.log.append(("list", listtype))
-
-    def row(self, **kw):
-        return self
-
-    column = box = row
 
 
 @pytest.mark.parametrize("state", ["empty", "running", "result", "empties"])

@@ -108,6 +108,7 @@ PLAIN_TEXT = {
     "fit_verdict_kind",
     "fit_intervals",
     "capture_releases",
+    "apply_take",
 }
 
 

@@ -267,7 +267,7 @@ def test_export_blender_cloth_says_what_is_wrong_with_the_file(tmp_path):
 
 def test_usage_errors_exit_64_bad_data_exits_2(tmp_path):
     for args, needle in (
-        (["fit"], "required: capture"),
+        (["fit"], "required: TAKE"),
         (["no-such-command"], "invalid choice"),
         (["fit", tmp_path, "--max-evaluations", "many"], "invalid int value"),
         (["fit", tmp_path, "--resume", "--force"], "not allowed with"),

@@ -389,6 +389,52 @@ class CLOTHFIT_OT_remove_handle(_ClothFitOperator, bpy.types.Operator):
         return f"Removed the handle; {len(context.scene.clothfit.handles)} left"
 
 
+class CLOTHFIT_OT_add_take(_ClothFitOperator, bpy.types.Operator):
+    """Add another take of the same cloth (a capture folder): the fit fits it together with the loaded capture"""
+
+    bl_idname = "clothfit.add_take"
+    bl_label = "Add Take"
+    directory: StringProperty(
+        name="Directory",
+        default="",
+        subtype="DIR_PATH",
+        options={"SKIP_SAVE"},
+        description="The take's capture folder (capture.json, cameras.json, silhouettes)",
+    )
+
+    def invoke(self, context, event):
+        if self.directory or bpy.app.background or getattr(context, "window", None) is None:
+            return self.execute(context)
+        p = context.scene.clothfit
+        if p.capture_dir:  # start beside the loaded capture
+            self.directory = os.path.dirname(os.path.normpath(bpy.path.abspath(p.capture_dir))) + os.sep
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def run(self, context):
+        cap = api.add_take(context.scene, self.directory)
+        n = len(context.scene.clothfit.fit_takes)
+        return f"Added take {cap.root}: {cap.n_cameras} cameras, {cap.n_frames} frames; {n + 1} takes in the fit"
+
+
+class CLOTHFIT_OT_remove_take(_ClothFitOperator, bpy.types.Operator):
+    """Remove a take from the fit's other takes (its folder stays)"""
+
+    bl_idname = "clothfit.remove_take"
+    bl_label = "Remove Take"
+    index: IntProperty(
+        name="Index",
+        default=-1,
+        min=-1,
+        options={"SKIP_SAVE"},
+        description="Take to remove (0-based; -1: the active one)",
+    )
+
+    def run(self, context):
+        folder = api.remove_take(context.scene, self.index)
+        return f"Removed take {folder}; {len(context.scene.clothfit.fit_takes)} other take(s) left"
+
+
 class CLOTHFIT_OT_apply_fit(_ClothFitOperator, bpy.types.Operator):
     """Write the fitted parameters into the scene and re-simulate"""
 
@@ -628,6 +674,8 @@ CLASSES = (
     CLOTHFIT_OT_export_cameras,
     CLOTHFIT_OT_add_handle_empty,
     CLOTHFIT_OT_remove_handle,
+    CLOTHFIT_OT_add_take,
+    CLOTHFIT_OT_remove_take,
     CLOTHFIT_OT_fit,
     CLOTHFIT_OT_apply_fit,
     CLOTHFIT_OT_apply_blender_cloth,

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import os
+
 import bpy
 
 from ..core.physics.paper import identifiable
@@ -156,14 +158,38 @@ def draw_extract(layout, scene, p):
         box.label(text=p.extract_status)
 
 
+def draw_takes(layout, scene, p):
+    """The takes the fit fits together: the loaded capture and the other takes of the same cloth."""
+    box = layout.box()
+    name = os.path.basename(os.path.normpath(p.capture_dir)) if p.capture_dir else "none"
+    box.label(text=f"Capture: {name}", icon="FILE_FOLDER")
+    box.label(text="Other takes of this cloth, fitted together:")
+    row = box.row()
+    row.template_list("CLOTHFIT_UL_takes", "", p, "fit_takes", p, "fit_takes_index", rows=2)
+    col = row.column(align=True)
+    col.operator("clothfit.add_take", icon="ADD", text="")
+    col.operator("clothfit.remove_take", icon="REMOVE", text="")
+
+
+class CLOTHFIT_UL_takes(bpy.types.UIList):
+    """One row per other take: its folder."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_property, index=0, flt_flag=0):
+        layout.label(text=item.name or item.directory, icon="FILE_FOLDER")
+
+
 def draw_fitting(layout, scene, p):
+    draw_takes(layout, scene, p)
     col = layout.column(align=True)
     col.prop(p, "fit_model")
     if p.fit_model == "BLENDER":
         col.prop(p, "fit_quality")
         col.prop(p, "fit_bending_model")
         fps = scene.render.fps / scene.render.fps_base
-        col.label(text=f"For this scene's {fps:g} fps", icon="TIME")
+        if len(p.fit_takes):
+            col.label(text="Each take at its own frame rate", icon="TIME")
+        else:
+            col.label(text=f"For this scene's {fps:g} fps", icon="TIME")
     col = layout.column(align=True)
     col.prop(p, "train_cameras")
     col.prop(p, "train_times")
@@ -202,6 +228,11 @@ def draw_verdict(layout, p, width=56):
     box.label(text=lines[0], icon=VERDICT_ICONS.get(p.fit_verdict_kind, "INFO"))
     for line in lines[1:]:
         box.label(text=line)
+    for t in p.fit_take_results:  # a fit of several takes: each take's own verdict under the fit's
+        lines = textwrap.wrap(f"take {t.name}: {t.verdict or 'no verdict'}", width) or [""]
+        box.label(text=lines[0], icon=VERDICT_ICONS.get(t.verdict_kind, "INFO"))
+        for line in lines[1:]:
+            box.label(text=line)
     if p.fit_intervals:  # how sure each setting is; the undetermined ones flagged
         col = box.column(align=True)
         for line in p.fit_intervals.split("\n"):
@@ -262,6 +293,8 @@ def draw_blender_cloth(layout, p):
     ):
         if k in s:
             col.label(text=f"{k.replace('_', ' ').capitalize()} = {s[k]:.4g}")
+    if len(p.fit_take_results):  # a fit of several takes: the take Apply replays (empty: the loaded capture's)
+        layout.prop_search(p, "apply_take", p, "fit_take_results", icon="FILE_FOLDER")
     layout.operator("clothfit.apply_blender_cloth", icon="MOD_CLOTH")
 
 
@@ -314,4 +347,4 @@ def _section_panel(key, label, func):
     )
 
 
-CLASSES = (CLOTHFIT_UL_handles, CLOTHFIT_PT_main) + tuple(_section_panel(*s) for s in SECTIONS)
+CLASSES = (CLOTHFIT_UL_handles, CLOTHFIT_UL_takes, CLOTHFIT_PT_main) + tuple(_section_panel(*s) for s in SECTIONS)

@@ -90,6 +90,26 @@ class ClothFitHandleLink(bpy.types.PropertyGroup):
     )
 
 
+class ClothFitTake(bpy.types.PropertyGroup):
+    """Another take of the same cloth (a capture folder), fitted together with the loaded capture"""
+
+    directory: StringProperty(
+        name="Capture",
+        subtype="DIR_PATH",
+        options=PATH_OPTIONS,
+        default="",
+        description="The take's capture folder (capture.json, cameras.json, silhouettes)",
+    )
+
+
+class ClothFitTakeResult(bpy.types.PropertyGroup):
+    """One take of the last fit of several takes: its name (``name``), verdict and frame rate"""
+
+    verdict: StringProperty(name="Verdict", default="", description="The take's verdict in one line")
+    verdict_kind: StringProperty(name="Verdict kind", default="", description="at_floor, far_above, ...")
+    fps: FloatProperty(name="Frame Rate", default=0.0, description="The frame rate the take was fitted at")
+
+
 THRESHOLD_MODES = [
     ("AUTO", "Auto", "Noise-model threshold per camera, never below 2 levels (default)"),
     ("OTSU", "Otsu", "Otsu's threshold on each camera's difference histogram"),
@@ -363,6 +383,12 @@ class ClothFitProperties(bpy.types.PropertyGroup):
         name="Debug Images", default=False, description="Write images of every extraction step into <output>/debug"
     )
     extract_status: StringProperty(name="Extraction", default="", description="Summary of the last extraction")
+    fit_takes: CollectionProperty(
+        name="Other Takes",
+        type=ClothFitTake,
+        description="Other takes of the same cloth, fitted together with the loaded capture (one set of settings)",
+    )
+    fit_takes_index: IntProperty(name="Active Take", default=0, min=0, description="The take selected in the list")
     view_frame: IntProperty(
         name="Show Frame",
         default=0,
@@ -481,6 +507,17 @@ class ClothFitProperties(bpy.types.PropertyGroup):
         default="",
         description="How sure each fitted setting is: value, 90 % interval, UNDETERMINED where the capture cannot tell it",
     )
+    fit_take_results: CollectionProperty(
+        name="Fitted Takes",
+        type=ClothFitTakeResult,
+        description="Each take of the last fit of several takes, with its verdict",
+    )
+    apply_take: StringProperty(
+        name="Take",
+        default="",
+        description="The take of the fit Apply Blender Cloth replays and whose frame rate it sets "
+        "(empty: the loaded capture's)",
+    )
     result_path: StringProperty(
         name="Result",
         subtype="FILE_PATH",
@@ -505,7 +542,7 @@ class ClothFitProperties(bpy.types.PropertyGroup):
     )
 
 
-CLASSES = (ClothFitHandleLink, ClothFitProperties)
+CLASSES = (ClothFitHandleLink, ClothFitTake, ClothFitTakeResult, ClothFitProperties)
 
 
 def register_scene_property():

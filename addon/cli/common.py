@@ -152,9 +152,15 @@ def _cams(capture, spec):
     return out
 
 
-def _times(spec):
+def _times(spec, capture=None):
+    """--times: None = all; 'train' / 'test'; 'even' / 'odd' (every other frame of ``capture``: the first,
+    third... / the second, fourth..., whatever its frame rate); else a comma list of times [s]."""
     if not spec:
         return None
+    if spec in ("even", "odd"):
+        if capture is None:
+            raise ClothFitError(f"--times {spec}: needs a capture")
+        return [float(t) for t in capture.frame_times[(0 if spec == "even" else 1) :: 2]]
     if spec == "train":
         return list(D.TRAIN_TIMES)
     if spec == "test":
@@ -244,7 +250,8 @@ def _selection_args(s, what="fit"):
     s.add_argument(
         "--times",
         help=f"frame times to {what}: 'train' (0.1, 0.2 ... 1.5 s), 'test' (0.05, 0.15 ... "
-        "1.45 s) or a comma list of times [s] (default: every frame of the capture)",
+        "1.45 s), 'even' / 'odd' (every other frame of each capture, from its first / second), or a comma list "
+        "of times [s] (default: every frame of the capture)",
     )
 
 

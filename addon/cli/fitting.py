@@ -118,6 +118,18 @@ def _checkpoint_summary(ck):
 
 
 def fit_config(a, cap):
+    """The FitConfig of ``fit`` and ``fit-many`` (``cap``: a capture, or the takes of a fit of several: each
+    take's cameras and times chosen in it)."""
+    if isinstance(cap, (list, tuple)):
+        cfg = _fit_config(a, cap[0])
+        cams, times = [_cams(c, a.cameras) for c in cap], [_times(a.times, c) for c in cap]
+        cfg.train_cameras = None if all(c is None for c in cams) else cams
+        cfg.train_times = None if all(t is None for t in times) else times
+        return cfg
+    return _fit_config(a, cap)
+
+
+def _fit_config(a, cap):
     """The FitConfig of ``fit`` and ``fit-many`` from their parsed options (one rule for both; not yet
     checked: ``fit`` adds its backend first). An option the command does not declare keeps FitConfig's
     default. ``--max-evaluations``: not given = D.FIT_EVALUATIONS; any number given is the budget as it
@@ -126,7 +138,7 @@ def fit_config(a, cap):
 
     kw = dict(
         train_cameras=_cams(cap, a.cameras),
-        train_times=_times(a.times),
+        train_times=_times(a.times, cap),
         optimizer=a.optimizer,
         seed=a.seed,
         max_evaluations=D.FIT_EVALUATIONS if a.max_evaluations is None else a.max_evaluations,
@@ -191,9 +203,11 @@ def cmd_fit(a):
             raise ClothFitError(f"{what} {path} is a directory: give a file name")
     if not a.resume and not a.force and os.path.lexists(a.out) and not os.path.lexists(ck):
         raise ClothFitError(f"--out {a.out} exists (its checkpoint {ck} is gone): --force overwrites it")
-    cap = load_capture(a.capture)
-    _refuse_overwriting_inputs(a.out, cap, "--out")
-    _refuse_overwriting_inputs(ck, cap, "--checkpoint")
+    caps = [load_capture(c) for c in a.captures]
+    for c in caps:
+        _refuse_overwriting_inputs(a.out, c, "--out")
+        _refuse_overwriting_inputs(ck, c, "--checkpoint")
+    cap = caps[0] if len(caps) == 1 else caps
     cfg = fit_config(a, cap)
     for k, v in _backend_args(a).items():
         setattr(cfg, k, v)
@@ -228,6 +242,8 @@ def cmd_fit(a):
             raise
         if getattr(job.par, "fps_source", None):  # a blender-model fit: the scene frame rate its settings are for
             print(f"frame rate {job.par.model.fps:g} fps ({job.par.fps_source})", file=sys.stderr)
+            for t in job.takes[1:]:
+                print(f"  take {t.name}: {t.fps:g} fps ({t.fps_source})", file=sys.stderr)
         bar = fit_progress(job, a.quiet)
         try:
             job.run(callback=bar)
@@ -282,6 +298,28 @@ def cmd_fit(a):
     return summary
 
 
+def _manipulation_report(r, pad=""):
+    """The fitted manipulation's lines for people (stderr), each after ``pad``."""
+    if "time_offset_s" in r or r.get("manipulation_note"):
+        t = r.get("time_offset_s")
+        u = r.get("time_offset_uncertainty_s")
+        flat = set(r.get("not_separated") or [])  # kept for the replay, not measurements
+        if t is not None:
+            tail = " (not separated)" if "time_offset_s" in flat else f" (+-{1000 * u:.1f} ms)" if u else ""
+            print(f"{pad}time offset {1000 * t:+.1f} ms{tail}", file=sys.stderr)
+        for k, h in enumerate(r.get("handles") or []):
+            if h.get("offset_bound_m"):
+                loose = [f"handle{k}_{ax}" in flat for ax in "xyz"]
+                shown = [f"{1000 * v:+.2f}" + ("?" if q else "") for v, q in zip(h["offset_m"], loose)]
+                print(
+                    f"{pad}handle {k} (vertex {h['vertex']}) moved by {', '.join(shown)} mm"
+                    + (" (?: not separated)" if any(loose) else ""),
+                    file=sys.stderr,
+                )
+        if r.get("manipulation_note"):
+            print(f"{pad}note: {r['manipulation_note']}", file=sys.stderr)
+
+
 def _fit_report(r):
     """The result's lines for people (stderr): quality chosen, manipulation, the floor, its warning and
     the verdict."""
@@ -291,24 +329,18 @@ def _fit_report(r):
         print(f"quality {qc['chosen']} ({qc['rule']}; tried {tried})", file=sys.stderr)
         if qc.get("advice"):
             print(f"note: {qc['advice']}", file=sys.stderr)
-    if "time_offset_s" in r or r.get("manipulation_note"):
-        t = r.get("time_offset_s")
-        u = r.get("time_offset_uncertainty_s")
-        flat = set(r.get("not_separated") or [])  # kept for the replay, not measurements
-        if t is not None:
-            tail = " (not separated)" if "time_offset_s" in flat else f" (+-{1000 * u:.1f} ms)" if u else ""
-            print(f"time offset {1000 * t:+.1f} ms{tail}", file=sys.stderr)
-        for k, h in enumerate(r.get("handles") or []):
-            if h.get("offset_bound_m"):
-                loose = [f"handle{k}_{ax}" in flat for ax in "xyz"]
-                shown = [f"{1000 * v:+.2f}" + ("?" if q else "") for v, q in zip(h["offset_m"], loose)]
-                print(
-                    f"handle {k} (vertex {h['vertex']}) moved by {', '.join(shown)} mm"
-                    + (" (?: not separated)" if any(loose) else ""),
-                    file=sys.stderr,
-                )
-        if r.get("manipulation_note"):
-            print(f"note: {r['manipulation_note']}", file=sys.stderr)
+    _manipulation_report(r)
+    for e in r.get("takes") or []:  # several takes: each take's own errors, verdict and manipulation
+        fl = e.get("floor") or {}
+        line = f"take {e['take']}"
+        if fl.get("train_floor_pct") is not None:
+            line += f": training {fl['train_E_sil_pct']:.3f} % (floor {fl['train_floor_pct']:.3f} %)"
+        if fl.get("heldout_E_sil_pct") is not None:
+            line += f", held-out {fl['heldout_E_sil_pct']:.3f} % (floor {fl['heldout_floor_pct']:.3f} %)"
+        print(line, file=sys.stderr)
+        _manipulation_report(e, "  ")
+        if e.get("verdict"):
+            print(f"  verdict: {e['verdict']}", file=sys.stderr)
     for k, line in enumerate(interval_lines(r)):
         print(line if k == 0 else f"  {line}", file=sys.stderr)
     fl = r.get("floor") or {}
@@ -379,13 +411,21 @@ def cmd_evaluate(a):
     refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
     params = _params(a, _capture_truth(cap))
-    r = evaluate(cap, params, cameras=_cams(cap, a.cameras), times=_times(a.times), resolution=_res(a.resolution))
+    r = evaluate(
+        cap,
+        params,
+        cameras=_cams(cap, a.cameras),
+        times=_times(a.times, cap),
+        resolution=_res(a.resolution),
+        fit_unknowns=a.fit_unknowns,
+    )
     if r["exploded"]:
         raise ClothFitError(f"the {r['model']['name']} model with these parameters explodes: no silhouette to score")
     s = f"silhouette error {r['silhouette_error_pct']:.3f} % over {len(r['cameras'])} cameras x {len(r['times'])} frames"
     if "shape_error_mm" in r:
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
     print(s)
+    print(f"manipulation: {r['manipulation']}", file=sys.stderr)
     if isinstance(params, dict) and params.get("floor"):  # a fit's result: its own verdict beside the new errors
         from ..core.fitting.verdict import verdict
 
@@ -422,7 +462,7 @@ def cmd_floor(a):
 
     refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
-    cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times), _res(a.resolution))
+    cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times, cap), _res(a.resolution))
     d = cf.to_dict()
     print(
         f"noise floor {100 * d['floor']:.3f} % E_sil per image (median {100 * d['floor_median']:.3f} %; "
@@ -447,11 +487,14 @@ def cmd_overlay(a):
         from ..core.footage.extract import footage_images
 
         images = footage_images(cap)
-    cams, times = _cams(cap, a.cameras), _times(a.times)
+    cams, times = _cams(cap, a.cameras), _times(a.times, cap)
     floors = None
     if a.floor:
         floors = _capture_floor(cap, cams, times, None).per_image()
-    params = _params(a, _capture_truth(cap))
+    from ..core.fitting.evaluate import for_take
+
+    params, how = for_take(cap, _params(a, _capture_truth(cap)))
+    print(f"manipulation: {how}", file=sys.stderr)
     paths = capture_overlays(
         cap, params, a.out, cameras=cams, times=times, images=images, floors=floors, legend=interval_lines(params)
     )
@@ -511,7 +554,13 @@ def _add_fit(sub):
         "fit the model to a capture",
         "a summary of the fit as JSON (params, errors, evaluations, stop_reason, out); the whole result is in --out",
     )
-    s.add_argument("capture", help="capture folder (capture.json, cameras.json, silhouettes)")
+    s.add_argument(
+        "captures",
+        nargs="+",
+        metavar="TAKE",
+        help="capture folder (capture.json, cameras.json, silhouettes); several: takes of one cloth, fitted "
+        "together (one set of settings; each take its own cameras, frame rate and manipulation's unknowns)",
+    )
     s.add_argument("--out", default="out/fit.json", help="result JSON to write (default: %(default)s)")
     _selection_args(s, "fit")
     _search_args(s)
@@ -644,6 +693,17 @@ def _add_scoring(sub):
     )
     _selection_args(s, "score")
     s.add_argument("--resolution", help="score at HxW [px] (default: the capture's)")
+    s.add_argument(
+        "--fit-unknowns",
+        type=int,
+        nargs="?",
+        const=D.HELD_UNKNOWNS_EVALUATIONS,
+        default=0,
+        metavar="N",
+        help="a take the result never saw: fit the unknowns its capture declares (time offset, handle offsets) on "
+        f"the images scored, the settings held, in N evaluations (default N: {D.HELD_UNKNOWNS_EVALUATIONS}; "
+        "without the option: its declared manipulation as it is)",
+    )
     s.add_argument("--json", help="also write the result to this file")
     force_arg(s, "--json")
 
@@ -677,7 +737,7 @@ def _add_scoring(sub):
         "--floor",
         action="store_true",
         help="estimate each image's noise floor (see the floor command), frame the contact sheet's tiles "
-        "by E_sil / floor (green at it, amber above, red more than 3x) and write floor_sheet.png",
+        "by E_sil / floor (green at it, amber above, red more than 2x) and write floor_sheet.png",
     )
 
     s = _command(

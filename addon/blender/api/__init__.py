@@ -12,7 +12,8 @@ Every function takes the scene (its ``scene.clothfit`` properties hold the setti
 This file only hands names on. The work lives by concern: ``reading`` (the scene read once into
 core objects: ``read_scene``), ``cameras`` (rig, import/export), ``building`` (cloth, handles,
 simulate), ``rendering`` (Render Silhouettes), ``footage`` (extract, load a capture, camera
-backgrounds), ``fitting`` (fit session, run, apply), ``overlays``; ``steps`` cuts long calls into
+backgrounds), ``fitting`` (fit session, run, apply), ``takes`` (other takes of the cloth fitted together with the
+loaded capture, the take Apply replays), ``overlays``; ``steps`` cuts long calls into
 steps for the modal operators (``render_steps``, ``simulate_steps``, ``extract_steps``).
 """
 
@@ -44,6 +45,8 @@ from .fitting import (  # noqa: F401
     run_fit,
     show_verdict,
     start_fit,
+    take_scenario,
+    take_settings,
 )
 from .footage import (  # noqa: F401
     EXTRACT_GENERATOR,
@@ -93,3 +96,4 @@ from .rendering import (  # noqa: F401
     render_steps,
 )
 from .steps import Steps  # noqa: F401
+from .takes import add_take, chosen_take, remove_take, show_take_verdicts, take_captures  # noqa: F401

@@ -20,6 +20,7 @@ from ...core.observation.camera import select_training
 from ...core.physics.paper import Params
 from .building import simulate
 from .reading import capture_dir, cloth_object, params_to_scene, props, scene_scenario
+from .takes import chosen_take, show_take_verdicts, take_captures
 
 RESULT_JSON = "fit_result.json"
 RESULT_JSON_BLENDER = "fit_result_blender.json"  # a Blender-cloth fit keeps the paper fit's result
@@ -27,32 +28,38 @@ BLENDER_CLOTH_NAME = "Blender Cloth (fitted)"
 
 
 def fit_config(scene, capture):
-    """The core ``FitConfig`` the scene's Fitting settings describe for ``capture``."""
+    """The core ``FitConfig`` the scene's Fitting settings describe for ``capture``, or for a list of takes
+    (the loaded capture first): then each take's training cameras and times are chosen in that take, and
+    each take is simulated at its own frame rate (the one its capture declares, else its frame times')."""
     from ...core.fitting.job import FitConfig
 
     p = props(scene)
-    ncam = len(capture.cameras)
-    if p.train_cameras > ncam:
-        raise ClothFitError(f"{p.train_cameras} training cameras asked but the capture has {ncam}")
-    train, _ = select_training(capture.cameras, p.train_cameras)
-    times = None
-    if p.train_times == "PAPER":
-        have = [t for t in D.TRAIN_TIMES if np.any(np.abs(capture.frame_times - t) < 1e-6)]
-        times = have or None
+    caps = list(capture) if isinstance(capture, (list, tuple)) else [capture]
+    cams, times = [], []
+    for cap in caps:
+        ncam = len(cap.cameras)
+        if p.train_cameras > ncam:
+            where = f"the capture {cap.root}" if len(caps) > 1 else "the capture"
+            raise ClothFitError(f"{p.train_cameras} training cameras asked but {where} has {ncam}")
+        cams.append(select_training(cap.cameras, p.train_cameras)[0])
+        have = None
+        if p.train_times == "PAPER":
+            have = [t for t in D.TRAIN_TIMES if np.any(np.abs(cap.frame_times - t) < 1e-6)] or None
+        times.append(have)
+    train, train_times = (cams[0], times[0]) if len(caps) == 1 else (cams, times)
+    if len(caps) > 1 and all(t is None for t in times):
+        train_times = None  # every frame of every take
     res = None if p.fit_resolution == "FULL" else [int(x) for x in p.fit_resolution.split("x")]
     model = None
-    if p.fit_model == "BLENDER":  # Blender's cloth for this scene's frame rate
+    if p.fit_model == "BLENDER":  # Blender's cloth for this scene's frame rate (one take)
         from ..cloth import scene_fps
 
-        model = {
-            "name": "blender",
-            "fps": scene_fps(scene),
-            "quality": int(p.fit_quality),
-            "bending_model": p.fit_bending_model,
-        }
+        model = {"name": "blender", "quality": int(p.fit_quality), "bending_model": p.fit_bending_model}
+        if len(caps) == 1:
+            model["fps"] = scene_fps(scene)
     return FitConfig(
         train_cameras=train,
-        train_times=times,
+        train_times=train_times,
         optimizer=p.optimizer,
         seed=p.seed,
         max_evaluations=p.max_evaluations,
@@ -113,7 +120,8 @@ def _params_text(bp) -> str:
 
 
 def start_fit(scene, capture=None):
-    """Load the capture, build the core ``FitJob``; returns a ``FitSession``."""
+    """Load the capture and the scene's other takes (``takes.take_captures``), build the core ``FitJob`` of
+    them all (the loaded capture first); returns a ``FitSession``."""
     from ...core.fitting.job import FitJob
     from ...core.observation.capture import load_capture as core_load
 
@@ -121,14 +129,20 @@ def start_fit(scene, capture=None):
     if p.fit_running:
         raise ClothFitError("a fit is already running in this scene")
     cap = capture or core_load(capture_dir(scene))
-    job = FitJob(cap, fit_config(scene, cap))
+    caps = [cap, *take_captures(scene)]
+    job = FitJob(caps if len(caps) > 1 else cap, fit_config(scene, caps))
     name = RESULT_JSON if job.par.model.name == "paper" else RESULT_JSON_BLENDER
     sess = FitSession(scene, job, os.path.join(cap.root, name))
     p.fit_running = True
     p.fit_verdict = p.fit_verdict_kind = ""
     p.fit_progress = 0.0
     p.fit_generation = p.fit_evaluations = 0
-    p.fit_status = f"fitting {len(job.train_cameras)} cameras x {len(job.train_times)} times"
+    p.fit_take_results.clear()
+    if len(job.takes) > 1:
+        n = sum(len(t.train_cameras) * len(t.train_times) for t in job.takes)
+        p.fit_status = f"fitting {len(job.takes)} takes together, {n} images"
+    else:
+        p.fit_status = f"fitting {len(job.train_cameras)} cameras x {len(job.train_times)} times"
     return sess
 
 
@@ -219,14 +233,16 @@ def finish_fit(session, cancelled=False):
 
 
 def show_verdict(scene, result: dict) -> str:
-    """Put a fit result's one-line verdict (``core.fitting.verdict``) and its settings' intervals
-    (``core.fitting.result.interval_lines``) in the Fitting section; returns the verdict."""
+    """Put a fit result's one-line verdict (``core.fitting.verdict``), its settings' intervals
+    (``core.fitting.result.interval_lines``) and, for a fit of several takes, each take's verdict
+    (``takes.show_take_verdicts``) in the Fitting section; returns the verdict."""
     from ...core.fitting.result import interval_lines
     from ...core.fitting.verdict import verdict
 
     p = props(scene)
     p.fit_verdict_kind, p.fit_verdict = verdict(result)
     p.fit_intervals = "\n".join(interval_lines(result))
+    show_take_verdicts(scene, result)
     return p.fit_verdict
 
 
@@ -279,36 +295,72 @@ def apply_fit(scene, result=None):
     return simulate(scene)
 
 
-def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
-    """A Blender-model fit result -> a Cloth modifier. On the scene's own cloth (or with no mesh
-    active) a "Blender Cloth (fitted)" object is built beside it from the capture's scenario: the
-    same mesh, pins and release as the fit, so Blender replays the fitted motion. On any other
-    mesh its Cloth modifier (found by type; none is an error) gets the settings, its own pin group
-    kept, through ``cloth_script.apply_cloth_settings``, the function the script of
-    ``export-blender-cloth --python`` calls. The scene's frame rate is set to the one the settings
-    are for (``set_fps``), else a differing rate is an error. The message names the nearest of
-    Blender's own presets. Returns (object, message)."""
-    from ...core.physics.cloth_presets import nearest_preset
-    from ...core.physics.models import BlenderModel
-    from .. import cloth as BC
-    from ..cloth_script import ClothTargetError, apply_cloth_settings
+def take_settings(res: FitResult, entry: dict | None):
+    """(BlenderModel, ClothSettings values) of a Blender-model fit for one of its takes (``entry``, an item of
+    its ``takes``; None: the fit's own): the same cloth at the take's frame rate, its Speed Multiplier scaled
+    as the fit scaled it for that take (``core.fitting.evaluate.at_rate``). A paper-model fit is an error."""
+    from ...core.fitting.evaluate import at_rate
+    from ...core.physics.models import BlenderModel, model_and_row
 
-    res = FitResult.from_json(result) if result is not None else load_result(scene)
-    model, row = res.replay()
+    model, row = model_and_row(at_rate(dict(res), (entry or {}).get("fps")))
     if not isinstance(model, BlenderModel):
         raise ClothFitError(
             "the fit result is a paper-model fit: it has no Blender cloth settings (fit with the Blender Cloth model)"
         )
-    settings = model.settings(row)
+    return model, model.settings(row)
+
+
+def take_scenario(scene, res: FitResult, entry: dict | None):
+    """(scenario, the result's part that holds its fitted manipulation) of the take Apply replays: for a fit of
+    one take the scene's own scenario and the result; for a take of a fit of several, that take's capture (its
+    folder in the result) and its entry."""
+    if entry is None:
+        return scene_scenario(scene)[0], res
+    from ...core.observation.capture import load_capture as core_load
+
+    folder = entry.get("capture")
+    if not isinstance(folder, str) or not os.path.isdir(folder):
+        raise ClothFitError(f"take {entry.get('take')!r}: its capture folder {folder!r} is not there any more")
+    return core_load(folder).scenario, entry
+
+
+def _replace_fitted_object():
+    """Remove the fitted cloth built before, with the empties its moving pins followed."""
+    from .. import cloth as BC
+
+    old = bpy.data.objects.get(BLENDER_CLOTH_NAME)
+    if old is not None:
+        BC.remove_cloth_object(old)
+
+
+def apply_blender_cloth(scene, obj=None, result=None, set_fps=True, take=None):
+    """A Blender-model fit result -> a Cloth modifier. On the scene's own cloth (or with no mesh
+    active) a "Blender Cloth (fitted)" object is built beside it from the fit's scenario: the
+    same mesh, pins and release as the fit, so Blender replays the fitted motion. A fit of several
+    takes replays the take ``take`` (None: the scene's Take; empty: the loaded capture's;
+    ``takes.chosen_take``): that take's capture, its fitted handles and frame rate. On any other
+    mesh its Cloth modifier (found by type; none is an error) gets the settings, its own pin group
+    kept, through ``cloth_script.apply_cloth_settings``, the function the script of
+    ``export-blender-cloth --python`` calls. The scene's frame rate is set to the one the settings
+    are for (the take's; ``set_fps``), else a differing rate is an error. The message names the nearest of
+    Blender's own presets. Returns (object, message)."""
+    from ...core.physics.cloth_presets import nearest_preset
+    from ...core.physics.scenario import fitted_scenario
+    from .. import cloth as BC
+    from ..cloth_script import ClothTargetError, apply_cloth_settings
+
+    res = FitResult.from_json(result) if result is not None else load_result(scene)
+    entry = chosen_take(scene, res, take)
+    model, settings = take_settings(res, entry)
     fps = BC.scene_fps(scene)
-    note = ""
+    note = f"; take {entry['take']}" if entry is not None else ""
     if abs(fps - model.fps) > 1e-6:
         if not set_fps:
             raise ClothFitError(
                 f"the settings are for {model.fps:g} fps but the scene runs at {fps:g} fps: "
                 f"Blender's cloth moves per frame, so they would move it differently"
             )
-        note = f"; scene frame rate set from {fps:g} to {model.fps:g} fps"
+        note += f"; scene frame rate set from {fps:g} to {model.fps:g} fps"
     near = nearest_preset(settings)
     note += f"; nearest Blender preset {near['name']} (typically {near['factor']:.2g}x apart)"
     own = None
@@ -317,21 +369,17 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True):
     except ClothFitError:
         pass
     if obj is None or (own is not None and obj == own):
-        sc, _ = scene_scenario(scene)
-        from ...core.physics.scenario import fitted_scenario
-
-        sc = fitted_scenario(sc, {"handles": res.get("handles")})  # the pins where the fit put them
+        sc, manip = take_scenario(scene, res, entry)
+        sc = fitted_scenario(sc, {"handles": manip.get("handles")})  # the pins where the fit put them
         net, plan = model.plan(sc)
-        t_off = res.get("time_offset_s")
+        t_off = manip.get("time_offset_s")
         if t_off:
             note += (
                 f"; the fit read the footage {1000 * t_off:+.1f} ms off: the release is at capture time "
                 f"{1000 * t_off:+.1f} ms"
             )
         BC.set_scene_fps(scene, model.fps)
-        old = bpy.data.objects.get(BLENDER_CLOTH_NAME)
-        if old is not None:
-            BC.remove_cloth_object(old)
+        _replace_fitted_object()
         new = BC.build_cloth_object(scene, net, plan, settings, name=BLENDER_CLOTH_NAME, frame_start=scene.frame_start)
         return new, (
             f"Built '{new.name}' with the fitted Cloth settings, pins and release of the scenario "

@@ -130,6 +130,16 @@ def identity(job: FitJob) -> dict[str, Any]:
             "frame_zero": job.config.frame_zero,
         },
     }
+    if len(job.takes) > 1:  # several takes: each one's capture, images, cameras and times
+        ident["takes"] = [
+            {
+                "capture_hash": t.capture_hash,
+                "silhouettes_hash": t.silhouettes_hash,
+                "cameras": [t.capture.cameras[c].name for c in t.train_cameras],
+                "times": list(t.train_times),
+            }
+            for t in job.takes
+        ]
     if job.config.search_options():  # only when set: a checkpoint from before them resumes
         ident["search_options"] = job.config.search_options()
     return plain(ident)
@@ -324,7 +334,7 @@ def reopen_search(job: FitJob) -> None:
 
 def checkpoint_dict(job: FitJob) -> dict[str, Any]:
     """A job's checkpoint (format v3): what it is a fit of, its optimiser and stages, its result so far."""
-    return {
+    ck = {
         "format": CHECKPOINT_FORMAT,
         "version": CHECKPOINT_VERSION,
         "identity": job.identity(),
@@ -340,6 +350,9 @@ def checkpoint_dict(job: FitJob) -> dict[str, Any]:
         "error": job.error,
         "result": job.result(),
     }
+    if len(job.takes) > 1:  # several takes: every take's capture (the first is also "capture")
+        ck["takes"] = [os.path.abspath(t.capture.root) for t in job.takes]
+    return ck
 
 
 def write_checkpoint(path: str | os.PathLike, ck: dict[str, Any]) -> None:
@@ -367,7 +380,12 @@ def resume(
     saved_cfg = config_type.from_dict(ck["config"])
     if config is None:
         config = saved_cfg
-    cap = capture or load_capture(ck["capture"])
+    if capture is not None:
+        cap = capture
+    elif "takes" in ck:
+        cap = [load_capture(p) for p in ck["takes"]]
+    else:
+        cap = load_capture(ck["capture"])
     job = cls(cap, config, checkpoint=path, checkpoint_interval=checkpoint_interval, evaluator=evaluator)
     diff = identity_diff(ck["identity"], job.identity())
     if diff:
@@ -481,7 +499,7 @@ def read_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
             f"checkpoint {path}: version {ck.get('version')!r} is not supported "
             f"(this reader knows version {CHECKPOINT_VERSION})"
         )
-    unknown = sorted(set(ck) - set(CHECKPOINT_KEYS))
+    unknown = sorted(set(ck) - set(CHECKPOINT_KEYS) - {"takes"})
     missing = [k for k in CHECKPOINT_KEYS if k not in ck]
     if unknown or missing:
         raise ClothFitError(
@@ -500,6 +518,9 @@ def read_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
             raise ClothFitError(f"checkpoint {path}: '{k}' must be an object")
     if not isinstance(ck["capture"], str) or not ck["capture"]:
         raise ClothFitError(f"checkpoint {path}: 'capture' must be a path")
+    t = ck.get("takes")
+    if "takes" in ck and (not isinstance(t, list) or len(t) < 2 or not all(isinstance(p, str) and p for p in t)):
+        raise ClothFitError(f"checkpoint {path}: 'takes' must be a list of two or more capture paths")
     e = ck["elapsed"]
     if isinstance(e, bool) or not isinstance(e, (int, float)) or not math.isfinite(e) or e < 0:
         raise ClothFitError(f"checkpoint {path}: 'elapsed' must be a number >= 0")

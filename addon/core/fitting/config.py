@@ -51,8 +51,8 @@ def resolve_optimizer(name: str, stageable: bool) -> str:
 
 @dataclass
 class FitConfig:
-    train_cameras: list | None = None  # camera indices (None = all)
-    train_times: list | None = None  # frame times (None = all of the capture's)
+    train_cameras: list | None = None  # camera indices (None = all); several takes: one list (or None) per take
+    train_times: list | None = None  # frame times (None = all of the capture's); several takes: one list per take
     optimizer: str = D.FIT_OPTIMIZER  # "auto": resolve_optimizer
     seed: int = 0
     max_evaluations: int = D.FIT_EVALUATIONS
@@ -141,13 +141,17 @@ class FitConfig:
             ):
                 raise ClothFitError(f"fit config: {name} must be a finite number in [{lo}, {hi}], got {v!r}")
 
+        def per_take(v):  # a list per take (several takes), or one list for every take
+            nested = isinstance(v, (list, tuple)) and any(x is None or isinstance(x, (list, tuple)) for x in v)
+            return list(v) if nested else [v]
+
         def intlist(name):
-            v = getattr(self, name)
-            if v is not None and (
-                not isinstance(v, (list, tuple))
-                or not all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in v)
-            ):
-                raise ClothFitError(f"fit config: {name} must be a list of integers, got {v!r}")
+            for v in per_take(getattr(self, name)):
+                if v is not None and (
+                    not isinstance(v, (list, tuple))
+                    or not all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in v)
+                ):
+                    raise ClothFitError(f"fit config: {name} must be a list of integers (or one per take), got {v!r}")
 
         intval("seed", 0, 2**63 - 1, none_ok=False)
         intval("max_evaluations", 1, none_ok=False)
@@ -160,12 +164,14 @@ class FitConfig:
         numval("cloth_mass", 1e-12)
         numval("fps", 1e-3, 1e4)
         intlist("train_cameras")
-        tt = self.train_times
-        if tt is not None and (
-            not isinstance(tt, (list, tuple))
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in tt)
-        ):
-            raise ClothFitError(f"fit config: train_times must be a list of finite numbers, got {tt!r}")
+        for tt in per_take(self.train_times):
+            if tt is not None and (
+                not isinstance(tt, (list, tuple))
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in tt)
+            ):
+                raise ClothFitError(
+                    f"fit config: train_times must be a list of finite numbers (or one per take), got {tt!r}"
+                )
         if not isinstance(self.optimizer, str):
             raise ClothFitError(f"fit config: optimizer must be a name, got {self.optimizer!r}")
         opt = resolve_optimizer(self.optimizer, stageable=True)  # "auto" is a CMA-ES search either way

@@ -36,6 +36,7 @@ from ..errors import ClothFitError
 from ..observation.floor import capture_floor
 from ..physics import blender as B
 from .objective import SilhouetteObjective
+from .takes import TakeView
 from .verdict import settings_at_bound
 
 if TYPE_CHECKING:
@@ -263,3 +264,76 @@ def report(job: FitJob) -> dict:
             + f"): likely cause: {d['likely_cause']}"
         )
     return d
+
+
+def _weighted(blocks, key, weight) -> float | None:
+    """The mean of the take blocks' ``key`` weighted by ``weight(block)`` (None when a block lacks it)."""
+    vals = [(b.get(key), weight(b)) for b in blocks]
+    if not vals or any(not isinstance(v, (int, float)) for v, _ in vals):
+        return None
+    w = sum(n for _, n in vals)
+    return sum(v * n for v, n in vals) / w if w else None
+
+
+def report_takes(job: FitJob) -> tuple[dict, list[dict]]:
+    """A fit of several takes: (the fit's ``floor`` block over every take, each take's own ``report``).
+    Training and held-out errors and floors over all takes are their images' weighted means; the fit is far
+    above its floor when any take is, with that take's likely cause."""
+    per = []
+    for k in range(len(job.takes)):
+        try:
+            per.append(report(TakeView(job, k)))
+        except ClothFitError as e:  # never a reason to lose the result
+            per.append({"error": str(e)})
+    ok = [b for b in per if "error" not in b]
+    n_train = [len(t.train_cameras) * len(t.train_frames) for t, b in zip(job.takes, per) if "error" not in b]
+    train_w = dict(zip(map(id, ok), n_train))
+    d = {
+        "train_E_sil_pct": 100.0 * float(job.best_error) / job.objective.n_images,
+        "train_floor_pct": _weighted(ok, "train_floor_pct", lambda b: train_w[id(b)]),
+        "train_rim_pct": _weighted(ok, "train_rim_pct", lambda b: train_w[id(b)]),
+        "threshold": D.FLOOR_FAR_ABOVE,
+        "floor_basis": "each take's images (weighted by their number)",
+        "floor_limits": (ok[0] if ok else {}).get("floor_limits"),
+        "floor_zero": bool(ok) and all(b.get("floor_zero") for b in ok),
+    }
+    d["train_ratio"] = (
+        d["train_E_sil_pct"] / d["train_floor_pct"] if d["train_floor_pct"] and not d["floor_zero"] else None
+    )
+    held = [b for b in ok if b.get("heldout_E_sil_pct") is not None]
+    if held and len(held) == len(ok):
+
+        def n_held(b):
+            return len(b["heldout_cameras"]) * b["heldout_n_frames"]
+
+        d.update(
+            heldout_E_sil_pct=_weighted(held, "heldout_E_sil_pct", n_held),
+            heldout_floor_pct=_weighted(held, "heldout_floor_pct", n_held),
+            heldout_rim_pct=_weighted(held, "heldout_rim_pct", n_held),
+        )
+        d["heldout_ratio"] = (
+            d["heldout_E_sil_pct"] / d["heldout_floor_pct"]
+            if d["heldout_floor_pct"] and not all(b.get("floor_zero") for b in held)
+            else None
+        )
+    d["settings_at_bound"] = settings_at_bound(job.par, job.best_x)
+    far = [
+        (max(r for r in (b.get("train_ratio"), b.get("heldout_ratio")) if r is not None), t.name, b)
+        for t, b in zip(job.takes, per)
+        if b.get("far_above")
+    ]
+    d["far_above"] = bool(far) or len(ok) < len(per)
+    d["likely_cause"] = None
+    d["warning"] = None
+    if far:
+        _, name, worst = max(far, key=lambda w: w[0])
+        d["likely_cause"] = f"take {name}: {worst.get('likely_cause')}"
+        d["warning"] = f"take {name}: {worst.get('warning')}"
+    elif len(ok) < len(per):
+        bad = next(t.name for t, b in zip(job.takes, per) if "error" in b)
+        d["likely_cause"] = d["warning"] = (
+            f"take {bad} has no floor report: {per[[t.name for t in job.takes].index(bad)]['error']}"
+        )
+    elif d["floor_zero"]:
+        d["warning"] = next(b["warning"] for b in ok if b.get("warning"))
+    return d, per

@@ -105,11 +105,14 @@ def _pixel_part(job) -> float:
     without images (an objective given as a function)."""
     if getattr(job, "capture", None) is None:
         return 0.0
-    try:
-        cf = capture_floor(job.capture, job.train_cameras, job.train_frames, job.config.resolution)
-    except ClothFitError:
-        return 0.0
-    ims = [e for row in cf.images for e in row]
+    takes = getattr(job, "takes", None) or [job]  # several takes: every take's training images
+    ims = []
+    for t in takes:
+        try:
+            cf = capture_floor(t.capture, t.train_cameras, t.train_frames, job.config.resolution)
+        except ClothFitError:
+            return 0.0
+        ims += [e for row in cf.images for e in row]
     return pixel_threshold([e.floor for e in ims], [e.rim * e.fit_area for e in ims])
 
 

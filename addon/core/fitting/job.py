@@ -14,6 +14,9 @@ The checkpoint (what the job is a fit of, its optimiser and stages; resumed only
 is ``checkpoint.py``'s; the result (``FitResult``) is ``result.py``'s; the configuration (``FitConfig``) is
 ``config.py``'s.
 
+A fit is of one take (a capture) or of several takes of one cloth (``takes.py``): one set of settings shared
+by every take, each take its own cameras, frames, frame rate and manipulation's unknowns.
+
 The model is the paper's sheet (default) or Blender's cloth (``FitConfig.model``); what is searched
 for each lives in ``parameters.py``. Identifiability (SPEC 2): the motion depends on ratios to the
 mass only, so the job fixes the mass from the cloth mass (``FitConfig.cloth_mass``, else the
@@ -40,7 +43,6 @@ from ..errors import ClothFitError
 from ..jsonio import write_json
 from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
 from ..physics.models import BlenderModel
-from ..physics.scenario import Uncertainty
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from . import checkpoint
 from .checkpoint import STOP_REASONS, capture_hash, identity_diff, read_checkpoint, silhouettes_hash  # noqa: F401 (re-exported)  # noqa: F401 (re-exported for the CLI and tests)
@@ -57,18 +59,28 @@ from .offset_profile import profile_step
 from .optimise import make_optimizer
 from .parameters import (
     BlenderParameters,
-    ManipulationParameters,
     PaperParameters,
     SceneParameters,
     declared_model,
     joint_space,
     make_parameters,
-    release_instants,
+    scene_frame_rate,
 )
 from .quality import Ladder
 from .result import FitResult, job_result
 from .result import finite_or_none as _finite
 from .steppable import ask_within
+from .takes import (
+    Take,
+    TakesManipulation,
+    TakesObjective,
+    candidate_errors,
+    combined_hash,
+    manipulation_result,
+    selection,
+    take_names,
+    takes_entries,
+)
 
 if TYPE_CHECKING:
     from ..observation.capture import Capture
@@ -106,41 +118,47 @@ class FitJob:
         self.evaluator = evaluator
         self.checkpoint_interval = float(checkpoint_interval)
         self._last_save = -math.inf
-        ncam = len(capture.cameras)
-        cams = list(range(ncam)) if cfg.train_cameras is None else [int(c) for c in cfg.train_cameras]
-        for c in cams:
-            if not 0 <= c < ncam:
-                raise ClothFitError(f"training camera index {c} outside 0..{ncam - 1}")
-        if not cams:
-            raise ClothFitError("no training camera selected")
-        if len(set(cams)) != len(cams):
-            raise ClothFitError(f"training cameras {cams} name a camera twice")
-        times = list(capture.frame_times) if cfg.train_times is None else list(cfg.train_times)
-        if not times:
-            raise ClothFitError("no training frame selected")
-        fidx = [capture.frame_index(t) for t in times]
-        if len(set(fidx)) != len(fidx):
-            raise ClothFitError(f"training times {times} name a frame twice")
-        self.train_cameras = cams
-        self.train_frames = fidx
-        self.train_times = [float(capture.frame_times[i]) for i in fidx]
-        cameras, observed, ignore = load_observed(capture, cams, fidx, cfg.resolution)
-        self.capture_hash = capture_hash(capture)
-        self.silhouettes_hash = silhouettes_hash(observed, ignore)
-        names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
-        self._images = (cameras, observed, ignore, names)
-        if evaluator is not None:
-            self.scenario = evaluator.scenario(self.train_times)
-            self.par = SceneParameters(capture, cfg, evaluator)
-        else:
-            self.scenario = capture.scenario.with_frames(self.train_times)
-            self.par = make_parameters(capture, cfg)
-        self.objective = SilhouetteObjective(
-            self.scenario, cameras, observed, backend=cfg.backend, names=names, model=self.par.model, ignore=ignore
+        captures = list(capture) if isinstance(capture, (list, tuple)) else [capture]
+        if not captures:
+            raise ClothFitError("a fit needs at least one take (a capture folder)")
+        if len(captures) > 1 and evaluator is not None:
+            raise ClothFitError(
+                "several takes are fitted with the core models; --backend blender fits one take (its .blend)"
+            )
+        names = take_names(captures) if len(captures) > 1 else [""]
+        self.takes = [
+            Take(
+                c,
+                cfg,
+                names[k],
+                selection(cfg.train_cameras, k, len(captures), "train_cameras"),
+                selection(cfg.train_times, k, len(captures), "train_times"),
+                evaluator,
+            )
+            for k, c in enumerate(captures)
+        ]
+        t0 = self.takes[0]
+        self.capture = t0.capture
+        self.train_cameras, self.train_frames, self.train_times = t0.train_cameras, t0.train_frames, t0.train_times
+        self.scenario = t0.scenario
+        self.capture_hash = combined_hash([t.capture_hash for t in self.takes]) if names[0] else t0.capture_hash
+        self.silhouettes_hash = (
+            combined_hash([t.silhouettes_hash for t in self.takes]) if names[0] else t0.silhouettes_hash
         )
+        self.par = (
+            SceneParameters(self.capture, cfg, evaluator)
+            if evaluator is not None
+            else make_parameters(self.capture, cfg)
+        )
+        self.take_scales = self._take_rates(cfg)
         self._objectives = {}
+        self.objective = self._build_objective(None)
         self.m, self.m_source = self.par.m, self.par.m_source
-        self.manip, self.manip_note = self._manipulation(capture, cfg, evaluator)
+        if len(self.takes) == 1:
+            self.manip, self.manip_note = t0.manip, t0.manip_note
+        else:
+            tm = TakesManipulation(self.takes)
+            self.manip, self.manip_note = (tm if tm.n else None), None
         self.npar = self.par.space.n
         self.space = joint_space(self.par.space, self.manip)
         strong = self._strong_free()
@@ -173,6 +191,7 @@ class FitJob:
         self.polish_rounds = 0  # the profile's polish rounds done (D.PROFILE_POLISH_ROUNDS)
         self.polish_scale = 1.0  # their step, in profile steps (halved when no step helps)
         self.final = None
+        self.take_finals = None  # several takes: each take's floor block (diagnose.report_takes)
         self.start_x = self._start_point()
         self.start_f = None  # its training error, once evaluated (the fit never ends worse)
         self.started = time.time()
@@ -184,45 +203,20 @@ class FitJob:
         self.exploded = self.cut_batches = 0  # cut_batches: last batches cut to the budget (generations too)
 
     # ------------------------------------------------------------- set-up
-    def _manipulation(self, capture, cfg, evaluator):
-        """(ManipulationParameters or None, note): what of the manipulation the fit estimates."""
-        sc = capture.scenario
-        nh = len(sc.handles)
-        if cfg.uncertain is None:
-            unc = capture.uncertain
-        elif isinstance(cfg.uncertain, str):
-            unc = Uncertainty.from_text(cfg.uncertain, nh, "fit: uncertain")
-        else:
-            unc = Uncertainty.parse(cfg.uncertain, nh, "fit: uncertain")
-        if unc is None or not unc.active:
-            return None, None
-        notes = []
-        if evaluator is not None and any(b > 0 for b in unc.handles):
-            raise ClothFitError(
-                "fit: uncertain handles cannot be estimated with --backend blender (the scene's pins "
-                "are its own objects): give --uncertain time_offset=S,handles=0, or fit the capture "
-                "with the core model"
-            )
-        n_frames = len(self.train_times)
-        rel = [h.release_time for h in sc.handles if h.release_time is not None]
-        after = sum(t >= min(rel) for t in self.train_times) if rel else n_frames
-        t_bound, h_bounds = unc.time_offset, unc.handles
-        if t_bound > 0 and after < D.MIN_FRAMES_FOR_TIME_OFFSET:
-            notes.append(
-                f"time_offset not estimated: {after} training frame(s) after the release cannot separate "
-                f"it from the cloth's settings (need {D.MIN_FRAMES_FOR_TIME_OFFSET})"
-            )
-            t_bound = 0.0
-        if any(b > 0 for b in h_bounds) and n_frames < 2:
-            notes.append(
-                "handle offsets not estimated: one training frame cannot separate them from the cloth's settings"
-            )
-            h_bounds = (0.0,) * nh
-        unc = Uncertainty(t_bound, tuple(h_bounds))
-        note = "; ".join(notes) or None
-        if not unc.active:
-            return None, note
-        return ManipulationParameters(unc, self.scenario), note
+    def _take_rates(self, cfg) -> list[float]:
+        """Each take's frame rate (``Take.fps``) and the factor its rows' time scale takes (the first take's rate
+        over its own: the same cloth in physical time); 1 for the paper's sheet."""
+        model = self.par.model
+        out = []
+        for k, t in enumerate(self.takes):
+            if getattr(model, "name", "") != "blender" or self.evaluator is not None:
+                t.fps, t.fps_source = getattr(model, "fps", None), getattr(self.par, "fps_source", None)
+            elif k == 0:
+                t.fps, t.fps_source = model.fps, self.par.fps_source
+            else:
+                t.fps, t.fps_source = scene_frame_rate(t.capture, cfg)
+            out.append(1.0 if not t.fps or k == 0 else model.fps / t.fps)
+        return out
 
     def _ladder(self, capture, cfg, evaluator):
         """The quality ladder where the fit chooses the quality (blender model; None otherwise)."""
@@ -420,20 +414,28 @@ class FitJob:
         self.par.model = self.objective.model
         self.par.fixed["quality"] = int(quality)
 
-    def objective_at(self, quality: int | None) -> SilhouetteObjective:
-        """The training objective simulated at ``quality`` (kept once built; not made the running one)."""
+    def objective_at(self, quality: int | None) -> SilhouetteObjective | TakesObjective:
+        """The training objective simulated at ``quality`` (kept once built; not made the running one): a
+        ``SilhouetteObjective``, or over several takes a ``takes.TakesObjective``."""
         if quality not in self._objectives:
-            cameras, observed, ignore, names = self._images
-            self._objectives[quality] = SilhouetteObjective(
-                self.scenario,
-                cameras,
-                observed,
-                backend=self.config.backend,
-                names=names,
-                model=self._model_at(quality),
-                ignore=ignore,
-            )
+            self._objectives[quality] = self._build_objective(quality)
         return self._objectives[quality]
+
+    def _build_objective(self, quality):
+        if len(self.takes) == 1:
+            return self.take_objective(0, quality)
+        return TakesObjective([self.take_objective(k, quality) for k in range(len(self.takes))], self.take_scales)
+
+    def take_objective(self, k: int, quality: int | None) -> SilhouetteObjective:
+        """Take ``k``'s own training objective at ``quality``, simulated at its own frame rate (kept once built)."""
+        key = ("take", k, quality)
+        if key not in self._objectives:
+            model = self._model_at(quality)
+            t = self.takes[k]
+            if k and isinstance(model, BlenderModel) and self.evaluator is None:
+                model = BlenderModel(t.fps, model.quality, model.bending_model)
+            self._objectives[key] = t.objective(model, self.config.backend)
+        return self._objectives[key]
 
     # ------------------------------------------------------------- identity
     def identity(self) -> dict:
@@ -447,12 +449,7 @@ class FitJob:
 
     def evaluate(self, X: ArrayLike, objective: SilhouetteObjective | None = None) -> np.ndarray:
         """Training error (sum of E_sil over the training images) of candidates ``X`` (search space)."""
-        obj = objective or self.objective
-        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-        rows = self.par.rows(X[:, : self.npar])
-        if self.manip is None:
-            return obj(rows)
-        return obj(rows, offsets=self.manip.offsets(X[:, self.npar :]))
+        return candidate_errors(self, X, objective)
 
     # ---------------------------------------------------------------- state
     @property
@@ -659,10 +656,13 @@ class FitJob:
         """Once, at the end: the errors beside the noise floor (``diagnose.report``)."""
         if self.final is not None or self.error or self.best_x is None:
             return
-        from .diagnose import report
+        from .diagnose import report, report_takes
 
         try:
-            self.final = report(self)
+            if len(self.takes) == 1:
+                self.final = report(self)
+            else:
+                self.final, self.take_finals = report_takes(self)
         except ClothFitError as e:  # never a reason to lose the result
             self.final = {"error": str(e)}
 
@@ -688,72 +688,13 @@ class FitJob:
 
     # --------------------------------------------------------------- output
     def manipulation(self) -> dict:
-        """The result's fitted manipulation: ``time_offset_s``, ``handles`` with uncertainties (from the
-        profile), what could not be separated, or nothing when the manipulation had no unknowns."""
-        x = self.best_x
-        if self.manip is None or x is None:
-            return {"manipulation_note": self.manip_note} if self.manip_note else {}
-        m = np.array(x[self.npar :], dtype=np.float64)
-        spread = None
-        notes = [self.manip_note] if self.manip_note else []
-        prof = self.profile or {}
+        """The result's fitted manipulation (``takes.manipulation_result``); over several takes, each take's
+        is in its own entry of the result's ``takes``."""
+        return manipulation_result(self) if len(self.takes) == 1 else {}
 
-        def falls_outward(n):  # the profile's error still falls beyond the bound, on the value's side
-            p = prof.get(n)
-            if p is None:
-                return False  # no profile: only the value itself, at the bound, tells
-            out = p["E_plus"] if m[self.manip.names.index(n)] > 0 else p["E_minus"]
-            return None not in (out, p["E_centre"], p["rise"]) and out < p["E_centre"] - p["rise"]
-
-        # at the edge of its declared bound: a separated offset there, or one within a profile step of it whose
-        # error still falls outward (a slope the profile cannot call a valley: the capture is further off than
-        # it declares, and the search stopped against the bound)
-        at = self.manip.at_bound(m)
-        near = self.manip.at_bound(m, D.MANIP_AT_BOUND_SHARE - D.PROFILE_STEP)
-        # exactly at its bound: only the polish puts an offset there (a step cut at the bound that lowered the error)
-        pressed = self.manip.at_bound(m, 1.0)
-        edge = [
-            n
-            for n in near
-            if (n in at and (prof.get(n) or {}).get("separated", True)) or n in pressed or falls_outward(n)
-        ]
-        flat = []
-        if self.profile is not None:
-            spread = [self.profile[n]["uncertainty"] for n in self.manip.names]
-            flat = [n for n in self.manip.names if not self.profile[n]["separated"] and n not in edge]
-            if flat:
-                # the settings were fitted with these values: a replay with the capture's own (as this fit did
-                # before) scored other settings than the fit's, on the released corner often much worse
-                notes.append(
-                    f"cannot be separated from the cloth's settings (the error is flat within the bound): "
-                    f"{', '.join(flat)}; the fitted value is kept for the replay (the settings were fitted with "
-                    f"it) but is not a measurement"
-                )
-        d = self.manip.describe(m, self.capture.scenario, spread)
-        d["at_bound"] = edge
-        d["not_separated"] = flat
-        if edge:
-
-            def shown(n):
-                v, b = m[self.manip.names.index(n)], self.manip.bounds[n][1]
-                unit = "ms" if n == "time_offset_s" else "mm"
-                return f"{n} {1e3 * v:+.2f} {unit} (bound {1e3 * b:.2f} {unit})"
-
-            notes.append(
-                f"at the edge of the capture's declared bound: {', '.join(shown(n) for n in edge)}; the "
-                f"manipulation may be further off than the capture declares: fit again with a wider --uncertain"
-            )
-        rel = release_instants(
-            self.par.model, self.capture.scenario, d.get("time_offset_s"), d.get("time_offset_uncertainty_s")
-        )
-        if rel:
-            d["release_instants"] = rel
-        if self.profile is None:
-            notes.append("uncertainties not estimated (the fit stopped before its profile)")
-        d["manipulation_profile"] = self.profile
-        if notes:
-            d["manipulation_note"] = "; ".join(notes)
-        return d
+    def take_entries(self) -> list[dict]:
+        """Several takes: the result's entry for each (``takes.takes_entries``)."""
+        return takes_entries(self)
 
     def result(self) -> FitResult:
         """The result so far (``result.FitResult``; ``to_json()`` is what the result file holds)."""

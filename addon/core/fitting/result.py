@@ -288,6 +288,8 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
         if isinstance(res.get("blender_cloth"), dict):
             res["blender_cloth"]["quality"] = job.chosen_quality()
     res.update(job.manipulation())
+    if len(job.takes) > 1:
+        res["takes"] = job.take_entries()
     st = job.intervals
     if st is not None and st.get("result"):
         res.update(st["result"])
