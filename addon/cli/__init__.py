@@ -19,7 +19,7 @@ import re
 import sys
 
 from ..core.errors import ClothFitError
-from . import blender, fitting, footage, studies, synth
+from . import blender, fitting, footage, studies
 from .common import (  # noqa: F401
     DEBUG_ENV,
     EPILOG,
@@ -62,7 +62,6 @@ def build_parser():
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
     for family in (fitting, studies, footage, blender):  # the order of the command list in --help
         family.register(sub)
-    synth.extend(sub)  # synth --handling
     return p
 
 

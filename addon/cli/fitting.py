@@ -31,27 +31,7 @@ from .common import (
 )
 from .export import add_export
 from .progress import fit_progress, progress_interval
-
-
-def cmd_synth(a):
-    from ..core.observation.synth import synth_capture
-
-    refuse_filled_folder(a.out, a.force)
-    kw = {} if a.truth_dt_safety is None else {"truth_dt_safety": a.truth_dt_safety}
-    spec = _model_spec(a)
-    params = _params(a, {} if spec and spec["name"] == "blender" else None)
-    if spec and spec["name"] == "blender":
-        params = params.get("blender_cloth", params)
-    cap = synth_capture(
-        a.out, params, rig=a.rig, noise=a.noise, resolution=_res(a.resolution), seed=a.seed, model=spec, **kw
-    )
-    print(f"wrote capture {a.out}: {len(cap.cameras)} cameras x {len(cap.frame_times)} frames")
-    return {
-        "capture": a.out,
-        "cameras": [c.name for c in cap.cameras],
-        "frame_times": list(cap.frame_times),
-        "resolution": [cap.cameras[0].height, cap.cameras[0].width],
-    }
+from .synth import add_synth
 
 
 def _scene_evaluator(cfg):
@@ -505,46 +485,6 @@ def cmd_overlay(a):
     return out
 
 
-def _add_synth(sub):
-    """``synth``: a synthetic capture."""
-    s = _command(
-        sub,
-        "synth",
-        cmd_synth,
-        "make a synthetic capture from ground-truth parameters",
-        "the capture's cameras, frame times and image size as JSON",
-    )
-    s.add_argument("--out", required=True, help="capture folder to write (new or empty unless --force)")
-    force_arg(s, "the files of a capture already in --out")
-    s.add_argument(
-        "--rig",
-        default=D.DEFAULT_RIG,
-        help="camera rig: a preset of rigs/ (lab18, lab18_far, ring8) or a cameras JSON (default: %(default)s)",
-    )
-    s.add_argument(
-        "--params",
-        help="JSON or a JSON file: the paper model's m [kg per point mass], k [N/m], l [m], "
-        "d [N s/m], or Blender cloth settings with --model blender (default: the built-in "
-        "ground truth)",
-    )
-    s.add_argument(
-        "--noise",
-        type=float,
-        default=D.NOISE_FRACTION,
-        help="fraction of the silhouettes' boundary pixels flipped (default: %(default)s)",
-    )
-    s.add_argument("--resolution", help="image size HxW [px], e.g. 120x160 (default: the rig's)")
-    s.add_argument("--seed", type=int, default=0, help="random seed of the boundary noise (default: %(default)s)")
-    s.add_argument(
-        "--truth-dt-safety",
-        type=float,
-        default=None,
-        help="time step of the truth as a factor of sqrt(m/k); 0.125 = 4x finer than the fitter's "
-        "(default: the model's own)",
-    )
-    _model_args(s, "paper")
-
-
 def _add_fit(sub):
     """``fit``: one capture, checkpointed, resumable."""
     s = _command(
@@ -759,7 +699,7 @@ def _add_scoring(sub):
 
 def register(sub):
     """The fitting family, in the order of ``--help``."""
-    _add_synth(sub)
+    add_synth(sub)
     _add_fit(sub)
     _add_fit_many(sub)
     _add_scoring(sub)

@@ -1,13 +1,12 @@
 """``synth``: a synthetic capture, with the handling its cloth is given (``--handling``).
 
-``extend(sub)`` adds ``--handling`` to the ``synth`` command the fitting family registers and makes
-``cmd_synth`` (here) its command: the paper's release, a corner waved, two hands lifting the cloth or
-moving apart (``core.physics.handling``)."""
+``add_synth(sub)`` declares the command (the fitting family registers it first): the paper's release, a corner
+waved, two hands lifting the cloth or moving apart (``core.physics.handling``)."""
 
 from __future__ import annotations
 
 from ..core import defaults as D
-from .common import _model_spec, _params, _res
+from .common import _command, _model_args, _model_spec, _params, _res, force_arg
 
 
 def cmd_synth(a):
@@ -55,8 +54,42 @@ HANDLING_HELP = (
 )
 
 
-def extend(sub):
-    """``--handling`` on the ``synth`` command of ``sub`` (the subparsers), run by ``cmd_synth``."""
-    s = sub.choices["synth"]
+def add_synth(sub):
+    """``synth``: a synthetic capture, with the handling its cloth is given."""
+    s = _command(
+        sub,
+        "synth",
+        cmd_synth,
+        "make a synthetic capture from ground-truth parameters",
+        "the capture's cameras, frame times and image size as JSON",
+    )
+    s.add_argument("--out", required=True, help="capture folder to write (new or empty unless --force)")
+    force_arg(s, "the files of a capture already in --out")
+    s.add_argument(
+        "--rig",
+        default=D.DEFAULT_RIG,
+        help="camera rig: a preset of rigs/ (lab18, lab18_far, ring8) or a cameras JSON (default: %(default)s)",
+    )
+    s.add_argument(
+        "--params",
+        help="JSON or a JSON file: the paper model's m [kg per point mass], k [N/m], l [m], "
+        "d [N s/m], or Blender cloth settings with --model blender (default: the built-in "
+        "ground truth)",
+    )
+    s.add_argument(
+        "--noise",
+        type=float,
+        default=D.NOISE_FRACTION,
+        help="fraction of the silhouettes' boundary pixels flipped (default: %(default)s)",
+    )
+    s.add_argument("--resolution", help="image size HxW [px], e.g. 120x160 (default: the rig's)")
+    s.add_argument("--seed", type=int, default=0, help="random seed of the boundary noise (default: %(default)s)")
+    s.add_argument(
+        "--truth-dt-safety",
+        type=float,
+        default=None,
+        help="time step of the truth as a factor of sqrt(m/k); 0.125 = 4x finer than the fitter's "
+        "(default: the model's own)",
+    )
+    _model_args(s, "paper")
     s.add_argument("--handling", choices=D.HANDLINGS, default=D.HANDLING, help=HANDLING_HELP)
-    s.set_defaults(fn=cmd_synth)
