@@ -227,3 +227,20 @@ def test_no_selection_means_every_camera_and_frame_of_every_take(takes):
     job = FitJob(list(takes), _cfg(train_cameras=[None, [1, 3]], train_times=[None, None]))
     assert job.takes[0].train_cameras == list(range(8)) and job.takes[1].train_cameras == [1, 3]
     assert [len(t.train_times) for t in job.takes] == [6, 7]
+
+
+def test_takes_of_another_cloth_or_without_the_training_frames_are_refused_naming_them(takes, tmp_path):
+    one, _ = takes
+    small = synth_capture(
+        str(tmp_path / "small"),
+        TRUTH,
+        model={"name": "blender", "fps": 24},
+        rig="ring8",
+        resolution=(60, 80),
+        scenario=paper_scenario(ClothGrid(5, 5, 0.1), frame_times=[0.125, 0.25]),
+        noise=0.0,
+    )
+    with pytest.raises(ClothFitError, match=r"takes one_corner and small are not of one cloth: a 7 x 7 grid"):
+        FitJob([one, small], _cfg())
+    with pytest.raises(ClothFitError, match=r"^take two_corners: .*time 0.125 s is not a frame"):
+        FitJob(list(takes), _cfg(train_times=[0.125, 0.25]))

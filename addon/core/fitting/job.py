@@ -75,6 +75,7 @@ from .takes import (
     TakesManipulation,
     TakesObjective,
     candidate_errors,
+    check_same_cloth,
     combined_hash,
     manipulation_result,
     selection,
@@ -126,6 +127,8 @@ class FitJob:
                 "several takes are fitted with the core models; --backend blender fits one take (its .blend)"
             )
         names = take_names(captures) if len(captures) > 1 else [""]
+        if len(captures) > 1:
+            check_same_cloth(captures, names)
         self.takes = [
             Take(
                 c,

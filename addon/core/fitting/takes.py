@@ -55,6 +55,23 @@ def take_names(captures: Sequence[Any]) -> list[str]:
     return [b if base.count(b) == 1 else f"{b}#{i + 1}" for i, b in enumerate(base)]
 
 
+def check_same_cloth(captures: Sequence[Any], names: Sequence[str]) -> None:
+    """Takes of one cloth: the same grid (vertices, size) and the same cloth mass where they give one; else a
+    one-line error naming the takes that differ."""
+    first = captures[0]
+    g0 = first.scenario.grid
+    for c, n in zip(captures[1:], names[1:]):
+        g = c.scenario.grid
+        if (g.nx, g.ny) != (g0.nx, g0.ny) or not np.allclose([g.side, g.side_y], [g0.side, g0.side_y], rtol=1e-9):
+            raise ClothFitError(
+                f"takes {names[0]} and {n} are not of one cloth: a {g0.nx} x {g0.ny} grid of "
+                f"{g0.side:g} x {g0.side_y:g} m against a {g.nx} x {g.ny} grid of {g.side:g} x {g.side_y:g} m"
+            )
+        m0, m = first.cloth_mass, c.cloth_mass
+        if m0 is not None and m is not None and abs(m - m0) > 1e-9 * max(m, m0):
+            raise ClothFitError(f"takes {names[0]} and {n} are not of one cloth: cloth_mass {m0:g} kg against {m:g} kg")
+
+
 class Take:
     """One capture in a fit: the training cameras and frames (``cameras``: indices, None = all; ``times``:
     frame times, None = all), their silhouettes at the fit's resolution, the scenario at those frames, and
@@ -76,7 +93,10 @@ class Take:
         times = list(capture.frame_times) if times is None else list(times)
         if not times:
             raise ClothFitError(f"{where}no training frame selected")
-        fidx = [capture.frame_index(t) for t in times]
+        try:
+            fidx = [capture.frame_index(t) for t in times]
+        except ClothFitError as e:  # which take has no frame there
+            raise ClothFitError(f"{where}{e}") from None
         if len(set(fidx)) != len(fidx):
             raise ClothFitError(f"{where}training times {times} name a frame twice")
         self.train_cameras = cams
