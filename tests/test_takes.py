@@ -244,3 +244,29 @@ def test_takes_of_another_cloth_or_without_the_training_frames_are_refused_namin
         FitJob([one, small], _cfg())
     with pytest.raises(ClothFitError, match=r"^take two_corners: .*time 0.125 s is not a frame"):
         FitJob(list(takes), _cfg(train_times=[0.125, 0.25]))
+
+
+def test_each_take_is_searched_alone_and_a_take_the_shared_settings_do_not_serve_is_named(takes, tmp_path):
+    from clothfit.core.fitting.alone import disagreement_text
+    from clothfit.core.fitting.verdict import verdict
+
+    ck = str(tmp_path / "ck.json")
+    job = FitJob(list(takes), _cfg(max_evaluations=4 * 2 * 150), checkpoint=ck)
+    while job.stage != "alone":
+        job.step()
+    job.step()
+    job.step()
+    again = FitJob.resume(ck, config=_cfg(max_evaluations=4 * 2 * 150))
+    r1, r2 = job.run().to_json(), again.run().to_json()
+    assert [e["alone_E_sil_pct"] for e in r1["takes"]] == [e["alone_E_sil_pct"] for e in r2["takes"]]
+    for e in r1["takes"]:  # searched alone from the shared settings, a take is served at least as well
+        assert e["alone_E_sil_pct"] <= e["train_E_sil_pct"] + 1e-9
+    assert r1["blender_cloth"] == r2["blender_cloth"]
+    results = [
+        {"take": "a", "alone_E_sil_pct": 1.0, "joint_E_sil_pct": 1.2},
+        {"take": "b", "alone_E_sil_pct": 1.0, "joint_E_sil_pct": 3.0},
+    ]
+    line = disagreement_text(results)
+    assert "take b 3.00 %" in line and "take a" not in line
+    kind, text = verdict({"floor": {"train_floor_pct": 1.0, "train_ratio": 1.5, "takes_note": line}})
+    assert kind == "takes_disagree" and "take b" in text

@@ -216,7 +216,13 @@ def draw_fitting(layout, scene, p):
         row.operator("clothfit.apply_scene_fit", text="Apply", icon="CHECKMARK")
 
 
-VERDICT_ICONS = {"at_floor": "CHECKMARK", "far_above": "ERROR", "at_bound": "ERROR", "failed": "CANCEL"}
+VERDICT_ICONS = {
+    "at_floor": "CHECKMARK",
+    "far_above": "ERROR",
+    "at_bound": "ERROR",
+    "takes_disagree": "ERROR",
+    "failed": "CANCEL",
+}
 
 
 def draw_verdict(layout, p, width=56):

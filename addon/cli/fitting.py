@@ -317,6 +317,8 @@ def _fit_report(r):
             line += f": training {fl['train_E_sil_pct']:.3f} % (floor {fl['train_floor_pct']:.3f} %)"
         if fl.get("heldout_E_sil_pct") is not None:
             line += f", held-out {fl['heldout_E_sil_pct']:.3f} % (floor {fl['heldout_floor_pct']:.3f} %)"
+        if e.get("alone_E_sil_pct") is not None:
+            line += f"; searched alone {e['alone_E_sil_pct']:.3f} % training"
         print(line, file=sys.stderr)
         _manipulation_report(e, "  ")
         if e.get("verdict"):

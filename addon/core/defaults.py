@@ -315,3 +315,9 @@ INTERVAL_BUDGET_FACTOR = 3  # intervals only where the budget is at least this m
 # the settings held, CMA-ES over the unknowns alone (docs/takes.md, "Hold one take out")
 HELD_UNKNOWNS_EVALUATIONS = 150  # its budget when --fit-unknowns is given without a number
 HELD_UNKNOWNS_SIGMA = 0.25  # its first step, in the unit cube of the declared bounds
+
+# a fit of several takes: after the joint search each take is searched alone from the joint best point (fitting/alone.py)
+TAKES_ALONE_EVALUATIONS = 150  # evaluations of each take's own search
+TAKES_ALONE_BUDGET_SHARE = 4  # ... made only where the fit's budget is at least this times their sum
+TAKES_ALONE_FACTOR = 1.5  # a take the shared settings serve more than this times worse than it serves itself says
+# that one set of settings does not serve every take

@@ -162,6 +162,9 @@ def stages_state(job: FitJob) -> dict[str, Any]:
         "polish_scale": job.polish_scale,
         "start_f": job.start_f,
         "intervals": job.intervals,
+        "alone": None  # each take alone (alone.py): its running CMA-ES's state with it
+        if job.alone is None
+        else dict(job.alone, opt=job.alone_opt.state_dict() if job.alone_opt is not None else job.alone.get("opt")),
     }
 
 
@@ -184,14 +187,14 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
         raise bad("not an object")
     keys = set("stage stage_quality stage_end done_evals records best_by_quality history_prev search_stop".split())
     keys |= {"ladder", "profile", "start_f"}
-    later = {"polish_rounds", "polish_scale", "intervals"}  # these came later: none in older checkpoints
+    later = {"polish_rounds", "polish_scale", "intervals", "alone"}  # these came later: none in older checkpoints
     if set(st) - later != keys:
         raise bad(f"fields {sorted((set(st) - later) ^ keys)}")
     if not is_int(st.get("polish_rounds", 0)) or not (
         is_num(st.get("polish_scale", 1.0)) and 0 < st.get("polish_scale", 1.0) <= 1
     ):
         raise bad("polish_rounds or polish_scale")
-    if st["stage"] not in ("search", "rung", "profile", "intervals", "done") or (
+    if st["stage"] not in ("search", "rung", "profile", "alone", "intervals", "done") or (
         st["stage"] == "intervals" and job.intervals_note is not None
     ):
         raise bad(f"stage {st['stage']!r}")
@@ -268,6 +271,7 @@ def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> Non
     job.polish_rounds = st.get("polish_rounds", 0)
     job.polish_scale = float(st.get("polish_scale", 1.0))
     job.intervals = check_intervals_state(st.get("intervals"), job.space.n, bad)
+    job.alone, job.alone_opt = check_alone_state(st.get("alone"), len(job.takes), bad), None
     job.start_f = None if st["start_f"] is None else float(st["start_f"])
     if ladder is not None:
         job.ladder = ladder
@@ -299,6 +303,25 @@ def check_intervals_state(st: Any, n: int, bad: Callable[[str], ClothFitError]) 
     )
     if not ok:
         raise bad("intervals")
+    return st
+
+
+def check_alone_state(st: Any, n_takes: int, bad: Callable[[str], ClothFitError]) -> dict | None:
+    """The each-take-alone stage's saved state (``alone.alone_state``), checked: None, or the state."""
+    if st is None:
+        return None
+    ok = (
+        n_takes > 1
+        and isinstance(st, dict)
+        and isinstance(st.get("take"), int)
+        and 0 <= st["take"] <= n_takes
+        and isinstance(st.get("results"), list)
+        and len(st["results"]) == st["take"]
+        and all(isinstance(r, dict) for r in st["results"])
+        and (st.get("opt") is None or isinstance(st["opt"], dict))
+    )
+    if not ok:
+        raise bad("alone")
     return st
 
 

@@ -35,6 +35,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..observation.floor import capture_floor
 from ..physics import blender as B
+from .alone import alone_note, disagreement_text
 from .objective import SilhouetteObjective
 from .takes import TakeView
 from .verdict import settings_at_bound
@@ -317,6 +318,13 @@ def report_takes(job: FitJob) -> tuple[dict, list[dict]]:
             else None
         )
     d["settings_at_bound"] = settings_at_bound(job.par, job.best_x)
+    alone = (job.alone or {}).get("results") or []
+    for t, b in zip(job.takes, per):  # what each take reaches searched alone (alone.py), beside its joint error
+        r = next((r for r in alone if r["take"] == t.name), None)
+        if r is not None and "error" not in b:
+            b["alone_E_sil_pct"] = r["alone_E_sil_pct"]
+    d["takes_note"] = disagreement_text(alone)
+    d["takes_alone_note"] = alone_note(job)
     far = [
         (max(r for r in (b.get("train_ratio"), b.get("heldout_ratio")) if r is not None), t.name, b)
         for t, b in zip(job.takes, per)
@@ -325,7 +333,10 @@ def report_takes(job: FitJob) -> tuple[dict, list[dict]]:
     d["far_above"] = bool(far) or len(ok) < len(per)
     d["likely_cause"] = None
     d["warning"] = None
-    if far:
+    if far and d["takes_note"]:  # the takes disagree: that is the cause a search of all of them cannot remove
+        d["likely_cause"] = d["takes_note"]
+        d["warning"] = f"the fit ends far above its floor on {', '.join(n for _, n, _ in far)}: {d['takes_note']}"
+    elif far:
         _, name, worst = max(far, key=lambda w: w[0])
         d["likely_cause"] = f"take {name}: {worst.get('likely_cause')}"
         d["warning"] = f"take {name}: {worst.get('warning')}"

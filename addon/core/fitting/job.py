@@ -45,6 +45,7 @@ from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F4
 from ..physics.models import BlenderModel
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from . import checkpoint
+from .alone import alone_budget, alone_step
 from .checkpoint import STOP_REASONS, capture_hash, identity_diff, read_checkpoint, silhouettes_hash  # noqa: F401 (re-exported)  # noqa: F401 (re-exported for the CLI and tests)
 from .config import (  # noqa: F401 (re-exported)
     CMA_OPTIMIZERS,
@@ -179,6 +180,8 @@ class FitJob:
         self.intervals_note = intervals_plan(self)
         if self.intervals_note is None:  # kept like the profile's: no rung eats into it
             self.profile_reserve += interval_budget(self.space.n)
+        self.alone, self.alone_opt = None, None  # several takes: each take searched alone (alone.py)
+        self.profile_reserve += alone_budget(self)
         reserved += self.profile_reserve
         self.search_end = cfg.max_evaluations - reserved
         self.opt = self._main_optimizer()
@@ -542,7 +545,7 @@ class FitJob:
         elif self.stage in ("search", "rung") and (self.opt.stopped or self.evaluations >= self.stage_end):
             self._next_stage()
         elif self.stage == "done" or (
-            self.evaluations >= self.config.max_evaluations and self.stage not in ("profile", "intervals")
+            self.evaluations >= self.config.max_evaluations and self.stage not in ("profile", "alone", "intervals")
         ):
             self._next_stage()
         self.finished = self.stop_reason is not None
@@ -586,7 +589,16 @@ class FitJob:
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
             return
-        if self.stage in ("search", "rung", "profile") and self.intervals_note is None and self.best_by_quality:
+        if self.stage in ("search", "rung", "profile") and alone_budget(self) and self.best_by_quality:
+            self.stage = "alone"
+            self._activate(self.chosen_quality())
+            self.stage_quality = self.chosen_quality()
+            return
+        if (
+            self.stage in ("search", "rung", "profile", "alone")
+            and self.intervals_note is None
+            and self.best_by_quality
+        ):
             self.stage = "intervals"
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
@@ -619,6 +631,9 @@ class FitJob:
         elif self.stage == "intervals":
             if interval_step(self):
                 self.stage = "done"
+        elif self.stage == "alone":
+            if alone_step(self):
+                self._next_stage()
         elif self.stage == "search" and self.start_x is not None and self.start_f is None:
             self.start_f = self._score_aside(self.start_x[None])
         elif self.stage in ("search", "rung"):  # never past the stage's budget (unless it left none for a first best)

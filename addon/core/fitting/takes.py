@@ -403,6 +403,7 @@ def takes_entries(job: Any) -> list[dict]:
             e["floor"] = fl = job.take_finals[k]
             e["train_E_sil_pct"] = fl.get("train_E_sil_pct")
             e["heldout_E_sil_pct"] = fl.get("heldout_E_sil_pct")
+            e["alone_E_sil_pct"] = fl.get("alone_E_sil_pct")
             e["verdict_kind"], e["verdict"] = verdict({"floor": fl, "evaluations": job.evaluations})
         out.append(e)
     return out

@@ -11,6 +11,9 @@ these it is:
   cloth's value may lie beyond it;
 * ``far_above``: far above the floor, with the cause the floor report tested (``diagnose.report``'s
   ``likely_cause``);
+* ``takes_disagree``: a fit of several takes whose shared settings serve a take clearly worse than that take's
+  own search does (``alone.py``): one set of settings does not serve every take; each such take's error beside
+  what it reaches alone;
 * ``noise_free``: the floor is 0 (noise-free or synthetic silhouettes at the fit's resolution): a ratio to
   it means nothing, so the line gives the errors beside a one-pixel shift of the outline instead;
 * ``unfinished`` (cancelled, or stopped before its floor report) and ``failed`` (an error).
@@ -27,7 +30,16 @@ import numpy as np
 
 from .. import defaults as D
 
-KINDS = ("at_floor", "at_floor_undetermined", "at_bound", "far_above", "noise_free", "unfinished", "failed")
+KINDS = (
+    "at_floor",
+    "at_floor_undetermined",
+    "at_bound",
+    "far_above",
+    "takes_disagree",
+    "noise_free",
+    "unfinished",
+    "failed",
+)
 
 # what would determine a setting the capture leaves undetermined, by the part of its name that says what it is
 DETERMINED_BY = (
@@ -142,6 +154,9 @@ def verdict(result: dict) -> tuple[str, str]:
             + tail
         )
     ratios = _ratios(fl)
+    if fl.get("takes_note"):  # a fit of several takes that one set of settings does not serve
+        where = "far above the floor" if fl.get("far_above") else "at the floor"
+        return "takes_disagree", f"{where} ({ratios}), but {fl['takes_note']}" + tail
     if fl.get("far_above"):
         cause = fl.get("likely_cause") or "not tested"
         extra = f"; {bounds}" if bounds and "bound" not in cause else ""
