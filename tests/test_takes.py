@@ -251,14 +251,15 @@ def test_each_take_is_searched_alone_and_a_take_the_shared_settings_do_not_serve
     from clothfit.core.fitting.verdict import verdict
 
     ck = str(tmp_path / "ck.json")
-    job = FitJob(list(takes), _cfg(max_evaluations=4 * 2 * 150), checkpoint=ck)
+    job = FitJob(list(takes), _cfg(max_evaluations=4 * 2 * 150, intervals=True), checkpoint=ck)
     while job.stage != "alone":
         job.step()
     job.step()
     job.step()
-    again = FitJob.resume(ck, config=_cfg(max_evaluations=4 * 2 * 150))
+    again = FitJob.resume(ck, config=_cfg(max_evaluations=4 * 2 * 150, intervals=True))
     r1, r2 = job.run().to_json(), again.run().to_json()
     assert [e["alone_E_sil_pct"] for e in r1["takes"]] == [e["alone_E_sil_pct"] for e in r2["takes"]]
+    assert r1["intervals"] is not None  # the intervals came first: alone starts from the final best point
     for e in r1["takes"]:  # searched alone from the shared settings, a take is served at least as well
         assert e["alone_E_sil_pct"] <= e["train_E_sil_pct"] + 1e-9
     assert r1["blender_cloth"] == r2["blender_cloth"]

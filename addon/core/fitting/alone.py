@@ -1,6 +1,7 @@
 """Each take alone: can one set of settings serve every take of a fit of several?
 
-After the joint search (and the offsets' profile), each take is searched on its own for
+After the joint search (and the offsets' profile and the intervals, which may move its best point), each take
+is searched on its own for
 ``D.TAKES_ALONE_EVALUATIONS`` evaluations: CMA-ES over the settings and that take's own unknowns, started at the
 joint fit's best point (``takes.TakeView``), at the quality the fit chose. Its best training error is what the take
 reaches alone near the joint settings (a local search: far-off settings that serve it better are not looked for).

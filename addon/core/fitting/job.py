@@ -571,7 +571,7 @@ class FitJob:
                 self.ladder.record(self.stage_quality, self.best_by_quality[self.stage_quality][0])
 
     def _next_stage(self):
-        """End the running stage; start a rung, the profile, or finish."""
+        """End the running stage; start a rung, the profile, the intervals, each take alone, or finish."""
         self._end_running()
         left = self.config.max_evaluations - self.done_evals - self.profile_reserve  # the profile's kept
         if self.stage in ("search", "rung") and self.ladder is not None and self.best_by_quality:
@@ -589,17 +589,14 @@ class FitJob:
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
             return
-        if self.stage in ("search", "rung", "profile") and alone_budget(self) and self.best_by_quality:
-            self.stage = "alone"
+        if self.stage in ("search", "rung", "profile") and self.intervals_note is None and self.best_by_quality:
+            self.stage = "intervals"
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
             return
-        if (
-            self.stage in ("search", "rung", "profile", "alone")
-            and self.intervals_note is None
-            and self.best_by_quality
-        ):
-            self.stage = "intervals"
+        # several takes: each take alone from the final best point (the intervals may have moved it)
+        if self.stage in ("search", "rung", "profile", "intervals") and alone_budget(self) and self.best_by_quality:
+            self.stage = "alone"
             self._activate(self.chosen_quality())
             self.stage_quality = self.chosen_quality()
             return
@@ -630,7 +627,7 @@ class FitJob:
             self._profile_step()
         elif self.stage == "intervals":
             if interval_step(self):
-                self.stage = "done"
+                self._next_stage()
         elif self.stage == "alone":
             if alone_step(self):
                 self._next_stage()
