@@ -470,7 +470,7 @@ def main(argv=None):
     c = sub.add_parser("converge", help="the truth on finer meshes and with half the step (continuum check)")
     c.add_argument("--material", default="silk", help="material (default: %(default)s, the finest folds)")
     c.add_argument("--json", required=True, help="write the distances to this JSON file")
-    t = sub.add_parser("table", help="print a baseline JSON as a Markdown table")
+    t = sub.add_parser("table", help="print a baseline or takes-baseline JSON as a Markdown table")
     t.add_argument("json")
     import continuum_takes  # several takes of one cloth (it builds on this module's rig and truth)
 
@@ -490,7 +490,8 @@ def main(argv=None):
         converge(a.material, a.json)
     else:
         with open(a.json) as f:
-            print(format_table(json.load(f)["rows"]))
+            rows = json.load(f)["rows"]
+        print(continuum_takes.format_table(rows) if rows and "fitted_on" in rows[0] else format_table(rows))
 
 
 if __name__ == "__main__":
