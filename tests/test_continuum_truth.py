@@ -1,4 +1,4 @@
-"""The continuum truth of issue 20 (tools/warp_cloth.py, tools/continuum_truth.py).
+"""The continuum truth (tools/warp_cloth.py, tools/continuum_truth.py, tools/continuum_takes.py).
 
 1. The engine's physics, independently of our models: a cantilever strip's droop against the heavy
    elastica (bending rigidity, density and gravity in SI units), a hanging strip's stretch against
@@ -8,6 +8,8 @@
    shapes are there and lie on the truth's surface.
 3. The truth is not one of our models: the core blender model at Blender's defaults does not
    reproduce it to the floor.
+4. Several takes of one cloth (``takes``): each capture loads and passes the fit's checks, a hand that
+   moves along a keyed path moves the truth's vertex along that path, released corners fall free.
 """
 
 from __future__ import annotations
@@ -225,3 +227,85 @@ def test_small_make_writes_a_valid_capture_that_our_model_does_not_reproduce(tmp
     s = B.check_settings({"time_scale": B.physical_time_scale(30.0)})
     ev = evaluate(cap, {"model": {"name": "blender", "fps": 30.0}, "blender_cloth": s, "blender_scene": {"fps": 30.0}})
     assert ev["silhouette_error_pct"] > 10 * fl and ev["shape_error_mm"] > 2.0, ev
+
+
+def _small_rig(scale=4):
+    """The truth's rig at a quarter of its image size (120 x 160): the same views, small images."""
+    from clothfit.core.observation.camera import Camera, intrinsics
+
+    return [
+        Camera(
+            intrinsics(c.K[0, 0] / scale, c.width // scale, c.height // scale),
+            c.R,
+            c.t,
+            c.width // scale,
+            c.height // scale,
+            name=c.name,
+        )
+        for c in CT.rig()
+    ]
+
+
+def test_small_takes_write_captures_whose_hands_the_truth_follows(tmp_path):
+    """A tiny ``takes`` run (one material, few frames, small images): every take loads and passes the fit's
+    checks, a moving hand's vertex is where the capture's keyed handle path says at every frame, and the
+    released corners fall free of where they were held."""
+    import continuum_takes as K
+    from clothfit.cli import build_parser
+    from clothfit.cli.fitting import fit_config
+    from clothfit.core.fitting.job import FitJob
+    from clothfit.core.observation.capture import load_capture
+
+    frames = 6
+    takes = ("two_adjacent", "wave", "lift")
+    written = K.make_takes(
+        str(tmp_path), ["cotton"], takes, n_truth=11, grid_n=9, settle=0.3, frames=frames, cameras=_small_rig()
+    )
+    assert set(written) == {f"cotton_{t}{v}" for t in takes for v in ("", "_clean")}
+    for tk in takes:
+        take = K.TAKES[tk]
+        cap = load_capture(written[f"cotton_{tk}"])
+        cap.validate(full=True)
+        assert np.allclose(np.diff(cap.frame_times), 1 / take.fps)  # the take's own frame rate
+        even, _ = CT.even_odd(cap)
+        a = build_parser().parse_args(
+            ["fit", cap.root, "--model", "blender", "--cameras", "n:4", "--times", CT.times_arg(even)]
+        )
+        job = FitJob(cap, fit_config(a, cap))  # the checks `fit` makes before it runs
+        assert job.train_frames == [1, 3, 5] and len(job.train_cameras) == 4
+        corners = cap.scenario.grid.corners()
+        hands = {h.vertex: h for h in cap.scenario.handles}
+        assert set(hands) == set(corners)
+        moving = [corners[k] for k, _ in take.moves]
+        for v in moving:  # a keyed path that really moves, followed by the truth's surface at that corner
+            h = hands[v]
+            assert len(h.times) > 2 and np.ptp(h.position(cap.frame_times)[:, 2]) > 0.02
+            assert np.abs(cap.shapes[:, v] - h.position(cap.frame_times)).max() < 1e-4
+        for k in take.released:  # released at t = 0: at the last frame far below where the hand held it
+            v = corners[k]
+            assert hands[v].release_time == 0.0
+            assert cap.shapes[-1, v, 2] < hands[v].position(0.0)[2] - 0.02
+        for k, v in enumerate(corners):  # the other hands hold their corner still
+            if k not in take.released and v not in moving:
+                assert np.abs(cap.shapes[:, v] - hands[v].position(0.0)).max() < 1e-4
+
+
+def test_the_truth_drives_a_moving_hand_along_its_keys_between_frames():
+    """Warp's kinematic corner follows the declared path (piecewise linear between keys, as the capture's
+    ``Handle.position`` reads it) also between frames and between keys, and a released corner is free."""
+    import continuum_takes as K
+
+    take = K.TAKES["wave"]
+    sc = K.take_scenario(take, 7, 6)
+    t = np.sort(np.r_[sc.frame_times, sc.frame_times - 0.5 * K.KEY_DT, sc.frame_times - 0.013])
+    n = 9
+    V, tris, X, _ = K.simulate_take(CT.MATERIALS["cotton"], take, t, n_truth=n, settle=0.2)
+    corner = [0, n - 1, n * (n - 1), n * n - 1]
+    for k, h in enumerate(sc.handles):
+        d = np.linalg.norm(X[:, corner[k]] - h.position(t), axis=1)
+        if h.release_time is None:
+            assert d.max() < 1e-4, (k, d.max())  # 0.1 mm (float32 positions)
+        else:
+            assert d[-1] > 0.02  # fell free of the hand
+    moving = corner[take.moves[0][0]]
+    assert np.ptp(X[:, moving, 2]) > 0.02

@@ -17,6 +17,9 @@ Issue 20 ("Fit a real capture"). Neither the paper's sheet nor Blender's cloth m
 
 Steps:
   make      simulate every material, write ``OUT/<material>`` (noisy) and ``OUT/<material>_clean``
+  takes     several takes of one cloth, each handled differently (corners released, a corner waved,
+            two corners lifted and lowered): ``tools/continuum_takes.py``
+  takes-baseline  fit each take alone, score the result on every take of its material
   baseline  fit each noisy capture as a new user would with today's code, through the CLI in
             subprocesses: ``python -m clothfit fit CAP --model blender --cameras n:4 --times <even>``
             (nothing else), then the same with ``--fps 30``; score with ``python -m clothfit evaluate``
@@ -25,6 +28,8 @@ Steps:
 
     python tools/continuum_truth.py make --out out/continuum
     python tools/continuum_truth.py baseline --out out/continuum --json out/continuum/baseline.json
+    python tools/continuum_truth.py takes --out out/takes [--materials cotton,silk] [--takes one_corner,wave]
+    python tools/continuum_truth.py takes-baseline --out out/takes --json out/takes/baseline.json
 """
 
 from __future__ import annotations
@@ -210,13 +215,56 @@ def simulate_truth(mat, n_truth=TRUTH_N, settle=SETTLE_TRUTH, ramp=RAMP, times=N
     return V, tris, X, facts
 
 
-def make(out, materials=None, n_truth=TRUTH_N, grid_n=GRID_N, settle=SETTLE_TRUTH, after=None, cameras=None, seed=0):
-    """Simulate each material and write ``out/<name>`` (5 % boundary noise) and ``out/<name>_clean``."""
+def truth_meta(mat, n_truth, V, tris, settle, facts, seed, fps=FPS):
+    """The capture's ``meta`` of a Warp truth (nothing in it is read by a fitter)."""
+    return {
+        "generator": f"NVIDIA Warp {W.WARP_VERSION} warp.sim (FEM triangles, hinge bending, air drag, "
+        f"semi-implicit Euler) via tools/continuum_truth.py; core rasteriser on the truth's "
+        f"own triangles",
+        "truth_engine": "warp.sim",
+        "material": mat.to_dict(),
+        "truth_mesh": {
+            "n": n_truth,
+            "vertices": int(len(V)),
+            "triangles": int(len(tris)),
+            "diagonals": "alternating",
+        },
+        "truth_settle_s": settle,
+        "truth_ramp_s": min(RAMP, settle / 2),
+        "hold_fraction": HOLD,
+        "true_fps_of_capture": fps,
+        "sim": facts,
+        "seed": seed,
+        "note": "not made by any model of this repository: no true parameters of ours exist",
+    }
+
+
+def write_truth(root, cams, sc, V, tris, X, cloth_mass, meta, seed, noise=NOISE):
+    """Write ``root`` (silhouettes of the truth mesh ``X`` (F, V, 3) with ``noise`` boundary noise) and
+    ``root + "_clean"`` (noise-free), both with the truth's shapes at the grid of ``sc``; returns both paths."""
     from clothfit.core.observation.capture import write_capture
     from clothfit.core.observation.metrics import add_boundary_noise
     from clothfit.core.observation.raster import silhouette
     from clothfit.core.observation.synth import noise_rng
 
+    tri_of, w = barycentric_sampler(V, tris, sc.grid.rest[:, :2])
+    shapes = sample(X, tris, tri_of, w)
+    clean = [[silhouette(c, X[f], tris) for f in range(len(X))] for c in cams]
+    noisy = [
+        [add_boundary_noise(clean[ci][f], noise, noise_rng(seed, ci, f)) for f in range(len(X))]
+        for ci in range(len(cams))
+    ]
+    out = []
+    for variant, sils, nf in (("", noisy, noise), ("_clean", clean, 0.0)):
+        write_capture(
+            root + variant, cams, sc, sils, shapes=shapes, cloth_mass=cloth_mass, meta=dict(meta, noise_fraction=nf)
+        )
+        out.append(root + variant)
+    return out
+
+
+def make(out, materials=None, n_truth=TRUTH_N, grid_n=GRID_N, settle=SETTLE_TRUTH, after=None, cameras=None, seed=0):
+    """Simulate each material and write ``out/<name>`` (5 % boundary noise) and ``out/<name>_clean``."""
     sc = user_scenario(grid_n, AFTER if after is None else after)
     cams = rig() if cameras is None else cameras
     written = {}
@@ -226,45 +274,11 @@ def make(out, materials=None, n_truth=TRUTH_N, grid_n=GRID_N, settle=SETTLE_TRUT
         V, tris, X, facts = simulate_truth(
             mat, n_truth, settle=settle, ramp=min(RAMP, settle / 2), times=sc.frame_times
         )
-        tri_of, w = barycentric_sampler(V, tris, sc.grid.rest[:, :2])
-        shapes = sample(X, tris, tri_of, w)
-        clean = [[silhouette(c, X[f], tris) for f in range(len(X))] for c in cams]
-        noisy = [
-            [add_boundary_noise(clean[ci][f], NOISE, noise_rng(seed, ci, f)) for f in range(len(X))]
-            for ci in range(len(cams))
-        ]
-        meta = {
-            "generator": f"NVIDIA Warp {W.WARP_VERSION} warp.sim (FEM triangles, hinge bending, air drag, "
-            f"semi-implicit Euler) via tools/continuum_truth.py; core rasteriser on the truth's "
-            f"own triangles",
-            "truth_engine": "warp.sim",
-            "material": mat.to_dict(),
-            "truth_mesh": {
-                "n": n_truth,
-                "vertices": int(len(V)),
-                "triangles": int(len(tris)),
-                "diagonals": "alternating",
-            },
-            "truth_settle_s": settle,
-            "truth_ramp_s": min(RAMP, settle / 2),
-            "hold_fraction": HOLD,
-            "true_fps_of_capture": FPS,
-            "sim": facts,
-            "seed": seed,
-            "note": "not made by any model of this repository: no true parameters of ours exist",
-        }
-        for variant, sils, noise in (("", noisy, NOISE), ("_clean", clean, 0.0)):
-            root = os.path.join(out, name + variant)
-            write_capture(
-                root,
-                cams,
-                sc,
-                sils,
-                shapes=shapes,
-                cloth_mass=mat.areal_density * SIDE * SIDE,
-                meta=dict(meta, noise_fraction=noise),
-            )
-            written[name + variant] = root
+        meta = truth_meta(mat, n_truth, V, tris, settle, facts, seed)
+        noisy, clean = write_truth(
+            os.path.join(out, name), cams, sc, V, tris, X, mat.areal_density * SIDE * SIDE, meta, seed
+        )
+        written[name], written[name + "_clean"] = noisy, clean
         print(
             f"made {name}: {len(X)} frames, {facts['steps']} steps of {facts['dt'] * 1e6:.1f} us, "
             f"{facts['cpu_s']:.0f} cpu s, {time.time() - t0:.0f} s -> {os.path.join(out, name)}",
@@ -456,9 +470,14 @@ def main(argv=None):
     c = sub.add_parser("converge", help="the truth on finer meshes and with half the step (continuum check)")
     c.add_argument("--material", default="silk", help="material (default: %(default)s, the finest folds)")
     c.add_argument("--json", required=True, help="write the distances to this JSON file")
-    t = sub.add_parser("table", help="print a baseline JSON as a Markdown table")
+    t = sub.add_parser("table", help="print a baseline or takes-baseline JSON as a Markdown table")
     t.add_argument("json")
+    import continuum_takes  # several takes of one cloth (it builds on this module's rig and truth)
+
+    continuum_takes.add_parsers(sub)
     a = ap.parse_args(argv)
+    if a.step in ("takes", "takes-baseline"):
+        return continuum_takes.run(a)
     if a.step == "make":
         make(a.out, [x for x in a.materials.split(",") if x], a.truth_n, a.grid, a.settle, a.after)
     elif a.step == "baseline":
@@ -471,7 +490,8 @@ def main(argv=None):
         converge(a.material, a.json)
     else:
         with open(a.json) as f:
-            print(format_table(json.load(f)["rows"]))
+            rows = json.load(f)["rows"]
+        print(continuum_takes.format_table(rows) if rows and "fitted_on" in rows[0] else format_table(rows))
 
 
 if __name__ == "__main__":

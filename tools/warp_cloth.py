@@ -179,11 +179,41 @@ def stable_dt(V, tris, mat: Material, safety: float = 0.7):
 class Pin:
     """A vertex held by a hand: it moves in a straight line from its rest position to ``hold``
     during the first ``ramp`` seconds of the settling, stays there, and is released (free) at
-    ``release`` [s] if given (t = 0 ends the settling)."""
+    ``release`` [s] if given (t = 0 ends the settling).
+
+    A moving hand: ``path_times`` [s] (increasing, the first >= 0) and ``path_positions`` (one per
+    time, the first = ``hold``) key a path read as the capture's handles are
+    (``clothfit.core.physics.scenario.Handle.position``): piecewise linear between the keys, at the
+    first key's position before it and at the last one's after it."""
 
     vertex: int
     hold: tuple
     release: float | None = None
+    path_times: tuple | None = None
+    path_positions: tuple | None = None
+
+    def __post_init__(self):
+        if self.path_times is None:
+            return
+        t = np.asarray(self.path_times, dtype=np.float64).reshape(-1)
+        p = np.asarray(self.path_positions, dtype=np.float64).reshape(-1, 3)
+        if t.size == 0 or t.size != len(p) or np.any(np.diff(t) <= 0) or t[0] < 0:
+            raise ValueError(f"pin {self.vertex}: path keys must be increasing times >= 0, one position each")
+        if not np.allclose(p[0], self.hold, atol=1e-12):
+            raise ValueError(f"pin {self.vertex}: the path starts at {p[0].tolist()}, not at the hold {self.hold}")
+
+    @property
+    def moves(self) -> bool:
+        return self.path_times is not None and len(self.path_times) > 1
+
+    def position(self, t):
+        """Where the hand holds the vertex at times ``t`` [s] >= 0 (relative to the simulation's origin)."""
+        t = np.asarray(t, dtype=np.float64)
+        if not self.moves:
+            return np.broadcast_to(np.asarray(self.hold, dtype=np.float64), t.shape + (3,)).copy()
+        kt = np.asarray(self.path_times, dtype=np.float64)
+        kp = np.asarray(self.path_positions, dtype=np.float64)
+        return np.stack([np.interp(t, kt, kp[:, a]) for a in range(3)], -1)
 
 
 def energy(V_rest, tris, H, mat, x, v, masses, gravity=GRAVITY, origin_z=0.0):
@@ -399,8 +429,13 @@ def simulate(
     q[pv] = hold
     s[cur].particle_q.assign(q)
     run(max(0, n_settle - n_ramp), settle_cmds)
-    # after t = 0: Warp's forces only; a pin is released by giving its particle its mass back
+    # after t = 0: Warp's forces only; a pin is released by giving its particle its mass back; a
+    # moving pin is kinematic (no mass): between two events (a key of its path, a release, a frame)
+    # it is put on its path and given the velocity that takes it to the path's point at the next one
     pending = sorted((float(p.release), p.vertex) for p in pins if p.release is not None)
+    moving = [p for p in pins if p.moves]
+    keys = sorted({int(math.ceil(k / dt - 1e-9)) for p in moving for k in p.path_times})
+    released = set()
     out = np.empty((len(times), len(V), 3))
     vout = np.empty((len(times), len(V), 3)) if velocities else None
     k_step = 0
@@ -412,8 +447,19 @@ def simulate(
                 while pending and pending[0][0] <= k_step * dt + 1e-12:
                     v = pending.pop(0)[1]
                     inv[v] = 1.0 / masses[v]
+                    released.add(v)
                 model.particle_inv_mass.assign(inv)
             nxt = n_to if not pending else min(n_to, max(k_step + 1, int(math.ceil(pending[0][0] / dt - 1e-9))))
+            nxt = min([nxt] + [k for k in keys if k > k_step])
+            held = [p for p in moving if p.vertex not in released]
+            if held:
+                q, qd = s[cur].particle_q.numpy(), s[cur].particle_qd.numpy()
+                for p in held:
+                    a, b = p.position(k_step * dt), p.position(nxt * dt)
+                    q[p.vertex] = a
+                    qd[p.vertex] = (b - a) / ((nxt - k_step) * dt)
+                s[cur].particle_q.assign(q)
+                s[cur].particle_qd.assign(qd)
             run(nxt - k_step, free_cmds)
             k_step = nxt
         out[fi] = s[cur].particle_q.numpy().astype(np.float64)
