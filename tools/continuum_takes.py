@@ -21,6 +21,11 @@ blender --cameras n:4 --times <the 15 even frames>``, the default budget, one su
 scores the result on every take of the material with ``python -m clothfit evaluate`` on the take's
 8 held-out cameras and its 15 odd frames; the floor of a take is the truth's own held-out error (its
 noise-free silhouettes against the noisy ones). One JSON file.
+
+``takes-pairs`` fits every pair of three takes together (``python -m clothfit fit A B --model blender --cameras
+n:4 --times odd``: each take's own 15 training frames) and scores each result the same way on all three, the
+third a handling the fit never saw (evaluate replays it with its own handles at its own frame rate). With the
+single-take rows of ``takes-baseline`` this is the docs' table per cloth (docs/takes.md).
 """
 
 from __future__ import annotations
@@ -313,6 +318,87 @@ def format_table(rows):
     return "\n".join(out)
 
 
+# ------------------------------------------------------------------------------------- pairs
+
+PAIR_TAKES = ("one_corner", "two_adjacent", "wave")  # the docs' three takes of each material
+
+
+def _fit_pair(out, m, ta, tb, res, max_evaluations, log):
+    """Takes ``ta`` and ``tb`` of material ``m`` fitted together as a user would (``fit A B``); the odd frames
+    of each take are its own training frames (the baseline's even/odd split), the held-out cameras left out."""
+    args = ["fit", os.path.join(out, f"{m}_{ta}"), os.path.join(out, f"{m}_{tb}"), "--model", "blender"]
+    args += ["--cameras", f"n:{CT.TRAIN_CAMERAS}", "--times", "odd", "--out", res, "--force", "--quiet"]
+    if max_evaluations:
+        args += ["--max-evaluations", str(max_evaluations)]
+    load0 = os.getloadavg()[0]
+    fit, wall = CT._cli(args, log)
+    return args, fit, wall, load0
+
+
+def takes_pairs(out, json_path, materials=("cotton",), takes=PAIR_TAKES, max_evaluations=None, refit=False, only=None):
+    """Every pair of ``takes`` fitted together, the result scored on each of the three (the third: a handling the
+    fit never saw); one JSON, rows kept across runs for other materials; a finished result is reused unless
+    ``refit``; ``only``: the pairs to fit ("a+b" names), all when None. With the single-take rows of
+    ``takes-baseline`` this is the docs' table per cloth."""
+    from clothfit.core.jsonio import read_json
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.safeio import atomic_json
+
+    rows = []
+    if os.path.isfile(json_path):
+        rows = [r for r in read_json(json_path, "takes pairs JSON").get("rows", []) if r["material"] not in materials]
+    log = os.path.join(out, "takes_pairs.log")
+    os.makedirs(os.path.join(out, "pairs"), exist_ok=True)
+    for m in materials:
+        caps = {t: load_capture(os.path.join(out, f"{m}_{t}")) for t in takes}
+        floors = {t: CT.floor(c, _split(c)[2], _split(c)[1]) for t, c in caps.items()}
+        for i, ta in enumerate(takes):
+            for tb in takes[i + 1 :]:
+                if only is not None and f"{ta}+{tb}" not in only:
+                    continue
+                res = os.path.join(out, "pairs", f"{m}_{ta}+{tb}.json")
+                fit_row = {"reused": True}
+                if refit or not os.path.isfile(res):
+                    args, fit, wall, load0 = _fit_pair(out, m, ta, tb, res, max_evaluations, log)
+                    fit_row = {"fit_command": "python -m clothfit " + " ".join(args), "fit_wall_s": wall}
+                    fit_row.update(load_1min_before=load0)
+                fitted = read_json(res, "fit result")
+                fit_row.update(
+                    evaluations=fitted.get("evaluations"),
+                    train_E_sil_pct=fitted.get("best_E_sil_mean_pct"),
+                    verdict_kind=fitted.get("verdict_kind"),
+                    blender_cloth=fitted.get("blender_cloth"),
+                    blender_scene=fitted.get("blender_scene"),
+                    intervals=fitted.get("intervals"),
+                    undetermined=fitted.get("undetermined"),
+                    take_verdicts={e["take"]: e.get("verdict_kind") for e in fitted.get("takes") or []},
+                )
+                for tc in takes:
+                    score, args = _score(os.path.join(out, f"{m}_{tc}"), res, caps[tc], log)
+                    r = {"material": m, "fitted_on": f"{ta}+{tb}", "scored_on": tc, "seen": tc in (ta, tb)}
+                    r.update(score, floor_heldout_E_sil_pct=floors[tc], result=res)
+                    r.update(evaluate_command="python -m clothfit " + " ".join(args))
+                    if tc == ta:
+                        r.update(fit_row)
+                    rows.append(r)
+                    print(format_row(r), flush=True)
+                    atomic_json(json_path, _pairs_doc(rows, max_evaluations))
+    return rows
+
+
+def _pairs_doc(rows, max_evaluations):
+    return {
+        "what": "continuum cloth (Warp), several takes: every pair of three takes fitted together by the blender "
+        "model (fit A B, default options), scored on each take's held-out cameras and frames, the third a handling "
+        "the fit never saw",
+        "takes": {k: {"fps": t.fps, "what": t.what} for k, t in TAKES.items()},
+        "train_cameras": CT.TRAIN_CAMERAS,
+        "frames": FRAMES,
+        "max_evaluations": max_evaluations or "the CLI's default",
+        "rows": rows,
+    }
+
+
 def add_parsers(sub):
     """The ``takes`` and ``takes-baseline`` steps of ``tools/continuum_truth.py``."""
     k = sub.add_parser("takes", help="simulate several takes of one cloth in Warp and write their captures")
@@ -327,6 +413,14 @@ def add_parsers(sub):
     b.add_argument("--takes", default=",".join(BASELINE_TAKES), help="comma list (default: %(default)s)")
     b.add_argument("--max-evaluations", type=int, default=None, help="budget per fit (default: the CLI's own)")
     b.add_argument("--refit", action="store_true", help="fit again even where a result exists")
+    q = sub.add_parser("takes-pairs", help="fit every pair of three takes together, score each result on all three")
+    q.add_argument("--out", default="out/takes", help="folder of the captures (default: %(default)s)")
+    q.add_argument("--json", required=True, help="write the rows to this JSON file")
+    q.add_argument("--materials", default="cotton", help="comma list (default: %(default)s)")
+    q.add_argument("--takes", default=",".join(PAIR_TAKES), help="three takes, comma list (default: %(default)s)")
+    q.add_argument("--max-evaluations", type=int, default=None, help="budget per fit (default: the CLI's own)")
+    q.add_argument("--refit", action="store_true", help="fit again even where a result exists")
+    q.add_argument("--pairs", help="only these pairs, comma list of A+B (default: every pair)")
 
 
 def run(a):
@@ -340,5 +434,8 @@ def run(a):
     mats, takes = names(a.materials, list(CT.MATERIALS)), names(a.takes, list(TAKES))
     if a.step == "takes":
         make_takes(a.out, mats, takes, frames=a.frames)
+    elif a.step == "takes-pairs":
+        only = None if not a.pairs else [x for x in a.pairs.split(",") if x]
+        print(format_table(takes_pairs(a.out, a.json, mats, takes, a.max_evaluations, a.refit, only)))
     else:
         print(format_table(takes_baseline(a.out, a.json, mats, takes, a.max_evaluations, a.refit)))

@@ -476,7 +476,7 @@ def main(argv=None):
 
     continuum_takes.add_parsers(sub)
     a = ap.parse_args(argv)
-    if a.step in ("takes", "takes-baseline"):
+    if a.step in ("takes", "takes-baseline", "takes-pairs"):
         return continuum_takes.run(a)
     if a.step == "make":
         make(a.out, [x for x in a.materials.split(",") if x], a.truth_n, a.grid, a.settle, a.after)

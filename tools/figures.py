@@ -538,6 +538,60 @@ SOURCES = {
         "what": "issue 20's offsets fits (the recordings issue20_offsets_seeds and issue20_offsets_hold, no fit run): each "
         "stated offset's error over the uncertainty the fit states, and the share within 1x and 2x",
     },
+    "takes_baseline": {
+        "argv": [
+            "{py}",
+            "tools/continuum_truth.py",
+            "takes-baseline",
+            "--out",
+            "out/takes",
+            "--materials",
+            "cotton,silk",
+            "--takes",
+            "one_corner,two_adjacent,wave",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "several takes of one continuum cloth (Warp; cotton, silk): each of three takes fitted alone by the "
+        "blender model as a new user would, scored on the held-out cameras and frames of every take (the captures: "
+        "tools/continuum_truth.py takes --out out/takes; a finished fit in out/takes/fits is reused: about 45 min "
+        "without them)",
+    },
+    "takes_pairs": {
+        "argv": [
+            "{py}",
+            "tools/continuum_truth.py",
+            "takes-pairs",
+            "--out",
+            "out/takes",
+            "--materials",
+            "cotton",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the cotton: every pair of the three takes fitted together (fit A B), scored on all three, the "
+        "third a handling the fit never saw (a finished fit in out/takes/pairs is reused: about 45 min without them)",
+    },
+    "takes_pairs_silk": {
+        "argv": [
+            "{py}",
+            "tools/continuum_truth.py",
+            "takes-pairs",
+            "--out",
+            "out/takes",
+            "--materials",
+            "silk",
+            "--pairs",
+            "one_corner+two_adjacent",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the silk: its one-corner and edge (two adjacent corners) releases fitted together, scored on those "
+        "and on the waved take (a finished fit in out/takes/pairs is reused: about 15 min without it)",
+    },
     "interval_coverage": {
         "argv": ["{py}", "tools/interval_coverage.py", "--captures", "6", "--json", "{out}"],
         "cost": "expensive",

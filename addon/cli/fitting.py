@@ -407,12 +407,13 @@ def cmd_evaluate(a):
     if "shape_error_mm" in r:
         s += f"; shape error {r['shape_error_mm']:.3f} mm"
     print(s)
-    print(f"manipulation: {r['manipulation']}", file=sys.stderr)
+    rate = f"; simulated at {r['model']['fps']:g} fps" if r["model"].get("fps") else ""
+    print(f"manipulation: {r['manipulation']}{rate}", file=sys.stderr)
     if isinstance(params, dict) and params.get("floor"):  # a fit's result: its own verdict beside the new errors
         from ..core.fitting.verdict import verdict
 
         r["fit_verdict_kind"], r["fit_verdict"] = verdict(params)
-        print(f"the fit's verdict: {r['fit_verdict']}", file=sys.stderr)
+        print(f"the fit's verdict (on the takes it fitted): {r['fit_verdict']}", file=sys.stderr)
     if a.json:
         from ..core.safeio import atomic_json
 
