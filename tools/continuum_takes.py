@@ -267,6 +267,9 @@ def takes_baseline(out, json_path, materials=("cotton",), takes=BASELINE_TAKES, 
                 blender_scene=fitted.get("blender_scene"),
                 quality_choice=fitted.get("quality_choice"),
                 fps_source=fitted.get("fps_source"),
+                fit_verdict_kind=fitted.get("verdict_kind"),
+                intervals=fitted.get("intervals"),
+                undetermined=fitted.get("undetermined"),
             )
             for tb in takes:
                 score, args = _score(os.path.join(out, f"{m}_{tb}"), res, caps[tb], log)

@@ -506,7 +506,61 @@ def floor_calibration(recording):
     return table(d["synthetic"] + d["resampled"] + ([d["footage"]] if "footage" in d else []))
 
 
+def _takes_table(recording, material, pairs_name):
+    """One cloth's takes: each take fitted alone (takes_baseline) and pairs fitted together (``pairs_name``),
+    every result scored on every take's held-out cameras and frames: held-out E_sil % / shape error mm, the takes
+    a fit saw in bold; the settings its intervals leave undetermined."""
+    takes = ("one_corner", "two_adjacent", "wave")
+    rows = [r for r in _data(recording, "takes_baseline")["rows"] if r["material"] == material]
+    rows += [r for r in _data(recording, pairs_name)["rows"] if r["material"] == material]
+    fits = list(
+        dict.fromkeys(r["fitted_on"] for r in rows if r["scored_on"] in takes and r["fitted_on"].split("+")[0] in takes)
+    )
+    out = [
+        "| fitted on | " + " | ".join(t.replace("_", " ") for t in takes) + " | verdict | undetermined |",
+        "|---|" + "---|" * (len(takes) + 2),
+    ]
+    for f in fits:
+        seen = f.split("+")
+        cells = []
+        for t in takes:
+            r = next((r for r in rows if r["fitted_on"] == f and r["scored_on"] == t), None)
+            if r is None or "heldout_E_sil_pct" not in r:
+                cells.append("")
+                continue
+            c = f"{r['heldout_E_sil_pct']:.1f} % / {r['shape_error_mm']:.1f} mm"
+            cells.append(f"**{c}**" if t in seen else c)
+        fit = next((r for r in rows if r["fitted_on"] == f and r.get("undetermined") is not None), None)
+        undet = (
+            ""
+            if fit is None
+            else ", ".join(n.replace("_stiffness", "").replace("_", " ") for n in fit["undetermined"]) or "none"
+        )
+        kind = next(
+            (
+                r.get("verdict_kind") or r.get("fit_verdict_kind")
+                for r in rows
+                if r["fitted_on"] == f and (r.get("verdict_kind") or r.get("fit_verdict_kind"))
+            ),
+            "",
+        )
+        out.append(f"| {f.replace('_', ' ').replace('+', ' + ')} | " + " | ".join(cells) + f" | {kind} | {undet} |")
+    floors = {r["scored_on"]: r["floor_heldout_E_sil_pct"] for r in rows}
+    out.append("| *the truth's own (floor)* | " + " | ".join(f"{floors[t]:.2f} %" for t in takes) + " | | |")
+    return "\n".join(out)
+
+
+def takes_cotton(recording):
+    return _takes_table(recording, "cotton", "takes_pairs")
+
+
+def takes_silk(recording):
+    return _takes_table(recording, "silk", "takes_pairs_silk")
+
+
 VIEWS = {
+    "takes.cotton": takes_cotton,
+    "takes.silk": takes_silk,
     "issue20_goals": issue20_goals,
     "floor_calibration": floor_calibration,
     "identifiability.default": identifiability_default,
