@@ -229,7 +229,10 @@ def test_fit_ends_with_its_verdict_and_the_verdict_command_reads_it_back(caps, t
     assert err.splitlines().count(f"{out}: {r['verdict']}") == 2
     rc, so, err = _run("evaluate", caps["noisy"], "--params", out, "--cameras", "1", "--times", "0.1")
     assert rc == 0, err
-    assert json.loads(so)["fit_verdict"] == r["verdict"] and f"the fit's verdict: {r['verdict']}" in err
+    assert (
+        json.loads(so)["fit_verdict"] == r["verdict"]
+        and f"the fit's verdict (on the takes it fitted): {r['verdict']}" in err
+    )
 
 
 def test_the_demo_ends_by_printing_its_fits_verdicts():
