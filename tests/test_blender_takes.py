@@ -10,48 +10,17 @@ from blender_support import FakeLayout, bpy, factory, run_error  # noqa: F401
 from clothfit.blender import api  # noqa: E402
 from clothfit.blender import cloth as BC  # noqa: E402
 from clothfit.core.fitting.checkpoint import capture_hash  # noqa: E402
-from clothfit.core.observation.synth import synth_capture  # noqa: E402
 from clothfit.core.physics import blender as B  # noqa: E402
-from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, paper_scenario  # noqa: E402
+from takes_support import make_takes  # noqa: E402
 
 pytest.importorskip("numba")
 pytestmark = pytest.mark.usefixtures("factory")
-
-TRUTH = {"tension_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness": 0.2, "air_damping": 2.0}
-GRID = ClothGrid(7, 7, 0.1)
-
-
-def _released(corners, times):
-    """Four corners held, ``corners`` (indices into the grid's corners) let go at t = 0."""
-    sc = paper_scenario(GRID, frame_times=times)
-    cs = GRID.corners()
-    hs = [
-        Handle(h.vertex, h.times, h.positions, 0.0 if h.vertex in [cs[c] for c in corners] else None)
-        for h in sc.handles
-    ]
-    return Scenario(GRID, hs, sc.frame_times)
 
 
 @pytest.fixture(scope="module")
 def takes(tmp_path_factory):
     """Two takes of one cloth: one corner let go (24 fps), two corners let go (20 fps)."""
-    root = tmp_path_factory.mktemp("takes")
-    kw = dict(rig="ring8", resolution=(60, 80), noise=0.05)
-    one = synth_capture(
-        str(root / "one_corner"),
-        TRUTH,
-        model={"name": "blender", "fps": 24},
-        scenario=_released([0], [0.125, 0.25, 0.375, 0.5]),
-        **kw,
-    )
-    two = synth_capture(
-        str(root / "two_corners"),
-        TRUTH,
-        model={"name": "blender", "fps": 20},
-        scenario=_released([0, 1], [0.1, 0.2, 0.3, 0.4, 0.5]),
-        **kw,
-    )
-    return one, two
+    return make_takes(tmp_path_factory.mktemp("takes"), 4, 5)
 
 
 def _released_vertices(obj):

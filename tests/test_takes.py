@@ -14,47 +14,15 @@ from clothfit.core.fitting.job import FitConfig, FitJob
 from clothfit.core.fitting.takes import TAKE_SEP
 from clothfit.core.observation.synth import synth_capture
 from clothfit.core.physics import blender as B
-from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, paper_scenario
+from clothfit.core.physics.scenario import ClothGrid, paper_scenario
+from takes_support import TRUTH, make_takes
 
 pytest.importorskip("numba")
-
-TRUTH = {"tension_stiffness": 40.0, "shear_stiffness": 8.0, "bending_stiffness": 0.2, "air_damping": 2.0}
-GRID = ClothGrid(7, 7, 0.1)
-
-
-def _released(corners, times):
-    """Four corners held, ``corners`` (indices into the grid's corners) let go at t = 0."""
-    sc = paper_scenario(GRID, frame_times=times)
-    cs = GRID.corners()
-    hs = [
-        Handle(h.vertex, h.times, h.positions, 0.0 if h.vertex in [cs[c] for c in corners] else None)
-        for h in sc.handles
-    ]
-    return Scenario(GRID, hs, sc.frame_times)
 
 
 @pytest.fixture(scope="module")
 def takes(tmp_path_factory):
-    root = tmp_path_factory.mktemp("takes")
-    one = synth_capture(
-        str(root / "one_corner"),
-        TRUTH,
-        model={"name": "blender", "fps": 24},
-        rig="ring8",
-        resolution=(60, 80),
-        scenario=_released([0], [0.125, 0.25, 0.375, 0.5, 0.625, 0.75]),
-        noise=0.05,
-    )
-    two = synth_capture(
-        str(root / "two_corners"),
-        TRUTH,
-        model={"name": "blender", "fps": 20},
-        rig="ring8",
-        resolution=(60, 80),
-        scenario=_released([0, 1], [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7]),
-        noise=0.05,
-    )
-    return one, two
+    return make_takes(tmp_path_factory.mktemp("takes"), 6, 7)
 
 
 def _cfg(**kw):

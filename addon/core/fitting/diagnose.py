@@ -341,10 +341,8 @@ def report_takes(job: FitJob) -> tuple[dict, list[dict]]:
         d["likely_cause"] = f"take {name}: {worst.get('likely_cause')}"
         d["warning"] = f"take {name}: {worst.get('warning')}"
     elif len(ok) < len(per):
-        bad = next(t.name for t, b in zip(job.takes, per) if "error" in b)
-        d["likely_cause"] = d["warning"] = (
-            f"take {bad} has no floor report: {per[[t.name for t in job.takes].index(bad)]['error']}"
-        )
+        name, err = next((t.name, b["error"]) for t, b in zip(job.takes, per) if "error" in b)
+        d["likely_cause"] = d["warning"] = f"take {name} has no floor report: {err}"
     elif d["floor_zero"]:
         d["warning"] = next(b["warning"] for b in ok if b.get("warning"))
     return d, per

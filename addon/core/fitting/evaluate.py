@@ -14,15 +14,15 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..observation.frame_rate import frame_rate_from_times
 from ..observation.metrics import shape_error_mm
+from ..physics.blender_settings import rate_factor
 from ..physics.models import model_and_row
 from ..physics.scenario import fitted_scenario
 from .checkpoint import capture_hash
 from .job import load_observed
 from .objective import SilhouetteObjective
 from .optimise import make_optimizer
-from .parameters import ManipulationParameters
+from .parameters import ManipulationParameters, capture_frame_rate
 from .space import SearchSpace
 
 if TYPE_CHECKING:
@@ -131,14 +131,6 @@ def held_unknowns(
     return {"time_offset_s": d["time_offset_s"], "handles": d["handles"]}
 
 
-def capture_rate(capture: Capture) -> float | None:
-    """A capture's frame rate: its model's, else read from its frame times (None when they do not say)."""
-    m = getattr(capture, "model", None)
-    if isinstance(m, dict) and m.get("fps"):
-        return float(m["fps"])
-    return frame_rate_from_times(capture.frame_times)[0]
-
-
 def for_take(capture: Capture, params: Any) -> tuple[Any, str]:
     """(the parameters that replay ``params`` on ``capture``, how its manipulation is read). A fit's result (of
     one take or several) replays a take it fitted with the manipulation it fitted there, at that take's frame
@@ -155,7 +147,7 @@ def for_take(capture: Capture, params: Any) -> tuple[Any, str]:
             return at_rate(base, e.get("fps")), f"fitted: take {e.get('take')} of the fit"
     if not params.get("takes") and params["capture_hash"] == h:
         return params, "fitted" if any(k in params for k in MANIPULATION_KEYS) else "declared"
-    return at_rate(base, capture_rate(capture)), UNSEEN
+    return at_rate(base, capture_frame_rate(capture)[0]), UNSEEN
 
 
 def at_rate(params: dict, fps: float | None) -> dict:
@@ -163,11 +155,11 @@ def at_rate(params: dict, fps: float | None) -> dict:
     the same cloth in physical time); as it is for another model, no rate, or its own rate."""
     bc, scene = params.get("blender_cloth"), params.get("blender_scene") or {}
     own = scene.get("fps")
-    if not isinstance(bc, dict) or not fps or not own or abs(float(own) - fps) <= 1e-9 * fps:
+    if not isinstance(bc, dict) or not fps or not own or rate_factor(own, fps) == 1.0:
         return params
     out = dict(params, blender_scene=dict(scene, fps=float(fps)))
     if "time_scale" in bc:
-        out["blender_cloth"] = dict(bc, time_scale=float(bc["time_scale"]) * float(own) / fps)
+        out["blender_cloth"] = dict(bc, time_scale=float(bc["time_scale"]) * rate_factor(own, fps))
     if isinstance(params.get("model"), dict):
         out["model"] = dict(params["model"], fps=float(fps))
     return out

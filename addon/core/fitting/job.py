@@ -42,6 +42,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..jsonio import write_json
 from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
+from ..physics.blender_settings import rate_factor
 from ..physics.models import BlenderModel
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from . import checkpoint
@@ -221,7 +222,7 @@ class FitJob:
                 t.fps, t.fps_source = model.fps, self.par.fps_source
             else:
                 t.fps, t.fps_source = scene_frame_rate(t.capture, cfg)
-            out.append(1.0 if not t.fps or k == 0 else model.fps / t.fps)
+            out.append(1.0 if not t.fps or k == 0 else rate_factor(model.fps, t.fps))
         return out
 
     def _ladder(self, capture, cfg, evaluator):

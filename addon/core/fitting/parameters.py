@@ -341,13 +341,21 @@ def scene_frame_rate(capture: Capture, cfg: FitConfig, init: dict | None = None)
     warm = ((init or {}).get("blender_scene") or {}).get("fps") if (init or {}).get("blender_cloth") else None
     if warm is not None:
         return float(warm), "warm start"
+    fps, why = capture_frame_rate(capture)
+    if fps is None:
+        return float(D.BLENDER_FPS), f"default ({why})"
+    return fps, why
+
+
+def capture_frame_rate(capture: Capture) -> tuple[float | None, str]:
+    """(fps, where it came from) of a capture alone: ``"capture"`` (its own ``model``: a synthetic capture
+    declares the rate its cloth was simulated at), ``"frame times"`` (the rate whose period divides every gap
+    between its frame times: ``observation.frame_rate``), else (None, why the frame times could not tell)."""
     cap = getattr(capture, "model", None)
     if isinstance(cap, dict) and cap.get("fps") is not None:
         return float(cap["fps"]), "capture"
     fps, why = frame_rate_from_times(capture.frame_times)
-    if fps is None:
-        return float(D.BLENDER_FPS), f"default ({why})"
-    return fps, "frame times"
+    return (fps, "frame times") if fps is not None else (None, why)
 
 
 def declared_model(capture: Capture, cfg: FitConfig) -> dict:

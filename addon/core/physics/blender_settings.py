@@ -171,6 +171,14 @@ def physical_time_scale(fps: float, gravity: ArrayLike = D.GRAVITY) -> float:
     return math.sqrt(1.0 / GRAVITY_SCALE) / float(fps)
 
 
+def rate_factor(own_fps: float, fps: float) -> float:
+    """The factor on a cloth's Speed Multiplier (``time_scale``) that keeps it in physical time when its
+    scene's frame rate goes from ``own_fps`` to ``fps`` (``physical_time_scale``: time_scale x fps is what
+    matters); 1 for the same rate."""
+    own, new = float(own_fps), float(fps)
+    return 1.0 if abs(own - new) <= 1e-9 * new else own / new
+
+
 def check_settings(s: dict, source: str = "Blender cloth settings") -> dict:
     """Validate settings against Blender's ranges; returns a complete dict (defaults filled in)."""
     if not isinstance(s, dict):
