@@ -221,6 +221,7 @@ VERDICT_ICONS = {
     "far_above": "ERROR",
     "at_bound": "ERROR",
     "takes_disagree": "ERROR",
+    "start_better": "ERROR",
     "failed": "CANCEL",
 }
 

@@ -135,6 +135,9 @@ FLOOR_FAR_ABOVE = 2.0  # a fit error more than 2x its images' noise floor (obser
 # the floor now matches the true settings' own error within -15 %..+20 % (docs/noise_floor.md, floor_calibration) and
 # settings a part in 10^7 from the truth already score 1.3-1.8x it (the jitter floor, docs/search.md), so 2x is just
 # clear of both; a fit between the jitter floor and 2x may still be in another basin (docs/limitations.md)
+START_HELDOUT_MARGIN = 0.05  # a fit that started from a user's settings (a scene's Cloth modifier, a warm start)
+# must predict its held-out cameras and frames more than 5 % better than those settings do, or the verdict says that
+# it is no better than what it was given (``start_better``): a contact scene's chaos alone moves the error that much
 FLOOR_ZERO_OF_RIM = 0.005  # a floor below 0.5 % of a one-pixel shift of the whole outline (the floor's rim) reads
 # as 0: noise-free or synthetic silhouettes at the fit's own resolution, where a ratio to it means nothing (`clothfit
 # floor` on the paper scenario, lab18 at 240 x 320, 4 cameras: 0.12 % noise-free, 5.0 % with 5 % boundary noise)

@@ -173,6 +173,27 @@ def _is_zero(cf) -> bool:
     return cf.floor <= D.FLOOR_ZERO_OF_RIM * _rim(cf)
 
 
+def _start_beside(job, x, obj, e) -> dict:
+    """The settings the fit started from (a scene's Cloth modifier, a warm start) beside the fit's, on the
+    cameras and frames it did not see: ``start_train_E_sil_pct``, ``start_heldout_E_sil_pct`` and, when the start
+    predicts them as well or better, ``start_note`` (the fit is then no better than what it was given, whatever
+    its training error says). {} for a fit without a start, or one that ended on it."""
+    x0, f0 = getattr(job, "start_x", None), getattr(job, "start_f", None)
+    if x0 is None or f0 is None or not np.isfinite(f0) or np.array_equal(np.asarray(x0), np.asarray(x)):
+        return {}
+    e0 = float(job.evaluate(np.asarray(x0, dtype=np.float64)[None], objective=obj)[0]) / obj.n_images
+    out = {"start_train_E_sil_pct": 100.0 * float(f0) / job.objective.n_images}
+    out["start_heldout_E_sil_pct"] = 100.0 * e0 if np.isfinite(e0) else None
+    if np.isfinite(e0) and np.isfinite(e) and e0 <= e * (1.0 + D.START_HELDOUT_MARGIN):
+        out["start_note"] = (
+            f"the settings the fit started from predict the cameras and frames it did not see as well or better "
+            f"(held-out {100.0 * e0:.2f} % against the fit's {100.0 * e:.2f} %; training {out['start_train_E_sil_pct']:.2f} % "
+            f"against {100.0 * float(job.best_error) / job.objective.n_images:.2f} %): the fit is no better than "
+            f"what it was given; keep those settings (the result's start_settings)"
+        )
+    return out
+
+
 def report(job: FitJob) -> dict:
     """The result's ``floor`` block (see the module's text)."""
     x = job.best_x
@@ -213,6 +234,7 @@ def report(job: FitJob) -> dict:
                 if not _is_zero(hf) and d["heldout_E_sil_pct"] is not None
                 else None
             )
+            d.update(_start_beside(job, x, obj, e))
         except ClothFitError as err:
             d["heldout_error"] = str(err)
     ratios = [r for r in (d.get("train_ratio"), d.get("heldout_ratio")) if r is not None]

@@ -283,6 +283,8 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
     if bp and not paper:
         with job._at_quality(job.chosen_quality()):
             res.update(job.par.describe(job.best_x[: job.npar]))
+            if job.start_x is not None:  # what the fit was given (verdict ``start_better``: keep them)
+                res["start_settings"] = job.par.describe(job.start_x[: job.npar]).get("blender_cloth")
     if job.ladder is not None and job.ladder.tried:
         res["quality_choice"] = job.ladder.describe(n_img)
         if isinstance(res.get("blender_cloth"), dict):

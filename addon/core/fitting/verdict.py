@@ -14,6 +14,9 @@ these it is:
 * ``takes_disagree``: a fit of several takes whose shared settings serve a take clearly worse than that take's
   own search does (``alone.py``): one set of settings does not serve every take; each such take's error beside
   what it reaches alone;
+* ``start_better``: a fit that started from a user's settings (a scene's Cloth modifier, a warm start) predicts
+  the cameras and frames it did not see no better than those settings do (``diagnose.report``'s ``start_note``):
+  keep them (the result's ``start_settings``);
 * ``noise_free``: the floor is 0 (noise-free or synthetic silhouettes at the fit's resolution): a ratio to
   it means nothing, so the line gives the errors beside a one-pixel shift of the outline instead;
 * ``unfinished`` (cancelled, or stopped before its floor report) and ``failed`` (an error).
@@ -36,6 +39,7 @@ KINDS = (
     "at_bound",
     "far_above",
     "takes_disagree",
+    "start_better",
     "noise_free",
     "unfinished",
     "failed",
@@ -154,6 +158,9 @@ def verdict(result: dict) -> tuple[str, str]:
             + tail
         )
     ratios = _ratios(fl)
+    if fl.get("start_note"):
+        where = "far above the floor" if fl.get("far_above") else "at the floor"
+        return "start_better", f"{where} ({ratios}), but {fl['start_note']}" + tail
     if fl.get("takes_note"):  # a fit of several takes that one set of settings does not serve
         where = "far above the floor" if fl.get("far_above") else "at the floor"
         return "takes_disagree", f"{where} ({ratios}), but {fl['takes_note']}" + tail
