@@ -65,3 +65,50 @@ def add_boundary_noise(mask: np.ndarray, fraction: float, rng: np.random.Generat
     flat = m.ravel()
     flat[pick] = ~flat[pick]
     return flat.reshape(m.shape)
+
+
+def points_to_cloth_m(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, chunk: int = 256) -> np.ndarray:
+    """Each point's distance [m] to the nearest point of a triangle mesh (``vertices`` (V, 3), ``triangles``
+    (T, 3) indices): the one-sided distance of real points (a depth camera's, cropped) to a fitted cloth, which
+    need not cover the part of the cloth the points miss. Exact point-triangle distance (Ericson's closest
+    point on a triangle); NaN vertices give inf."""
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    X = np.asarray(vertices, dtype=np.float64)
+    T = np.asarray(triangles, dtype=np.int64)
+    if not np.all(np.isfinite(X)):
+        return np.full(len(P), np.inf)
+    a, b, c = X[T[:, 0]], X[T[:, 1]], X[T[:, 2]]
+    out = np.empty(len(P))
+    for s in range(0, len(P), chunk):
+        p = P[s : s + chunk, None, :]
+        out[s : s + chunk] = np.sqrt(_closest_sq(p, a[None], b[None], c[None]).min(axis=1))
+    return out
+
+
+def _closest_sq(p, a, b, c):
+    """Squared distance from points ``p`` to triangles ``a, b, c`` (broadcast), by the triangle's Voronoi regions."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
+    bp = p - b
+    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
+    cp = p - c
+    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        v_in, w_in = vb / denom, vc / denom
+        t_ab = d1 / (d1 - d3)
+        t_ac = d2 / (d2 - d6)
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+    q = a + v_in[..., None] * ab + w_in[..., None] * ac  # inside the face
+    regions = [
+        ((d1 <= 0) & (d2 <= 0), a),
+        ((d3 >= 0) & (d4 <= d3), b),
+        ((d6 >= 0) & (d5 <= d6), c),
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + t_ab[..., None] * ab),
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + t_ac[..., None] * ac),
+        ((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), b + t_bc[..., None] * (c - b)),
+    ]
+    for mask, point in reversed(regions):  # the first region that holds wins (Ericson's order)
+        q = np.where(mask[..., None], np.broadcast_to(point, q.shape), q)
+    return ((p - q) ** 2).sum(-1)
