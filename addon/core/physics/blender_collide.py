@@ -5,26 +5,29 @@ Written from the equations of Blender's ``blenkernel/intern/collision.cc`` (``cl
 (``cloth_solve_collisions``); no code copied. After the velocity solve of every step:
 
 1. the step's new positions ``tx = x + v dt`` and motions ``tv = tx - x``;
-2. every cloth triangle (not all of its corners pinned) against every collider: the contact point is
-   the corner nearest the collider's surface (the corners in order, the first of equals), at its
-   distance; a triangle with a corner inside the collider (single sided, Blender's default) takes
-   the deepest corner, at distance 0. The pair counts when that distance is within
-   ``distance_min + distance`` and its vector is longer than sqrt(FLT_EPSILON) (Blender's test);
-   the normal points from the collider to the corner;
-3. two passes of impulses on each triangle's corners (``response``): against an approaching motion
-   ``m = -tv . n > 0`` the corner gets ``n m / 1.5`` and a Coulomb friction impulse
-   ``min(friction m / 100, |tangential motion|) / 1.5`` against its tangential motion, and when
-   ``m < 0.1 d / dt`` (``d = 8/9 (distance_min + distance) - distance``) all three corners a
-   repulsion; a receding corner within ``d`` gets ``d dt / 4.5``. A vertex keeps, per axis, the
+2. every cloth triangle (not all of its corners pinned) against every triangle of every collider's
+   mesh (``colliders.Collider.mesh``, quads split as Blender splits them): the contact point is the
+   corner nearest the collider triangle (the corners in order, the first of equals), at its
+   distance; a cloth triangle with a corner behind the collider triangle's plane (single sided,
+   Blender's default) takes the corner deepest behind it whose projection falls inside it, at
+   distance 0, or none (nor does a nearest corner behind the plane). The pair counts when that
+   distance is within ``distance_min + distance`` and its vector is longer than sqrt(FLT_EPSILON)
+   (Blender's test); the normal points from the collider to the corner;
+3. two passes of impulses (``_respond``). The contact point's motion ``tv`` is its corner's, or, on a
+   cloth triangle too small for Blender's barycentric weights (``_small``: sides of about 1.7 cm or
+   less), the mean of its three corners', the impulse then shared by the three. Against an
+   approaching motion ``m = -tv . n > 0``: ``n m / 1.5`` and a Coulomb friction impulse
+   ``min(friction m / 100, |tangential motion|) / 1.5`` against the tangential motion, and when
+   ``m < 0.1 d / dt`` (``d = 8/9 (distance_min + distance) - distance``) a repulsion on all three
+   corners; a receding point within ``d`` gets ``d dt / 4.5``. A vertex keeps, per axis, the
    largest impulse of its pairs; the impulses are added to ``tv`` and to the collision velocity;
 4. the positions ``tx = x + tv`` of the free vertices; steps 2-4 again, ``collision_quality`` rounds
    in all, while there is a contact;
 5. the free vertices' velocities ``v += dcvel / dt``; the solver then moves ``x += v dt``.
 
-Differences from Blender: a contact is always at a triangle's corner, never on an edge (Blender's
-edge-edge contacts matter only on a box's edges); a box is one surface (Blender tests its twelve
-triangles one by one and merges their impulses); the broad phase is the exact test every round.
-The collider is static.
+Differences from Blender: a contact is always at a cloth triangle's corner, never on one of its
+edges or where a collider's corner or edge meets it (Blender's edge-edge and corner contacts matter at
+a box's edges and corners); the broad phase is the exact test every round. The collider is static.
 """
 
 from __future__ import annotations
@@ -47,6 +50,8 @@ TENTH = F32(0.1)
 HUNDREDTH = F32(0.01)
 EIGHT_NINTHS = F32(8.0 / 9.0)
 FIVE = F32(5.0)
+THIRD = F32(1.0 / 3.0)
+EPS64 = float(EPS)
 
 
 @njit(inline="always", **CJIT)
@@ -152,7 +157,7 @@ def _contacts(tx, free, tris, col, pair_t, pair_k, pair_c, pair_n, pair_d, s, sv
             if d > reach or dist * dist <= EPS:
                 continue
             pair_t[n] = t
-            pair_k[n] = best
+            pair_k[n] = best + 3 * _small(tx, i0, i1, i2)
             pair_c[n] = c
             pair_n[n, 0] = b0
             pair_n[n, 1] = b1
@@ -160,6 +165,24 @@ def _contacts(tx, free, tris, col, pair_t, pair_k, pair_c, pair_n, pair_d, s, sv
             pair_d[n] = d
             n += 1
     return n
+
+
+@njit(inline="always", **CJIT)
+def _small(tx, i0, i1, i2):
+    """1 when Blender's barycentric weights of a point on the cloth triangle fall back to 1/3 each: the
+    determinant ``|p1 - p3|^2 |p2 - p3|^2 - ((p1 - p3).(p2 - p3))^2`` (in double, as Blender) below
+    FLT_EPSILON, i.e. twice the triangle's area under sqrt(FLT_EPSILON) m^2 (sides of about 1.7 cm or
+    less), so that the contact's impulse is shared by the three corners; else 0."""
+    a = 0.0
+    b = 0.0
+    c = 0.0
+    for x in range(3):
+        e1 = float(tx[3 * i0 + x]) - float(tx[3 * i2 + x])
+        e2 = float(tx[3 * i1 + x]) - float(tx[3 * i2 + x])
+        a += e1 * e1
+        b += e1 * e2
+        c += e2 * e2
+    return 1 if abs(a * c - b * b) < EPS64 else 0
 
 
 @njit(inline="always", **CJIT)
@@ -178,29 +201,39 @@ def _take(imp, cnt, v, i0, i1, i2):
 def _respond(tv, tris, col, n_pairs, pair_t, pair_k, pair_c, pair_n, pair_d, tm, imp, cnt, seen, rep_of, stamp):
     """One pass of cloth_collision_response_static over the pairs; True when any pair responded.
 
-    Pairs with the same contact corner and collider give that corner the same impulse (the motions
-    change only after the pass): it is computed once (``seen[v * C + c] == stamp``, its repulsion
-    in ``rep_of``), and only the repulsion of the other corners is taken again. Zero impulses are not
+    ``pair_k`` 0..2: the contact is that corner (weight 1); 3..5: the same corner, but the contact's
+    motion and impulse are shared by the three corners (weights 1/3: ``_small``). Pairs with the same
+    single contact corner and collider triangle give that corner the same impulse (the motions change
+    only after the pass): it is computed once (``seen[v * C + c] == stamp``, its repulsion in
+    ``rep_of``), and only the repulsion of the other corners is taken again. Zero impulses are not
     taken (they change no vertex)."""
     result = False
     C = col.shape[0]
     for p in range(n_pairs):
         t, k, c = pair_t[p], pair_k[p], pair_c[p]
+        shared = k >= 3
+        k = k % 3
         v = tris[t, k]
         nx, ny, nz = pair_n[p, 0], pair_n[p, 1], pair_n[p, 2]
         key = v * C + c
-        if seen[key] == stamp:
+        if not shared and seen[key] == stamp:
             rep = rep_of[key]
             if rep != ZERO:
                 for j in range(3):
                     if j != k:
                         _take(imp, cnt, tris[t, j], nx * rep, ny * rep, nz * rep)
             continue
-        rx, ry, rz = -tv[3 * v], -tv[3 * v + 1], -tv[3 * v + 2]
+        if shared:
+            i0, i1, i2 = tris[t, 0], tris[t, 1], tris[t, 2]
+            rx = -(tv[3 * i0] * THIRD + tv[3 * i1] * THIRD + tv[3 * i2] * THIRD)
+            ry = -(tv[3 * i0 + 1] * THIRD + tv[3 * i1 + 1] * THIRD + tv[3 * i2 + 1] * THIRD)
+            rz = -(tv[3 * i0 + 2] * THIRD + tv[3 * i1 + 2] * THIRD + tv[3 * i2 + 2] * THIRD)
+        else:
+            rx, ry, rz = -tv[3 * v], -tv[3 * v + 1], -tv[3 * v + 2]
         mag = rx * nx + ry * ny + rz * nz
         d = (col[c, 14] + col[c, 12]) * EIGHT_NINTHS - pair_d[p]
-        a0, a1, a2 = ZERO, ZERO, ZERO  # the contact corner's impulse
-        rep = ZERO  # all three corners' repulsion
+        a0, a1, a2 = ZERO, ZERO, ZERO  # the contact point's impulse (shared by the weights)
+        rep = ZERO  # every corner's repulsion
         responded = False
         if mag > ZERO:
             ux, uy, uz = rx - nx * mag, ry - ny * mag, rz - nz * mag
@@ -223,15 +256,16 @@ def _respond(tv, tris, col, n_pairs, pair_t, pair_k, pair_c, pair_n, pair_d, tm,
             imp_n = d / tm / C45
             a0, a1, a2 = nx * imp_n, ny * imp_n, nz * imp_n
             responded = True
-        seen[key] = stamp
-        rep_of[key] = rep
+        if not shared:
+            seen[key] = stamp
+            rep_of[key] = rep
         if responded:
             result = True
-            _take(imp, cnt, v, a0 + nx * rep, a1 + ny * rep, a2 + nz * rep)
-            if rep != ZERO:
-                for j in range(3):
-                    if j != k:
-                        _take(imp, cnt, tris[t, j], nx * rep, ny * rep, nz * rep)
+            for j in range(3):
+                w = THIRD if shared else (ONE if j == k else ZERO)
+                i0, i1, i2 = a0 * w + nx * rep, a1 * w + ny * rep, a2 * w + nz * rep
+                if i0 != ZERO or i1 != ZERO or i2 != ZERO:
+                    _take(imp, cnt, tris[t, j], i0, i1, i2)
     return result
 
 
