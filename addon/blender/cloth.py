@@ -21,7 +21,8 @@ import numpy as np
 
 from ..core.errors import ClothFitError
 from ..core.physics import blender as B
-from .cloth_script import set_frame_rate
+from ..core.physics.colliders import blender_objects
+from .cloth_script import add_colliders, set_frame_rate
 from .scene import evaluated_positions, set_key_interpolation
 
 PIN_GROUP = "clothfit_pin"
@@ -114,10 +115,18 @@ def add_pins(scene, obj, plan: B.FramePlan, frame_start: int, name_prefix="cloth
 
 
 def build_cloth_object(
-    scene, net: B.Network, plan: B.FramePlan, settings: dict, name="Blender Cloth", frame_start: int = 1, faces=None
+    scene,
+    net: B.Network,
+    plan: B.FramePlan,
+    settings: dict,
+    name="Blender Cloth",
+    frame_start: int = 1,
+    faces=None,
+    colliders=None,
 ):
     """A mesh object with the network's first-frame positions and ``faces``, its pins and a Cloth
-    modifier with ``settings`` (collisions off: the core model has none)."""
+    modifier with ``settings``; ``colliders`` (a scenario's ``Collisions``): collider objects with a
+    Collision modifier and the cloth's collisions on (``add_scene_colliders``), else collisions off."""
     faces = net.faces if faces is None else faces
     me = bpy.data.meshes.new(name)
     # the edges in the network's order: Blender builds its structural springs in mesh edge order
@@ -136,12 +145,25 @@ def build_cloth_object(
     cs.shrink_min = 0.0
     cl.collision_settings.use_collision = False
     cl.collision_settings.use_self_collision = False
+    if colliders is not None:
+        add_scene_colliders(scene, obj, colliders)
     cl.point_cache.frame_start = frame_start
     cl.point_cache.frame_end = frame_start + plan.n_frames
     set_scene_fps(scene, plan.fps)
     scene.frame_start = frame_start
     scene.frame_end = max(scene.frame_end, frame_start + plan.n_frames)
     return obj
+
+
+def add_scene_colliders(scene, obj, colliders):
+    """A scenario's colliders (``Collisions``) beside the cloth ``obj``: mesh objects with a Collision
+    modifier (``cloth_script.add_colliders``, what the exported script does) and the cloth's collision
+    settings; their names are kept on ``obj`` so that ``remove_cloth_object`` removes them too."""
+    made = add_colliders(
+        blender_objects(colliders, f"{obj.name} collider"), colliders.settings_dict(), obj.name, scene=scene
+    )
+    obj["clothfit_colliders"] = [o.name for o in made]
+    return made
 
 
 def cloth_modifier(obj):
@@ -181,6 +203,13 @@ def remove_cloth_object(obj):
     """Remove a cloth object ``build_cloth_object`` made: the object, its mesh when nothing else uses
     it, and the keyed empties its hooks follow (``add_pins``) when no other object hooks them."""
     empties = [m.object for m in obj.modifiers if m.type == "HOOK" and m.object is not None]
+    for name in obj.get("clothfit_colliders", []):
+        col = bpy.data.objects.get(name)
+        if col is not None:
+            cme = col.data
+            bpy.data.objects.remove(col, do_unlink=True)
+            if cme is not None and cme.users == 0:
+                bpy.data.meshes.remove(cme)
     me = obj.data
     bpy.data.objects.remove(obj, do_unlink=True)
     if me is not None and me.users == 0:
@@ -209,7 +238,9 @@ def replay(scene, scenario, settings: dict, fps: float, frame_start: int = 1):
     model = BlenderModel(fps, s["quality"], s["bending_model"])
     net, plan = model.plan(scenario)
     set_scene_fps(scene, fps)
-    obj = build_cloth_object(scene, net, plan, s, name="Replay Cloth", frame_start=frame_start)
+    obj = build_cloth_object(
+        scene, net, plan, s, name="Replay Cloth", frame_start=frame_start, colliders=scenario.colliders
+    )
     try:
         frames, _, _ = simulate_frames(scene, obj, plan.n_frames, frame_start)
     finally:

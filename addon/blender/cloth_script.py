@@ -54,3 +54,36 @@ def apply_cloth_settings(settings, fps, object_name=None, set_fps=True, scene=No
     for name, value in settings.items():
         setattr(cs, name, value)
     return obj
+
+
+def add_colliders(colliders, collision_settings, cloth_object_name=None, scene=None):
+    """The colliders of the fit's scene: each ``{"name", "vertices", "faces", "thickness_outer",
+    "cloth_friction"}`` a mesh object with a Collision modifier (an object of the same name is
+    replaced), and collisions on for the Cloth modifier of the object named ``cloth_object_name``
+    (else the active object; none is skipped) with ``collision_settings`` (distance_min,
+    collision_quality). Returns the collider objects."""
+    scene = scene or bpy.context.scene
+    made = []
+    for c in colliders:
+        old = bpy.data.objects.get(c["name"])
+        if old is not None:
+            bpy.data.objects.remove(old, do_unlink=True)
+        me = bpy.data.meshes.new(c["name"])
+        me.from_pydata(c["vertices"], [], c["faces"])
+        me.update()
+        obj = bpy.data.objects.new(c["name"], me)
+        scene.collection.objects.link(obj)
+        obj.modifiers.new("Collision", "COLLISION")
+        obj.collision.use_culling = True
+        obj.collision.thickness_outer = c["thickness_outer"]
+        obj.collision.cloth_friction = c["cloth_friction"]
+        made.append(obj)
+    try:
+        _, mod = find_cloth_modifier(cloth_object_name)
+    except ClothTargetError:
+        return made
+    cs = mod.collision_settings
+    cs.use_collision = True
+    for name, value in collision_settings.items():
+        setattr(cs, name, value)
+    return made

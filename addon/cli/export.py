@@ -13,9 +13,11 @@ from .common import Text, _command, force_arg, refuse_existing
 SCRIPT_FILE = os.path.join(PACKAGE_DIR, "blender", "cloth_script.py")  # read as text: it imports bpy
 
 
-def blender_script(settings: dict, fps: float, object_name=None, source="", comments=()) -> str:
+def blender_script(settings: dict, fps: float, object_name=None, source="", comments=(), colliders=None) -> str:
     """The script that puts ``settings`` on a Cloth modifier in Blender: the Blender layer's
-    ``cloth_script.py`` (the function the add-on's Apply Blender Cloth calls) and one call of it."""
+    ``cloth_script.py`` (the function the add-on's Apply Blender Cloth calls) and one call of it;
+    ``colliders`` (a scenario's ``Collisions``): the colliders too, as mesh objects with a Collision
+    modifier, and the cloth's collisions on (``add_colliders``)."""
     with open(SCRIPT_FILE, encoding="utf-8") as f:
         body = f.read().rstrip("\n")
     lines = [
@@ -28,6 +30,16 @@ def blender_script(settings: dict, fps: float, object_name=None, source="", comm
         f"obj = apply_cloth_settings(SETTINGS, fps={fps!r}, object_name={object_name!r})",
         f'print(f"fitted Cloth settings applied to {{obj.name!r}}, scene at {fps:g} fps")',
     ]
+    if colliders is not None:
+        from ..core.physics.colliders import blender_objects
+
+        lines += [
+            "# the colliders of the fit's scene (Collision modifiers) and the cloth's collision settings",
+            f"COLLIDERS = {pprint.pformat(blender_objects(colliders), sort_dicts=False, width=119)}",
+            f"COLLISION_SETTINGS = {pprint.pformat(colliders.settings_dict(), sort_dicts=False)}",
+            "made = add_colliders(COLLIDERS, COLLISION_SETTINGS, obj.name)",
+            "print('colliders:', ', '.join(o.name for o in made))",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -62,7 +74,12 @@ def cmd_export_blender_cloth(a):
     text = None
     if a.python:  # the one command whose stdout is not JSON: Python, by request
         comments = _manipulation_comments(manip, near) + interval_comments(out)
-        text = blender_script(s, fps, a.object, a.result, comments)
+        cols = None
+        if out.get("colliders"):
+            from ..core.physics.colliders import Collisions
+
+            cols = Collisions.from_dicts(out["colliders"], out.get("collision_settings"), a.result)
+        text = blender_script(s, fps, a.object, a.result, comments, cols)
     if a.out:
         from ..core.safeio import json_text
 

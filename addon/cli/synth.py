@@ -50,7 +50,9 @@ HANDLING_HELP = (
     f"{D.WAVE_AMPLITUDE * 100:g} cm at {D.WAVE_FREQUENCY:g} Hz; lift = the cloth hanging from two hands "
     f"at the corners of one edge, lifted by {D.LIFT_HEIGHT * 100:g} cm and lowered over {D.LIFT_DURATION:g} s; "
     f"apart = the same two hands {D.APART_HOLD:g} of the edge apart, moving to {D.APART_SPREAD:g} of it and "
-    f"back over {D.APART_DURATION:g} s (default: %(default)s)"
+    f"back over {D.APART_DURATION:g} s; drag = a table {D.DRAG_TABLE_DROP * 100:g} cm below the cloth, three corners let "
+    f"go at t = 0 and the fourth dragged {D.DRAG_DISTANCE * 100:g} cm along the table (--model blender: the "
+    "capture declares the table) (default: %(default)s)"
 )
 
 

@@ -57,7 +57,7 @@ NOISE_FRACTION = 0.05  # fraction of boundary pixels flipped
 
 # --- synthetic handlings (physics/handling.py, `synth --handling`): how the hands move the cloth after the settle.
 # "release" is the paper's (above); the others move held corners along keyed paths from t = 0
-HANDLINGS = ("release", "wave", "lift", "apart")
+HANDLINGS = ("release", "wave", "lift", "apart", "drag")
 HANDLING = "release"
 HANDLING_KEY_STEP = 1.0 / 48.0  # s between a path's keys (piecewise linear between them: a 2 cm wave at 1.5 Hz
 # strays from its sine by at most 0.1 mm)
@@ -76,6 +76,22 @@ LIFT_DURATION = 1.0  # s from t = 0 up and back down
 APART_HOLD = 0.7  # the hands start this share of the cloth's width apart (the edge slack between them)
 APART_SPREAD = 1.0  # and move apart to this share (the edge taut) and back (a raised cosine)
 APART_DURATION = 1.0  # s
+# drag: a cloth held flat by its corners above a table, dropped onto it at t = 0 (three corners let go), the fourth
+# corner lowered to the table and dragged along it (the table: a plane ``DRAG_TABLE_DROP`` below the cloth)
+DRAG_CORNER = 0  # index in ClothGrid.corners() of the corner dragged
+DRAG_TABLE_DROP = 0.03  # m from the cloth down to the table
+DRAG_LOWER_DURATION = 0.25  # s the dragged corner takes down to the table
+DRAG_DISTANCE = 0.05  # m the corner is dragged along the table (away from the cloth's middle)
+DRAG_DURATION = 1.0  # s of dragging after it is down
+DRAG_TABLE_DISTANCE = 0.004  # m: the table's outer thickness (Collision modifier thickness_outer)
+DRAG_CLOTH_DISTANCE = 0.004  # m: the cloth's collision distance (collision_settings.distance_min)
+
+# --- colliders (physics/colliders.py): Blender's own defaults for a Collision modifier and a cloth's collisions
+COLLIDER_DISTANCE = 0.02  # m: Collision modifier thickness_outer
+COLLIDER_FRICTION = 5.0  # Collision modifier cloth_friction
+COLLISION_DISTANCE_MIN = 0.015  # m: ClothCollisionSettings.distance_min
+COLLISION_QUALITY = 2  # ClothCollisionSettings.collision_quality
+PLANE_MESH_SIZE = 10.0  # m: the side of the square mesh that stands for an unbounded plane in Blender
 IMAGE_H, IMAGE_W = 480, 640
 DEFAULT_RIG = "lab18"
 TABLE1_CAMERAS = [1, 2, 4, 8, 16]

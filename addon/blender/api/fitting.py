@@ -380,7 +380,9 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True, take=None):
             )
         BC.set_scene_fps(scene, model.fps)
         _replace_fitted_object()
-        new = BC.build_cloth_object(scene, net, plan, settings, name=BLENDER_CLOTH_NAME, frame_start=scene.frame_start)
+        new = BC.build_cloth_object(
+            scene, net, plan, settings, name=BLENDER_CLOTH_NAME, frame_start=scene.frame_start, colliders=sc.colliders
+        )
         return new, (
             f"Built '{new.name}' with the fitted Cloth settings, pins and release of the scenario "
             f"(t = 0 at frame {scene.frame_start + plan.release_frame}){note}"

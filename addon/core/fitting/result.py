@@ -179,6 +179,9 @@ class FitResult(dict):
         out = {"blender_cloth": s, "blender_scene": {"fps": model.fps}}
         if self.manipulation:
             out["manipulation"] = self.manipulation
+        if self.get("colliders"):
+            out["colliders"] = self["colliders"]
+            out["collision_settings"] = self.get("collision_settings") or {}
         if self.get("intervals"):  # how sure each setting is (fitting/intervals.py); undetermined ones keep values
             out["intervals"] = {n: v for n, v in self["intervals"].items() if n in s}
             out["undetermined"] = list(self.get("undetermined") or [])
@@ -290,6 +293,10 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
         if isinstance(res.get("blender_cloth"), dict):
             res["blender_cloth"]["quality"] = job.chosen_quality()
     res.update(job.manipulation())
+    cols = job.capture.scenario.colliders
+    if cols is not None:  # what the cloth lands on: the export and Apply build it in Blender
+        res["colliders"] = [c.to_dict() for c in cols.colliders]
+        res["collision_settings"] = cols.settings_dict()
     if len(job.takes) > 1:
         res["takes"] = job.take_entries()
     st = job.intervals

@@ -59,6 +59,7 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
+from .blender_collide import collide
 from .blender_settings import (  # noqa: F401  (re-exported: blender.X is the public path)
     AIR_SCALE,
     ALMOST_ZERO,
@@ -83,6 +84,7 @@ from .blender_settings import (  # noqa: F401  (re-exported: blender.X is the pu
     settings_row,
     steps_per_frame,
 )
+from .colliders import Collisions
 from .scenario import ClothGrid, Scenario
 
 # --------------------------------------------------------------------------- the spring network
@@ -590,10 +592,16 @@ def _cg_filtered(A, B, pinned):
 
 
 def simulate_reference(
-    net: Network, plan: FramePlan, settings: dict, gravity: ArrayLike = D.GRAVITY, keep_frames: bool = False
+    net: Network,
+    plan: FramePlan,
+    settings: dict,
+    gravity: ArrayLike = D.GRAVITY,
+    keep_frames: bool = False,
+    colliders: Collisions | None = None,
 ) -> Trajectory:
     """One candidate, step by step as Blender's solver runs it (numpy; the numba kernels of
-    ``blender_kernels`` compute the same and are tested against it)."""
+    ``blender_kernels`` compute the same and are tested against it). ``colliders``: the contact step
+    of ``blender_collide`` (in float32, as the kernels) after every velocity solve."""
     s = check_settings(settings)
     V = net.n_vertices
     m = s["mass"]
@@ -675,6 +683,8 @@ def simulate_reference(
             dV, it = _cg_filtered(A, B, pinned)
             iters.append(it)
             Vel = Vel + dV
+            if colliders is not None:
+                Vel = _collided(X, Vel, pinned, net, colliders, dt)
             X = X + dt * Vel
             if pinned.any():
                 X[pinned] = xold[pinned] + (xconst[pinned] - xold[pinned]) * ((step + dt) / ts)
@@ -688,6 +698,16 @@ def simulate_reference(
     else:
         pos = plan.sample(frames)
     return Trajectory(pos, frames if keep_frames else None, bool(reason), reason, np.array(iters), len(starts))
+
+
+def _collided(X, Vel, pinned, net: Network, colliders: Collisions, dt: float) -> np.ndarray:
+    """The velocities after ``blender_collide``'s contact step (float32, one lane)."""
+    X32 = np.ascontiguousarray(X.reshape(-1, 1), dtype=np.float32)
+    V32 = np.ascontiguousarray(Vel.reshape(-1, 1), dtype=np.float32)
+    free = np.where(pinned, 0.0, 1.0).astype(np.float32)
+    tris = np.ascontiguousarray(net.triangles, dtype=np.int64)
+    collide(X32, V32, free, tris, colliders.packed(), np.float32(dt))
+    return V32.reshape(-1, 3).astype(np.float64)
 
 
 def _explosion_limits(net: Network, plan: FramePlan):

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from . import simd as _simd_ir
 from . import simd_plain
+from .blender_collide import collide
 from .blender_constants import (
     C4,
     CG_EPS,
@@ -268,6 +269,8 @@ def simulate_batch(
     max_ratio,
     codes,
     iterations,
+    tris,
+    col,
 ):
     """Simulate the W = simd.W lanes of ``par`` (W, N_LANE_PARAMS) in lockstep through every frame.
 
@@ -440,12 +443,14 @@ def simulate_batch(
                         on = delta[0, l] > target[0, l]
                         run[0, l] = ONE if on else ZERO
                         anyrun = anyrun or on
-            # advance: v += dv, x += v dt; pinned vertices to their interpolated targets
-            for v in range(V):
-                for a in range(3):
-                    for l in range(L):
-                        Vel[3 * v + a, l] = Vel[3 * v + a, l] + dV[3 * v + a, l]
-                        X[3 * v + a, l] = X[3 * v + a, l] + Vel[3 * v + a, l] * dt
+            # advance: v += dv (then the colliders' impulses), x += v dt; pinned vertices to their targets
+            for k in range(3 * V):
+                for l in range(L):
+                    Vel[k, l] = Vel[k, l] + dV[k, l]
+            collide(X, Vel, free, tris, col, dt)
+            for k in range(3 * V):
+                for l in range(L):
+                    X[k, l] = X[k, l] + Vel[k, l] * dt
             tp = tp_steps[st]
             sp = ONE - tp
             for h in range(H):
@@ -528,6 +533,8 @@ def simulate_population(
     max_ratio,
     codes,
     iterations,
+    tris,
+    col,
 ):
     """Batches of simd.W lanes ``lane_start[b]:lane_start[b] + W`` of ``par`` in parallel threads;
     ``restlen`` (NB, S, W), ``restang`` (NB, B, W) and ``targets`` (NB, n_frames + 1, H, 3, W) per batch."""
@@ -565,6 +572,8 @@ def simulate_population(
             max_ratio,
             codes[a:e],
             iterations[a:e],
+            tris,
+            col,
         )
 
 
@@ -574,8 +583,12 @@ def simulate_population(
 class Prepared:
     """The float32 arrays of one network and frame plan, ready for ``simulate_population``."""
 
-    def __init__(self, net, plan, quality: int, time_scale: float, gravity, all_frames: bool = False):
+    def __init__(self, net, plan, quality: int, time_scale: float, gravity, all_frames: bool = False, colliders=None):
         from .blender import MAX_STRAIN, _explosion_limits
+        from .colliders import packed_or_empty
+
+        self.col = packed_or_empty(colliders)  # the colliders' rows (blender_collide), (0, ...) without
+        self.tris = np.ascontiguousarray(net.triangles, dtype=np.int64)
 
         self.net, self.plan = net, plan
         self.rest = np.ascontiguousarray(net.rest, dtype=np.float32)
@@ -756,6 +769,8 @@ class Prepared:
             self.max_ratio,
             codes,
             its,
+            self.tris,
+            self.col,
         )
         return out[:n], codes[:n], its[:n]
 

@@ -10,7 +10,11 @@ it and at its last after it (the ``Handle`` rule). The names (``D.HANDLINGS``, `
 * ``lift``: the cloth hangs from two hands at the corners of one edge (the other corners free);
   both hands go up by ``height`` and down again over ``duration`` (a raised cosine);
 * ``apart``: the same two hands start ``hold`` of the edge's length apart (the edge slack), move
-  apart to ``spread`` of it and back over ``duration`` (a raised cosine).
+  apart to ``spread`` of it and back over ``duration`` (a raised cosine);
+* ``drag``: a table (a plane ``drop`` below the sheet, ``colliders.py``); the sheet is held flat by its
+  four corners, at t = 0 three of them let go (it drops onto the table) and the fourth is lowered
+  onto the table and dragged along it by ``distance`` over ``duration`` (smoothly), away from the
+  cloth's middle (the cloth follows it).
 
 Every default is in ``defaults.py``; the builders take the grid and frame times of any scenario.
 """
@@ -25,6 +29,7 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
+from .colliders import Collider, Collisions
 from .scenario import ClothGrid, Handle, Scenario, paper_scenario
 
 OPTIONS = {
@@ -37,6 +42,12 @@ OPTIONS = {
     },
     "lift": {"height": D.LIFT_HEIGHT, "duration": D.LIFT_DURATION},
     "apart": {"hold": D.APART_HOLD, "spread": D.APART_SPREAD, "duration": D.APART_DURATION},
+    "drag": {
+        "corner": D.DRAG_CORNER,
+        "drop": D.DRAG_TABLE_DROP,
+        "distance": D.DRAG_DISTANCE,
+        "duration": D.DRAG_DURATION,
+    },
 }
 assert tuple(OPTIONS) == tuple(D.HANDLINGS)
 
@@ -99,7 +110,7 @@ def _options(name: str, given: dict[str, Any]) -> dict[str, Any]:
                 raise ClothFitError(f"handling {name!r}: {k} must be a corner index 0..3, got {v!r}")
         elif k != "direction" and not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ClothFitError(f"handling {name!r}: {k} must be a number >= 0, got {v!r}")
-    for k in ("frequency", "duration", "hold", "spread"):
+    for k in ("frequency", "duration", "hold", "spread", "drop"):
         if k in opts and opts[k] <= 0:
             raise ClothFitError(f"handling {name!r}: {k} must be positive, got {opts[k]!r}")
     return opts
@@ -131,6 +142,8 @@ def handling_scenario(
         )
         handles = [Handle(v, t, p) if v == waved else Handle(v, [0.0], rest[v][None]) for v in corners]
         return Scenario(grid, handles, times)
+    if name == "drag":
+        return drag_scenario(grid, times, opts)
     a, b = two_hands(grid)
     if name == "lift":
         up = np.array([0.0, 0.0, opts["height"]])
@@ -149,3 +162,47 @@ def handling_scenario(
 def moving_handles(scenario: Scenario, tol: float = 1e-12) -> list[int]:
     """The vertices of the handles whose keyed positions change (a path, not a point held still)."""
     return [h.vertex for h in scenario.handles if np.ptp(h.positions, axis=0).max(initial=0.0) > tol]
+
+
+def smoothstep(t: ArrayLike, duration: float) -> np.ndarray:
+    """0 at t <= 0, rising smoothly to 1 at ``duration`` and after."""
+    s = np.clip(np.asarray(t, dtype=np.float64) / duration, 0.0, 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+def drag_scenario(grid: ClothGrid, times: np.ndarray, opts: dict[str, Any]) -> Scenario:
+    """``drag`` (see the module): the table, the three corners let go at t = 0, the dragged corner's path
+    (down onto the table over ``D.DRAG_LOWER_DURATION``, then ``distance`` away from the cloth's middle over
+    ``duration``)."""
+    rest = grid.rest
+    corners = grid.corners()
+    dragged = corners[opts["corner"]]
+    top = float(rest[:, 2].min()) - opts["drop"]
+    table = Collisions(
+        [
+            Collider.from_dict(
+                {
+                    "type": "plane",
+                    "point": [0.0, 0.0, top],
+                    "normal": [0.0, 0.0, 1.0],
+                    "distance": D.DRAG_TABLE_DISTANCE,
+                    "friction": D.COLLIDER_FRICTION,
+                }
+            )
+        ],
+        D.DRAG_CLOTH_DISTANCE,
+        D.COLLISION_QUALITY,
+    )
+    rest_gap = (D.DRAG_TABLE_DISTANCE + D.DRAG_CLOTH_DISTANCE) * 8.0 / 9.0  # where Blender's cloth rests on it
+    down = D.DRAG_LOWER_DURATION
+    t = np.concatenate([key_times(down), down + key_times(opts["duration"])[1:]])
+    lowered = smoothstep(t, down)
+    along = smoothstep(t - down, opts["duration"])
+    p = np.repeat(rest[dragged][None], t.size, axis=0)
+    p[:, 2] += lowered * (top + rest_gap - rest[dragged, 2])
+    out = rest[dragged] - rest.mean(axis=0)  # away from the cloth's middle, along the table: the cloth follows
+    out[2] = 0.0
+    out /= max(float(np.linalg.norm(out)), 1e-12)
+    p += (along * opts["distance"])[:, None] * out
+    handles = [Handle(dragged, t, p)] + [Handle(v, [0.0], rest[v][None], 0.0) for v in corners if v != dragged]
+    return Scenario(grid, handles, times, colliders=table)

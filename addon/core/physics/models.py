@@ -67,6 +67,8 @@ class PaperModel:
         offsets: Offsets | None = None,
     ) -> SimResult:
         """``offsets``: each candidate's own manipulation (``Scenario.moved``), None = the scenario's."""
+        if scenario.colliders is not None:
+            raise ClothFitError("the paper model has no colliders: fit a scene with a table with --model blender")
         P = _as_params(rows)
         if _backend(backend) == "numba":
             return paper_kernels.simulate(scenario, P, self.safety, offsets)
@@ -179,7 +181,9 @@ class BlenderModel:
             reason = [""] * n
             steps = np.zeros(n, dtype=np.int64)
             for p in range(n):
-                tr = B.simulate_reference(net, plan, self.settings(rows[p]), scenario.gravity)
+                tr = B.simulate_reference(
+                    net, plan, self.settings(rows[p]), scenario.gravity, colliders=scenario.colliders
+                )
                 out[p], exploded[p], reason[p] = tr.positions, tr.exploded, tr.reason
                 steps[p] = tr.steps_per_frame * plan.n_frames
             return SimResult(out, exploded, steps, reason)
@@ -206,7 +210,7 @@ class BlenderModel:
         prep = store.get((time_scale, all_frames))
         if prep is None:
             prep = store[(time_scale, all_frames)] = blender_kernels.Prepared(
-                net, plan, self.quality, time_scale, scenario.gravity, all_frames
+                net, plan, self.quality, time_scale, scenario.gravity, all_frames, scenario.colliders
             )
         return prep
 

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
+from .colliders import Collisions
 
 # plausibility limits of a scenario read from a file: beyond them a value is a typo or an attack
 # (memory exhaustion, a simulation that never ends), not a cloth
@@ -289,8 +290,11 @@ class Scenario:
     frame_times: np.ndarray
     settle_time: float = D.SETTLE_TIME
     gravity: np.ndarray = field(default_factory=lambda: np.array(D.GRAVITY))
+    colliders: Collisions | None = None  # what the cloth lands on (``colliders.py``); None: nothing
 
     def __post_init__(self):
+        if self.colliders is not None and not isinstance(self.colliders, Collisions):
+            raise ClothFitError(f"scenario: colliders must be a Collisions, got {type(self.colliders).__name__}")
         self.frame_times = np.asarray(self.frame_times, dtype=np.float64).reshape(-1)
         self.gravity = np.asarray(self.gravity, dtype=np.float64).reshape(3)
         if self.frame_times.size == 0:
@@ -329,13 +333,17 @@ class Scenario:
             seen.add(h.vertex)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        d = {
             "cloth": self.grid.to_dict(),
             "handles": [h.to_dict() for h in self.handles],
             "frame_times": self.frame_times.tolist(),
             "settle_time": self.settle_time,
             "gravity": self.gravity.tolist(),
         }
+        if self.colliders is not None:
+            d["colliders"] = [c.to_dict() for c in self.colliders.colliders]
+            d["collision_settings"] = self.colliders.settings_dict()
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "scenario") -> Scenario:
@@ -346,12 +354,24 @@ class Scenario:
         handles = [Handle.from_dict(h, grid.n_vertices, f"{source} handle #{i}") for i, h in enumerate(hs)]
         if "frame_times" not in d:
             raise ClothFitError(f"{source}: missing 'frame_times'")
+        cols = None
+        if d.get("colliders") is not None:
+            cols = Collisions.from_dicts(d["colliders"], d.get("collision_settings"), source)
+        elif d.get("collision_settings") is not None:
+            raise ClothFitError(f"{source}: 'collision_settings' without 'colliders'")
         return cls(
-            grid, handles, d["frame_times"], float(d.get("settle_time", D.SETTLE_TIME)), d.get("gravity", D.GRAVITY)
+            grid,
+            handles,
+            d["frame_times"],
+            float(d.get("settle_time", D.SETTLE_TIME)),
+            d.get("gravity", D.GRAVITY),
+            cols,
         )
 
     def with_frames(self, times: ArrayLike) -> Scenario:
-        return Scenario(self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity)
+        return Scenario(
+            self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity, self.colliders
+        )
 
     def moved(self, time_offset: float = 0.0, handle_offsets: ArrayLike | None = None) -> Scenario:
         """The manipulation a fit estimated (``Uncertainty``): the frames read ``time_offset`` s earlier
@@ -362,7 +382,7 @@ class Scenario:
             off = np.asarray(handle_offsets, dtype=np.float64).reshape(len(hs), 3)
             hs = [Handle(h.vertex, h.times, h.positions + off[k], h.release_time) for k, h in enumerate(hs)]
         times = np.maximum(self.frame_times - float(time_offset), -self.settle_time)
-        return Scenario(self.grid, hs, times, self.settle_time, self.gravity)
+        return Scenario(self.grid, hs, times, self.settle_time, self.gravity, self.colliders)
 
 
 def paper_scenario(
