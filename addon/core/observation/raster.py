@@ -22,6 +22,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .camera import Camera
+    from .crop import CropPlane
 
 
 def triangle_spans(
@@ -82,9 +83,19 @@ def rasterize(pts: np.ndarray, tris: np.ndarray, height: int, width: int) -> np.
 
 
 def silhouette(
-    camera: Camera, vertices: np.ndarray, tris: np.ndarray, height: int | None = None, width: int | None = None
+    camera: Camera,
+    vertices: np.ndarray,
+    tris: np.ndarray,
+    height: int | None = None,
+    width: int | None = None,
+    crop: CropPlane | None = None,
 ) -> np.ndarray:
-    """Silhouette of a mesh (world vertices ``(V, 3)``) seen by ``camera``."""
+    """Silhouette of a mesh (world vertices ``(V, 3)``) seen by ``camera``; with a ``crop`` plane
+    (``crop.py``) only the part of the mesh on its kept side."""
+    if crop is not None:
+        from .crop import clip_mesh
+
+        vertices, tris = clip_mesh(vertices, tris, crop)
     h = camera.height if height is None else height
     w = camera.width if width is None else width
     cam = camera if (h, w) == (camera.height, camera.width) else camera.resized(h, w)

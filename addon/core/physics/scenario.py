@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
+from ..observation.crop import CropPlane
 
 # plausibility limits of a scenario read from a file: beyond them a value is a typo or an attack
 # (memory exhaustion, a simulation that never ends), not a cloth
@@ -282,15 +283,20 @@ class Handle:
 
 @dataclass
 class Scenario:
-    """A cloth, its handles, the settling phase and the capture times: one manipulation."""
+    """A cloth, its handles, the settling phase and the capture times: one manipulation.
+
+    ``crop`` (``observation.crop.CropPlane``, None = none): the part of the scene the capture's data
+    left out (points near a table); the model's silhouettes leave it out too. The simulation ignores it."""
 
     grid: ClothGrid
     handles: list
     frame_times: np.ndarray
     settle_time: float = D.SETTLE_TIME
     gravity: np.ndarray = field(default_factory=lambda: np.array(D.GRAVITY))
+    crop: CropPlane | None = None
 
     def __post_init__(self):
+        self.crop = CropPlane.parse(self.crop, "scenario crop")
         self.frame_times = np.asarray(self.frame_times, dtype=np.float64).reshape(-1)
         self.gravity = np.asarray(self.gravity, dtype=np.float64).reshape(3)
         if self.frame_times.size == 0:
@@ -335,6 +341,7 @@ class Scenario:
             "frame_times": self.frame_times.tolist(),
             "settle_time": self.settle_time,
             "gravity": self.gravity.tolist(),
+            **({} if self.crop is None else {"crop": self.crop.to_dict()}),
         }
 
     @classmethod
@@ -346,12 +353,19 @@ class Scenario:
         handles = [Handle.from_dict(h, grid.n_vertices, f"{source} handle #{i}") for i, h in enumerate(hs)]
         if "frame_times" not in d:
             raise ClothFitError(f"{source}: missing 'frame_times'")
+        crop = CropPlane.parse(d.get("crop"), f"{source} crop")
         return cls(
-            grid, handles, d["frame_times"], float(d.get("settle_time", D.SETTLE_TIME)), d.get("gravity", D.GRAVITY)
+            grid,
+            handles,
+            d["frame_times"],
+            float(d.get("settle_time", D.SETTLE_TIME)),
+            d.get("gravity", D.GRAVITY),
+            crop,
         )
 
     def with_frames(self, times: ArrayLike) -> Scenario:
-        return Scenario(self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity)
+        times = np.asarray(times, dtype=np.float64)
+        return Scenario(self.grid, self.handles, times, self.settle_time, self.gravity, self.crop)
 
     def moved(self, time_offset: float = 0.0, handle_offsets: ArrayLike | None = None) -> Scenario:
         """The manipulation a fit estimated (``Uncertainty``): the frames read ``time_offset`` s earlier
@@ -362,7 +376,7 @@ class Scenario:
             off = np.asarray(handle_offsets, dtype=np.float64).reshape(len(hs), 3)
             hs = [Handle(h.vertex, h.times, h.positions + off[k], h.release_time) for k, h in enumerate(hs)]
         times = np.maximum(self.frame_times - float(time_offset), -self.settle_time)
-        return Scenario(self.grid, hs, times, self.settle_time, self.gravity)
+        return Scenario(self.grid, hs, times, self.settle_time, self.gravity, self.crop)
 
 
 def paper_scenario(
