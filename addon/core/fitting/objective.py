@@ -123,7 +123,7 @@ class SilhouetteObjective:
         unknowns (time offset, handle offsets); None = the scenario as it is."""
         if offsets is not None and len(offsets) != np.asarray(P).reshape(len(offsets), -1).shape[0]:
             raise ClothFitError(f"objective: {len(offsets)} offsets for {np.asarray(P).shape[0]} candidates")
-        if not self.paper or self.crop is not None:
+        if not self.paper or self.crop is not None or (offsets is not None and offsets.stretches):
             return self._per_image_positions(P, offsets)
         P = np.ascontiguousarray(np.asarray(P, dtype=np.float64).reshape(-1, 4))
         C, F = self.areas.shape

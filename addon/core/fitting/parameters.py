@@ -441,7 +441,9 @@ class ManipulationParameters:
     """The manipulation's unknowns a fit estimates with the cloth's settings (``Uncertainty``): the
     time offset ``time_offset_s`` in ``[-b, b]`` and one 3-D offset per uncertain handle, each
     coordinate in ``[-b_k, b_k]`` (linear coordinates: an offset of zero is the declared
-    manipulation). ``offsets(X)`` turns the coordinates of a population into ``scenario.Offsets``."""
+    manipulation), and with a declared ``time_scale`` S the stretch of the capture's clock as
+    ``log_time_scale`` in ``[-ln S, ln S]`` (zero: the declared frame interval). ``offsets(X)`` turns the
+    coordinates of a population into ``scenario.Offsets``."""
 
     def __init__(self, uncertainty: Uncertainty, scenario):
         self.uncertainty = uncertainty
@@ -450,6 +452,9 @@ class ManipulationParameters:
         if uncertainty.time_offset > 0:
             names.append("time_offset_s")
             bounds["time_offset_s"] = (-uncertainty.time_offset, uncertainty.time_offset)
+        if uncertainty.time_scale > 1.0:
+            names.append("log_time_scale")
+            bounds["log_time_scale"] = (-math.log(uncertainty.time_scale), math.log(uncertainty.time_scale))
         self.handle_coords = []  # (name, handle index, axis)
         for k, b in enumerate(uncertainty.handles):
             if b > 0:
@@ -473,7 +478,9 @@ class ManipulationParameters:
         h = np.zeros((P, self.n_handles, 3))
         for nm, k, a in self.handle_coords:
             h[:, k, a] = M[:, self.names.index(nm)]
-        return Offsets(t, h)
+        if "log_time_scale" not in self.names:
+            return Offsets(t, h)
+        return Offsets(t, h, np.exp(M[:, self.names.index("log_time_scale")]))
 
     def at_bound(self, m: ArrayLike, share: float = D.MANIP_AT_BOUND_SHARE) -> list[str]:
         """The unknowns whose fitted value ``m`` (coordinates in ``names`` order) lies at the edge of its
@@ -496,12 +503,16 @@ class ManipulationParameters:
                 d["offset_bound_m"] = self.uncertainty.handles[k]
                 d["offset_uncertainty_m"] = [sd.get(f"handle{k}_{ax}") for ax in "xyz"]
             handles.append(d)
-        return {
+        d = {
             "time_offset_s": float(off.time[0]),
             "time_offset_uncertainty_s": sd.get("time_offset_s"),
             "uncertain": self.uncertainty.to_dict(),
             "handles": handles,
         }
+        if "log_time_scale" in self.names:  # the stretch and its relative uncertainty (of its logarithm)
+            d["time_scale"] = float(off.scale[0])
+            d["time_scale_uncertainty"] = sd.get("log_time_scale")
+        return d
 
 
 def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None, uncertainty_s: float | None) -> list:

@@ -20,6 +20,7 @@ of one take is the same machinery with one take.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -145,6 +146,11 @@ def take_manipulation(
             "are its own objects): give --uncertain time_offset=S,handles=0, or fit the capture "
             "with the core model"
         )
+    if evaluator is not None and unc.time_scale > 1.0:
+        raise ClothFitError(
+            "fit: an uncertain time_scale cannot be estimated with --backend blender (the scene keeps its own "
+            "frame rate): fit the capture with the core model"
+        )
     n_frames = len(train_times)
     rel = [h.release_time for h in sc.handles if h.release_time is not None]
     after = sum(t >= min(rel) for t in train_times) if rel else n_frames
@@ -158,7 +164,7 @@ def take_manipulation(
     if any(b > 0 for b in h_bounds) and n_frames < 2:
         notes.append("handle offsets not estimated: one training frame cannot separate them from the cloth's settings")
         h_bounds = (0.0,) * nh
-    unc = Uncertainty(t_bound, tuple(h_bounds))
+    unc = Uncertainty(t_bound, tuple(h_bounds), unc.time_scale)
     note = "; ".join(notes) or None
     if not unc.active:
         return None, note
@@ -361,6 +367,8 @@ def manipulation_result(fit: Any) -> dict:
 
         def shown(n):
             v, b = m[manip.names.index(n)], manip.bounds[n][1]
+            if n == "log_time_scale":
+                return f"time_scale {math.exp(v):.3f} (bound {math.exp(-b):.3f}..{math.exp(b):.3f})"
             unit = "ms" if n == "time_offset_s" else "mm"
             return f"{n} {1e3 * v:+.2f} {unit} (bound {1e3 * b:.2f} {unit})"
 
