@@ -109,7 +109,7 @@ class Take:
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
         self.images = (cameras_, observed, ignore, names)
         if evaluator is not None:
-            self.scenario = evaluator.scenario(self.train_times)
+            self.scenario = evaluator.scenario(self.train_times, capture.scenario.crop)
         else:
             self.scenario = capture.scenario.with_frames(self.train_times)
         self.manip, self.manip_note = take_manipulation(capture, cfg, self.scenario, self.train_times, evaluator)
