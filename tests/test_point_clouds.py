@@ -145,12 +145,14 @@ def test_a_file_that_is_no_npy_array_is_one_line_naming_it(tmp_path):
     assert str(p) in str(e.value) and "\n" not in str(e.value)
 
 
-def test_a_crop_plane_above_the_cloth_is_one_line_naming_the_plane(tmp_path, clouds):
-    setup = read_setup(str(_setup(tmp_path, crop={"point": [0, 0, 0.6], "normal": [0, 0, 1]})))
+@pytest.mark.parametrize("top, says", [(0.7, "no frame keeps"), (0.5, "grasped corner never rises")])
+def test_a_crop_plane_above_the_cloth_is_one_line_naming_the_plane(tmp_path, clouds, top, says):
+    path = {"waypoints": [[0.0, 0.0, 0.05], [0.0, 0.0, top]]}  # the clouds reach 0.25 m
+    setup = read_setup(str(_setup(tmp_path, crop={"point": [0, 0, 0.6], "normal": [0, 0, 1]}, path=path)))
     with pytest.raises(ClothFitError) as e:
         points_to_capture(str(clouds), setup, str(tmp_path / "cap"))
     msg = str(e.value)
-    assert "crop plane" in msg and "0.6" in msg and "above the cloth" in msg and "\n" not in msg
+    assert "crop plane" in msg and "0.6" in msg and "above the cloth" in msg and says in msg and "\n" not in msg
 
 
 def test_a_path_of_fewer_than_two_waypoints_is_one_line_naming_it(tmp_path):

@@ -294,10 +294,15 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
     ``D.POINTS_MIN_POINTS`` points above the crop are left out (listed in the report). Returns the capture
     and a report (frames kept and left out, points per frame, the cameras)."""
     files = point_cloud_files(folder)
+    h = setup.handle
+    if setup.crop is not None and not np.any(setup.crop.height(h.positions) > 0.0):
+        raise ClothFitError(
+            f"crop plane {setup.crop.to_dict()}: above the cloth: its grasped corner never rises above it "
+            f"(waypoints {h.positions[0].round(4).tolist()} .. {h.positions[-1].round(4).tolist()} m)"
+        )
     frames, counts = kept_points(files, setup)
     keep = [k for k, c in enumerate(counts) if c >= D.POINTS_MIN_POINTS]
     times = np.round(setup.frame_interval * np.asarray(keep, dtype=np.float64), 9)  # 0.6, not 0.6000000000000001
-    h = setup.handle
     grid = flat_square(h.positions[0], setup.across, setup.side, setup.grid_n)
     scenario = Scenario(grid, [h], times, setup.settle_time, crop=setup.crop)
     every = np.concatenate([frames[k] for k in keep] + [h.positions, grid.rest])
