@@ -9,15 +9,15 @@ from clothfit.core import defaults as D
 from clothfit.core.errors import ClothFitError
 from clothfit.core.fitting.evaluate import held_unknowns
 from clothfit.core.fitting.objective import SilhouetteObjective
-from clothfit.core.fitting.parameters import ManipulationParameters
+from clothfit.core.fitting.parameters import ManipulationParameters, release_instants
 from clothfit.core.observation.camera import ring_rig
 from clothfit.core.observation.capture import write_capture
 from clothfit.core.observation.raster import silhouette
 from clothfit.core.physics import jit
 from clothfit.core.physics.handling import handling_scenario
-from clothfit.core.physics.models import simulate
+from clothfit.core.physics.models import PaperModel, simulate
 from clothfit.core.physics.paper import Params
-from clothfit.core.physics.scenario import ClothGrid, Offsets, Uncertainty, fitted_scenario
+from clothfit.core.physics.scenario import ClothGrid, Handle, Offsets, Uncertainty, fitted_scenario
 
 TRUE_SCALE = 1.3
 
@@ -96,3 +96,14 @@ def test_fitting_the_unknowns_of_a_capture_recovers_its_frame_interval(tmp_path)
     row = np.array([truth.m, truth.k, truth.l, truth.d])
     got = held_unknowns(cap, None, row, cams, obs, [[None] * cap.n_frames] * 3, list(sc.frame_times), "auto", 80)
     assert got["time_scale"] == pytest.approx(TRUE_SCALE, rel=0.03)
+
+
+def test_a_fitted_release_lands_on_the_capture_clock_through_the_stretch_and_the_offset():
+    sc = handling_scenario("release", ClothGrid(4), frame_times=[0.1, 0.3])
+    h = sc.handles[D.RELEASED_CORNER]
+    sc.handles[D.RELEASED_CORNER] = Handle(h.vertex, h.times, h.positions, 0.2)
+    (rel,) = release_instants(PaperModel(), sc, 0.01, None, 1.5)
+    assert rel["model_s"] == pytest.approx(0.3)  # the declared release, stretched
+    assert 1.5 * rel["capture_s"] - 0.01 == pytest.approx(rel["model_s"])  # true = scale x capture - offset
+    (plain,) = release_instants(PaperModel(), sc, 0.01, None)
+    assert plain["capture_s"] == pytest.approx(0.21)

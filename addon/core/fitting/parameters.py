@@ -515,11 +515,13 @@ class ManipulationParameters:
         return d
 
 
-def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None, uncertainty_s: float | None) -> list:
+def release_instants(
+    model: Any, scenario: Scenario, time_offset_s: float | None, uncertainty_s: float | None, time_scale: float = 1.0
+) -> list:
     """Where a fit puts each released handle's release on the capture's clock: the instant the model's
     cloth starts to fall (``model.release_instant``: Blender's cloth lets go at the last held frame, so
-    up to a frame before the declared time) plus the fitted ``time_offset_s`` (true time = capture
-    time - offset). Empty when nothing is released, the offset was not estimated (None) or the model
+    up to a frame before the declared time, stretched by a fitted ``time_scale``) plus the fitted
+    ``time_offset_s``, on the capture's clock (true time = time_scale x capture time - offset). Empty when nothing is released, the offset was not estimated (None) or the model
     does not say when its cloth lets go (a user's own scene: its pins are its own)."""
     at = getattr(model, "release_instant", None)
     if time_offset_s is None or at is None:
@@ -528,14 +530,14 @@ def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None
     for k, h in enumerate(scenario.handles):
         if h.release_time is None:
             continue
-        m = float(at(h.release_time))
+        m = float(at(h.release_time * time_scale))
         out.append(
             {
                 "handle": k,
                 "vertex": int(h.vertex),
                 "declared_s": float(h.release_time),
                 "model_s": m,
-                "capture_s": m + float(time_offset_s),
+                "capture_s": (m + float(time_offset_s)) / time_scale,
                 "uncertainty_s": uncertainty_s,
             }
         )

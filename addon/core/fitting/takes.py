@@ -377,7 +377,11 @@ def manipulation_result(fit: Any) -> dict:
             f"manipulation may be further off than the capture declares: fit again with a wider --uncertain"
         )
     rel = release_instants(
-        fit.objective.model, fit.capture.scenario, d.get("time_offset_s"), d.get("time_offset_uncertainty_s")
+        fit.objective.model,
+        fit.capture.scenario,
+        d.get("time_offset_s"),
+        d.get("time_offset_uncertainty_s"),
+        d.get("time_scale", 1.0),
     )
     if rel:
         d["release_instants"] = rel
