@@ -160,3 +160,20 @@ def test_a_path_of_fewer_than_two_waypoints_is_one_line_naming_it(tmp_path):
         read_setup(str(_setup(tmp_path, path={"waypoints": [[0.0, 0.0, 0.05]]})))
     msg = str(e.value)
     assert "waypoints" in msg and "at least two" in msg and "setup.json" in msg and "\n" not in msg
+
+
+@pytest.mark.parametrize(
+    "change, says",
+    [
+        ({"cameras": {"resolution": 120}}, "resolution"),
+        ({"cameras": {"count": 0}}, "count"),
+        ({"splat_radius": -1}, "splat_radius"),
+        ({"cloth": {"side": 0.2}}, "cloth"),
+        ({"frame_interval": "fast"}, "frame_interval"),
+        ({"colour": 1}, "colour"),
+    ],
+)
+def test_a_bad_setup_value_is_one_line_naming_it(tmp_path, clouds, change, says):
+    with pytest.raises(ClothFitError) as e:
+        points_to_capture(str(clouds), read_setup(str(_setup(tmp_path, **change))), str(tmp_path / "cap"))
+    assert says in str(e.value) and "\n" not in str(e.value)

@@ -220,8 +220,11 @@ def virtual_ring(points: np.ndarray, spec: dict[str, Any]) -> list[Camera]:
         raise ClothFitError(f"cameras count: {count!r} must be a whole number 1..64")
     elev = _number(spec.get("elevation_deg", D.POINTS_ELEVATION_DEG), "cameras elevation_deg", -89.0, False)
     fov = _number(spec.get("fov_deg", D.POINTS_FOV_DEG), "cameras fov_deg")
-    h, w = spec.get("resolution", D.POINTS_RESOLUTION)
-    if not all(isinstance(x, int) and 8 <= x <= D.MAX_IMAGE_SIDE for x in (h, w)):
+    res = spec.get("resolution", D.POINTS_RESOLUTION)
+    if not isinstance(res, (list, tuple)) or len(res) != 2:
+        raise ClothFitError(f"cameras resolution: {res!r} must be [H, W]")
+    h, w = res
+    if not all(isinstance(x, int) and not isinstance(x, bool) and 8 <= x <= D.MAX_IMAGE_SIDE for x in (h, w)):
         raise ClothFitError(f"cameras resolution: {[h, w]} must be [H, W] whole numbers of pixels, at least 8")
     if not (fov < 170 and elev <= 89):
         raise ClothFitError(
