@@ -6,9 +6,9 @@ from clothfit.core import defaults as D
 from clothfit.core.errors import ClothFitError
 from clothfit.core.fitting.objective import SilhouetteObjective
 from clothfit.core.observation.camera import ring_rig
-from clothfit.core.observation.crop import CropPlane, clip_mesh
 from clothfit.core.observation.raster import silhouette
 from clothfit.core.physics import jit
+from clothfit.core.physics.crop import CropPlane, clip_mesh
 from clothfit.core.physics.models import simulate
 from clothfit.core.physics.paper import Params
 from clothfit.core.physics.scenario import ClothGrid, Scenario, paper_scenario

@@ -39,7 +39,7 @@ class SceneMesh:
 class SceneScenario:
     grid: SceneMesh
     frame_times: np.ndarray
-    crop: Any = None  # the capture's crop plane (``core.observation.crop``): the model's silhouettes honour it
+    crop: Any = None  # the capture's crop plane (``core.physics.crop``): the model's silhouettes honour it
 
     def with_frames(self, times):
         return SceneScenario(self.grid, np.asarray(times, dtype=np.float64), self.crop)

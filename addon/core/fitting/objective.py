@@ -21,10 +21,10 @@ from numpy.typing import ArrayLike
 
 from ..errors import ClothFitError
 from ..observation.coverage import refuse_full_silhouettes
-from ..observation.crop import clip_mesh, clipped_triangles
 from ..observation.floor import resample_ignore, resample_silhouette
 from ..observation.raster import rasterize, rasterize_window
 from ..physics import jit, paper_kernels
+from ..physics.crop import clip_mesh, clipped_triangles
 from ..physics.models import PaperModel, get_model
 from ..physics.paper import simulate_numpy
 from ..physics.scenario import Offsets

@@ -11,7 +11,7 @@ clouds' own frame (z up) scaled by the unit; waypoints read from a file may carr
 What it writes: a ring of virtual cameras looking at the points; per camera and frame a silhouette made by
 drawing every point above the crop as a disc of ``splat_radius`` metres facing the camera (``splat``);
 the scenario (the cloth flat at rest at t = 0, its grasped corner the handle moving along the waypoints,
-the frame times, the crop, which the model's silhouettes then honour: ``observation/crop.py``).
+the frame times, the crop, which the model's silhouettes then honour: ``physics/crop.py``).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from ..errors import ClothFitError
 from ..jsonio import read_json
 from ..observation.camera import Camera, ring_rig
 from ..observation.capture import Capture, write_capture
-from ..observation.crop import CropPlane
+from ..physics.crop import CropPlane
 from ..physics.scenario import ClothGrid, Handle, Scenario
 
 SETUP_KEYS = (

@@ -20,9 +20,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..physics.crop import clip_mesh
+
 if TYPE_CHECKING:
+    from ..physics.crop import CropPlane
     from .camera import Camera
-    from .crop import CropPlane
 
 
 def triangle_spans(
@@ -91,10 +93,8 @@ def silhouette(
     crop: CropPlane | None = None,
 ) -> np.ndarray:
     """Silhouette of a mesh (world vertices ``(V, 3)``) seen by ``camera``; with a ``crop`` plane
-    (``crop.py``) only the part of the mesh on its kept side."""
+    (``physics/crop.py``) only the part of the mesh on its kept side."""
     if crop is not None:
-        from .crop import clip_mesh
-
         vertices, tris = clip_mesh(vertices, tris, crop)
     h = camera.height if height is None else height
     w = camera.width if width is None else width

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..observation.crop import CropPlane
+from .crop import CropPlane
 
 # plausibility limits of a scenario read from a file: beyond them a value is a typo or an attack
 # (memory exhaustion, a simulation that never ends), not a cloth
@@ -286,7 +286,7 @@ class Handle:
 class Scenario:
     """A cloth, its handles, the settling phase and the capture times: one manipulation.
 
-    ``crop`` (``observation.crop.CropPlane``, None = none): the part of the scene the capture's data
+    ``crop`` (``crop.CropPlane``, None = none): the part of the scene the capture's data
     left out (points near a table); the model's silhouettes leave it out too. The simulation ignores it."""
 
     grid: ClothGrid
