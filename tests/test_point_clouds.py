@@ -10,6 +10,7 @@ import pytest
 from clothfit import cli
 from clothfit.core.errors import ClothFitError
 from clothfit.core.footage.point_clouds import flat_square, points_to_capture, read_point_cloud, read_setup
+from clothfit.core.observation.camera import ring_rig
 from clothfit.core.observation.capture import load_capture
 from clothfit.core.observation.raster import silhouette
 from clothfit.core.physics.scenario import ClothGrid
@@ -177,3 +178,30 @@ def test_a_bad_setup_value_is_one_line_naming_it(tmp_path, clouds, change, says)
     with pytest.raises(ClothFitError) as e:
         points_to_capture(str(clouds), read_setup(str(_setup(tmp_path, **change))), str(tmp_path / "cap"))
     assert says in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_camera_calibrated_in_a_robot_frame_sees_the_clouds_as_it_saw_the_robots_world(tmp_path, clouds):
+    """A camera's calibration against a robot (camera -> robot, metres) and the robot's frame relative to the
+    clouds (the path's convention) give a camera that projects the clouds' points where the real one would."""
+    truth = ring_rig((1,), (35.0,), 0.8, (0.0, 0.0, 0.15), 64, 48, 70.0, (20.0,))[0]
+    a = math.radians(30.0)
+    rz = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    move = np.array([0.3, -0.1, 0.05])  # robot = rz @ world + move, the inverse of ((w - move) / s) @ rz
+    cam_to_robot = np.hstack([rz @ truth.R.T, (move - rz @ truth.R.T @ truth.t)[:, None]])
+    np.save(tmp_path / "tcr.npy", cam_to_robot)
+    real = {
+        "name": "side",
+        "intrinsics": [70.0, 70.0, 31.5, 23.5],
+        "camera_to_frame": "tcr.npy",
+        "resolution": [48, 64],
+        "frame": {"translation": move.tolist(), "scale": UNIT, "z_rotation_deg": 30.0},
+    }
+    setup = read_setup(str(_setup(tmp_path, cameras={"real": [real]})))
+    cap, report = points_to_capture(str(clouds), setup, str(tmp_path / "cap"))
+    assert report["cameras"] == ["side"]
+    X = np.random.default_rng(0).uniform(-0.1, 0.2, (50, 3))
+    assert np.allclose(cap.cameras[0].project(X), truth.project(X), atol=1e-9)
+    wrong = dict(real, frame=dict(real["frame"], scale=1.0))
+    with pytest.raises(ClothFitError) as e:
+        read_setup(str(_setup(tmp_path, cameras={"real": [wrong]})))
+    assert "scale" in str(e.value) and "\n" not in str(e.value)

@@ -179,8 +179,10 @@ def parse_setup(d: Any, where: str, base: str = ".", **override: Any) -> PointsS
     if "path" not in d:
         raise ClothFitError(f"{where}: no 'path' (the grasped corner's waypoints)")
     cams = d.get("cameras", {})
-    if not isinstance(cams, dict) or set(cams) - {"count", "elevation_deg", "fov_deg", "resolution"}:
-        raise ClothFitError(f"{where} cameras: expected {{count, elevation_deg, fov_deg, resolution: [H, W]}}")
+    if not isinstance(cams, dict) or set(cams) - {"count", "elevation_deg", "fov_deg", "resolution", "real"}:
+        raise ClothFitError(f"{where} cameras: expected {{count, elevation_deg, fov_deg, resolution: [H, W], real}}")
+    if "real" in cams:
+        cams = dict(cams, real=real_cameras(cams["real"], unit, f"{where} cameras real", base))
     return PointsSetup(
         unit,
         interval,
@@ -215,9 +217,11 @@ def flat_square(corner: np.ndarray, across: np.ndarray, side: float, n: int) -> 
 
 def virtual_ring(points: np.ndarray, spec: dict[str, Any]) -> list[Camera]:
     """A ring of cameras at one elevation around the points, far enough that each sees all of them."""
-    count = spec.get("count", D.POINTS_CAMERAS)
-    if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= 64:
-        raise ClothFitError(f"cameras count: {count!r} must be a whole number 1..64")
+    count = spec.get("count", 0 if spec.get("real") else D.POINTS_CAMERAS)
+    if isinstance(count, bool) or not isinstance(count, int) or not (0 if spec.get("real") else 1) <= count <= 64:
+        raise ClothFitError(f"cameras count: {count!r} must be a whole number 1..64 (0 with real cameras)")
+    if count == 0:
+        return []
     elev = _number(spec.get("elevation_deg", D.POINTS_ELEVATION_DEG), "cameras elevation_deg", -89.0, False)
     fov = _number(spec.get("fov_deg", D.POINTS_FOV_DEG), "cameras fov_deg")
     res = spec.get("resolution", D.POINTS_RESOLUTION)
@@ -237,6 +241,56 @@ def virtual_ring(points: np.ndarray, spec: dict[str, Any]) -> list[Camera]:
     distance = radius * D.POINTS_MARGIN / math.sin(half)
     fx = (w / 2.0) / math.tan(math.radians(fov) / 2.0)
     return ring_rig((count,), (elev,), distance, target, w, h, fx, (0.0,))
+
+
+def _array(v: Any, shape: tuple, what: str, base: str) -> np.ndarray:
+    """Numbers of a given shape, written in the setup or in a .npy file named there."""
+    if isinstance(v, str):
+        path = v if os.path.isabs(v) else os.path.join(base, v)
+        try:
+            v = np.load(path, allow_pickle=False)
+        except (OSError, ValueError, EOFError) as e:
+            raise ClothFitError(f"{what} {path}: not a readable .npy array ({type(e).__name__})") from None
+        what = f"{what} {path}"
+    try:
+        a = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ClothFitError(f"{what}: not numbers") from None
+    if a.shape != shape or not np.all(np.isfinite(a)):
+        raise ClothFitError(f"{what}: shape {a.shape}, expected {shape} finite numbers")
+    return a
+
+
+def real_cameras(specs: Any, unit_scale: float, where: str, base: str = ".") -> list[Camera]:
+    """Cameras calibrated in a robot's frame, moved into the clouds' frame: each ``{"name", "intrinsics":
+    [fx, fy, cx, cy], "camera_to_frame": 3 x 4 [R | t] (camera -> robot, metres), "resolution": [H, W],
+    "frame": the path's kind of frame}`` (arrays inline or in .npy files). The frame's scale must equal
+    ``unit_scale`` (metres stay metres: a camera cannot be scaled)."""
+    if not isinstance(specs, list) or not specs:
+        raise ClothFitError(f"{where}: expected a list of cameras")
+    out = []
+    for i, c in enumerate(specs):
+        w = f"{where}[{i}]"
+        if not isinstance(c, dict) or set(c) - {"name", "intrinsics", "camera_to_frame", "resolution", "frame"}:
+            raise ClothFitError(f"{w}: expected {{name, intrinsics, camera_to_frame, resolution, frame}}")
+        fx, fy, cx, cy = _array(c.get("intrinsics"), (4,), f"{w} intrinsics", base)
+        T = _array(c.get("camera_to_frame"), (3, 4), f"{w} camera_to_frame", base)
+        frame = c.get("frame", {})
+        if abs(float(frame.get("scale", 1.0)) - unit_scale) > 1e-9 * unit_scale:
+            raise ClothFitError(f"{w} frame scale: {frame.get('scale', 1.0)!r} must equal unit_scale {unit_scale:g}")
+        res = c.get("resolution")
+        if not isinstance(res, list) or len(res) != 2 or not all(isinstance(x, int) and x >= 8 for x in res):
+            raise ClothFitError(f"{w} resolution: {res!r} must be [H, W] whole numbers of pixels")
+        # world (clouds' metres) -> robot: X_r = rz X_w + t (frame_transform inverted); robot -> camera
+        origin = frame_transform(np.zeros((1, 3)), frame, w)[0] * unit_scale  # where the robot's origin lands
+        rz = frame_transform(np.eye(3), dict(frame, translation=[0.0, 0.0, 0.0]), w) * unit_scale  # rows: axes
+        R_rc = T[:, :3].T  # robot -> camera rotation
+        R = R_rc @ rz
+        t = R_rc @ (rz @ -origin - T[:, 3])
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        name = str(c.get("name", f"real{i}"))
+        out.append(Camera(K, R, t, int(res[1]), int(res[0]), name=name))
+    return out
 
 
 def splat(camera: Camera, points: np.ndarray, radius: float) -> np.ndarray:
@@ -309,7 +363,7 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
     grid = flat_square(h.positions[0], setup.across, setup.side, setup.grid_n)
     scenario = Scenario(grid, [h], times, setup.settle_time, crop=setup.crop)
     every = np.concatenate([frames[k] for k in keep] + [h.positions, grid.rest])
-    cams = virtual_ring(every, setup.cameras)
+    cams = virtual_ring(every, setup.cameras) + list(setup.cameras.get("real", []))
     sils = [[splat(c, frames[k], setup.splat_radius) for k in keep] for c in cams]
     meta = {
         "generator": "points-to-capture (discs splatted from point clouds)",
