@@ -8,9 +8,9 @@ robot's waypoints, keyed one ``interval`` apart); optionally a crop plane (the p
 clouds left out, e.g. within 2 cm of a table) and the virtual cameras. Every length is in metres in the
 clouds' own frame (z up) scaled by the unit; waypoints read from a file may carry their own frame.
 
-What it writes: a ring of virtual cameras looking at the points; per camera and frame a silhouette made by
-drawing every point above the crop as a disc of ``splat_radius`` metres facing the camera (``splat``);
-the scenario (the cloth flat at rest at t = 0, its grasped corner the handle moving along the waypoints,
+What it writes: a ring of virtual cameras looking at the points (and any calibrated real ones,
+``real_cameras``); per camera and frame a silhouette made by drawing every point above the crop as a disc
+of ``splat_radius`` metres facing the camera (``splat``); the scenario (the cloth flat at rest at t = 0, its grasped corner the handle moving along the waypoints,
 the frame times, the crop, which the model's silhouettes then honour: ``physics/crop.py``).
 """
 
