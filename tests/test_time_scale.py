@@ -107,3 +107,9 @@ def test_a_fitted_release_lands_on_the_capture_clock_through_the_stretch_and_the
     assert 1.5 * rel["capture_s"] - 0.01 == pytest.approx(rel["model_s"])  # true = scale x capture - offset
     (plain,) = release_instants(PaperModel(), sc, 0.01, None)
     assert plain["capture_s"] == pytest.approx(0.21)
+
+
+def test_the_command_line_declares_a_time_scale_like_the_other_unknowns():
+    u = Uncertainty.from_text("time_offset=0.02,time_scale=1.3", 1)
+    assert (u.time_offset, u.time_scale) == (0.02, 1.3)
+    assert Uncertainty.from_text("none", 1).time_scale == 1.0
