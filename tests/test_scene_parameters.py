@@ -40,7 +40,7 @@ class CoreScene:
     def settings(self, row):
         return self.model.settings(row)
 
-    def scenario(self, times):
+    def scenario(self, times, crop=None):
         return self.cap.scenario.with_frames(times)
 
     def simulate(self, scenario, rows, backend="auto"):

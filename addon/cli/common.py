@@ -289,7 +289,8 @@ def _search_args(s):
         "--uncertain",
         default=None,
         help="what the manipulation could not measure, estimated with the cloth: 'time_offset=S,handles=M' "
-        "(bounds in seconds and metres; true time = capture time - time_offset_s), or 'none' "
+        "(bounds in seconds and metres; true time = capture time - time_offset_s), with ',time_scale=F' the "
+        "frame interval known only to a factor F >= 1 (frames and handle paths stretched alike), or 'none' "
         "(default: the capture's 'uncertain' block)",
     )
     s.add_argument(

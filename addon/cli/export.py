@@ -96,6 +96,11 @@ def _manipulation_comments(manip, near):
             f"# the fit read the footage {1000 * manip['time_offset_s']:+.1f} ms off: the release "
             f"happened at capture time + time_offset_s"
         )
+    if manip.get("time_scale") is not None:
+        lines.append(
+            f"# the fit read the capture's clock stretched by {manip['time_scale']:.4g}: true time = "
+            f"time_scale x capture time - time_offset_s, the pins' keys stretched alike"
+        )
     for h in manip.get("handles") or []:
         if any(h.get("offset_m") or []):
             lines.append(

@@ -257,6 +257,7 @@ def cmd_fit(a):
             "cancelled",
             "quality_choice",
             "time_offset_s",
+            "time_scale",
             "floor",
             "verdict_kind",
             "verdict",
@@ -287,6 +288,9 @@ def _manipulation_report(r, pad=""):
         if t is not None:
             tail = " (not separated)" if "time_offset_s" in flat else f" (+-{1000 * u:.1f} ms)" if u else ""
             print(f"{pad}time offset {1000 * t:+.1f} ms{tail}", file=sys.stderr)
+        if r.get("time_scale") is not None:
+            tail = " (not separated)" if "log_time_scale" in flat else ""
+            print(f"{pad}time scale {r['time_scale']:.4g} (the capture's clock stretched){tail}", file=sys.stderr)
         for k, h in enumerate(r.get("handles") or []):
             if h.get("offset_bound_m"):
                 loose = [f"handle{k}_{ax}" in flat for ax in "xyz"]

@@ -8,6 +8,7 @@ import sys
 from ..core import defaults as D
 from ..core.errors import ClothFitError
 from .common import _command, _floats, _pair, force_arg, refuse_existing, refuse_filled_folder
+from .points import add_points
 
 
 def add_extract_arguments(parser):
@@ -769,3 +770,4 @@ def register(sub):
     """The footage family, in the order of ``--help``."""
     _add_calibration(sub)
     _add_handles(sub)
+    add_points(sub)

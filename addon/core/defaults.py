@@ -340,3 +340,14 @@ TAKES_ALONE_EVALUATIONS = 150  # evaluations of each take's own search
 TAKES_ALONE_BUDGET_SHARE = 4  # ... made only where the fit's budget is at least this times their sum
 TAKES_ALONE_FACTOR = 1.5  # a take the shared settings serve more than this times worse than it serves itself says
 # that one set of settings does not serve every take
+
+# --- captures from point clouds (footage/point_clouds.py, `clothfit points-to-capture`, docs/point_clouds.md)
+POINTS_SPLAT_RADIUS = 0.005  # [m] each point drawn as a disc of this radius: ~ the spacing of 3500 points on a
+# 0.28 m square (4.7 mm), so neighbouring discs close the gaps without fattening the outline by more than that
+POINTS_MIN_POINTS = 30  # a frame keeping fewer points above the crop shows too little cloth to compare: left out
+POINTS_CAMERAS = 6  # virtual cameras in one ring around the points
+POINTS_ELEVATION_DEG = 20.0  # the ring's elevation above the horizontal
+POINTS_FOV_DEG = 50.0  # the virtual cameras' horizontal field of view
+POINTS_RESOLUTION = (120, 160)  # their image size H x W
+POINTS_MARGIN = 1.15  # the ring's distance leaves this factor of room around the bounding sphere of all points
+POINTS_SETTLE_TIME = 0.0  # the initial state is not measured: the cloth starts flat and at rest at t = 0

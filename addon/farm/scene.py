@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -38,9 +39,10 @@ class SceneMesh:
 class SceneScenario:
     grid: SceneMesh
     frame_times: np.ndarray
+    crop: Any = None  # the capture's crop plane (``core.physics.crop``): the model's silhouettes honour it
 
     def with_frames(self, times):
-        return SceneScenario(self.grid, np.asarray(times, dtype=np.float64))
+        return SceneScenario(self.grid, np.asarray(times, dtype=np.float64), self.crop)
 
 
 class BlendSceneEvaluator:
@@ -103,9 +105,9 @@ class BlendSceneEvaluator:
             )
         return f
 
-    def scenario(self, times) -> SceneScenario:
+    def scenario(self, times, crop: Any = None) -> SceneScenario:
         self.frames(times)
-        return SceneScenario(self.mesh, np.asarray(times, dtype=np.float64))
+        return SceneScenario(self.mesh, np.asarray(times, dtype=np.float64), crop)
 
     def simulate(self, scenario, rows, backend: str = "auto", offsets=None) -> SimResult:
         """``offsets`` (``scenario.Offsets``): each candidate reads the scene ``offsets.time[p]`` s

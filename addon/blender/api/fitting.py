@@ -370,7 +370,8 @@ def apply_blender_cloth(scene, obj=None, result=None, set_fps=True, take=None):
         pass
     if obj is None or (own is not None and obj == own):
         sc, manip = take_scenario(scene, res, entry)
-        sc = fitted_scenario(sc, {"handles": manip.get("handles")})  # the pins where the fit put them
+        # the pins where the fit put them, on the clock it read (a fitted time_scale stretches their keys)
+        sc = fitted_scenario(sc, {"handles": manip.get("handles"), "time_scale": manip.get("time_scale")})
         net, plan = model.plan(sc)
         t_off = manip.get("time_offset_s")
         if t_off:

@@ -27,7 +27,7 @@ def model_masks_core(scene, cap, frame_indices):
         raise ClothFitError(f"the scene's parameters make the simulation unstable: {res.reason[0]}")
     X = res.positions[0]
     tris = sc.grid.triangles
-    return [[silhouette(c, X[k], tris) for k in range(len(frame_indices))] for c in cap.cameras]
+    return [[silhouette(c, X[k], tris, crop=sc.crop) for k in range(len(frame_indices))] for c in cap.cameras]
 
 
 def model_masks_blender(scene, cap, frame_indices):

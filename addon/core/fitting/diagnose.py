@@ -61,7 +61,11 @@ def _objective(job, cams, fidx):
 
     cap = job.capture
     times = [float(cap.frame_times[i]) for i in fidx]
-    sc = job.evaluator.scenario(times) if job.evaluator is not None else cap.scenario.with_frames(times)
+    sc = (
+        job.evaluator.scenario(times, cap.scenario.crop)
+        if job.evaluator is not None
+        else cap.scenario.with_frames(times)
+    )
     cameras, observed, ignore = load_observed(cap, cams, fidx, job.config.resolution)
     return SilhouetteObjective(
         sc, cameras, observed, backend=job.config.backend, model=job.objective.model, ignore=ignore

@@ -68,6 +68,7 @@ def evaluate(
         "times": tt,
         "manipulation": manipulation,
         "time_offset_s": params.get("time_offset_s") if isinstance(params, dict) else None,
+        **({"time_scale": params["time_scale"]} if isinstance(params, dict) and params.get("time_scale") else {}),
         "exploded": bool(exploded[0]),
         "silhouette_error_pct": float(100 * esil[0].mean()),
         "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
@@ -92,7 +93,7 @@ FITTED_HERE = (
     "fitted here: a take the fit never saw, its declared unknowns fitted on these same images with the settings "
     "held (an optimistic score: score other cameras or frames for a fair one)"
 )
-MANIPULATION_KEYS = ("time_offset_s", "handles")
+MANIPULATION_KEYS = ("time_offset_s", "handles", "time_scale")
 
 
 def held_unknowns(
@@ -128,7 +129,7 @@ def held_unknowns(
     if opt.best_x is not None and opt.best_f < best_f:
         best_m = np.asarray(opt.best_x, dtype=np.float64)
     d = manip.describe(best_m, capture.scenario)
-    return {"time_offset_s": d["time_offset_s"], "handles": d["handles"]}
+    return {k: d[k] for k in MANIPULATION_KEYS if k in d}
 
 
 def for_take(capture: Capture, params: Any) -> tuple[Any, str]:

@@ -24,6 +24,7 @@ from ..observation.coverage import refuse_full_silhouettes
 from ..observation.floor import resample_ignore, resample_silhouette
 from ..observation.raster import rasterize, rasterize_window
 from ..physics import jit, paper_kernels
+from ..physics.crop import clip_mesh, clipped_triangles
 from ..physics.models import PaperModel, get_model
 from ..physics.paper import simulate_numpy
 from ..physics.scenario import Offsets
@@ -42,6 +43,7 @@ class SilhouetteObjective:
         (``physics.models.get_model``; default: the paper's sheet); ``ignore[c][f]`` a bool image of
         the pixels whose truth is unknown, or None (the whole list or any entry)."""
         self.scenario = scenario
+        self.crop = scenario.crop  # the model's silhouettes leave out what the capture's crop left out
         self.model = get_model(model)
         self.paper = isinstance(self.model, PaperModel)
         self.cameras = list(cameras)
@@ -108,8 +110,8 @@ class SilhouetteObjective:
             self._Ws = np.array([c.width for c in self.cameras], dtype=np.int64)
             self._maxh = int(max(c.height for c in self.cameras))
             self._maxw = int(max(c.width for c in self.cameras))
-            self._span_cap = int(scenario.grid.triangles.shape[0] * (self._maxh + 1))
-            self._tris = np.ascontiguousarray(scenario.grid.triangles, dtype=np.int64)
+            self._tris = np.ascontiguousarray(self._mesh_triangles(), dtype=np.int64)
+            self._span_cap = int(self._tris.shape[0] * (self._maxh + 1))
 
     @property
     def n_images(self) -> int:
@@ -121,7 +123,7 @@ class SilhouetteObjective:
         unknowns (time offset, handle offsets); None = the scenario as it is."""
         if offsets is not None and len(offsets) != np.asarray(P).reshape(len(offsets), -1).shape[0]:
             raise ClothFitError(f"objective: {len(offsets)} offsets for {np.asarray(P).shape[0]} candidates")
-        if not self.paper:
+        if not self.paper or self.crop is not None or (offsets is not None and offsets.stretches):
             return self._per_image_positions(P, offsets)
         P = np.ascontiguousarray(np.asarray(P, dtype=np.float64).reshape(-1, 4))
         C, F = self.areas.shape
@@ -188,7 +190,7 @@ class SilhouetteObjective:
         esil = np.full((rows.shape[0], C, F), np.inf)
         ok = ~sim.exploded
         if self.backend == "numba":
-            X = np.ascontiguousarray(np.where(ok[:, None, None, None], sim.positions, 0.0))
+            X = np.ascontiguousarray(self._mesh_points(np.where(ok[:, None, None, None], sim.positions, 0.0)))
             kernels.score_population(
                 X,
                 ok,
@@ -212,10 +214,10 @@ class SilhouetteObjective:
                 esil,
             )
         else:
-            tris = self.scenario.grid.triangles
+            tris = self._mesh_triangles()
             for p in np.nonzero(ok)[0]:
                 for c, cam in enumerate(self.cameras):
-                    uv = cam.project(sim.positions[p])
+                    uv = cam.project(self._mesh_points(sim.positions[p]))
                     for f in range(F):
                         esil[p, c, f] = self._esil_numpy(
                             uv[f], tris, cam, self.observed[c][f], self.areas[c, f], self.ignore[c][f]
@@ -233,11 +235,20 @@ class SilhouetteObjective:
             sim = self.model.simulate(self.scenario, rows, backend=self.backend, offsets=offsets)
         if sim.exploded[0] or not np.all(np.isfinite(sim.positions[0])):
             return None
-        X, tris = sim.positions[0], self.scenario.grid.triangles
+        X, tris = self._mesh_points(sim.positions[0]), self._mesh_triangles()
         return [
             [rasterize(cam.project(X[f]), tris, cam.height, cam.width) for f in range(X.shape[0])]
             for cam in self.cameras
         ]
+
+    def _mesh_triangles(self) -> np.ndarray:
+        """The triangles the silhouettes are drawn from: the cloth's, or its clipped mesh's under a crop."""
+        tris = self.scenario.grid.triangles
+        return tris if self.crop is None else clipped_triangles(tris.shape[0])
+
+    def _mesh_points(self, X: np.ndarray) -> np.ndarray:
+        """The points of ``_mesh_triangles`` for cloth positions ``X`` (..., V, 3)."""
+        return X if self.crop is None else clip_mesh(X, self.scenario.grid.triangles, self.crop)[0]
 
     @staticmethod
     def _esil_numpy(uv, tris, cam, obs, area, ignore=None):

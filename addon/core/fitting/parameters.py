@@ -441,7 +441,9 @@ class ManipulationParameters:
     """The manipulation's unknowns a fit estimates with the cloth's settings (``Uncertainty``): the
     time offset ``time_offset_s`` in ``[-b, b]`` and one 3-D offset per uncertain handle, each
     coordinate in ``[-b_k, b_k]`` (linear coordinates: an offset of zero is the declared
-    manipulation). ``offsets(X)`` turns the coordinates of a population into ``scenario.Offsets``."""
+    manipulation), and with a declared ``time_scale`` S the stretch of the capture's clock as
+    ``log_time_scale`` in ``[-ln S, ln S]`` (zero: the declared frame interval). ``offsets(X)`` turns the
+    coordinates of a population into ``scenario.Offsets``."""
 
     def __init__(self, uncertainty: Uncertainty, scenario):
         self.uncertainty = uncertainty
@@ -450,6 +452,9 @@ class ManipulationParameters:
         if uncertainty.time_offset > 0:
             names.append("time_offset_s")
             bounds["time_offset_s"] = (-uncertainty.time_offset, uncertainty.time_offset)
+        if uncertainty.time_scale > 1.0:
+            names.append("log_time_scale")
+            bounds["log_time_scale"] = (-math.log(uncertainty.time_scale), math.log(uncertainty.time_scale))
         self.handle_coords = []  # (name, handle index, axis)
         for k, b in enumerate(uncertainty.handles):
             if b > 0:
@@ -473,7 +478,9 @@ class ManipulationParameters:
         h = np.zeros((P, self.n_handles, 3))
         for nm, k, a in self.handle_coords:
             h[:, k, a] = M[:, self.names.index(nm)]
-        return Offsets(t, h)
+        if "log_time_scale" not in self.names:
+            return Offsets(t, h)
+        return Offsets(t, h, np.exp(M[:, self.names.index("log_time_scale")]))
 
     def at_bound(self, m: ArrayLike, share: float = D.MANIP_AT_BOUND_SHARE) -> list[str]:
         """The unknowns whose fitted value ``m`` (coordinates in ``names`` order) lies at the edge of its
@@ -496,19 +503,25 @@ class ManipulationParameters:
                 d["offset_bound_m"] = self.uncertainty.handles[k]
                 d["offset_uncertainty_m"] = [sd.get(f"handle{k}_{ax}") for ax in "xyz"]
             handles.append(d)
-        return {
+        d = {
             "time_offset_s": float(off.time[0]),
             "time_offset_uncertainty_s": sd.get("time_offset_s"),
             "uncertain": self.uncertainty.to_dict(),
             "handles": handles,
         }
+        if "log_time_scale" in self.names:  # the stretch and its relative uncertainty (of its logarithm)
+            d["time_scale"] = float(off.scale[0])
+            d["time_scale_uncertainty"] = sd.get("log_time_scale")
+        return d
 
 
-def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None, uncertainty_s: float | None) -> list:
+def release_instants(
+    model: Any, scenario: Scenario, time_offset_s: float | None, uncertainty_s: float | None, time_scale: float = 1.0
+) -> list:
     """Where a fit puts each released handle's release on the capture's clock: the instant the model's
     cloth starts to fall (``model.release_instant``: Blender's cloth lets go at the last held frame, so
-    up to a frame before the declared time) plus the fitted ``time_offset_s`` (true time = capture
-    time - offset). Empty when nothing is released, the offset was not estimated (None) or the model
+    up to a frame before the declared time, stretched by a fitted ``time_scale``) plus the fitted
+    ``time_offset_s``, on the capture's clock (true time = time_scale x capture time - offset). Empty when nothing is released, the offset was not estimated (None) or the model
     does not say when its cloth lets go (a user's own scene: its pins are its own)."""
     at = getattr(model, "release_instant", None)
     if time_offset_s is None or at is None:
@@ -517,14 +530,14 @@ def release_instants(model: Any, scenario: Scenario, time_offset_s: float | None
     for k, h in enumerate(scenario.handles):
         if h.release_time is None:
             continue
-        m = float(at(h.release_time))
+        m = float(at(h.release_time * time_scale))
         out.append(
             {
                 "handle": k,
                 "vertex": int(h.vertex),
                 "declared_s": float(h.release_time),
                 "model_s": m,
-                "capture_s": m + float(time_offset_s),
+                "capture_s": (m + float(time_offset_s)) / time_scale,
                 "uncertainty_s": uncertainty_s,
             }
         )

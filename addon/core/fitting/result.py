@@ -117,6 +117,9 @@ class FitResult(dict):
         t = self.get("time_offset_s")
         if t is not None and not _is_num(t):
             raise bad("time_offset_s", f"must be a number, got {t!r}")
+        ts = self.get("time_scale")
+        if ts is not None and not (_is_num(ts) and ts > 0):
+            raise bad("time_scale", f"must be a positive number, got {ts!r}")
         return self
 
     def save(self, path: str | os.PathLike) -> None:
@@ -148,8 +151,8 @@ class FitResult(dict):
 
     @property
     def manipulation(self) -> dict:
-        """The manipulation the fit estimated: ``time_offset_s`` and ``handles`` where given."""
-        return {k: self[k] for k in ("time_offset_s", "handles") if self.get(k) is not None}
+        """The manipulation the fit estimated: ``time_offset_s``, ``handles`` and ``time_scale`` where given."""
+        return {k: self[k] for k in ("time_offset_s", "handles", "time_scale") if self.get(k) is not None}
 
     def replay(
         self, default_model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None

@@ -20,6 +20,7 @@ of one take is the same machinery with one take.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -108,7 +109,7 @@ class Take:
         names = [[capture.silhouette_path(c, f) for f in fidx] for c in cams]
         self.images = (cameras_, observed, ignore, names)
         if evaluator is not None:
-            self.scenario = evaluator.scenario(self.train_times)
+            self.scenario = evaluator.scenario(self.train_times, capture.scenario.crop)
         else:
             self.scenario = capture.scenario.with_frames(self.train_times)
         self.manip, self.manip_note = take_manipulation(capture, cfg, self.scenario, self.train_times, evaluator)
@@ -145,6 +146,11 @@ def take_manipulation(
             "are its own objects): give --uncertain time_offset=S,handles=0, or fit the capture "
             "with the core model"
         )
+    if evaluator is not None and unc.time_scale > 1.0:
+        raise ClothFitError(
+            "fit: an uncertain time_scale cannot be estimated with --backend blender (the scene keeps its own "
+            "frame rate): fit the capture with the core model"
+        )
     n_frames = len(train_times)
     rel = [h.release_time for h in sc.handles if h.release_time is not None]
     after = sum(t >= min(rel) for t in train_times) if rel else n_frames
@@ -158,7 +164,7 @@ def take_manipulation(
     if any(b > 0 for b in h_bounds) and n_frames < 2:
         notes.append("handle offsets not estimated: one training frame cannot separate them from the cloth's settings")
         h_bounds = (0.0,) * nh
-    unc = Uncertainty(t_bound, tuple(h_bounds))
+    unc = Uncertainty(t_bound, tuple(h_bounds), unc.time_scale)
     note = "; ".join(notes) or None
     if not unc.active:
         return None, note
@@ -361,6 +367,8 @@ def manipulation_result(fit: Any) -> dict:
 
         def shown(n):
             v, b = m[manip.names.index(n)], manip.bounds[n][1]
+            if n == "log_time_scale":
+                return f"time_scale {math.exp(v):.3f} (bound {math.exp(-b):.3f}..{math.exp(b):.3f})"
             unit = "ms" if n == "time_offset_s" else "mm"
             return f"{n} {1e3 * v:+.2f} {unit} (bound {1e3 * b:.2f} {unit})"
 
@@ -369,7 +377,11 @@ def manipulation_result(fit: Any) -> dict:
             f"manipulation may be further off than the capture declares: fit again with a wider --uncertain"
         )
     rel = release_instants(
-        fit.objective.model, fit.capture.scenario, d.get("time_offset_s"), d.get("time_offset_uncertainty_s")
+        fit.objective.model,
+        fit.capture.scenario,
+        d.get("time_offset_s"),
+        d.get("time_offset_uncertainty_s"),
+        d.get("time_scale", 1.0),
     )
     if rel:
         d["release_instants"] = rel

@@ -354,7 +354,7 @@ def capture_overlays(
         cam = capture.cameras[c]
         for j, f in enumerate(fidx):
             obs, ign = capture.load_observation(c, f)
-            mod = silhouette(cam, X[j], sc.grid.triangles)
+            mod = silhouette(cam, X[j], sc.grid.triangles, crop=sc.crop)
             photo = images(c, f) if images is not None else None
             img = overlay_on_image(photo, obs, mod, ign) if photo is not None else overlay_image(obs, mod, ign)
             xor = obs ^ mod if ign is None else (obs ^ mod) & ~ign

@@ -20,7 +20,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..physics.crop import clip_mesh
+
 if TYPE_CHECKING:
+    from ..physics.crop import CropPlane
     from .camera import Camera
 
 
@@ -82,9 +85,17 @@ def rasterize(pts: np.ndarray, tris: np.ndarray, height: int, width: int) -> np.
 
 
 def silhouette(
-    camera: Camera, vertices: np.ndarray, tris: np.ndarray, height: int | None = None, width: int | None = None
+    camera: Camera,
+    vertices: np.ndarray,
+    tris: np.ndarray,
+    height: int | None = None,
+    width: int | None = None,
+    crop: CropPlane | None = None,
 ) -> np.ndarray:
-    """Silhouette of a mesh (world vertices ``(V, 3)``) seen by ``camera``."""
+    """Silhouette of a mesh (world vertices ``(V, 3)``) seen by ``camera``; with a ``crop`` plane
+    (``physics/crop.py``) only the part of the mesh on its kept side."""
+    if crop is not None:
+        vertices, tris = clip_mesh(vertices, tris, crop)
     h = camera.height if height is None else height
     w = camera.width if width is None else width
     cam = camera if (h, w) == (camera.height, camera.width) else camera.resized(h, w)

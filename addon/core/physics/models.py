@@ -71,6 +71,8 @@ class PaperModel:
             raise ClothFitError("the paper model has no colliders: fit a scene with a table with --model blender")
         P = _as_params(rows)
         if _backend(backend) == "numba":
+            if offsets is not None and offsets.stretches:  # key times differ per candidate: one by one
+                return _each(P, offsets, lambda p, sc: paper_kernels.simulate(sc, p, self.safety), scenario)
             return paper_kernels.simulate(scenario, P, self.safety, offsets)
         if offsets is None:
             return simulate_numpy(scenario, P, self.safety)
@@ -218,8 +220,8 @@ class BlenderModel:
         n = rows.shape[0]
         if len(offsets) != n:
             raise ClothFitError(f"blender model: {len(offsets)} offsets for {n} candidates")
-        if _backend(backend) == "numpy":
-            return _each(rows, offsets, lambda r, sc: self.simulate(sc, r, "numpy"), scenario)
+        if _backend(backend) == "numpy" or offsets.stretches:  # stretched keys: each candidate on its own
+            return _each(rows, offsets, lambda r, sc: self.simulate(sc, r, backend), scenario)
         ext = self.spanning(scenario, offsets.span)
         net, plan = self.plan(ext)
         F, V = scenario.frame_times.size, net.n_vertices
@@ -246,7 +248,8 @@ class BlenderModel:
 def _each(rows, offsets: Offsets, simulate_one, scenario: Scenario) -> SimResult:
     """The reference path of a population with offsets: each candidate on its own moved scenario."""
     parts = [
-        simulate_one(rows[p : p + 1], scenario.moved(offsets.time[p], offsets.handles[p])) for p in range(len(offsets))
+        simulate_one(rows[p : p + 1], scenario.moved(offsets.time[p], offsets.handles[p], offsets.scale[p]))
+        for p in range(len(offsets))
     ]
     return SimResult(
         np.concatenate([r.positions for r in parts]),

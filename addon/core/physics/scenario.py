@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike
 from .. import defaults as D
 from ..errors import ClothFitError
 from .colliders import Collisions
+from .crop import CropPlane
 
 # plausibility limits of a scenario read from a file: beyond them a value is a typo or an attack
 # (memory exhaustion, a simulation that never ends), not a cloth
@@ -31,9 +32,10 @@ MAX_GRAVITY = 1000.0  # [m/s^2]
 MAX_FRAMES = 100_000
 # the manipulation's unknowns a capture may declare (``Uncertainty``): bounds beyond these are not an
 # uncertain measurement but a wrong one (a release misread by more than a second, a pin 5 cm away)
-UNCERTAIN_KEYS = ("time_offset", "handles")
+UNCERTAIN_KEYS = ("time_offset", "handles", "time_scale")
 MAX_TIME_OFFSET_S = 1.0
 MAX_HANDLE_OFFSET_M = 0.05
+MAX_TIME_SCALE = 2.0  # a frame interval known to within a factor 2 either way
 
 
 class ClothGrid:
@@ -283,7 +285,10 @@ class Handle:
 
 @dataclass
 class Scenario:
-    """A cloth, its handles, the settling phase and the capture times: one manipulation."""
+    """A cloth, its handles, the settling phase and the capture times: one manipulation.
+
+    ``crop`` (``crop.CropPlane``, None = none): the part of the scene the capture's data
+    left out (points near a table); the model's silhouettes leave it out too. The simulation ignores it."""
 
     grid: ClothGrid
     handles: list
@@ -291,10 +296,12 @@ class Scenario:
     settle_time: float = D.SETTLE_TIME
     gravity: np.ndarray = field(default_factory=lambda: np.array(D.GRAVITY))
     colliders: Collisions | None = None  # what the cloth lands on (``colliders.py``); None: nothing
+    crop: CropPlane | None = None  # the part of the scene the silhouettes leave out (``crop.py``); None: nothing
 
     def __post_init__(self):
         if self.colliders is not None and not isinstance(self.colliders, Collisions):
             raise ClothFitError(f"scenario: colliders must be a Collisions, got {type(self.colliders).__name__}")
+        self.crop = CropPlane.parse(self.crop, "scenario crop")
         self.frame_times = np.asarray(self.frame_times, dtype=np.float64).reshape(-1)
         self.gravity = np.asarray(self.gravity, dtype=np.float64).reshape(3)
         if self.frame_times.size == 0:
@@ -339,6 +346,7 @@ class Scenario:
             "frame_times": self.frame_times.tolist(),
             "settle_time": self.settle_time,
             "gravity": self.gravity.tolist(),
+            **({} if self.crop is None else {"crop": self.crop.to_dict()}),
         }
         if self.colliders is not None:
             d["colliders"] = [c.to_dict() for c in self.colliders.colliders]
@@ -359,30 +367,44 @@ class Scenario:
             cols = Collisions.from_dicts(d["colliders"], d.get("collision_settings"), source)
         elif d.get("collision_settings") is not None:
             raise ClothFitError(f"{source}: 'collision_settings' without 'colliders'")
+        crop = CropPlane.parse(d.get("crop"), f"{source} crop")
         return cls(
             grid,
             handles,
             d["frame_times"],
             float(d.get("settle_time", D.SETTLE_TIME)),
             d.get("gravity", D.GRAVITY),
-            cols,
+            colliders=cols,
+            crop=crop,
         )
 
     def with_frames(self, times: ArrayLike) -> Scenario:
+        times = np.asarray(times, dtype=np.float64)
         return Scenario(
-            self.grid, self.handles, np.asarray(times, dtype=np.float64), self.settle_time, self.gravity, self.colliders
+            self.grid, self.handles, times, self.settle_time, self.gravity, colliders=self.colliders, crop=self.crop
         )
 
-    def moved(self, time_offset: float = 0.0, handle_offsets: ArrayLike | None = None) -> Scenario:
+    def moved(
+        self, time_offset: float = 0.0, handle_offsets: ArrayLike | None = None, time_scale: float = 1.0
+    ) -> Scenario:
         """The manipulation a fit estimated (``Uncertainty``): the frames read ``time_offset`` s earlier
-        on the manipulation's clock (true time = capture time - time_offset; a frame before the
-        settle's start reads its start), every handle's trajectory moved by its offset (H, 3) [m]."""
+        on the manipulation's clock (true time = time_scale x capture time - time_offset; a frame before
+        the settle's start reads its start), every handle's trajectory moved by its offset (H, 3) [m]
+        and, with a ``time_scale``, its key and release times stretched by it like the frames'."""
         hs = self.handles
         if handle_offsets is not None:
             off = np.asarray(handle_offsets, dtype=np.float64).reshape(len(hs), 3)
             hs = [Handle(h.vertex, h.times, h.positions + off[k], h.release_time) for k, h in enumerate(hs)]
-        times = np.maximum(self.frame_times - float(time_offset), -self.settle_time)
-        return Scenario(self.grid, hs, times, self.settle_time, self.gravity, self.colliders)
+        frames = self.frame_times
+        if time_scale != 1.0:
+            s = float(time_scale)
+            hs = [
+                Handle(h.vertex, h.times * s, h.positions, None if h.release_time is None else h.release_time * s)
+                for h in hs
+            ]
+            frames = frames * s
+        times = np.maximum(frames - float(time_offset), -self.settle_time)
+        return Scenario(self.grid, hs, times, self.settle_time, self.gravity, colliders=self.colliders, crop=self.crop)
 
 
 def paper_scenario(
@@ -407,18 +429,25 @@ class Uncertainty:
       ``t`` (the settle, the keys and the release shift with it against the frames).
     * ``handles`` [m]: per handle (in the scenario's order) the bound of a 3-D offset of its whole
       trajectory, each coordinate in ``[-b, b]``; one number = the same for every handle; 0 = exact.
+    * ``time_scale`` (a factor S >= 1): the capture's frame interval is known only to within a factor S:
+      the fit estimates ``time_scale`` in ``[1/S, S]``, which stretches the frame times and the handles'
+      key and release times alike (true time = time_scale x capture time - time_offset_s); 1 = exact.
     """
 
     time_offset: float = 0.0
     handles: tuple = ()
+    time_scale: float = 1.0
 
     @property
     def active(self) -> bool:
-        return self.time_offset > 0 or any(b > 0 for b in self.handles)
+        return self.time_offset > 0 or any(b > 0 for b in self.handles) or self.time_scale > 1.0
 
     def to_dict(self) -> dict:
         h = list(self.handles)
-        return {"time_offset": self.time_offset, "handles": h[0] if h and all(b == h[0] for b in h) else h}
+        d = {"time_offset": self.time_offset, "handles": h[0] if h and all(b == h[0] for b in h) else h}
+        if self.time_scale > 1.0:  # written only when declared: older readers see the same keys as before
+            d["time_scale"] = self.time_scale
+        return d
 
     @classmethod
     def parse(cls, value: Any, n_handles: int, source: str = "uncertain") -> Uncertainty | None:
@@ -442,7 +471,12 @@ class Uncertainty:
             hs = tuple(_bound(b, f"{source} handles[{i}]", MAX_HANDLE_OFFSET_M, "m") for i, b in enumerate(hv))
         else:
             hs = (_bound(hv, f"{source} handles", MAX_HANDLE_OFFSET_M, "m"),) * n_handles
-        return cls(t, hs)
+        ts = _bound(value.get("time_scale", 1.0), f"{source} time_scale", MAX_TIME_SCALE, "x")
+        if ts < 1.0:
+            raise ClothFitError(
+                f"{source} time_scale: {ts:g} must be a factor >= 1 (the scale is searched in [1/S, S])"
+            )
+        return cls(t, hs, ts)
 
     @classmethod
     def from_text(cls, text: str, n_handles: int, source: str = "--uncertain") -> Uncertainty | None:
@@ -483,15 +517,20 @@ def _bound(v, what: str, limit: float, unit: str) -> float:
 @dataclass
 class Offsets:
     """Per-candidate estimates of a manipulation's unknowns (a fit's ``Uncertainty``): ``time`` (P,)
-    [s] (``time_offset_s``: the model is read at capture time - time) and ``handles`` (P, H, 3) [m]
-    (each handle's trajectory moved by it)."""
+    [s] (``time_offset_s``: the model is read at capture time - time), ``handles`` (P, H, 3) [m]
+    (each handle's trajectory moved by it) and ``scale`` (P,) (``time_scale``: frame times and handle
+    key times stretched by it; None = 1 for all)."""
 
     time: np.ndarray
     handles: np.ndarray
+    scale: np.ndarray | None = None
 
     def __post_init__(self):
         self.time = np.asarray(self.time, dtype=np.float64).reshape(-1)
         self.handles = np.asarray(self.handles, dtype=np.float64)
+        self.scale = np.ones(self.time.size) if self.scale is None else np.asarray(self.scale, np.float64).reshape(-1)
+        if self.scale.size != self.time.size:
+            raise ClothFitError(f"offsets: {self.time.size} time offsets but {self.scale.size} time scales")
         if self.handles.ndim != 3 or self.handles.shape[0] != self.time.size or self.handles.shape[2] != 3:
             raise ClothFitError(
                 f"offsets: {self.time.size} time offsets but handle offsets of shape "
@@ -502,7 +541,12 @@ class Offsets:
         return self.time.size
 
     def take(self, idx: np.ndarray | list[int] | slice) -> Offsets:
-        return Offsets(self.time[idx], self.handles[idx])
+        return Offsets(self.time[idx], self.handles[idx], self.scale[idx])
+
+    @property
+    def stretches(self) -> bool:
+        """True when some candidate's time scale is not 1 (its frames and keys stretched)."""
+        return bool(np.any(self.scale != 1.0))
 
     @property
     def moves_handles(self) -> bool:
@@ -520,7 +564,8 @@ def fitted_scenario(scenario: Scenario, result: dict[str, Any]) -> Scenario:
     without them leaves the scenario as it is."""
     hs = result.get("handles")
     t = result.get("time_offset_s") or 0.0
-    if not hs and not t:
+    scale = result.get("time_scale") or 1.0
+    if not hs and not t and scale == 1.0:
         return scenario
     offsets = None
     if hs:
@@ -539,4 +584,6 @@ def fitted_scenario(scenario: Scenario, result: dict[str, Any]) -> Scenario:
                 raise ClothFitError(f"result: fitted handle #{k} has a bad 'offset_m'") from None
     if not (isinstance(t, (int, float)) and math.isfinite(t)):
         raise ClothFitError(f"result: time_offset_s {t!r} is not a number")
-    return scenario.moved(float(t), offsets)
+    if isinstance(scale, bool) or not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
+        raise ClothFitError(f"result: time_scale {scale!r} is not a positive number")
+    return scenario.moved(float(t), offsets, float(scale))
