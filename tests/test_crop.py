@@ -64,7 +64,7 @@ def test_the_fit_objective_scores_cropped_observations_against_the_cropped_model
         pytest.skip("numba not importable")
     crop = CropPlane.parse({"point": [0.0, 0.0, 0.06], "normal": [0.0, 0.0, 1.0]})
     base = paper_scenario(ClothGrid(8), frame_times=[0.1, 0.2])
-    cropped = Scenario(base.grid, base.handles, base.frame_times, 0.2, base.gravity, crop)
+    cropped = Scenario(base.grid, base.handles, base.frame_times, 0.2, base.gravity, crop=crop)
     plain = Scenario(base.grid, base.handles, base.frame_times, 0.2, base.gravity)
     cams = ring_rig((3,), (20.0,), distance=0.5, target=(0.0, 0.0, 0.06), width=64, height=48, fx=90.0)
     truth = Params.from_dict(D.GT_PARAMS | {"l": 0.1 / 7})

@@ -28,6 +28,7 @@ from ..errors import ClothFitError
 from ..jsonio import read_json
 from ..observation.camera import Camera, ring_rig
 from ..observation.capture import Capture, write_capture
+from ..physics.colliders import Collisions
 from ..physics.crop import CropPlane
 from ..physics.scenario import ClothGrid, Handle, Scenario
 
@@ -41,6 +42,8 @@ SETUP_KEYS = (
     "cameras",
     "uncertain",
     "settle_time",
+    "colliders",
+    "collision_settings",
 )
 MAX_SPLAT_PX = 64  # a disc wider than this many pixels is a wrong radius or a camera inside the cloud
 
@@ -151,6 +154,7 @@ class PointsSetup:
     cameras: dict[str, Any]
     uncertain: Any
     settle_time: float
+    colliders: Collisions | None = None
 
 
 def parse_setup(d: Any, where: str, base: str = ".", **override: Any) -> PointsSetup:
@@ -195,7 +199,18 @@ def parse_setup(d: Any, where: str, base: str = ".", **override: Any) -> PointsS
         cams,
         d.get("uncertain"),
         _number(d.get("settle_time", D.POINTS_SETTLE_TIME), f"{where} settle_time", 0.0, False),
+        _colliders(d, where),
     )
+
+
+def _colliders(d: dict, where: str) -> Collisions | None:
+    """The setup's colliders (a table the cloth lies on: ``physics/colliders.py``, lengths in metres in the
+    clouds' frame), or None."""
+    if d.get("colliders") is None:
+        if d.get("collision_settings") is not None:
+            raise ClothFitError(f"{where}: 'collision_settings' without 'colliders'")
+        return None
+    return Collisions.from_dicts(d["colliders"], d.get("collision_settings"), where)
 
 
 def read_setup(path: str, **override: Any) -> PointsSetup:
@@ -361,7 +376,7 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
     keep = [k for k, c in enumerate(counts) if c >= D.POINTS_MIN_POINTS]
     times = np.round(setup.frame_interval * np.asarray(keep, dtype=np.float64), 9)  # 0.6, not 0.6000000000000001
     grid = flat_square(h.positions[0], setup.across, setup.side, setup.grid_n)
-    scenario = Scenario(grid, [h], times, setup.settle_time, crop=setup.crop)
+    scenario = Scenario(grid, [h], times, setup.settle_time, colliders=setup.colliders, crop=setup.crop)
     every = np.concatenate([frames[k] for k in keep] + [h.positions, grid.rest])
     cams = virtual_ring(every, setup.cameras) + list(setup.cameras.get("real", []))
     sils = [[splat(c, frames[k], setup.splat_radius) for k in keep] for c in cams]
