@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from clothfit import cli
 from clothfit.core.errors import ClothFitError
-from clothfit.core.footage.point_clouds import flat_square, points_to_capture, read_point_cloud, read_setup
+from clothfit.core.footage.point_clouds import flat_square, points_to_capture, read_setup
 from clothfit.core.observation.camera import ring_rig
 from clothfit.core.observation.capture import load_capture
+from clothfit.core.observation.points import read_point_cloud
 from clothfit.core.observation.raster import silhouette
 from clothfit.core.physics.scenario import ClothGrid
 
@@ -205,3 +206,30 @@ def test_a_camera_calibrated_in_a_robot_frame_sees_the_clouds_as_it_saw_the_robo
     with pytest.raises(ClothFitError) as e:
         read_setup(str(_setup(tmp_path, cameras={"real": [wrong]})))
     assert "scale" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_capture_from_point_clouds_reads_its_real_points_back_in_metres_above_its_crop(tmp_path, clouds):
+    from clothfit.core.fitting.evaluate import evaluate
+    from clothfit.core.observation.metrics import points_to_cloth_m
+    from clothfit.core.observation.points import capture_points
+
+    points_to_capture(str(clouds), read_setup(str(_setup(tmp_path))), str(tmp_path / "cap"))
+    cap = load_capture(tmp_path / "cap")
+    got = capture_points(cap, [0, 1])
+    for P, g in zip(got, _sheets()):
+        assert len(P) > 1000 and P[:, 2].min() >= 0.1  # scaled to metres, cropped as the silhouettes were
+        assert points_to_cloth_m(P, g.rest, g.triangles).max() < 1e-9  # on the sheet they were sampled from
+    r = evaluate(cap, {"tension_stiffness": 15.0})
+    assert len(r["points_mm_per_time"]) == 2 and np.isfinite(r["points_mm"]) and r["points_mm"] > 0
+    clouds.rename(tmp_path / "moved")
+    with pytest.raises(ClothFitError, match=r"point cloud .*000.npy is not there"):
+        capture_points(cap, [0])
+
+
+def test_frames_before_the_first_frame_are_left_out_keeping_their_times(tmp_path, clouds):
+    cap, report = points_to_capture(str(clouds), read_setup(str(_setup(tmp_path, first_frame=1))), str(tmp_path / "c"))
+    assert report["frame_times"] == [0.1] and report["left_out"] == ["000.npy"]
+    with pytest.raises(ClothFitError, match=r"first_frame 2: the folder .* has only 2 frames"):
+        points_to_capture(str(clouds), read_setup(str(_setup(tmp_path, first_frame=2))), str(tmp_path / "d"))
+    with pytest.raises(ClothFitError, match=r"first_frame: -1 must be a whole number"):
+        read_setup(str(_setup(tmp_path, first_frame=-1)))

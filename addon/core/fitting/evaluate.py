@@ -14,7 +14,8 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..observation.metrics import shape_error_mm
+from ..observation.metrics import points_to_cloth_m, shape_error_mm
+from ..observation.points import capture_points
 from ..physics.blender_settings import rate_factor
 from ..physics.models import model_and_row
 from ..physics.scenario import fitted_scenario
@@ -74,15 +75,22 @@ def evaluate(
         "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
         "silhouette_error_pct_per_time": (100 * esil[0].mean(0)).tolist(),
     }
-    if capture.shapes is not None:
+    points = capture_points(capture, fidx)
+    if capture.shapes is not None or points is not None:
         sim = model.simulate(sc, row[None], backend=backend)
-        true = capture.shapes[fidx]
-        if sim.exploded[0]:
-            se = np.full(len(fidx), np.inf)
-        else:
-            se = shape_error_mm(sim.positions[0], true)
+        X = None if sim.exploded[0] else sim.positions[0]
+    if capture.shapes is not None:
+        se = np.full(len(fidx), np.inf) if X is None else shape_error_mm(X, capture.shapes[fidx])
         out["shape_error_mm"] = float(se.mean())
         out["shape_error_mm_per_time"] = se.tolist()
+    if points is not None:  # the real points the capture was made from: each one's distance to the cloth
+        tri = capture.scenario.grid.triangles
+        pm = [
+            np.inf if X is None or not len(P) else 1000.0 * float(points_to_cloth_m(P, X[k], tri).mean())
+            for k, P in enumerate(points)
+        ]
+        out["points_mm"] = float(np.mean(pm))
+        out["points_mm_per_time"] = pm
     return out
 
 

@@ -28,6 +28,7 @@ from ..errors import ClothFitError
 from ..jsonio import read_json
 from ..observation.camera import Camera, ring_rig
 from ..observation.capture import Capture, write_capture
+from ..observation.points import read_point_cloud
 from ..physics.colliders import Collisions
 from ..physics.crop import CropPlane
 from ..physics.scenario import ClothGrid, Handle, Scenario
@@ -44,27 +45,12 @@ SETUP_KEYS = (
     "settle_time",
     "colliders",
     "collision_settings",
+    "first_frame",
 )
 MAX_SPLAT_PX = 64  # a disc wider than this many pixels is a wrong radius or a camera inside the cloud
 
 
 # ============================================================================ reading
-
-
-def read_point_cloud(path: str) -> np.ndarray:
-    """The points ``(N, 3)`` of one .npy file: a numeric N x 3 array of finite numbers, N >= 1."""
-    try:
-        a = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError) as e:
-        raise ClothFitError(f"point cloud {path}: not a readable .npy array ({type(e).__name__}: {e})") from None
-    if not isinstance(a, np.ndarray) or a.dtype.kind not in "iuf":
-        raise ClothFitError(f"point cloud {path}: not an array of numbers (dtype {getattr(a, 'dtype', type(a))})")
-    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] == 0:
-        raise ClothFitError(f"point cloud {path}: shape {a.shape}, expected N x 3 points (N >= 1)")
-    bad = int(np.count_nonzero(~np.isfinite(a).all(axis=1)))
-    if bad:
-        raise ClothFitError(f"point cloud {path}: {bad} of {a.shape[0]} points are not finite")
-    return a.astype(np.float64)
 
 
 def point_cloud_files(folder: str) -> list[str]:
@@ -155,6 +141,7 @@ class PointsSetup:
     uncertain: Any
     settle_time: float
     colliders: Collisions | None = None
+    first_frame: int = 0  # frames of the folder before this one are left out (their times kept)
 
 
 def parse_setup(d: Any, where: str, base: str = ".", **override: Any) -> PointsSetup:
@@ -200,7 +187,14 @@ def parse_setup(d: Any, where: str, base: str = ".", **override: Any) -> PointsS
         d.get("uncertain"),
         _number(d.get("settle_time", D.POINTS_SETTLE_TIME), f"{where} settle_time", 0.0, False),
         _colliders(d, where),
+        _first_frame(d.get("first_frame", 0), where),
     )
+
+
+def _first_frame(v: Any, where: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise ClothFitError(f"{where} first_frame: {v!r} must be a whole number of frames >= 0")
+    return v
 
 
 def _colliders(d: dict, where: str) -> Collisions | None:
@@ -373,7 +367,9 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
             f"(waypoints {h.positions[0].round(4).tolist()} .. {h.positions[-1].round(4).tolist()} m)"
         )
     frames, counts = kept_points(files, setup)
-    keep = [k for k, c in enumerate(counts) if c >= D.POINTS_MIN_POINTS]
+    if setup.first_frame >= len(files):
+        raise ClothFitError(f"first_frame {setup.first_frame}: the folder {folder} has only {len(files)} frames")
+    keep = [k for k, c in enumerate(counts) if c >= D.POINTS_MIN_POINTS and k >= setup.first_frame]
     times = np.round(setup.frame_interval * np.asarray(keep, dtype=np.float64), 9)  # 0.6, not 0.6000000000000001
     grid = flat_square(h.positions[0], setup.across, setup.side, setup.grid_n)
     scenario = Scenario(grid, [h], times, setup.settle_time, colliders=setup.colliders, crop=setup.crop)
