@@ -592,6 +592,14 @@ SOURCES = {
         "what": "the silk: its one-corner and edge (two adjacent corners) releases fitted together, scored on those "
         "and on the waved take (a finished fit in out/takes/pairs is reused: about 15 min without it)",
     },
+    "real_lifts": {
+        "argv": ["{py}", "tools/real_lifts.py", "trials", "--fabrics", "paper,navy", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "DiffCloud's real lifts (fabrics paper and navy, three trials each; a checkout of its repository in "
+        "out/diffcloud_real2sim): each trial converted with points-to-capture and fitted alone as a user fits it, "
+        "scored on its held-out cameras and frames and against the real points (a finished fit in "
+        "out/real_lifts/fits is reused: about 30 min without them)",
+    },
     "interval_coverage": {
         "argv": ["{py}", "tools/interval_coverage.py", "--captures", "6", "--json", "{out}"],
         "cost": "expensive",
