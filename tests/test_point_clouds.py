@@ -233,3 +233,21 @@ def test_frames_before_the_first_frame_are_left_out_keeping_their_times(tmp_path
         points_to_capture(str(clouds), read_setup(str(_setup(tmp_path, first_frame=2))), str(tmp_path / "d"))
     with pytest.raises(ClothFitError, match=r"first_frame: -1 must be a whole number"):
         read_setup(str(_setup(tmp_path, first_frame=-1)))
+
+
+def test_a_sparse_cloud_splatted_with_large_discs_and_eroded_back_keeps_the_outline_and_fills_the_holes(tmp_path):
+    from clothfit.core.footage.point_clouds import splat
+
+    g = _sheets()[0]
+    cam = ring_rig((1,), (20.0,), 0.8, g.rest.mean(0), 256, 192, 250.0, (0.0,))[0]
+    truth = silhouette(cam, g.rest, g.triangles)
+    sparse = _sample(g.rest, g.triangles, 1500, np.random.default_rng(5))
+
+    def err(o):
+        return np.count_nonzero(o ^ truth) / truth.sum()
+
+    plain, closed = splat(cam, sparse, 0.004), splat(cam, sparse, 0.008, erode=0.005)
+    assert err(closed) < 0.6 * err(plain)  # holes filled, the outline not pushed out by the large discs
+    assert np.count_nonzero(truth & ~closed) < np.count_nonzero(truth & ~plain)
+    with pytest.raises(ClothFitError, match=r"erode_radius: 0.01 m must be below the splat radius 0.008 m"):
+        read_setup(str(_setup(tmp_path, splat_radius=0.008, erode_radius=0.01)))

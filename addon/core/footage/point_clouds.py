@@ -46,6 +46,7 @@ SETUP_KEYS = (
     "colliders",
     "collision_settings",
     "first_frame",
+    "erode_radius",
 )
 MAX_SPLAT_PX = 64  # a disc wider than this many pixels is a wrong radius or a camera inside the cloud
 
@@ -142,6 +143,9 @@ class PointsSetup:
     settle_time: float
     colliders: Collisions | None = None
     first_frame: int = 0  # frames of the folder before this one are left out (their times kept)
+    erode_radius: float = (
+        0.0  # [m] each splatted silhouette eroded by this much (a closing: holes filled, outline kept)
+    )
 
 
 def parse_setup(d: Any, where: str, base: str = ".", **override: Any) -> PointsSetup:
@@ -188,7 +192,15 @@ def parse_setup(d: Any, where: str, base: str = ".", **override: Any) -> PointsS
         _number(d.get("settle_time", D.POINTS_SETTLE_TIME), f"{where} settle_time", 0.0, False),
         _colliders(d, where),
         _first_frame(d.get("first_frame", 0), where),
+        _erode(d, radius, where),
     )
+
+
+def _erode(d: dict, radius: float, where: str) -> float:
+    e = _number(d.get("erode_radius", 0.0), f"{where} erode_radius", 0.0, False)
+    if e >= radius:
+        raise ClothFitError(f"{where} erode_radius: {e:g} m must be below the splat radius {radius:g} m")
+    return e
 
 
 def _first_frame(v: Any, where: str) -> int:
@@ -302,9 +314,25 @@ def real_cameras(specs: Any, unit_scale: float, where: str, base: str = ".") -> 
     return out
 
 
-def splat(camera: Camera, points: np.ndarray, radius: float) -> np.ndarray:
+def splat(camera: Camera, points: np.ndarray, radius: float, erode: float = 0.0) -> np.ndarray:
     """The silhouette (bool H x W) of ``points`` drawn as discs of ``radius`` metres facing the camera: a pixel
-    is in when its centre lies within a disc's projected radius ``fx * radius / depth`` of a point."""
+    is in when its centre lies within a disc's projected radius ``fx * radius / depth`` of a point; then, with
+    ``erode`` > 0, eroded by a disc of ``fx * erode / depth`` pixels at the points' median depth (discs large
+    enough to close the gaps of a sparse cloud, the outline drawn back towards the surface's)."""
+    out = _discs(camera, points, radius)
+    if erode > 0.0 and out.any():
+        z = float(np.median(camera.to_camera(points)[:, 2]))
+        rp = int(round(float(camera.K[0, 0]) * erode / z)) if z > 1e-9 else 0
+        if rp > 0:
+            import cv2  # as the silhouette readers do: the add-on loads without it
+
+            d = np.arange(-rp, rp + 1)
+            disc = (d[:, None] ** 2 + d[None, :] ** 2 <= rp * rp).astype(np.uint8)
+            out = cv2.erode(out.astype(np.uint8), disc, borderValue=0) > 0
+    return out
+
+
+def _discs(camera: Camera, points: np.ndarray, radius: float) -> np.ndarray:
     depth = camera.to_camera(points)[:, 2]
     uv = camera.project(points)
     ok = np.isfinite(uv).all(1) & (depth > 1e-9)
@@ -375,7 +403,7 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
     scenario = Scenario(grid, [h], times, setup.settle_time, colliders=setup.colliders, crop=setup.crop)
     every = np.concatenate([frames[k] for k in keep] + [h.positions, grid.rest])
     cams = virtual_ring(every, setup.cameras) + list(setup.cameras.get("real", []))
-    sils = [[splat(c, frames[k], setup.splat_radius) for k in keep] for c in cams]
+    sils = [[splat(c, frames[k], setup.splat_radius, setup.erode_radius) for k in keep] for c in cams]
     meta = {
         "generator": "points-to-capture (discs splatted from point clouds)",
         "points": os.path.abspath(folder),
@@ -383,6 +411,7 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
         "unit_scale": setup.unit_scale,
         "frame_interval_s": setup.frame_interval,
         "splat_radius_m": setup.splat_radius,
+        "erode_radius_m": setup.erode_radius,
         "points_per_frame": [counts[k] for k in keep],
         "left_out": [os.path.basename(files[k]) for k in range(len(files)) if k not in keep],
     }
