@@ -558,7 +558,37 @@ def takes_silk(recording):
     return _takes_table(recording, "silk", "takes_pairs_silk")
 
 
+def real_lifts(recording):
+    """DiffCloud's real lifts, each trial fitted alone: held-out E_sil beside the floor, the real points' mean
+    distance to the fitted cloth, the fitted stretch of the clock, the stiffnesses with their 90 % intervals, the
+    fit's wall time with the load."""
+    rows = _data(recording, "real_lifts")["rows"]
+
+    def setting(r, n):
+        v, iv = (r.get("blender_cloth") or {}).get(n), (r.get("intervals") or {}).get(n)
+        if v is None:
+            return ""
+        mark = " (undetermined)" if n in (r.get("undetermined") or []) else ""
+        return f"{v:.3g} [{iv[0]:.3g}, {iv[1]:.3g}]{mark}" if iv else f"{v:.3g}"
+
+    out = [
+        "| trial | held-out E_sil | images' floor | splat floor | real points to cloth | clock stretch | tension | bending | air damping "
+        "| verdict | fit wall time (load) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        wall = "reused" if r.get("fit_wall_s") is None else f"{r['fit_wall_s']:.0f} s ({r['load'][0]:.1f})"
+        out.append(
+            f"| {r['trial']} | {r['heldout_E_sil_pct']:.1f} % | {r['heldout_floor_pct']:.1f} % | {r['splat_floor_pct']:.1f} % "
+            f"| {r['points_mm']:.1f} mm "
+            f"| {r.get('time_scale') or 1.0:.3f} | {setting(r, 'tension_stiffness')} | {setting(r, 'bending_stiffness')} "
+            f"| {setting(r, 'air_damping')} | {r.get('verdict_kind') or ''} | {wall} |"
+        )
+    return "\n".join(out)
+
+
 VIEWS = {
+    "real_lifts": real_lifts,
     "takes.cotton": takes_cotton,
     "takes.silk": takes_silk,
     "issue20_goals": issue20_goals,

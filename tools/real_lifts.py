@@ -4,14 +4,18 @@ with ``clothfit evaluate`` on the cameras and frames the fit did not see and aga
 
     python tools/real_lifts.py convert [--diffcloud out/diffcloud_real2sim] [--out out/real_lifts] [--fabrics paper,navy]
     python tools/real_lifts.py trials [--diffcloud DIR] [--out out/real_lifts] [--fabrics paper,navy] --json FILE
+    python tools/real_lifts.py pictures [--out out/real_lifts] [--fabrics paper,navy] [--images docs/img]
 
 ``DIR`` (default ``out/diffcloud_real2sim``) is a checkout of https://github.com/priyasundaresan/diffcloud_real2sim (no licence: nothing of it is copied
 here; docs/point_clouds.md). ``convert`` writes ``OUT/setup.json`` (the constants below, read from that repository's
 files) and one capture per trial (``OUT/<trial>``: ``paper``, ``paper2``, ``paper3``, ``navy`` ...). ``trials`` fits
 each trial (``python -m clothfit fit CAP --model blender --cameras n:4 --times even``, the default budget; a finished
 fit in ``OUT/fits`` is reused) and scores it: held-out E_sil (the 2 other cameras, the odd frames), the floor, the
-mean distance of the real points to the fitted cloth over every kept frame (``points_mm``), the settings and their
-90 % intervals, the wall and CPU time of the fit with the machine's load. One JSON file.
+mean distance of the real points to the fitted cloth over every kept frame (``points_mm``), the splatting's own error
+(``splat_floor``: the floor the images' noise cannot show), the settings and their
+90 % intervals, the wall and CPU time of the fit with the machine's load. One JSON file. ``pictures`` draws each
+fabric's first trial: the real points (dark) on the fitted cloth (light, cropped as the fit saw it) at three frames
+from two of the virtual cameras, ``IMAGES/real_lifts_<fabric>.png``.
 
 Only ``paper`` and ``navy`` are fitted here: DiffCloud's other fabrics (polka, redblack, tan) are kept apart for a
 check the project's own tuning never saw.
@@ -108,6 +112,46 @@ def _score(cap: str, fit: str, fr: dict) -> dict:
     }
 
 
+def splat_floor(cap_dir: str, fit: str, seed: int = 0) -> float:
+    """The splatting's own error [%]: the fitted cloth sampled with as many points above the crop as each real
+    frame keeps, splatted as the converter splats the real points, against the same cloth's silhouette (every
+    camera and frame). A fit cannot be asked to go below it; the images' noise floor does not see it."""
+    import numpy as np
+
+    sys.path.insert(0, ROOT)
+    from clothfit.core.footage.point_clouds import splat
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.observation.points import capture_points
+    from clothfit.core.observation.raster import silhouette
+    from clothfit.core.physics.models import model_and_row
+    from clothfit.core.physics.scenario import fitted_scenario
+
+    cap = load_capture(cap_dir)
+    with open(fit) as f:
+        fr = json.load(f)
+    model, row = model_and_row(fr)
+    X = model.simulate(fitted_scenario(cap.scenario, fr), row[None]).positions[0]
+    pts = capture_points(cap, list(range(cap.n_frames)))
+    g, crop, rng = cap.scenario.grid, cap.scenario.crop, np.random.default_rng(seed)
+    r, e = cap.meta["splat_radius_m"], cap.meta.get("erode_radius_m", 0.0)
+    errs = []
+    for k in range(cap.n_frames):
+        a, b, c = (X[k][g.triangles[:, i]] for i in range(3))
+        area = np.linalg.norm(np.cross(b - a, c - a), axis=1) / 2
+        n = 20 * len(pts[k])
+        pick = rng.choice(len(area), n, p=area / area.sum())
+        u, v = rng.random(n), rng.random(n)
+        flip = u + v > 1
+        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+        S = a[pick] + u[:, None] * (b[pick] - a[pick]) + v[:, None] * (c[pick] - a[pick])
+        S = S[crop.height(S) >= 0.0][: len(pts[k])]
+        for cam in cap.cameras:
+            m = silhouette(cam, X[k], g.triangles, crop=crop)
+            o = splat(cam, S, r, e)
+            errs.append(np.count_nonzero(m ^ o) / max(int(o.sum()), 1))
+    return 100.0 * float(np.mean(errs))
+
+
 def trials(a) -> None:
     convert(a)  # the captures not made yet
     fits = os.path.join(a.out, "fits")
@@ -143,6 +187,7 @@ def trials(a) -> None:
                 "load": [round(x, 2) for x in load],
             }
             row.update(_score(cap, fit, fr))
+            row["splat_floor_pct"] = splat_floor(cap, fit)
             rows.append(row)
             print(
                 f"{trial}: held-out {row['heldout_E_sil_pct']:.1f} %, points {row['points_mm']:.1f} mm", file=sys.stderr
@@ -151,19 +196,66 @@ def trials(a) -> None:
         json.dump({"rows": rows}, f, indent=1)
 
 
+PICTURE_TIMES = (1.0, 1.6, 2.4)  # s: the cloth leaving the table, half lifted, hanging from its corner
+PICTURE_CAMERAS = (0, 2)
+
+
+def pictures(a) -> None:
+    import cv2
+    import numpy as np
+
+    sys.path.insert(0, ROOT)
+    from clothfit.core.observation.capture import load_capture
+    from clothfit.core.observation.points import capture_points
+    from clothfit.core.observation.raster import silhouette
+    from clothfit.core.physics.models import model_and_row
+    from clothfit.core.physics.scenario import fitted_scenario
+
+    for fabric in a.fabrics.split(","):
+        trial = TRIALS[fabric][0]
+        cap = load_capture(os.path.join(a.out, trial))
+        with open(os.path.join(a.out, "fits", f"{trial}.json")) as f:
+            fr = json.load(f)
+        fidx = [cap.frame_index(t) for t in PICTURE_TIMES]
+        model, row = model_and_row(fr)
+        sc = fitted_scenario(cap.scenario.with_frames([cap.frame_times[i] for i in fidx]), fr)
+        X = model.simulate(sc, row[None]).positions[0]
+        pts = capture_points(cap, fidx)
+        tiles = []
+        for c in PICTURE_CAMERAS:
+            cam = cap.cameras[c].resized(480, 640)
+            row_tiles = []
+            for k, t in enumerate(PICTURE_TIMES):
+                img = np.full((480, 640, 3), 255, np.uint8)
+                img[silhouette(cam, X[k], cap.scenario.grid.triangles, crop=cap.scenario.crop)] = (200, 170, 120)
+                uv = np.rint(cam.project(pts[k])).astype(int)
+                ok = (uv[:, 0] >= 0) & (uv[:, 0] < 640) & (uv[:, 1] >= 0) & (uv[:, 1] < 480)
+                for u, v in uv[ok]:
+                    cv2.circle(img, (int(u), int(v)), 1, (40, 40, 160), -1)
+                cv2.putText(img, f"{trial} {cam.name} t = {t:.1f} s", (10, 28), 0, 0.8, (0, 0, 0), 2)
+                row_tiles.append(img)
+            tiles.append(np.concatenate(row_tiles, 1))
+        os.makedirs(a.images, exist_ok=True)
+        path = os.path.join(a.images, f"real_lifts_{fabric}.png")
+        cv2.imwrite(path, cv2.resize(np.concatenate(tiles, 0), None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA))
+        print(f"wrote {path}", file=sys.stderr)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     c = sub.add_parser("convert")
     t = sub.add_parser("trials")
     t.add_argument("--json", required=True)
-    for p in (c, t):
+    pic = sub.add_parser("pictures")
+    pic.add_argument("--images", default=os.path.join(ROOT, "docs", "img"))
+    for p in (c, t, pic):
         p.add_argument("--diffcloud", default="out/diffcloud_real2sim")
         p.add_argument("--out", default="out/real_lifts")
         p.add_argument("--fabrics", default="paper,navy")
     a = ap.parse_args(argv)
     a.out = os.path.abspath(a.out)
-    {"convert": convert, "trials": trials}[a.cmd](a)
+    {"convert": convert, "trials": trials, "pictures": pictures}[a.cmd](a)
 
 
 if __name__ == "__main__":
