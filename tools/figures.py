@@ -165,6 +165,25 @@ SOURCES = {
         "atol": 1e-9,
         "what": "the core's blender model against Blender's own cloth, 12 cases",
     },
+    "blender_agreement_drag": {
+        "argv": [
+            "{py}",
+            "-m",
+            "clothfit",
+            "blender-agreement",
+            "--handling",
+            "drag",
+            "--settle",
+            "0.5",
+            "--json",
+            "{out}",
+        ],
+        "cost": "cheap",
+        "rtol": 0,
+        "atol": 1e-9,
+        "what": "the core's blender model with a table against Blender's own cloth and Collision object: a cloth "
+        "dropped onto a table and one corner dragged along it, 12 cases",
+    },
     "sensitivity": {
         "argv": ["{py}", "tools/sensitivity.py", "--json", "{out}"],
         "cost": "cheap",
