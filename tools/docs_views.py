@@ -55,6 +55,25 @@ def blender_agreement(recording):
     return "\n".join(out)
 
 
+def blender_agreement_drag(recording):
+    """The same cases with a table: the cloth dropped onto it and one corner dragged along it."""
+    d = _data(recording, "blender_agreement_drag")
+    out = [
+        f"{d['grid']} x {d['grid']} sheet, 10 cm, held flat by its corners, {d['settle_s']:g} s settle, dropped onto a "
+        f"table and one corner dragged along it, {d['after_s']:g} s after, {d['fps']:g} fps: the core's blender model "
+        f"with the table against Blender {d.get('blender', '(version not recorded)')} with a Collision object:",
+        "",
+        "| case | quality | mean mm | max mm | mean mm after the drop | equal frames |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in d["cases"]:
+        out.append(
+            f"| {r['case']} | {r['settings']['quality']} | {r['mean_mm']:.2f} | {r['max_mm']:.1f} | "
+            f"{r['mean_mm_after_release']:.2f} | {r['exactly_equal_frames']}/{r['frames']} |"
+        )
+    return "\n".join(out)
+
+
 def cross_simulator(recording):
     from cross_simulator import format_table
 
@@ -589,6 +608,7 @@ def real_lifts(recording):
 
 VIEWS = {
     "real_lifts": real_lifts,
+    "blender_agreement.drag": blender_agreement_drag,
     "takes.cotton": takes_cotton,
     "takes.silk": takes_silk,
     "issue20_goals": issue20_goals,
