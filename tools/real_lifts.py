@@ -13,7 +13,7 @@ each trial (``python -m clothfit fit CAP --model blender --cameras n:4 --times e
 fit in ``OUT/fits`` is reused) and scores it: held-out E_sil (the 2 other cameras, the odd frames), the floor, the
 mean distance of the real points to the fitted cloth over every kept frame (``points_mm``), the splatting's own error
 (``splat_floor``: the floor the images' noise cannot show), the settings and their
-90 % intervals, the wall and CPU time of the fit with the machine's load. One JSON file. ``pictures`` draws each
+90 % intervals, the fit's time (its result's ``elapsed_s``; wall and CPU time too when it ran here, with the load). One JSON file. ``pictures`` draws each
 fabric's first trial: the real points (dark) on the fitted cloth (light, cropped as the fit saw it) at three frames
 from two of the virtual cameras, ``IMAGES/real_lifts_<fabric>.png``.
 
@@ -182,6 +182,7 @@ def trials(a) -> None:
                 "undetermined": fr.get("undetermined"),
                 "time_scale": fr.get("time_scale"),
                 "time_offset_s": fr.get("time_offset_s"),
+                "fit_elapsed_s": fr.get("elapsed_s"),  # the fit's own time (its result's), reused or not
                 "fit_wall_s": wall,
                 "fit_cpu_s": cpu,
                 "load": [round(x, 2) for x in load],
