@@ -20,7 +20,8 @@ from clothfit.core import defaults as D  # noqa: E402
 from clothfit.core.errors import ClothFitError  # noqa: E402
 from clothfit.core.footage import handles as HM  # noqa: E402
 from clothfit.core.observation.camera import Camera, intrinsics, look_at, save_cameras  # noqa: E402
-from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, Uncertainty, rotation_matrix, rotation_vector  # noqa: E402
+from clothfit.core.physics.rotation import rotation_matrix, rotation_vector  # noqa: E402
+from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, Uncertainty  # noqa: E402
 
 FPS = 30.0
 TIMES = np.arange(20) / FPS

@@ -41,7 +41,8 @@ if ROOT not in sys.path:
 sys.path.insert(0, os.path.join(ROOT, "tools"))
 
 from clothfit.core.observation.camera import Camera, intrinsics, look_at  # noqa: E402
-from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, rotation_vector  # noqa: E402
+from clothfit.core.physics.rotation import rotation_vector  # noqa: E402
+from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario  # noqa: E402
 
 WIDTH, HEIGHT = 0.30, 0.24  # the cloth [m]
 NX, NY = 16, 13  # 2 cm cells: the clips at u = 0, 0.1, 0.2, 0.3 sit on vertices

@@ -578,7 +578,8 @@ def cloth_truth(seed: int, frames: int):
     the cloth's motion by the core's Blender model (Blender's cloth, bit-exact) at the true settings."""
     from clothfit.core.physics import blender as B
     from clothfit.core.physics.models import BlenderModel
-    from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario, rotation_vector
+    from clothfit.core.physics.rotation import rotation_vector
+    from clothfit.core.physics.scenario import ClothGrid, Handle, Scenario
 
     rng = np.random.default_rng([seed, 12])
     # the truth runs Blender's cloth at TRUTH_FPS (quality 1: the time step of 30 fps at quality 5, the motion

@@ -12,7 +12,8 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..physics.scenario import ClothGrid, rotation_vector
+from ..physics.rotation import rotation_vector
+from ..physics.scenario import ClothGrid
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence

@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
+from .rotation import rotation_matrix
 
 TYPES = ("plane", "box")
 KIND = {"plane": 0, "box": 1}
@@ -61,16 +62,6 @@ def _number(v: Any, what: str, lo: float, hi: float) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and lo <= v <= hi):
         raise ClothFitError(f"{what} must be a number in [{lo:g}, {hi:g}], got {v!r}")
     return float(v)
-
-
-def _rotation(rvec: np.ndarray) -> np.ndarray:
-    """The rotation matrix of a rotation vector (axis times angle [rad])."""
-    th = float(np.linalg.norm(rvec))
-    if th < 1e-15:
-        return np.eye(3)
-    k = rvec / th
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(th) * K + (1.0 - math.cos(th)) * (K @ K)
 
 
 def _plane_axes(normal: np.ndarray) -> np.ndarray:
@@ -150,7 +141,7 @@ class Collider:
         if size.min() <= 0:
             raise ClothFitError(f"{source}: size {d['size']!r} must be three positive lengths")
         rot = None if d.get("rotation") is None else _vec(d["rotation"], f"{source}: rotation")
-        axes = np.eye(3) if rot is None else _rotation(rot).T  # rows: the box's local axes in the world
+        axes = np.eye(3) if rot is None else rotation_matrix(rot).T  # rows: the box's local axes in the world
         return cls("box", centre, axes, size, dist, fric, rot)
 
     def packed(self, distance_min: float, quality: int, index: int = 0) -> np.ndarray:
