@@ -112,26 +112,33 @@ def _score(cap: str, fit: str, fr: dict) -> dict:
     }
 
 
-def splat_floor(cap_dir: str, fit: str, seed: int = 0) -> float:
-    """The splatting's own error [%]: the fitted cloth sampled with as many points above the crop as each real
-    frame keeps, splatted as the converter splats the real points, against the same cloth's silhouette (every
-    camera and frame). A fit cannot be asked to go below it; the images' noise floor does not see it."""
-    import numpy as np
-
+def _fitted(cap_dir: str, fit: str, times=None):
+    """(the capture, the fitted cloth's vertices at ``times`` (default: every frame), the real points there)."""
     sys.path.insert(0, ROOT)
-    from clothfit.core.footage.point_clouds import splat
     from clothfit.core.observation.capture import load_capture
     from clothfit.core.observation.points import capture_points
-    from clothfit.core.observation.raster import silhouette
     from clothfit.core.physics.models import model_and_row
     from clothfit.core.physics.scenario import fitted_scenario
 
     cap = load_capture(cap_dir)
     with open(fit) as f:
         fr = json.load(f)
+    fidx = list(range(cap.n_frames)) if times is None else [cap.frame_index(t) for t in times]
     model, row = model_and_row(fr)
-    X = model.simulate(fitted_scenario(cap.scenario, fr), row[None]).positions[0]
-    pts = capture_points(cap, list(range(cap.n_frames)))
+    sc = fitted_scenario(cap.scenario.with_frames([cap.frame_times[i] for i in fidx]), fr)
+    return cap, model.simulate(sc, row[None]).positions[0], capture_points(cap, fidx)
+
+
+def splat_floor(cap_dir: str, fit: str, seed: int = 0) -> float:
+    """The splatting's own error [%]: the fitted cloth sampled with as many points above the crop as each real
+    frame keeps, splatted as the converter splats the real points, against the same cloth's silhouette (every
+    camera and frame). A fit cannot be asked to go below it; the images' noise floor does not see it."""
+    import numpy as np
+
+    cap, X, pts = _fitted(cap_dir, fit)
+    from clothfit.core.footage.point_clouds import splat
+    from clothfit.core.observation.raster import silhouette
+
     g, crop, rng = cap.scenario.grid, cap.scenario.crop, np.random.default_rng(seed)
     r, e = cap.meta["splat_radius_m"], cap.meta.get("erode_radius_m", 0.0)
     errs = []
@@ -206,22 +213,12 @@ def pictures(a) -> None:
     import numpy as np
 
     sys.path.insert(0, ROOT)
-    from clothfit.core.observation.capture import load_capture
-    from clothfit.core.observation.points import capture_points
     from clothfit.core.observation.raster import silhouette
-    from clothfit.core.physics.models import model_and_row
-    from clothfit.core.physics.scenario import fitted_scenario
 
     for fabric in a.fabrics.split(","):
         trial = TRIALS[fabric][0]
-        cap = load_capture(os.path.join(a.out, trial))
-        with open(os.path.join(a.out, "fits", f"{trial}.json")) as f:
-            fr = json.load(f)
-        fidx = [cap.frame_index(t) for t in PICTURE_TIMES]
-        model, row = model_and_row(fr)
-        sc = fitted_scenario(cap.scenario.with_frames([cap.frame_times[i] for i in fidx]), fr)
-        X = model.simulate(sc, row[None]).positions[0]
-        pts = capture_points(cap, fidx)
+        cap, X, pts = _fitted(os.path.join(a.out, trial), os.path.join(a.out, "fits", f"{trial}.json"), PICTURE_TIMES)
+
         tiles = []
         for c in PICTURE_CAMERAS:
             cam = cap.cameras[c].resized(480, 640)
