@@ -251,3 +251,79 @@ def test_a_sparse_cloud_splatted_with_large_discs_and_eroded_back_keeps_the_outl
     assert np.count_nonzero(truth & ~closed) < np.count_nonzero(truth & ~plain)
     with pytest.raises(ClothFitError, match=r"erode_radius: 0.01 m must be below the splat radius 0.008 m"):
         read_setup(str(_setup(tmp_path, splat_radius=0.008, erode_radius=0.01)))
+
+
+def test_the_stated_splat_floor_is_the_error_the_cloth_the_points_came_from_scores_against_them(tmp_path):
+    """The splatting's own error (a perfect model against silhouettes splatted from its own sparse points): what
+    ``splat_floor`` states for a cloth must match what the true cloth scores against a capture made from points
+    sampled on it, image by image on average."""
+    from clothfit.core.footage.point_clouds import splat_floor
+
+    folder = tmp_path / "sparse"
+    folder.mkdir()
+    rng = np.random.default_rng(11)
+    sheets = _sheets()
+    for k, g in enumerate(sheets):
+        np.save(folder / f"{k:03d}.npy", _sample(g.rest, g.triangles, 2500, rng) / UNIT)
+    points_to_capture(str(folder), read_setup(str(_setup(tmp_path, splat_radius=0.004))), str(tmp_path / "cap"))
+    cap = load_capture(tmp_path / "cap")
+    crop = cap.scenario.crop
+    truth = np.array(
+        [
+            [
+                np.count_nonzero(silhouette(cam, g.rest, g.triangles, crop=crop) ^ cap.load_silhouette(c, f))
+                / cap.load_silhouette(c, f).sum()
+                for f, g in enumerate(sheets)
+            ]
+            for c, cam in enumerate(cap.cameras)
+        ]
+    )
+    V = np.stack([g.rest for g in sheets])
+    stated = splat_floor(cap.cameras, V, sheets[0].triangles, crop, cap.meta["points_per_frame"], 0.004)
+    assert truth.mean() > 0.03  # sparse enough for the splatting to matter
+    assert abs(stated.mean() / truth.mean() - 1.0) < 0.15, (stated.mean(), truth.mean())
+    assert np.corrcoef(stated.ravel(), truth.ravel())[0, 1] > 0.7  # and image by image, not only on average
+
+
+def test_a_capture_from_points_states_its_splat_floor_and_every_floor_of_its_images_honours_it(tmp_path, clouds):
+    from clothfit.core.observation.floor import capture_floor
+
+    points_to_capture(str(clouds), read_setup(str(_setup(tmp_path, splat_radius=0.004))), str(tmp_path / "cap"))
+    cap = load_capture(tmp_path / "cap")
+    sf = cap.meta["splat_floor"]
+    assert sf["cameras"] == cap.camera_names and sf["frame_times"] == [0.0, 0.1]
+    # at t = 0 the default cloth lies flat below the crop (the real points stand above it): not estimable there
+    assert [row[0] for row in sf["per_image"]] == [None] * 4
+    P = np.array([row[1] for row in sf["per_image"]])
+    assert P.min() > 0.05
+    cf = capture_floor(cap)
+    assert np.all(cf.per_image()[:, 1] >= P - 1e-12) and [e.splat for e in cf.images[0]] == [0.0, P[0]]
+    assert "splatting" in cf.basis
+    one = capture_floor(cap, [2], [1])  # a subset finds its own images' values by camera name and time
+    assert one.images[0][0].splat == P[2]
+    sf["per_image"] = [[0.1]]
+    with pytest.raises(ClothFitError, match=r"capture.json meta splat_floor: per_image must be 4 x 2"):
+        capture_floor(cap)
+
+
+def test_a_floor_raised_by_splatting_leaves_the_intervals_pixel_noise_as_it_was(tmp_path, clouds):
+    """The intervals' pixel-noise threshold reads an image's noise, not the splatting's error (which is not a
+    random flip of boundary pixels): the same with and without the capture's splat floor."""
+    from clothfit.core.fitting.intervals import pixel_threshold
+    from clothfit.core.observation.floor import capture_floor
+
+    points_to_capture(str(clouds), read_setup(str(_setup(tmp_path, splat_radius=0.004))), str(tmp_path / "cap"))
+    cap = load_capture(tmp_path / "cap")
+    with_splat = [e for row in capture_floor(cap).images for e in row]
+    del cap.meta["splat_floor"]
+    without = [e for row in capture_floor(cap).images for e in row]
+    assert any(a.floor > 2 * b.floor for a, b in zip(with_splat, without))
+
+    def thr(ims):
+        return pixel_threshold([e.noise + e.resampling for e in ims], [e.rim * e.fit_area for e in ims])
+
+    assert (
+        thr(with_splat)
+        == thr(without)
+        == pixel_threshold([e.floor for e in without], [e.rim * e.fit_area for e in without])
+    )

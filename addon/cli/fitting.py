@@ -453,7 +453,9 @@ def cmd_floor(a):
     d = cf.to_dict()
     print(
         f"noise floor {100 * d['floor']:.3f} % E_sil per image (median {100 * d['floor_median']:.3f} %; "
-        f"resampling {100 * d['resampling']:.3f} %) over {d['n_images']} images; a 1-pixel shift of the outline "
+        f"resampling {100 * d['resampling']:.3f} %"
+        + (f"; splatting the points {100 * d['splat']:.3f} %" if d["splat"] > 0 else "")
+        + f") over {d['n_images']} images; a 1-pixel shift of the outline "
         f"costs {100 * d['rim']:.2f} %; {cf.limits}"
     )
     if a.json:

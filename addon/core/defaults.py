@@ -344,6 +344,8 @@ TAKES_ALONE_FACTOR = 1.5  # a take the shared settings serve more than this time
 # --- captures from point clouds (footage/point_clouds.py, `clothfit points-to-capture`, docs/point_clouds.md)
 POINTS_SPLAT_RADIUS = 0.005  # [m] each point drawn as a disc of this radius: ~ the spacing of 3500 points on a
 # 0.28 m square (4.7 mm), so neighbouring discs close the gaps without fattening the outline by more than that
+SPLAT_FLOOR_OVERSAMPLE = 20  # the splat floor's cloth is sampled with this many times a frame's points, those above
+# the crop kept up to the real count (footage/point_clouds.splat_floor)
 POINTS_MIN_POINTS = 30  # a frame keeping fewer points above the crop shows too little cloth to compare: left out
 POINTS_CAMERAS = 6  # virtual cameras in one ring around the points
 POINTS_ELEVATION_DEG = 20.0  # the ring's elevation above the horizontal

@@ -29,8 +29,11 @@ from ..jsonio import read_json
 from ..observation.camera import Camera, ring_rig
 from ..observation.capture import Capture, write_capture
 from ..observation.points import read_point_cloud
+from ..observation.raster import silhouette
+from ..physics import blender_settings as BS
 from ..physics.colliders import Collisions
 from ..physics.crop import CropPlane
+from ..physics.models import model_and_row
 from ..physics.scenario import ClothGrid, Handle, Scenario
 
 SETUP_KEYS = (
@@ -360,6 +363,69 @@ def _discs(camera: Camera, points: np.ndarray, radius: float) -> np.ndarray:
     return out
 
 
+# ============================================================================ the splatting's own error
+
+
+def splat_floor(
+    cameras: list[Camera],
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    crop: CropPlane | None,
+    counts: list[int],
+    radius: float,
+    erode: float = 0.0,
+    seed: int = 0,
+) -> np.ndarray:
+    """(C, F) ``E_sil`` fractions of a cloth's own points splatted as the converter splats real points, against
+    the same cloth's silhouette: the error a perfect model keeps against splatted silhouettes, which the
+    images' outline noise (``observation/floor.py``) cannot see. ``vertices`` (F, V, 3) the cloth per frame;
+    frame f is sampled uniformly over its area with ``counts[f]`` points above the ``crop`` (as many as the
+    real cloud keeps there) and splatted with ``radius`` and ``erode`` (``splat``). A frame where the cloth shows
+    too little area above the crop to hold that many points (even sampled ``D.SPLAT_FLOOR_OVERSAMPLE`` times as
+    densely) gets NaN: its error cannot be estimated with this cloth."""
+    rng = np.random.default_rng(seed)
+    out = np.zeros((len(cameras), len(counts)))
+    for f, n in enumerate(counts):
+        V = vertices[f]
+        a, b, c = (V[triangles[:, i]] for i in range(3))
+        area = np.linalg.norm(np.cross(b - a, c - a), axis=1) / 2.0
+        m = D.SPLAT_FLOOR_OVERSAMPLE * int(n)
+        pick = rng.choice(len(area), m, p=area / area.sum())
+        u, v = rng.random(m), rng.random(m)
+        flip = u + v > 1.0
+        u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
+        S = a[pick] + u[:, None] * (b[pick] - a[pick]) + v[:, None] * (c[pick] - a[pick])
+        if crop is not None:
+            S = S[crop.height(S) >= 0.0]
+        if S.shape[0] < int(n):  # too little of this cloth above the crop to hold the frame's points
+            out[:, f] = np.nan
+            continue
+        S = S[: int(n)]
+        for ci, cam in enumerate(cameras):
+            model = silhouette(cam, V, triangles, crop=crop)
+            o = splat(cam, S, radius, erode)
+            out[ci, f] = np.count_nonzero(model ^ o) / max(int(o.sum()), 1)
+    return out
+
+
+def default_cloth_splat_floor(cameras: list[Camera], scenario: Scenario, counts: list[int], setup: PointsSetup) -> dict:
+    """The capture's ``meta["splat_floor"]``: ``splat_floor`` of Blender's default cloth moved by the capture's
+    handling (its settings are unknown before a fit; the splatting's error depends on the points' density, the
+    disc radius and the cloth's outline far more than on its stiffness), per camera name and frame time; null for
+    a frame where that cloth lies below the crop."""
+    model, row = model_and_row({"blender_cloth": dict(BS.DEFAULTS)})
+    X = model.simulate(scenario, row[None]).positions[0]
+    P = splat_floor(cameras, X, scenario.grid.triangles, scenario.crop, counts, setup.splat_radius, setup.erode_radius)
+    return {
+        "cloth": "Blender's default cloth moved by the capture's handling, sampled with each frame's count of points",
+        "resolution": [cameras[0].height, cameras[0].width],
+        "cameras": [c.name for c in cameras],
+        "frame_times": [float(t) for t in scenario.frame_times],
+        "per_image": [[round(float(x), 6) if np.isfinite(x) else None for x in row] for row in P],
+        "mean": round(float(np.nanmean(P)), 6) if np.isfinite(P).any() else None,
+    }
+
+
 # ============================================================================ conversion
 
 
@@ -414,6 +480,7 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
         "erode_radius_m": setup.erode_radius,
         "points_per_frame": [counts[k] for k in keep],
         "left_out": [os.path.basename(files[k]) for k in range(len(files)) if k not in keep],
+        "splat_floor": default_cloth_splat_floor(cams, scenario, [counts[k] for k in keep], setup),
     }
     cap = write_capture(out, cams, scenario, sils, meta=meta, uncertain=setup.uncertain)
     report = {
@@ -424,6 +491,7 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
         "frame_times": times.tolist(),
         "left_out": meta["left_out"],
         "splat_radius_m": setup.splat_radius,
+        "splat_floor_pct": None if meta["splat_floor"]["mean"] is None else round(100 * meta["splat_floor"]["mean"], 3),
         "crop": None if setup.crop is None else setup.crop.to_dict(),
     }
     return cap, report

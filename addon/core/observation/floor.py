@@ -196,6 +196,8 @@ class FloorEstimate:
     shape: tuple  # image (H, W)
     fit_shape: tuple  # fit (h, w)
     basis: str = "straight outline"  # where the noise rate came from
+    splat: float = 0.0  # E_sil of a perfect model against silhouettes splatted from points (a capture converted
+    # from point clouds, its meta's ``splat_floor``); ``floor`` is the larger of it and noise + resampling
 
     @property
     def rate(self) -> float:
@@ -487,7 +489,7 @@ class CaptureFloor:
         P = self.per_image()
         parts = {
             k: float(np.mean([[getattr(e, k) for e in row] for row in self.images]))
-            for k in ("noise", "resampling", "rim")
+            for k in ("noise", "resampling", "rim", "splat")
         }
         d = {
             "floor": float(P.mean()),
@@ -606,6 +608,7 @@ def capture_floor(
     observed, ignore = capture.load_observations(cams, fidx)
     names = [[f"camera '{capture.cameras[c].name}' frame {f}" for f in fidx] for c in cams]
     images, rate, basis = pooled_floors(observed, ignore, resolution, names, model)
+    basis = _with_splat(capture, images, cams, fidx, basis)
     return CaptureFloor(
         images,
         [capture.cameras[c].name for c in cams],
@@ -614,6 +617,42 @@ def capture_floor(
         rate,
         basis,
     )
+
+
+def _with_splat(capture: Capture, images: list, cams: list[int], fidx: list[int], basis: str) -> str:
+    """Raise each image's floor to its splatting error when the capture was made from point clouds (its meta's
+    ``splat_floor``, per camera name and frame time, null where it could not be estimated:
+    ``footage/point_clouds.default_cloth_splat_floor``); returns the basis, extended when it did."""
+    sf = capture.meta.get("splat_floor")
+    if sf is None:
+        return basis
+    where = f"{getattr(capture, 'root', 'capture')}/capture.json meta splat_floor"
+    try:
+        P = np.array([[np.nan if x is None else x for x in row] for row in sf["per_image"]], dtype=np.float64)
+        cam_row = {str(n): i for i, n in enumerate(sf["cameras"])}
+        times = np.asarray(sf["frame_times"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        raise ClothFitError(f"{where}: expected cameras, frame_times and per_image (cameras x frames)") from None
+    if P.shape != (len(cam_row), times.size) or np.any(np.isinf(P)) or np.any(P < 0):
+        raise ClothFitError(f"{where}: per_image must be {len(cam_row)} x {times.size} fractions >= 0 (or null)")
+    raised = False
+    for i, c in enumerate(cams):
+        row = cam_row.get(capture.cameras[c].name)
+        for j, f in enumerate(fidx):
+            k = np.flatnonzero(np.abs(times - capture.frame_times[f]) < 1e-6)
+            if row is None or not k.size:
+                raise ClothFitError(
+                    f"{where}: no value for camera '{capture.cameras[c].name}' at t = {capture.frame_times[f]:g} s"
+                )
+            e = images[i][j]
+            if np.isnan(P[row, k[0]]):  # not estimable there (the converter's cloth lay below the crop)
+                continue
+            e.splat = float(P[row, k[0]])
+            if e.splat > e.floor:
+                e.floor, raised = e.splat, True
+    if not raised:
+        return basis
+    return f"{basis}; raised to the error of splatting a cloth's own points (the images were splatted from points)"
 
 
 # ============================================================================ a fit against its floor
