@@ -107,6 +107,7 @@ def _score(cap: str, fit: str, fr: dict) -> dict:
     return {
         "heldout_E_sil_pct": h["silhouette_error_pct"],
         "points_mm": allf["points_mm"],
+        "points_scatter_mm": allf["points_scatter_mm"],
         "points_mm_per_time": allf["points_mm_per_time"],
         "times": allf["times"],
     }

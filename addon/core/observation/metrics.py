@@ -85,6 +85,29 @@ def points_to_cloth_m(points: np.ndarray, vertices: np.ndarray, triangles: np.nd
     return out
 
 
+def points_scatter_m(points: np.ndarray, k: int = 16, chunk: int = 512) -> np.ndarray:
+    """Each point's distance [m] to the plane through its ``k`` nearest neighbours (itself among them): the
+    points' own scatter about a smooth surface (a depth camera's noise), which a perfect cloth would still
+    score in ``points_to_cloth_m``. A surface curved on the scale of the neighbourhood adds to it: at 3000
+    points on a 0.28 m square (``k`` = 16 spans about 1 cm), a bend round a 10 cm cylinder adds 0.15 mm."""
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = len(P)
+    if n < 4:
+        return np.zeros(n)
+    k = min(int(k), n)
+    out = np.empty(n)
+    sq = (P * P).sum(1)
+    for s in range(0, n, chunk):
+        p = P[s : s + chunk]
+        d2 = sq[s : s + chunk, None] - 2.0 * p @ P.T + sq[None, :]
+        nb = P[np.argpartition(d2, k - 1, axis=1)[:, :k]]  # (m, k, 3)
+        c = nb.mean(1)
+        A = nb - c[:, None]
+        normal = np.linalg.eigh(np.einsum("mki,mkj->mij", A, A))[1][:, :, 0]  # the smallest spread's direction
+        out[s : s + chunk] = np.abs(((p - c) * normal).sum(1))
+    return out
+
+
 def _closest_sq(p, a, b, c):
     """Squared distance from points ``p`` to triangles ``a, b, c`` (broadcast), by the triangle's Voronoi regions."""
     ab, ac, ap = b - a, c - a, p - a
