@@ -169,7 +169,7 @@ def test_the_command_line_fits_two_takes_and_scores_each(takes, tmp_path):
 def test_an_unseen_takes_declared_unknowns_are_fitted_with_the_settings_held_when_asked(takes, tmp_path):
     import shutil
 
-    from clothfit.core.fitting.evaluate import FITTED_HERE
+    from clothfit.core.fitting.evaluate import FITTED_HERE, for_take
     from clothfit.core.observation.capture import load_capture
 
     one, two = takes
@@ -189,6 +189,16 @@ def test_an_unseen_takes_declared_unknowns_are_fitted_with_the_settings_held_whe
     assert fitted["manipulation"] == FITTED_HERE
     assert fitted["silhouette_error_pct"] <= plain["silhouette_error_pct"]
     assert fitted["time_offset_s"] != 0.0
+    # the unknowns it found replay as they are: fitted on some images, they score others without refitting
+    d["uncertain"] = {"time_offset": 0.04, "handles": 0.005}
+    json.dump(d, open(late / "capture.json", "w"))
+    cap = load_capture(str(late))
+    fitted = evaluate(cap, res, cameras=[1, 3, 5], fit_unknowns=60)
+    assert len(fitted["handles"]) == 4 and fitted["time_offset_s"] != 0.0  # its four pinned corners
+    held, _ = for_take(cap, res)
+    again = dict(held, time_offset_s=fitted["time_offset_s"], handles=fitted["handles"])
+    del again["capture_hash"]
+    assert evaluate(cap, again, cameras=[1, 3, 5])["silhouette_error_pct"] == fitted["silhouette_error_pct"]
 
 
 def test_no_selection_means_every_camera_and_frame_of_every_take(takes):

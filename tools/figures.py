@@ -619,6 +619,15 @@ SOURCES = {
         "scored on its held-out cameras and frames and against the real points (a finished fit in "
         "out/real_lifts/fits is reused: about 30 min without them)",
     },
+    "real_lifts_pairs": {
+        "argv": ["{py}", "tools/real_lifts.py", "pairs", "--fabrics", "paper,navy", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "DiffCloud's real lifts, per fabric (paper, navy) its first two trials fitted together as a user fits "
+        "them and the third predicted: its unknowns (clock stretch and offset, the grasp) fitted with the settings held "
+        "on the images its own fit trained on, then scored on its held-out cameras and frames and against its real "
+        "points, beside the third fitted alone (finished fits in out/real_lifts/pairs and fits are reused: about 20 "
+        "min without them)",
+    },
     "interval_coverage": {
         "argv": ["{py}", "tools/interval_coverage.py", "--captures", "6", "--json", "{out}"],
         "cost": "expensive",

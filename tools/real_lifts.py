@@ -4,6 +4,7 @@ with ``clothfit evaluate`` on the cameras and frames the fit did not see and aga
 
     python tools/real_lifts.py convert [--diffcloud out/diffcloud_real2sim] [--out out/real_lifts] [--fabrics paper,navy]
     python tools/real_lifts.py trials [--diffcloud DIR] [--out out/real_lifts] [--fabrics paper,navy] --json FILE
+    python tools/real_lifts.py pairs [--diffcloud DIR] [--out out/real_lifts] [--fabrics paper,navy] --json FILE
     python tools/real_lifts.py pictures [--out out/real_lifts] [--fabrics paper,navy] [--images docs/img]
 
 ``DIR`` (default ``out/diffcloud_real2sim``) is a checkout of https://github.com/priyasundaresan/diffcloud_real2sim (no licence: nothing of it is copied
@@ -13,7 +14,8 @@ each trial (``python -m clothfit fit CAP --model blender --cameras n:4 --times e
 fit in ``OUT/fits`` is reused) and scores it: held-out E_sil (the 2 other cameras, the odd frames), the floor, the
 mean distance of the real points to the fitted cloth over every kept frame (``points_mm``), the splatting's own error
 (``splat_floor``: the floor the images' noise cannot show), the settings and their
-90 % intervals, the fit's time (its result's ``elapsed_s``; wall and CPU time too when it ran here, with the load). One JSON file. ``pictures`` draws each
+90 % intervals, the fit's time (its result's ``elapsed_s``; wall and CPU time too when it ran here, with the load). One JSON file. ``pairs`` fits each fabric's first two trials together
+(``OUT/pairs``) and predicts the third (``_predict``) beside the third fitted alone. ``pictures`` draws each
 fabric's first trial: the real points (dark) on the fitted cloth (light, cropped as the fit saw it) at three frames
 from two of the virtual cameras, ``IMAGES/real_lifts_<fabric>.png``.
 
@@ -32,6 +34,7 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+UNKNOWNS_BUDGET = 150  # evaluations for an unseen trial's unknowns (evaluate --fit-unknowns' default)
 TRIALS = {"paper": ("paper", "paper2", "paper3"), "navy": ("navy", "navy2", "navy3")}
 CLOUDS = "sim/diffcloud/pysim/lift_real_pcls/lift_{trial}"
 PATH = "real/kinova_percep/hardware/utils/trajs/lift_traj.npy"
@@ -154,6 +157,100 @@ def splat_floor(cap_dir: str, fit: str, seed: int = 0) -> float:
     return 100.0 * float(np.nanmean(P))
 
 
+def _fit(fit: str, caps: list) -> tuple[dict, float | None, float | None]:
+    """(the result, wall s, CPU s) of the fit of ``caps`` together as a user fits them; a finished ``fit`` is reused
+    (then no times)."""
+    wall = cpu = None
+    if not os.path.exists(fit):
+        with open(fit[: -len(".json")] + ".log", "w") as log:
+            _, wall, cpu = _clothfit(
+                ["fit", *caps, "--model", "blender", "--cameras", "n:4", "--times", "even", "--out", fit], log
+            )
+    with open(fit) as f:
+        return json.load(f), wall, cpu
+
+
+def _predict(cap_dir: str, fit: str, alone: dict) -> dict:
+    """A trial the fit ``fit`` never saw, scored as its own fit ``alone`` was: its unknowns (the clock's stretch and
+    offset, the grasp) fitted with the settings held on the images its own fit trained on (``evaluate
+    --fit-unknowns``), then the held-out cameras and frames and the real points scored with them."""
+    sys.path.insert(0, ROOT)
+    from clothfit.core.fitting.evaluate import evaluate, for_take
+    from clothfit.core.observation.capture import load_capture
+
+    cap = load_capture(cap_dir)
+    with open(fit) as f:
+        fr = json.load(f)
+    train = [cap.camera_index(n) for n in alone["train_cameras"]]
+    held = [c for c in range(cap.n_cameras) if c not in train]
+    odd = [t for t in cap.frame_times if min(abs(t - u) for u in alone["train_times"]) > 1e-6]
+    u = evaluate(cap, fr, cameras=train, times=alone["train_times"], fit_unknowns=UNKNOWNS_BUDGET)
+    params, how = for_take(cap, fr)
+    params = {k: v for k, v in params.items() if k != "capture_hash"}
+    params.update({k: u[k] for k in ("time_offset_s", "time_scale", "handles") if u.get(k) is not None})
+    h, allf = evaluate(cap, params, cameras=held, times=odd), evaluate(cap, params)
+    return {
+        "manipulation": how,
+        "unknowns_train_E_sil_pct": u["silhouette_error_pct"],
+        "time_scale": u.get("time_scale"),
+        "time_offset_s": u.get("time_offset_s"),
+        "heldout_E_sil_pct": h["silhouette_error_pct"],
+        "points_mm": allf["points_mm"],
+        "points_mm_per_time": allf["points_mm_per_time"],
+    }
+
+
+def pairs(a) -> None:
+    """Per fabric: its first two trials fitted together, the third predicted (``_predict``) beside its own fit."""
+    convert(a)
+    os.makedirs(os.path.join(a.out, "pairs"), exist_ok=True)
+    os.makedirs(os.path.join(a.out, "fits"), exist_ok=True)
+    rows = []
+    for fabric in a.fabrics.split(","):
+        *two, third = TRIALS[fabric]
+        load = os.getloadavg()
+        fr, wall, cpu = _fit(
+            os.path.join(a.out, "pairs", "+".join(two) + ".json"), [os.path.join(a.out, t) for t in two]
+        )
+        alone, _, _ = _fit(os.path.join(a.out, "fits", f"{third}.json"), [os.path.join(a.out, third)])
+        cap = os.path.join(a.out, third)
+        own = _score(cap, os.path.join(a.out, "fits", f"{third}.json"), alone)
+        pred = _predict(cap, os.path.join(a.out, "pairs", "+".join(two) + ".json"), alone)
+        row = {
+            "fabric": fabric,
+            "fitted": two,
+            "predicted": third,
+            "blender_cloth": fr.get("blender_cloth"),
+            "intervals": fr.get("intervals"),
+            "undetermined": fr.get("undetermined"),
+            "verdict_kind": fr.get("verdict_kind"),
+            "takes": [
+                {
+                    "take": t.get("take"),
+                    "heldout_E_sil_pct": (t.get("floor") or {}).get("heldout_E_sil_pct"),
+                    "heldout_floor_pct": (t.get("floor") or {}).get("heldout_floor_pct"),
+                    "alone_E_sil_pct": t.get("alone_E_sil_pct"),
+                }
+                for t in fr.get("takes") or []
+            ],
+            "third_alone": {"heldout_E_sil_pct": own["heldout_E_sil_pct"], "points_mm": own["points_mm"]},
+            "third_predicted": pred,
+            "ratio_to_alone": pred["heldout_E_sil_pct"] / own["heldout_E_sil_pct"],
+            "fit_elapsed_s": fr.get("elapsed_s"),
+            "fit_wall_s": wall,
+            "fit_cpu_s": cpu,
+            "load": [round(x, 2) for x in load],
+        }
+        rows.append(row)
+        print(
+            f"{'+'.join(two)} -> {third}: held-out {pred['heldout_E_sil_pct']:.1f} % (alone "
+            f"{own['heldout_E_sil_pct']:.1f} %), points {pred['points_mm']:.1f} mm",
+            file=sys.stderr,
+        )
+    with open(a.json, "w") as f:
+        json.dump({"rows": rows}, f, indent=1)
+
+
 def trials(a) -> None:
     convert(a)  # the captures not made yet
     fits = os.path.join(a.out, "fits")
@@ -162,15 +259,8 @@ def trials(a) -> None:
     for fabric in a.fabrics.split(","):
         for trial in TRIALS[fabric]:
             cap, fit = os.path.join(a.out, trial), os.path.join(fits, f"{trial}.json")
-            wall = cpu = None
             load = os.getloadavg()
-            if not os.path.exists(fit):
-                with open(os.path.join(fits, f"{trial}.log"), "w") as log:
-                    _, wall, cpu = _clothfit(
-                        ["fit", cap, "--model", "blender", "--cameras", "n:4", "--times", "even", "--out", fit], log
-                    )
-            with open(fit) as f:
-                fr = json.load(f)
+            fr, wall, cpu = _fit(fit, [cap])
             fl = fr.get("floor") or {}
             row = {
                 "fabric": fabric,
@@ -242,15 +332,17 @@ def main(argv=None) -> None:
     c = sub.add_parser("convert")
     t = sub.add_parser("trials")
     t.add_argument("--json", required=True)
+    pr = sub.add_parser("pairs")
+    pr.add_argument("--json", required=True)
     pic = sub.add_parser("pictures")
     pic.add_argument("--images", default=os.path.join(ROOT, "docs", "img"))
-    for p in (c, t, pic):
+    for p in (c, t, pr, pic):
         p.add_argument("--diffcloud", default="out/diffcloud_real2sim")
         p.add_argument("--out", default="out/real_lifts")
         p.add_argument("--fabrics", default="paper,navy")
     a = ap.parse_args(argv)
     a.out = os.path.abspath(a.out)
-    {"convert": convert, "trials": trials, "pictures": pictures}[a.cmd](a)
+    {"convert": convert, "trials": trials, "pairs": pairs, "pictures": pictures}[a.cmd](a)
 
 
 if __name__ == "__main__":

@@ -69,7 +69,7 @@ def evaluate(
         "times": tt,
         "manipulation": manipulation,
         "time_offset_s": params.get("time_offset_s") if isinstance(params, dict) else None,
-        **({"time_scale": params["time_scale"]} if isinstance(params, dict) and params.get("time_scale") else {}),
+        **({k: params[k] for k in ("time_scale", "handles") if isinstance(params, dict) and params.get(k)}),
         "exploded": bool(exploded[0]),
         "silhouette_error_pct": float(100 * esil[0].mean()),
         "silhouette_error_pct_per_camera": (100 * esil[0].mean(1)).tolist(),
