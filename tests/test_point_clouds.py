@@ -117,8 +117,10 @@ def test_the_command_writes_the_capture_and_reports_it_as_json(tmp_path, clouds,
     code = cli.main(
         ["points-to-capture", str(clouds), setup, "--out", str(tmp_path / "cap"), "--splat-radius", "0.004"]
     )
-    out = json.loads(capsys.readouterr().out)
+    got = capsys.readouterr()
+    out = json.loads(got.out)
     assert code == 0 and out["splat_radius_m"] == 0.004 and out["frames"] == 2
+    assert f"the splatting's own error: {out['splat_floor_pct']:.1f} %" in got.err
     assert load_capture(tmp_path / "cap").meta["splat_radius_m"] == 0.004
 
 

@@ -14,6 +14,11 @@ def cmd_points_to_capture(a):
     cap, report = points_to_capture(a.points, setup, a.out)
     left = f", {len(report['left_out'])} left out (too few points above the crop)" if report["left_out"] else ""
     print(f"wrote capture {a.out}: {cap.n_cameras} cameras x {cap.n_frames} frames{left}")
+    if report["splat_floor_pct"] is not None:
+        print(
+            f"the splatting's own error: {report['splat_floor_pct']:.1f} % E_sil per image (what a perfect model "
+            f"keeps against these silhouettes: the floor a fit is judged against)"
+        )
     return report
 
 
@@ -24,7 +29,8 @@ def add_points(sub):
         "points-to-capture",
         cmd_points_to_capture,
         "make a capture from a folder of point clouds (one N x 3 .npy per frame)",
-        "the capture, its cameras, frame times, the frames left out, the splat radius and the crop as JSON",
+        "the capture, its cameras, frame times, the frames left out, the splat radius, the splatting's own error and the "
+        "crop as JSON",
     )
     s.add_argument("points", help="folder of point clouds: one N x 3 .npy per frame, in name order")
     s.add_argument(
