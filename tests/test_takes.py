@@ -169,7 +169,7 @@ def test_the_command_line_fits_two_takes_and_scores_each(takes, tmp_path):
 def test_an_unseen_takes_declared_unknowns_are_fitted_with_the_settings_held_when_asked(takes, tmp_path):
     import shutil
 
-    from clothfit.core.fitting.evaluate import FITTED_HERE, for_take
+    from clothfit.core.fitting.evaluate import FITTED_HERE, FITTED_ON_OTHERS, for_take
     from clothfit.core.observation.capture import load_capture
 
     one, two = takes
@@ -199,6 +199,44 @@ def test_an_unseen_takes_declared_unknowns_are_fitted_with_the_settings_held_whe
     again = dict(held, time_offset_s=fitted["time_offset_s"], handles=fitted["handles"])
     del again["capture_hash"]
     assert evaluate(cap, again, cameras=[1, 3, 5])["silhouette_error_pct"] == fitted["silhouette_error_pct"]
+    # fitted on some cameras and frames, scored on others: the unknowns those give, these scored with them
+    fair = evaluate(
+        cap,
+        res,
+        cameras=[0, 2, 4],
+        times=cap.frame_times[1::2],
+        fit_unknowns=60,
+        unknowns_on=([1, 3, 5], cap.frame_times[::2]),
+    )
+    on = evaluate(cap, res, cameras=[1, 3, 5], times=cap.frame_times[::2], fit_unknowns=60)
+    assert fair["manipulation"] == FITTED_ON_OTHERS and fair["handles"] == on["handles"]
+    again = dict(held, time_offset_s=on["time_offset_s"], handles=on["handles"])
+    del again["capture_hash"]
+    assert evaluate(cap, again, cameras=[0, 2, 4], times=cap.frame_times[1::2]) == {**fair, "manipulation": "declared"}
+    json.dump(res, open(tmp_path / "res.json", "w"))
+    from clothfit import cli
+
+    argv = ["evaluate", str(late), "--params", str(tmp_path / "res.json"), "--cameras", "0,2,4", "--times", "odd"]
+    assert (
+        cli.main(
+            [
+                *argv,
+                "--fit-unknowns",
+                "60",
+                "--unknowns-cameras",
+                "1,3,5",
+                "--unknowns-times",
+                "even",
+                "--json",
+                str(tmp_path / "e.json"),
+            ]
+        )
+        == 0
+    )
+    got = json.load(open(tmp_path / "e.json"))
+    assert got["manipulation"] == FITTED_ON_OTHERS and got["silhouette_error_pct"] == fair["silhouette_error_pct"]
+    assert cli.main([*argv, "--unknowns-times", "even", "--json", str(tmp_path / "f.json")]) == 0  # implies fitting
+    assert json.load(open(tmp_path / "f.json"))["manipulation"] == FITTED_ON_OTHERS
 
 
 def test_no_selection_means_every_camera_and_frame_of_every_take(takes):

@@ -34,7 +34,6 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-UNKNOWNS_BUDGET = 150  # evaluations for an unseen trial's unknowns (evaluate --fit-unknowns' default)
 TRIALS = {"paper": ("paper", "paper2", "paper3"), "navy": ("navy", "navy2", "navy3")}
 CLOUDS = "sim/diffcloud/pysim/lift_real_pcls/lift_{trial}"
 PATH = "real/kinova_percep/hardware/utils/trajs/lift_traj.npy"
@@ -170,30 +169,31 @@ def _fit(fit: str, caps: list) -> tuple[dict, float | None, float | None]:
         return json.load(f), wall, cpu
 
 
-def _predict(cap_dir: str, fit: str, alone: dict) -> dict:
-    """A trial the fit ``fit`` never saw, scored as its own fit ``alone`` was: its unknowns (the clock's stretch and
-    offset, the grasp) fitted with the settings held on the images its own fit trained on (``evaluate
-    --fit-unknowns``), then the held-out cameras and frames and the real points scored with them."""
-    sys.path.insert(0, ROOT)
-    from clothfit.core.fitting.evaluate import evaluate, for_take
-    from clothfit.core.observation.capture import load_capture
-
-    cap = load_capture(cap_dir)
-    with open(fit) as f:
-        fr = json.load(f)
-    train = [cap.camera_index(n) for n in alone["train_cameras"]]
-    held = [c for c in range(cap.n_cameras) if c not in train]
-    odd = [t for t in cap.frame_times if min(abs(t - u) for u in alone["train_times"]) > 1e-6]
-    u = evaluate(cap, fr, cameras=train, times=alone["train_times"], fit_unknowns=UNKNOWNS_BUDGET)
-    params, how = for_take(cap, fr)
-    params = {k: v for k, v in params.items() if k != "capture_hash"}
-    params.update({k: u[k] for k in ("time_offset_s", "time_scale", "handles") if u.get(k) is not None})
-    h, allf = evaluate(cap, params, cameras=held, times=odd), evaluate(cap, params)
+def _predict(cap: str, fit: str, alone: dict) -> dict:
+    """A trial the fit ``fit`` never saw, scored as its own fit ``alone`` was, as a user scores it: its unknowns (the
+    clock's stretch and offset, the grasp) fitted with the settings held on the cameras and frames its own fit
+    trained on (``evaluate --unknowns-cameras --unknowns-times``), its held-out cameras and frames and its real
+    points scored with them."""
+    with open(os.path.join(cap, "cameras.json")) as f:
+        names = [c["name"] for c in json.load(f)["cameras"]]
+    with open(os.path.join(cap, "capture.json")) as f:
+        times = json.load(f)["frame_times"]
+    held = [n for n in names if n not in alone["train_cameras"]]
+    odd = [t for t in times if min(abs(t - u) for u in alone["train_times"]) > 1e-6]
+    on = [
+        "--unknowns-cameras",
+        ",".join(alone["train_cameras"]),
+        "--unknowns-times",
+        ",".join(map(str, alone["train_times"])),
+    ]
+    h, _, _ = _clothfit(
+        ["evaluate", cap, "--params", fit, "--cameras", ",".join(held), "--times", ",".join(map(str, odd)), *on]
+    )
+    allf, _, _ = _clothfit(["evaluate", cap, "--params", fit, *on])
     return {
-        "manipulation": how,
-        "unknowns_train_E_sil_pct": u["silhouette_error_pct"],
-        "time_scale": u.get("time_scale"),
-        "time_offset_s": u.get("time_offset_s"),
+        "manipulation": h["manipulation"],
+        "time_scale": h.get("time_scale"),
+        "time_offset_s": h.get("time_offset_s"),
         "heldout_E_sil_pct": h["silhouette_error_pct"],
         "points_mm": allf["points_mm"],
         "points_mm_per_time": allf["points_mm_per_time"],

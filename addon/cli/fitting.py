@@ -403,7 +403,13 @@ def cmd_evaluate(a):
         cameras=_cams(cap, a.cameras),
         times=_times(a.times, cap),
         resolution=_res(a.resolution),
-        fit_unknowns=a.fit_unknowns,
+        fit_unknowns=a.fit_unknowns or (D.HELD_UNKNOWNS_EVALUATIONS if a.unknowns_cameras or a.unknowns_times else 0),
+        unknowns_on=None
+        if not (a.unknowns_cameras or a.unknowns_times)
+        else (
+            _cams(cap, a.unknowns_cameras) if a.unknowns_cameras else None,
+            _times(a.unknowns_times, cap) if a.unknowns_times else None,
+        ),
     )
     if r["exploded"]:
         raise ClothFitError(f"the {r['model']['name']} model with these parameters explodes: no silhouette to score")
@@ -652,6 +658,15 @@ def _add_scoring(sub):
         help="a take the result never saw: fit the unknowns its capture declares (time offset, handle offsets) on "
         f"the images scored, the settings held, in N evaluations (default N: {D.HELD_UNKNOWNS_EVALUATIONS}; "
         "without the option: its declared manipulation as it is)",
+    )
+    s.add_argument(
+        "--unknowns-cameras",
+        help="with a take the result never saw: fit its unknowns on these cameras instead of the scored ones (as "
+        "--cameras; implies --fit-unknowns): score the held-out cameras of a take with unknowns fitted on others",
+    )
+    s.add_argument(
+        "--unknowns-times",
+        help="the same for frame times (as --times; implies --fit-unknowns): e.g. fit on 'even', score 'odd'",
     )
     s.add_argument("--json", help="also write the result to this file")
     force_arg(s, "--json")

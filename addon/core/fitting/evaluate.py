@@ -38,6 +38,7 @@ def evaluate(
     resolution: Sequence[int] | None = None,
     backend: str = "auto",
     fit_unknowns: int = 0,
+    unknowns_on: tuple[Iterable[int] | None, Iterable[float] | None] | None = None,
 ) -> dict:
     """Mean ``E_sil x 100`` over the images of ``cameras`` (indices) at ``times`` and, if the capture
     has ground-truth shapes, the mean vertex distance [mm] per shape and overall. ``params``: a fit
@@ -45,7 +46,8 @@ def evaluate(
     Pixels the capture marks as unknown (ignore masks / ignore labels) are left out of the error
     (``objective``). ``fit_unknowns``: a take the result never saw has the unknowns its capture declares
     (``uncertain``) fitted on these same images with the settings held, in that many evaluations
-    (``held_unknowns``; 0: its declared manipulation as it is)."""
+    (``held_unknowns``; 0: its declared manipulation as it is). ``unknowns_on``: (cameras, times) to fit them on
+    instead (None in either: the scored ones), so that the images scored are not those they were fitted on."""
     params, manipulation = for_take(capture, params)
     model, row = model_and_row(params, getattr(capture, "model", None))
     cams = list(range(len(capture.cameras))) if cameras is None else [int(c) for c in cameras]
@@ -56,10 +58,21 @@ def evaluate(
     tt = [float(capture.frame_times[i]) for i in fidx]
     camobjs, observed, ignore = load_observed(capture, cams, fidx, resolution)
     if fit_unknowns and manipulation == UNSEEN:
-        unknowns = held_unknowns(capture, model, row, camobjs, observed, ignore, tt, backend, fit_unknowns)
+        on = (camobjs, observed, ignore, tt)
+        if unknowns_on is not None:
+            uc = cams if unknowns_on[0] is None else [int(c) for c in unknowns_on[0]]
+            ut = (
+                tt
+                if unknowns_on[1] is None
+                else [float(capture.frame_times[capture.frame_index(t)]) for t in unknowns_on[1]]
+            )
+            if not uc:
+                raise ClothFitError("evaluate: no camera to fit the unknowns on")
+            on = (*load_observed(capture, uc, [capture.frame_index(t) for t in ut], resolution), ut)
+        unknowns = held_unknowns(capture, model, row, *on, backend, fit_unknowns)
         if unknowns is not None:
             params = dict(params, **unknowns)
-            manipulation = FITTED_HERE
+            manipulation = FITTED_HERE if unknowns_on is None else FITTED_ON_OTHERS
     sc = fitted_scenario(capture.scenario.with_frames(tt), params)  # a result's estimated manipulation
     obj = SilhouetteObjective(sc, camobjs, observed, backend=backend, model=model, ignore=ignore)
     esil, exploded = obj.per_image(row[None])
@@ -102,6 +115,10 @@ UNSEEN = (
 FITTED_HERE = (
     "fitted here: a take the fit never saw, its declared unknowns fitted on these same images with the settings "
     "held (an optimistic score: score other cameras or frames for a fair one)"
+)
+FITTED_ON_OTHERS = (
+    "fitted on other images: a take the fit never saw, its declared unknowns fitted with the settings held on the "
+    "images given (--unknowns-cameras, --unknowns-times), then these scored"
 )
 MANIPULATION_KEYS = ("time_offset_s", "handles", "time_scale")
 
