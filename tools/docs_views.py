@@ -577,37 +577,90 @@ def takes_silk(recording):
     return _takes_table(recording, "silk", "takes_pairs_silk")
 
 
+def _setting(r, n):
+    """A real lift's fitted setting with its 90 % interval, marked when undetermined."""
+    v, iv = (r.get("blender_cloth") or {}).get(n), (r.get("intervals") or {}).get(n)
+    if v is None:
+        return ""
+    mark = " (undetermined)" if n in (r.get("undetermined") or []) else ""
+    return f"{v:.3g} [{iv[0]:.3g}, {iv[1]:.3g}]{mark}" if iv else f"{v:.3g}"
+
+
+def _settings(r):
+    return " | ".join(_setting(r, n) for n in ("tension_stiffness", "bending_stiffness", "air_damping"))
+
+
 def real_lifts(recording):
-    """DiffCloud's real lifts, each trial fitted alone: held-out E_sil beside the floor, the real points' mean
-    distance to the fitted cloth, the fitted stretch of the clock, the stiffnesses with their 90 % intervals, the
-    fit's wall time with the load."""
+    """DiffCloud's real lifts, each trial fitted alone: held-out E_sil beside its floor (raised to the splatting's
+    error the converter states), that error beside the fitted cloth's own, the real points' mean distance to the
+    fitted cloth beside their own scatter, the fitted stretch of the clock, the stiffnesses with their 90 %
+    intervals, the fit's time."""
     rows = _data(recording, "real_lifts")["rows"]
-
-    def setting(r, n):
-        v, iv = (r.get("blender_cloth") or {}).get(n), (r.get("intervals") or {}).get(n)
-        if v is None:
-            return ""
-        mark = " (undetermined)" if n in (r.get("undetermined") or []) else ""
-        return f"{v:.3g} [{iv[0]:.3g}, {iv[1]:.3g}]{mark}" if iv else f"{v:.3g}"
-
     out = [
-        "| trial | held-out E_sil | images' floor | splat floor | real points to cloth | clock stretch | tension | bending | air damping "
-        "| verdict | fit time |",
+        "| trial | held-out E_sil | its floor | splat error: stated / the fitted cloth's | real points to cloth "
+        "(their scatter) | clock stretch | tension | bending | air damping | verdict | fit time |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         wall = f"{r['fit_elapsed_s']:.0f} s" + ("" if r.get("fit_wall_s") is None else f" (load {r['load'][0]:.1f})")
         out.append(
-            f"| {r['trial']} | {r['heldout_E_sil_pct']:.1f} % | {r['heldout_floor_pct']:.1f} % | {r['splat_floor_pct']:.1f} % "
-            f"| {r['points_mm']:.1f} mm "
-            f"| {r.get('time_scale') or 1.0:.3f} | {setting(r, 'tension_stiffness')} | {setting(r, 'bending_stiffness')} "
-            f"| {setting(r, 'air_damping')} | {r.get('verdict_kind') or ''} | {wall} |"
+            f"| {r['trial']} | {r['heldout_E_sil_pct']:.1f} % | {r['heldout_floor_pct']:.1f} % "
+            f"| {r['splat_floor_stated_pct']:.1f} / {r['splat_floor_pct']:.1f} % "
+            f"| {r['points_mm']:.1f} mm ({r['points_scatter_mm']:.1f} mm) | {r.get('time_scale') or 1.0:.3f} "
+            f"| {_settings(r)} | {r.get('verdict_kind') or ''} | {wall} |"
+        )
+    out.append("")
+    for fabric in dict.fromkeys(r["fabric"] for r in rows):
+        trials = [r for r in rows if r["fabric"] == fabric]
+        names = [
+            n
+            for n in trials[0]["intervals"]
+            if all(n in (r.get("intervals") or {}) and n in (r.get("blender_cloth") or {}) for r in trials)
+        ]
+
+        def inside(n, trials=trials):
+            return all(
+                a["intervals"][n][0] <= b["blender_cloth"][n] <= a["intervals"][n][1]
+                for a in trials
+                for b in trials
+                if a is not b
+            )
+
+        agree = [n for n in names if inside(n)]
+        apart = [n for n in names if not inside(n)]
+        out.append(
+            f"*{fabric}*: each trial's value within every other trial's interval for {', '.join(agree) or 'no setting'}; "
+            f"not for {', '.join(apart) or 'any'}."
+        )
+        out.append("")
+    return "\n".join(out).rstrip()
+
+
+def real_lifts_pairs(recording):
+    """DiffCloud's real lifts, per fabric two trials fitted together and the third predicted: each fitted trial's
+    held-out E_sil (and alone), the third's held-out E_sil and real points predicted beside its own fit's, the
+    shared settings with their 90 % intervals, the joint fit's time."""
+    rows = _data(recording, "real_lifts_pairs")["rows"]
+    out = [
+        "| fabric | fitted together: held-out E_sil | predicted | held-out E_sil: predicted / its own fit | "
+        "real points to cloth: predicted / its own fit | tension | bending | air damping | verdict | fit time |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        fitted = ", ".join(f"{t['take']} {t['heldout_E_sil_pct']:.1f} %" for t in r["takes"])
+        p, a = r["third_predicted"], r["third_alone"]
+        wall = f"{r['fit_elapsed_s']:.0f} s" + ("" if r.get("fit_wall_s") is None else f" (load {r['load'][0]:.1f})")
+        out.append(
+            f"| {r['fabric']} | {fitted} | {r['predicted']} | {p['heldout_E_sil_pct']:.1f} / {a['heldout_E_sil_pct']:.1f} % "
+            f"({r['ratio_to_alone']:.2f}x) | {p['points_mm']:.1f} / {a['points_mm']:.1f} mm | {_settings(r)} "
+            f"| {r.get('verdict_kind') or ''} | {wall} |"
         )
     return "\n".join(out)
 
 
 VIEWS = {
     "real_lifts": real_lifts,
+    "real_lifts_pairs": real_lifts_pairs,
     "blender_agreement.drag": blender_agreement_drag,
     "takes.cotton": takes_cotton,
     "takes.silk": takes_silk,
