@@ -95,13 +95,18 @@ def convert(a) -> None:
             print(f"{trial}: {r['frames']} frames, left out {len(r['left_out'])}", file=sys.stderr)
 
 
-def _score(cap: str, fit: str, fr: dict) -> dict:
+def _heldout(cap: str, fr: dict) -> tuple[list, list]:
+    """(the cameras, the frame times) of capture ``cap`` that the fit ``fr`` did not train on."""
     with open(os.path.join(cap, "cameras.json")) as f:
         names = [c["name"] for c in json.load(f)["cameras"]]
     with open(os.path.join(cap, "capture.json")) as f:
         times = json.load(f)["frame_times"]
     held = [n for n in names if n not in fr["train_cameras"]]
-    odd = [t for t in times if min(abs(t - u) for u in fr["train_times"]) > 1e-6]
+    return held, [t for t in times if min(abs(t - u) for u in fr["train_times"]) > 1e-6]
+
+
+def _score(cap: str, fit: str, fr: dict) -> dict:
+    held, odd = _heldout(cap, fr)
     h, _, _ = _clothfit(
         ["evaluate", cap, "--params", fit, "--cameras", ",".join(held), "--times", ",".join(map(str, odd))]
     )
@@ -174,12 +179,7 @@ def _predict(cap: str, fit: str, alone: dict) -> dict:
     clock's stretch and offset, the grasp) fitted with the settings held on the cameras and frames its own fit
     trained on (``evaluate --unknowns-cameras --unknowns-times``), its held-out cameras and frames and its real
     points scored with them."""
-    with open(os.path.join(cap, "cameras.json")) as f:
-        names = [c["name"] for c in json.load(f)["cameras"]]
-    with open(os.path.join(cap, "capture.json")) as f:
-        times = json.load(f)["frame_times"]
-    held = [n for n in names if n not in alone["train_cameras"]]
-    odd = [t for t in times if min(abs(t - u) for u in alone["train_times"]) > 1e-6]
+    held, odd = _heldout(cap, alone)
     on = [
         "--unknowns-cameras",
         ",".join(alone["train_cameras"]),
