@@ -397,19 +397,15 @@ def cmd_evaluate(a):
     refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
     params = _params(a, _capture_truth(cap))
+    elsewhere = bool(a.unknowns_cameras or a.unknowns_times)  # either implies --fit-unknowns
     r = evaluate(
         cap,
         params,
         cameras=_cams(cap, a.cameras),
         times=_times(a.times, cap),
         resolution=_res(a.resolution),
-        fit_unknowns=a.fit_unknowns or (D.HELD_UNKNOWNS_EVALUATIONS if a.unknowns_cameras or a.unknowns_times else 0),
-        unknowns_on=None
-        if not (a.unknowns_cameras or a.unknowns_times)
-        else (
-            _cams(cap, a.unknowns_cameras) if a.unknowns_cameras else None,
-            _times(a.unknowns_times, cap) if a.unknowns_times else None,
-        ),
+        fit_unknowns=a.fit_unknowns or (D.HELD_UNKNOWNS_EVALUATIONS if elsewhere else 0),
+        unknowns_on=(_cams(cap, a.unknowns_cameras), _times(a.unknowns_times, cap)) if elsewhere else None,
     )
     if r["exploded"]:
         raise ClothFitError(f"the {r['model']['name']} model with these parameters explodes: no silhouette to score")

@@ -61,14 +61,10 @@ def evaluate(
         on = (camobjs, observed, ignore, tt)
         if unknowns_on is not None:
             uc = cams if unknowns_on[0] is None else [int(c) for c in unknowns_on[0]]
-            ut = (
-                tt
-                if unknowns_on[1] is None
-                else [float(capture.frame_times[capture.frame_index(t)]) for t in unknowns_on[1]]
-            )
+            uf = fidx if unknowns_on[1] is None else [capture.frame_index(t) for t in unknowns_on[1]]
             if not uc:
                 raise ClothFitError("evaluate: no camera to fit the unknowns on")
-            on = (*load_observed(capture, uc, [capture.frame_index(t) for t in ut], resolution), ut)
+            on = (*load_observed(capture, uc, uf, resolution), [float(capture.frame_times[i]) for i in uf])
         unknowns = held_unknowns(capture, model, row, *on, backend, fit_unknowns)
         if unknowns is not None:
             params = dict(params, **unknowns)
