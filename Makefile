@@ -36,7 +36,7 @@ demo: venv
 	@$(PY) -m clothfit verdict out/demo/capture/fit_result*.json >/dev/null
 
 test: venv
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q tests lab/tests
 
 lint: venv
 	$(PY) -m ruff check .

@@ -62,7 +62,7 @@ def test_zip_layout(ext_zips):
             n
             for n in names
             if n.split("/")[0]
-            in ("tests", "out", ".venv", ".ci", "docs", "tools", "demo_blend", "dist", ".git", "wheels.log")
+            in ("tests", "out", ".venv", ".ci", "docs", "tools", "lab", "demo_blend", "dist", ".git", "wheels.log")
             or "__pycache__" in n
             or n.endswith(".pyc")
         ]

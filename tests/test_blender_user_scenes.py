@@ -1,10 +1,10 @@
-"""Blender scenes built the way a user builds them (``tools/user_scenes.py``: bpy operators, their
+"""Blender scenes built the way a user builds them (``lab/user_scenes.py``: bpy operators, their
 own mesh, pin group and keyed Vertex Weight Mix release) against the core's blender model.
 
 Built from the scene's own reading (``addon/blender/user_cloth.read_scene_cloth``) the core model
 follows Blender's solver bit for bit; every difference between that and the model a user gets
 from a declared grid moves it off Blender's path, and each has a test here. Measured on the full
-scenes: ``python tools/user_scenes.py all`` (docs/user_scenes.md).
+scenes: ``python lab/user_scenes.py all`` (docs/user_scenes.md).
 """
 
 import json
@@ -17,7 +17,7 @@ import pytest
 from blender_support import bpy, factory  # noqa: F401
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "tools"))
+sys.path.insert(0, os.path.join(ROOT, "lab"))
 
 import user_scenes as US  # noqa: E402
 from clothfit.blender.cloth import cloth_modifier, simulate_frames  # noqa: E402
@@ -269,7 +269,7 @@ def test_user_scenes_tool_builds_observes_and_measures(tmp_path):
     r = subprocess.run(
         [
             sys.executable,
-            os.path.join(ROOT, "tools", "user_scenes.py"),
+            os.path.join(ROOT, "lab", "user_scenes.py"),
             "all",
             "--out",
             str(out),

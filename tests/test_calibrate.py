@@ -3,7 +3,7 @@
 The truth is made here, not by the code under test: the printed board traced exactly through known
 OpenCV cameras (tests/calib_synth.py: every pixel's ray meets the board plane, 3x supersampled,
 sensor noise), small images so the test runs in seconds. The photoreal measurement against the
-issue's goals is ``tools/phone_rig.py calibrate`` (docs/figures/phone_rig_calib.json).
+issue's goals is ``lab/phone_rig.py calibrate`` (docs/figures/phone_rig_calib.json).
 """
 
 import json

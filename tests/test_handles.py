@@ -439,7 +439,7 @@ def test_release_of_a_corner_that_snaps_away():
     """The core's paper sheet hung by four clips: the released corner springs back within milliseconds (a
     jump, not a fall from rest). Its release frame is the departure frame at every phase; a fall from rest
     (the synthetic clip) is recovered one frame before its departure when it started under the threshold."""
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "tools"))
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "lab"))
     import phone_handles as P
 
     rng = np.random.default_rng(0)

@@ -10,7 +10,7 @@ import os
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-for _d in (ROOT, os.path.join(ROOT, "tools")):
+for _d in (ROOT, os.path.join(ROOT, "tools"), os.path.join(ROOT, "lab")):
     if _d not in sys.path:
         sys.path.insert(0, _d)
 
@@ -512,10 +512,10 @@ def recordings(recording):
     return "\n".join(out)
 
 
-def issue20_goals(recording):
-    from issue20_goals import format_table
+def fit_goals(recording):
+    from fit_goals import format_table
 
-    return format_table(_data(recording, "issue20_goals"))
+    return format_table(_data(recording, "fit_goals"))
 
 
 def floor_calibration(recording):
@@ -664,7 +664,7 @@ VIEWS = {
     "blender_agreement.drag": blender_agreement_drag,
     "takes.cotton": takes_cotton,
     "takes.silk": takes_silk,
-    "issue20_goals": issue20_goals,
+    "fit_goals": fit_goals,
     "floor_calibration": floor_calibration,
     "identifiability.default": identifiability_default,
     "blender_agreement": blender_agreement,

@@ -58,11 +58,11 @@ TIMING = (
 # minutes: ``rerun`` runs it) or "expensive"; ``rtol``/``atol``: rerun tolerance of the
 # deterministic figures (a fit with a fixed seed gives the same numbers: 0); ``what``: one line.
 def _phone_rig(cmd, out, seed, scale, poses, close=None):
-    """The command line of a phone-rig rehearsal (tools/phone_rig.py): ``calibrate`` (the board's renders
+    """The command line of a phone-rig rehearsal (lab/phone_rig.py): ``calibrate`` (the board's renders
     alone) or ``e2e`` (the whole session: 15 frames, both fits at 2500 evaluations; the renders a previous run
     of the same seed left are kept, so a pipeline change is measured again without rendering), 4 Cycles
     samples."""
-    argv = ["{py}", "tools/phone_rig.py", cmd, "--out", f"out/phone_rig/{out}", "--seed", str(seed)]
+    argv = ["{py}", "lab/phone_rig.py", cmd, "--out", f"out/phone_rig/{out}", "--seed", str(seed)]
     argv += ["--scale", scale, "--poses", str(poses)] + ([] if close is None else ["--close", str(close)])
     if cmd == "e2e":
         argv += ["--frames", "15", "--samples", "4", "--evals", "2500", "--uncertain-evals", "2500", "--keep-renders"]
@@ -72,11 +72,11 @@ def _phone_rig(cmd, out, seed, scale, poses, close=None):
 
 
 def _spread(rig, box=None, uncertain_only=False, optimizer=None):
-    """The command line of ``tools/phone_rig.py spread`` on a recorded phone rig's folder; ``box`` [m]: the
+    """The command line of ``lab/phone_rig.py spread`` on a recorded phone rig's folder; ``box`` [m]: the
     uncertain fit alone (beside the fit given the truth) with every clip's box at that size; ``uncertain_only``:
     the uncertain fit alone (beside the fit given the truth) in the capture's own boxes; ``optimizer``: the
     uncertain fit's search (alone, beside the fit given the truth)."""
-    argv = ["{py}", "tools/phone_rig.py", "spread", "--e2e", f"out/phone_rig/e2e_s{rig}"]
+    argv = ["{py}", "lab/phone_rig.py", "spread", "--e2e", f"out/phone_rig/e2e_s{rig}"]
     if box is not None or uncertain_only or optimizer:
         argv += ["--kinds", "uncertain,truth_given"]
     if box is not None:
@@ -88,24 +88,20 @@ def _spread(rig, box=None, uncertain_only=False, optimizer=None):
 
 def _offsets_with(*search):
     """The command line of issue 20's offsets goal with the fit's ``--search`` settings."""
-    return (
-        ["{py}", "tools/issue20_goals.py", "offsets"]
-        + [x for s in search for x in ("--search", s)]
-        + ["--json", "{out}"]
-    )
+    return ["{py}", "lab/fit_goals.py", "offsets"] + [x for s in search for x in ("--search", s)] + ["--json", "{out}"]
 
 
 # the five exact-model captures the search's variants are judged on (docs/search.md, "Runs again"): the goal's
-# (made by tools/issue20_goals.py exact), fresh, damped, and a soft and a stiff cloth away from the search's centre
-SEARCH_RUNS_CAPTURES = ["out/issue20/exact", "synth:fresh", "synth:damped", "synth:soft", "synth:stiff"]
+# (made by lab/fit_goals.py exact), fresh, damped, and a soft and a stiff cloth away from the search's centre
+SEARCH_RUNS_CAPTURES = ["out/fit_goals/exact", "synth:fresh", "synth:damped", "synth:soft", "synth:stiff"]
 
 
 def _search_ab_reused(strategies, *rows, captures=SEARCH_RUNS_CAPTURES, seeds="0-4"):
-    """tools/search_ab.py's strategies x ``seeds`` on ``captures`` (default: seeds 0-4 on the five captures of
+    """lab/search_ab.py's strategies x ``seeds`` on ``captures`` (default: seeds 0-4 on the five captures of
     search_runs): the fits of the rows files (drop --only-reused to run the missing ones)."""
     return [
         "{py}",
-        "tools/search_ab.py",
+        "lab/search_ab.py",
         *captures,
         "--strategies",
         strategies,
@@ -152,7 +148,7 @@ SOURCES = {
         "what": "sensitivity and Cramer-Rao bounds of Blender's cloth settings",
     },
     "simd": {
-        "argv": ["{py}", "tools/simd_bench.py", "--json", "{out}"],
+        "argv": ["{py}", "lab/simd_bench.py", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 0,
         "atol": 0,
@@ -185,19 +181,19 @@ SOURCES = {
         "dropped onto a table and one corner dragged along it, 12 cases",
     },
     "sensitivity": {
-        "argv": ["{py}", "tools/sensitivity.py", "--json", "{out}"],
+        "argv": ["{py}", "lab/sensitivity.py", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 1e-6,
         "what": "how far a relative change of k moves the paper sheet (chaos below d/m = 8 /s)",
     },
     "raster_agreement": {
-        "argv": ["{py}", "tools/raster_agreement.py", "--json", "{out}"],
+        "argv": ["{py}", "lab/raster_agreement.py", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 0,
         "what": "core rasteriser against Blender's Workbench renders, 540 images",
     },
     "raster_agreement_eevee": {
-        "argv": ["{py}", "tools/raster_agreement.py", "--engine", "eevee", "--times", "0.1:1.5:0.2", "--json", "{out}"],
+        "argv": ["{py}", "lab/raster_agreement.py", "--engine", "eevee", "--times", "0.1:1.5:0.2", "--json", "{out}"],
         "cost": "expensive",
         "what": "core rasteriser against Blender's Eevee renders, 144 images (software GL: minutes)",
     },
@@ -207,19 +203,19 @@ SOURCES = {
         "what": "speed figures (make bench)",
     },
     "optimiser_ab": {
-        "argv": ["{py}", "tools/optimiser_ab.py", "all", "0-5", "--json", "{out}"],
+        "argv": ["{py}", "lab/optimiser_ab.py", "all", "0-5", "--json", "{out}"],
         "cost": "expensive",
         "what": "our CMA-ES plain / active against the cma package, cotton capture of the cross-simulator, seeds 0-5 "
-        "(needs tools/cross_simulator.py observe --out out/cross2)",
+        "(needs lab/cross_simulator.py observe --out out/cross2)",
     },
     "search_landscape": {
-        "argv": ["{py}", "tools/search_ab.py", "synth:default", "--landscape", "{out}", "--local", "0.05"],
+        "argv": ["{py}", "lab/search_ab.py", "synth:default", "--landscape", "{out}", "--local", "0.05"],
         "cost": "expensive",
         "what": "issue 20 item 3: the exact-model capture's truth perturbed group by group (train and held-out "
         "error), and a CMA-ES run started 5 % from the truth (about 2 CPU min)",
     },
     "search_slice": {
-        "argv": ["{py}", "tools/search_ab.py", "synth:default", "synth:fresh", "--slice", "{out}"],
+        "argv": ["{py}", "lab/search_ab.py", "synth:default", "synth:fresh", "--slice", "{out}"],
         "cost": "cheap",
         "rtol": 0,
         "what": "issue 20 item 3: the first stage's slice of two exact-model captures: training error over bending x "
@@ -236,7 +232,7 @@ SOURCES = {
         "what": "issue 20 item 3: runs again in the first stage ('staged-runs', 'staged-rs48'; not kept then, 'staged-rs48' with "
         "the warm tail the default since search_rs_tail) against "
         "one run (the default, 'staged'), and 'staged-rs' and 'staged-pop24' where run, seeds 0-4 on five exact-model "
-        "captures (the goal's, made by tools/issue20_goals.py exact; fresh, damped, and a soft and a stiff cloth away "
+        "captures (the goal's, made by lab/fit_goals.py exact; fresh, damped, and a soft and a stiff cloth away "
         "from the search's centre): the fits of the rows file (drop --only-reused to run the missing ones, about "
         "1 CPU min each)",
     },
@@ -313,7 +309,7 @@ SOURCES = {
             "docs/figures/search_rs_tail_rows.jsonl",
             "docs/figures/search_step_rows.jsonl",
             "docs/figures/search_step10_rows.jsonl",
-            captures=["out/issue20/exact"],
+            captures=["out/fit_goals/exact"],
             seeds="0-9",
         ),
         "cost": "cheap",
@@ -341,8 +337,8 @@ SOURCES = {
     "search_pop16_wall": {
         "argv": [
             "{py}",
-            "tools/search_ab.py",
-            "out/issue20/exact",
+            "lab/search_ab.py",
+            "out/fit_goals/exact",
             "--strategies",
             "staged,staged-pop16",
             "--seeds",
@@ -361,8 +357,8 @@ SOURCES = {
     "search_profile": {
         "argv": [
             "{py}",
-            "tools/search_ab.py",
-            "out/issue20/exact",
+            "lab/search_ab.py",
+            "out/fit_goals/exact",
             "synth:fresh",
             "--profile",
             "{out}",
@@ -377,14 +373,14 @@ SOURCES = {
         "64 and 96 evaluations per bending value, seeds 0-1 (about 6 CPU min)",
     },
     "same_fit": {
-        "argv": ["{py}", "tools/same_fit.py", "--json", "{out}"],
+        "argv": ["{py}", "lab/same_fit.py", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 0,
         "what": "a seed's fit natively and with NumPy's AVX-512 kernels switched off (as on a CPU without them): the "
         "same fit? (about 1 CPU min)",
     },
     "search_oracle": {
-        "argv": ["{py}", "tools/search_ab.py", "synth:fresh", "--oracle", "{out}", "--samples", "128"],
+        "argv": ["{py}", "lab/search_ab.py", "synth:fresh", "--oracle", "{out}", "--samples", "128"],
         "cost": "expensive",
         "what": "issue 20 item 3: 128 points 1e-7, 1e-5 and 1e-3 (relative) round the truth of the fresh exact-model "
         "capture, and the best of n by training error: what a search that came that close could keep (about 1 CPU min)",
@@ -392,7 +388,7 @@ SOURCES = {
     "search_tune": {
         "argv": [
             "{py}",
-            "tools/search_ab.py",
+            "lab/search_ab.py",
             "--summary",
             "docs/figures/search_tune_rows.jsonl",
             "--json-summary",
@@ -400,12 +396,12 @@ SOURCES = {
         ],
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: the strategies tried on the tuning capture (rows written by tools/search_ab.py)",
+        "what": "issue 20 item 3: the strategies tried on the tuning capture (rows written by lab/search_ab.py)",
     },
     "search_ab": {
         "argv": [
             "{py}",
-            "tools/search_ab.py",
+            "lab/search_ab.py",
             "synth:fresh",
             "--strategies",
             "baseline,active32,staged,staged-race3,staged-scan,staged-tie",
@@ -426,7 +422,7 @@ SOURCES = {
     "search_ab_damped": {
         "argv": [
             "{py}",
-            "tools/search_ab.py",
+            "lab/search_ab.py",
             "synth:damped",
             "--strategies",
             "baseline,staged,staged-race3,staged-scan,staged-tie,staged-recipe",
@@ -447,7 +443,7 @@ SOURCES = {
     "blender_scene_warm": {
         "argv": [
             "{py}",
-            "tools/blender_scene_fit.py",
+            "lab/blender_scene_fit.py",
             "all",
             "--out",
             "out/scene_warm",
@@ -468,7 +464,7 @@ SOURCES = {
     "blender_scene_cold": {
         "argv": [
             "{py}",
-            "tools/blender_scene_fit.py",
+            "lab/blender_scene_fit.py",
             "all",
             "--out",
             "out/scene_cold",
@@ -507,60 +503,60 @@ SOURCES = {
         "what": "the occluder study: ignore masks vs occluders counted as background",
     },
     "user_scenes": {
-        "argv": ["{py}", "tools/user_scenes.py", "all", "--out", "out/user_scenes", "--json", "{out}"],
+        "argv": ["{py}", "lab/user_scenes.py", "all", "--out", "out/user_scenes", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 1e-9,
         "atol": 1e-12,
         "what": "issue 20: Blender scenes built as a user builds them; the core blender model's drift from them, "
         "cause by cause",
     },
-    "issue20_goals": {
-        "argv": ["{py}", "tools/issue20_goals.py", "all", "--json", "{out}"],
+    "fit_goals": {
+        "argv": ["{py}", "lab/fit_goals.py", "all", "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 20's goals measured through the CLI on fresh captures (exact model, offsets, continuum, "
-        "collider, time); each goal also alone: tools/issue20_goals.py GOAL --json FILE",
+        "collider, time); each goal also alone: lab/fit_goals.py GOAL --json FILE",
     },
-    "issue20_time": {
-        "argv": ["{py}", "tools/issue20_goals.py", "time", "--diagnose", "--json", "{out}"],
+    "fit_goals_time": {
+        "argv": ["{py}", "lab/fit_goals.py", "time", "--diagnose", "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 20's time goal as the issue asks it (a 21 x 21 quality-15 cloth at 480 x 640 whose capture "
         "names no quality, release and pins declared with error and uncertain), then the same fit told the quality, "
         "and the truth's capture with only its quality left out (about 8 min)",
     },
-    "issue20_time_refit": {
-        "argv": ["{py}", "tools/issue20_goals.py", "time", "--quality", "10,12", "--json", "{out}"],
+    "fit_goals_time_refit": {
+        "argv": ["{py}", "lab/fit_goals.py", "time", "--quality", "10,12", "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 20's time capture refitted as the floor block of its default fit advises (its ladder chose 10, "
         "42 % below the search at 5): a search at quality 10 from the start, and at 12, the highest quality the "
         "ladder tried (about 11 min)",
     },
-    "issue20_time_quality": {
-        "argv": ["{py}", "tools/issue20_goals.py", "time_quality", "--json", "{out}"],
+    "fit_goals_time_quality": {
+        "argv": ["{py}", "lab/fit_goals.py", "time_quality", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 1e-9,
         "atol": 1e-12,
         "what": "issue 20's time capture: its true settings simulated at each quality of the fit's ladder and at "
         "the truth's own 15 (training E_sil on the true capture)",
     },
-    "issue20_offsets_sensitivity": {
-        "argv": ["{py}", "tools/issue20_goals.py", "offsets_sensitivity", "--json", "{out}"],
+    "fit_goals_offsets_sensitivity": {
+        "argv": ["{py}", "lab/fit_goals.py", "offsets_sensitivity", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 1e-6,
         "atol": 1e-9,
         "what": "issue 20's offsets capture: its truth scored as the goal scores a fit, the same with only the time "
         "offset or one pin moved, and its jitter floor (16 points a part in 10^7 from the truth)",
     },
-    "issue20_offsets_coverage": {
-        "argv": ["{py}", "tools/issue20_goals.py", "offsets_coverage", "--json", "{out}"],
+    "fit_goals_offsets_coverage": {
+        "argv": ["{py}", "lab/fit_goals.py", "offsets_coverage", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20's offsets fits (the recordings issue20_offsets_seeds and issue20_offsets_hold, no fit run): each "
+        "what": "issue 20's offsets fits (the recordings fit_goals_offsets_seeds and fit_goals_offsets_hold, no fit run): each "
         "stated offset's error over the uncertainty the fit states, and the share within 1x and 2x",
     },
     "takes_baseline": {
         "argv": [
             "{py}",
-            "tools/continuum_truth.py",
+            "lab/continuum_truth.py",
             "takes-baseline",
             "--out",
             "out/takes",
@@ -574,13 +570,13 @@ SOURCES = {
         "cost": "expensive",
         "what": "several takes of one continuum cloth (Warp; cotton, silk): each of three takes fitted alone by the "
         "blender model as a new user would, scored on the held-out cameras and frames of every take (the captures: "
-        "tools/continuum_truth.py takes --out out/takes; a finished fit in out/takes/fits is reused: about 45 min "
+        "lab/continuum_truth.py takes --out out/takes; a finished fit in out/takes/fits is reused: about 45 min "
         "without them)",
     },
     "takes_pairs": {
         "argv": [
             "{py}",
-            "tools/continuum_truth.py",
+            "lab/continuum_truth.py",
             "takes-pairs",
             "--out",
             "out/takes",
@@ -596,7 +592,7 @@ SOURCES = {
     "takes_pairs_silk": {
         "argv": [
             "{py}",
-            "tools/continuum_truth.py",
+            "lab/continuum_truth.py",
             "takes-pairs",
             "--out",
             "out/takes",
@@ -612,7 +608,7 @@ SOURCES = {
         "and on the waved take (a finished fit in out/takes/pairs is reused: about 15 min without it)",
     },
     "real_lifts": {
-        "argv": ["{py}", "tools/real_lifts.py", "trials", "--fabrics", "paper,navy", "--json", "{out}"],
+        "argv": ["{py}", "lab/real_lifts.py", "trials", "--fabrics", "paper,navy", "--json", "{out}"],
         "cost": "expensive",
         "what": "DiffCloud's real lifts (fabrics paper and navy, three trials each; a checkout of its repository in "
         "out/diffcloud_real2sim): each trial converted with points-to-capture and fitted alone as a user fits it, "
@@ -620,7 +616,7 @@ SOURCES = {
         "out/real_lifts/fits is reused: about 30 min without them)",
     },
     "real_lifts_pairs": {
-        "argv": ["{py}", "tools/real_lifts.py", "pairs", "--fabrics", "paper,navy", "--json", "{out}"],
+        "argv": ["{py}", "lab/real_lifts.py", "pairs", "--fabrics", "paper,navy", "--json", "{out}"],
         "cost": "expensive",
         "what": "DiffCloud's real lifts, per fabric (paper, navy) its first two trials fitted together as a user fits "
         "them and the third predicted: its unknowns (clock stretch and offset, the grasp) fitted with the settings held "
@@ -629,27 +625,27 @@ SOURCES = {
         "min without them)",
     },
     "interval_coverage": {
-        "argv": ["{py}", "tools/interval_coverage.py", "--captures", "6", "--json", "{out}"],
+        "argv": ["{py}", "lab/interval_coverage.py", "--captures", "6", "--json", "{out}"],
         "cost": "expensive",
         "what": "how often a fit's 90 % intervals hold the truth: six synthetic captures of Blender's cloth (11 x 11, "
         "lab18 at 120 x 160, 5 % noise, settings drawn within a factor 3 of Blender's defaults), each fitted with the "
         "default options and 4 training cameras; the truth's own error tells the fits in its basin apart (about 8 min)",
     },
     "interval_coverage_check": {
-        "argv": ["{py}", "tools/interval_coverage.py", "--first", "6", "--captures", "6", "--json", "{out}"],
+        "argv": ["{py}", "lab/interval_coverage.py", "--first", "6", "--captures", "6", "--json", "{out}"],
         "cost": "expensive",
         "what": "the same as interval_coverage on six other captures (cap06-cap11), none of which set the intervals' "
         "calibration (about 8 min)",
     },
-    "issue20_offsets_seeds": {
-        "argv": ["{py}", "tools/issue20_goals.py", "offsets", "--seeds", "0-2", "--json", "{out}"],
+    "fit_goals_offsets_seeds": {
+        "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-2", "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 20's offsets goal with the default fit over seeds 0-2 (one fit each, about 4 min)",
     },
-    "issue20_offsets_e4000": {
+    "fit_goals_offsets_e4000": {
         "argv": [
             "{py}",
-            "tools/issue20_goals.py",
+            "lab/fit_goals.py",
             "offsets",
             "--seeds",
             "0-2",
@@ -661,34 +657,34 @@ SOURCES = {
         "cost": "expensive",
         "what": "issue 20's offsets goal with 4000 evaluations instead of the default 2500, seeds 0-2 (about 6 min)",
     },
-    "issue20_offsets_hold": {
-        "argv": ["{py}", "tools/issue20_goals.py", "offsets", "--hold-frames", "--seeds", "0-2", "--json", "{out}"],
+    "fit_goals_offsets_hold": {
+        "argv": ["{py}", "lab/fit_goals.py", "offsets", "--hold-frames", "--seeds", "0-2", "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 20's offsets goal on a capture with two frames before the release too (the cloth held by all "
         "four corners), trained on them as well; the default fit, seeds 0-2 (about 5 min)",
     },
-    "issue20_search": {
-        "argv": ["{py}", "tools/issue20_goals.py", "search", "--json", "{out}"],
+    "fit_goals_search": {
+        "argv": ["{py}", "lab/fit_goals.py", "search", "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 20's search goal over seeds 0-4 with the fit's default search (cma-staged) and with cma-es, "
         "the default before it, and the offsets goal with cma-es (about 25 min)",
     },
-    "issue20_offsets_runs": {
+    "fit_goals_offsets_runs": {
         "argv": _offsets_with("staged_restart_step=0.005", "staged_first_fraction=0.72", "staged_explore=0.56"),
         "cost": "expensive",
         "what": "issue 20's offsets goal with runs again in the first stage (tried, not kept; docs/search.md), one fit "
         "(about 3 min)",
     },
-    "issue20_offsets_rs48": {
+    "fit_goals_offsets_rs48": {
         "argv": _offsets_with("staged_restart_step=0.005"),
         "cost": "expensive",
         "what": "issue 20's offsets goal with runs again within the first stage's own share (staged-rs48; tried, not "
         "kept; docs/search.md), one fit (about 3 min)",
     },
-    "issue20_continuum_rs48": {
+    "fit_goals_continuum_rs48": {
         "argv": [
             "{py}",
-            "tools/issue20_goals.py",
+            "lab/fit_goals.py",
             "continuum",
             "--search",
             "staged_restart_step=0.005",
@@ -700,13 +696,13 @@ SOURCES = {
         "share (staged-rs48; tried, not kept; docs/search.md), one fit each (about 7 min)",
     },
     "cross_simulator": {
-        "argv": ["{py}", "tools/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
+        "argv": ["{py}", "lab/cross_simulator.py", "all", "--out", "out/cross2", "--budget", "2500"],
         "output": "out/cross2/cross_simulator.json",
         "cost": "expensive",
         "what": "Blender's cloth as the truth, fitted by both core models (about 45 min)",
     },
     "continuum_baseline": {
-        "argv": ["{py}", "tools/continuum_truth.py", "baseline", "--make", "--out", "out/continuum", "--json", "{out}"],
+        "argv": ["{py}", "lab/continuum_truth.py", "baseline", "--make", "--out", "out/continuum", "--json", "{out}"],
         "cost": "expensive",
         "what": "issue 20's baseline: a Warp continuum cloth (cotton, silk; 30 fps, a rig not ours) fitted by "
         "today's CLI as a new user would, and with --fps 30 (about 40 min on a loaded machine)",
@@ -826,11 +822,11 @@ SOURCES = {
     },
     "footage": {
         "steps": [
-            ["{py}", "tools/render_footage.py", "render", "--out", "out/real/footage"],
+            ["{py}", "lab/render_footage.py", "render", "--out", "out/real/footage"],
             ["{py}", "-m", "clothfit", "extract", "out/real/footage", "-o", "out/real/capture", "--force"],
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "score",
                 "--footage",
                 "out/real/footage",
@@ -841,7 +837,7 @@ SOURCES = {
             ],
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "score",
                 "--footage",
                 "out/real/footage",
@@ -853,7 +849,7 @@ SOURCES = {
             ],
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "score",
                 "--footage",
                 "out/real/footage",
@@ -866,7 +862,7 @@ SOURCES = {
             ],
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "score",
                 "--footage",
                 "out/real/footage",
@@ -879,7 +875,7 @@ SOURCES = {
             ],
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "score",
                 "--footage",
                 "out/real/footage",
@@ -892,7 +888,7 @@ SOURCES = {
             ],
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "score",
                 "--footage",
                 "out/real/footage",
@@ -905,7 +901,7 @@ SOURCES = {
             ],
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "score",
                 "--footage",
                 "out/real/footage",
@@ -918,7 +914,7 @@ SOURCES = {
             ],
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "score",
                 "--footage",
                 "out/real/footage",
@@ -956,7 +952,7 @@ SOURCES = {
         "steps": [
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "fit",
                 "--capture",
                 "out/real/capture",
@@ -976,7 +972,7 @@ SOURCES = {
         + [
             [
                 "{py}",
-                "tools/render_footage.py",
+                "lab/render_footage.py",
                 "fit",
                 "--capture",
                 "out/real/capture_paper",
@@ -1003,7 +999,7 @@ SOURCES = {
     },
     "floor_calibration": {
         "steps": [
-            ["{py}", "tools/floor_calibration.py", "--out", "out/floor_cal", "--json", "out/floor_cal/calibration.json"]
+            ["{py}", "lab/floor_calibration.py", "--out", "out/floor_cal", "--json", "out/floor_cal/calibration.json"]
         ],
         "outputs": {"calibration": "out/floor_cal/calibration.json"},
         "cost": "expensive",
@@ -1013,11 +1009,11 @@ SOURCES = {
     },
     "blender_cloth": {
         "steps": [
-            ["{py}", "tools/blender_cloth_experiment.py", "check-units", "--json", "out/blendercloth/units.json"],
-            ["{py}", "tools/blender_cloth_experiment.py", "observe", "--out", "out/blendercloth/capture"],
+            ["{py}", "lab/blender_cloth_experiment.py", "check-units", "--json", "out/blendercloth/units.json"],
+            ["{py}", "lab/blender_cloth_experiment.py", "observe", "--out", "out/blendercloth/capture"],
             [
                 "{py}",
-                "tools/blender_cloth_experiment.py",
+                "lab/blender_cloth_experiment.py",
                 "fit",
                 "--capture",
                 "out/blendercloth/capture",
@@ -1035,25 +1031,25 @@ SOURCES = {
         "what": "Blender's cloth simulator as the truth, fitted by the paper's sheet",
     },
     "blender_scene_fit_pop12": {
-        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_pop12", "--population", "12"],
+        "argv": ["{py}", "lab/blender_scene_fit.py", "all", "--out", "out/scene_fit_pop12", "--population", "12"],
         "output": "out/scene_fit_pop12/summary.json",
         "cost": "expensive",
         "what": "the same, population 12",
     },
     "blender_scene_fit_2400": {
-        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_2400", "--budget", "2400"],
+        "argv": ["{py}", "lab/blender_scene_fit.py", "all", "--out", "out/scene_fit_2400", "--budget", "2400"],
         "output": "out/scene_fit_2400/summary.json",
         "cost": "expensive",
         "what": "the same, 2400 evaluations",
     },
     "blender_scene_fit_480x640": {
-        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit_480", "--resolution", "480x640"],
+        "argv": ["{py}", "lab/blender_scene_fit.py", "all", "--out", "out/scene_fit_480", "--resolution", "480x640"],
         "output": "out/scene_fit_480/summary.json",
         "cost": "expensive",
         "what": "the same, silhouettes at 480 x 640",
     },
     "stopping": {
-        "argv": ["{py}", "tools/stopping.py", "--json", "{out}"],
+        "argv": ["{py}", "lab/stopping.py", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 1e-6,
         "what": "fits that stop by themselves: CMA-ES and SPX + MGG on a small capture, budget 100,000",
@@ -1118,7 +1114,7 @@ SOURCES = {
     "phone_rig_sensitivity": {
         "argv": [
             "{py}",
-            "tools/phone_rig.py",
+            "lab/phone_rig.py",
             "sensitivity",
             "--seed",
             "7",
@@ -1211,14 +1207,14 @@ SOURCES = {
         "what": "issue 18: the unseen seed 11 rig's uncertain fit (in the capture's 0.7 mm clip boxes, the default) over "
         "fit seeds 0-4, beside the fit given the truth (needs phone_rig_e2e_s11's folder; about 8 min)",
     },
-    "issue20_offsets_polish": {
+    "fit_goals_offsets_polish": {
         "argv": _offsets_with(),
         "cost": "expensive",
         "what": "issue 20's offsets goal with the default fit since the offsets' polish and the replay at the fitted "
         "offsets (commit e0330c9), one fit (about 2 min)",
     },
     "blender_scene_fit": {
-        "argv": ["{py}", "tools/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
+        "argv": ["{py}", "lab/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
         "output": "out/scene_fit/summary.json",
         "cost": "expensive",
         "what": "issue 10: a cloth dropped onto a box, fitted with Blender's own solver on Ray",
@@ -1260,6 +1256,7 @@ def git_state():
                 "--",
                 "addon",
                 "tools",
+                "lab",
                 "demo_blend",
                 "rigs",
                 ":!tools/figures.py",

@@ -16,7 +16,7 @@ CLOTH_HEIGHT = 0.10  # the held corners sit at z = 0.10 m, cloth centred on the 
 # m: 2.5 g cloth / 256 points; k chosen so the hanging cloth stretches ~10 % near the held corners;
 # l: the flat grid spacing; d: viscous damping, d/m = 10 /s (a light cloth in air). Below d/m of about 8 /s
 # this bending-free sheet is chaotic after release (a 1e-7 relative change of k moves vertices by up to
-# 1.4 mm within 1.5 s at k = 11 N/m, d/m = 7 /s; tools/sensitivity.py), so the ground truth sits in the damped,
+# 1.4 mm within 1.5 s at k = 11 N/m, d/m = 7 /s; lab/sensitivity.py), so the ground truth sits in the damped,
 # reproducible regime; the search space still includes the chaotic one.
 GT_PARAMS = {"m": 1.0e-5, "k": 10.0, "l": CLOTH_SIDE / (GRID_N - 1), "d": 1.0e-4}
 
@@ -29,12 +29,12 @@ TRUTH_DT_SAFETY = (
 SETTLE_TIME = 0.5  # seconds of settling under gravity with all handles held, before t = 0
 # the settle `clothfit handles` writes into a footage scenario: a filmed cloth hangs still when it is let go, and
 # the model's cloth comes from flat to its clips in the first half of the settle (SETTLE_RAMP_FRACTION), so it
-# needs the second half to come to rest (tools/phone_rig.py e2e: the release was seen 2 frames early with 0.5 s)
+# needs the second half to come to rest (lab/phone_rig.py e2e: the release was seen 2 frames early with 0.5 s)
 FOOTAGE_SETTLE_TIME = 1.0
 # the blender model's handles go from the flat cloth to their held positions over this share of the settle
 # (physics/blender.settle_ramp): the rest shape stays the flat sheet; the rest of the settle lets it come to
 # rest. Issue 20: a continuum cloth held with slack fitted to 32.4 % held-out with the handles put there at
-# the start frame (slack built into the rest lengths) and to 3.1 % with this ramp (docs/issue20_goals.md)
+# the start frame (slack built into the rest lengths) and to 3.1 % with this ramp (docs/fit_goals.md)
 SETTLE_RAMP_FRACTION = 0.5
 SETTLE_DAMPING_RATE = 40.0  # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
 EXPLODE_FACTOR = 10.0  # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded
@@ -249,7 +249,7 @@ QUALITY_CLEARLY_BETTER = (
     0.10  # a probe (or --backend blender's rung above the scene's quality) fits clearly better: > 10 %
 )
 QUALITY_BASIN_GAIN = 0.3  # a fit far above its floor whose ladder chose a quality fitting > 30 % better than the
-# start says to refit at that quality from the start (its rungs began in the start's basin: docs/issue20_goals.md)
+# start says to refit at that quality from the start (its rungs began in the start's basin: docs/fit_goals.md)
 SCENE_QUALITY_PROBE = 0.05  # --backend blender: the budget of the one rung above the scene's quality it tries
 STAGED_FIRST_FRACTION = 0.48  # cma-staged: the share of the budget for the strong settings alone (1200 of 2500)
 STAGED_FIRST_RESTART_STEP = 0.01  # cma-staged: a first-stage run whose every step is below this (unit cube) has
@@ -322,7 +322,7 @@ INTERVAL_WIDEN = 3.0  # each later round's covariance: the weighted points' time
 INTERVAL_CHI2_HALF = 1.353  # chi2_1(0.90) / 2: the rise, in temperatures, at a 90 % marginal end (quadratic error)
 INTERVAL_CALIBRATION = 3.0  # the temperature times this: the observation is one chaotic realisation too, which the
 # jitter at the best point does not measure; set so that the calibration captures' 90 % intervals hold their truth
-# nine times in ten (tools/interval_coverage.py --first 0: the truth sat 1.76x the half-width out at the 90th
+# nine times in ten (lab/interval_coverage.py --first 0: the truth sat 1.76x the half-width out at the 90th
 # percentile, so 1.76^2 ~ 3), and checked on other captures (--first 6: docs/intervals.md)
 INTERVAL_BOUND_EDGE = 0.01  # an interval end within this of the unit cube's face reaches the search's bound
 INTERVAL_UNDETERMINED_FACTOR = 3.0  # an interval wider than this factor, or reaching a bound: undetermined

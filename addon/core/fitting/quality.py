@@ -14,7 +14,7 @@ within ``QUALITY_TOLERANCE`` of the best tried: what the images can tell apart, 
 In a "cma-staged" fit each rung is staged too (``FitJob._rung_optimizer``: the strong settings and the
 time offset first, from the warm start). Until 2026-11-26 the climb needed a rung
 ``QUALITY_CLEARLY_BETTER`` (10 %) better, and there was no refining rung and no staged rung
-(docs/issue20_goals.md, the time goal).
+(docs/fit_goals.md, the time goal).
 
 ``Ladder`` is plain decisions on numbers (which quality next, which is chosen), kept apart from the
 job that runs the rungs, so it is tested on its own and its state is plain JSON in checkpoints.

@@ -47,7 +47,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..observation.camera import Camera
 
-# calibrate.X names that addon/cli.py, tests/test_calibrate.py and tools/phone_rig.py use
+# calibrate.X names that addon/cli.py, tests/test_calibrate.py and lab/phone_rig.py use
 from .calib_board import Board, _natural_key, make_board, parse_board  # noqa: E402,F401
 from .calib_bundle import bundle_adjust, camera_uncertainty
 from .calib_detect import (

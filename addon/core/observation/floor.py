@@ -5,7 +5,7 @@ pixel centres at the fit resolution) would score against the observed silhouette
 it: it comes from the observation's own errors and from resampling the images to the fit resolution.
 A fit whose error ends far above its images' floor is limited by something else (the model, the time
 scale, the manipulation) or by errors this estimate cannot see (below). ``docs/noise_floor.md`` has
-the calibration (``tools/floor_calibration.py``).
+the calibration (``lab/floor_calibration.py``).
 
 The estimate has two parts:
 
@@ -62,7 +62,7 @@ from ..errors import ClothFitError
 if TYPE_CHECKING:
     from .capture import Capture
 
-# --- calibration (tools/floor_calibration.py, docs/noise_floor.md)
+# --- calibration (lab/floor_calibration.py, docs/noise_floor.md)
 STRAIGHT_RADIUS = 20.0  # px: outline with a larger curvature radius counts as straight (a 3 x 3 median never
 # changes a clean digitised edge there: measured baseline < 0.01 % at 240 x 320)
 CURVATURE_SIGMA = 2.0  # px: blur of the silhouette for its curvature (isolated flipped pixels barely move it)

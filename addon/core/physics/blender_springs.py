@@ -2,7 +2,7 @@
 hand-written LLVM IR through a numba intrinsic (``_springs_v``, on ``simd.py``'s lane vectors).
 ``_springs_plain`` is its plain numba twin (the same float32 operations in the same order, lane by
 lane), which the kernel runs with ``CLOTHFIT_NO_SIMD=1``. Why the IR is hand-written, what it gains
-(``python tools/simd_bench.py``) and how to run without it: ``docs/kernels.md``.
+(``python lab/simd_bench.py``) and how to run without it: ``docs/kernels.md``.
 """
 
 from __future__ import annotations

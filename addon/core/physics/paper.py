@@ -21,7 +21,7 @@ Integrator (part of the model, docs/method.md#spec-2):
   one shorter remainder step that lands exactly on the event. Unlike "split the interval into
   ceil(len/dt) equal steps", this makes the simulated motion a *continuous* function of k/m: the
   number of steps never jumps (an earlier equal-split version of this simulator, not kept, moved the
-  cloth by about 0.1 mm for a 1e-4 relative change of k; now it is 1e-5 m: tools/sensitivity.py);
+  cloth by about 0.1 mm for a 1e-4 relative change of k; now it is 1e-5 m: lab/sensitivity.py);
 * before t = 0 the cloth settles for ``settle_time`` with every handle held and damping rate
   ``max(d/m, SETTLE_DAMPING_RATE)``: the rest shape does not depend on d, this only gets there fast;
 * a candidate whose state goes non-finite, stretches a spring beyond ``1 + MAX_STRAIN`` times its

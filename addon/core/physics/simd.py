@@ -13,7 +13,7 @@ numba is required (the callers are numba kernels); without numba the module stil
 Why by hand, what it gains, how to run without it (``docs/kernels.md``): the lanes must compute
 Blender's float32 operations in Blender's order (its CG's stopping iteration depends on rounding),
 which rules out ``fastmath``, and without it LLVM leaves the lane loops scalar. Measured by
-``python tools/simd_bench.py`` (``docs/figures/simd.json``): the Blender model takes about 14 times
+``python lab/simd_bench.py`` (``docs/figures/simd.json``): the Blender model takes about 14 times
 less CPU per candidate than on the plain numba twins (``simd_plain.py``), with the same trajectory
 to the bit. ``CLOTHFIT_NO_SIMD=1`` runs those twins instead (``ENABLED`` below).
 """
