@@ -235,9 +235,8 @@ def _score(root, res, cap, log):
 def takes_baseline(out, json_path, materials=("cotton",), takes=BASELINE_TAKES, max_evaluations=None, refit=False):
     """Fit each take alone, score each result on every take of its material; one JSON (rows kept
     across runs for other materials and fitted takes; a finished result is reused unless ``refit``)."""
-    from clothfit.core.jsonio import read_json
+    from clothfit.core.jsonio import read_json, write_json
     from clothfit.core.observation.capture import load_capture
-    from clothfit.core.safeio import atomic_json
 
     rows = []
     if os.path.isfile(json_path):
@@ -280,7 +279,7 @@ def takes_baseline(out, json_path, materials=("cotton",), takes=BASELINE_TAKES, 
                     r.update(fit_row)
                 rows.append(r)
                 print(format_row(r), flush=True)
-                atomic_json(json_path, _doc(rows, max_evaluations))
+                write_json(json_path, _doc(rows, max_evaluations))
     return rows
 
 
@@ -343,9 +342,8 @@ def takes_pairs(out, json_path, materials=("cotton",), takes=PAIR_TAKES, max_eva
     fit never saw); one JSON, rows kept across runs for other materials; a finished result is reused unless
     ``refit``; ``only``: the pairs to fit ("a+b" names), all when None. With the single-take rows of
     ``takes-baseline`` this is the docs' table per cloth."""
-    from clothfit.core.jsonio import read_json
+    from clothfit.core.jsonio import read_json, write_json
     from clothfit.core.observation.capture import load_capture
-    from clothfit.core.safeio import atomic_json
 
     rows = []
     if os.path.isfile(json_path):
@@ -385,7 +383,7 @@ def takes_pairs(out, json_path, materials=("cotton",), takes=PAIR_TAKES, max_eva
                         r.update(fit_row)
                     rows.append(r)
                     print(format_row(r), flush=True)
-                    atomic_json(json_path, _pairs_doc(rows, max_evaluations))
+                    write_json(json_path, _pairs_doc(rows, max_evaluations))
     return rows
 
 

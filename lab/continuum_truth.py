@@ -392,16 +392,16 @@ def baseline(out, json_path, materials=BASELINE_MATERIALS, max_evaluations=None)
                 "train_cameras": TRAIN_CAMERAS,
                 "rows": rows,
             }
-            from clothfit.core.safeio import atomic_json
+            from clothfit.core.jsonio import write_json
 
-            atomic_json(json_path, doc)
+            write_json(json_path, doc)
     return rows
 
 
 def converge(material, json_path, meshes=(21, 29, 41)):
     """How far the truth is from its continuum limit: the same material on finer meshes and with half
     the step, sampled at the user's grid; mean and max distance [mm] to the finest mesh per frame."""
-    from clothfit.core.safeio import atomic_json
+    from clothfit.core.jsonio import write_json
 
     sc = user_scenario()
     runs = {}
@@ -437,7 +437,7 @@ def converge(material, json_path, meshes=(21, 29, 41)):
             f"{rows[-1]['vs_finest_max_mm']:.2f} mm; vs the truth's mesh mean {rows[-1]['vs_truth_mesh_mean_mm']:.2f} mm",
             flush=True,
         )
-    atomic_json(json_path, {"material": material, "rows": rows})
+    write_json(json_path, {"material": material, "rows": rows})
     return rows
 
 

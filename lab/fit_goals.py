@@ -275,8 +275,7 @@ def row(goal, capture, key, value, run, status="measured", details=None, target_
 def merge_rows(path, goal, rows, extra=None, label="after") -> dict:
     """Replace the rows of ``goal`` measured as ``label`` ("before": the fit without the lead's issue-20
     features; "after": with them) in the JSON at ``path``, others kept; returns the document."""
-    from clothfit.core.jsonio import read_json
-    from clothfit.core.safeio import atomic_json
+    from clothfit.core.jsonio import read_json, write_json
 
     doc = read_json(path, "goals JSON") if os.path.isfile(path) else {}
     for r in rows:
@@ -300,7 +299,7 @@ def merge_rows(path, goal, rows, extra=None, label="after") -> dict:
     doc["runs"][f"{goal} ({label})"] = dict(
         commits(), finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **(extra or {})
     )
-    atomic_json(path, doc)
+    write_json(path, doc)
     return doc
 
 
@@ -422,9 +421,8 @@ def shift_capture(true_root, out_root, early_s, pin_off_m, direction_seed, uncer
     """Copy the capture ``true_root`` to ``out_root`` with the shifted scenario and frame times (also
     in shapes.npz) and the ``uncertain`` block, its model's keys ``undeclare`` dropped (a real capture
     declares no quality); returns the shift (recorded in the capture's meta: ``declared_shift``)."""
-    from clothfit.core.jsonio import read_json
+    from clothfit.core.jsonio import read_json, write_json
     from clothfit.core.observation.capture import load_capture
-    from clothfit.core.safeio import atomic_json
 
     if os.path.isdir(out_root):
         shutil.rmtree(out_root)
@@ -456,7 +454,7 @@ def shift_capture(true_root, out_root, early_s, pin_off_m, direction_seed, uncer
         "time_offset_s, so time_offset_s = +early_s; a pin declared at true + d needs the offset -d",
     }
     doc.setdefault("meta", {})["declared_shift"] = shift
-    atomic_json(os.path.join(out_root, "capture.json"), doc)
+    write_json(os.path.join(out_root, "capture.json"), doc)
     load_capture(out_root)  # the copy reads as a capture
     return shift
 
@@ -825,7 +823,7 @@ def _collider_child(a):
     with the SOFT truth (``build``) or replay settings (``replay``); writes npz/json files."""
     import user_scenes as US
     from clothfit.blender.scene_worker import BlendScene
-    from clothfit.core.safeio import atomic_json
+    from clothfit.core.jsonio import write_json
 
     blend = _p(a, "collider", "user.blend")
     frames = US.FRAME_START + np.arange(0, US.AFTER + 1)  # scene frames: t = 0 and the capture frames
@@ -838,7 +836,7 @@ def _collider_child(a):
         if r["exploded"]:
             raise SystemExit(f"the soft truth explodes: {r['reason']}")
         np.savez(_p(a, "collider", "truth.npz"), positions=r["positions"], triangles=np.array(info["triangles"]))
-        atomic_json(
+        write_json(
             _p(a, "collider", "scene.json"),
             {
                 "info": {k: v for k, v in info.items() if k != "triangles"},
@@ -1182,8 +1180,7 @@ def _truth_by_quality(a, run) -> dict:
     """The time capture's true settings simulated at each quality of the fit's ladder and the truth's own, on
     the true capture's training cameras and times: training E_sil (%) by quality."""
     from clothfit.core import defaults as D
-    from clothfit.core.jsonio import read_json
-    from clothfit.core.safeio import atomic_json
+    from clothfit.core.jsonio import read_json, write_json
 
     true_cap = _p(a, "time21_true")
     meta = read_json(os.path.join(true_cap, "capture.json"), "capture")["meta"]
@@ -1191,7 +1188,7 @@ def _truth_by_quality(a, run) -> dict:
     for q in sorted(set(D.QUALITY_LADDER) | {TIME["quality"]}):
         path = _p(a, "fits", f"time21_truth_q{q}.json")
         model = dict(meta["true_model"], quality=q)
-        atomic_json(path, {"model": model, "blender_cloth": dict(meta["true_blender_cloth"], quality=q)})
+        write_json(path, {"model": model, "blender_cloth": dict(meta["true_blender_cloth"], quality=q)})
         ev, _ = _heldout(run, true_cap, path, cameras=f"n:{TRAIN_CAMERAS}", times="train")
         out[str(q)] = ev["silhouette_error_pct"]
     return out
@@ -1378,10 +1375,10 @@ def main(argv=None):
         _collider_child(a)
         return 0
     if a.cmd == "offsets_coverage":
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
         out = offsets_coverage(a.recordings)
-        atomic_json(a.json, out)
+        write_json(a.json, out)
         print(
             f"{out['stated']} stated offsets over {len(out['fits'])} fits: {100 * out['share_within_1']:.0f} % within "
             f"their uncertainty, {100 * out['share_within_2']:.0f} % within twice it (a 1-sigma statement: 68 %, 95 %); "
@@ -1390,20 +1387,20 @@ def main(argv=None):
         )
         return 0
     if a.cmd == "time_quality":
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
         os.makedirs(os.path.join(a.out, "fits"), exist_ok=True)
         _time_captures(a)
         by_q = _truth_by_quality(a, Runner(os.path.join(a.out, "goals.log")))
-        atomic_json(a.json, {"truth_quality": TIME["quality"], "train_E_sil_pct_by_quality": by_q})
+        write_json(a.json, {"truth_quality": TIME["quality"], "train_E_sil_pct_by_quality": by_q})
         print(json.dumps(by_q))
         return 0
     if a.cmd == "offsets_sensitivity":
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
         os.makedirs(a.out, exist_ok=True)
         out = offsets_sensitivity(a, Runner(os.path.join(a.out, "goals.log")))
-        atomic_json(a.json, out)
+        write_json(a.json, out)
         print(f"truth: held-out {out['truth']['heldout_ratio']:.3f}x its floor ({out['floor_pct']:.3f} %)")
         jf = out["jitter_floor"]
         print(

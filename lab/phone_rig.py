@@ -487,9 +487,9 @@ def run_calibrate(a) -> dict:
     }
     print(format_table(out), file=sys.stderr)
     if a.json:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
-        atomic_json(a.json, out)
+        write_json(a.json, out)
     return out
 
 
@@ -1106,9 +1106,9 @@ def run_e2e(a) -> dict:
     print(format_e2e(out), file=sys.stderr)
     out["pictures"] = make_pictures(a.out, os.path.join(a.out, "pictures"))
     if a.json:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
-        atomic_json(a.json, out)
+        write_json(a.json, out)
     return out
 
 

@@ -100,9 +100,9 @@ def main(argv=None):
     else:
         print("no AVX-512 on this CPU: nothing to switch off", file=sys.stderr)
     if a.json:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
-        atomic_json(a.json, doc)
+        write_json(a.json, doc)
     print(json.dumps(doc))
     return 0
 

@@ -758,7 +758,7 @@ def main(argv=None):
     )
     a = ap.parse_args(argv)
     if a.profile:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
         out = []
         for c in a.captures:
@@ -772,20 +772,20 @@ def main(argv=None):
                         flush=True,
                     )
                     out.append(r)
-        atomic_json(a.profile, {"runs": out})
+        write_json(a.profile, {"runs": out})
         return
     if a.oracle:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
-        atomic_json(a.oracle, {"captures": [oracle(Bench(capture_path(c)), a.samples) for c in a.captures]})
+        write_json(a.oracle, {"captures": [oracle(Bench(capture_path(c)), a.samples) for c in a.captures]})
         return
     if a.slice:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
-        atomic_json(a.slice, {"captures": [slice_grid(Bench(capture_path(c))) for c in a.captures]})
+        write_json(a.slice, {"captures": [slice_grid(Bench(capture_path(c))) for c in a.captures]})
         return
     if a.landscape:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
         out = []
         for c in a.captures:
@@ -794,7 +794,7 @@ def main(argv=None):
             if a.local:
                 d["local_start"] = local_start(b, rel=a.local)
             out.append(d)
-        atomic_json(a.landscape, {"captures": out})
+        write_json(a.landscape, {"captures": out})
         return
     if a.summary:
         rows = [json.loads(line) for p in a.summary for line in open(p) if line.strip()]
@@ -842,9 +842,9 @@ def main(argv=None):
     summ = summary(rows)
     print_table(summ)
     if a.json_summary:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
-        atomic_json(a.json_summary, {"summary": summ, "rows": rows})
+        write_json(a.json_summary, {"summary": summ, "rows": rows})
     print(json.dumps({"summary": summ}))
 
 

@@ -861,10 +861,10 @@ def drift(out, names=None, json_path=None):
     print(format_table(doc), flush=True)
     print(format_causes(doc), flush=True)
     if json_path:
-        from clothfit.core.safeio import atomic_json
+        from clothfit.core.jsonio import write_json
 
         os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
-        atomic_json(json_path, doc)
+        write_json(json_path, doc)
     return doc
 
 

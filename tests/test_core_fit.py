@@ -191,7 +191,7 @@ def test_checkpoint_and_resume_continue_to_the_budget(capture, tmp_path):
     del job
 
     job2 = FitJob.resume(ck, capture=capture)
-    assert job2.evaluations == 14 and not job2.finished
+    assert job2.evaluations == 14 and not job2.state.finished
     r = job2.run()
     assert r["evaluations"] == 42 and r["finished"]
     # the resumed run is the uninterrupted one
@@ -199,7 +199,7 @@ def test_checkpoint_and_resume_continue_to_the_budget(capture, tmp_path):
     assert r["history"] == ref["history"]
     # resuming a finished job does nothing more
     job3 = FitJob.resume(ck, capture=capture)
-    assert job3.finished and not job3.step() and job3.evaluations == 42
+    assert job3.state.finished and not job3.step() and job3.evaluations == 42
     with pytest.raises(ClothFitError, match="not found"):
         FitJob.resume(str(tmp_path / "missing.json"), capture=capture)
 
@@ -216,7 +216,7 @@ def test_the_evaluation_budget_is_a_hard_cap_and_the_count_is_honest(capture, tm
 
     # what the search scores (the report at the end scores the best again: not a candidate)
     def counted(X, objective=None):
-        if not job.finished:
+        if not job.state.finished:
             scored.append(len(X))
         return score(X, objective)
 

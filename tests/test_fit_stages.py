@@ -187,18 +187,18 @@ def test_the_profile_polishes_the_offsets_first_and_resumes_exactly(caps, tmp_pa
         free=FREE, fixed=FIXED, max_evaluations=120, seed=3, train_cameras=[0, 2, 4, 6], uncertain="time_offset=0.05"
     )
     job = FitJob(cap, FitConfig(**cfg))
-    while job.stage != "profile":
+    while job.state.stage != "profile":
         job.step()
     searched = job.best_error
-    while job.stage == "profile" and job.polish_rounds == 0:
+    while job.state.stage == "profile" and job.state.polish_rounds == 0:
         job.step()
     ck = str(tmp_path / "ck.json")
     job.save_checkpoint(ck)  # one round done
     r = job.run()
-    assert job.polish_rounds >= 2, "this search should stop short of the time offset's valley"
+    assert job.state.polish_rounds >= 2, "this search should stop short of the time offset's valley"
     assert r["best_E_all"] < searched
     p = r["manipulation_profile"]["time_offset_s"]
-    assert job.polish_rounds == D.PROFILE_POLISH_ROUNDS or min(p["E_plus"], p["E_minus"]) >= p["E_best"]
+    assert job.state.polish_rounds == D.PROFILE_POLISH_ROUNDS or min(p["E_plus"], p["E_minus"]) >= p["E_best"]
     assert p["E_best"] == pytest.approx(r["best_E_all"])
     assert evaluate(cap, r, cameras=[0, 2, 4, 6])["silhouette_error_pct"] == pytest.approx(r["best_E_sil_mean_pct"])
     assert r["evaluations"] <= cfg["max_evaluations"]
@@ -241,12 +241,12 @@ def test_quality_ladder_runs_its_rungs_and_resumes_exactly_across_stages(caps, t
     # stopped in a rung, resumed from the checkpoint: the same fit
     ck = str(tmp_path / "ck.json")
     job = FitJob(cap, FitConfig(**cfg), checkpoint=ck)
-    while job.stage != "rung":
+    while job.state.stage != "rung":
         job.step()
     job.step()
     job.save_checkpoint(ck)
     again = FitJob.resume(ck, capture=cap, config=FitConfig(**cfg))
-    assert again.stage == "rung" and again.evaluations == job.evaluations
+    assert again.state.stage == "rung" and again.evaluations == job.evaluations
     r = again.run()
     assert r["quality_choice"] == qc and r["best_E_all"] == ref["best_E_all"]
     assert r["blender_cloth"] == ref["blender_cloth"]
@@ -261,7 +261,7 @@ def test_a_staged_fits_rungs_resettle_its_strong_settings_first_and_resume_exact
     assert ref["optimizer"] == "cma-staged" and len(ref["quality_choice"]["tried"]) >= 2
     ck = str(tmp_path / "ck.json")
     job = FitJob(cap, FitConfig(**cfg), checkpoint=ck)
-    while job.stage != "rung":
+    while job.state.stage != "rung":
         job.step()
     assert job.opt.name == "cma-staged" and job.opt.first == FREE  # tension and air: the strong ones free
     x = job.opt.ask()
@@ -271,7 +271,7 @@ def test_a_staged_fits_rungs_resettle_its_strong_settings_first_and_resume_exact
     job.step()
     job.save_checkpoint(ck)
     again = FitJob.resume(ck, capture=cap, config=FitConfig(**cfg))
-    assert again.stage == "rung" and again.evaluations == job.evaluations
+    assert again.state.stage == "rung" and again.evaluations == job.evaluations
     r = again.run()
     assert r["quality_choice"] == ref["quality_choice"] and r["best_E_all"] == ref["best_E_all"]
 

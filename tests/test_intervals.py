@@ -8,6 +8,7 @@ import pytest
 from clothfit.core import defaults as D
 from clothfit.core.fitting import intervals
 from clothfit.core.fitting.job import FitConfig, FitJob
+from clothfit.core.fitting.run_state import RunState
 from clothfit.core.fitting.space import SearchSpace
 from clothfit.core.observation.synth import synth_capture
 from clothfit.core.physics.scenario import ClothGrid, paper_scenario
@@ -28,16 +29,12 @@ class QuadraticJob:
         self.par = _Par()
         self.sigma = sigma
         self.rng = np.random.default_rng(seed)
-        self.done_evals = 0
-        self.exploded = 0
-        self.intervals = None
+        self.state = RunState()  # the fit's progress: evaluations, exploded, the stage's own state, the best
         # E = 10 + (a - 0.4)^2 / (2 s1^2) + (a + b - 1)^2 / (2 s2^2), in units of the temperature T
         self.T = D.INTERVAL_Z * math.sqrt(2.0) * sigma / D.INTERVAL_CHI2_HALF
         self.s1, self.s2 = 0.05, 0.01
         self.best_x = np.array([0.4, 0.6, 0.5])
         self.best_error = 10.0
-        self.best_by_quality = {}
-        self.history_prev = []
 
     def chosen_quality(self):
         return None
@@ -57,7 +54,7 @@ def run_stage(job):
     while not intervals.interval_step(job):
         steps += 1
         assert steps < 100
-    return job.intervals["result"]
+    return job.state.intervals["result"]
 
 
 def test_intervals_are_marginal_and_sized_by_the_errors_own_noise():
@@ -102,7 +99,7 @@ def test_a_lower_point_found_by_the_stage_becomes_the_fits_best():
     job.best_x = np.array([0.4 + 2 * job.s1, 0.6 - 2 * job.s1, 0.5])  # a search that stopped two sds short
     job.best_error = float(job.error(job.best_x[None])[0])
     r = run_stage(job)
-    f, x = job.best_by_quality[None]
+    f, x = job.state.best_by_quality[None]
     assert f < job.best_error and r["interval_method"]["improved_best"]["to"] == f
     assert abs(x[0] - 0.4) < abs(job.best_x[0] - 0.4)
 
@@ -112,7 +109,7 @@ def test_a_round_whose_every_point_fails_keeps_the_last_proposal():
     good = job.evaluate
     job.evaluate = lambda X: np.where(np.abs(np.atleast_2d(X)[:, 0] - 0.4) < 1e-6, good(X), np.inf)
     r = run_stage(job)  # only the jittered best point scores: no sampled point has a weight
-    means = [m for m, _ in job.intervals["props"]]
+    means = [m for m, _ in job.state.intervals["props"]]
     assert all(np.allclose(m, means[0]) for m in means)
     assert r["intervals"]["a"][0] <= 0.4 <= r["intervals"]["a"][1]
 
@@ -120,7 +117,7 @@ def test_a_round_whose_every_point_fails_keeps_the_last_proposal():
 def test_the_stage_stays_within_its_budget():
     job = QuadraticJob()
     run_stage(job)
-    assert job.done_evals <= intervals.interval_budget(3)
+    assert job.state.done_evals <= intervals.interval_budget(3)
 
 
 @pytest.fixture(scope="module")
@@ -163,9 +160,9 @@ def test_a_resumed_fit_reports_the_same_intervals(cap, tmp_path):
     ck = str(tmp_path / "fit.ckpt.json")
     whole = fit(cap).run()
     job = fit(cap, checkpoint=ck)
-    while job.stage != "intervals" or (job.intervals or {}).get("phase") in (None, "jitter"):
+    while job.state.stage != "intervals" or (job.state.intervals or {}).get("phase") in (None, "jitter"):
         job.step()
-    assert job.intervals["phase"] in ("axes", "sample")
+    assert job.state.intervals["phase"] in ("axes", "sample")
     job.save_checkpoint(ck)
     resumed = FitJob.resume(ck, cap).run()
     assert resumed["intervals"] == whole["intervals"]

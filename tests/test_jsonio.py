@@ -5,7 +5,7 @@ import os
 
 import numpy as np
 import pytest
-from clothfit.core import jsonio, safeio
+from clothfit.core import jsonio
 from clothfit.core.errors import ClothFitError
 
 DATA = {"a": np.float64(0.1), "b": np.arange(3), "c": [np.int64(7), {"d": np.array([[1.5]])}], "e": None}
@@ -16,7 +16,7 @@ def test_one_encoder_numpy_as_numbers_and_lists_the_same_text_as_before():
     assert json.loads(text) == {"a": 0.1, "b": [0, 1, 2], "c": [7, {"d": [[1.5]]}], "e": None}
     # the text every writer produced before: indent 1, the numpy values converted
     assert text == json.dumps({"a": 0.1, "b": [0, 1, 2], "c": [7, {"d": [[1.5]]}], "e": None}, indent=1)
-    assert safeio.json_text(DATA) == text
+    assert jsonio.dumps(DATA) == text
     assert jsonio.plain(DATA) == json.loads(text)
     with pytest.raises(TypeError):
         jsonio.dumps({"x": object()})
@@ -34,7 +34,7 @@ def test_write_json_is_atomic_and_strict_when_asked(tmp_path):
         jsonio.write_json(p, {"x": float("inf")}, strict=True)
     assert json.load(open(p))["e"] is None  # the old file, whole
     assert [n for n in os.listdir(tmp_path)] == ["x.json"]  # no temporary left behind
-    safeio.atomic_json(p, {"y": np.float32(2.0)})
+    jsonio.write_json(p, {"y": np.float32(2.0)})
     assert jsonio.read_json(p) == {"y": 2.0}
 
 

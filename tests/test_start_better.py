@@ -41,13 +41,13 @@ def job(cap, tmp_path_factory):
     cfg = FitConfig(model="blender", quality=5, init=str(p), train_cameras=[0, 2, 4, 6], intervals=False)
     j = FitJob(cap, cfg)
     j.step()
-    assert j.start_f is not None and np.isfinite(j.start_f)
+    assert j.state.start_f is not None and np.isfinite(j.state.start_f)
     return j
 
 
 def _set_best(job, x):
     x = np.asarray(x, dtype=np.float64)
-    job.best_by_quality[job.stage_quality] = [float(job.evaluate(x[None])[0]), x.tolist()]
+    job.state.best_by_quality[job.state.stage_quality] = [float(job.evaluate(x[None])[0]), x.tolist()]
 
 
 def _away(job, x):
@@ -63,7 +63,7 @@ def test_a_fit_whose_start_predicts_the_unseen_cameras_better_says_so_and_keeps_
     fl = report(job)
     assert fl["start_heldout_E_sil_pct"] < fl["heldout_E_sil_pct"]
     assert "no better than what it was given" in fl["start_note"]
-    job.final = fl  # what the fit's end writes
+    job.state.final = fl  # what the fit's end writes
     r = job.result()
     kind, line = verdict(r)
     assert kind == "start_better" and kind in KINDS and "held-out" in line
@@ -72,13 +72,13 @@ def test_a_fit_whose_start_predicts_the_unseen_cameras_better_says_so_and_keeps_
 
 def test_a_fit_that_predicts_them_clearly_better_than_its_start_has_no_such_note(job):
     truth_x = np.array(job.start_x)
-    start_x, start_f = job.start_x, job.start_f
+    start_x, start_f = job.start_x, job.state.start_f
     try:
         job.start_x = _away(job, truth_x)
-        job.start_f = float(job.evaluate(job.start_x[None])[0])
+        job.state.start_f = float(job.evaluate(job.start_x[None])[0])
         _set_best(job, truth_x)
         fl = report(job)
         assert fl["start_heldout_E_sil_pct"] > fl["heldout_E_sil_pct"]
         assert "start_note" not in fl
     finally:
-        job.start_x, job.start_f = start_x, start_f
+        job.start_x, job.state.start_f = start_x, start_f

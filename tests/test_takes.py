@@ -268,7 +268,7 @@ def test_each_take_is_searched_alone_and_a_take_the_shared_settings_do_not_serve
 
     ck = str(tmp_path / "ck.json")
     job = FitJob(list(takes), _cfg(max_evaluations=4 * 2 * 150, intervals=True), checkpoint=ck)
-    while job.stage != "alone":
+    while job.state.stage != "alone":
         job.step()
     job.step()
     job.step()

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from clothfit import cli
 from clothfit.core import defaults as D
-from clothfit.core import safeio
+from clothfit.core import jsonio, safeio
 from clothfit.core.errors import ClothFitError
 from clothfit.core.fitting import objective as O
 from clothfit.core.fitting.job import FitConfig, FitJob, read_checkpoint
@@ -278,7 +278,7 @@ def test_writers_never_follow_planted_symlinks(cap, tmp_path):
     assert victim.read_text() == "precious"
     # a symlink at the destination itself is replaced, its target untouched
     os.symlink(victim, tmp_path / "link.json")
-    safeio.atomic_json(tmp_path / "link.json", {"a": 1})
+    jsonio.write_json(tmp_path / "link.json", {"a": 1})
     assert victim.read_text() == "precious" and not os.path.islink(tmp_path / "link.json")
     assert json.loads((tmp_path / "link.json").read_text()) == {"a": 1}
 

@@ -33,9 +33,9 @@ def cmd_blender_agreement(a):
         "cases": agreement.run(a.grid, a.settle, a.after, a.fps, handling=a.handling),
     }
     if a.json:
-        from ..core.safeio import atomic_json
+        from ..core.jsonio import write_json
 
-        atomic_json(a.json, out)
+        write_json(a.json, out)
     return out
 
 

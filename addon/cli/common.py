@@ -443,8 +443,8 @@ def emit(result):
     """Write a command's result to stdout: text as it is, anything else as one JSON document."""
     if result is None:
         return
-    from ..core.safeio import json_text
+    from ..core.jsonio import dumps
 
-    text = result if isinstance(result, Text) else json_text(_finite(json.loads(json_text(result))), strict=True)
+    text = result if isinstance(result, Text) else dumps(_finite(json.loads(dumps(result))), strict=True)
     sys.stdout.write(text.rstrip("\n") + "\n")
     sys.stdout.flush()

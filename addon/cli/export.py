@@ -81,9 +81,9 @@ def cmd_export_blender_cloth(a):
             cols = Collisions.from_dicts(out["colliders"], out.get("collision_settings"), a.result)
         text = blender_script(s, fps, a.object, a.result, comments, cols)
     if a.out:
-        from ..core.safeio import json_text
+        from ..core.jsonio import dumps
 
-        _write_text(a.out, text if text is not None else json_text(out))
+        _write_text(a.out, text if text is not None else dumps(out))
         print(f"wrote {a.out}")
         return dict(out, out=a.out)
     return Text(text) if text is not None else out

@@ -232,7 +232,7 @@ def cmd_fit(a):
             with _sigint_deferred():  # a second Ctrl-C must not lose the result being written
                 job.cancel()
         except ClothFitError as e:  # e.g. a worker that died for good: the best so far is kept
-            job.error = str(e)
+            job.state.error = str(e)
             job.cancel()
         finally:
             if bar is not None:
@@ -242,8 +242,8 @@ def cmd_fit(a):
             if evaluator is not None:
                 evaluator.close()
     r = job.result()
-    if job.error:
-        raise ClothFitError(f"fit failed: {job.error} (the result so far is in {a.out})")
+    if job.state.error:
+        raise ClothFitError(f"fit failed: {job.state.error} (the result so far is in {a.out})")
     keys = ("params", "identifiable") if r.get("params") else ("blender_cloth", "blender_scene")
     summary = {
         k: r[k]
@@ -367,11 +367,11 @@ def cmd_fit_many(a):
     every = None if a.quiet else progress_interval()
     results, kind, workers = fit_many(a.captures, configs, a.workers, a.address, a.executor, every)
     wall = time.time() - t0
-    from ..core.fitting.job import _atomic_json
+    from ..core.jsonio import write_json
 
     fits = []
     for c, r, path in zip(a.captures, results, paths):
-        _atomic_json(path, r)
+        write_json(path, r, strict=True)
         print(f"{c}: E_sil {r['best_E_sil_mean_pct']:.3f} % after {r['evaluations']} evaluations -> {path}")
         fits.append(
             {
@@ -421,9 +421,9 @@ def cmd_evaluate(a):
         r["fit_verdict_kind"], r["fit_verdict"] = verdict(params)
         print(f"the fit's verdict (on the takes it fitted): {r['fit_verdict']}", file=sys.stderr)
     if a.json:
-        from ..core.safeio import atomic_json
+        from ..core.jsonio import write_json
 
-        atomic_json(a.json, r)
+        write_json(a.json, r)
     return r
 
 
@@ -461,9 +461,9 @@ def cmd_floor(a):
         f"costs {100 * d['rim']:.2f} %; {cf.limits}"
     )
     if a.json:
-        from ..core.safeio import atomic_json
+        from ..core.jsonio import write_json
 
-        atomic_json(a.json, d)
+        write_json(a.json, d)
     return d
 
 

@@ -32,7 +32,7 @@ def cmd_paper(a):
 
 def _paper_parallel(a):
     """``paper --workers N / --address``: the protocol's parts as tasks on Ray (or spawned processes)."""
-    from ..core.fitting.job import _atomic_json
+    from ..core.jsonio import write_json
     from ..core.studies.experiment import format_tables
     from ..farm.tasks import PAPER_PARTS, paper_parts
 
@@ -53,7 +53,7 @@ def _paper_parallel(a):
         "rig": a.rig,
     }
     out = paper_parts(parts, a.out, kw, a.workers, a.address, a.executor)
-    _atomic_json(a.json, out)
+    write_json(a.json, out, strict=True)
     print(format_tables(out))
     print(
         f"{len(parts)} part(s) on {out['workers']} {out['executor']} worker(s) in {out['total_seconds']:.1f} s; wrote {a.json}"

@@ -9,28 +9,10 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import Any
 
 from .errors import ClothFitError
-
-
-def json_text(obj: Any, strict: bool = False, default: Callable[[Any], Any] | None = None) -> str:
-    """The JSON text the project writes: ``jsonio.dumps`` (indent 1, the one encoder). Kept for its
-    callers; new code calls ``jsonio`` (this module knows bytes, not JSON)."""
-    from .jsonio import dumps
-
-    return dumps(obj, strict, default=default)
-
-
-def atomic_json(
-    path: str | os.PathLike, obj: Any, strict: bool = False, default: Callable[[Any], Any] | None = None
-) -> None:
-    """Write JSON safely: ``jsonio.write_json`` (see :func:`atomic_write`); ``strict``: no NaN / Infinity.
-    Kept for its callers; new code calls ``jsonio.write_json``."""
-    from .jsonio import write_json
-
-    write_json(path, obj, strict, default)
 
 
 def atomic_write(path: str | os.PathLike, data: bytes) -> None:

@@ -189,7 +189,7 @@ def fit_tick(session):
         _publish(session.scene, session.job)
         if not more:
             return False
-    elif session.job.finished:
+    elif session.job.state.finished:
         return False
     else:
         more = None
@@ -207,10 +207,10 @@ def finish_fit(session, cancelled=False):
             _publish(session.scene, session.job)
     job = session.job
     scene = session.scene
-    if cancelled and not job.finished:
+    if cancelled and not job.state.finished:
         job.cancel()
     elif cancelled:
-        job.cancelled = True
+        job.state.cancelled = True
     p = props(scene)
     p.fit_running = False
     _publish(scene, job)
@@ -218,14 +218,14 @@ def finish_fit(session, cancelled=False):
     p.result_path = session.result_path
     show_verdict(scene, job.result())
     bp = job.best_params
-    if job.error:
-        p.fit_status = f"failed: {job.error}"
-        return "ERROR", f"Fit failed: {job.error} (result so far: {session.result_path})"
+    if job.state.error:
+        p.fit_status = f"failed: {job.state.error}"
+        return "ERROR", f"Fit failed: {job.state.error} (result so far: {session.result_path})"
     if bp is None:
         p.fit_status = "cancelled before the first generation: no result"
         return "WARNING", "Fit cancelled before the first generation finished: no result"
     kept = f"best E_sil {p.fit_best_pct:.3f} % after {job.evaluations} evaluations"
-    if job.cancelled:
+    if job.state.cancelled:
         p.fit_status = f"cancelled at generation {job.generation}; {kept} kept"
         return "WARNING", f"Fit cancelled at generation {job.generation}: {kept} kept ({session.result_path})"
     p.fit_status = f"finished: {kept}"

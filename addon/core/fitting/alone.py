@@ -9,7 +9,7 @@ The floor report (``diagnose.report_takes``) puts each take's joint error beside
 serve more than ``D.TAKES_ALONE_FACTOR`` times worse than it serves itself says that one set of settings does not
 serve every take. The joint fit's best point is not changed by this stage.
 
-One generation per ``alone_step``; the state (``job.alone``: the take running, the results so far, the running
+One generation per ``alone_step``; the state (``job.state.alone``: the take running, the results so far, the running
 CMA-ES's own state) is plain JSON in the checkpoint, so a resumed fit continues it exactly.
 """
 
@@ -61,9 +61,9 @@ def _optimizer(job: Any, view: TakeView, state: dict | None) -> Any:
 
 def alone_step(job: Any) -> bool:
     """One generation of the take running alone; True once every take has had its run."""
-    st = job.alone
+    st = job.state.alone
     if st is None:
-        st = job.alone = {"take": 0, "results": [], "opt": None}
+        st = job.state.alone = {"take": 0, "results": [], "opt": None}
     k = st["take"]
     if k >= len(job.takes):
         return True
@@ -74,8 +74,8 @@ def alone_step(job: Any) -> bool:
     X = opt.ask()
     f = view.evaluate(X)
     opt.tell(X, f)
-    job.done_evals += len(X)
-    job.exploded += int(sum(1 for v in f if not math.isfinite(v)))
+    job.state.done_evals += len(X)
+    job.state.exploded += int(sum(1 for v in f if not math.isfinite(v)))
     if opt.evaluations >= D.TAKES_ALONE_EVALUATIONS or opt.stopped:
         n = view.objective.n_images
         alone = float(opt.best_f) if opt.best_x is not None and math.isfinite(opt.best_f) else None

@@ -14,7 +14,6 @@ import hashlib
 import json
 import math
 import os
-from collections.abc import Callable
 from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
@@ -24,6 +23,7 @@ from ..errors import ClothFitError
 from ..jsonio import dumps, plain, write_json
 from .optimise import optimizer_from_state
 from .quality import Ladder
+from .run_state import OUTCOME_FIELDS, STOP_REASONS, FitShape, RunState
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -33,7 +33,6 @@ if TYPE_CHECKING:
     from ..observation.capture import Capture
     from .job import FitConfig, FitJob
 
-STOP_REASONS = ("converged", "budget", "target", "cancelled", "error")
 CHECKPOINT_FORMAT = "silhouette-cloth-fit/checkpoint"
 CHECKPOINT_VERSION = 3  # 3: the fit's stages (quality ladder, manipulation profile)
 CHECKPOINT_KEYS = (
@@ -44,12 +43,7 @@ CHECKPOINT_KEYS = (
     "capture",
     "optimizer_state",
     "stages",
-    "elapsed",
-    "exploded",
-    "finished",
-    "cancelled",
-    "stop_reason",
-    "error",
+    *OUTCOME_FIELDS,
     "result",
 )
 MAX_CHECKPOINT_BYTES = 64 * 1024 * 1024
@@ -99,7 +93,7 @@ def _int_attr(opt, name):
 
 def identity(job: FitJob) -> dict[str, Any]:
     """What this job is a fit of: a checkpoint is only resumed by a job with the same identity."""
-    opt = job.opt if job.stage == "search" else job._main_optimizer()
+    opt = job.opt if job.state.stage == "search" else job.main_optimizer()
     ident = {
         "capture_hash": job.capture_hash,
         "silhouettes_hash": job.silhouettes_hash,
@@ -107,7 +101,7 @@ def identity(job: FitJob) -> dict[str, Any]:
         "camera_indices": list(job.train_cameras),
         "times": list(job.train_times),
         "resolution": None if job.config.resolution is None else [int(x) for x in job.config.resolution],
-        "model": job._model_at(job.start_quality).to_dict(),
+        "model": job.model_at(job.start_quality).to_dict(),
         "fixed": None
         if getattr(job.par, "fixed", None) is None
         else dict(job.par.fixed, quality=job.start_quality or job.par.fixed.get("quality")),
@@ -145,214 +139,62 @@ def identity(job: FitJob) -> dict[str, Any]:
     return plain(ident)
 
 
-def stages_state(job: FitJob) -> dict[str, Any]:
-    """The fit's stages (search, quality rungs, profile) as plain numbers: the checkpoint's ``stages``."""
-    return {
-        "stage": job.stage,
-        "stage_quality": job.stage_quality,
-        "stage_end": job.stage_end,
-        "done_evals": job.done_evals,
-        "records": job.records,
-        "best_by_quality": [[q, f, x] for q, (f, x) in job.best_by_quality.items()],
-        "history_prev": job.history_prev,
-        "search_stop": job.search_stop,
-        "ladder": None if job.ladder is None else job.ladder.state_dict(),
-        "profile": job.profile,
-        "polish_rounds": job.polish_rounds,
-        "polish_scale": job.polish_scale,
-        "start_f": job.start_f,
-        "intervals": job.intervals,
-        "alone": None  # each take alone (alone.py): its running CMA-ES's state with it
-        if job.alone is None
-        else dict(job.alone, opt=job.alone_opt.state_dict() if job.alone_opt is not None else job.alone.get("opt")),
-    }
-
-
-def load_stages(job: FitJob, st: dict[str, Any], path: str | os.PathLike) -> None:
-    """The stages' state of a checkpoint, checked field by field (one-line errors)."""
+def load_stages(job: FitJob, st: Any, outcome: dict[str, Any], path: str | os.PathLike) -> None:
+    """A checkpoint's stages and outcome into ``job.state`` (``RunState.from_saved``: checked field by field,
+    one-line errors), with the quality ladder's saved state checked against the job's ladder."""
+    shape = FitShape(
+        n=job.space.n,
+        manip_names=None if job.manip is None else tuple(job.manip.names),
+        ladder=job.ladder,
+        intervals_planned=job.intervals_note is None,
+        n_takes=len(job.takes),
+    )
+    state, saved_ladder = RunState.from_saved(st, outcome, shape, os.fspath(path))
 
     def bad(what):
         return ClothFitError(f"checkpoint {path}: bad 'stages' ({what})")
 
-    def is_int(v, lo=0):
-        return isinstance(v, int) and not isinstance(v, bool) and v >= lo
-
-    def is_num(v):
-        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-    def is_q(v):
-        return v is None or is_int(v, 1) and v <= 80
-
-    if not isinstance(st, dict):
-        raise bad("not an object")
-    keys = set("stage stage_quality stage_end done_evals records best_by_quality history_prev search_stop".split())
-    keys |= {"ladder", "profile", "start_f"}
-    later = {"polish_rounds", "polish_scale", "intervals", "alone"}  # these came later: none in older checkpoints
-    if set(st) - later != keys:
-        raise bad(f"fields {sorted((set(st) - later) ^ keys)}")
-    if not is_int(st.get("polish_rounds", 0)) or not (
-        is_num(st.get("polish_scale", 1.0)) and 0 < st.get("polish_scale", 1.0) <= 1
-    ):
-        raise bad("polish_rounds or polish_scale")
-    if st["stage"] not in ("search", "rung", "profile", "alone", "intervals", "done") or (
-        st["stage"] == "intervals" and job.intervals_note is not None
-    ):
-        raise bad(f"stage {st['stage']!r}")
-    if not is_q(st["stage_quality"]) or not is_int(st["stage_end"]) or not is_int(st["done_evals"]):
-        raise bad("stage_quality, stage_end or done_evals")
-    recs = st["records"]
-    if not isinstance(recs, list) or not all(
-        isinstance(r, dict)
-        and r.get("stage") in ("search", "rung")
-        and is_q(r.get("quality"))
-        and is_int(r.get("evaluations"))
-        and is_int(r.get("generations"))
-        and (r.get("best_f") is None or is_num(r.get("best_f")))
-        and r.get("stop") in ("converged", "budget")
-        for r in recs
-    ):
-        raise bad("records")
-    bq = st["best_by_quality"]
-    if not isinstance(bq, list) or not all(
-        isinstance(e, list)
-        and len(e) == 3
-        and is_q(e[0])
-        and is_num(e[1])
-        and isinstance(e[2], list)
-        and len(e[2]) == job.space.n
-        and all(is_num(v) for v in e[2])
-        for e in bq
-    ):
-        raise bad("best_by_quality")
-    hp = st["history_prev"]
-    if not isinstance(hp, list) or not all(
-        isinstance(e, list) and len(e) == 2 and is_int(e[0]) and (e[1] is None or is_num(e[1])) for e in hp
-    ):
-        raise bad("history_prev")
-    if st["search_stop"] not in (None, "converged", "budget"):
-        raise bad("search_stop")
-    if st["start_f"] is not None and not is_num(st["start_f"]):
-        raise bad("start_f")
-    prof = st["profile"]
-    if prof is not None and (
-        job.manip is None
-        or not isinstance(prof, dict)
-        or set(prof) != set(job.manip.names)
-        or not all(
-            isinstance(v, dict)
-            and isinstance(v.get("separated"), bool)
-            and (v.get("uncertainty") is None or is_num(v.get("uncertainty")))
-            for v in prof.values()
-        )
-    ):
-        raise bad("profile")
-    if (st["ladder"] is None) != (job.ladder is None):
-        raise bad("a quality ladder in one and not the other")
-    ladder = None if st["ladder"] is None else Ladder.from_state(st["ladder"])
+    ladder = None if saved_ladder is None else Ladder.from_state(saved_ladder)
     if ladder is not None and (
-        not isinstance(st["ladder"], dict)
+        not isinstance(saved_ladder, dict)
         or ladder.start != job.ladder.start
         or ladder.probe_only != job.ladder.probe_only
         or any(not ladder.allows(q) for q in ladder.tried)
     ):
         raise bad("quality ladder")
-    if st["stage"] == "rung" and (ladder is None or not ladder.allows(st["stage_quality"])):
+    if state.stage == "rung" and (ladder is None or not ladder.allows(state.stage_quality)):
         raise bad("a rung outside the ladder")
-    job.stage = st["stage"]
-    job.stage_quality = st["stage_quality"]
-    if job.stage != "search":  # the search's end follows the budget asked for now
-        job.stage_end = st["stage_end"]
-    job.done_evals = st["done_evals"]
-    job.records = [dict(r) for r in recs]
-    job.best_by_quality = {e[0]: [float(e[1]), [float(v) for v in e[2]]] for e in bq}
-    job.history_prev = [list(e) for e in hp]
-    job.search_stop = st["search_stop"]
-    job.profile = prof
-    job.polish_rounds = st.get("polish_rounds", 0)
-    job.polish_scale = float(st.get("polish_scale", 1.0))
-    job.intervals = check_intervals_state(st.get("intervals"), job.space.n, bad)
-    job.alone, job.alone_opt = check_alone_state(st.get("alone"), len(job.takes), bad), None
-    job.start_f = None if st["start_f"] is None else float(st["start_f"])
+    if state.stage == "search":  # the search's end follows the budget asked for now
+        state.stage_end = job.state.stage_end
+    if ladder is not None and state.stage_quality is not None and not ladder.allows(state.stage_quality):
+        raise bad("stage_quality outside the ladder")
+    job.state, job.alone_opt = state, None
     if ladder is not None:
         job.ladder = ladder
-    if job.stage_quality is not None and job.ladder is not None and not job.ladder.allows(job.stage_quality):
-        raise bad("stage_quality outside the ladder")
-    if job.stage_quality is not None:
-        job._activate(job.stage_quality)
-
-
-def check_intervals_state(st: Any, n: int, bad: Callable[[str], ClothFitError]) -> dict | None:
-    """The intervals stage's saved state (``intervals.start``'s fields), checked: None, or the state."""
-    if st is None:
-        return None
-    phases = ("jitter", "axes", "sample", "done")
-    ok = (
-        isinstance(st, dict)
-        and st.get("phase") in phases
-        and isinstance(st.get("u0"), list)
-        and len(st["u0"]) == n
-        and isinstance(st.get("h"), list)
-        and len(st["h"]) == n
-        and isinstance(st.get("U"), list)
-        and isinstance(st.get("F"), list)
-        and len(st["U"]) == len(st["F"])
-        and all(isinstance(u, list) and len(u) == n for u in st["U"])
-        and all(v is None or (isinstance(v, (int, float)) and math.isfinite(v)) for v in st["F"])
-        and isinstance(st.get("round"), int)
-        and isinstance(st.get("props"), list)
-    )
-    if not ok:
-        raise bad("intervals")
-    return st
-
-
-def check_alone_state(st: Any, n_takes: int, bad: Callable[[str], ClothFitError]) -> dict | None:
-    """The each-take-alone stage's saved state (``alone.alone_state``), checked: None, or the state."""
-    if st is None:
-        return None
-    ok = (
-        n_takes > 1
-        and isinstance(st, dict)
-        and isinstance(st.get("take"), int)
-        and 0 <= st["take"] <= n_takes
-        and isinstance(st.get("results"), list)
-        and len(st["results"]) == st["take"]
-        and all(isinstance(r, dict) for r in st["results"])
-        and (st.get("opt") is None or isinstance(st["opt"], dict))
-    )
-    if not ok:
-        raise bad("alone")
-    return st
+    if state.stage_quality is not None:
+        job.activate(state.stage_quality)
 
 
 def reopen_search(job: FitJob) -> None:
     """A search that stopped on its budget and was followed by nothing but its profile continues
     when resumed with a larger budget (the profile is made again at its new end)."""
-    last = job.records[-1] if job.records else None
+    s = job.state
+    last = s.records[-1] if s.records else None
     if not (
-        job.stage in ("done", "profile")
+        s.stage in ("done", "profile")
         and last
         and last["stage"] == "search"
         and last["stop"] == "budget"
-        and len(job.records) == 1
+        and len(s.records) == 1
         and job.config.max_evaluations > job.evaluations
     ):
         return
-    job.records = []
-    job.done_evals = 0 if job.start_f is None else 1
-    job.history_prev = []
-    job.search_stop = None
-    job.profile = None
-    job.polish_rounds = 0
-    job.polish_scale = 1.0
-    job.intervals = None
-    job.stage = "search"
-    job.stage_end = job.search_end
+    quality = s.stage_quality
+    s.reopen_search(job.search_end)
     if job.ladder is not None:
-        job.ladder.tried.pop(job.stage_quality, None)
-        if job.stage_quality in job.ladder.order:
-            job.ladder.order.remove(job.stage_quality)
-    job.stop_reason = None
+        job.ladder.tried.pop(quality, None)
+        if quality in job.ladder.order:
+            job.ladder.order.remove(quality)
 
 
 def checkpoint_dict(job: FitJob) -> dict[str, Any]:
@@ -364,13 +206,11 @@ def checkpoint_dict(job: FitJob) -> dict[str, Any]:
         "config": asdict(job.config),
         "capture": os.path.abspath(job.capture.root),
         "optimizer_state": job.opt.state_dict(),
-        "stages": stages_state(job),
-        "elapsed": job.elapsed,
-        "exploded": job.exploded,
-        "finished": job.finished,
-        "cancelled": job.cancelled,
-        "stop_reason": job.stop_reason,
-        "error": job.error,
+        "stages": job.state.saved_stages(
+            None if job.ladder is None else job.ladder.state_dict(),
+            None if job.alone_opt is None else job.alone_opt.state_dict(),
+        ),
+        **job.state.saved_outcome(),
         "result": job.result(),
     }
     if len(job.takes) > 1:  # several takes: every take's capture (the first is also "capture")
@@ -419,8 +259,8 @@ def resume(
             f"with --force or another --out"
         )
     opt = optimizer_from_state(ck["optimizer_state"])
-    load_stages(job, ck["stages"], path)
-    main = job.stage == "search" or (job.stage in ("done", "profile") and len(job.records) == 1)
+    load_stages(job, ck["stages"], ck, path)
+    main = job.state.stage == "search" or (job.state.stage in ("done", "profile") and len(job.state.records) == 1)
     mine = (
         type(job.opt),
         job.opt.space.state_dict(),
@@ -450,13 +290,9 @@ def resume(
         )
     job.opt = opt
     reopen_search(job)
-    job.elapsed = ck["elapsed"]
-    job.exploded = ck["exploded"]
-    job.finished = False
-    job.cancelled = False
-    job._update_stop()
-    if job.finished:
-        job._finalise()
+    job.update_stop()
+    if job.state.finished:
+        job.finalise()
     return job
 
 

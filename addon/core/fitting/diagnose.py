@@ -149,11 +149,11 @@ def _probes(job, x, f0):
 def _still_improving(job):
     """A description when the main search stopped on its budget while its best still fell by more
     than ``CLEARLY`` over its last fifth, else None."""
-    rec = [r for r in job.records if r["stage"] == "search"]
+    rec = [r for r in job.state.records if r["stage"] == "search"]
     if not rec or rec[0]["stop"] != "budget":
         return None
     n = rec[0]["evaluations"]
-    hist = [(e, f) for e, f in job.history_prev if e <= n and f is not None]
+    hist = [(e, f) for e, f in job.state.history_prev if e <= n and f is not None]
     if len(hist) < 2:
         return None
     before = [f for e, f in hist if e <= 0.8 * n]
@@ -182,7 +182,8 @@ def _start_beside(job, x, obj, e) -> dict:
     cameras and frames it did not see: ``start_train_E_sil_pct``, ``start_heldout_E_sil_pct`` and, when the start
     predicts them as well or better, ``start_note`` (the fit is then no better than what it was given, whatever
     its training error says). {} for a fit without a start, or one that ended on it."""
-    x0, f0 = getattr(job, "start_x", None), getattr(job, "start_f", None)
+    x0 = getattr(job, "start_x", None)  # a take of several (takes.TakeView) has none of its own
+    f0 = None if x0 is None else job.state.start_f
     if x0 is None or f0 is None or not np.isfinite(f0) or np.array_equal(np.asarray(x0), np.asarray(x)):
         return {}
     e0 = float(job.evaluate(np.asarray(x0, dtype=np.float64)[None], objective=obj)[0]) / obj.n_images
@@ -344,7 +345,7 @@ def report_takes(job: FitJob) -> tuple[dict, list[dict]]:
             else None
         )
     d["settings_at_bound"] = settings_at_bound(job.par, job.best_x)
-    alone = (job.alone or {}).get("results") or []
+    alone = (job.state.alone or {}).get("results") or []
     for t, b in zip(job.takes, per):  # what each take reaches searched alone (alone.py), beside its joint error
         r = next((r for r in alone if r["take"] == t.name), None)
         if r is not None and "error" not in b:

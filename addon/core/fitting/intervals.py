@@ -35,7 +35,7 @@ What it cannot see: a search that ended in the wrong basin gets an interval arou
 The intervals describe the neighbourhood of the answer; the result's verdict and floor say whether
 the answer's basin is the one the images ask for.
 
-The stage's whole state is plain numbers (``job.intervals``), written to the checkpoint between any two
+The stage's whole state is plain numbers (``job.state.intervals``), written to the checkpoint between any two
 steps, so a resumed fit reports the same intervals.
 """
 
@@ -148,8 +148,8 @@ def _evaluate(job, st, U):
     U = np.clip(np.atleast_2d(U), 0.0, 1.0)
     f = np.asarray(job.evaluate(job.space.decode(U)), dtype=np.float64)
     f = np.where(np.isfinite(f), f, np.inf)
-    job.exploded += int(np.sum(~np.isfinite(f)))
-    job.done_evals += len(U)
+    job.state.exploded += int(np.sum(~np.isfinite(f)))
+    job.state.done_evals += len(U)
     st["U"] += U.tolist()
     st["F"] += [_finite(v) for v in f]
     return f
@@ -279,9 +279,9 @@ def _phase_sample(job, st):
     F = np.full(k, np.inf)
     if inside.any():  # outside the bounds: no evaluation (its weight is nothing)
         F[inside] = np.asarray(job.evaluate(job.space.decode(U[inside])), dtype=np.float64)
-        job.done_evals += int(np.sum(inside))
+        job.state.done_evals += int(np.sum(inside))
     F = np.where(np.isfinite(F), F, np.inf)
-    job.exploded += int(np.sum(inside & ~np.isfinite(F)))
+    job.state.exploded += int(np.sum(inside & ~np.isfinite(F)))
     st["U"] += U.tolist()
     st["F"] += [_finite(v) for v in F]
     st["round"] += 1
@@ -366,8 +366,8 @@ def _keep_lowest(job, st):
     if k < 0 or not F[k] < st["f0"]:
         return
     x = job.space.decode(np.array(st["U"][k]))
-    job.best_by_quality[job.chosen_quality()] = [float(F[k]), x.tolist()]
-    job.history_prev.append([int(job.done_evals), float(F[k])])
+    job.state.best_by_quality[job.chosen_quality()] = [float(F[k]), x.tolist()]
+    job.state.history_prev.append([int(job.state.done_evals), float(F[k])])
     res = st["result"]
     res["interval_method"]["improved_best"] = {"from": st["f0"], "to": float(F[k])}
     for i, name in enumerate(job.space.names):  # every interval holds the value the result now reports
@@ -378,10 +378,10 @@ def _keep_lowest(job, st):
 
 
 def interval_step(job: FitJob) -> bool:
-    """One batch of the intervals stage (``job.intervals`` holds its state); True once it is done."""
-    if job.intervals is None:
-        job.intervals = start(job)
-    st = job.intervals
+    """One batch of the intervals stage (``job.state.intervals`` holds its state); True once it is done."""
+    if job.state.intervals is None:
+        job.state.intervals = start(job)
+    st = job.state.intervals
     if st["phase"] != "done":
         PHASES[st["phase"]](job, st)
         if st["phase"] == "done":

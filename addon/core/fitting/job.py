@@ -32,7 +32,7 @@ import contextlib
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -40,7 +40,6 @@ from numpy.typing import ArrayLike
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..jsonio import write_json
 from ..observation.floor import resample_ignore, resample_silhouette  # noqa: F401 (also the fit's resampling)
 from ..physics.blender_settings import rate_factor
 from ..physics.models import BlenderModel
@@ -71,6 +70,7 @@ from .parameters import (
 from .quality import Ladder
 from .result import FitResult, job_result
 from .result import finite_or_none as _finite
+from .run_state import RunState
 from .steppable import ask_within
 from .takes import (
     Take,
@@ -177,37 +177,19 @@ class FitJob:
         if self.manip is not None:  # the profile: either side of each offset, its centre, its polish rounds
             k = self.manip.n
             self.profile_reserve = 2 * k + D.PROFILE_JITTER + D.PROFILE_POLISH_ROUNDS * (2 * k + 1)
-        self.intervals = None  # the intervals stage's state (intervals.py), once it has begun
+        self.state = RunState()  # where the fit is: everything a checkpoint saves of its progress (run_state.py)
         self.intervals_note = intervals_plan(self)
         if self.intervals_note is None:  # kept like the profile's: no rung eats into it
             self.profile_reserve += interval_budget(self.space.n)
-        self.alone, self.alone_opt = None, None  # several takes: each take searched alone (alone.py)
+        self.alone_opt = None  # several takes: the running optimiser of each take searched alone (alone.py)
         self.profile_reserve += alone_budget(self)
         reserved += self.profile_reserve
         self.search_end = cfg.max_evaluations - reserved
-        self.opt = self._main_optimizer()
-        self.stage = "search"
-        self.stage_quality = self.start_quality
-        self.stage_end = self.search_end = cfg.max_evaluations - reserved
-        self.done_evals = 0
-        self.records = []  # finished stages
-        self.best_by_quality = {}  # quality (or None) -> [best_f, best_x]
-        self.history_prev = []
-        self.search_stop = None
-        self.profile = None
-        self.polish_rounds = 0  # the profile's polish rounds done (D.PROFILE_POLISH_ROUNDS)
-        self.polish_scale = 1.0  # their step, in profile steps (halved when no step helps)
-        self.final = None
-        self.take_finals = None  # several takes: each take's floor block (diagnose.report_takes)
-        self.start_x = self._start_point()
-        self.start_f = None  # its training error, once evaluated (the fit never ends worse)
+        self.opt = self.main_optimizer()
+        self.state.stage_quality = self.start_quality
+        self.state.stage_end = self.search_end
+        self.start_x = self._start_point()  # the user's own settings, scored first (state.start_f)
         self.started = time.time()
-        self.elapsed = 0.0
-        self.finished = False
-        self.cancelled = False
-        self.error = None
-        self.stop_reason = None
-        self.exploded = self.cut_batches = 0  # cut_batches: last batches cut to the budget (generations too)
 
     # ------------------------------------------------------------- set-up
     def _take_rates(self, cfg) -> list[float]:
@@ -255,13 +237,16 @@ class FitJob:
         """Score candidates outside the optimiser (the start point; a last batch cut to the budget):
         counted, the best kept if it is the best so far. Returns their lowest error (inf if none)."""
         f = self.evaluate(X) if len(X) else np.zeros(0)
-        self.done_evals += len(f)
-        self.exploded += int(np.sum(~np.isfinite(f)))
+        self.state.done_evals += len(f)
+        self.state.exploded += int(np.sum(~np.isfinite(f)))
         g = np.where(np.isfinite(f), f, np.inf)
         i = int(np.argmin(g)) if len(g) else -1
-        have = self.best_by_quality.get(self.stage_quality)
+        have = self.state.best_by_quality.get(self.state.stage_quality)
         if i >= 0 and math.isfinite(g[i]) and (have is None or g[i] < have[0]):
-            self.best_by_quality[self.stage_quality] = [float(g[i]), np.asarray(X[i], dtype=np.float64).tolist()]
+            self.state.best_by_quality[self.state.stage_quality] = [
+                float(g[i]),
+                np.asarray(X[i], dtype=np.float64).tolist(),
+            ]
         return float(g[i]) if i >= 0 else math.inf
 
     def _rung_budget(self) -> int:
@@ -354,7 +339,8 @@ class FitJob:
         """The main search's share of the budget (the rest is kept for the ladder and the profile)."""
         return getattr(self, "search_end", self.config.max_evaluations)
 
-    def _main_optimizer(self):
+    def main_optimizer(self) -> Any:
+        """The main search's optimiser, as configured (a fresh one: the checkpoint's identity names it)."""
         return make_optimizer(self.optimizer_name, self.space, self.config.seed, **self._optimizer_kw())
 
     def rung_optimizer_name(self) -> str:
@@ -400,14 +386,14 @@ class FitJob:
             }
         return make_optimizer("cma-es", self.space, self.config.seed, **kw)
 
-    def _model_at(self, quality):
+    def model_at(self, quality: int | None) -> Any:
         """The parameter set-up's model at ``quality`` (the main one when None)."""
         if quality is None or self.evaluator is not None:
             return self.par.model
         base = self.par.model
         return BlenderModel(base.fps, int(quality), base.bending_model)
 
-    def _activate(self, quality):
+    def activate(self, quality: int | None) -> None:
         """Simulate at ``quality`` from now on: the objective, the settings the result reports."""
         if quality is None:
             return
@@ -437,7 +423,7 @@ class FitJob:
         """Take ``k``'s own training objective at ``quality``, simulated at its own frame rate (kept once built)."""
         key = ("take", k, quality)
         if key not in self._objectives:
-            model = self._model_at(quality)
+            model = self.model_at(quality)
             t = self.takes[k]
             if k and isinstance(model, BlenderModel) and self.evaluator is None:
                 model = BlenderModel(t.fps, model.quality, model.bending_model)
@@ -461,43 +447,43 @@ class FitJob:
     # ---------------------------------------------------------------- state
     @property
     def evaluations(self) -> int:
-        return int(self.done_evals + (self.opt.evaluations if self.stage in ("search", "rung") else 0))
+        return int(self.state.done_evals + (self.opt.evaluations if self.state.stage in ("search", "rung") else 0))
 
     @property
     def generation(self) -> int:
         return int(
-            sum(r["generations"] for r in self.records)
-            + self.cut_batches
-            + (self.opt.generation if self.stage in ("search", "rung") else 0)
+            sum(r["generations"] for r in self.state.records)
+            + self.state.cut_batches
+            + (self.opt.generation if self.state.stage in ("search", "rung") else 0)
         )
 
     @property
     def progress(self) -> float:
-        return 1.0 if self.finished else min(1.0, self.evaluations / max(1, self.config.max_evaluations))
+        return 1.0 if self.state.finished else min(1.0, self.evaluations / max(1, self.config.max_evaluations))
 
     def chosen_quality(self) -> int | None:
         if self.ladder is None:
             return None
         return self.ladder.chosen() if self.ladder.tried else self.start_quality
 
-    def _best(self):
+    def best_point(self) -> tuple[float, np.ndarray | None]:
         """(best_f, best_x) at the chosen quality: the stages' records, or the running search's."""
         q = self.chosen_quality()
-        if q in self.best_by_quality:
-            f, x = self.best_by_quality[q]
+        if q in self.state.best_by_quality:
+            f, x = self.state.best_by_quality[q]
             return float(f), np.asarray(x, dtype=np.float64)
-        if self.stage == "search" and self.opt.best_x is not None:
+        if self.state.stage == "search" and self.opt.best_x is not None:
             return float(self.opt.best_f), np.asarray(self.opt.best_x, dtype=np.float64)
         return float("inf"), None
 
     @property
     def best_error(self) -> float:
         """Best E_all found so far (sum over the training images) at the chosen quality."""
-        return self._best()[0]
+        return self.best_point()[0]
 
     @property
     def best_x(self) -> np.ndarray | None:
-        return self._best()[1]
+        return self.best_point()[1]
 
     @property
     def best_params(self) -> dict[str, float] | None:
@@ -507,105 +493,106 @@ class FitJob:
             return None
         if isinstance(self.par, PaperParameters):
             return self.par.params(x[: self.npar])
-        with self._at_quality(self.chosen_quality()):
+        with self.at_quality(self.chosen_quality()):
             return self.par.settings(x[: self.npar])
 
     @contextlib.contextmanager
-    def _at_quality(self, quality):
-        was = self.stage_quality
+    def at_quality(self, quality: int | None) -> Iterator[None]:
+        was = self.state.stage_quality
         if quality is not None and quality != was:
-            self._activate(quality)
+            self.activate(quality)
         try:
             yield
         finally:
             if quality is not None and quality != was and was is not None:
-                self._activate(was)
+                self.activate(was)
 
     def _track(self):
-        """The running stage's best into ``best_by_quality``."""
-        if self.opt.best_x is None:
-            return
-        q = self.stage_quality
-        have = self.best_by_quality.get(q)
-        if have is None or self.opt.best_f < have[0]:
-            self.best_by_quality[q] = [float(self.opt.best_f), np.asarray(self.opt.best_x, dtype=np.float64).tolist()]
+        """The running stage's best into ``state.best_by_quality``."""
+        if self.opt.best_x is not None:
+            self.state.track(self.state.stage_quality, float(self.opt.best_f), np.asarray(self.opt.best_x))
 
-    def _update_stop(self):
+    def update_stop(self) -> None:
         """After a generation: finish the job, or end the running stage and start the next."""
-        if self.finished:
+        if self.state.finished:
             return
         n_img = self.objective.n_images
-        if self.stage == "search" and self.opt.best_x is None and self.evaluations >= D.FIT_EXPLODED_LIMIT:
-            self.error = (
+        if self.state.stage == "search" and self.opt.best_x is None and self.evaluations >= D.FIT_EXPLODED_LIMIT:
+            self.state.error = (
                 f"every one of the {self.evaluations} candidates tried made the simulation explode or "
                 f"fail: check the capture's scenario (settle_time, gravity, cloth size) and the bounds"
             )
-            self.stop_reason = "error"
+            self.state.stop_reason = "error"
         elif self.config.target_error is not None and self.best_error / n_img <= self.config.target_error:
-            self.stop_reason = "target"
-        elif self.stage in ("search", "rung") and (self.opt.stopped or self.evaluations >= self.stage_end):
+            self.state.stop_reason = "target"
+        elif self.state.stage in ("search", "rung") and (self.opt.stopped or self.evaluations >= self.state.stage_end):
             self._next_stage()
-        elif self.stage == "done" or (
-            self.evaluations >= self.config.max_evaluations and self.stage not in ("profile", "alone", "intervals")
+        elif self.state.stage == "done" or (
+            self.evaluations >= self.config.max_evaluations
+            and self.state.stage not in ("profile", "alone", "intervals")
         ):
             self._next_stage()
-        self.finished = self.stop_reason is not None
+        self.state.finished = self.state.stop_reason is not None
 
     def _end_running(self):
-        if self.stage in ("search", "rung"):
+        s = self.state
+        if s.stage in ("search", "rung"):
             self._track()
-            self.records.append(
-                {
-                    "stage": self.stage,
-                    "quality": self.stage_quality,
-                    "evaluations": int(self.opt.evaluations),
-                    "generations": int(self.opt.generation),
-                    "best_f": _finite(self.opt.best_f) if self.opt.best_x is not None else None,
-                    "stop": "converged" if self.opt.stopped else "budget",
-                }
-            )
-            self.history_prev += [[int(a) + self.done_evals, b] for a, b in self._opt_history()]
-            self.done_evals += int(self.opt.evaluations)
-            if self.stage == "search":
-                self.search_stop = "converged" if self.opt.stopped else "budget"
-            if self.ladder is not None and self.stage_quality in self.best_by_quality:
-                self.ladder.record(self.stage_quality, self.best_by_quality[self.stage_quality][0])
+            record = {
+                "stage": s.stage,
+                "quality": s.stage_quality,
+                "evaluations": int(self.opt.evaluations),
+                "generations": int(self.opt.generation),
+                "best_f": _finite(self.opt.best_f) if self.opt.best_x is not None else None,
+                "stop": "converged" if self.opt.stopped else "budget",
+            }
+            s.end_stage(record, self.opt_history(), self.opt.evaluations)
+            if self.ladder is not None and s.stage_quality in s.best_by_quality:
+                self.ladder.record(s.stage_quality, s.best_by_quality[s.stage_quality][0])
 
     def _next_stage(self):
         """End the running stage; start a rung, the profile, the intervals, each take alone, or finish."""
         self._end_running()
-        left = self.config.max_evaluations - self.done_evals - self.profile_reserve  # the profile's kept
-        if self.stage in ("search", "rung") and self.ladder is not None and self.best_by_quality:
+        left = self.config.max_evaluations - self.state.done_evals - self.profile_reserve  # the profile's kept
+        if self.state.stage in ("search", "rung") and self.ladder is not None and self.state.best_by_quality:
             q = self.ladder.next()
             rung = self._rung_budget()
             if q is not None and left >= max(1, rung // 2):  # the search's last generation may eat into a rung
-                f, x = self.best_by_quality[self.chosen_quality()]
-                self.stage, self.stage_quality = "rung", q
-                self._activate(q)
+                f, x = self.state.best_by_quality[self.chosen_quality()]
+                self.state.stage, self.state.stage_quality = "rung", q
+                self.activate(q)
                 self.opt = self._rung_optimizer(x)
-                self.stage_end = self.done_evals + min(rung, left)
+                self.state.stage_end = self.state.done_evals + min(rung, left)
                 return
-        if self.stage in ("search", "rung") and self.manip is not None and self.best_by_quality:
-            self.stage = "profile"
-            self._activate(self.chosen_quality())
-            self.stage_quality = self.chosen_quality()
+        if self.state.stage in ("search", "rung") and self.manip is not None and self.state.best_by_quality:
+            self.state.stage = "profile"
+            self.activate(self.chosen_quality())
+            self.state.stage_quality = self.chosen_quality()
             return
-        if self.stage in ("search", "rung", "profile") and self.intervals_note is None and self.best_by_quality:
-            self.stage = "intervals"
-            self._activate(self.chosen_quality())
-            self.stage_quality = self.chosen_quality()
+        if (
+            self.state.stage in ("search", "rung", "profile")
+            and self.intervals_note is None
+            and self.state.best_by_quality
+        ):
+            self.state.stage = "intervals"
+            self.activate(self.chosen_quality())
+            self.state.stage_quality = self.chosen_quality()
             return
         # several takes: each take alone from the final best point (the intervals may have moved it)
-        if self.stage in ("search", "rung", "profile", "intervals") and alone_budget(self) and self.best_by_quality:
-            self.stage = "alone"
-            self._activate(self.chosen_quality())
-            self.stage_quality = self.chosen_quality()
+        if (
+            self.state.stage in ("search", "rung", "profile", "intervals")
+            and alone_budget(self)
+            and self.state.best_by_quality
+        ):
+            self.state.stage = "alone"
+            self.activate(self.chosen_quality())
+            self.state.stage_quality = self.chosen_quality()
             return
-        self.stage = "done"
+        self.state.stage = "done"
         if self.chosen_quality() is not None:
-            self._activate(self.chosen_quality())
-            self.stage_quality = self.chosen_quality()
-        self.stop_reason = self.search_stop or "budget"
+            self.activate(self.chosen_quality())
+            self.state.stage_quality = self.chosen_quality()
+        self.state.stop_reason = self.state.search_stop or "budget"
 
     def end_profile(self) -> None:
         """The profile is over: the intervals stage next, or the end."""
@@ -615,44 +602,48 @@ class FitJob:
         """The "profile" stage's step: a polish round of the offsets or their profile (``offset_profile.profile_step``)."""
         profile_step(self)
 
-    def _opt_history(self):
+    def opt_history(self) -> list[list]:
+        """The running optimiser's [evaluations, best error] steps (None for an error that is not finite)."""
         return [[int(a), float(b) if math.isfinite(b) else None] for a, b in self.opt.history]
 
     def step(self) -> bool:
         """Run one generation. Returns False once the job is finished (converged, budget, target,
         cancelled or failed)."""
-        if self.finished:
+        if self.state.finished:
             return False
         t0 = time.time()
-        if self.stage == "profile":
+        if self.state.stage == "profile":
             self._profile_step()
-        elif self.stage == "intervals":
+        elif self.state.stage == "intervals":
             if interval_step(self):
                 self._next_stage()
-        elif self.stage == "alone":
+        elif self.state.stage == "alone":
             if alone_step(self):
                 self._next_stage()
-        elif self.stage == "search" and self.start_x is not None and self.start_f is None:
-            self.start_f = self._score_aside(self.start_x[None])
-        elif self.stage in ("search", "rung"):  # never past the stage's budget (unless it left none for a first best)
-            left = self.stage_end - self.evaluations
+        elif self.state.stage == "search" and self.start_x is not None and self.state.start_f is None:
+            self.state.start_f = self._score_aside(self.start_x[None])
+        elif self.state.stage in (
+            "search",
+            "rung",
+        ):  # never past the stage's budget (unless it left none for a first best)
+            left = self.state.stage_end - self.evaluations
             left = math.inf if left <= 0 and self.best_x is None else left
             self.opt, X, whole = ask_within(self.opt, left)
             if whole:
                 f = self.evaluate(X)
-                self.exploded += int(np.sum(~np.isfinite(f)))
+                self.state.exploded += int(np.sum(~np.isfinite(f)))
                 self.opt.tell(X, f)
                 self._track()
             else:  # the budget's last batch, cut to what is left: scored aside, and the stage ends
                 self._score_aside(X)
-                self.stage_end, self.cut_batches = self.evaluations, self.cut_batches + 1
-        self.elapsed += time.time() - t0
-        self._update_stop()
-        if self.finished:
-            self._finalise()
-        if self.checkpoint and (self.finished or time.monotonic() - self._last_save >= self.checkpoint_interval):
+                self.state.stage_end, self.state.cut_batches = self.evaluations, self.state.cut_batches + 1
+        self.state.elapsed += time.time() - t0
+        self.update_stop()
+        if self.state.finished:
+            self.finalise()
+        if self.checkpoint and (self.state.finished or time.monotonic() - self._last_save >= self.checkpoint_interval):
             self.save_checkpoint(self.checkpoint)
-        return not self.finished
+        return not self.state.finished
 
     def run(self, callback: Callable[[FitJob], Any] | None = None) -> FitResult:
         try:
@@ -668,36 +659,36 @@ class FitJob:
             raise
         return self.result()
 
-    def _finalise(self):
+    def finalise(self) -> None:
         """Once, at the end: the errors beside the noise floor (``diagnose.report``)."""
-        if self.final is not None or self.error or self.best_x is None:
+        if self.state.final is not None or self.state.error or self.best_x is None:
             return
         from .diagnose import report, report_takes
 
         try:
             if len(self.takes) == 1:
-                self.final = report(self)
+                self.state.final = report(self)
             else:
-                self.final, self.take_finals = report_takes(self)
+                self.state.final, self.state.take_finals = report_takes(self)
         except ClothFitError as e:  # never a reason to lose the result
-            self.final = {"error": str(e)}
+            self.state.final = {"error": str(e)}
 
     def cancel(self) -> None:
         """Stop; the best result so far is kept (and written to the checkpoint)."""
-        self.cancelled = True
-        if not self.finished:
-            self.stop_reason = "cancelled"
-        self.finished = True
-        if self.stage in ("search", "rung"):
+        self.state.cancelled = True
+        if not self.state.finished:
+            self.state.stop_reason = "cancelled"
+        self.state.finished = True
+        if self.state.stage in ("search", "rung"):
             self._track()
         if self.checkpoint:
             self.save_checkpoint(self.checkpoint)
 
     def fail(self, message: str) -> None:
         """Stop because of an error; the best so far is kept (and written to the checkpoint)."""
-        self.error = str(message)
-        self.stop_reason = "error"
-        self.finished = True
+        self.state.error = str(message)
+        self.state.stop_reason = "error"
+        self.state.finished = True
         if self.checkpoint:
             with contextlib.suppress(ClothFitError):
                 self.save_checkpoint(self.checkpoint)
@@ -739,11 +730,3 @@ class FitJob:
         naming the differing fields; only the budget and the target may differ). ``evaluator``: the workers
         of a Blender-scene fit."""
         return checkpoint.resume(cls, FitConfig, path, capture, config, checkpoint_interval, evaluator)
-
-
-def atomic_json(path: str | os.PathLike, obj: Any) -> None:
-    """Results: strict JSON (no NaN), written atomically (``jsonio.write_json``)."""
-    write_json(path, obj, strict=True)
-
-
-_atomic_json = atomic_json  # the CLI's name for it

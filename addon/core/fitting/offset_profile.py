@@ -33,9 +33,9 @@ def polish_round(
     S = steps.copy()
     S[:, job.npar :] = np.clip(S[:, job.npar :], lo, hi)
     f = job.evaluate(S)
-    job.exploded += int(np.sum(~np.isfinite(f)))
-    job.done_evals += 2 * k
-    job.polish_rounds += 1
+    job.state.exploded += int(np.sum(~np.isfinite(f)))
+    job.state.done_evals += 2 * k
+    job.state.polish_rounds += 1
     g = np.where(np.isfinite(f), f, np.inf)
     if not np.min(g) < f0:
         return False, (f if np.array_equal(S, steps) else None)
@@ -44,11 +44,11 @@ def polish_round(
         if min(g[2 * i], g[2 * i + 1]) < f0:
             xc[job.npar + i] = S[2 * i if g[2 * i] < g[2 * i + 1] else 2 * i + 1, job.npar + i]
     fc = float(job.evaluate(xc[None])[0])
-    job.done_evals += 1
+    job.state.done_evals += 1
     j = int(np.argmin(g))
     fb, xb = (fc, xc) if math.isfinite(fc) and fc < g[j] else (float(g[j]), S[j].copy())
-    job.best_by_quality[job.chosen_quality()] = [float(fb), np.asarray(xb, dtype=np.float64).tolist()]
-    job.history_prev.append([int(job.done_evals), float(fb)])
+    job.state.best_by_quality[job.chosen_quality()] = [float(fb), np.asarray(xb, dtype=np.float64).tolist()]
+    job.state.history_prev.append([int(job.state.done_evals), float(fb)])
     return True, None
 
 
@@ -62,7 +62,7 @@ def profile_step(job: FitJob) -> None:
     is the offset at which the quadratic through the three points rises by ``PROFILE_RISE`` of the error
     or by ``PROFILE_JITTER_SIGMAS`` of the jitter's spread, whichever is more: a rise within the
     objective's own jitter tells nothing."""
-    f0, x0 = job._best()
+    f0, x0 = job.best_point()
     names = job.manip.names
     lo = np.array([job.manip.bounds[n][0] for n in names])
     bounds = np.array([job.manip.bounds[n][1] for n in names])
@@ -74,14 +74,14 @@ def profile_step(job: FitJob) -> None:
         X[2 * i, job.npar + i] += h[i]
         X[2 * i + 1, job.npar + i] -= h[i]
     f_steps = None
-    if job.polish_rounds < D.PROFILE_POLISH_ROUNDS:
-        scale = job.polish_scale
+    if job.state.polish_rounds < D.PROFILE_POLISH_ROUNDS:
+        scale = job.state.polish_scale
         steps = X[: 2 * k] if scale == 1.0 else x0 + scale * (X[: 2 * k] - x0)
         moved, f_steps = polish_round(job, f0, x0, steps, lo, bounds)
         if moved:
             return
         if scale > D.PROFILE_POLISH_FINEST:  # no step of this size helps: a finer one next round
-            job.polish_scale = scale / 2
+            job.state.polish_scale = scale / 2
             return
         f_steps = f_steps if scale == 1.0 else None  # the profile's own points only at the profile's step
     signs = np.random.default_rng(D.PROFILE_JITTER_SEED).choice([-1.0, 1.0], size=(J, len(x0)))
@@ -89,8 +89,8 @@ def profile_step(job: FitJob) -> None:
     X[2 * k :] += signs * tiny
     todo = X if f_steps is None else X[2 * k :]  # the steps' errors, when the last polish round has them
     f = job.evaluate(todo)
-    job.exploded += int(np.sum(~np.isfinite(f)))
-    job.done_evals += len(todo)
+    job.state.exploded += int(np.sum(~np.isfinite(f)))
+    job.state.done_evals += len(todo)
     if f_steps is not None:
         f = np.concatenate([f_steps, f])
     fj = f[2 * k :][np.isfinite(f[2 * k :])]
@@ -113,5 +113,5 @@ def profile_step(job: FitJob) -> None:
             "uncertainty": unc,
             "separated": unc is not None and unc < bounds[i],
         }
-    job.profile = prof
+    job.state.profile = prof
     job.end_profile()

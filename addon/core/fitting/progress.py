@@ -48,7 +48,7 @@ def progress_line(job: Any, seconds: float, rate: float) -> str:
     best = job.best_error
     err = f"{100 * best / job.objective.n_images:.3f} %" if math.isfinite(best) else "none yet"
     settings = " ".join(f"{k} {v:.4g}" for k, v in free_settings(job).items())
-    left = 0.0 if job.finished else (budget - n) / rate if rate > 0 else math.nan
+    left = 0.0 if job.state.finished else (budget - n) / rate if rate > 0 else math.nan
     text = f"{n}/{budget} evaluations, E_sil {err}, {duration_text(seconds)} spent, {duration_text(left)} left"
     return text + (f": {settings}" if settings else "")
 

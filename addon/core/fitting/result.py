@@ -33,7 +33,7 @@ from .verdict import settings_at_bound, verdict
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..physics.models import BlenderModel, PaperModel
+    from ..physics.models import BlenderModel, ClothModel
     from .job import FitJob
 
 RESULT_FORMAT = "silhouette-cloth-fit/result"
@@ -154,9 +154,7 @@ class FitResult(dict):
         """The manipulation the fit estimated: ``time_offset_s``, ``handles`` and ``time_scale`` where given."""
         return {k: self[k] for k in ("time_offset_s", "handles", "time_scale") if self.get(k) is not None}
 
-    def replay(
-        self, default_model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None
-    ) -> tuple[PaperModel | BlenderModel | Any, np.ndarray]:
+    def replay(self, default_model: str | dict[str, Any] | ClothModel | None = None) -> tuple[ClothModel, np.ndarray]:
         """(model, parameter row) that replays the fit (``physics.models.model_and_row``)."""
         from ..physics.models import model_and_row
 
@@ -245,8 +243,8 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
     the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``)."""
     bp = job.best_params
     n_img = job.objective.n_images
-    history = job.history_prev + (
-        [[a + job.done_evals, b] for a, b in job._opt_history()] if job.stage in ("search", "rung") else []
+    history = job.state.history_prev + (
+        [[a + job.state.done_evals, b] for a, b in job.opt_history()] if job.state.stage in ("search", "rung") else []
     )
     res = {
         "format": RESULT_FORMAT,
@@ -263,31 +261,33 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
         "evaluations": job.evaluations,
         "generations": job.generation,
         "max_evaluations": job.config.max_evaluations,
-        "stop_reason": job.stop_reason,
+        "stop_reason": job.state.stop_reason,
         "converged_by": list(
             getattr(job.opt, "run_stops", None)
             or ([job.opt.stop_reason] if getattr(job.opt, "stop_reason", None) else [])
         ),
-        "exploded_candidates": job.exploded,
+        "exploded_candidates": job.state.exploded,
         "best_E_all": finite_or_none(job.best_error),
         "best_E_sil_mean_pct": finite_or_none(100.0 * job.best_error / n_img),
         "n_train_images": n_img,
-        "model": job._model_at(job.chosen_quality()).to_dict(),
+        "model": job.model_at(job.chosen_quality()).to_dict(),
         "params": bp if paper else None,
         "identifiable": identifiable(bp) if bp and paper else None,
         "mass_source": job.m_source,
         "note": job.par.note,
-        "finished": job.finished,
-        "cancelled": job.cancelled,
-        "error": job.error,
-        "elapsed_s": job.elapsed,
+        "finished": job.state.finished,
+        "cancelled": job.state.cancelled,
+        "error": job.state.error,
+        "elapsed_s": job.state.elapsed,
         "backend": job.objective.backend,
-        "stages": job.records,
-        "start_E_sil_mean_pct": None if job.start_f is None else finite_or_none(100.0 * job.start_f / n_img),
+        "stages": job.state.records,
+        "start_E_sil_mean_pct": None
+        if job.state.start_f is None
+        else finite_or_none(100.0 * job.state.start_f / n_img),
         "history": history,
     }
     if bp and not paper:
-        with job._at_quality(job.chosen_quality()):
+        with job.at_quality(job.chosen_quality()):
             res.update(job.par.describe(job.best_x[: job.npar]))
             if job.start_x is not None:  # what the fit was given (verdict ``start_better``: keep them)
                 res["start_settings"] = job.par.describe(job.start_x[: job.npar]).get("blender_cloth")
@@ -302,7 +302,7 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
         res["collision_settings"] = cols.settings_dict()
     if len(job.takes) > 1:
         res["takes"] = job.take_entries()
-    st = job.intervals
+    st = job.state.intervals
     if st is not None and st.get("result"):
         res.update(st["result"])
     else:
@@ -312,8 +312,8 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
     if bp:  # the free settings at their search bounds, then the offsets at theirs (manipulation's at_bound)
         res["settings_at_bound"] = settings_at_bound(job.par, job.best_x)
         res["at_bound"] = list(res["settings_at_bound"]) + list(res.get("at_bound") or [])
-    if job.final is not None:
-        res["floor"] = job.final
+    if job.state.final is not None:
+        res["floor"] = job.state.final
         caveat = uncertainty_caveat(res)
         if caveat:
             res["uncertainty_caveat"] = caveat
@@ -321,7 +321,7 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
     if job.evaluator is not None:
         res["raster_backend"] = res["backend"]
         res.update(job.evaluator.describe())
-        res["seconds"] = job.elapsed
+        res["seconds"] = job.state.elapsed
     gt = (job.capture.meta or {}).get("true_params")
     if gt and bp and paper:
         # the capture's own record of its truth: free-form metadata, never a reason to lose the result

@@ -23,6 +23,7 @@ import hashlib
 import math
 import os
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -277,7 +278,6 @@ class TakeView:
         self.train_cameras, self.train_frames, self.train_times = t.train_cameras, t.train_frames, t.train_times
         self.scenario, self.manip, self.manip_note = t.scenario, t.manip, t.manip_note
         self.npar, self.ladder = job.npar, job.ladder
-        self.records, self.history_prev = job.records, job.history_prev
         self.par = TakeParameters(job.par, job.take_scales[k])
         x = job.best_x
         self.best_x = None
@@ -287,8 +287,9 @@ class TakeView:
         self.objective = self.objective_at(job.chosen_quality())
         self._best_error = None
         prefix = f"{t.name}{TAKE_SEP}"
-        prof = job.profile
-        self.profile = None if prof is None or t.manip is None else {n: prof[prefix + n] for n in t.manip.names}
+        prof = job.state.profile
+        own = None if prof is None or t.manip is None else {n: prof[prefix + n] for n in t.manip.names}
+        self.state = replace(job.state, profile=own)  # the fit's progress, with this take's part of the profile
 
     @property
     def best_error(self) -> float:
@@ -329,7 +330,7 @@ def manipulation_result(fit: Any) -> dict:
     m = np.array(x[npar:], dtype=np.float64)
     spread = None
     notes = [fit.manip_note] if fit.manip_note else []
-    prof = fit.profile or {}
+    prof = fit.state.profile or {}
 
     def falls_outward(n):  # the profile's error still falls beyond the bound, on the value's side
         p = prof.get(n)
@@ -349,9 +350,9 @@ def manipulation_result(fit: Any) -> dict:
         n for n in near if (n in at and (prof.get(n) or {}).get("separated", True)) or n in pressed or falls_outward(n)
     ]
     flat = []
-    if fit.profile is not None:
-        spread = [fit.profile[n]["uncertainty"] for n in manip.names]
-        flat = [n for n in manip.names if not fit.profile[n]["separated"] and n not in edge]
+    if fit.state.profile is not None:
+        spread = [fit.state.profile[n]["uncertainty"] for n in manip.names]
+        flat = [n for n in manip.names if not fit.state.profile[n]["separated"] and n not in edge]
         if flat:
             # the settings were fitted with these values: a replay with the capture's own (as this fit did
             # before) scored other settings than the fit's, on the released corner often much worse
@@ -385,9 +386,9 @@ def manipulation_result(fit: Any) -> dict:
     )
     if rel:
         d["release_instants"] = rel
-    if fit.profile is None:
+    if fit.state.profile is None:
         notes.append("uncertainties not estimated (the fit stopped before its profile)")
-    d["manipulation_profile"] = fit.profile
+    d["manipulation_profile"] = fit.state.profile
     if notes:
         d["manipulation_note"] = "; ".join(notes)
     return d
@@ -411,8 +412,8 @@ def takes_entries(job: Any) -> list[dict]:
         }
         if job.best_x is not None:
             e.update(manipulation_result(TakeView(job, k)))
-        if job.take_finals is not None:
-            e["floor"] = fl = job.take_finals[k]
+        if job.state.take_finals is not None:
+            e["floor"] = fl = job.state.take_finals[k]
             e["train_E_sil_pct"] = fl.get("train_E_sil_pct")
             e["heldout_E_sil_pct"] = fl.get("heldout_E_sil_pct")
             e["alone_E_sil_pct"] = fl.get("alone_E_sil_pct")

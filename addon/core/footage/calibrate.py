@@ -355,7 +355,7 @@ def write_outputs(
     """Write the cameras JSON (ours, with the calibration's summary), and optionally an export
     (``calib_io.export_cameras``) and the full report. Every destination is checked before the first
     file is written; each file is written atomically."""
-    from ..safeio import atomic_json
+    from ..jsonio import write_json
     from .calib_io import FORMATS, export_cameras
 
     dests = [p for p in (out, export, report_path) if p]
@@ -379,7 +379,7 @@ def write_outputs(
         export_cameras(result.cameras, export, fmt)
         written["export"] = export
     if report_path:
-        atomic_json(report_path, result.report)
+        write_json(report_path, result.report)
         written["report"] = report_path
     return written
 

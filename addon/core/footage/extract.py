@@ -35,8 +35,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import ClothFitError
+from ..jsonio import write_json
 from ..observation.camera import check_camera_name
-from ..safeio import atomic_json
 from .silhouette import (  # noqa: F401
     MIN_AUTO_THRESHOLD,
     THRESHOLD_MODES,
@@ -503,7 +503,7 @@ def _write_result(
         allow_empty=opts.allow_empty,
         uncertain=uncertain,
     )
-    atomic_json(os.path.join(out_dir, REPORT_JSON), report)
+    write_json(os.path.join(out_dir, REPORT_JSON), report)
     return report
 
 

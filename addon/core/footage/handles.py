@@ -355,7 +355,7 @@ def _measure_handle(k, h, cams, tracks, tri0s, times, opts: HandleOptions, warni
 def write_scenario(path: str, result: dict[str, Any], inputs: Iterable[str | None] = ()) -> dict[str, Any]:
     """The scenario file ``clothfit extract --scenario`` reads: ``{"format", "version", "scenario",
     "uncertain", "report"}``, written atomically; refuses to overwrite one of ``inputs``."""
-    from ..safeio import atomic_json
+    from ..jsonio import write_json
 
     real = os.path.realpath(path)
     for p in inputs:
@@ -370,7 +370,7 @@ def write_scenario(path: str, result: dict[str, Any], inputs: Iterable[str | Non
         "uncertain": result["uncertain"].to_dict(),
         "report": result["report"],
     }
-    atomic_json(path, d)
+    write_json(path, d)
     return d
 
 

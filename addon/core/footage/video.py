@@ -331,9 +331,9 @@ def flash_sync(
             )
         sync[name] = flash_time_of(Video(p)) - float(flash_time)
     if out_path:
-        from ..safeio import atomic_json
+        from ..jsonio import write_json
 
-        atomic_json(out_path, sync)
+        write_json(out_path, sync)
     return sync
 
 

@@ -298,9 +298,9 @@ def save_cameras(path: str, cameras: Iterable[Camera], extra: dict | None = None
     }
     if extra:
         d.update(extra)
-    from ..safeio import atomic_json
+    from ..jsonio import write_json
 
-    atomic_json(path, d)
+    write_json(path, d)
 
 
 def load_cameras(path: str) -> list[Camera]:

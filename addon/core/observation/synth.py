@@ -16,7 +16,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from ..physics import blender as B
 from ..physics.handling import handling_scenario
-from ..physics.models import BlenderModel, PaperModel, get_model, simulate
+from ..physics.models import BlenderModel, ClothModel, PaperModel, get_model, simulate
 from ..physics.paper import Params
 from ..physics.scenario import Scenario
 from .camera import Camera, load_rig
@@ -40,7 +40,7 @@ def synth_capture(
     scenario: Scenario | None = None,
     cameras: Sequence[Camera] | None = None,
     truth_dt_safety: float = D.TRUTH_DT_SAFETY,
-    model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None,
+    model: str | dict[str, Any] | ClothModel | None = None,
     handling: str | None = None,
 ) -> Capture:
     """Simulate ``params`` on ``scenario`` (default: the paper's) with ``model`` (default: the paper's

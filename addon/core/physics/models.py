@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -40,6 +40,24 @@ def _backend(backend: str) -> str:
     if backend == "numba" and not jit.available():
         raise ClothFitError("the numba backend was asked for but numba is not importable")
     return backend
+
+
+@runtime_checkable
+class ClothModel(Protocol):
+    """What a fit asks of a cloth model: ``PaperModel``, ``BlenderModel``, or a model-like evaluator (Blender's
+    own solver on a user's scene, ``farm.scene.BlendSceneEvaluator``). ``name``: "paper" or "blender";
+    ``row_names``: the values of a parameter row, in order; ``to_dict``: what a result and a checkpoint record
+    of it (``get_model`` builds the model back from it); ``simulate``: a population of rows on a scenario,
+    each candidate with its own manipulation (``offsets``) or the scenario's."""
+
+    name: str
+    row_names: tuple[str, ...]
+
+    def to_dict(self) -> dict: ...
+
+    def simulate(
+        self, scenario: Scenario, rows: ArrayLike, backend: str = "auto", offsets: Offsets | None = None
+    ) -> SimResult: ...
 
 
 class PaperModel:
@@ -259,14 +277,13 @@ def _each(rows, offsets: Offsets, simulate_one, scenario: Scenario) -> SimResult
     )
 
 
-def get_model(spec: str | dict[str, Any] | PaperModel | BlenderModel | Any = None) -> PaperModel | BlenderModel | Any:
-    """A model from a name ("paper", "blender") or a ``to_dict()``; None = the paper model."""
+def get_model(spec: str | dict[str, Any] | ClothModel | None = None) -> ClothModel:
+    """A model from a name ("paper", "blender") or a ``to_dict()``; None = the paper model; a model (or a
+    model-like evaluator, e.g. Blender's workers on a scene) is returned as it is."""
     if spec is None:
         return PaperModel()
-    if isinstance(spec, (PaperModel, BlenderModel)):
+    if isinstance(spec, ClothModel) and callable(spec.simulate):
         return spec
-    if callable(getattr(spec, "simulate", None)) and hasattr(spec, "row_names"):
-        return spec  # a model-like evaluator (e.g. Blender workers on a scene)
     if isinstance(spec, str):
         spec = {"name": spec}
     if not isinstance(spec, dict) or "name" not in spec:
@@ -287,8 +304,8 @@ def get_model(spec: str | dict[str, Any] | PaperModel | BlenderModel | Any = Non
 
 
 def model_and_row(
-    res: dict[str, Any], default_model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None
-) -> tuple[PaperModel | BlenderModel | Any, np.ndarray]:
+    res: dict[str, Any], default_model: str | dict[str, Any] | ClothModel | None = None
+) -> tuple[ClothModel, np.ndarray]:
     """(model, one parameter row) to replay ``res``: a fit result (its ``model``, ``blender_cloth``,
     ``blender_scene`` or ``params``), a paper parameter object (m, k, l, d) or an object of
     ClothSettings values (for ``default_model``'s frame rate, else Blender's default 24 fps)."""
@@ -328,7 +345,7 @@ def simulate(
     params: Params | dict[str, float] | ArrayLike | Iterable[Params | dict[str, float]],
     backend: str = "auto",
     safety: float = D.DT_SAFETY,
-    model: str | dict[str, Any] | PaperModel | BlenderModel | Any = None,
+    model: str | dict[str, Any] | ClothModel | None = None,
 ) -> SimResult:
     """Simulate a population of ``model`` (default: the paper's sheet, rows (m, k, l, d)).
     ``safety`` scales the paper model's time step (``dt <= safety * sqrt(m/k)``); synthetic ground

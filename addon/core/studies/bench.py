@@ -245,7 +245,7 @@ def _bench_fit(out, cap, train, evals, progress=None):
             job.save_checkpoint(ck)
         out["checkpoint_ms"] = 1000 * (time.perf_counter() - t0) / 20
         out["checkpoint_bytes"] = os.path.getsize(ck)
-    out["fit"]["stop_reason"] = job.stop_reason
+    out["fit"]["stop_reason"] = job.state.stop_reason
     print(
         f"checkpoint: {out['checkpoint_ms']:.1f} ms per write ({out['checkpoint_bytes']} bytes, after "
         f"{job.generation} generations; written at most every {D.CHECKPOINT_INTERVAL_S:g} s by the CLI)",

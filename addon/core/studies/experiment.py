@@ -303,9 +303,9 @@ def _fmt_id(e):
 
 
 def _dump(path, obj):
-    from ..safeio import atomic_json
+    from ..jsonio import write_json
 
-    atomic_json(path, obj)
+    write_json(path, obj)
 
 
 def format_tables(out: dict[str, Any]) -> str:

@@ -145,7 +145,7 @@ def run(
         echo(format_table(t))
         out.append(t)
     if json_path:
-        from ..safeio import atomic_json
+        from ..jsonio import write_json
 
-        atomic_json(json_path, out)
+        write_json(json_path, out)
     return out

@@ -193,7 +193,7 @@ def run_occlusion(
             f"{fb['shape_error_mm']:<9.3f} {row['ratio_ignore']:>9.3f} / {row['ratio_background']:<9.3f}"
         )
     if json_path:
-        from ..safeio import atomic_json
+        from ..jsonio import write_json
 
-        atomic_json(json_path, res)
+        write_json(json_path, res)
     return res
