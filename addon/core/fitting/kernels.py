@@ -6,11 +6,39 @@ positions, one candidate per thread.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..observation.silhouette_kernels import eval_frames
 from ..physics.jit import JIT, PARALLEL, njit, prange
 from ..physics.paper_kernels import simulate_one
+
+
+class Views(NamedTuple):
+    """The training images as the scoring kernels read them (``objective.SilhouetteObjective``): each
+    camera's K, R, t, distortion (5), height and width; per image the observed silhouette's row prefix sums
+    inside its bounding box (``pre``, offsets ``pofs``, boxes ``bbs``) and the ignore mask's (``ipre``,
+    ``ipofs``, ``ibbs``); the silhouettes' areas (C, F); the mesh's triangles; the largest image and the
+    row spans a thread's scratch holds."""
+
+    Ks: np.ndarray
+    Rs: np.ndarray
+    ts: np.ndarray
+    dists: np.ndarray
+    Hs: np.ndarray
+    Ws: np.ndarray
+    pre: np.ndarray
+    pofs: np.ndarray
+    bbs: np.ndarray
+    ipre: np.ndarray
+    ipofs: np.ndarray
+    ibbs: np.ndarray
+    areas: np.ndarray
+    tris: np.ndarray
+    max_h: int
+    max_w: int
+    span_cap: int
 
 
 @njit(**JIT)
@@ -32,51 +60,30 @@ def work_buffers(span_cap, max_h, max_w):
 
 
 @njit(**PARALLEL)
-def objective_population(
-    P,
-    nx,
-    ny,
-    rest,
-    springs,
-    rest_factor,
-    hv,
-    key_start,
-    key_times,
-    key_pos,
-    release,
-    events,
-    n_events,
-    frame_of_event,
-    n_frames,
-    gravity,
-    settle_rate,
-    safety,
-    centre,
-    limit,
-    max_strain,
-    max_steps,
-    Ks,
-    Rs,
-    ts,
-    dists,
-    Hs,
-    Ws,
-    pre,
-    pofs,
-    bbs,
-    ipre,
-    ipofs,
-    ibbs,
-    areas,
-    tris,
-    max_h,
-    max_w,
-    span_cap,
-    esil,
-    codes,
-):
+def objective_population(P, sheet, moves, views, esil, codes):
     """Simulate and score every candidate (its own key positions and events, as
     ``paper_kernels.population_arrays`` gives them): esil[p, c, f]; codes[p] != 0 = exploded."""
+    (
+        nx,
+        ny,
+        rest,
+        springs,
+        rest_factor,
+        hv,
+        key_start,
+        key_times,
+        release,
+        n_frames,
+        gravity,
+        settle_rate,
+        safety,
+        centre,
+        limit,
+        max_strain,
+        max_steps,
+    ) = sheet
+    key_pos, events, n_events, frame_of_event = moves
+    Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, max_h, max_w, span_cap = views
     V = rest.shape[0]
     for p in prange(P.shape[0]):
         X = np.zeros((n_frames, V, 3))
@@ -113,10 +120,9 @@ def objective_population(
 
 
 @njit(**PARALLEL)
-def score_population(
-    X, ok, Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, max_h, max_w, span_cap, esil
-):
+def score_population(X, ok, views, esil):
     """esil[p, c, f] for the positions X (P, F, V, 3) of every candidate with ok[p]."""
+    Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, max_h, max_w, span_cap = views
     for p in prange(X.shape[0]):
         if not ok[p]:
             continue

@@ -113,6 +113,28 @@ class SilhouetteObjective:
             self._tris = np.ascontiguousarray(self._mesh_triangles(), dtype=np.int64)
             self._span_cap = int(self._tris.shape[0] * (self._maxh + 1))
 
+    def _views(self):
+        """The training images as the scoring kernels take them (``kernels.Views``)."""
+        return kernels.Views(
+            self._Ks,
+            self._Rs,
+            self._ts,
+            self._dists,
+            self._Hs,
+            self._Ws,
+            self._pre,
+            self._pofs,
+            self._bbs,
+            self._ipre,
+            self._ipofs,
+            self._ibbs,
+            self.areas,
+            self._tris,
+            self._maxh,
+            self._maxw,
+            self._span_cap,
+        )
+
     @property
     def n_images(self) -> int:
         return int(self.areas.size)
@@ -131,30 +153,10 @@ class SilhouetteObjective:
         if self.backend == "numba":
             esil = np.full((P.shape[0], C, F), np.inf)
             codes = np.zeros(P.shape[0], dtype=np.int64)
-            a = paper_kernels.population_arrays(self.scenario, P.shape[0], offsets=offsets)
-            kernels.objective_population(
-                P,
-                *[a[k] for k in paper_kernels.ORDER],
-                self._Ks,
-                self._Rs,
-                self._ts,
-                self._dists,
-                self._Hs,
-                self._Ws,
-                self._pre,
-                self._pofs,
-                self._bbs,
-                self._ipre,
-                self._ipofs,
-                self._ibbs,
-                self.areas,
-                self._tris,
-                self._maxh,
-                self._maxw,
-                self._span_cap,
-                esil,
-                codes,
+            sheet, moves = paper_kernels.kernel_inputs(
+                paper_kernels.population_arrays(self.scenario, P.shape[0], offsets=offsets)
             )
+            kernels.objective_population(P, sheet, moves, self._views(), esil, codes)
             exploded = codes != 0
             esil[exploded] = np.inf
             return esil, exploded
@@ -191,28 +193,7 @@ class SilhouetteObjective:
         ok = ~sim.exploded
         if self.backend == "numba":
             X = np.ascontiguousarray(self._mesh_points(np.where(ok[:, None, None, None], sim.positions, 0.0)))
-            kernels.score_population(
-                X,
-                ok,
-                self._Ks,
-                self._Rs,
-                self._ts,
-                self._dists,
-                self._Hs,
-                self._Ws,
-                self._pre,
-                self._pofs,
-                self._bbs,
-                self._ipre,
-                self._ipofs,
-                self._ibbs,
-                self.areas,
-                self._tris,
-                self._maxh,
-                self._maxw,
-                self._span_cap,
-                esil,
-            )
+            kernels.score_population(X, ok, self._views(), esil)
         else:
             tris = self._mesh_triangles()
             for p in np.nonzero(ok)[0]:

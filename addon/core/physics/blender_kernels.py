@@ -20,6 +20,7 @@ twins instead: ``docs/kernels.md``).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -102,39 +103,10 @@ def _add_block(Mb, k, l, o00, o01, o02, o11, o12, o22):
 
 
 @njit(**LANES_JIT)
-def _assemble(
-    X,
-    Vel,
-    F,
-    Xd,
-    Vd,
-    Xo,
-    Vo,
-    act,
-    sp_i,
-    sp_j,
-    sp_kind,
-    sp_hinge,
-    restlen,
-    h_pa,
-    h_la,
-    h_pb,
-    h_lb,
-    restang,
-    angular,
-    par,
-    parT,
-    g,
-    goal,
-    pinned,
-    xold,
-    xconst,
-    hv,
-    tg,
-    L,
-):
+def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, mesh, restlen, restang, par, parT, g, goal, pinned, xold, xconst, tg, L):
     """cloth_calc_force for every lane: forces F and the blocks of dF/dx (Xd diagonal, Xo per spring)
     and dF/dv (Vd, Vo); ``act[s, l]`` = spring s has a block in lane l."""
+    _, sp_i, sp_j, sp_kind, sp_hinge, h_pa, h_la, h_pb, h_lb, angular, hv, _, _, _ = mesh
     V = X.shape[0] // 3
     for v in range(V):
         for a in range(3):
@@ -239,39 +211,7 @@ def _assemble(
 
 
 @njit(**LANES_JIT)
-def simulate_batch(
-    rest,
-    sp_i,
-    sp_j,
-    sp_kind,
-    sp_hinge,
-    restlen,
-    h_pa,
-    h_la,
-    h_pb,
-    h_lb,
-    restang,
-    angular,
-    hv,
-    targets,
-    weights,
-    n_steps,
-    dt,
-    tg_steps,
-    tp_steps,
-    inv_ts,
-    g,
-    par,
-    keep,
-    out,
-    centre,
-    limit,
-    max_ratio,
-    codes,
-    iterations,
-    tris,
-    col,
-):
+def simulate_batch(mesh, clock, restlen, restang, targets, par, out, codes, iterations):
     """Simulate the W = simd.W lanes of ``par`` (W, N_LANE_PARAMS) in lockstep through every frame.
 
     The manipulation may differ between lanes (a fit of uncertain pins): ``targets``
@@ -280,6 +220,8 @@ def simulate_batch(
     rest length in ``par[:, P_AVG]``; ``weights`` (n_frames + 1, H) pin weights; ``tg_steps``/``tp_steps`` the goal and pin interpolation factors of each step;
     ``keep`` (n_frames + 1,) index into ``out`` (L, K, V, 3) of the frames to keep, or -1.
     ``codes[l]`` != 0: the lane exploded (it is reset to rest and ignored from then on)."""
+    rest, sp_i, sp_j, sp_kind, sp_hinge, h_pa, h_la, h_pb, h_lb, angular, hv, weights, tris, col = mesh
+    n_steps, dt, tg_steps, tp_steps, inv_ts, g, keep, centre, limit, max_ratio = clock
     L = simd.W
     V = rest.shape[0]
     S = sp_i.shape[0]
@@ -368,17 +310,9 @@ def simulate_batch(
                 Xo,
                 Vo,
                 act,
-                sp_i,
-                sp_j,
-                sp_kind,
-                sp_hinge,
+                mesh,
                 restlen,
-                h_pa,
-                h_la,
-                h_pb,
-                h_lb,
                 restang,
-                angular,
                 par,
                 parT,
                 g,
@@ -386,7 +320,6 @@ def simulate_batch(
                 pinned,
                 xold,
                 xconst,
-                hv,
                 tg_steps[st],
                 L,
             )
@@ -502,82 +435,56 @@ def simulate_batch(
 
 
 @njit(**LANES_PARALLEL)
-def simulate_population(
-    rest,
-    sp_i,
-    sp_j,
-    sp_kind,
-    sp_hinge,
-    restlen,
-    h_pa,
-    h_la,
-    h_pb,
-    h_lb,
-    restang,
-    angular,
-    hv,
-    targets,
-    weights,
-    n_steps,
-    dt,
-    tg_steps,
-    tp_steps,
-    inv_ts,
-    g,
-    par,
-    lane_start,
-    keep,
-    out,
-    centre,
-    limit,
-    max_ratio,
-    codes,
-    iterations,
-    tris,
-    col,
-):
+def simulate_population(mesh, clock, restlen, restang, targets, par, lane_start, out, codes, iterations):
     """Batches of simd.W lanes ``lane_start[b]:lane_start[b] + W`` of ``par`` in parallel threads;
     ``restlen`` (NB, S, W), ``restang`` (NB, B, W) and ``targets`` (NB, n_frames + 1, H, 3, W) per batch."""
     nb = lane_start.shape[0]
     for b in prange(nb):
         a = lane_start[b]
         e = a + simd.W
-        simulate_batch(
-            rest,
-            sp_i,
-            sp_j,
-            sp_kind,
-            sp_hinge,
-            restlen[b],
-            h_pa,
-            h_la,
-            h_pb,
-            h_lb,
-            restang[b],
-            angular,
-            hv,
-            targets[b],
-            weights,
-            n_steps,
-            dt,
-            tg_steps,
-            tp_steps,
-            inv_ts,
-            g,
-            par[a:e],
-            keep,
-            out[a:e],
-            centre,
-            limit,
-            max_ratio,
-            codes[a:e],
-            iterations[a:e],
-            tris,
-            col,
-        )
+        simulate_batch(mesh, clock, restlen[b], restang[b], targets[b], par[a:e], out[a:e], codes[a:e], iterations[a:e])
 
 
 # --------------------------------------------------------------------------- the Python side
+
+
+class Mesh(NamedTuple):
+    """The cloth's network as the kernel reads it, the same for every candidate (built once: ``Prepared``):
+    rest positions (V, 3); springs' ends, kinds and hinges; the hinges' faces (``h_pa``/``h_pb``, their vertex
+    counts ``h_la``/``h_lb``); ``angular`` (1: Blender's angular bending); the pinned vertices ``hv`` and
+    their weights per frame (n_frames + 1, H); the triangles; the colliders' packed rows."""
+
+    rest: np.ndarray
+    sp_i: np.ndarray
+    sp_j: np.ndarray
+    sp_kind: np.ndarray
+    sp_hinge: np.ndarray
+    h_pa: np.ndarray
+    h_la: np.ndarray
+    h_pb: np.ndarray
+    h_lb: np.ndarray
+    angular: int
+    hv: np.ndarray
+    weights: np.ndarray
+    tris: np.ndarray
+    col: np.ndarray
+
+
+class Clock(NamedTuple):
+    """The steps through the frames: ``n_steps`` steps of ``dt`` per frame, each step's goal and pin
+    interpolation factors, ``inv_ts`` (1 / time scale), gravity ``g``; the frames to keep (``keep``: index
+    into the output or -1); the explosion test's centre, distance limit and largest spring stretch."""
+
+    n_steps: int
+    dt: np.float32
+    tg_steps: np.ndarray
+    tp_steps: np.ndarray
+    inv_ts: np.float32
+    g: np.ndarray
+    keep: np.ndarray
+    centre: np.ndarray
+    limit: np.float32
+    max_ratio: np.float32
 
 
 class Prepared:
@@ -633,6 +540,19 @@ class Prepared:
         self.keep = np.full(plan.n_frames + 1, -1, dtype=np.int64)
         self.keep[frames] = np.arange(frames.size)
         self.kept = frames
+        self.mesh = Mesh(*(getattr(self, n) for n in Mesh._fields))
+        self.clock = Clock(
+            self.tg.size,
+            self.dt,
+            self.tg,
+            self.tp,
+            self.inv_ts,
+            self.g,
+            self.keep,
+            self.centre,
+            self.limit,
+            self.max_ratio,
+        )
 
     def _setup(self, first):
         """(rest lengths, mean structural rest length, rest angles) of a first frame (V, 3) float32."""
@@ -739,38 +659,16 @@ class Prepared:
         codes = np.zeros(nb * W, dtype=np.int64)
         its = np.zeros(nb * W, dtype=np.int64)
         simulate_population(
-            self.rest,
-            self.sp_i,
-            self.sp_j,
-            self.sp_kind,
-            self.sp_hinge,
+            self.mesh,
+            self.clock,
             restlen,
-            self.h_pa,
-            self.h_la,
-            self.h_pb,
-            self.h_lb,
             restang,
-            self.angular,
-            self.hv,
             targets,
-            self.weights,
-            self.tg.size,
-            self.dt,
-            self.tg,
-            self.tp,
-            self.inv_ts,
-            self.g,
             padded,
             np.arange(nb, dtype=np.int64) * W,
-            self.keep,
             out,
-            self.centre,
-            self.limit,
-            self.max_ratio,
             codes,
             its,
-            self.tris,
-            self.col,
         )
         return out[:n], codes[:n], its[:n]
 

@@ -5,7 +5,7 @@ thread. Same formulas, same order of operations (tests compare them with the num
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -215,35 +215,29 @@ def simulate_one(
 
 
 @njit(**PARALLEL)
-def simulate_population(
-    P,
-    nx,
-    ny,
-    rest,
-    springs,
-    rest_factor,
-    hv,
-    key_start,
-    key_times,
-    key_pos,
-    release,
-    events,
-    n_events,
-    frame_of_event,
-    n_frames,
-    gravity,
-    settle_rate,
-    safety,
-    centre,
-    limit,
-    max_strain,
-    max_steps,
-    out,
-    codes,
-    steps,
-):
+def simulate_population(P, sheet, moves, out, codes, steps):
     """Every candidate p with its own handle keys ``key_pos[p]`` and events ``events[p, :n_events[p]]``
     (a fit of an uncertain manipulation; otherwise all the same)."""
+    (
+        nx,
+        ny,
+        rest,
+        springs,
+        rest_factor,
+        hv,
+        key_start,
+        key_times,
+        release,
+        n_frames,
+        gravity,
+        settle_rate,
+        safety,
+        centre,
+        limit,
+        max_strain,
+        max_steps,
+    ) = sheet
+    key_pos, events, n_events, frame_of_event = moves
     for p in prange(P.shape[0]):
         ne = n_events[p]
         code, st = simulate_one(
@@ -315,29 +309,40 @@ def scenario_arrays(scenario: Scenario, safety: float = D.DT_SAFETY) -> dict[str
     )
 
 
-ORDER = [
-    "nx",
-    "ny",
-    "rest",
-    "springs",
-    "rest_factor",
-    "hv",
-    "key_start",
-    "key_times",
-    "key_pos",
-    "release",
-    "events",
-    "n_events",
-    "frame_of_event",
-    "n_frames",
-    "gravity",
-    "settle_rate",
-    "safety",
-    "centre",
-    "limit",
-    "max_strain",
-    "max_steps",
-]
+class Sheet(NamedTuple):
+    """What the kernel reads of a scenario, the same for every candidate (``scenario_arrays``): the grid
+    (``nx`` x ``ny``, rest positions, springs and their rest-length factors), the handles' vertices, key
+    times (``key_start``: each handle's first key) and release times, the frames, gravity, the settle's
+    damping rate, the time step's safety factor and the explosion test (centre, distance limit, largest
+    strain, most steps)."""
+
+    nx: int
+    ny: int
+    rest: np.ndarray
+    springs: np.ndarray
+    rest_factor: np.ndarray
+    hv: np.ndarray
+    key_start: np.ndarray
+    key_times: np.ndarray
+    release: np.ndarray
+    n_frames: int
+    gravity: np.ndarray
+    settle_rate: float
+    safety: float
+    centre: np.ndarray
+    limit: float
+    max_strain: float
+    max_steps: int
+
+
+class Moves(NamedTuple):
+    """Each candidate's own manipulation (``population_arrays``): handle key positions (P, K, 3), event
+    times (P, E) of which the first ``n_events[p]`` count, and the frame each event is (or -1)."""
+
+    key_pos: np.ndarray
+    events: np.ndarray
+    n_events: np.ndarray
+    frame_of_event: np.ndarray
 
 
 def population_arrays(
@@ -372,6 +377,11 @@ def population_arrays(
     return a
 
 
+def kernel_inputs(a: dict[str, Any]) -> tuple[Sheet, Moves]:
+    """``population_arrays``' dict as the kernels take it: the scenario's ``Sheet``, the candidates' ``Moves``."""
+    return Sheet(*(a[k] for k in Sheet._fields)), Moves(*(a[k] for k in Moves._fields))
+
+
 def simulate(
     scenario: Scenario, P: ArrayLike, safety: float = D.DT_SAFETY, offsets: Offsets | None = None
 ) -> SimResult:
@@ -381,7 +391,7 @@ def simulate(
     out = np.zeros((P.shape[0], a["n_frames"], V, 3))
     codes = np.zeros(P.shape[0], dtype=np.int64)
     steps = np.zeros(P.shape[0], dtype=np.int64)
-    simulate_population(P, *[a[k] for k in ORDER], out, codes, steps)
+    simulate_population(P, *kernel_inputs(a), out, codes, steps)
     exploded = codes != 0
     out[exploded] = np.nan
     reason = [REASONS[c] for c in codes]
