@@ -6,7 +6,7 @@ Runs the Blender cloth model (``physics/blender_kernels.py``) on the workload of
 bench``'s blender-model figures (the paper's 16 x 16 sheet, 0.5 s settling, then the training
 times, quality 5, a population of 16 = two batches of 8 lanes with varied settings) twice, each in
 its own process: once as shipped (``simd.py`` / ``blender_springs.py``'s LLVM vectors) and once with
-``CLOTHFIT_NO_SIMD=1`` (``simd_plain.py``, ``blender_springs._springs_plain``). Writes per path the
+``CLOTHFIT_NO_SIMD=1`` (``simd_plain.py``, ``blender_springs.springs_plain``). Writes per path the
 simulated candidates per wall second and the CPU milliseconds per candidate, their ratio, and the
 largest distance between the two paths' vertex positions (mm; 0 = the same trajectory to the bit).
 """

@@ -7,6 +7,7 @@ circles (module-level imports; a function-level import is how a lower module def
 
 import ast
 import os
+import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PKG = os.path.join(ROOT, "addon")
@@ -156,3 +157,51 @@ def test_public_core_functions_have_type_hints():
 
         visit(ast.parse(open(path, encoding="utf-8").read()).body)
     assert not missing, missing
+
+
+def _private_uses():
+    """(module, name) for every private name (``_x``) one module of the add-on takes from another: imported
+    by name, or read as an attribute of an imported module."""
+    out = []
+    for name, path in _modules():
+        tree = ast.parse(open(path, encoding="utf-8").read())
+        is_package = path.endswith("__init__.py")
+        modules = set()  # local names bound to one of the add-on's modules
+        for n in ast.walk(tree):
+            if not isinstance(n, ast.ImportFrom) or n.level == 0:
+                continue
+            parts = name.split(".") if name else []
+            base = parts if is_package else parts[:-1]
+            base = base[: len(base) - (n.level - 1)]
+            target = ".".join(base + ([n.module] if n.module else []))
+            for a in n.names:
+                sub = f"{target}.{a.name}" if target else a.name
+                if os.path.exists(_path_of(sub)) and (sub.endswith(a.name)):
+                    modules.add(a.asname or a.name)
+                elif a.name.startswith("_") and not a.name.startswith("__"):
+                    out.append(f"{name} imports {target}.{a.name}")
+        for n in ast.walk(tree):
+            if (
+                isinstance(n, ast.Attribute)
+                and isinstance(n.value, ast.Name)
+                and n.value.id in modules
+                and n.attr.startswith("_")
+                and not n.attr.startswith("__")
+            ):
+                out.append(f"{name} reads {n.value.id}.{n.attr}")
+    return sorted(set(out))
+
+
+def test_no_private_name_is_used_across_modules():
+    assert not _private_uses(), _private_uses()
+
+
+def test_the_private_name_check_sees_an_import_and_an_attribute(tmp_path, monkeypatch):
+    pkg = tmp_path / "addon" / "core"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("def _hidden():\n    return 1\n")
+    (pkg / "b.py").write_text("from .a import _hidden\n")
+    (pkg / "c.py").write_text("from . import a\n\nx = a._hidden()\n")
+    monkeypatch.setattr(sys.modules[__name__], "PKG", str(tmp_path / "addon"))
+    assert _private_uses() == ["core.b imports core.a._hidden", "core.c reads a._hidden"]

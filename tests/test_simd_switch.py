@@ -1,5 +1,5 @@
 """CLOTHFIT_NO_SIMD=1: the Blender kernel on the plain numba twins of the hand-written LLVM IR
-(``physics/simd_plain.py``, ``blender_springs._springs_plain``) moves the cloth as the default
+(``physics/simd_plain.py``, ``blender_springs.springs_plain``) moves the cloth as the default
 SIMD path does (docs/kernels.md).
 
 Each path runs in its own process (the switch is read at import) on a 9 x 9 sheet hung by its

@@ -503,7 +503,7 @@ def begin_steps(context, steps, label, done=None):
     text, timer. Returns the ``StepsRun``. ``done(context, result) -> (warnings, message)``."""
     run = StepsRun(steps, label, done)
     steps.step()
-    _ui_begin(context, run, run.status_text())
+    ui_begin(context, run, run.status_text())
     return run
 
 
@@ -529,7 +529,7 @@ def steps_tick(context, run, event_type):
         return "CANCELLED", "ERROR", f"{run.label} failed: {failure_text(e)}" + (f" ({kept})" if kept else "")
     if more:
         context.window_manager.progress_update(int(1000 * run.steps.fraction))
-        _status(context, run.status_text())
+        show_status(context, run.status_text())
         return "RUNNING", None, None
     end_steps(context, run)
     return "FINISHED", "INFO", msg
@@ -537,27 +537,27 @@ def steps_tick(context, run, event_type):
 
 def end_steps(context, run):
     """The one finish routine of a long operator: timer, progress bar, status text, redraw."""
-    _ui_end(context, run)
+    ui_end(context, run)
     _redraw(context)
 
 
-def _ui_begin(context, run, text, interval=0.02):
+def ui_begin(context, run, text, interval=0.02):
     """Progress bar, timer (``run.timer``, every ``interval`` s) and status text of a modal run (the
     fits, a long operator)."""
     wm = context.window_manager
     wm.progress_begin(0, 1000)
     if context.window is not None:
         run.timer = wm.event_timer_add(interval, window=context.window)
-    _status(context, text)
+    show_status(context, text)
 
 
-def _ui_end(context, run):
+def ui_end(context, run):
     wm = context.window_manager
     if run.timer is not None:
         wm.event_timer_remove(run.timer)
         run.timer = None
     wm.progress_end()
-    _status(context, None)
+    show_status(context, None)
 
 
 # ============================================================= the modal fit
@@ -570,7 +570,7 @@ def begin_modal(context, threaded=True):
     touched on the main thread); otherwise one generation runs inside each TIMER event."""
     sess = api.start_fit(context.scene)
     sess.threaded = threaded
-    _ui_begin(context, sess, sess.status_text())
+    ui_begin(context, sess, sess.status_text())
     return sess
 
 
@@ -594,7 +594,7 @@ def modal_tick(context, session, event_type):
             text += f"; and then: {failure_text(e2)}"
         return "CANCELLED", "ERROR", f"Fit stopped: {text}"
     context.window_manager.progress_update(int(1000 * session.job.progress))
-    _status(context, session.status_text())
+    show_status(context, session.status_text())
     _redraw(context)
     if more:
         return "RUNNING", None, None
@@ -604,13 +604,13 @@ def modal_tick(context, session, event_type):
 
 def end_modal(context, session, cancelled):
     """The one finish routine: timer, progress bar, status text, result file, panel."""
-    _ui_end(context, session)
+    ui_end(context, session)
     out = api.finish_fit(session, cancelled)
     _redraw(context)
     return out
 
 
-def _status(context, text):
+def show_status(context, text):
     ws = getattr(context, "workspace", None)
     if ws is not None:
         try:

@@ -29,7 +29,7 @@ from ..core.physics.blender_settings import check_settings
 from . import api
 from .cloth import cloth_modifier, scene_fps
 from .cloth_script import ClothTargetError, apply_cloth_settings
-from .ops import _status, _ui_begin, _ui_end
+from .ops import show_status, ui_begin, ui_end
 
 RESULT_KEY = "clothfit_scene_fit_result"  # object custom property: the last fit's result JSON
 
@@ -37,7 +37,7 @@ RESULT_KEY = "clothfit_scene_fit_result"  # object custom property: the last fit
 class SceneFitSession:
     """A fit of ``obj``'s Cloth settings running in its own process."""
 
-    timer = None  # the operator's UI timer while it runs modal (ops._ui_begin / _ui_end)
+    timer = None  # the operator's UI timer while it runs modal (ops.ui_begin / ui_end)
 
     def __init__(
         self,
@@ -253,12 +253,12 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
         except (ClothFitError, OSError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        _ui_begin(context, self._session, None, interval=0.5)
+        ui_begin(context, self._session, None, interval=0.5)
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
     def _end(self, context):
-        _ui_end(context, self._session)
+        ui_end(context, self._session)
         try:
             res = self._session.finish(context.scene)
         except ClothFitError as e:
@@ -280,7 +280,7 @@ class CLOTHFIT_OT_fit_scene_cloth(bpy.types.Operator):
             return {"PASS_THROUGH"}
         n, e = s.progress()
         context.window_manager.progress_update(int(1000 * min(1.0, n / max(1, s.budget))))
-        _status(
+        show_status(
             context,
             f"Fitting '{s.obj_name}' with Blender's solver: {n}/{s.budget} candidates"
             + (f", E_sil {e:.3f} %" if e is not None else "")

@@ -32,9 +32,9 @@ from .common import (  # noqa: F401
     HelpFormatter,
     Interrupted,
     Text,
-    _one_line,
     emit,
     messages_to_stderr,
+    one_line,
 )
 
 __all__ = [
@@ -99,19 +99,19 @@ def main(argv=None):
         with messages_to_stderr():
             result = args.fn(args)
     except Interrupted as e:
-        print(f"interrupted: {_one_line(e)}", file=sys.stderr)
+        print(f"interrupted: {one_line(e)}", file=sys.stderr)
         result, code = e.result, EXIT_INTERRUPTED
     except KeyboardInterrupt:
         print(f"interrupted: {args.cmd} stopped", file=sys.stderr)
         return EXIT_INTERRUPTED
     except ClothFitError as e:
-        print(f"error: {_one_line(e)}", file=sys.stderr)
+        print(f"error: {one_line(e)}", file=sys.stderr)
         return EXIT_BAD_DATA
     except Exception as e:  # noqa: BLE001 - the last line of defence: never a traceback for the user
         if os.environ.get(DEBUG_ENV):
             raise
         print(
-            f"error: {args.cmd} failed: {type(e).__name__}: {_one_line(e) or 'no message'} "
+            f"error: {args.cmd} failed: {type(e).__name__}: {one_line(e) or 'no message'} "
             f"(set {DEBUG_ENV}=1 for the traceback)",
             file=sys.stderr,
         )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..core import defaults as D
 from ..core.errors import ClothFitError
-from .common import _command, force_arg, refuse_existing
+from .common import add_command, force_arg, refuse_existing
 
 
 def cmd_blender(a):
@@ -45,7 +45,7 @@ def register(sub):
     from ..blender import pipeline
 
     pipeline.add_arguments(
-        _command(
+        add_command(
             sub,
             "blender",
             cmd_blender,
@@ -54,7 +54,7 @@ def register(sub):
             "a summary of the run as JSON",
         )
     )
-    s = _command(
+    s = add_command(
         sub,
         "blender-agreement",
         cmd_blender_agreement,

@@ -63,7 +63,7 @@ class ArgumentParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
 
 
-def _floats(s, what="--times"):
+def floats(s, what="--times"):
     if not s:
         return None
     try:
@@ -72,7 +72,7 @@ def _floats(s, what="--times"):
         raise ClothFitError(f"{what} {s!r} must be a comma-separated list of numbers") from None
 
 
-def _res(s):
+def res(s):
     if not s:
         return None
     from ..core.fitting.config import check_resolution
@@ -84,9 +84,9 @@ def _res(s):
     return check_resolution([h, w], f"resolution {s!r}")
 
 
-def _params(args, default=None):
+def params_arg(args, default=None):
     if getattr(args, "params", None):
-        d = _json_arg(args.params, "--params")
+        d = json_arg(args.params, "--params")
         if "params" in d and not d.get("params") and not d.get("blender_cloth"):
             raise ClothFitError(f"--params {args.params}: 'params' is empty (a fit that never evaluated?)")
         return d
@@ -95,7 +95,7 @@ def _params(args, default=None):
     return dict(D.GT_PARAMS)
 
 
-def _model_spec(a):
+def model_spec(a):
     """--model/--fps/--quality/--bending-model -> a model dict (None: not asked for)."""
     name = getattr(a, "model", None)
     given = lambda k: getattr(a, k, None) is not None and not (k == "quality" and getattr(a, k) == "auto")  # noqa: E731
@@ -114,7 +114,7 @@ def _model_spec(a):
     return spec
 
 
-def _capture_truth(cap):
+def capture_truth(cap):
     """The parameters a synthetic capture was made with (for evaluate/overlay without --params)."""
     meta = cap.meta or {}
     if meta.get("true_blender_cloth"):
@@ -126,7 +126,7 @@ def _capture_truth(cap):
     return None
 
 
-def _cams(capture, spec):
+def camera_selection(capture, spec):
     """Camera selection: None = all; "n:4" = 4 spread cameras; "0,3,5" indices; names allowed."""
     from ..core.observation.camera import select_training
 
@@ -152,7 +152,7 @@ def _cams(capture, spec):
     return out
 
 
-def _times(spec, capture=None):
+def time_selection(spec, capture=None):
     """--times: None = all; 'train' / 'test'; 'even' / 'odd' (every other frame of ``capture``: the first,
     third... / the second, fourth..., whatever its frame rate); else a comma list of times [s]."""
     if not spec:
@@ -165,14 +165,14 @@ def _times(spec, capture=None):
         return list(D.TRAIN_TIMES)
     if spec == "test":
         return list(D.TEST_TIMES)
-    return _floats(spec)
+    return floats(spec)
 
 
-def _names(spec):
+def name_list(spec):
     return [x.strip() for x in spec.split(",") if x.strip()] if spec else None
 
 
-def _json_arg(text, what):
+def json_arg(text, what):
     """An option that takes JSON or a JSON file."""
     if not text:
         return None
@@ -190,7 +190,7 @@ def _json_arg(text, what):
     return d
 
 
-def _pair(text, what, kind=float):
+def pair(text, what, kind=float):
     """``AxB`` -> (a, b)."""
     try:
         a_, b_ = (kind(x) for x in text.lower().replace("×", "x").split("x"))
@@ -208,7 +208,7 @@ def _quality_arg(text):
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of steps per frame or 'auto'") from None
 
 
-def _model_args(s, default_text="the capture's, else paper"):
+def model_args(s, default_text="the capture's, else paper"):
     from ..core.physics import blender as B
 
     s.add_argument(
@@ -240,7 +240,7 @@ def _model_args(s, default_text="the capture's, else paper"):
     )
 
 
-def _selection_args(s, what="fit"):
+def selection_args(s, what="fit"):
     """--cameras / --times: which cameras and frames a command uses."""
     s.add_argument(
         "--cameras",
@@ -255,7 +255,7 @@ def _selection_args(s, what="fit"):
     )
 
 
-def _search_args(s):
+def search_args(s):
     """Options of fit and fit-many: the optimiser and the fit's budget and scale."""
     s.add_argument(
         "--optimizer",
@@ -313,7 +313,7 @@ def _search_args(s):
     )
 
 
-def _farm_args(s, what, workers_help=None, address_help=None, executor_help=None):
+def farm_args(s, what, workers_help=None, address_help=None, executor_help=None):
     """--workers / --address / --executor: where the work runs (fit --backend blender, fit-many, paper);
     a command may word the help its own way."""
     s.add_argument(
@@ -361,7 +361,7 @@ def force_arg(s, what="the output files"):
     s.add_argument("--force", action="store_true", help=f"overwrite {what} (without it an existing one is refused)")
 
 
-def _command(sub, name, fn, help, output):
+def add_command(sub, name, fn, help, output):
     """One subcommand: ``help`` in the command list and as its description, ``output`` in its epilog."""
     s = sub.add_parser(
         name,
@@ -378,13 +378,13 @@ def _command(sub, name, fn, help, output):
 DEBUG_ENV = "CLOTHFIT_DEBUG"
 
 
-def _one_line(text, limit=1500):
+def one_line(text, limit=1500):
     text = " ".join(str(text).split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @contextlib.contextmanager
-def _sigint_deferred():
+def sigint_deferred():
     """Ctrl-C inside waits until the block is done (a result being written is not cut short)."""
     if threading.current_thread() is not threading.main_thread():
         yield

@@ -8,7 +8,7 @@ import pprint
 
 from ..core.errors import ClothFitError
 from ..core.location import PACKAGE_DIR
-from .common import Text, _command, force_arg, refuse_existing
+from .common import Text, add_command, force_arg, refuse_existing
 
 SCRIPT_FILE = os.path.join(PACKAGE_DIR, "blender", "cloth_script.py")  # read as text: it imports bpy
 
@@ -119,7 +119,7 @@ def _manipulation_comments(manip, near):
 
 def add_export(sub):
     """Register ``export-blender-cloth``."""
-    s = _command(
+    s = add_command(
         sub,
         "export-blender-cloth",
         cmd_export_blender_cloth,

@@ -11,23 +11,23 @@ from ..core.errors import ClothFitError
 from ..core.fitting.result import interval_lines
 from .common import (
     Interrupted,
-    _cams,
-    _capture_truth,
-    _command,
-    _farm_args,
-    _json_arg,
-    _model_args,
-    _model_spec,
-    _names,
-    _params,
-    _res,
-    _search_args,
-    _selection_args,
-    _sigint_deferred,
-    _times,
+    add_command,
+    camera_selection,
+    capture_truth,
+    farm_args,
     force_arg,
+    json_arg,
+    model_args,
+    model_spec,
+    name_list,
+    params_arg,
     refuse_existing,
     refuse_filled_folder,
+    res,
+    search_args,
+    selection_args,
+    sigint_deferred,
+    time_selection,
 )
 from .export import add_export
 from .progress import fit_progress, progress_interval
@@ -102,7 +102,7 @@ def fit_config(a, cap):
     take's cameras and times chosen in it)."""
     if isinstance(cap, (list, tuple)):
         cfg = _fit_config(a, cap[0])
-        cams, times = [_cams(c, a.cameras) for c in cap], [_times(a.times, c) for c in cap]
+        cams, times = [camera_selection(c, a.cameras) for c in cap], [time_selection(a.times, c) for c in cap]
         cfg.train_cameras = None if all(c is None for c in cams) else cams
         cfg.train_times = None if all(t is None for t in times) else times
         return cfg
@@ -117,27 +117,27 @@ def _fit_config(a, cap):
     from ..core.fitting.job import FitConfig
 
     kw = dict(
-        train_cameras=_cams(cap, a.cameras),
-        train_times=_times(a.times, cap),
+        train_cameras=camera_selection(cap, a.cameras),
+        train_times=time_selection(a.times, cap),
         optimizer=a.optimizer,
         seed=a.seed,
         max_evaluations=D.FIT_EVALUATIONS if a.max_evaluations is None else a.max_evaluations,
-        resolution=_res(a.resolution),
+        resolution=res(a.resolution),
         cloth_mass=a.cloth_mass,
         population=a.population,
     )
     backend = getattr(a, "backend", None)
     if backend is not None:
         kw["backend"] = backend
-    kw["model"] = None if backend == "blender" else _model_spec(a)
+    kw["model"] = None if backend == "blender" else model_spec(a)
     if hasattr(a, "free"):  # fit's own options (fit-many keeps FitConfig's defaults)
         kw.update(
             children=a.children,
             target_error=a.target,
-            free=_names(a.free),
-            fixed=_json_arg(a.fixed, "--fixed"),
+            free=name_list(a.free),
+            fixed=json_arg(a.fixed, "--fixed"),
             init=a.init,
-            bounds=_json_arg(a.bounds, "--bounds"),
+            bounds=json_arg(a.bounds, "--bounds"),
             restarts=a.restarts,
         )
     kw.update(quality="auto" if a.quality == "auto" else None, uncertain=a.uncertain)
@@ -229,7 +229,7 @@ def cmd_fit(a):
             job.run(callback=bar)
         except KeyboardInterrupt:
             interrupted = True
-            with _sigint_deferred():  # a second Ctrl-C must not lose the result being written
+            with sigint_deferred():  # a second Ctrl-C must not lose the result being written
                 job.cancel()
         except ClothFitError as e:  # e.g. a worker that died for good: the best so far is kept
             job.state.error = str(e)
@@ -237,7 +237,7 @@ def cmd_fit(a):
         finally:
             if bar is not None:
                 bar.done(job)
-            with _sigint_deferred():
+            with sigint_deferred():
                 job.save_result(a.out)
             if evaluator is not None:
                 evaluator.close()
@@ -396,16 +396,18 @@ def cmd_evaluate(a):
 
     refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
-    params = _params(a, _capture_truth(cap))
+    params = params_arg(a, capture_truth(cap))
     elsewhere = bool(a.unknowns_cameras or a.unknowns_times)  # either implies --fit-unknowns
     r = evaluate(
         cap,
         params,
-        cameras=_cams(cap, a.cameras),
-        times=_times(a.times, cap),
-        resolution=_res(a.resolution),
+        cameras=camera_selection(cap, a.cameras),
+        times=time_selection(a.times, cap),
+        resolution=res(a.resolution),
         fit_unknowns=a.fit_unknowns or (D.HELD_UNKNOWNS_EVALUATIONS if elsewhere else 0),
-        unknowns_on=(_cams(cap, a.unknowns_cameras), _times(a.unknowns_times, cap)) if elsewhere else None,
+        unknowns_on=(camera_selection(cap, a.unknowns_cameras), time_selection(a.unknowns_times, cap))
+        if elsewhere
+        else None,
     )
     if r["exploded"]:
         raise ClothFitError(f"the {r['model']['name']} model with these parameters explodes: no silhouette to score")
@@ -451,7 +453,7 @@ def cmd_floor(a):
 
     refuse_existing(a.json, a.force, "--json")
     cap = load_capture(a.capture)
-    cf = _capture_floor(cap, _cams(cap, a.cameras), _times(a.times, cap), _res(a.resolution))
+    cf = _capture_floor(cap, camera_selection(cap, a.cameras), time_selection(a.times, cap), res(a.resolution))
     d = cf.to_dict()
     print(
         f"noise floor {100 * d['floor']:.3f} % E_sil per image (median {100 * d['floor_median']:.3f} %; "
@@ -478,13 +480,13 @@ def cmd_overlay(a):
         from ..core.footage.extract import footage_images
 
         images = footage_images(cap)
-    cams, times = _cams(cap, a.cameras), _times(a.times, cap)
+    cams, times = camera_selection(cap, a.cameras), time_selection(a.times, cap)
     floors = None
     if a.floor:
         floors = _capture_floor(cap, cams, times, None).per_image()
     from ..core.fitting.evaluate import for_take
 
-    params, how = for_take(cap, _params(a, _capture_truth(cap)))
+    params, how = for_take(cap, params_arg(a, capture_truth(cap)))
     print(f"manipulation: {how}", file=sys.stderr)
     paths = capture_overlays(
         cap, params, a.out, cameras=cams, times=times, images=images, floors=floors, legend=interval_lines(params)
@@ -498,7 +500,7 @@ def cmd_overlay(a):
 
 def _add_fit(sub):
     """``fit``: one capture, checkpointed, resumable."""
-    s = _command(
+    s = add_command(
         sub,
         "fit",
         cmd_fit,
@@ -513,8 +515,8 @@ def _add_fit(sub):
         "together (one set of settings; each take its own cameras, frame rate and manipulation's unknowns)",
     )
     s.add_argument("--out", default="out/fit.json", help="result JSON to write (default: %(default)s)")
-    _selection_args(s, "fit")
-    _search_args(s)
+    selection_args(s, "fit")
+    search_args(s)
     s.add_argument("--children", type=int, default=None, help="GA: SPX children per family (default: 5n = 15)")
     s.add_argument(
         "--target",
@@ -562,14 +564,14 @@ def _add_fit(sub):
         default=None,
         help="blender backend: scene frame of capture time 0 (default: the scene's frame_start)",
     )
-    _farm_args(s, "blender backend")
+    farm_args(s, "blender backend")
     s.add_argument(
         "--quiet",
         action="store_true",
         help="no progress on stderr (a bar on a terminal or with CLOTHFIT_PROGRESS=1, else a line "
         f"every {D.PROGRESS_INTERVAL_S:g} s)",
     )
-    _model_args(s)
+    model_args(s)
     s.add_argument(
         "--free",
         help="blender model: comma list of ClothSettings to search (default: the stiffnesses (compression with ANGULAR bending only), the "
@@ -590,7 +592,7 @@ def _add_fit(sub):
 
 def _add_fit_many(sub):
     """``fit-many``: many captures on the farm."""
-    s = _command(
+    s = add_command(
         sub,
         "fit-many",
         cmd_fit_many,
@@ -604,10 +606,10 @@ def _add_fit_many(sub):
         help="folder for one result JSON per capture, NNN_<capture>.json (default: %(default)s)",
     )
     force_arg(s, "result files already in --out-dir")
-    _selection_args(s, "fit")
-    _search_args(s)
-    _farm_args(s, "the fits")
-    _model_args(s)
+    selection_args(s, "fit")
+    search_args(s)
+    farm_args(s, "the fits")
+    model_args(s)
     s.add_argument(
         "--quiet",
         action="store_true",
@@ -619,7 +621,7 @@ def _add_scoring(sub):
     """``export-blender-cloth``, ``evaluate``, ``overlay``, ``floor``: reading a fit back."""
     add_export(sub)
 
-    s = _command(
+    s = add_command(
         sub,
         "verdict",
         cmd_verdict,
@@ -628,7 +630,7 @@ def _add_scoring(sub):
     )
     s.add_argument("results", nargs="+", help="result JSON files of fits")
 
-    s = _command(
+    s = add_command(
         sub,
         "evaluate",
         cmd_evaluate,
@@ -642,7 +644,7 @@ def _add_scoring(sub):
         help="a result JSON file, or JSON with m, k, l, d (default: a synthetic capture's "
         "truth, else the built-in ground truth)",
     )
-    _selection_args(s, "score")
+    selection_args(s, "score")
     s.add_argument("--resolution", help="score at HxW [px] (default: the capture's)")
     s.add_argument(
         "--fit-unknowns",
@@ -667,7 +669,7 @@ def _add_scoring(sub):
     s.add_argument("--json", help="also write the result to this file")
     force_arg(s, "--json")
 
-    s = _command(
+    s = add_command(
         sub,
         "overlay",
         cmd_overlay,
@@ -687,7 +689,7 @@ def _add_scoring(sub):
         "(default: %(default)s)",
     )
     force_arg(s, "images already in --out")
-    _selection_args(s, "draw")
+    selection_args(s, "draw")
     s.add_argument(
         "--on-images",
         action="store_true",
@@ -700,7 +702,7 @@ def _add_scoring(sub):
         "by E_sil / floor (green at it, amber above, red more than 2x) and write floor_sheet.png",
     )
 
-    s = _command(
+    s = add_command(
         sub,
         "floor",
         cmd_floor,
@@ -708,7 +710,7 @@ def _add_scoring(sub):
         "the capture's floor, its parts and the per-image floors as JSON",
     )
     s.add_argument("capture", help="capture folder")
-    _selection_args(s, "estimate")
+    selection_args(s, "estimate")
     s.add_argument(
         "--resolution",
         help="for a fit at HxW [px]: the silhouettes area-resampled as the fitter does (default: the capture's)",

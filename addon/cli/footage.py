@@ -7,7 +7,7 @@ import sys
 
 from ..core import defaults as D
 from ..core.errors import ClothFitError
-from .common import _command, _floats, _pair, force_arg, refuse_existing, refuse_filled_folder
+from .common import add_command, floats, force_arg, pair, refuse_existing, refuse_filled_folder
 from .points import add_points
 
 
@@ -306,14 +306,14 @@ def add_cameras_arguments(p, cmd):
 def cmd_cameras(a):
     """Run ``import-cameras`` / ``export-cameras`` from parsed :func:`add_cameras_arguments` arguments: prints a
     table of the cameras (for people) and returns ``{"command", "out", "cameras": [names]}``."""
-    from ..core.footage.calib_io import _cameras_from_any, describe, export_cameras, import_cameras
+    from ..core.footage.calib_io import cameras_from_any, describe, export_cameras, import_cameras
 
     refuse_existing(a.out, a.force)
     if a.cameras_cmd == "import-cameras":
         cams = import_cameras(a.src, a.format, a.width, a.height)
         export_cameras(cams, a.out, "json")
     else:
-        cams = _cameras_from_any(a.src, "auto", a.width, a.height)
+        cams = cameras_from_any(a.src, "auto", a.width, a.height)
         export_cameras(cams, a.out, a.format)
     print(describe(cams))
     print(f"{'imported' if a.cameras_cmd == 'import-cameras' else 'exported'} {len(cams)} cameras -> {a.out}")
@@ -324,10 +324,10 @@ def cmd_handles(a):
     from ..core.footage import handles as H
 
     refuse_existing(a.out, a.force)
-    size = _pair(a.size, "--size")
+    size = pair(a.size, "--size")
     grid = None
     if a.grid:
-        grid = _pair(a.grid, "--grid", int) if "x" in a.grid.lower() else None
+        grid = pair(a.grid, "--grid", int) if "x" in a.grid.lower() else None
         if grid is None:
             try:
                 grid = int(a.grid)
@@ -362,7 +362,7 @@ def cmd_handles(a):
         find_sync=a.find_sync == "flash",
         flash_time=a.flash_time,
         cameras=a.cameras,
-        times=_floats(a.times),
+        times=floats(a.times),
         fps=a.fps,
         start=a.start,
         frames=a.frames,
@@ -382,7 +382,7 @@ def _gravity(text):
     cam, sep, vec = text.rpartition(":")
     if not sep or not cam:
         raise ClothFitError(f"--gravity {text!r}: expected CAMERA:GX,GY,GZ (gravity in that camera's axes)")
-    v = _floats(vec, "--gravity")
+    v = floats(vec, "--gravity")
     if not v or len(v) != 3:
         raise ClothFitError(f"--gravity {text!r}: expected three numbers after the camera name")
     return cam, tuple(v)
@@ -446,7 +446,7 @@ def cmd_calibrate(a):
         opts,
         sync=sync,
         every=a.every,
-        times=_floats(a.times) if a.times else None,
+        times=floats(a.times) if a.times else None,
         debug_dir=a.debug,
         log=lambda s: print(s),
     )
@@ -612,7 +612,7 @@ def _calibrate_solve_args(s):
 def _add_calibration(sub):
     """``extract``, ``calibrate``, ``import-cameras``, ``export-cameras``."""
     add_extract_arguments(
-        _command(
+        add_command(
             sub,
             "extract",
             cmd_extract,
@@ -622,7 +622,7 @@ def _add_calibration(sub):
         )
     )
     _calibrate_args(
-        _command(
+        add_command(
             sub,
             "calibrate",
             cmd_calibrate,
@@ -634,7 +634,7 @@ def _add_calibration(sub):
         )
     )
     add_cameras_arguments(
-        _command(
+        add_command(
             sub,
             "import-cameras",
             cmd_cameras,
@@ -644,7 +644,7 @@ def _add_calibration(sub):
         "import-cameras",
     )
     add_cameras_arguments(
-        _command(
+        add_command(
             sub,
             "export-cameras",
             cmd_cameras,
@@ -658,7 +658,7 @@ def _add_calibration(sub):
 
 def _add_handles(sub):
     """``handles``: the manipulation from footage."""
-    s = _command(
+    s = add_command(
         sub,
         "handles",
         cmd_handles,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .common import _command, force_arg
+from .common import add_command, force_arg
 
 
 def cmd_points_to_capture(a):
@@ -24,7 +24,7 @@ def cmd_points_to_capture(a):
 
 def add_points(sub):
     """``points-to-capture``: silhouettes splatted from point clouds, the robot's path as the handle."""
-    s = _command(
+    s = add_command(
         sub,
         "points-to-capture",
         cmd_points_to_capture,

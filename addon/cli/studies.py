@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..core import defaults as D
 from ..core.errors import ClothFitError
-from .common import Text, _command, _farm_args, _floats, _names, _res, force_arg, refuse_existing
+from .common import Text, add_command, farm_args, floats, force_arg, name_list, refuse_existing, res
 from .progress import study_progress
 
 
@@ -87,7 +87,7 @@ def cmd_identifiability(a):
     from ..core.studies.identifiability import MATERIALS, run
 
     refuse_existing(a.json, a.force, "--json")
-    mats = _names(a.materials)
+    mats = name_list(a.materials)
     bad = [m for m in mats or [] if m not in MATERIALS]
     if bad:
         raise ClothFitError(f"--materials: unknown {', '.join(bad)} (known: {', '.join(MATERIALS)})")
@@ -105,8 +105,8 @@ def cmd_occlusion(a):
         n_train=a.train_cameras,
         evaluations=a.max_evaluations,
         seed=a.seed,
-        resolution=_res(a.resolution),
-        scales=_floats(a.scales, "--scales"),
+        resolution=res(a.resolution),
+        scales=floats(a.scales, "--scales"),
         truth_dt_safety=a.truth_dt_safety,
     )
 
@@ -127,7 +127,7 @@ def cmd_rig(a):
 
 def _add_paper(sub):
     """``paper``, ``tables``, ``bench``."""
-    s = _command(
+    s = add_command(
         sub,
         "paper",
         cmd_paper,
@@ -154,7 +154,7 @@ def _add_paper(sub):
     )
     s.add_argument("--children", type=int, default=None, help="GA: SPX children per family (default: 5n = 15)")
     s.add_argument("--rig", default=None, help=f"camera rig preset (default: {D.DEFAULT_RIG})")
-    _farm_args(
+    farm_args(
         s,
         "paper",
         workers_help="run the parts (table1, fig8, table2, optimizers) in parallel on this many workers "
@@ -171,7 +171,7 @@ def _add_paper(sub):
         "i.e. a model mismatch the fit cannot remove)",
     )
 
-    s = _command(
+    s = add_command(
         sub,
         "tables",
         cmd_tables,
@@ -180,7 +180,7 @@ def _add_paper(sub):
     )
     s.add_argument("json", help="a JSON written by `paper --json`")
 
-    s = _command(sub, "bench", cmd_bench, "speed figures", "every figure as JSON (the same as --json)")
+    s = add_command(sub, "bench", cmd_bench, "speed figures", "every figure as JSON (the same as --json)")
     s.add_argument("--json", required=True, help="write every figure to this JSON file")
     force_arg(s, "--json")
     s.add_argument(
@@ -204,7 +204,7 @@ def _add_paper(sub):
 
 def _add_others(sub):
     """``identifiability``, ``occlusion``, ``rig``."""
-    s = _command(
+    s = add_command(
         sub,
         "identifiability",
         cmd_identifiability,
@@ -215,7 +215,7 @@ def _add_others(sub):
     s.add_argument("--json", help="also write the tables to this file")
     force_arg(s, "--json")
 
-    s = _command(
+    s = add_command(
         sub,
         "occlusion",
         cmd_occlusion,
@@ -248,7 +248,7 @@ def _add_others(sub):
     s.add_argument("--resolution", help="HxW [px] (default: the rig's 480x640; --quick 240x320)")
     s.add_argument("--seed", type=int, default=0, help="random seed of the captures and fits (default: %(default)s)")
 
-    s = _command(
+    s = add_command(
         sub,
         "rig",
         cmd_rig,

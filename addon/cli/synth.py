@@ -6,7 +6,7 @@ waved, two hands lifting the cloth or moving apart (``core.physics.handling``)."
 from __future__ import annotations
 
 from ..core import defaults as D
-from .common import _command, _model_args, _model_spec, _params, _res, force_arg
+from .common import add_command, force_arg, model_args, model_spec, params_arg, res
 
 
 def cmd_synth(a):
@@ -15,8 +15,8 @@ def cmd_synth(a):
 
     refuse_filled_folder(a.out, a.force)
     kw = {} if a.truth_dt_safety is None else {"truth_dt_safety": a.truth_dt_safety}
-    spec = _model_spec(a)
-    params = _params(a, {} if spec and spec["name"] == "blender" else None)
+    spec = model_spec(a)
+    params = params_arg(a, {} if spec and spec["name"] == "blender" else None)
     if spec and spec["name"] == "blender":
         params = params.get("blender_cloth", params)
     handling = getattr(a, "handling", D.HANDLING)
@@ -25,7 +25,7 @@ def cmd_synth(a):
         params,
         rig=a.rig,
         noise=a.noise,
-        resolution=_res(a.resolution),
+        resolution=res(a.resolution),
         seed=a.seed,
         model=spec,
         handling=handling,
@@ -58,7 +58,7 @@ HANDLING_HELP = (
 
 def add_synth(sub):
     """``synth``: a synthetic capture, with the handling its cloth is given."""
-    s = _command(
+    s = add_command(
         sub,
         "synth",
         cmd_synth,
@@ -93,5 +93,5 @@ def add_synth(sub):
         help="time step of the truth as a factor of sqrt(m/k); 0.125 = 4x finer than the fitter's "
         "(default: the model's own)",
     )
-    _model_args(s, "paper")
+    model_args(s, "paper")
     s.add_argument("--handling", choices=D.HANDLINGS, default=D.HANDLING, help=HANDLING_HELP)

@@ -70,11 +70,11 @@ def _footage_cameras(scene, footage, sizes=None):
     if p.extract_calibration.strip():
         path = abspath(p.extract_calibration, "calibration")
         return calib_io.import_cameras(path, sizes=sizes), path
-    meta, meta_path = X._read_footage_json(footage)
+    meta, meta_path = X.read_footage_json(footage)
     if isinstance(meta.get("cameras"), str):
         path = os.path.join(footage, meta["cameras"])
         return calib_io.import_cameras(path), path
-    path = X._find_calibration(footage)
+    path = X.find_calibration(footage)
     if path is not None:
         return calib_io.import_cameras(path, sizes=sizes), path
     if p.rig_cameras_json.strip():
@@ -149,7 +149,7 @@ def _extract_work(steps, scene):
     if p.scenario_source == "EMPTIES":
         ft = times
         if ft is None:
-            ft = X._read_footage_json(footage)[0].get("frame_times")
+            ft = X.read_footage_json(footage)[0].get("frame_times")
             if not isinstance(ft, list) or not ft:
                 raise ClothFitError(f"footage {footage}: no frame times (set Times, or frame_times in footage.json)")
         scenario = empties_scenario(scene, scene_grid(scene), ft, notes)
@@ -302,7 +302,7 @@ def releases_text(scenario) -> str:
     )
 
 
-def _load_image(name, path):
+def load_image(name, path):
     img = bpy.data.images.get(name)
     if img is None:
         img = bpy.data.images.load(path, check_existing=False)
@@ -347,6 +347,6 @@ def show_observations(scene, frame_index, cap=None, kind="observed"):
         else:
             path = cap.silhouette_path(ci, fi)
         if os.path.isfile(path):
-            show_background(obj, _load_image(f"clothfit {kind} {c.name}", path))
+            show_background(obj, load_image(f"clothfit {kind} {c.name}", path))
             shown += 1
     return shown

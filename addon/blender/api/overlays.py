@@ -12,7 +12,7 @@ import numpy as np
 from ...core.errors import ClothFitError
 from .. import render as R
 from .. import scene as S
-from .footage import OVERLAY_DIR, _load_image, overlay_path, show_observations
+from .footage import OVERLAY_DIR, load_image, overlay_path, show_observations
 from .reading import capture_dir, cloth_object, params_from_scene, props
 
 
@@ -107,7 +107,7 @@ def make_overlays(scene, source=None, frame_indices=None, sheet_frame=None):
         sheet = contact_sheet(tiles, cols=min(6, len(tiles)))
         sheet_path = os.path.join(out_dir, "contact_sheet.png")
         write_rgb(sheet_path, sheet)
-        img = _load_image("clothfit contact sheet", sheet_path)
+        img = load_image("clothfit contact sheet", sheet_path)
         img.use_fake_user = False
     summary = {
         "source": source,

@@ -37,19 +37,19 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from .space import (
     SearchSpace,
-    _active,
-    _array,
-    _bool,
-    _field,
-    _flag,
-    _float_to_json,
-    _integer,
-    _num,
-    _number,
-    _rng_state_from_json,
-    _stop_reason,
+    checked_flag,
+    checked_integer,
+    checked_number,
+    float_to_json,
     reflect_unit,
+    rng_state_from_json,
     sanitize_fitness,
+    saved_active,
+    saved_array,
+    saved_bool,
+    saved_field,
+    saved_stop_reason,
+    saved_value,
 )
 from .steppable import Optimizer
 
@@ -77,12 +77,14 @@ class CMAES(Optimizer):
         active: bool = False,
     ):
         super().__init__(space, seed, initial)
-        self.active = _flag(active, "cma-es: active")  # active CMA: the worse half lowers the variance along its steps
-        self.popsize = _integer(D.CMA_POPSIZE if popsize is None else popsize, "cma-es: popsize", 2)
-        self.sigma0 = _number(sigma0, "cma-es: sigma0 (unit cube)", 0.0, 10.0, lo_open=True)
-        self.restarts = _integer(restarts, "cma-es: restarts", 0, 20)
-        self.tolx = _number(tolx, "cma-es: tolx")
-        self.tolfun = _number(tolfun, "cma-es: tolfun")
+        self.active = checked_flag(
+            active, "cma-es: active"
+        )  # active CMA: the worse half lowers the variance along its steps
+        self.popsize = checked_integer(D.CMA_POPSIZE if popsize is None else popsize, "cma-es: popsize", 2)
+        self.sigma0 = checked_number(sigma0, "cma-es: sigma0 (unit cube)", 0.0, 10.0, lo_open=True)
+        self.restarts = checked_integer(restarts, "cma-es: restarts", 0, 20)
+        self.tolx = checked_number(tolx, "cma-es: tolx")
+        self.tolfun = checked_number(tolfun, "cma-es: tolfun")
         self.restarts_done = 0
         self.stop_reason = None  # the criterion that ended the last run (None: running)
         self.run_stops = []  # the criterion that ended each finished run
@@ -315,7 +317,7 @@ class CMAES(Optimizer):
                 "pc": self.pc.tolist(),
                 "ps": self.ps.tolist(),
                 "run_generation": self.run_generation,
-                "run_bests": [_float_to_json(v) for v in self.run_bests],
+                "run_bests": [float_to_json(v) for v in self.run_bests],
                 "last_fvals": list(self.last_fvals),
                 "rng": self.rng.bit_generator.state,
                 "initial_u": self._initial_u.tolist(),
@@ -334,53 +336,53 @@ class CMAES(Optimizer):
         opt = cls(
             space,
             seed=d["seed"],
-            popsize=_num(d, "popsize", w, int, 2, 10**6),
-            sigma0=_num(d, "sigma0", w, float, 1e-300, 10.0),
-            restarts=_num(d, "restarts", w, int, 0, 20),
-            tolx=_num(d, "tolx", w, float, 0.0),
-            tolfun=_num(d, "tolfun", w, float, 0.0),
-            active=_active(d, w),
+            popsize=saved_value(d, "popsize", w, int, 2, 10**6),
+            sigma0=saved_value(d, "sigma0", w, float, 1e-300, 10.0),
+            restarts=saved_value(d, "restarts", w, int, 0, 20),
+            tolx=saved_value(d, "tolx", w, float, 0.0),
+            tolfun=saved_value(d, "tolfun", w, float, 0.0),
+            active=saved_active(d, w),
         )
         opt._load_base(d)
-        opt.restarts_done = _num(d, "restarts_done", w, int, 0, opt.restarts)
-        lam = _num(d, "lam", w, int, 2, 10**7)
+        opt.restarts_done = saved_value(d, "restarts_done", w, int, 0, opt.restarts)
+        lam = saved_value(d, "lam", w, int, 2, 10**7)
         if lam != opt.popsize * 2**opt.restarts_done:
             raise ClothFitError(f"checkpoint: {w} 'lam' {lam} is not popsize x 2^restarts_done")
         opt._setup(lam)
-        opt.stop_reason = _stop_reason(d, w, CMA_STOPS)
-        rs = _field(d, "run_stops", w)
+        opt.stop_reason = saved_stop_reason(d, w, CMA_STOPS)
+        rs = saved_field(d, "run_stops", w)
         if not isinstance(rs, list) or len(rs) > opt.restarts + 1 or any(r not in CMA_STOPS for r in rs):
             raise ClothFitError(f"checkpoint: {w} 'run_stops' must be a list of stop criteria")
         opt.run_stops = list(rs)
-        opt._stopped = _bool(d, "stopped", w)
-        opt.mean = _array(d, "mean", w, (n,))
+        opt._stopped = saved_bool(d, "stopped", w)
+        opt.mean = saved_array(d, "mean", w, (n,))
         if np.abs(opt.mean).max() > 1e6:
             raise ClothFitError(f"checkpoint: {w} 'mean' is absurdly far from the unit cube")
-        opt.sigma = _num(d, "sigma", w, float, 1e-300, 1e6)
+        opt.sigma = saved_value(d, "sigma", w, float, 1e-300, 1e6)
         if opt.sigma <= 0:
             raise ClothFitError(f"checkpoint: {w} 'sigma' must be positive")
-        C = _array(d, "C", w, (n, n))
+        C = saved_array(d, "C", w, (n, n))
         if not np.array_equal(C, C.T):
             raise ClothFitError(f"checkpoint: {w} 'C' is not symmetric")
         ev = np.linalg.eigvalsh(C)
         if not ev.min() > 0 or ev.max() > 1e12:
             raise ClothFitError(f"checkpoint: {w} 'C' is not a positive-definite covariance matrix")
         opt.C = C
-        opt.pc = _array(d, "pc", w, (n,))
-        opt.ps = _array(d, "ps", w, (n,))
-        opt.run_generation = _num(d, "run_generation", w, int, 0, opt.generation)
-        rb = _array(d, "run_bests", w, (None,), inf_as_none=True)
+        opt.pc = saved_array(d, "pc", w, (n,))
+        opt.ps = saved_array(d, "ps", w, (n,))
+        opt.run_generation = saved_value(d, "run_generation", w, int, 0, opt.generation)
+        rb = saved_array(d, "run_bests", w, (None,), inf_as_none=True)
         if len(rb) > 2 * opt.stag_window:
             raise ClothFitError(f"checkpoint: {w} 'run_bests' is longer than its window")
         opt.run_bests = rb.tolist()
-        opt.last_fvals = _array(d, "last_fvals", w, (None,)).tolist()
+        opt.last_fvals = saved_array(d, "last_fvals", w, (None,)).tolist()
         if len(opt.last_fvals) > lam:
             raise ClothFitError(f"checkpoint: {w} 'last_fvals' has more values than a generation")
-        opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
-        opt._initial_u = _array(d, "initial_u", w, (None, n))
-        opt._inject = _array(d, "inject", w, (None, n))
-        opt._pending = _array(d, "pending", w, (lam, n), allow_none=True)
+        opt.rng = rng_state_from_json(saved_field(d, "rng", w), w)
+        opt._initial_u = saved_array(d, "initial_u", w, (None, n))
+        opt._inject = saved_array(d, "inject", w, (None, n))
+        opt._pending = saved_array(d, "pending", w, (lam, n), allow_none=True)
         if opt._pending is not None and np.abs(opt._pending).max() > 1e7:
             raise ClothFitError(f"checkpoint: {w} 'pending' is absurdly far from the unit cube")
-        opt._pending_injected = _num(d, "pending_injected", w, int, 0, lam if opt._pending is not None else 0)
+        opt._pending_injected = saved_value(d, "pending_injected", w, int, 0, lam if opt._pending is not None else 0)
         return opt

@@ -33,16 +33,16 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from .space import (
     SearchSpace,
-    _array,
-    _field,
-    _float_to_json,
-    _integer,
-    _num,
-    _number,
-    _rng_state_from_json,
-    _stop_reason,
+    checked_integer,
+    checked_number,
+    float_to_json,
     reflect_unit,
+    rng_state_from_json,
     sanitize_fitness,
+    saved_array,
+    saved_field,
+    saved_stop_reason,
+    saved_value,
 )
 from .steppable import Optimizer
 
@@ -87,13 +87,13 @@ class SPXMGG(Optimizer):
     ):
         super().__init__(space, seed, initial)
         n = space.n
-        self.population = _integer(D.GA_POPULATION if population is None else population, "spx-mgg: population")
-        self.children = _integer(D.GA_CHILDREN if children is None else children, "spx-mgg: children")
+        self.population = checked_integer(D.GA_POPULATION if population is None else population, "spx-mgg: population")
+        self.children = checked_integer(D.GA_CHILDREN if children is None else children, "spx-mgg: children")
         self.eps = float(math.sqrt(n + 2) if eps is None else eps)
-        self.tolx = _number(tolx, "spx-mgg: tolx")
-        self.tolfun = _number(tolfun, "spx-mgg: tolfun")
+        self.tolx = checked_number(tolx, "spx-mgg: tolx")
+        self.tolfun = checked_number(tolfun, "spx-mgg: tolfun")
         self.stall_evaluations = (
-            None if stall_evaluations is None else _integer(stall_evaluations, "spx-mgg: stall_evaluations")
+            None if stall_evaluations is None else checked_integer(stall_evaluations, "spx-mgg: stall_evaluations")
         )
         self._ref_best = math.inf  # best at the last improvement by more than tolfun
         self._last_improved = 0  # evaluations then
@@ -200,13 +200,13 @@ class SPXMGG(Optimizer):
                 "tolx": self.tolx,
                 "tolfun": self.tolfun,
                 "stall_evaluations": self.stall_evaluations,
-                "ref_best": _float_to_json(self._ref_best),
+                "ref_best": float_to_json(self._ref_best),
                 "last_improved": int(self._last_improved),
                 "stop_reason": self.stop_reason,
                 "rng": self.rng.bit_generator.state,
                 "initial_u": self._initial_u.tolist(),
                 "pop_u": None if self.pop_u is None else self.pop_u.tolist(),
-                "pop_f": None if self.pop_f is None else [_float_to_json(v) for v in self.pop_f],
+                "pop_f": None if self.pop_f is None else [float_to_json(v) for v in self.pop_f],
                 "pending_u": None if self._pending is None else self._pending.tolist(),
                 "replace": None if self._replace is None else [int(i) for i in self._replace],
             }
@@ -218,34 +218,34 @@ class SPXMGG(Optimizer):
         w = cls.name
         space = cls._check_state(d, w, cls.STATE_KEYS)
         n = space.n
-        stall = _num(d, "stall_evaluations", w, int, 1, 10**12, allow_none=True)
+        stall = saved_value(d, "stall_evaluations", w, int, 1, 10**12, allow_none=True)
         opt = cls(
             space,
             seed=d["seed"],
-            population=_num(d, "population", w, int, n + 1, 10**6),
-            children=_num(d, "children", w, int, 1, 10**6),
-            eps=_num(d, "eps", w, float, 1e-12, 1e6),
-            tolx=_num(d, "tolx", w, float, 0.0),
-            tolfun=_num(d, "tolfun", w, float, 0.0),
+            population=saved_value(d, "population", w, int, n + 1, 10**6),
+            children=saved_value(d, "children", w, int, 1, 10**6),
+            eps=saved_value(d, "eps", w, float, 1e-12, 1e6),
+            tolx=saved_value(d, "tolx", w, float, 0.0),
+            tolfun=saved_value(d, "tolfun", w, float, 0.0),
             stall_evaluations=stall,
         )
         opt._load_base(d)
-        rb = _num(d, "ref_best", w, float, allow_none=True)
+        rb = saved_value(d, "ref_best", w, float, allow_none=True)
         opt._ref_best = math.inf if rb is None else rb
-        opt._last_improved = _num(d, "last_improved", w, int, 0, opt.evaluations)
-        opt.stop_reason = _stop_reason(d, w, ("tolx", "stagnation"))
-        opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
-        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        opt._last_improved = saved_value(d, "last_improved", w, int, 0, opt.evaluations)
+        opt.stop_reason = saved_stop_reason(d, w, ("tolx", "stagnation"))
+        opt.rng = rng_state_from_json(saved_field(d, "rng", w), w)
+        opt._initial_u = saved_array(d, "initial_u", w, (None, n))
         if len(opt._initial_u) > opt.population:
             raise ClothFitError(f"checkpoint: {w} has more initial guesses than its population")
-        opt.pop_u = _array(d, "pop_u", w, (opt.population, n), allow_none=True)
-        pop_f = _array(d, "pop_f", w, (opt.population,), allow_none=True, inf_as_none=True)
+        opt.pop_u = saved_array(d, "pop_u", w, (opt.population, n), allow_none=True)
+        pop_f = saved_array(d, "pop_f", w, (opt.population,), allow_none=True, inf_as_none=True)
         if (opt.pop_u is None) != (pop_f is None):
             raise ClothFitError(f"checkpoint: {w} 'pop_u' and 'pop_f' must be both set or both null")
         opt.pop_f = pop_f
         rows = opt.population if opt.pop_u is None else opt.children
-        opt._pending = _array(d, "pending_u", w, (rows, n), allow_none=True)
-        rep = _field(d, "replace", w)
+        opt._pending = saved_array(d, "pending_u", w, (rows, n), allow_none=True)
+        rep = saved_field(d, "replace", w)
         if opt._pending is not None and opt.pop_u is not None:
             if (
                 not isinstance(rep, list)

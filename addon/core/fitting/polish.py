@@ -10,15 +10,15 @@ import numpy as np
 from ..errors import ClothFitError
 from .space import (
     SearchSpace,
-    _array,
-    _bool,
-    _float_from_json,
-    _float_to_json,
-    _num,
-    _number,
-    _stop_reason,
+    checked_number,
+    float_from_json,
+    float_to_json,
     reflect_unit,
     sanitize_fitness,
+    saved_array,
+    saved_bool,
+    saved_stop_reason,
+    saved_value,
 )
 from .steppable import Optimizer
 
@@ -51,9 +51,9 @@ class CoordinatePolish(Optimizer):
         tolx: float = 1e-11,
     ):
         super().__init__(space, seed, initial)
-        self.step0 = _number(step, "coord-polish: step (unit cube)", 0.0, 10.0, lo_open=True)
-        self.max_step = _number(max_step, "coord-polish: max_step (unit cube)", 0.0, 10.0, lo_open=True)
-        self.tolx = _number(tolx, "coord-polish: tolx")
+        self.step0 = checked_number(step, "coord-polish: step (unit cube)", 0.0, 10.0, lo_open=True)
+        self.max_step = checked_number(max_step, "coord-polish: max_step (unit cube)", 0.0, 10.0, lo_open=True)
+        self.tolx = checked_number(tolx, "coord-polish: tolx")
         n = space.n
         self.x = self._initial_u[0].copy() if len(self._initial_u) else np.full(n, 0.5)
         self.fx = math.inf if f0 is None else float(f0)
@@ -131,7 +131,7 @@ class CoordinatePolish(Optimizer):
                 "max_step": self.max_step,
                 "tolx": self.tolx,
                 "x": self.x.tolist(),
-                "fx": _float_to_json(self.fx),
+                "fx": float_to_json(self.fx),
                 "steps": self.steps.tolist(),
                 "pattern": None if self.pattern is None else self.pattern.tolist(),
                 "pending": None if self._pending is None else self._pending.tolist(),
@@ -150,23 +150,23 @@ class CoordinatePolish(Optimizer):
         opt = cls(
             space,
             seed=d["seed"],
-            step=_num(d, "step0", w, float),
-            max_step=_num(d, "max_step", w, float),
-            tolx=_num(d, "tolx", w, float, 0.0),
+            step=saved_value(d, "step0", w, float),
+            max_step=saved_value(d, "max_step", w, float),
+            tolx=saved_value(d, "tolx", w, float, 0.0),
         )
         opt._load_base(d)
-        opt._initial_u = _array(d, "initial_u", w, (None, n))
-        opt.x = _array(d, "x", w, (n,))
+        opt._initial_u = saved_array(d, "initial_u", w, (None, n))
+        opt.x = saved_array(d, "x", w, (n,))
         if opt.x.min() < 0 or opt.x.max() > 1:
             raise ClothFitError(f"checkpoint: {w} 'x' must lie in the unit cube")
-        opt.fx = _float_from_json(_num(d, "fx", w, float, allow_none=True))
-        opt.steps = _array(d, "steps", w, (n,))
+        opt.fx = float_from_json(saved_value(d, "fx", w, float, allow_none=True))
+        opt.steps = saved_array(d, "steps", w, (n,))
         if opt.steps.min() < 0 or opt.steps.max() > opt.max_step:
             raise ClothFitError(f"checkpoint: {w} 'steps' must lie in [0, max_step]")
-        opt.pattern = _array(d, "pattern", w, (n,), allow_none=True)
-        opt._pending = _array(d, "pending", w, (None, n), allow_none=True)
+        opt.pattern = saved_array(d, "pattern", w, (n,), allow_none=True)
+        opt._pending = saved_array(d, "pending", w, (None, n), allow_none=True)
         if opt._pending is not None and (opt._pending.min() < 0 or opt._pending.max() > 1):
             raise ClothFitError(f"checkpoint: {w} 'pending' must lie in the unit cube")
-        opt.stop_reason = _stop_reason(d, w, ("tolx",))
-        opt._stopped = _bool(d, "stopped", w)
+        opt.stop_reason = saved_stop_reason(d, w, ("tolx",))
+        opt._stopped = saved_bool(d, "stopped", w)
         return opt

@@ -20,19 +20,19 @@ from .evolution_strategy import CMA_STOPS, CMAES
 from .polish import CoordinatePolish
 from .space import (
     SearchSpace,
-    _active,
-    _array,
-    _bool,
-    _field,
-    _flag,
-    _integer,
-    _num,
-    _number,
-    _rng_state_from_json,
-    _step,
-    _stop_reason,
+    checked_flag,
+    checked_integer,
+    checked_number,
     reflect_unit,
+    rng_state_from_json,
     sanitize_fitness,
+    saved_active,
+    saved_array,
+    saved_bool,
+    saved_field,
+    saved_step,
+    saved_stop_reason,
+    saved_value,
 )
 from .steppable import Optimizer
 
@@ -89,17 +89,19 @@ class CMAPortfolio(Optimizer):
         if polish not in PORTFOLIO_POLISH:
             raise ClothFitError(f"cma-portfolio: polish must be one of {list(PORTFOLIO_POLISH)}, got {polish!r}")
         self.polish = polish
-        self.refine_until = _number(refine_until, "cma-portfolio: refine_until (a fraction)", 0.0, 1.0)
-        self.popsize = _integer(D.CMA_POPSIZE if popsize is None else popsize, "cma-portfolio: popsize", 2)
-        self.sigma0 = _number(sigma0, "cma-portfolio: sigma0 (unit cube)", 0.0, 10.0, lo_open=True)
-        self.polish_sigma = _number(polish_sigma, "cma-portfolio: polish_sigma (unit cube)", 0.0, 10.0, lo_open=True)
-        self.tolx = _number(tolx, "cma-portfolio: tolx")
-        self.tolfun = _number(tolfun, "cma-portfolio: tolfun")
-        self.active = _flag(active, "cma-portfolio: active")
-        self.runs = _integer(runs, "cma-portfolio: runs", 1, 64)
-        self.explore = _number(explore, "cma-portfolio: explore (a fraction)", 0.0, 1.0)
-        self.budget = _integer(D.FIT_EVALUATIONS if budget is None else budget, "cma-portfolio: budget")
-        self.max_polishes = _integer(max_polishes, "cma-portfolio: max_polishes")
+        self.refine_until = checked_number(refine_until, "cma-portfolio: refine_until (a fraction)", 0.0, 1.0)
+        self.popsize = checked_integer(D.CMA_POPSIZE if popsize is None else popsize, "cma-portfolio: popsize", 2)
+        self.sigma0 = checked_number(sigma0, "cma-portfolio: sigma0 (unit cube)", 0.0, 10.0, lo_open=True)
+        self.polish_sigma = checked_number(
+            polish_sigma, "cma-portfolio: polish_sigma (unit cube)", 0.0, 10.0, lo_open=True
+        )
+        self.tolx = checked_number(tolx, "cma-portfolio: tolx")
+        self.tolfun = checked_number(tolfun, "cma-portfolio: tolfun")
+        self.active = checked_flag(active, "cma-portfolio: active")
+        self.runs = checked_integer(runs, "cma-portfolio: runs", 1, 64)
+        self.explore = checked_number(explore, "cma-portfolio: explore (a fraction)", 0.0, 1.0)
+        self.budget = checked_integer(D.FIT_EVALUATIONS if budget is None else budget, "cma-portfolio: budget")
+        self.max_polishes = checked_integer(max_polishes, "cma-portfolio: max_polishes")
         self.n_rounds = int(math.ceil(math.log2(self.runs))) + 1
         self.phase = "explore"
         self.round = 0
@@ -296,35 +298,35 @@ class CMAPortfolio(Optimizer):
         n = space.n
         opt = cls.__new__(cls)
         Optimizer.__init__(opt, space, d["seed"], None)
-        opt.popsize = _num(d, "popsize", w, int, 2, 10**6)
-        opt.sigma0 = _step(d, "sigma0", w)
-        opt.polish_sigma = _step(d, "polish_sigma", w)
-        opt.tolx = _num(d, "tolx", w, float, 0.0)
-        opt.tolfun = _num(d, "tolfun", w, float, 0.0)
-        opt.active = _active(d, w)
-        opt.runs = _num(d, "runs", w, int, 1, 64)
-        opt.explore = _num(d, "explore", w, float, 0.0, 1.0)
-        opt.budget = _num(d, "budget", w, int, 1, 10**12)
-        opt.max_polishes = _num(d, "max_polishes", w, int, 1, 10**6)
-        opt.polish = _field(d, "polish", w)
+        opt.popsize = saved_value(d, "popsize", w, int, 2, 10**6)
+        opt.sigma0 = saved_step(d, "sigma0", w)
+        opt.polish_sigma = saved_step(d, "polish_sigma", w)
+        opt.tolx = saved_value(d, "tolx", w, float, 0.0)
+        opt.tolfun = saved_value(d, "tolfun", w, float, 0.0)
+        opt.active = saved_active(d, w)
+        opt.runs = saved_value(d, "runs", w, int, 1, 64)
+        opt.explore = saved_value(d, "explore", w, float, 0.0, 1.0)
+        opt.budget = saved_value(d, "budget", w, int, 1, 10**12)
+        opt.max_polishes = saved_value(d, "max_polishes", w, int, 1, 10**6)
+        opt.polish = saved_field(d, "polish", w)
         if opt.polish not in PORTFOLIO_POLISH:
             raise ClothFitError(f"checkpoint: {w} 'polish' must be one of {list(PORTFOLIO_POLISH)}")
-        opt.refine_until = _num(d, "refine_until", w, float, 0.0, 1.0)
+        opt.refine_until = saved_value(d, "refine_until", w, float, 0.0, 1.0)
         opt.n_rounds = int(math.ceil(math.log2(opt.runs))) + 1
         opt._load_base(d)
-        opt.phase = _field(d, "phase", w)
+        opt.phase = saved_field(d, "phase", w)
         if opt.phase not in PORTFOLIO_PHASES:
             raise ClothFitError(f"checkpoint: {w} 'phase' must be one of {list(PORTFOLIO_PHASES)}")
-        opt.round = _num(d, "round", w, int, 0, opt.n_rounds - 1)
-        opt.round_spent = _num(d, "round_spent", w, int, 0, 10**12)
-        opt.polishes = _num(d, "polishes", w, int, 0, opt.max_polishes)
-        opt.stop_reason = _stop_reason(d, w, PORTFOLIO_STOPS)
-        rs = _field(d, "run_stops", w)
+        opt.round = saved_value(d, "round", w, int, 0, opt.n_rounds - 1)
+        opt.round_spent = saved_value(d, "round_spent", w, int, 0, 10**12)
+        opt.polishes = saved_value(d, "polishes", w, int, 0, opt.max_polishes)
+        opt.stop_reason = saved_stop_reason(d, w, PORTFOLIO_STOPS)
+        rs = saved_field(d, "run_stops", w)
         if not isinstance(rs, list) or len(rs) > 100 or any(r not in CMA_STOPS for r in rs):
             raise ClothFitError(f"checkpoint: {w} 'run_stops' must be a list of stop criteria")
         opt.run_stops = list(rs)
-        opt._stopped = _bool(d, "stopped", w)
-        kids = _field(d, "children", w)
+        opt._stopped = saved_bool(d, "stopped", w)
+        kids = saved_field(d, "children", w)
         if not isinstance(kids, list) or not opt.runs <= len(kids) <= opt.runs + opt.max_polishes:
             raise ClothFitError(f"checkpoint: {w} 'children' must be a list of CMA-ES states")
         opt.children = []
@@ -341,7 +343,7 @@ class CMAPortfolio(Optimizer):
             ):
                 raise ClothFitError(f"checkpoint: {w} 'children' hold a run of another space or population")
             opt.children.append(c)
-        al = _field(d, "alive", w)
+        al = saved_field(d, "alive", w)
         if (
             not isinstance(al, list)
             or not al
@@ -356,7 +358,7 @@ class CMAPortfolio(Optimizer):
         ):
             raise ClothFitError(f"checkpoint: {w} 'alive' must list kept runs")
         opt.alive = list(al)
-        cur = _field(d, "current", w)
+        cur = saved_field(d, "current", w)
         if cur is not None and (
             isinstance(cur, bool)
             or not isinstance(cur, int)
@@ -366,6 +368,6 @@ class CMAPortfolio(Optimizer):
         ):
             raise ClothFitError(f"checkpoint: {w} 'current' must be a run with a pending batch, or null")
         opt._current = cur
-        opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
-        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        opt.rng = rng_state_from_json(saved_field(d, "rng", w), w)
+        opt._initial_u = saved_array(d, "initial_u", w, (None, n))
         return opt

@@ -18,15 +18,16 @@ has been told.
 
 Validators
 ----------
-``_number``, ``_integer`` and ``_flag`` check an optimiser's settings; ``_num``, ``_array``,
-``_field`` ... check a checkpoint's fields. Each raises a one-line :class:`ClothFitError`
+``checked_number``, ``checked_integer`` and ``checked_flag`` check an optimiser's settings; ``saved_value``, ``saved_array``,
+``saved_field`` ... check a checkpoint's fields. Each raises a one-line :class:`ClothFitError`
 naming the value at fault.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,7 +39,7 @@ if TYPE_CHECKING:
 # --------------------------------------------------------------------------- helpers
 
 
-def _new_rng(seed):
+def new_rng(seed: int | None) -> np.random.Generator:
     return np.random.Generator(np.random.PCG64(seed))
 
 
@@ -48,12 +49,12 @@ def _rng_from_state(state):
     return rng
 
 
-def _float_to_json(v):
+def float_to_json(v: float) -> float | None:
     v = float(v)
     return v if math.isfinite(v) else None
 
 
-def _float_from_json(v):
+def float_from_json(v: float | None) -> float:
     return math.inf if v is None else float(v)
 
 
@@ -77,20 +78,28 @@ def reflect_unit(U: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- state validation
 
 
-def _field(d, key, where):
+def saved_field(d: dict, key: str, where: str) -> Any:
     if key not in d:
         raise ClothFitError(f"checkpoint: {where} state lacks '{key}'")
     return d[key]
 
 
-def _check_keys(d, allowed, where):
+def check_keys(d: dict, allowed: Iterable[str], where: str) -> None:
     unknown = sorted(set(d) - set(allowed))
     if unknown:
         raise ClothFitError(f"checkpoint: {where} state has unknown fields {unknown} (not written by this version)")
 
 
-def _num(d, key, where, kind=float, lo=None, hi=None, allow_none=False):
-    v = _field(d, key, where)
+def saved_value(
+    d: dict,
+    key: str,
+    where: str,
+    kind: type = float,
+    lo: float | None = None,
+    hi: float | None = None,
+    allow_none: bool = False,
+) -> Any:
+    v = saved_field(d, key, where)
     if v is None and allow_none:
         return None
     if isinstance(v, bool) or not isinstance(v, (int, float)) or (kind is int and not isinstance(v, int)):
@@ -104,10 +113,12 @@ def _num(d, key, where, kind=float, lo=None, hi=None, allow_none=False):
     return kind(v)
 
 
-def _array(d, key, where, shape, allow_none=False, inf_as_none=False):
+def saved_array(
+    d: dict, key: str, where: str, shape: tuple, allow_none: bool = False, inf_as_none: bool = False
+) -> np.ndarray | None:
     """A nested list of numbers of the given shape (None in shape = any length), all finite
     (or ``None`` = +inf where ``inf_as_none``)."""
-    v = _field(d, key, where)
+    v = saved_field(d, key, where)
     if v is None and allow_none:
         return None
     if not isinstance(v, list):
@@ -135,7 +146,7 @@ def _array(d, key, where, shape, allow_none=False, inf_as_none=False):
     return A
 
 
-def _rng_state_from_json(v, where):
+def rng_state_from_json(v: Any, where: str) -> dict:
     """A PCG64 bit-generator state made of plain integers, validated."""
     if (
         not isinstance(v, dict)
@@ -154,34 +165,34 @@ def _rng_state_from_json(v, where):
         raise ClothFitError(f"checkpoint: {where} 'rng' is invalid ({exc})") from None
 
 
-def _stop_reason(d, where, allowed):
-    v = _field(d, "stop_reason", where)
+def saved_stop_reason(d: dict, where: str, allowed: Iterable[str]) -> str | None:
+    v = saved_field(d, "stop_reason", where)
     if v is not None and v not in allowed:
         raise ClothFitError(f"checkpoint: {where} 'stop_reason' {v!r} is not one of {list(allowed)}")
     return v
 
 
-def _bool(d, key, where):
+def saved_bool(d: dict, key: str, where: str) -> bool:
     """A checkpoint's required true/false field ``key``."""
-    v = _field(d, key, where)
+    v = saved_field(d, key, where)
     if not isinstance(v, bool):
         raise ClothFitError(f"checkpoint: {where} '{key}' must be true or false")
     return v
 
 
-def _step(d, key, where):
+def saved_step(d: dict, key: str, where: str) -> float:
     """A checkpoint's CMA-ES step ``key`` (unit cube): a number in (0, 10]."""
-    return _number(_num(d, key, where, float), f"checkpoint: {where} '{key}'", 0.0, 10.0, lo_open=True)
+    return checked_number(saved_value(d, key, where, float), f"checkpoint: {where} '{key}'", 0.0, 10.0, lo_open=True)
 
 
-def _active(d, where):
+def saved_active(d: dict, where: str) -> bool:
     v = d.get("active", False)  # older checkpoints: plain CMA-ES
     if not isinstance(v, bool):
         raise ClothFitError(f"checkpoint: {where} 'active' must be true or false")
     return v
 
 
-def _number(v, what, lo=0.0, hi=math.inf, lo_open=False):
+def checked_number(v: Any, what: str, lo: float = 0.0, hi: float = math.inf, lo_open: bool = False) -> float:
     """``v`` as a finite float in ``[lo, hi]`` (``(lo, hi]`` where ``lo_open``), else a one-line
     ClothFitError naming ``what``: every real-valued setting of every optimiser goes through here."""
     try:
@@ -194,14 +205,14 @@ def _number(v, what, lo=0.0, hi=math.inf, lo_open=False):
     return x
 
 
-def _flag(v, what):
+def checked_flag(v: Any, what: str) -> bool:
     """``v`` as a bool (a numpy bool too; not 0 / 1 / "yes"), else a one-line ClothFitError."""
     if not isinstance(v, (bool, np.bool_)):
         raise ClothFitError(f"{what} must be true or false, got {v!r}")
     return bool(v)
 
 
-def _integer(v, what, lo=1, hi=None):
+def checked_integer(v: Any, what: str, lo: int = 1, hi: int | None = None) -> int:
     """``v`` as an int in ``lo..hi`` (no upper bound when None; a bool is not an integer), else a
     one-line ClothFitError naming ``what``."""
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) < lo or (hi is not None and int(v) > hi):
@@ -345,7 +356,7 @@ class SearchSpace:
     def from_state(cls, d: dict) -> SearchSpace:
         if not isinstance(d, dict):
             raise ClothFitError("checkpoint: search space must be an object")
-        _check_keys(d, ("names", "bounds", "log_scaled"), "search space")
+        check_keys(d, ("names", "bounds", "log_scaled"), "search space")
         names, bounds, logs = d.get("names"), d.get("bounds"), d.get("log_scaled") or {}
         if (
             not isinstance(names, list)

@@ -24,20 +24,20 @@ from ..errors import ClothFitError
 from .evolution_strategy import CMA_STOPS, CMAES
 from .space import (
     SearchSpace,
-    _active,
-    _array,
-    _bool,
-    _field,
-    _flag,
-    _float_from_json,
-    _float_to_json,
-    _integer,
-    _num,
-    _number,
-    _rng_state_from_json,
-    _step,
+    checked_flag,
+    checked_integer,
+    checked_number,
+    float_from_json,
+    float_to_json,
     reflect_unit,
+    rng_state_from_json,
     sanitize_fitness,
+    saved_active,
+    saved_array,
+    saved_bool,
+    saved_field,
+    saved_step,
+    saved_value,
 )
 from .steppable import Optimizer
 
@@ -143,15 +143,15 @@ class StagedCMA(Optimizer):
         if unknown or not first:
             raise ClothFitError(f"{w}: 'first' must name coordinates of the search ({', '.join(names)}), got {first}")
         self.first = [n for n in names if n in set(first)]
-        self.popsize = _integer(D.CMA_POPSIZE if popsize is None else popsize, f"{w}: popsize", 2)
-        self.sigma0 = _number(sigma0, f"{w}: sigma0 (unit cube)", 0.0, 10.0, lo_open=True)
-        self.second_sigma = _number(second_sigma, f"{w}: second_sigma (unit cube)", 0.0, 10.0, lo_open=True)
-        self.tolx = _number(tolx, f"{w}: tolx")
-        self.tolfun = _number(tolfun, f"{w}: tolfun")
-        self.active = _flag(active, f"{w}: active")
-        self.restarts = _integer(restarts, f"{w}: restarts", 0, 100)
-        self.first_fraction = _number(first_fraction, f"{w}: first_fraction", 0.0, 1.0)
-        self.budget = _integer(D.FIT_EVALUATIONS if budget is None else budget, f"{w}: budget")
+        self.popsize = checked_integer(D.CMA_POPSIZE if popsize is None else popsize, f"{w}: popsize", 2)
+        self.sigma0 = checked_number(sigma0, f"{w}: sigma0 (unit cube)", 0.0, 10.0, lo_open=True)
+        self.second_sigma = checked_number(second_sigma, f"{w}: second_sigma (unit cube)", 0.0, 10.0, lo_open=True)
+        self.tolx = checked_number(tolx, f"{w}: tolx")
+        self.tolfun = checked_number(tolfun, f"{w}: tolfun")
+        self.active = checked_flag(active, f"{w}: active")
+        self.restarts = checked_integer(restarts, f"{w}: restarts", 0, 100)
+        self.first_fraction = checked_number(first_fraction, f"{w}: first_fraction", 0.0, 1.0)
+        self.budget = checked_integer(D.FIT_EVALUATIONS if budget is None else budget, f"{w}: budget")
         u = self._initial_u.mean(axis=0) if len(self._initial_u) else np.full(space.n, 0.5)
         x = space.decode(u)
         for n, v in (hold or {}).items():
@@ -167,27 +167,27 @@ class StagedCMA(Optimizer):
         init = [space.decode(self.hold_u)[self._idx]] if len(self._initial_u) else None
         k = sub.n if len(self.first) < space.n else None
         if first_popsize is not None:
-            lam1 = _integer(first_popsize, f"{w}: first_popsize", 2)
+            lam1 = checked_integer(first_popsize, f"{w}: first_popsize", 2)
         else:
             lam1 = self.popsize if k is None else 4 + int(3 * np.log(k))
-        self.race = _integer(race, f"{w}: race", 1, 100)
+        self.race = checked_integer(race, f"{w}: race", 1, 100)
         # each raced run gets at most a (race + 1)-th of the first stage: the winner as much again at least
         share = int(self.first_fraction * self.budget) // (self.race + 1)
-        self.race_evals = max(1, min(_integer(race_evals, f"{w}: race_evals", 1), share))
-        self.first_restart_step = _number(first_restart_step, f"{w}: first_restart_step (unit cube)", 0.0, 1.0)
+        self.race_evals = max(1, min(checked_integer(race_evals, f"{w}: race_evals", 1), share))
+        self.first_restart_step = checked_number(first_restart_step, f"{w}: first_restart_step (unit cube)", 0.0, 1.0)
         self.first_init = None if init is None else [float(v) for v in init[0]]  # where each first-stage run starts
         self.first_runs = 1
-        self.first_explore = _number(first_explore, f"{w}: first_explore", 0.0, 1.0)
+        self.first_explore = checked_number(first_explore, f"{w}: first_explore", 0.0, 1.0)
         self.first_best_run = None  # the converged run with the best point so far (its CMA-ES state)
         self.first_restart_vary, self.first_restart_levels = _vary(
             first_restart_vary, first_restart_levels, self.first, w
         )
-        self.second_warm = _flag(second_warm, f"{w}: second_warm")
-        self.warm_tail = _number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
-        self.warm_tail_stuck = _flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
+        self.second_warm = checked_flag(second_warm, f"{w}: second_warm")
+        self.warm_tail = checked_number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
+        self.warm_tail_stuck = checked_flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
         self.first_best_f = None  # the best value when the first stage ended (warm_tail_stuck compares with it)
-        self.warm_tail_stall = _number(warm_tail_stall, f"{w}: warm_tail_stall", 0.0, 1.0)
-        self.warm_tail_stall_gain = _number(warm_tail_stall_gain, f"{w}: warm_tail_stall_gain", 0.0, 1.0)
+        self.warm_tail_stall = checked_number(warm_tail_stall, f"{w}: warm_tail_stall", 0.0, 1.0)
+        self.warm_tail_stall_gain = checked_number(warm_tail_stall_gain, f"{w}: warm_tail_stall_gain", 0.0, 1.0)
         self.stall_mark = None  # the second stage's [evaluations, best value] its gain is measured from
         self.children = [self._child(sub, lam1, self.sigma0, init)]
         # the race (off by default): more first-stage runs from random points of the strong settings'
@@ -198,7 +198,7 @@ class StagedCMA(Optimizer):
                 u0 = self.rng.uniform(D.STAGED_RACE_START[0], D.STAGED_RACE_START[1], sub.n)
                 self.children.append(self._child(sub, lam1, self.sigma0, [sub.decode(u0)]))
         self.turn = 0
-        self.scan_points = _integer(scan_points, f"{w}: scan_points", 0, 10000)
+        self.scan_points = checked_integer(scan_points, f"{w}: scan_points", 0, 10000)
         self.scan_left: list = []  # the first stage's coordinates still to scan (between the stages)
         self.scanned = False
         self._scan_pending = None
@@ -402,7 +402,7 @@ class StagedCMA(Optimizer):
                 if self._converged(c):
                     # another run from where the first began, with a new random stream: the first stage's
                     # runs settle early, each in one of a few basins (docs/search.md, "Runs again")
-                    if self.first_best_run is None or c.best_f < _float_from_json(self.first_best_run["best_f"]):
+                    if self.first_best_run is None or c.best_f < float_from_json(self.first_best_run["best_f"]):
                         self.first_best_run = c.state_dict()
                     self.first_runs += 1
                     init = None if self.first_init is None else [np.array(self.first_init)]
@@ -415,7 +415,7 @@ class StagedCMA(Optimizer):
                     self.children[-1] = self._child(sub, c.popsize, self.sigma0, init)
             elif self.first_best_run is not None:
                 # the runs are over: the one with the best point goes on, to the end of the first stage
-                if _float_from_json(self.first_best_run["best_f"]) < c.best_f:
+                if float_from_json(self.first_best_run["best_f"]) < c.best_f:
                     self.children[-1] = CMAES.from_state(self.first_best_run)
                 self.first_best_run = None
         elif self._tail_due(c):
@@ -530,8 +530,8 @@ class StagedCMA(Optimizer):
                 "warm_tail_stall_gain": self.warm_tail_stall_gain,
                 "stall_mark": None
                 if self.stall_mark is None
-                else [self.stall_mark[0], _float_to_json(self.stall_mark[1])],
-                "first_best_f": None if self.first_best_f is None else _float_to_json(self.first_best_f),
+                else [self.stall_mark[0], float_to_json(self.stall_mark[1])],
+                "first_best_f": None if self.first_best_f is None else float_to_json(self.first_best_f),
                 "stage": self.stage,
                 "stopped": self._stopped,
                 "children": [c.state_dict() for c in self.children],
@@ -545,12 +545,12 @@ class StagedCMA(Optimizer):
         """from_state's part for runs again in the first stage (its fields, checked; older checkpoints: one run)."""
         # runs again in the first stage came after the scan: one run (none again) in older checkpoints
         self.first_restart_step = (
-            _num(d, "first_restart_step", w, float, 0.0, 1.0) if "first_restart_step" in d else 0.0
+            saved_value(d, "first_restart_step", w, float, 0.0, 1.0) if "first_restart_step" in d else 0.0
         )
-        self.first_runs = _num(d, "first_runs", w, int, 1, 10**9) if "first_runs" in d else 1
-        init = _array(d, "first_init", w, (len(self.first),), allow_none=True) if "first_init" in d else None
+        self.first_runs = saved_value(d, "first_runs", w, int, 1, 10**9) if "first_runs" in d else 1
+        init = saved_array(d, "first_init", w, (len(self.first),), allow_none=True) if "first_init" in d else None
         self.first_init = None if init is None else init.tolist()
-        self.first_explore = _num(d, "first_explore", w, float, 0.0, 1.0) if "first_explore" in d else 0.0
+        self.first_explore = saved_value(d, "first_explore", w, float, 0.0, 1.0) if "first_explore" in d else 0.0
         kept = d.get("first_best_run")
         if kept is not None:
             if not isinstance(kept, dict) or kept.get("algorithm") != "cma-es":
@@ -573,14 +573,14 @@ class StagedCMA(Optimizer):
         n = space.n
         opt = cls.__new__(cls)
         Optimizer.__init__(opt, space, d["seed"], None)
-        opt.popsize = _num(d, "popsize", w, int, 2, 10**6)
-        opt.sigma0 = _step(d, "sigma0", w)
-        opt.second_sigma = _step(d, "second_sigma", w)
-        opt.tolx = _num(d, "tolx", w, float, 0.0)
-        opt.tolfun = _num(d, "tolfun", w, float, 0.0)
-        opt.active = _active(d, w)
-        opt.restarts = _num(d, "restarts", w, int, 0, 100)
-        first = _field(d, "first", w)
+        opt.popsize = saved_value(d, "popsize", w, int, 2, 10**6)
+        opt.sigma0 = saved_step(d, "sigma0", w)
+        opt.second_sigma = saved_step(d, "second_sigma", w)
+        opt.tolx = saved_value(d, "tolx", w, float, 0.0)
+        opt.tolfun = saved_value(d, "tolfun", w, float, 0.0)
+        opt.active = saved_active(d, w)
+        opt.restarts = saved_value(d, "restarts", w, int, 0, 100)
+        first = saved_field(d, "first", w)
         if (
             not isinstance(first, list)
             or not first
@@ -589,21 +589,21 @@ class StagedCMA(Optimizer):
         ):
             raise ClothFitError(f"checkpoint: {w} 'first' must list coordinates of the search in order")
         opt.first = list(first)
-        opt.first_fraction = _num(d, "first_fraction", w, float, 0.0, 1.0)
-        opt.budget = _num(d, "budget", w, int, 1, 10**12)
+        opt.first_fraction = saved_value(d, "first_fraction", w, float, 0.0, 1.0)
+        opt.budget = saved_value(d, "budget", w, int, 1, 10**12)
         opt._load_base(d)
-        opt.hold_u = _array(d, "hold_u", w, (n,))
+        opt.hold_u = saved_array(d, "hold_u", w, (n,))
         if np.any(opt.hold_u < 0.0) or np.any(opt.hold_u > 1.0):
             raise ClothFitError(f"checkpoint: {w} 'hold_u' must lie in the unit cube")
         # 'tie' came after the first checkpoints of this search: none there
         opt.tie = cls._check_tie(d.get("tie", {}), list(space.names), opt.first, f"checkpoint: {w}")
-        opt.stage = _num(d, "stage", w, int, 1, 3)
-        opt._stopped = _bool(d, "stopped", w)
+        opt.stage = saved_value(d, "stage", w, int, 1, 3)
+        opt._stopped = saved_bool(d, "stopped", w)
         # the race came after the first checkpoints of this search: none there
-        opt.race = _num(d, "race", w, int, 1, 100) if "race" in d else 1
-        opt.race_evals = _num(d, "race_evals", w, int, 1, 10**12) if "race_evals" in d else D.STAGED_RACE_EVALS
-        opt.racing = _bool(d, "racing", w) if "racing" in d else False
-        kids = _field(d, "children", w)
+        opt.race = saved_value(d, "race", w, int, 1, 100) if "race" in d else 1
+        opt.race_evals = saved_value(d, "race_evals", w, int, 1, 10**12) if "race_evals" in d else D.STAGED_RACE_EVALS
+        opt.racing = saved_bool(d, "racing", w) if "racing" in d else False
+        kids = saved_field(d, "children", w)
         n_kids = opt.race if opt.racing else opt.stage
         if (
             (opt.racing and opt.stage != 1)
@@ -612,10 +612,10 @@ class StagedCMA(Optimizer):
             or any(not isinstance(k, dict) for k in kids)
         ):
             raise ClothFitError(f"checkpoint: {w} 'children' must hold one CMA-ES state per stage (per run racing)")
-        opt.turn = _num(d, "turn", w, int, 0, len(kids) - 1) if "turn" in d else 0
+        opt.turn = saved_value(d, "turn", w, int, 0, len(kids) - 1) if "turn" in d else 0
         # the scan between the stages came after the race: none in older checkpoints
-        opt.scan_points = _num(d, "scan_points", w, int, 0, 10000) if "scan_points" in d else 0
-        opt.scanned = _bool(d, "scanned", w) if "scanned" in d else False
+        opt.scan_points = saved_value(d, "scan_points", w, int, 0, 10000) if "scan_points" in d else 0
+        opt.scanned = saved_bool(d, "scanned", w) if "scanned" in d else False
         left = d.get("scan_left", [])
         if (
             not isinstance(left, list)
@@ -625,19 +625,19 @@ class StagedCMA(Optimizer):
             raise ClothFitError(f"checkpoint: {w} 'scan_left' must list first-stage coordinates, while scanning")
         opt.scan_left = list(left)
         opt._scan_pending = (
-            _array(d, "scan_pending", w, (opt.scan_points, n), allow_none=True) if "scan_pending" in d else None
+            saved_array(d, "scan_pending", w, (opt.scan_points, n), allow_none=True) if "scan_pending" in d else None
         )
         if opt._scan_pending is not None and not opt.scan_left:
             raise ClothFitError(f"checkpoint: {w} 'scan_pending' without a scan under way")
         opt._restore_runs_again(d, w)
         # the warm second stage came after runs again: a plain one in older checkpoints
-        opt.second_warm = _bool(d, "second_warm", w) if "second_warm" in d else False
-        opt.warm_tail = _num(d, "warm_tail", w, float, 0.0, 1.0) if "warm_tail" in d else 0.0
-        opt.warm_tail_stuck = _bool(d, "warm_tail_stuck", w) if "warm_tail_stuck" in d else False
+        opt.second_warm = saved_bool(d, "second_warm", w) if "second_warm" in d else False
+        opt.warm_tail = saved_value(d, "warm_tail", w, float, 0.0, 1.0) if "warm_tail" in d else 0.0
+        opt.warm_tail_stuck = saved_bool(d, "warm_tail_stuck", w) if "warm_tail_stuck" in d else False
         # the stalled second stage came after the stuck one: none in older checkpoints
-        opt.warm_tail_stall = _num(d, "warm_tail_stall", w, float, 0.0, 1.0) if "warm_tail_stall" in d else 0.0
+        opt.warm_tail_stall = saved_value(d, "warm_tail_stall", w, float, 0.0, 1.0) if "warm_tail_stall" in d else 0.0
         opt.warm_tail_stall_gain = (
-            _num(d, "warm_tail_stall_gain", w, float, 0.0, 1.0)
+            saved_value(d, "warm_tail_stall_gain", w, float, 0.0, 1.0)
             if "warm_tail_stall_gain" in d
             else D.STAGED_WARM_TAIL_STALL_GAIN
         )
@@ -652,12 +652,12 @@ class StagedCMA(Optimizer):
             or not isinstance(mark[1], (int, float, str))
         ):
             raise ClothFitError(f"checkpoint: {w} 'stall_mark' must be null or [evaluations, value]")
-        opt.stall_mark = None if mark is None or opt.stage != 2 else [mark[0], _float_from_json(mark[1])]
+        opt.stall_mark = None if mark is None or opt.stage != 2 else [mark[0], float_from_json(mark[1])]
         fb = d.get("first_best_f")
         if fb is not None and (isinstance(fb, bool) or not isinstance(fb, (int, float))):
             raise ClothFitError(f"checkpoint: {w} 'first_best_f' must be a number or null")
         # null: no first stage ended yet, or (past it) a first stage without a finite value
-        opt.first_best_f = _float_from_json(fb) if opt.stage >= 2 and "first_best_f" in d else None
+        opt.first_best_f = float_from_json(fb) if opt.stage >= 2 and "first_best_f" in d else None
         opt.children = []
         for i, k in enumerate(kids):
             if k.get("algorithm") != "cma-es":
@@ -669,6 +669,6 @@ class StagedCMA(Optimizer):
             if c.stop_reason is not None and c.stop_reason not in CMA_STOPS:
                 raise ClothFitError(f"checkpoint: {w} 'children' hold an unknown stop criterion")
             opt.children.append(c)
-        opt.rng = _rng_state_from_json(_field(d, "rng", w), w)
-        opt._initial_u = _array(d, "initial_u", w, (None, n))
+        opt.rng = rng_state_from_json(saved_field(d, "rng", w), w)
+        opt._initial_u = saved_array(d, "initial_u", w, (None, n))
         return opt

@@ -31,13 +31,13 @@ import numpy as np
 from ..errors import ClothFitError
 from .space import (
     SearchSpace,
-    _array,
-    _check_keys,
-    _field,
-    _float_from_json,
-    _float_to_json,
-    _new_rng,
-    _num,
+    check_keys,
+    float_from_json,
+    float_to_json,
+    new_rng,
+    saved_array,
+    saved_field,
+    saved_value,
 )
 
 if TYPE_CHECKING:
@@ -58,7 +58,7 @@ class Optimizer:
             raise ClothFitError(f"optimizer: expected a SearchSpace, got {type(space).__name__}")
         self.space = space
         self.seed = None if seed is None else int(seed)
-        self.rng = _new_rng(self.seed)
+        self.rng = new_rng(self.seed)
         self.evaluations = 0
         self.generation = 0
         self.history: list = []
@@ -171,8 +171,8 @@ class Optimizer:
             "seed": self.seed,
             "evaluations": int(self.evaluations),
             "generation": int(self.generation),
-            "history": [[int(e), _float_to_json(b)] for e, b in self.history],
-            "best_f": _float_to_json(self.best_f),
+            "history": [[int(e), float_to_json(b)] for e, b in self.history],
+            "best_f": float_to_json(self.best_f),
             "best_u": None if self._best_u is None else self._best_u.tolist(),
             "best_x": None if self._best_u is None else self.best_x.tolist(),
         }
@@ -192,9 +192,9 @@ class Optimizer:
 
     def _load_base(self, d: dict):
         w = self.name
-        self.evaluations = _num(d, "evaluations", w, int, 0, 10**12)
-        self.generation = _num(d, "generation", w, int, 0, 10**12)
-        hist = _field(d, "history", w)
+        self.evaluations = saved_value(d, "evaluations", w, int, 0, 10**12)
+        self.generation = saved_value(d, "generation", w, int, 0, 10**12)
+        hist = saved_field(d, "history", w)
         if not isinstance(hist, list) or len(hist) > 10**6:
             raise ClothFitError(f"checkpoint: {w} 'history' must be a list of [evaluations, best] pairs")
         out = []
@@ -210,11 +210,11 @@ class Optimizer:
                 )
             ):
                 raise ClothFitError(f"checkpoint: {w} 'history' must be a list of [evaluations, best] pairs")
-            out.append((int(item[0]), _float_from_json(item[1])))
+            out.append((int(item[0]), float_from_json(item[1])))
         self.history = out
-        bf = _num(d, "best_f", w, float, allow_none=True)
+        bf = saved_value(d, "best_f", w, float, allow_none=True)
         self.best_f = math.inf if bf is None else bf
-        bu = _array(d, "best_u", w, (self.space.n,), allow_none=True)
+        bu = saved_array(d, "best_u", w, (self.space.n,), allow_none=True)
         if (bu is None) != (bf is None):
             raise ClothFitError(f"checkpoint: {w} 'best_f' and 'best_u' must be both set or both null")
         self._best_u = bu
@@ -229,11 +229,11 @@ class Optimizer:
                 f"checkpoint: unsupported {name} state version {d.get('version')!r} "
                 f"(this version reads {STATE_VERSION})"
             )
-        _check_keys(d, Optimizer.BASE_KEYS + tuple(keys), name)
-        seed = _field(d, "seed", name)
+        check_keys(d, Optimizer.BASE_KEYS + tuple(keys), name)
+        seed = saved_field(d, "seed", name)
         if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
             raise ClothFitError(f"checkpoint: {name} 'seed' must be a non-negative integer or null")
-        return SearchSpace.from_state(_field(d, "space", name))
+        return SearchSpace.from_state(saved_field(d, "space", name))
 
     def state_dict(self) -> dict:
         raise NotImplementedError

@@ -146,8 +146,7 @@ def parse_board(text: str, legacy: bool = False) -> Board:
     known = dictionaries()
     if name not in known:
         raise ClothFitError(
-            f"--board {text!r}: unknown dictionary {parts[4]!r} (OpenCV's: "
-            f"{', '.join(sorted(known, key=_natural_key))})"
+            f"--board {text!r}: unknown dictionary {parts[4]!r} (OpenCV's: {', '.join(sorted(known, key=natural_key))})"
         )
     b = Board(sx, sy, sq, mk, name, bool(legacy))
     if b.n_markers > known[name][1]:
@@ -157,7 +156,7 @@ def parse_board(text: str, legacy: bool = False) -> Board:
     return b
 
 
-def _natural_key(s: str):
+def natural_key(s: str) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", s)]
 
 
@@ -208,13 +207,13 @@ def make_board(
 
 def _png_with_dpi(png: bytes, dpi: float) -> bytes:
     """The PNG with a pHYs chunk (pixels per metre) right after IHDR, so that it prints at its size."""
-    from ..observation.png import _chunk
+    from ..observation.png import png_chunk
 
     ppm = int(round(dpi / 0.0254))
     ihdr_end = 8 + 8 + 13 + 4
     import struct
 
-    return png[:ihdr_end] + _chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1)) + png[ihdr_end:]
+    return png[:ihdr_end] + png_chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1)) + png[ihdr_end:]
 
 
 def _board_pdf(board: Board, margin_m: float) -> tuple:

@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .calib_board import Board, _natural_key
+from .calib_board import Board, natural_key
 from .calib_intrinsics import DIST_ORDER, DISTORTION_MODELS, Intrinsics, Options, project_points, rodrigues, rotvec
 
 if TYPE_CHECKING:
@@ -143,7 +143,7 @@ def _sparsity(prob: Problem):
 
 def _problem(board: Board, views: dict, intr: dict, ref: str, opts: Options) -> Problem:
     cams = list(views)
-    moments = sorted({m for c in cams for m in views[c]}, key=_natural_key)
+    moments = sorted({m for c in cams for m in views[c]}, key=natural_key)
     mi = {m: i for i, m in enumerate(moments)}
     P = board.corners()
     oc, om, oX, ox = [], [], [], []

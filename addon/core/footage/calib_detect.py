@@ -16,7 +16,7 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from ..observation.camera import check_camera_name
-from .calib_board import Board, _natural_key, dictionaries
+from .calib_board import Board, dictionaries, natural_key
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
@@ -198,7 +198,7 @@ def find_source(folder: str) -> Source:
 
     if not os.path.isdir(folder):
         raise ClothFitError(f"calibration folder not found: {folder}")
-    entries = sorted(os.listdir(folder), key=_natural_key)
+    entries = sorted(os.listdir(folder), key=natural_key)
     dirs = [e for e in entries if not e.startswith(".") and os.path.isdir(os.path.join(folder, e))]
     vids = [
         e
@@ -248,7 +248,7 @@ def find_source(folder: str) -> Source:
                     f"({os.path.basename(by_moment[stem])}, {f}); keep one"
                 )
             by_moment[stem] = os.path.join(folder, d, f)
-        images[d] = dict(sorted(by_moment.items(), key=lambda kv: _natural_key(kv[0])))
+        images[d] = dict(sorted(by_moment.items(), key=lambda kv: natural_key(kv[0])))
     return Source("images", folder, list(images), images=images)
 
 
@@ -381,7 +381,7 @@ def detect_views(
         views[cam] = found
         st["views"] = len(found)
         stats[cam] = st
-    return Detections(views, sizes, stats, all_markers, debug, sorted(read, key=_natural_key))
+    return Detections(views, sizes, stats, all_markers, debug, sorted(read, key=natural_key))
 
 
 def _frames(source: Source, cam: str, sync, times):

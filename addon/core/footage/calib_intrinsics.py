@@ -7,6 +7,7 @@ with distortion, the calibration options, per camera ``cv2.calibrateCamera`` on 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -14,7 +15,7 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .calib_board import Board, _natural_key
+from .calib_board import Board, natural_key
 
 if TYPE_CHECKING:
     from .calib_detect import View
@@ -263,7 +264,7 @@ def initial_extrinsics(
     tree of most shared moments. Cameras not connected: one-line error naming the groups."""
     cams = list(poses)
     shared = {(a, b): sorted(set(poses[a]) & set(poses[b])) for i, a in enumerate(cams) for b in cams[i + 1 :]}
-    groups = _components(cams, [(a, b) for (a, b), s in shared.items() if s])
+    groups = components(cams, [(a, b) for (a, b), s in shared.items() if s])
     if len(groups) > 1:
         desc = "; ".join("{" + ", ".join(g) + "}" for g in groups)
         raise ClothFitError(
@@ -288,7 +289,7 @@ def initial_extrinsics(
         Ra, ta = cam_pose[a]
         cam_pose[b] = (R @ Ra, R @ ta + t)
     board_pose = {}
-    moments = sorted({m for c in cams for m in poses[c]}, key=_natural_key)
+    moments = sorted({m for c in cams for m in poses[c]}, key=natural_key)
     for m in moments:
         Rs, ts = [], []
         for c in cams:
@@ -301,7 +302,7 @@ def initial_extrinsics(
     return ref, cam_pose, board_pose
 
 
-def _components(nodes, edges):
+def components(nodes: Iterable, edges: Iterable) -> list:
     parent = {n: n for n in nodes}
 
     def find(x):

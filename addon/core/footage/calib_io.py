@@ -47,7 +47,7 @@ import numpy as np
 
 from ..errors import ClothFitError
 from ..observation.camera import Camera, check_image_size, load_cameras, save_cameras
-from .colmap import _check_unique, _colmap_folder, read_colmap, read_colmap_bin, write_colmap
+from .colmap import check_unique, colmap_folder, read_colmap, read_colmap_bin, write_colmap
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -234,7 +234,7 @@ def read_opencv(path: str, width: int | None = None, height: int | None = None) 
             f"{', '.join(_K_KEYS)}, and no 'cameras' list)"
         )
     cams = [_camera_from_mapping(v, k, where, width, height) for k, v, where in entries]
-    _check_unique(cams, path)
+    check_unique(cams, path)
     return cams
 
 
@@ -246,7 +246,7 @@ def read_opencv_dir(folder: str, width: int | None = None, height: int | None = 
     cams = []
     for f in files:
         cams.extend(read_opencv(os.path.join(folder, f), width, height))
-    _check_unique(cams, folder)
+    check_unique(cams, folder)
     return cams
 
 
@@ -393,7 +393,7 @@ def read_easymocap(
         cam.K, cam.R, cam.t, cam.dist, cam.width, cam.height, cam.name = K, R, t, dist, w, h, n
         cam.validate(where)
         cams.append(cam)
-    _check_unique(cams, ipath)
+    check_unique(cams, ipath)
     return cams
 
 
@@ -467,7 +467,7 @@ def import_cameras(
         return read_opencv_dir(path, width, height)
     if fmt == "easymocap":
         return read_easymocap(path, width, height, sizes)
-    folder, kind = _colmap_folder(path)
+    folder, kind = colmap_folder(path)
     return read_colmap_bin(folder) if kind == "bin" else read_colmap(folder)
 
 
@@ -564,7 +564,7 @@ def undistort_image(image: np.ndarray, camera: Camera, interpolation: int | None
 # ================================================================ cameras of anything
 
 
-def _cameras_from_any(path: str, fmt: str = "auto", width=None, height=None) -> list:
+def cameras_from_any(path: str, fmt: str = "auto", width: int | None = None, height: int | None = None) -> list:
     """Cameras of a calibration file/folder, or of a capture (its folder or capture.json)."""
     cj = path if os.path.basename(path) == "capture.json" else os.path.join(path, "capture.json")
     if os.path.isfile(cj) and fmt == "auto":

@@ -48,7 +48,7 @@ from ..errors import ClothFitError
 from ..observation.camera import Camera
 
 # calibrate.X names that addon/cli.py, tests/test_calibrate.py and lab/phone_rig.py use
-from .calib_board import Board, _natural_key, make_board, parse_board  # noqa: E402,F401
+from .calib_board import Board, make_board, natural_key, parse_board  # noqa: E402,F401
 from .calib_bundle import bundle_adjust, camera_uncertainty
 from .calib_detect import (
     Detections,
@@ -63,7 +63,7 @@ from .calib_intrinsics import (  # noqa: E402,F401
     DIST_ORDER,
     DISTORTION_MODELS,
     Options,
-    _components,
+    components,
     initial_extrinsics,
     initial_intrinsics,
     rotation_angle_deg,
@@ -89,7 +89,7 @@ def calibrate_views(board: Board, det: Detections, opts: Options, log: Callable[
     """Calibrate from detected views (see the module text); ``log(text)`` for progress messages."""
     opts.check()
     say = log or (lambda s: None)
-    views = {c: dict(sorted(v.items(), key=lambda kv: _natural_key(kv[0]))) for c, v in det.views.items()}
+    views = {c: dict(sorted(v.items(), key=lambda kv: natural_key(kv[0]))) for c, v in det.views.items()}
     if opts.shared and not [c for c in views if c not in opts.fixed]:
         opts.shared = False
     # too few views: per camera (estimated intrinsics), per group for shared intrinsics, 1 for fixed
@@ -176,7 +176,7 @@ def calibrate_views(board: Board, det: Detections, opts: Options, log: Callable[
 def _components_check(views, prefix=""):
     cams = list(views)
     edges = [(a, b) for i, a in enumerate(cams) for b in cams[i + 1 :] if set(views[a]) & set(views[b])]
-    groups = _components(cams, edges)
+    groups = components(cams, edges)
     if len(groups) > 1:
         raise ClothFitError(
             f"{prefix}the cameras are not connected by shared views: "
@@ -240,7 +240,7 @@ def _report(board, det, views, prob, resid, cams_out, frame, dropped_views, reje
             per_view.setdefault(c, {})[m] = {"rms_px": float(np.sqrt(np.mean(e**2))), "corners": int(v.ids.size)}
     for ci, (c, cam) in enumerate(zip(prob.cams, cams_out)):
         e = err[prob.obs_cam == ci]
-        shared = sorted({m for m in views[c] if sum(m in views[o] for o in views) > 1}, key=_natural_key)
+        shared = sorted({m for m in views[c] if sum(m in views[o] for o in views) > 1}, key=natural_key)
         cams.append(
             {
                 "name": c,

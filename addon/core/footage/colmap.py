@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence
 
 
-def _check_unique(cams, where):
+def check_unique(cams: Sequence, where: str) -> None:
     """Names are checked (one plain path component each, unique) before any of them is used."""
     names = [c.name for c in cams]
     for n in names:
@@ -361,11 +361,11 @@ def _colmap_cameras(images, intr, where_all):
         cam.K, cam.R, cam.t, cam.dist, cam.width, cam.height, cam.name = K.copy(), R, t, dist.copy(), w, h, name
         cam.validate(where)
         cams.append(cam)
-    _check_unique(cams, where_all)
+    check_unique(cams, where_all)
     return cams
 
 
-def _colmap_folder(path: str):
+def colmap_folder(path: str) -> tuple[str, str]:
     """(folder, 'bin' | 'txt') of a COLMAP model given as a folder (or sparse/0 under it) or one of its files."""
     folder = path if os.path.isdir(path) else os.path.dirname(path)
     for f in (folder, os.path.join(folder, "sparse", "0"), os.path.join(folder, "sparse")):

@@ -129,7 +129,7 @@ def list_camera_images(folder: str) -> tuple[list[str], list[str]]:
     return bgs, frames
 
 
-def _read_footage_json(footage_dir):
+def read_footage_json(footage_dir: str) -> tuple[dict, str | None]:
     p = os.path.join(footage_dir, FOOTAGE_JSON)
     if not os.path.isfile(p):
         return {}, p
@@ -143,7 +143,7 @@ def _read_footage_json(footage_dir):
     return d, p
 
 
-def _find_calibration(footage_dir):
+def find_calibration(footage_dir: str) -> str | None:
     for f in sorted(os.listdir(footage_dir)):
         stem, ext = os.path.splitext(f)
         if stem.lower() in ("cameras", "calibration", "calib") and ext.lower() in (".json", ".yml", ".yaml", ".xml"):
@@ -256,7 +256,7 @@ def extract_capture(
     opts = _options(options, option_overrides)
     if not os.path.isdir(footage_dir):
         raise ClothFitError(f"footage folder not found: {footage_dir}")
-    meta, meta_path = _read_footage_json(footage_dir)
+    meta, meta_path = read_footage_json(footage_dir)
     if cameras is None:
         cameras = _footage_calibration(footage_dir, meta, meta_path)
     inputs = [os.path.join(footage_dir, FOOTAGE_JSON)]
@@ -367,7 +367,7 @@ def _footage_calibration(footage_dir, meta, meta_path):
     elif cameras is not None:
         raise ClothFitError(f"{meta_path}: 'cameras' must be a path relative to the footage folder")
     else:
-        cameras = _find_calibration(footage_dir)
+        cameras = find_calibration(footage_dir)
     if cameras is None:
         raise ClothFitError(
             f"footage {footage_dir}: no cameras given and no {FOOTAGE_JSON}, cameras.* / "

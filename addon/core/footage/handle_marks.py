@@ -55,7 +55,7 @@ class HandleOptions:
             v = getattr(self, nm)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ClothFitError(f"handles option {nm} = {v!r} must be a positive number")
-        if not (_num(self.clip_size) and 0 < self.clip_size <= 1.0):
+        if not (finite_number(self.clip_size) and 0 < self.clip_size <= 1.0):
             raise ClothFitError(f"clip size {self.clip_size!r} must be a length in metres, at most 1 m")
         if not (isinstance(self.levels, int) and 0 <= self.levels <= 8):
             raise ClothFitError(f"pyramid levels {self.levels!r} must be 0..8")
@@ -79,7 +79,7 @@ class HandleMarks:
     size: float | None = None  # the clip's size [m] (sets the tracking window); None = the option's
 
 
-def _num(v):
+def finite_number(v: Any) -> bool:
     return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
 
 
@@ -124,7 +124,7 @@ def parse_marks(
         for cn, p in marks.items():
             if cn not in cams:
                 raise ClothFitError(f"{where}: camera '{cn}' is not in the calibration ({', '.join(list(cams)[:12])})")
-            if not (isinstance(p, (list, tuple)) and len(p) == 2 and all(_num(v) for v in p)):
+            if not (isinstance(p, (list, tuple)) and len(p) == 2 and all(finite_number(v) for v in p)):
                 raise ClothFitError(f"{where}: the mark in camera '{cn}' must be [x, y] pixels, got {p!r}")
             c = cams[cn]
             x, y = float(p[0]), float(p[1])
@@ -146,7 +146,7 @@ def parse_marks(
             raise ClothFitError(f"{where}: 'released' must be true or false, got {released!r}")
         at, at_text = _parse_at(h.get("at"), cloth_size, where)
         size = h.get("size")
-        if size is not None and not (_num(size) and 0 < size <= 1.0):
+        if size is not None and not (finite_number(size) and 0 < size <= 1.0):
             raise ClothFitError(f"{where}: 'size' {size!r} must be the clip's size in metres (at most 1)")
         out.append(
             HandleMarks(
@@ -179,7 +179,7 @@ def _parse_at(v, size, where):
             return None, v
         w, h = size
         return ((0.0 if "left" in v else w), (0.0 if "top" in v else h)), v
-    if not (isinstance(v, (list, tuple)) and len(v) == 2 and all(_num(x) for x in v)):
+    if not (isinstance(v, (list, tuple)) and len(v) == 2 and all(finite_number(x) for x in v)):
         raise ClothFitError(
             f"{where}: 'at' must be [u, v] metres from the cloth's top-left corner or a corner name, got {v!r}"
         )

@@ -62,7 +62,7 @@ from ..errors import ClothFitError
 from ..physics.scenario import MAX_HANDLE_OFFSET_M, Handle, Scenario, Uncertainty
 from .handle_marks import (
     HandleOptions,
-    _num,
+    finite_number,
     parse_marks,  # noqa: E402,F401  (handles.parse_marks: tests/test_handles.py)
     read_marks,
 )
@@ -404,7 +404,7 @@ def frame_times_for(
         return t
     if fps is None:
         raise ClothFitError(f"{what}: no frame times: give --times, or --fps (and for videos --frames)")
-    if not (_num(fps) and fps > 0):
+    if not (finite_number(fps) and fps > 0):
         raise ClothFitError(f"--fps {fps!r} must be a positive number of frames per second")
     if count is None or count < 1:
         raise ClothFitError(f"{what}: the number of frames is unknown: give --frames")
@@ -436,7 +436,7 @@ def run(
     capture times (default: ``footage.json``'s); ``size`` (width, height) [m]; ``grid``: None, N (along
     the longer side) or (nx, ny)."""
     from . import calib_io, video
-    from .extract import _find_calibration, _read_footage_json, list_camera_images
+    from .extract import find_calibration, list_camera_images, read_footage_json
 
     opts = (options or HandleOptions()).check()
     inputs = [marks]
@@ -448,11 +448,11 @@ def run(
     if footage:
         if not os.path.isdir(footage):
             raise ClothFitError(f"footage folder not found: {footage}")
-        meta, meta_path = _read_footage_json(footage)
+        meta, meta_path = read_footage_json(footage)
         inputs.append(meta_path)
         if cameras is None:
             cameras = meta.get("cameras")
-            cameras = os.path.join(footage, cameras) if isinstance(cameras, str) else _find_calibration(footage)
+            cameras = os.path.join(footage, cameras) if isinstance(cameras, str) else find_calibration(footage)
     if cameras is None:
         raise ClothFitError(
             "handles: no calibration: give --cameras (or a footage folder with footage.json's "

@@ -30,7 +30,7 @@ from ..errors import ClothFitError
 from ..jsonio import dumps, loads
 from ..physics.scenario import Scenario, Uncertainty
 from ..safeio import atomic_write
-from .camera import Camera, load_cameras, save_cameras
+from .camera import Camera, check_camera_name, load_cameras, save_cameras
 from .capture_format import (
     CAMERAS_JSON,
     CAPTURE_JSON,
@@ -42,26 +42,25 @@ from .capture_format import (
     REQUIRED_KEYS,
     SHAPES_NPZ,
     VERSION,
-    _check_camera_name,
-    _check_frame_times,
-    _check_model,
-    _field_regex,
-    _names_str,
-    _Time,
-    _times_str,
+    Time,
     check_cloth_mass,
+    check_frame_times,
+    check_model,
     check_pattern,
     check_shapes,
+    field_regex,
+    names_str,
+    times_str,
 )
 from .silhouette_files import (
-    _mask_from_array,
-    _where,
-    _write_bytes_atomic,
     check_mask_spec,
+    mask_from_array,
     read_label_silhouette,
     read_matte,
     read_silhouette,
     save_silhouette,
+    silhouette_where,
+    write_bytes_atomic,
 )
 
 if TYPE_CHECKING:
@@ -104,7 +103,7 @@ class Capture:
         for i, c in enumerate(self.cameras):
             if not isinstance(c, Camera):
                 raise ClothFitError(f"{where}: camera #{i} is a {type(c).__name__}, not a Camera")
-            _check_camera_name(c.name, where)
+            check_camera_name(c.name, where)
         names = [c.name for c in self.cameras]
         if len(set(names)) != len(names):
             raise ClothFitError(f"{where}: camera names are not unique: {names}")
@@ -126,7 +125,7 @@ class Capture:
         if not isinstance(meta, dict):
             raise ClothFitError(f"{where}: meta must be an object/dict, got {type(meta).__name__}")
         self.meta = meta
-        self.model = _check_model(model, where)
+        self.model = check_model(model, where)
         self.masks = check_mask_spec(masks, where)
         if uncertain is not None and not isinstance(uncertain, Uncertainty):
             uncertain = Uncertainty.parse(uncertain, len(scenario.handles), f"{where}: uncertain")
@@ -195,7 +194,7 @@ class Capture:
 
     # ------------------------------------------------------------- silhouettes
     def _relpath(self, name: str, file_frame: int, time: float) -> str:
-        return self.pattern.format(camera=name, frame=int(file_frame), time=_Time(time))
+        return self.pattern.format(camera=name, frame=int(file_frame), time=Time(time))
 
     def silhouette_path(self, cam_index: int, frame_index: int) -> str:
         ci, fi = self._check_cam(cam_index), self._check_frame(frame_index)
@@ -208,7 +207,7 @@ class Capture:
             return None
         ci, fi = self._check_cam(cam_index), self._check_frame(frame_index)
         rel = self.masks["ignore"].format(
-            camera=self.cameras[ci].name, frame=int(self._file_frames[fi]), time=_Time(self.frame_times[fi])
+            camera=self.cameras[ci].name, frame=int(self._file_frames[fi]), time=Time(self.frame_times[fi])
         )
         return os.path.join(self.root, *rel.replace("\\", "/").split("/"))
 
@@ -252,7 +251,7 @@ class Capture:
             mask = mask & ~ignore
             if not allow_empty and not mask.any():
                 raise ClothFitError(
-                    f"{_where(path, src)}: every cloth pixel is ignored (hidden by the ignore mask "
+                    f"{silhouette_where(path, src)}: every cloth pixel is ignored (hidden by the ignore mask "
                     f"or ignore labels): nothing left to compare"
                 )
         return mask, ignore
@@ -296,7 +295,7 @@ class Capture:
         for kind, pat in patterns:
             for _ci, c in enumerate(self.cameras):
                 for fi in range(self.n_frames):
-                    p = pat.format(camera=c.name, frame=int(self._file_frames[fi]), time=_Time(self.frame_times[fi]))
+                    p = pat.format(camera=c.name, frame=int(self._file_frames[fi]), time=Time(self.frame_times[fi]))
                     if p in seen:
                         raise ClothFitError(
                             f"capture {self.json_path}: {kind} pattern {pat!r} gives the same file {p} "
@@ -358,12 +357,12 @@ class Capture:
         if unknown or without:
             all_names = self._all_camera_names
             msg = (
-                f"{where}: camera count mismatch: cameras.json lists {len(all_names)} cameras ({_names_str(all_names)})"
+                f"{where}: camera count mismatch: cameras.json lists {len(all_names)} cameras ({names_str(all_names)})"
             )
             if found is not None:
                 msg += (
                     f" but the silhouettes (pattern {self.pattern!r}) are for {len(set(found))} cameras "
-                    f"({_names_str(sorted(set(found)))})"
+                    f"({names_str(sorted(set(found)))})"
                 )
             if unknown:
                 msg += f"; silhouettes of cameras not in cameras.json: {', '.join(unknown)}"
@@ -409,8 +408,8 @@ class Capture:
         parent = os.path.join(self.root, *parts[:k]) if k else self.root
         if not os.path.isdir(parent):
             return []
-        rx = _field_regex(parts[k])
-        known = [(n, _field_regex(parts[k], n)) for n in self._all_camera_names]
+        rx = field_regex(parts[k])
+        known = [(n, field_regex(parts[k], n)) for n in self._all_camera_names]
         is_dir_level = k < len(parts) - 1
         names = []
         for entry in sorted(os.listdir(parent)):
@@ -520,11 +519,11 @@ def load_capture(path: str | os.PathLike, validate: bool = False) -> Capture:
         raise ClothFitError(msg if where in msg else f"{where}: {msg}") from None
     except (TypeError, ValueError, AttributeError, KeyError) as e:
         raise ClothFitError(f"{where}: bad 'scenario' ({type(e).__name__}: {e})") from None
-    top = _check_frame_times(d["frame_times"], where, "'frame_times'")
+    top = check_frame_times(d["frame_times"], where, "'frame_times'")
     st = scenario.frame_times
     if top.shape != st.shape or np.max(np.abs(top - st)) > FRAME_TIME_TOL:
         raise ClothFitError(
-            f"{where}: frame_times mismatch between the top level {_times_str(top)} and the scenario {_times_str(st)}"
+            f"{where}: frame_times mismatch between the top level {times_str(top)} and the scenario {times_str(st)}"
         )
 
     pattern = check_pattern(d["silhouettes"], f"{where}: 'silhouettes' pattern")
@@ -588,7 +587,7 @@ def read_shapes(path: str, frame_times: ArrayLike | None = None, n_vertices: int
         ft = ft.reshape(-1).astype(np.float64)
         ref = np.asarray(frame_times, dtype=np.float64)
         if ft.shape != ref.shape or np.max(np.abs(ft - ref)) > FRAME_TIME_TOL:
-            raise ClothFitError(f"{where}: frame_times {_times_str(ft)} differ from the capture's {_times_str(ref)}")
+            raise ClothFitError(f"{where}: frame_times {times_str(ft)} differ from the capture's {times_str(ref)}")
     return pos
 
 
@@ -737,7 +736,7 @@ class PendingCapture:
                     f"{where}: cannot finalise: {len(missing)} of {n} silhouette files are missing:\n  {head}{more}"
                 )
         try:
-            _write_bytes_atomic(self.json_path, self._text.encode("utf-8"))
+            write_bytes_atomic(self.json_path, self._text.encode("utf-8"))
         except OSError as e:
             raise ClothFitError(f"{where}: cannot write ({e})") from None
         self.finalized = True
@@ -775,11 +774,11 @@ def _check_silhouettes(cap: Capture, silhouettes, allow_empty: bool, where: str,
             )
         for fi in range(cap.n_frames):
             w = f"{where}: silhouette of camera '{cam.name}' frame {fi} (t={cap.frame_times[fi]:g})"
-            m = _mask_from_array(row[fi], w)
+            m = mask_from_array(row[fi], w)
             if m.shape != (cam.height, cam.width):
                 raise ClothFitError(f"{w}: shape {m.shape} but the camera is {cam.height} x {cam.width} (H x W)")
             if ignore is not None and ignore[ci][fi] is not None:
-                g = _mask_from_array(ignore[ci][fi], w + " ignore mask")
+                g = mask_from_array(ignore[ci][fi], w + " ignore mask")
                 if g.shape != m.shape:
                     raise ClothFitError(
                         f"{w}: ignore mask shape {g.shape} but the camera is {cam.height} x {cam.width}"

@@ -10,12 +10,12 @@ import math
 import os
 import re
 import string
+from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import ClothFitError
-from .camera import check_camera_name
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -38,7 +38,7 @@ MASK_KEYS = ("silhouette_ids", "ignore_ids", "matte_threshold", "ignore")  # how
 # =========================================================================== pattern
 
 
-class _Time(float):
+class Time(float):
     """A frame time that formats as ``0.050`` under a bare ``{time}``."""
 
     def __format__(self, spec):
@@ -81,17 +81,13 @@ def check_pattern(pattern: Any, where: str = "silhouettes pattern") -> str:
     if ".." in norm.split("/"):
         raise ClothFitError(f"{where} {pattern!r}: must not leave the capture directory ('..')")
     try:
-        pattern.format(camera="cam", frame=0, time=_Time(0.0))
+        pattern.format(camera="cam", frame=0, time=Time(0.0))
     except (ValueError, TypeError, KeyError, IndexError) as e:
         raise ClothFitError(f"{where} {pattern!r}: cannot be formatted ({e})") from None
     return pattern
 
 
-def _check_camera_name(name: str, where: str):
-    check_camera_name(name, where)
-
-
-def _field_regex(component: str, camera: str | None = None) -> re.Pattern:
+def field_regex(component: str, camera: str | None = None) -> re.Pattern:
     """Regex of one path component of the pattern: {camera} captured (or the literal ``camera``),
     {frame} digits, {time} a number."""
     out = []
@@ -114,7 +110,7 @@ def _field_regex(component: str, camera: str | None = None) -> re.Pattern:
 # ================================================================= value checks
 
 
-def _check_model(model, where: str):
+def check_model(model: Any, where: str) -> dict:
     """The capture's optional ``model`` (the model a fit uses unless told otherwise), as a dict of what it
     declares, checked and in canonical form: a key it leaves out stays out, so a capture that names no
     quality leaves the fit to choose one (its ladder) rather than reading the default quality as declared."""
@@ -165,7 +161,7 @@ def check_cloth_mass(cloth_mass: Any, where: str) -> float | None:
     return v
 
 
-def _check_frame_times(value, where: str, name: str) -> np.ndarray:
+def check_frame_times(value: Any, where: str, name: str) -> np.ndarray:
     if not isinstance(value, (list, tuple)) or not value:
         raise ClothFitError(f"{where}: {name} must be a non-empty list of times in seconds, got {value!r:.80}")
     try:
@@ -177,11 +173,11 @@ def _check_frame_times(value, where: str, name: str) -> np.ndarray:
     return t
 
 
-def _names_str(names, limit=20):
+def names_str(names: Iterable[str], limit: int = 20) -> str:
     names = list(names)
     return ", ".join(names[:limit]) + (f", ... ({len(names)} in all)" if len(names) > limit else "")
 
 
-def _times_str(t, limit=8):
+def times_str(t: Sequence[float], limit: int = 8) -> str:
     s = ", ".join(f"{x:g}" for x in t[:limit])
     return f"[{s}{', ...' if len(t) > limit else ''}] ({len(t)} times)"

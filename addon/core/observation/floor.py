@@ -101,9 +101,9 @@ LIMITS = (
 
 
 def _mask(m, where: str) -> np.ndarray:
-    from .silhouette_files import _mask_from_array
+    from .silhouette_files import mask_from_array
 
-    return _mask_from_array(m, where)
+    return mask_from_array(m, where)
 
 
 def _fit_shape(fit_shape, native, where):

@@ -35,7 +35,7 @@ def _chunks(data: bytes, where: str):
     return out
 
 
-def _chunk(typ: bytes, body: bytes) -> bytes:
+def png_chunk(typ: bytes, body: bytes) -> bytes:
     return struct.pack(">I", len(body)) + typ + body + struct.pack(">I", zlib.crc32(typ + body) & 0xFFFFFFFF)
 
 
@@ -59,7 +59,7 @@ def _grey_ramp_palette(data: bytes, where: str) -> bytes:
             seen = True
         elif typ == b"tRNS":
             continue
-        out.append(_chunk(typ, body))
+        out.append(png_chunk(typ, body))
     if not seen:
         raise ClothFitError(f"{where}: corrupt palette PNG (no PLTE chunk)")
     return b"".join(out)

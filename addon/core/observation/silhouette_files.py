@@ -29,7 +29,7 @@ def _short_values(values, limit=8):
     return s + (", ..." if len(values) > limit else "")
 
 
-def _mask_from_array(mask, where: str) -> np.ndarray:
+def mask_from_array(mask: Any, where: str) -> np.ndarray:
     """A 2D boolean array from bool / 0-1 / 0-255 numeric input (anything else is an error)."""
     m = np.asarray(mask)
     if m.ndim != 2:
@@ -54,7 +54,7 @@ def save_silhouette(path: str, mask: ArrayLike) -> None:
     Parent directories are created; the file is written to a temporary name and renamed, so a
     reader never sees half a PNG.
     """
-    m = _mask_from_array(mask, f"silhouette {path}")
+    m = mask_from_array(mask, f"silhouette {path}")
     if os.path.splitext(path)[1].lower() != ".png":
         raise ClothFitError(
             f"silhouette {path}: silhouettes are written as PNG (lossless); the file name must end with .png"
@@ -67,7 +67,7 @@ def save_silhouette(path: str, mask: ArrayLike) -> None:
     try:
         if d:
             os.makedirs(d, exist_ok=True)
-        _write_bytes_atomic(path, buf.tobytes())
+        write_bytes_atomic(path, buf.tobytes())
     except OSError as e:
         raise ClothFitError(f"silhouette {path}: cannot write ({e})") from None
 
@@ -78,7 +78,7 @@ def _imencode(ext, img):
     return cv2.imencode(ext, img)
 
 
-def _write_bytes_atomic(path: str, data: bytes):
+def write_bytes_atomic(path: str, data: bytes) -> None:
     atomic_write(path, data)
 
 
@@ -192,7 +192,7 @@ def read_silhouette(
     return mask
 
 
-def _where(path, source):
+def silhouette_where(path: str, source: str | None) -> str:
     return f"silhouette {path}" + (f" ({source})" if source else "")
 
 
@@ -220,7 +220,7 @@ def read_label_silhouette(
     """
     from .png import read_label_png
 
-    where = _where(path, source)
+    where = silhouette_where(path, source)
     if not os.path.isfile(path):
         raise ClothFitError(f"{where}: file not found")
     labels = read_label_png(path, where)
@@ -247,7 +247,7 @@ def read_matte(
     ``threshold`` (0..1 of full scale, so 8- and 16-bit mattes take the same threshold)."""
     import cv2
 
-    where = _where(path, source)
+    where = silhouette_where(path, source)
     if not os.path.isfile(path):
         raise ClothFitError(f"{where}: file not found")
     data = np.fromfile(path, dtype=np.uint8)

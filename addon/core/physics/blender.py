@@ -622,7 +622,7 @@ def simulate_reference(
     hv = plan.handle_vertices
     frames = np.zeros((plan.n_frames + 1, V, 3))
     frames[0] = X
-    centre, limit = _explosion_limits(net, plan)
+    centre, limit = explosion_limits(net, plan)
     iters = []
     reason = ""
     for fr in range(1, plan.n_frames + 1):
@@ -710,7 +710,7 @@ def _collided(X, Vel, pinned, net: Network, colliders: Collisions, dt: float) ->
     return V32.reshape(-1, 3).astype(np.float64)
 
 
-def _explosion_limits(net: Network, plan: FramePlan):
+def explosion_limits(net: Network, plan: FramePlan) -> tuple[np.ndarray, float]:
     size = float(np.ptp(net.rest, axis=0).max())
     pts = plan.targets.reshape(-1, 3) if plan.targets.size else net.rest
     centre = pts.mean(0) if plan.targets.size else net.rest.mean(0)

@@ -62,18 +62,18 @@ from .blender_constants import (
     ZERO,
 )
 from .blender_rest import setup
-from .blender_springs import _springs_plain
+from .blender_springs import springs_plain
 from .jit import JIT, PARALLEL, njit, prange
 
 # The lane operations: simd.py's and blender_springs.py's hand-written LLVM IR, or with CLOTHFIT_NO_SIMD=1
 # their plain numba twins (docs/kernels.md). The kernels that call them are then not cached, so that a cached
 # build of the other path is never loaded for them.
 if _simd_ir.ENABLED:  # pragma: no branch
-    from .blender_springs import _springs_v
+    from .blender_springs import springs_v
 
     simd, LANES_JIT, LANES_PARALLEL = _simd_ir, JIT, PARALLEL
 else:
-    _springs_v, simd = _springs_plain, simd_plain
+    springs_v, simd = springs_plain, simd_plain
     LANES_JIT, LANES_PARALLEL = dict(JIT, cache=False), dict(PARALLEL, cache=False)
 
 
@@ -187,7 +187,7 @@ def _assemble(X, Vel, F, Xd, Vd, Xo, Vo, act, mesh, restlen, restang, par, parT,
             Vd[6 * v + 4, l] += ZERO * nd
             Vd[6 * v + 5, l] += nd
     # springs, in Blender's list order (vectorised over the lanes)
-    _springs_v(
+    springs_v(
         X,
         Vel,
         F,
@@ -491,7 +491,7 @@ class Prepared:
     """The float32 arrays of one network and frame plan, ready for ``simulate_population``."""
 
     def __init__(self, net, plan, quality: int, time_scale: float, gravity, all_frames: bool = False, colliders=None):
-        from .blender import MAX_STRAIN, _explosion_limits
+        from .blender import MAX_STRAIN, explosion_limits
         from .colliders import packed_or_empty
 
         self.col = packed_or_empty(colliders)  # the colliders' rows (blender_collide), (0, ...) without
@@ -532,7 +532,7 @@ class Prepared:
         self.g = np.array(
             [F32(gi) * (F32(0.001) * F32(1.0)) for gi in np.asarray(gravity, dtype=np.float64)], dtype=np.float32
         )
-        centre, limit = _explosion_limits(net, plan)
+        centre, limit = explosion_limits(net, plan)
         self.centre = np.asarray(centre, dtype=np.float32)
         self.limit = F32(limit)
         self.max_ratio = F32(1.0 + MAX_STRAIN)

@@ -1,6 +1,6 @@
 """The spring part of Blender's ``cloth_calc_force`` for W candidates (lanes) at once, as
-hand-written LLVM IR through a numba intrinsic (``_springs_v``, on ``simd.py``'s lane vectors).
-``_springs_plain`` is its plain numba twin (the same float32 operations in the same order, lane by
+hand-written LLVM IR through a numba intrinsic (``springs_v``, on ``simd.py``'s lane vectors).
+``springs_plain`` is its plain numba twin (the same float32 operations in the same order, lane by
 lane), which the kernel runs with ``CLOTHFIT_NO_SIMD=1``. Why the IR is hand-written, what it gains
 (``python lab/simd_bench.py``) and how to run without it: ``docs/kernels.md``.
 """
@@ -89,7 +89,7 @@ if simd.available():  # pragma: no branch
 
     def _hinge_ir(vb, b, c, x_, v_, f_, pa_, pb_, la_, lb_, ra_, prow, hb, maxl, i3, j3, L0):
         """The angular bending force across hinge ``hb`` (explicit; Blender's cloth_calc_force), lane by
-        lane, into the force rows ``f_``: the IR ``_springs_v`` emits for a spring that carries a hinge."""
+        lane, into the force rows ``f_``: the IR ``springs_v`` emits for a spring that carries a hinge."""
         pa_row = b.gep(pa_, [b.mul(hb, maxl)])
         pb_row = b.gep(pb_, [b.mul(hb, maxl)])
         la = vb.i(la_, hb)
@@ -132,7 +132,7 @@ if simd.available():  # pragma: no branch
             _subrow(vb, f_, b.add(j3, c(a)), fe[a])
 
     @_intrinsic
-    def _springs_v(
+    def springs_v(
         typingctx,
         X,
         Vel,
@@ -181,7 +181,7 @@ if simd.available():  # pragma: no branch
         )
 
         def codegen(context, builder, signature, args):
-            from .simd import VB, _data
+            from .simd import VB, array_data
 
             vb = VB(context, builder)
             b = builder
@@ -191,7 +191,7 @@ if simd.available():  # pragma: no branch
                 return _ir.Constant(I64, i)
 
             (x_, v_, f_, xd_, vd_, xo_, vo_, si_, sj_, sk_, sh_, rl_, pa_, la_, pb_, lb_, ra_, par_) = (
-                _data(context, builder, t, a) for t, a in zip(signature.args[:18], args[:18])
+                array_data(context, builder, t, a) for t, a in zip(signature.args[:18], args[:18])
             )
             ang_on = b.icmp_signed("!=", args[18], c(0))
             S = b.extract_value(context.make_array(signature.args[7])(context, builder, args[7]).shape, 0)
@@ -384,10 +384,10 @@ def _hinge_p(X, Vel, F, i3, j3, L0, hb, h_pa, h_la, h_pb, h_lb, restang, par, l)
 
 
 @njit(**JIT)
-def _springs_plain(
+def springs_plain(
     X, Vel, F, Xd, Vd, Xo, Vo, sp_i, sp_j, sp_kind, sp_hinge, restlen, h_pa, h_la, h_pb, h_lb, restang, par, angular
 ):
-    """``_springs_v`` as ordinary numba loops, lane by lane, with the same operations in the same order."""
+    """``springs_v`` as ordinary numba loops, lane by lane, with the same operations in the same order."""
     pp = np.empty(6, dtype=np.float32)
     jx = np.empty(6, dtype=np.float32)
     jv = np.empty(6, dtype=np.float32)

@@ -26,7 +26,7 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from . import blender as B
 from . import blender_kernels, jit, paper_kernels
-from .paper import PARAM_NAMES, Params, SimResult, _as_params, simulate_numpy
+from .paper import PARAM_NAMES, Params, SimResult, as_params, simulate_numpy
 from .scenario import Offsets, Scenario
 
 MODEL_NAMES = ("paper", "blender")
@@ -87,7 +87,7 @@ class PaperModel:
         """``offsets``: each candidate's own manipulation (``Scenario.moved``), None = the scenario's."""
         if scenario.colliders is not None:
             raise ClothFitError("the paper model has no colliders: fit a scene with a table with --model blender")
-        P = _as_params(rows)
+        P = as_params(rows)
         if _backend(backend) == "numba":
             if offsets is not None and offsets.stretches:  # key times differ per candidate: one by one
                 return _each(P, offsets, lambda p, sc: paper_kernels.simulate(sc, p, self.safety), scenario)

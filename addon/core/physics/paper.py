@@ -102,7 +102,7 @@ class SimResult:
     reason: list  # per candidate: "" or why it was flagged
 
 
-def _as_params(params):
+def as_params(params: Any) -> np.ndarray:
     """(P, 4) array of m, k, l, d from a Params, dict, list of those or an array."""
     if hasattr(params, "as_dict"):
         params = [params]

@@ -40,7 +40,7 @@ if available():  # pragma: no branch
     _VEC = ir.VectorType(_F, W)
     _I64 = ir.IntType(64)
 
-    def _data(context, builder, aryty, val):
+    def array_data(context, builder, aryty, val):
         return context.make_array(aryty)(context, builder, val).data
 
     def _rowp(builder, data, row):
@@ -81,7 +81,7 @@ if available():  # pragma: no branch
         sig = types.void(Md, Mo, sp_i, sp_j, x, to, temp)
 
         def codegen(context, builder, signature, args):
-            md, mo, si, sj, xx, tt, tp = (_data(context, builder, t, a) for t, a in zip(signature.args, args))
+            md, mo, si, sj, xx, tt, tp = (array_data(context, builder, t, a) for t, a in zip(signature.args, args))
             xs = context.make_array(signature.args[4])(context, builder, args[4]).shape
             S = context.make_array(signature.args[2])(context, builder, args[2]).shape
             rows = builder.extract_value(xs, 0)
@@ -126,7 +126,7 @@ if available():  # pragma: no branch
         sig = types.void(a, b, out)
 
         def codegen(context, builder, signature, args):
-            ad, bd, od = (_data(context, builder, t, x) for t, x in zip(signature.args, args))
+            ad, bd, od = (array_data(context, builder, t, x) for t, x in zip(signature.args, args))
             rows = builder.extract_value(context.make_array(signature.args[0])(context, builder, args[0]).shape, 0)
             nv = builder.udiv(rows, _c(3))
             acc = cgutils.alloca_once_value(builder, ir.Constant(_VEC, [0.0] * W))
@@ -150,7 +150,7 @@ if available():  # pragma: no branch
         sig = types.void(x, free)
 
         def codegen(context, builder, signature, args):
-            xd, fd = (_data(context, builder, t, v) for t, v in zip(signature.args, args))
+            xd, fd = (array_data(context, builder, t, v) for t, v in zip(signature.args, args))
             rows = builder.extract_value(context.make_array(signature.args[0])(context, builder, args[0]).shape, 0)
             with cgutils.for_range(builder, builder.udiv(rows, _c(3))) as lp:
                 f = _splat(builder, builder.load(builder.gep(fd, [lp.index])))
@@ -168,7 +168,7 @@ if available():  # pragma: no branch
         sig = types.void(dV, r, c, q, alpha, mask)
 
         def codegen(context, builder, signature, args):
-            dv, rr, cc, qq, al, mk = (_data(context, builder, t, v) for t, v in zip(signature.args, args))
+            dv, rr, cc, qq, al, mk = (array_data(context, builder, t, v) for t, v in zip(signature.args, args))
             rows = builder.extract_value(context.make_array(signature.args[0])(context, builder, args[0]).shape, 0)
             a = _ld(builder, al, _c(0))
             na = builder.fneg(a)
@@ -191,7 +191,7 @@ if available():  # pragma: no branch
         sig = types.void(c, r, ratio, mask, free)
 
         def codegen(context, builder, signature, args):
-            cc, rr, ra, mk, fd = (_data(context, builder, t, v) for t, v in zip(signature.args, args))
+            cc, rr, ra, mk, fd = (array_data(context, builder, t, v) for t, v in zip(signature.args, args))
             rows = builder.extract_value(context.make_array(signature.args[0])(context, builder, args[0]).shape, 0)
             rt = _ld(builder, ra, _c(0))
             m = builder.fcmp_unordered("!=", _ld(builder, mk, _c(0)), ir.Constant(_VEC, [0.0] * W))
