@@ -72,7 +72,7 @@ def main(argv=None):
 
 
 def write_summary(path, summary, a):
-    from clothfit.core.safeio import atomic_json
+    from clothfit.core.jsonio import write_json
 
     keep = {k: v for k, v in summary.items() if k not in ("capture", "result", "blend")}
     keep["settings"] = {
@@ -87,7 +87,7 @@ def write_summary(path, summary, a):
     }
     if "blender_model" in keep:
         keep["blender_model"] = {k: v for k, v in keep["blender_model"].items() if k not in ("result", "overlays")}
-    atomic_json(path, keep)
+    write_json(path, keep)
     print(f"summary {path}")
 
 

@@ -29,7 +29,7 @@ BLENDER = {
 
 
 def _old_writer(path, obj):
-    """How results were written before FitResult (safeio.atomic_json with job.py's own encoder)."""
+    """How results were written before FitResult (an atomic JSON writer with job.py's own encoder)."""
 
     def default(o):
         if isinstance(o, np.generic):

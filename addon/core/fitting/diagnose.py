@@ -1,4 +1,4 @@
-"""A fit's errors beside the noise floor of its own images, and when far above it, why (issue 20).
+"""A fit's errors beside the noise floor of its own images, and when far above it, why.
 
 ``report(job)`` (called once when a ``FitJob`` finishes) scores the best candidate on the training
 images and on held-out ones (the capture's cameras and frames the fit did not see: other cameras at

@@ -1,4 +1,4 @@
-"""The simulation quality a fit chooses (issue 20): a ladder of warm-started rungs.
+"""The simulation quality a fit chooses: a ladder of warm-started rungs.
 
 Blender's cloth takes ``quality`` solver steps per frame; too few, and a soft cloth moves like a
 stiffer one; more cost time in proportion. Nobody knows the right value for a real cloth, so where

@@ -213,7 +213,7 @@ def interval_lines(res: dict) -> list[str]:
 def uncertainty_caveat(res: dict) -> str | None:
     """What the offsets' stated uncertainties are, where a fit states any: the curvature of the error along each
     offset alone at the fitted point, the settings held, so an offset that trades against the settings may lie
-    further off (how far, on issue 20's offsets fits: docs/real_captures.md, figure source fit_goals_offsets_coverage);
+    further off (how far, on the offsets goal's fits (lab/fit_goals.py offsets): docs/fit_goals.md, figure source fit_goals_offsets_coverage);
     where the fit ends far above its floor, that it may sit in a wrong basin, where the curvature says even less.
     None where none is stated."""
     fl = res.get("floor") or {}
