@@ -20,7 +20,19 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FOLDERS = ("addon", "tests", "lab", "tools", "docs")
 TOP_FILES = ("README.md", "mkdocs.yml")
 TEXT_EXTENSIONS = (".md", ".json", ".jsonl", ".yml", ".yaml", ".py", ".toml", ".txt")
-SKIPPED_DIRS = {".git", ".venv", "out", "dist", "site", "__pycache__", ".pytest_cache", ".ruff_cache"}
+# what .gitignore leaves out, and the docs site and build folders
+SKIPPED_DIRS = {
+    ".git",
+    ".venv",
+    "out",
+    "dist",
+    "wheels",
+    "build",
+    "site",
+    "__pycache__",
+    ".pytest_cache",
+    ".ruff_cache",
+}
 
 # "issue" or "issues", any case, then digits after spaces, "-", "_" or "#", also inside a name ("test_issueN");
 # not "tissue"
