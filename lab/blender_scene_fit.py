@@ -1,4 +1,4 @@
-"""Issue 10's goal: a cloth hung and released onto a collider (no core model emulates it), fitted with
+"""The goal of the ``--backend blender`` fit: a cloth hung and released onto a collider (no core model emulates it), fitted with
 Blender's own solver (``fit --backend blender``) in at most 600 evaluations, and Blender replaying
 the result within 1 mm of the observed motion.
 

@@ -1,6 +1,6 @@
 """Test truths our cloth models did not make: a continuum cloth in NVIDIA Warp, seen by a rig that is not ours.
 
-Issue 20 ("Fit a real capture"). Neither the paper's sheet nor Blender's cloth made these captures:
+For the goals of fitting a real capture (lab/fit_goals.py). Neither the paper's sheet nor Blender's cloth made these captures:
 
 * the engine is Warp's ``warp.sim`` (FEM membrane triangles, hinge bending, quadratic air drag,
   gravity 9.81 m/s^2), driven by ``lab/warp_cloth.py`` with physical fabric values (``MATERIALS``);
@@ -387,7 +387,7 @@ def baseline(out, json_path, materials=BASELINE_MATERIALS, max_evaluations=None)
                 flush=True,
             )
             doc = {
-                "what": "issue 20 baseline: continuum cloth (Warp) fitted by today's blender model as a new user would",
+                "what": "baseline: continuum cloth (Warp) fitted by today's blender model as a new user would",
                 "fps_of_capture": FPS,
                 "train_cameras": TRAIN_CAMERAS,
                 "rows": rows,

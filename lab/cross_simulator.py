@@ -1,9 +1,10 @@
 """Cloth that Blender's solver made, fitted by the paper's sheet and by the core's blender model.
 
-The set-up of issue 9's report: a 10 cm sheet, 21 x 21 vertices, hung from its four corners for
-``SETTLE`` s, one corner released, ``AFTER`` s of motion at 24 fps; three materials; a 12-camera
-rig that is not ours (two rings and a top pair, 480 x 640, fx 700, 0.45 m); fitted on 1, 2, 4 and
-8 cameras (spread rule) and the even frames, scored on the held-out cameras and the odd frames.
+The set-up that first showed the paper's sheet cannot move like Blender's cloth: a 10 cm sheet, 21 x 21
+vertices, hung from its four corners for ``SETTLE`` s, one corner released, ``AFTER`` s of motion at 24 fps;
+three materials; a 12-camera rig that is not ours (two rings and a top pair, 480 x 640, fx 700, 0.45 m);
+fitted on 1, 2, 4 and 8 cameras (spread rule) and the even frames, scored on the held-out cameras and the
+odd frames.
 
 1. ``observe`` (needs the bpy module): Blender's own Cloth modifier simulates each material
    (``clothfit.blender.cloth.replay``); the true vertices go to ``shapes.npz``; silhouettes are the

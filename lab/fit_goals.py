@@ -1,4 +1,4 @@
-"""Issue 20's goals measured on captures nobody tuned on, through the CLI exactly as a user runs it.
+"""The goals for fitting a real capture measured on captures nobody tuned on, through the CLI exactly as a user runs it.
 
 Each goal has its own subcommand (a few minutes each on a 2-core machine) that makes its capture
 if it is missing (``--remake`` makes it again), runs ``python -m clothfit ...`` in subprocesses (this
@@ -28,7 +28,7 @@ and CPU seconds, the machine's load (``uptime``) and the commits it ran at.
   (no quality, no frame rate, no times, no hints); held-out E_sil over the 8 held-out cameras on
   the odd frames (continuum_truth's baseline split; all frames too), shape error, and the result's
   own ``floor`` block when the fit writes one. Goals: held-out <= 2/3 of today's (``TODAY_PCT``,
-  issue 20's baseline), shape <= 2 mm.
+  continuum_truth's baseline), shape <= 2 mm.
 * ``collider``: a user's .blend (``lab/user_scenes.py``'s ``drop`` scene: Add > Grid 17 x 17,
   0.6 m, default Cloth settings, Quality 5, 20 fps, falling onto a block with a Collision
   modifier); the truth is the same scene with a soft cloth (``SOFT``); ``fit CAP --backend blender
@@ -36,9 +36,9 @@ and CPU seconds, the machine's load (``uptime``) and the commits it ran at.
   and the scene's own starting settings on the user's .blend: mean distance to the true vertices.
   Goal: the result no worse than the start.
 * ``time``: a 21 x 21 cloth (``synth_capture`` with the paper's scenario on a 21 x 21 grid: the
-  CLI's ``synth`` has no grid option; quality 15, the issue's user scenes' quality), lab18 at 480 x
-  640, copied as a real capture arrives, the way the issue asks the time measured ("quality choice
-  and manipulation unknowns included"): no quality declared (the fit's ladder chooses it), the
+  CLI's ``synth`` has no grid option; quality 15, the quality of lab/user_scenes.py's scenes), lab18 at 480 x
+  640, copied as a real capture arrives, the time measured with the quality choice and the
+  manipulation's unknowns included: no quality declared (the fit's ladder chooses it), the
   release marked 20 ms early and each pin 2 mm off, declared uncertain as the offsets goal's. The
   default fit on 4 cameras and the 15 training frames (plus the 20 ms); wall and CPU seconds, the
   quality chosen and the offsets recovered. Goal: <= 180 s wall. (Until 2026-11-26 this goal ran
@@ -72,7 +72,7 @@ for _p in (ROOT, os.path.join(ROOT, "lab")):
 GOALS = ("exact", "offsets", "continuum", "collider", "time")
 
 # the captures' inputs, chosen once and recorded here (near Blender's defaults: tension 15, compression 15,
-# shear 5, bending 0.5, air 1; not equal to them, and not the issue's table's)
+# shear 5, bending 0.5, air 1; not equal to them)
 EXACT = {
     "settings": {
         "tension_stiffness": 12.0,
@@ -126,7 +126,7 @@ TIME = {
 SOFT = {"tension_stiffness": 5.0, "compression_stiffness": 5.0, "shear_stiffness": 2.0, "bending_stiffness": 0.05}
 COLLIDER = {"scene": "drop", "truth_settings": SOFT, "budget": 600, "workers": 2, "train_cameras": 4}
 TRAIN_CAMERAS = 4
-TODAY_PCT = {"cotton": 31.0, "silk": 50.0}  # issue 20's baseline held-out E_sil (8 held-out cameras, odd frames)
+TODAY_PCT = {"cotton": 31.0, "silk": 50.0}  # continuum_truth's baseline held-out E_sil (8 held-out cameras, odd frames)
 
 TARGETS = {  # goal key -> (target value, unit, what)
     "exact.heldout_ratio": (1.2, "x floor", "held-out E_sil / floor"),
@@ -273,8 +273,8 @@ def row(goal, capture, key, value, run, status="measured", details=None, target_
 
 
 def merge_rows(path, goal, rows, extra=None, label="after") -> dict:
-    """Replace the rows of ``goal`` measured as ``label`` ("before": the fit without the lead's issue-20
-    features; "after": with them) in the JSON at ``path``, others kept; returns the document."""
+    """Replace the rows of ``goal`` measured as ``label`` ("before": the fit without ``fit --uncertain`` and
+    the stages that came with it; "after": with them) in the JSON at ``path``, others kept; returns the document."""
     from clothfit.core.jsonio import read_json, write_json
 
     doc = read_json(path, "goals JSON") if os.path.isfile(path) else {}
@@ -284,7 +284,7 @@ def merge_rows(path, goal, rows, extra=None, label="after") -> dict:
     kept = [r for r in doc.get("rows", []) if (r["goal"], r.get("label", "before"), r["capture"]) not in new]
     order = {g: i for i, g in enumerate(GOALS)}
     doc = {
-        "what": "issue 20's goals measured on captures nobody tuned on, through the CLI (lab/fit_goals.py)",
+        "what": "the goals for fitting a real capture, measured on captures nobody tuned on, through the CLI (lab/fit_goals.py)",
         "inputs": {
             "exact": EXACT,
             "offsets": OFFSETS,
@@ -680,7 +680,7 @@ def goal_offsets(a, run):
     t = full.get("time_offset_s")
     terr = None if t is None else abs(float(t) - shift["expected_time_offset_s"]) * 1000
     why = (
-        "not estimated: needs the lead's fit --uncertain"
+        "not estimated: needs fit --uncertain"
         if not feature
         else f"not reported by the fit: {full.get('manipulation_note') or 'no time_offset_s'}"
     )
@@ -1421,7 +1421,7 @@ def main(argv=None):
             main(argv + (["--remake"] if a.remake else []))
         return 0
     run = Runner(os.path.join(a.out, "goals.log"))
-    before = not has_uncertain_option()  # the lead's issue-20 features (fit --uncertain, ...) not in yet
+    before = not has_uncertain_option()  # fit --uncertain (and the stages that came with it) not in yet
     for g in GOALS if a.cmd == "all" else (a.cmd,):
         at = commits()  # the code the goal runs (taken before it runs)
         rows, extra = RUNNERS[g](a, run)

@@ -19,7 +19,7 @@ frames), the cloth's placement.
     python lab/phone_handles.py render --out DIR [--seed S] [--cameras 4] [--resolution 720x1280]
     python lab/phone_handles.py measure --footage DIR --json OUT.json
 
-Goals (issue 18): handles within 1 mm; the release frame exact. The render (about 90 Cycles images) takes
+Goals (the phone rig's): handles within 1 mm; the release frame exact. The render (about 90 Cycles images) takes
 minutes on 2 cores; ``measure`` seconds.
 """
 

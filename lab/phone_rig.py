@@ -964,7 +964,7 @@ def run_e2e(a) -> dict:
     _, secs["extract"] = _cli(
         ["extract", footage, "-o", P["cap"], "--cameras", P["cams"], "--scenario", P["scen"], "--force"], log, "extract"
     )
-    # the fit as the issue compares it: the manipulation handles measured taken as it is (the same search as
+    # the fit as the phone rig's goal compares it: the manipulation handles measured taken as it is (the same search as
     # the fit given the truth: 3 settings, the same budget); then, with --uncertain-evals, the fit that also
     # estimates the capture's uncertain block (time offset, clip offsets: 16 unknowns, a larger budget)
     fit, secs["fit"] = _cli(_fit_args(P["cap"], P["fit"], a), log, "fit")

@@ -158,8 +158,8 @@ def strategy_budget(strategy, budget):
 
 
 # captures the tool makes itself (``synth:NAME``, under out/search_ab/NAME): the blender model on the
-# lab18 rig at 240 x 320 with 5 % boundary noise; "default" is Blender's default material (the issue's
-# capture), "fresh" another material and noise seed, kept apart for judging, "damped" below
+# lab18 rig at 240 x 320 with 5 % boundary noise; "default" is Blender's default material (the
+# tuning capture), "fresh" another material and noise seed, kept apart for judging, "damped" below
 SYNTH = {
     "default": ["--seed", "0"],
     # every setting off Blender's defaults (compression apart from tension, the three dampings): a

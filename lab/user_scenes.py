@@ -1,4 +1,4 @@
-"""Blender scenes built the way a user builds them, as test truths (issue 20), and why the core's
+"""Blender scenes built the way a user builds them, as test truths, and why the core's
 ``blender`` model drifts from Blender on them.
 
 ``build`` (bpy): four .blend files made with bpy operators as a user clicks them in the UI:

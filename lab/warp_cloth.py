@@ -1,6 +1,6 @@
 """A continuum cloth in another engine: NVIDIA Warp's ``warp.sim`` FEM triangles + hinge bending, on the CPU.
 
-Used by ``lab/continuum_truth.py`` to make test truths that neither of our cloth models made (issue 20).
+Used by ``lab/continuum_truth.py`` to make test truths that neither of our cloth models made.
 Nothing here is our code's physics: the forces are Warp's own kernels (``warp.sim.integrator_euler``:
 ``eval_triangles``, ``eval_bending``) and its semi-implicit Euler step (``integrate_particles``); this
 module only builds the mesh, turns physical material values into Warp's parameters, drives the pins

@@ -1,4 +1,4 @@
-"""The codebase's shape, checked (issue 19): the layers and their imports, module and function sizes.
+"""The codebase's shape, checked: the layers and their imports, module and function sizes.
 
 Layers, lowest first: ``core`` (never imports bpy) < ``farm`` < ``blender`` < ``cli``; a module never
 imports from a higher layer, not even inside a function, and the modules import one another without

@@ -460,7 +460,7 @@ def test_render_failing_midway_leaves_no_capture_json(tmp_path, monkeypatch):
     assert bpy.ops.clothfit.load_capture() == {"FINISHED"}
 
 
-# ---------------------------------------------------------------- issue 12: no lost or overwritten data
+# ---------------------------------------------------------------- no lost or overwritten data
 
 
 def test_export_cameras_never_replaces_a_captures_cameras(tmp_path, small_capture):

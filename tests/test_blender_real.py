@@ -1,4 +1,4 @@
-"""Real-footage features of the Blender layer (issue 4): calibrated cameras in and out, silhouette
+"""Real-footage features of the Blender layer: calibrated cameras in and out, silhouette
 extraction from footage, handles driven by (animated) empties. Real ``bpy`` module, factory scene."""
 
 import json

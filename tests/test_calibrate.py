@@ -3,7 +3,7 @@
 The truth is made here, not by the code under test: the printed board traced exactly through known
 OpenCV cameras (tests/calib_synth.py: every pixel's ray meets the board plane, 3x supersampled,
 sensor noise), small images so the test runs in seconds. The photoreal measurement against the
-issue's goals is ``lab/phone_rig.py calibrate`` (docs/figures/phone_rig_calib.json).
+phone rig's goals is ``lab/phone_rig.py calibrate`` (docs/figures/phone_rig_calib.json).
 """
 
 import json
@@ -62,7 +62,7 @@ def test_calibrate_recovers_the_cameras(dataset, tmp_path, capsys):
     errs = S.errors(truth, [est[t.name] for t in truth])
     # Measured at 300 x 400 px, 7-9 views per camera, 1.5 grey levels of noise (seeds 0-2): focal
     # 0.43-0.76 %, centres 2.5-5.1 mm, rotations 0.37-0.77 deg, RMS 0.23-0.24 px. The tolerances are
-    # about twice the worst; the issue's goals are measured on photoreal phone-sized renders.
+    # about twice the worst; the phone rig's goals are measured on photoreal phone-sized renders.
     for name, e in errs.items():
         assert e["focal_pct"] < 1.5, (name, e)
         assert e["centre_mm"] < 10.0, (name, e)

@@ -1,4 +1,4 @@
-"""The CLI's habits (issue 13): help on every option, ``--version`` from the manifest, the ``clothfit``
+"""The CLI's habits: help on every option, ``--version`` from the manifest, the ``clothfit``
 console script, stdout = one JSON document, exit codes 2 (bad data) / 64 (usage) / 130 (Ctrl-C, the
 fit's best result kept), and the runtime / development requirements split."""
 

@@ -138,7 +138,7 @@ def test_a_tag_covers_only_its_own_numbers(fake):
 
 def test_references_versions_sizes_and_code_are_not_figures(fake):
     md = (
-        "Blender 4.5.15 and Python 3.11 (issue 12, Table 1, section 6.2, eq. 6) on a 2-core machine, "
+        "Blender 4.5.15 and Python 3.11 (Figure 3, Table 1, section 6.2, eq. 6) on a 2-core machine, "
         "480 x 640 images of cam05 and lab18, `--budget 2500`, [link](docs/a1.md).\n\n"
         "```\npython -m clothfit fit --max-evaluations 1500\n```\n"
     )

@@ -1,4 +1,4 @@
-"""A fit's stages (issue 20): the quality ladder, the manipulation's unknowns estimated with the
+"""A fit's stages: the quality ladder, the manipulation's unknowns estimated with the
 cloth and their profile, the errors beside the images' noise floor; checkpoints across stages."""
 
 import json
@@ -53,8 +53,8 @@ def test_ladder_climbs_while_its_top_rung_is_the_choice_then_tries_one_below_and
 
 
 def test_ladder_refines_between_two_rungs_where_a_cloths_quality_lies_between_them():
-    """A quality-15 cloth (issue 20's time capture): 12 the best of the ladder's rungs, 18 worse; the refining
-    rung 15 is tried and, fitting best, chosen."""
+    """A quality-15 cloth (the capture of the time to answer, lab/fit_goals.py time): 12 the best of the ladder's
+    rungs, 18 worse; the refining rung 15 is tried and, fitting best, chosen."""
     lad = Ladder(5)
     for q, e in ((5, 12.5), (8, 11.5), (12, 9.7), (18, 14.4)):
         lad.record(q, e)

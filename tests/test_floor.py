@@ -2,7 +2,7 @@
 
 Truths the estimator did not make: star-shaped polygons rasterised at pixel centres, with a known
 number of flipped boundary pixels (``metrics.add_boundary_noise``, the synthetic captures' noise).
-Tolerance of the floor tests: +-25 %, the goal of issue 20. The calibration
+Tolerance of the floor tests: +-25 %, the accuracy asked of the floor. The calibration
 (``lab/floor_calibration.py``, docs/noise_floor.md) has the capture-level ratio within 0.93-1.18
 on captures at 120 x 160 and above with 1-10 % noise; a capture of 12 such polygons averages the
 per-image spread (10th-90th percentile 0.75-1.17 at 5 %) down to a few per cent.

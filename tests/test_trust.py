@@ -1,4 +1,4 @@
-"""Issue 12, trustworthy fits: nothing executed from files, no silent wrong results, no lost or
+"""Trustworthy fits: nothing executed from files, no silent wrong results, no lost or
 overwritten data, fits that stop when they have converged. The CLI is driven in-process
 (``cli.main``, the same code path as ``python -m clothfit``) except for the kill -9 test."""
 

@@ -31,7 +31,7 @@ comments, invisible on GitHub:
 
 A tag covers the numbers after the previous tag of the same paragraph, list item or table row.
 Not counted as numbers: inline code and code blocks (commands, options, file names), link
-targets, version numbers (``Python 3.11``, ``4.5.15``), references (``issue 12``, ``Table 1``,
+targets, version numbers (``Python 3.11``, ``4.5.15``), references (``Figure 3``, ``Table 1``,
 ``section 6.2``, ``eq. 6``), sizes written ``480 x 640``, compounds such as ``2-core`` or
 ``18-camera``, camera counts (``8 cameras``: the set-up), exponents (``s^2``), list numbering,
 ``t = 0.5`` times and names with digits (``cam00``, ``lab18``).

@@ -87,7 +87,7 @@ def _spread(rig, box=None, uncertain_only=False, optimizer=None):
 
 
 def _offsets_with(*search):
-    """The command line of issue 20's offsets goal with the fit's ``--search`` settings."""
+    """The command line of the offsets goal with the fit's ``--search`` settings."""
     return ["{py}", "lab/fit_goals.py", "offsets"] + [x for s in search for x in ("--search", s)] + ["--json", "{out}"]
 
 
@@ -211,14 +211,14 @@ SOURCES = {
     "search_landscape": {
         "argv": ["{py}", "lab/search_ab.py", "synth:default", "--landscape", "{out}", "--local", "0.05"],
         "cost": "expensive",
-        "what": "issue 20 item 3: the exact-model capture's truth perturbed group by group (train and held-out "
+        "what": "the search that reaches the floor: the exact-model capture's truth perturbed group by group (train and held-out "
         "error), and a CMA-ES run started 5 % from the truth (about 2 CPU min)",
     },
     "search_slice": {
         "argv": ["{py}", "lab/search_ab.py", "synth:default", "synth:fresh", "--slice", "{out}"],
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: the first stage's slice of two exact-model captures: training error over bending x "
+        "what": "the search that reaches the floor: the first stage's slice of two exact-model captures: training error over bending x "
         "air damping (16 x 16 across their ranges), tension and shear at the truth and 0.01 of the unit cube off "
         "(about 1 CPU min)",
     },
@@ -229,7 +229,7 @@ SOURCES = {
         ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: runs again in the first stage ('staged-runs', 'staged-rs48'; not kept then, 'staged-rs48' with "
+        "what": "the search that reaches the floor: runs again in the first stage ('staged-runs', 'staged-rs48'; not kept then, 'staged-rs48' with "
         "the warm tail the default since search_rs_tail) against "
         "one run (the default, 'staged'), and 'staged-rs' and 'staged-pop24' where run, seeds 0-4 on five exact-model "
         "captures (the goal's, made by lab/fit_goals.py exact; fresh, damped, and a soft and a stiff cloth away "
@@ -244,7 +244,7 @@ SOURCES = {
         ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: populations of 16 in both stages (two whole batches of the kernel's 8 lanes, one per "
+        "what": "the search that reaches the floor: populations of 16 in both stages (two whole batches of the kernel's 8 lanes, one per "
         "core; tried, not kept) at the default's 2500 evaluations ('staged-pop16') and at about its wall time on two "
         "cores ('staged-pop16-3900'), against the default ('staged', the rows of search_runs), seeds 0-4 on its five "
         "captures: the fits of the rows files (drop --only-reused to run the missing ones)",
@@ -257,7 +257,7 @@ SOURCES = {
         ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: the second stage's first steps: warm (the first stage's covariance on the strong "
+        "what": "the search that reaches the floor: the second stage's first steps: warm (the first stage's covariance on the strong "
         "settings), a warm tail for the last 20 % of the budget, and that tail only where the second stage has found "
         "nothing better (from 68 % and from 80 %: the default then, until search_rs_tail), against the default before "
         "('staged', the rows of search_runs); seeds 0-4 on its five captures where run (the rows file: drop --only-reused to run the rest)",
@@ -271,7 +271,7 @@ SOURCES = {
         ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: runs again in the first stage's own share followed by the warm tail, only where the "
+        "what": "the search that reaches the floor: runs again in the first stage's own share followed by the warm tail, only where the "
         "second stage found nothing better ('staged-rs48-stuck20') and in every fit ('staged-rs48-tail20': the default "
         "then), against the default before ('staged-stuck20', its missing rows those of 'staged', the same search "
         "where its tail did not start), runs again alone ('staged-rs48') and one run ('staged'), seeds 0-4 on the five "
@@ -285,7 +285,7 @@ SOURCES = {
         ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: the warm tail also started as soon as the second stage gains less than 1 % over 10 % "
+        "what": "the search that reaches the floor: the warm tail also started as soon as the second stage gains less than 1 % over 10 % "
         "of the budget ('staged-rs48-stall10'; tried, not kept), against the default then ('staged-rs48-tail20', the "
         "rows of search_rs_tail), seeds 0-4 where run (the goal's capture): the fits of the rows files (drop "
         "--only-reused to run the missing ones)",
@@ -298,7 +298,7 @@ SOURCES = {
         ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: runs again counting a first-stage run settled at steps below 0.02 ('staged-rs48-step02') "
+        "what": "the search that reaches the floor: runs again counting a first-stage run settled at steps below 0.02 ('staged-rs48-step02') "
         "or 0.01 ('staged-rs48-step01') of the cube instead of 0.005, the default then ('staged-rs48-tail20', the "
         "rows of search_rs_tail; 0.01 the default since where no quality ladder follows), seeds 0-4 on the five "
         "captures of search_runs: the fits of the rows files (drop --only-reused to run the missing ones)",
@@ -314,7 +314,7 @@ SOURCES = {
         ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: the default since (runs again settled at 0.01, 'staged-rs48-step01') against the "
+        "what": "the search that reaches the floor: the default since (runs again settled at 0.01, 'staged-rs48-step01') against the "
         "default before (0.005, 'staged-rs48-tail20') over ten seeds, 0-9, on the goal's capture: seeds 0-4 the rows "
         "of search_step and search_rs_tail, seeds 5-9 those of search_step10_rows.jsonl (drop --only-reused to run "
         "the missing ones)",
@@ -329,7 +329,7 @@ SOURCES = {
         ),
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: runs again each started at another bending ('staged-rs48-step01-bend'; tried, not "
+        "what": "the search that reaches the floor: runs again each started at another bending ('staged-rs48-step01-bend'; tried, not "
         "kept) against the default ('staged-rs48-step01'), seeds 0-9 on the five captures of search_runs (seeds 0-4 "
         "of the default's from search_step, 5-9 of the goal's capture from search_step10): the fits of the rows files "
         "(drop --only-reused to run the missing ones)",
@@ -351,7 +351,7 @@ SOURCES = {
         ],
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: the default search and 'staged-pop16' one after the other on one machine (the goal's "
+        "what": "the search that reaches the floor: the default search and 'staged-pop16' one after the other on one machine (the goal's "
         "capture, seed 0): CPU and wall time of the same 2500 evaluations (drop --only-reused to run them again)",
     },
     "search_profile": {
@@ -369,7 +369,7 @@ SOURCES = {
         ],
         "cost": "expensive",
         "rtol": 0,
-        "what": "issue 20 item 3: a first stage by profile over bending (tried, not kept) on two exact-model captures, "
+        "what": "the search that reaches the floor: a first stage by profile over bending (tried, not kept) on two exact-model captures, "
         "64 and 96 evaluations per bending value, seeds 0-1 (about 6 CPU min)",
     },
     "same_fit": {
@@ -382,7 +382,7 @@ SOURCES = {
     "search_oracle": {
         "argv": ["{py}", "lab/search_ab.py", "synth:fresh", "--oracle", "{out}", "--samples", "128"],
         "cost": "expensive",
-        "what": "issue 20 item 3: 128 points 1e-7, 1e-5 and 1e-3 (relative) round the truth of the fresh exact-model "
+        "what": "the search that reaches the floor: 128 points 1e-7, 1e-5 and 1e-3 (relative) round the truth of the fresh exact-model "
         "capture, and the best of n by training error: what a search that came that close could keep (about 1 CPU min)",
     },
     "search_tune": {
@@ -396,7 +396,7 @@ SOURCES = {
         ],
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: the strategies tried on the tuning capture (rows written by lab/search_ab.py)",
+        "what": "the search that reaches the floor: the strategies tried on the tuning capture (rows written by lab/search_ab.py)",
     },
     "search_ab": {
         "argv": [
@@ -415,7 +415,7 @@ SOURCES = {
         ],
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: search strategies on a fresh exact-model capture (blender model, lab18, 240 x 320, "
+        "what": "the search that reaches the floor: search strategies on a fresh exact-model capture (blender model, lab18, 240 x 320, "
         "5 % noise, tension 25 shear 8), held-out error over the floor, seeds 0-9 where run: the fits are those of "
         "the rows file (written by this tool; drop --only-reused to run the missing ones, about 2 CPU min each)",
     },
@@ -436,7 +436,7 @@ SOURCES = {
         ],
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20 item 3: the strong settings first ('staged') against today's search on an exact-model capture "
+        "what": "the search that reaches the floor: the strong settings first ('staged') against today's search on an exact-model capture "
         "whose every setting is off Blender's defaults (tension 15, compression 9, dampings 12 / 2 / 1.5), seeds 0-9 "
         "where run: the fits of the rows file (drop --only-reused to run the missing ones, about 2 CPU min each)",
     },
@@ -484,7 +484,7 @@ SOURCES = {
     "bench_default_fit": {
         "argv": ["{py}", "-m", "clothfit", "bench", "--default-fit", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's time to answer as bench prints it: the default fit of a 21 x 21 cloth, 4 cameras x 15 "
+        "what": "the time to answer as bench prints it: the default fit of a 21 x 21 cloth, 4 cameras x 15 "
         "frames at 480 x 640, quality chosen, manipulation estimated (about 3 min)",
     },
     "bench_blender_workers": {
@@ -507,26 +507,25 @@ SOURCES = {
         "cost": "cheap",
         "rtol": 1e-9,
         "atol": 1e-12,
-        "what": "issue 20: Blender scenes built as a user builds them; the core blender model's drift from them, "
-        "cause by cause",
+        "what": "Blender scenes built as a user builds them; the core blender model's drift from them, cause by cause",
     },
     "fit_goals": {
         "argv": ["{py}", "lab/fit_goals.py", "all", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's goals measured through the CLI on fresh captures (exact model, offsets, continuum, "
+        "what": "the goals for fitting a real capture, measured through the CLI on fresh captures (exact model, offsets, continuum, "
         "collider, time); each goal also alone: lab/fit_goals.py GOAL --json FILE",
     },
     "fit_goals_time": {
         "argv": ["{py}", "lab/fit_goals.py", "time", "--diagnose", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's time goal as the issue asks it (a 21 x 21 quality-15 cloth at 480 x 640 whose capture "
+        "what": "the time goal (a 21 x 21 quality-15 cloth at 480 x 640 whose capture "
         "names no quality, release and pins declared with error and uncertain), then the same fit told the quality, "
         "and the truth's capture with only its quality left out (about 8 min)",
     },
     "fit_goals_time_refit": {
         "argv": ["{py}", "lab/fit_goals.py", "time", "--quality", "10,12", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's time capture refitted as the floor block of its default fit advises (its ladder chose 10, "
+        "what": "the time goal's capture refitted as the floor block of its default fit advises (its ladder chose 10, "
         "42 % below the search at 5): a search at quality 10 from the start, and at 12, the highest quality the "
         "ladder tried (about 11 min)",
     },
@@ -535,7 +534,7 @@ SOURCES = {
         "cost": "cheap",
         "rtol": 1e-9,
         "atol": 1e-12,
-        "what": "issue 20's time capture: its true settings simulated at each quality of the fit's ladder and at "
+        "what": "the time goal's capture: its true settings simulated at each quality of the fit's ladder and at "
         "the truth's own 15 (training E_sil on the true capture)",
     },
     "fit_goals_offsets_sensitivity": {
@@ -543,14 +542,14 @@ SOURCES = {
         "cost": "cheap",
         "rtol": 1e-6,
         "atol": 1e-9,
-        "what": "issue 20's offsets capture: its truth scored as the goal scores a fit, the same with only the time "
+        "what": "the offsets goal's capture: its truth scored as the goal scores a fit, the same with only the time "
         "offset or one pin moved, and its jitter floor (16 points a part in 10^7 from the truth)",
     },
     "fit_goals_offsets_coverage": {
         "argv": ["{py}", "lab/fit_goals.py", "offsets_coverage", "--json", "{out}"],
         "cost": "cheap",
         "rtol": 0,
-        "what": "issue 20's offsets fits (the recordings fit_goals_offsets_seeds and fit_goals_offsets_hold, no fit run): each "
+        "what": "the offsets goal's fits (the recordings fit_goals_offsets_seeds and fit_goals_offsets_hold, no fit run): each "
         "stated offset's error over the uncertainty the fit states, and the share within 1x and 2x",
     },
     "takes_baseline": {
@@ -640,7 +639,7 @@ SOURCES = {
     "fit_goals_offsets_seeds": {
         "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-2", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's offsets goal with the default fit over seeds 0-2 (one fit each, about 4 min)",
+        "what": "the offsets goal with the default fit over seeds 0-2 (one fit each, about 4 min)",
     },
     "fit_goals_offsets_e4000": {
         "argv": [
@@ -655,30 +654,30 @@ SOURCES = {
             "{out}",
         ],
         "cost": "expensive",
-        "what": "issue 20's offsets goal with 4000 evaluations instead of the default 2500, seeds 0-2 (about 6 min)",
+        "what": "the offsets goal with 4000 evaluations instead of the default 2500, seeds 0-2 (about 6 min)",
     },
     "fit_goals_offsets_hold": {
         "argv": ["{py}", "lab/fit_goals.py", "offsets", "--hold-frames", "--seeds", "0-2", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's offsets goal on a capture with two frames before the release too (the cloth held by all "
+        "what": "the offsets goal on a capture with two frames before the release too (the cloth held by all "
         "four corners), trained on them as well; the default fit, seeds 0-2 (about 5 min)",
     },
     "fit_goals_search": {
         "argv": ["{py}", "lab/fit_goals.py", "search", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's search goal over seeds 0-4 with the fit's default search (cma-staged) and with cma-es, "
+        "what": "the search goal over seeds 0-4 with the fit's default search (cma-staged) and with cma-es, "
         "the default before it, and the offsets goal with cma-es (about 25 min)",
     },
     "fit_goals_offsets_runs": {
         "argv": _offsets_with("staged_restart_step=0.005", "staged_first_fraction=0.72", "staged_explore=0.56"),
         "cost": "expensive",
-        "what": "issue 20's offsets goal with runs again in the first stage (tried, not kept; docs/search.md), one fit "
+        "what": "the offsets goal with runs again in the first stage (tried, not kept; docs/search.md), one fit "
         "(about 3 min)",
     },
     "fit_goals_offsets_rs48": {
         "argv": _offsets_with("staged_restart_step=0.005"),
         "cost": "expensive",
-        "what": "issue 20's offsets goal with runs again within the first stage's own share (staged-rs48; tried, not "
+        "what": "the offsets goal with runs again within the first stage's own share (staged-rs48; tried, not "
         "kept; docs/search.md), one fit (about 3 min)",
     },
     "fit_goals_continuum_rs48": {
@@ -692,7 +691,7 @@ SOURCES = {
             "{out}",
         ],
         "cost": "expensive",
-        "what": "issue 20's continuum goal (cotton and silk from Warp) with runs again within the first stage's own "
+        "what": "the continuum goal (cotton and silk from Warp) with runs again within the first stage's own "
         "share (staged-rs48; tried, not kept; docs/search.md), one fit each (about 7 min)",
     },
     "cross_simulator": {
@@ -704,7 +703,7 @@ SOURCES = {
     "continuum_baseline": {
         "argv": ["{py}", "lab/continuum_truth.py", "baseline", "--make", "--out", "out/continuum", "--json", "{out}"],
         "cost": "expensive",
-        "what": "issue 20's baseline: a Warp continuum cloth (cotton, silk; 30 fps, a rig not ours) fitted by "
+        "what": "the continuum baseline: a Warp continuum cloth (cotton, silk; 30 fps, a rig not ours) fitted by "
         "today's CLI as a new user would, and with --fps 30 (about 40 min on a loaded machine)",
     },
     "paper_mismatch": {
@@ -1057,58 +1056,58 @@ SOURCES = {
     "phone_rig_calib_s101": {
         "argv": _phone_rig("calibrate", "calib_s101", 101, "0.375", 14, close=0),
         "cost": "expensive",
-        "what": "issue 18: clothfit calibrate on Cycles renders of a ChArUco board before 4 phones (seed 101), against "
+        "what": "the phone rig: clothfit calibrate on Cycles renders of a ChArUco board before 4 phones (seed 101), against "
         "the true cameras",
     },
     "phone_rig_calib_s202": {
         "argv": _phone_rig("calibrate", "calib_s202", 202, "0.375", 14, close=4),
         "cost": "expensive",
-        "what": "issue 18: calibrate as docs/phone_rig.md now asks (the board also held close before each phone, 4 poses), seed 202, 405 x 720",
+        "what": "the phone rig: calibrate as docs/phone_rig.md now asks (the board also held close before each phone, 4 poses), seed 202, 405 x 720",
     },
     "phone_rig_calib_s303": {
         "argv": _phone_rig("calibrate", "calib_s303", 303, "0.75", 14, close=4),
         "cost": "expensive",
-        "what": "issue 18: calibrate as docs/phone_rig.md now asks (4 close poses per phone), seed 303, at 810 x 1440 (0.75 of a phone's video)",
+        "what": "the phone rig: calibrate as docs/phone_rig.md now asks (4 close poses per phone), seed 303, at 810 x 1440 (0.75 of a phone's video)",
     },
     "phone_rig_calib_s404": {
         "argv": _phone_rig("calibrate", "calib_s404", 404, "0.75", 14, close=4),
         "cost": "expensive",
-        "what": "issue 18: calibrate as docs/phone_rig.md now asks (4 close poses per phone), seed 404, at 810 x 1440 (0.75 of a phone's video)",
+        "what": "the phone rig: calibrate as docs/phone_rig.md now asks (4 close poses per phone), seed 404, at 810 x 1440 (0.75 of a phone's video)",
     },
     "phone_rig_e2e": {
         "argv": _phone_rig("e2e", "e2e_s7", 7, "0.3", 10),
         "cost": "expensive",
-        "what": "issue 18 end to end: phones -> calibrate, handles, extract, fit, export-blender-cloth on Cycles "
+        "what": "the phone rig end to end: phones -> calibrate, handles, extract, fit, export-blender-cloth on Cycles "
         "renders, against the same fit given the true cameras and manipulation",
     },
     "phone_rig_e2e_close": {
         "argv": _phone_rig("e2e", "e2e_s7c", 7, "0.3", 10, close=4),
         "cost": "expensive",
-        "what": "issue 18 end to end as docs/phone_rig.md now asks: the e2e rig of seed 7 with the board also held "
+        "what": "the phone rig end to end as docs/phone_rig.md now asks: the e2e rig of seed 7 with the board also held "
         "close before each phone (4 poses)",
     },
     "phone_rig_e2e_s8": {
         "argv": _phone_rig("e2e", "e2e_s8", 8, "0.75", 10, close=4),
         "cost": "expensive",
-        "what": "issue 18 end to end on a rig not seen before (seed 8) at 810 x 1440 (0.75 of a phone's video), the "
+        "what": "the phone rig end to end on a rig not seen before (seed 8) at 810 x 1440 (0.75 of a phone's video), the "
         "board held close before each phone as docs/phone_rig.md asks",
     },
     "phone_rig_e2e_s9": {
         "argv": _phone_rig("e2e", "e2e_s9", 9, "0.75", 10, close=4),
         "cost": "expensive",
-        "what": "issue 18 end to end on a rig not seen before (seed 9, a second) at 810 x 1440 (0.75 of a phone's video), the "
+        "what": "the phone rig end to end on a rig not seen before (seed 9, a second) at 810 x 1440 (0.75 of a phone's video), the "
         "board held close before each phone as docs/phone_rig.md asks",
     },
     "phone_rig_e2e_s10": {
         "argv": _phone_rig("e2e", "e2e_s10", 10, "0.75", 10, close=4),
         "cost": "expensive",
-        "what": "issue 18 end to end on a third rig at 810 x 1440 not seen before (seed 10; about 65 min of renders "
+        "what": "the phone rig end to end on a third rig at 810 x 1440 not seen before (seed 10; about 65 min of renders "
         "on an idle 2-core machine)",
     },
     "phone_rig_e2e_s11": {
         "argv": _phone_rig("e2e", "e2e_s11", 11, "0.75", 10, close=4),
         "cost": "expensive",
-        "what": "issue 18 end to end on a fourth rig at 810 x 1440, not seen before, the first with the fit's 0.7 mm clip "
+        "what": "the phone rig end to end on a fourth rig at 810 x 1440, not seen before, the first with the fit's 0.7 mm clip "
         "box from the start (seed 11; about 65 min of renders on an idle 2-core machine)",
     },
     "phone_rig_sensitivity": {
@@ -1126,98 +1125,98 @@ SOURCES = {
             "{out}",
         ],
         "cost": "expensive",
-        "what": "issue 18: the true settings replayed under the clips phone_rig_e2e measured, and under clips moved "
+        "what": "the phone rig: the true settings replayed under the clips phone_rig_e2e measured, and under clips moved "
         "by 1 mm per axis: how far the clips alone move the cloth (needs that run's folder)",
     },
     "phone_rig_spread_s8": {
         "argv": _spread(8),
         "cost": "expensive",
-        "what": "issue 18: the seed 8 rig's three fits over fit seeds 0-4, and the true settings scored with the "
+        "what": "the phone rig: the seed 8 rig's three fits over fit seeds 0-4, and the true settings scored with the "
         "clips as measured and at their true points (needs phone_rig_e2e_s8's folder; about 20 min)",
     },
     "phone_rig_spread_s9": {
         "argv": _spread(9),
         "cost": "expensive",
-        "what": "issue 18: the seed 9 rig's three fits over fit seeds 0-4, and the true settings scored with the "
+        "what": "the phone rig: the seed 9 rig's three fits over fit seeds 0-4, and the true settings scored with the "
         "clips as measured and at their true points (needs phone_rig_e2e_s9's folder; about 20 min)",
     },
     "phone_rig_spread_s9_box07": {
         "argv": _spread(9, box=0.0007),
         "cost": "expensive",
-        "what": "issue 18: the seed 9 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
+        "what": "the phone rig: the seed 9 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
         "(the capture's: 1.3-1.5 mm), beside the fit given the truth (needs phone_rig_e2e_s9's folder; about 15 min)",
     },
     "phone_rig_spread_s8_box07": {
         "argv": _spread(8, box=0.0007),
         "cost": "expensive",
-        "what": "issue 18: the seed 8 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
+        "what": "the phone rig: the seed 8 rig's uncertain fit over fit seeds 0-4 with every clip's box at 0.7 mm "
         "(the capture's: 1.7-1.8 mm), beside the fit given the truth (needs phone_rig_e2e_s8's folder; about 15 min)",
     },
     "phone_rig_spread_s10": {
         "argv": _spread(10),
         "cost": "expensive",
-        "what": "issue 18: the unseen seed 10 rig's three fits over fit seeds 0-4, and the true settings scored with "
+        "what": "the phone rig: the unseen seed 10 rig's three fits over fit seeds 0-4, and the true settings scored with "
         "the clips as measured and at their true points (needs phone_rig_e2e_s10's folder; about 20 min)",
     },
     "phone_rig_spread_s10_box07": {
         "argv": _spread(10, box=0.0007),
         "cost": "expensive",
-        "what": "issue 18: the unseen seed 10 rig's uncertain fit over fit seeds 0-4 with every clip's box at the "
+        "what": "the phone rig: the unseen seed 10 rig's uncertain fit over fit seeds 0-4 with every clip's box at the "
         "0.7 mm chosen on the seed 8 and 9 rigs (the capture's: 1.6-1.7 mm), beside the fit given the truth (needs "
         "phone_rig_e2e_s10's folder; about 15 min)",
     },
     "phone_rig_spread_s8_polish": {
         "argv": _spread(8, uncertain_only=True),
         "cost": "expensive",
-        "what": "issue 18: the seed 8 rig's uncertain fit over fit seeds 0-4 since the offsets' polish and the replay "
+        "what": "the phone rig: the seed 8 rig's uncertain fit over fit seeds 0-4 since the offsets' polish and the replay "
         "at the fitted offsets (commit e0330c9), beside the fit given the truth (needs phone_rig_e2e_s8's folder; "
         "about 12 min)",
     },
     "phone_rig_spread_s9_polish": {
         "argv": _spread(9, uncertain_only=True),
         "cost": "expensive",
-        "what": "issue 18: the seed 9 rig's uncertain fit over fit seeds 0-4 since the offsets' polish and the replay "
+        "what": "the phone rig: the seed 9 rig's uncertain fit over fit seeds 0-4 since the offsets' polish and the replay "
         "at the fitted offsets (commit e0330c9), beside the fit given the truth (needs phone_rig_e2e_s9's folder; "
         "about 12 min)",
     },
     "phone_rig_spread_s8_staged": {
         "argv": _spread(8, optimizer="cma-staged"),
         "cost": "expensive",
-        "what": "issue 18: the seed 8 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
+        "what": "the phone rig: the seed 8 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
         "the time offset first, the clips held where clicked; then everything), beside the fit given the truth "
         "(needs phone_rig_e2e_s8's folder; about 12 min)",
     },
     "phone_rig_spread_s9_staged": {
         "argv": _spread(9, optimizer="cma-staged"),
         "cost": "expensive",
-        "what": "issue 18: the seed 9 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
+        "what": "the phone rig: the seed 9 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
         "the time offset first, the clips held where clicked; then everything), beside the fit given the truth "
         "(needs phone_rig_e2e_s9's folder; about 12 min)",
     },
     "phone_rig_spread_s10_staged": {
         "argv": _spread(10, optimizer="cma-staged"),
         "cost": "expensive",
-        "what": "issue 18: the seed 10 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
+        "what": "the phone rig: the seed 10 rig's uncertain fit over fit seeds 0-4 with cma-staged (the three settings and "
         "the time offset first, the clips held where clicked; then everything), beside the fit given the truth "
         "(needs phone_rig_e2e_s10's folder; about 12 min)",
     },
     "phone_rig_spread_s11": {
         "argv": _spread(11, uncertain_only=True),
         "cost": "expensive",
-        "what": "issue 18: the unseen seed 11 rig's uncertain fit (in the capture's 0.7 mm clip boxes, the default) over "
+        "what": "the phone rig: the unseen seed 11 rig's uncertain fit (in the capture's 0.7 mm clip boxes, the default) over "
         "fit seeds 0-4, beside the fit given the truth (needs phone_rig_e2e_s11's folder; about 8 min)",
     },
     "fit_goals_offsets_polish": {
         "argv": _offsets_with(),
         "cost": "expensive",
-        "what": "issue 20's offsets goal with the default fit since the offsets' polish and the replay at the fitted "
+        "what": "the offsets goal with the default fit since the offsets' polish and the replay at the fitted "
         "offsets (commit e0330c9), one fit (about 2 min)",
     },
     "blender_scene_fit": {
         "argv": ["{py}", "lab/blender_scene_fit.py", "all", "--out", "out/scene_fit"],
         "output": "out/scene_fit/summary.json",
         "cost": "expensive",
-        "what": "issue 10: a cloth dropped onto a box, fitted with Blender's own solver on Ray",
+        "what": "the --backend blender fit: a cloth dropped onto a box, fitted with Blender's own solver on Ray",
     },
 }
 

@@ -1,4 +1,4 @@
-"""A Blender scene the core's models cannot emulate, for the ``--backend blender`` fit (issue 10):
+"""A Blender scene the core's models cannot emulate, for the ``--backend blender`` fit:
 a square cloth hung by its four corners, settled, released at t = 0, falling onto a box collider
 narrower than the cloth (so it drapes over the box's edges), with cloth-object collisions on.
 

@@ -1,5 +1,5 @@
 """One Blender scene in a worker process: a user's .blend with a cloth object, simulated by
-Blender's own solver for candidate Cloth settings (the ``--backend blender`` fit, issue 10).
+Blender's own solver for candidate Cloth settings (the ``--backend blender`` fit).
 
 Runs only in worker processes (Ray actors or spawned pool processes, ``addon.farm``): it imports
 ``bpy``; the fitting process never does. The .blend is opened once per worker; each candidate's

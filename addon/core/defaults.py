@@ -33,8 +33,8 @@ SETTLE_TIME = 0.5  # seconds of settling under gravity with all handles held, be
 FOOTAGE_SETTLE_TIME = 1.0
 # the blender model's handles go from the flat cloth to their held positions over this share of the settle
 # (physics/blender.settle_ramp): the rest shape stays the flat sheet; the rest of the settle lets it come to
-# rest. Issue 20: a continuum cloth held with slack fitted to 32.4 % held-out with the handles put there at
-# the start frame (slack built into the rest lengths) and to 3.1 % with this ramp (docs/fit_goals.md)
+# rest. A continuum cloth held with slack (lab/continuum_truth.py) fitted to 32.4 % held-out with the handles put
+# there at the start frame (slack built into the rest lengths) and to 3.1 % with this ramp (docs/fit_goals.md)
 SETTLE_RAMP_FRACTION = 0.5
 SETTLE_DAMPING_RATE = 40.0  # d/m used while settling (1/s): reaches rest quickly; rest shape is independent of d
 EXPLODE_FACTOR = 10.0  # a vertex further than EXPLODE_FACTOR * cloth size from the handles' centre = exploded
@@ -234,11 +234,11 @@ CALIB_CORNER_CHECK_PX = 1.0  # a ChArUco corner further than this from where its
 CALIB_MARKER_RATIO_TOL = 0.1  # markers measured more than 10 % larger or smaller than --board says = a board definition
 # that does not match the print (lens distortion changes a marker's size by far less)
 
-# --- a fit's stages after its main search (issue 20; fitting/quality.py, fitting/job.py)
+# --- a fit's stages after its main search (fitting/quality.py, fitting/job.py)
 QUALITY_LADDER = (3, 5, 8, 12, 18, 27)  # the qualities a fit may choose from: steps ~1.5x apart (a quality-15
 # cloth lies between two rungs; past 27 a 21 x 21 cloth costs > 5x quality 5)
 QUALITY_TOLERANCE = 0.05  # the lowest rung whose training error is within 5 % of the best rung's is chosen: a
-# cheaper solver for a difference of the size of one seed's luck (issue 20 A/B spreads)
+# cheaper solver for a difference of the size of one seed's luck (the spread of the search strategies' A/B runs, lab/search_ab.py)
 QUALITY_RUNG_FRACTION = 0.07  # each rung: a warm-started CMA-ES run of 7 % of the budget (175 of 2500 evaluations:
 # 17 generations of 10, enough to re-settle a converged fit at a neighbouring quality)
 QUALITY_RUNG_FIRST_FRACTION = 0.5  # cma-staged fits: a rung's first half re-settles the strong settings (and the

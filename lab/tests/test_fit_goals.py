@@ -93,9 +93,7 @@ def test_rows_pass_fail_and_not_measured():
         "exact", "exact", "heldout_ratio", 1.1, run, details={"heldout_E_sil_pct": 0.4125, "floor_E_sil_pct": 0.375}
     )
     bad = G.row("time", "time", "wall_s", 200.0, run)
-    none = G.row(
-        "offsets", "offsets", "time_offset_error_ms", None, run, "not estimated: needs the lead's fit --uncertain"
-    )
+    none = G.row("offsets", "offsets", "time_offset_error_ms", None, run, "not estimated: needs fit --uncertain")
     assert (ok["pass"], bad["pass"], none["pass"]) == (True, False, None)
     assert ok["target"] == 1.2 and bad["target"] == 180.0
     for r in (ok, bad, none):
@@ -111,7 +109,7 @@ def test_rows_pass_fail_and_not_measured():
     body = lines[2:5]
     assert "1.10x (0.41 % / 0.375 %)" in body[0] and "<= 1.20x" in body[0] and "| pass |" in body[0]
     assert "200 s (CPU 20 s)" in body[1] and "FAIL" in body[1]
-    assert "not measured (not estimated: needs the lead's fit --uncertain)" in body[2] and "| - |" in body[2]
+    assert "not measured (not estimated: needs fit --uncertain)" in body[2] and "| - |" in body[2]
     assert all(r.count("|") - r.count("\\|") == 9 for r in body)  # the pipe in the command escaped
     assert "exact (before): held-out E_sil / floor" in body[0]
     assert "exact (before) at abc1234 (main def5678)" in table

@@ -1,4 +1,4 @@
-"""issue 18, end to end without the truth in the inputs (the small version of ``lab/phone_rig.py e2e``).
+"""The phone rig, end to end without the truth in the inputs (the small version of ``lab/phone_rig.py e2e``).
 
 Cycles renders (tiny: 3 phones, few samples) of a ChArUco board on the table, then of a cloth hung by four
 clips with one let go; then, as a user runs them, ``clothfit calibrate``, ``handles``, ``extract``, ``fit``
@@ -24,7 +24,7 @@ sys.path.insert(0, os.path.join(ROOT, "lab"))
 # centre 2.9 mm; clips within 1.9 mm; release frame 3 for a true 4 (the handles' departure test fires a frame
 # early at this size); replay 0.69 to 2.0 mm given the truth. Over fit seeds S = 0..7 the user's fit (the
 # capture's uncertain block: clip offsets and time offset estimated) replays at 1.17 to 3.79 times the
-# truth-given fit (median 2.68; the issue's goal of 2 on one seed of eight), the same fit told the clips are
+# truth-given fit (median 2.68; the phone rig's goal of 2 on one seed of eight), the same fit told the clips are
 # exact ("--uncertain none") at 1.23 to 3.46 times: 150 evaluations on this rig are a draw (the recorded full
 # run, docs/figures/phone_rig_e2e.json, measures the goal). Tolerances about 2x the measurements: the ratios
 # about twice their medians, above their worst seeds.

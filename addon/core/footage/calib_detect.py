@@ -93,8 +93,8 @@ class Detector:
     def refine(self, grey: np.ndarray, ids: np.ndarray, pts: np.ndarray) -> np.ndarray:
         """The corners refined again by ``cv2.cornerSubPix`` in a window scaled to the local square size.
 
-        OpenCV 4.7 to 4.12 return ChArUco corners shifted by +0.5 px in x and y (opencv/opencv issue
-        25539, fixed by pull request 28380): their refinement shifts its input by -0.5 px and its output
+        OpenCV 4.7 to 4.12 return ChArUco corners shifted by +0.5 px in x and y (https://github.com/opencv/opencv/issues/25539,
+        fixed by pull request 28380): their refinement shifts its input by -0.5 px and its output
         back by +0.5 px. ``cornerSubPix`` converges to the saddle point whatever its start, so refining
         again here removes that shift on every version (measured: tests/test_calibrate.py). The window is
         the white gap between a corner and the nearest marker edge, ``(square - marker) / 2``, in the

@@ -89,7 +89,7 @@ MODEL_CLUSTER = 3  # px: a model-image disagreement (8-connected) larger than th
 # within 2 px of it are left out (a wrong model must not lower the floor)
 MODEL_AGREEMENT = 0.8  # the share of the observed outline (away from such disagreements) below which the model
 # is too far from the images to serve as the baseline: the image-only estimate is used instead
-FAR_ABOVE = D.FLOOR_FAR_ABOVE  # a fit error more than this times its floor is "far above" it (issue 20)
+FAR_ABOVE = D.FLOOR_FAR_ABOVE  # a fit error more than this times its floor is "far above" it
 
 LIMITS = (
     "lower bound for real footage: a segmenter's bias (a rim lost or added along the whole outline) and "

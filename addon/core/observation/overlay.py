@@ -6,7 +6,7 @@ background black; pixels of unknown truth (ignore masks: occluders) grey (110, 1
 (70, 70, 70) where the model is not. ``overlay_on_image`` draws the same comparison on the camera's
 own picture (a footage frame, a render): red and blue tints and the model's outline in yellow.
 
-Against the noise floor (``floor.py``, issue 20): ``mark_floor`` frames an overlay in the colour of its
+Against the noise floor (``floor.py``): ``mark_floor`` frames an overlay in the colour of its
 image's ``E_sil / floor`` ratio (green at most ``FLOOR_NEAR`` x, amber up to ``far``, red beyond: far
 above its own floor) and labels it; ``floor_sheet`` draws every camera x frame as a grid of such cells
 (the overlays as thumbnails when given) with a summary line. ``capture_overlays(..., floors=...)``

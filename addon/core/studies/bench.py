@@ -1,4 +1,4 @@
-"""``python -m clothfit bench --json FILE``: speed figures against the targets of issue 2.
+"""``python -m clothfit bench --json FILE``: speed figures against their targets.
 
 * candidate evaluations per second on the full paper workload: simulate one candidate over the
   settling phase and 1.5 s, rasterise and compare its silhouettes for 16 cameras x 15 training
@@ -124,7 +124,7 @@ def bench_default_fit(
     max_evaluations: int | None = None,
     progress: Callable[[str], Any] | None = None,
 ) -> dict[str, Any]:
-    """Issue 20's time to answer: the default fit of a 21 x 21 blender-model cloth (1 s settle + 1.5 s
+    """The time to answer a capture: the default fit of a 21 x 21 blender-model cloth (1 s settle + 1.5 s
     at 24 fps, 25 cm), 4 training cameras, 15 training frames at 480 x 640, the quality chosen by the
     fit (the capture declares none) and the manipulation's unknowns estimated (time offset 50 ms,
     handles 5 mm); wall and CPU time with the load, against the 3-minute target."""
