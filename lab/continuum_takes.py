@@ -25,7 +25,7 @@ noise-free silhouettes against the noisy ones). One JSON file.
 ``takes-pairs`` fits every pair of three takes together (``python -m clothfit fit A B --model blender --cameras
 n:4 --times odd``: each take's own 15 training frames) and scores each result the same way on all three, the
 third a handling the fit never saw (evaluate replays it with its own handles at its own frame rate). With the
-single-take rows of ``takes-baseline`` this is the docs' table per cloth (docs/takes.md).
+single-take rows of ``takes-baseline`` this is the docs' table per cloth (docs/results.md).
 """
 
 from __future__ import annotations

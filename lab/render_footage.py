@@ -37,7 +37,7 @@ the silhouette error on the held-out cameras (against the extracted and the true
 the shape error against the true vertices.
 
 Engine: Cycles on the CPU with few samples and the OpenImageDenoise denoiser (measured in
-``docs/real_footage.md``). Runs under ``python`` with the ``bpy`` module and under
+``docs/footage_measured.md``). Runs under ``python`` with the ``bpy`` module and under
 ``blender -b --factory-startup -P lab/render_footage.py -- render ...``.
 """
 

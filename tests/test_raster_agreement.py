@@ -2,7 +2,7 @@
 
 lab18 rig at 480 x 640, the paper scenario simulated by the core, baked into the mesh, rendered by
 Workbench (AA off) and rasterised by ``core.observation.raster.silhouette``: XOR < 1 % of the silhouette area
-for every (camera, shape). Measured figures: ``python lab/raster_agreement.py`` (docs/blender.md).
+for every (camera, shape). Measured figures: ``python lab/raster_agreement.py`` (docs/results.md).
 """
 
 import numpy as np

@@ -27,7 +27,7 @@ threshold by hand; we add what real footage needs (all pure numpy + cv2, no bpy)
      Threshold = ``median + noise_k * 1.4826 * MAD`` of that noise difference (``noise_k`` 6).
    * ``otsu``: Otsu's threshold on the histogram of all difference images of the camera.
    * ``auto`` (default): the noise threshold, never below ``MIN_AUTO_THRESHOLD`` (2 levels).
-     Measured on the photoreal footage (``docs/real_footage.md``) it beats Otsu clearly: Otsu
+     Measured on the photoreal footage (``docs/footage_measured.md``) it beats Otsu clearly: Otsu
      lands between the bright parts of the cloth and the background and loses the low-contrast
      parts (cloth in its own shade); the noise threshold detects everything that is not noise and
      the boundary refinement (step 3) puts the edge back where it belongs.
