@@ -228,6 +228,34 @@ def test_a_capture_from_point_clouds_reads_its_real_points_back_in_metres_above_
         capture_points(cap, [0])
 
 
+def test_the_converter_states_each_frames_scatter_and_evaluate_reads_it_as_it_would_measure_it(tmp_path, clouds):
+    import json
+
+    from clothfit.core.fitting.evaluate import evaluate
+    from clothfit.core.observation.metrics import points_scatter_m
+    from clothfit.core.observation.points import capture_points
+
+    points_to_capture(str(clouds), read_setup(str(_setup(tmp_path))), str(tmp_path / "cap"))
+    cap = load_capture(tmp_path / "cap")
+    stated = cap.meta["points_scatter_mm"]
+    measured = [1000.0 * points_scatter_m(P).mean() for P in capture_points(cap, [0, 1])]
+    assert len(stated) == 2 and np.allclose(stated, measured, atol=1e-4)
+    r = evaluate(cap, {"tension_stiffness": 15.0})
+    assert r["points_scatter_mm"] == pytest.approx(np.mean(measured), abs=1e-4)
+    path = tmp_path / "cap" / "capture.json"
+    d = json.loads(path.read_text())
+    del d["meta"]["points_scatter_mm"]  # a capture converted before the converter stated it: measured instead
+    path.write_text(json.dumps(d))
+    assert evaluate(load_capture(tmp_path / "cap"), {"tension_stiffness": 15.0})["points_scatter_mm"] == (
+        pytest.approx(np.mean(measured), rel=1e-12)
+    )
+    d["meta"]["points_scatter_mm"] = [0.1]
+    path.write_text(json.dumps(d))
+    with pytest.raises(ClothFitError) as e:
+        evaluate(load_capture(tmp_path / "cap"), {"tension_stiffness": 15.0})
+    assert "points_scatter_mm" in str(e.value) and "\n" not in str(e.value)
+
+
 def test_frames_before_the_first_frame_are_left_out_keeping_their_times(tmp_path, clouds):
     cap, report = points_to_capture(str(clouds), read_setup(str(_setup(tmp_path, first_frame=1))), str(tmp_path / "c"))
     assert report["frame_times"] == [0.1] and report["left_out"] == ["000.npy"]

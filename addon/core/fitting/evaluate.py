@@ -14,8 +14,8 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from ..observation.metrics import points_scatter_m, points_to_cloth_m, shape_error_mm
-from ..observation.points import capture_points
+from ..observation.metrics import points_to_cloth_m, shape_error_mm
+from ..observation.points import capture_points, points_scatter_mm
 from ..physics.blender_settings import rate_factor
 from ..physics.models import model_and_row
 from ..physics.scenario import fitted_scenario
@@ -101,7 +101,7 @@ def evaluate(
         out["points_mm"] = float(np.mean(pm))
         out["points_mm_per_time"] = pm
         # what a perfect cloth would still score: the points' own scatter about a smooth surface
-        out["points_scatter_mm"] = float(np.mean([1000.0 * points_scatter_m(P).mean() for P in points if len(P)]))
+        out["points_scatter_mm"] = points_scatter_mm(capture, fidx, points)
     return out
 
 

@@ -28,7 +28,7 @@ from ..errors import ClothFitError
 from ..jsonio import read_json
 from ..observation.camera import Camera, ring_rig
 from ..observation.capture import Capture, write_capture
-from ..observation.points import read_point_cloud
+from ..observation.points import frame_scatter_mm, read_point_cloud
 from ..observation.raster import silhouette
 from ..physics import blender_settings as BS
 from ..physics.colliders import Collisions
@@ -481,6 +481,8 @@ def points_to_capture(folder: str, setup: PointsSetup, out: str) -> tuple[Captur
         "points_per_frame": [counts[k] for k in keep],
         "left_out": [os.path.basename(files[k]) for k in range(len(files)) if k not in keep],
         "splat_floor": default_cloth_splat_floor(cams, scenario, [counts[k] for k in keep], setup),
+        # each frame's points' own scatter about a smooth surface: what a perfect cloth still scores against them
+        "points_scatter_mm": [round(frame_scatter_mm(frames[k]), 4) for k in keep],
     }
     cap = write_capture(out, cams, scenario, sils, meta=meta, uncertain=setup.uncertain)
     report = {

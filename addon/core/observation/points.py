@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import ClothFitError
+from .metrics import points_scatter_m
 
 if TYPE_CHECKING:
     from .capture import Capture
@@ -49,3 +50,30 @@ def capture_points(capture: Capture, fidx: list[int]) -> list[np.ndarray] | None
         X = read_point_cloud(path) * unit
         out.append(X if crop is None else X[crop.height(X) >= 0.0])
     return out
+
+
+def frame_scatter_mm(points: np.ndarray) -> float:
+    """One frame's points' own scatter about a smooth surface [mm] (``metrics.points_scatter_m``, averaged):
+    what a perfect cloth would still score against them."""
+    return 1000.0 * float(points_scatter_m(points).mean())
+
+
+def points_scatter_mm(capture: Capture, fidx: list[int], points: list[np.ndarray]) -> float:
+    """The mean scatter [mm] of the real points of frames ``fidx``: as the converter stated it per frame
+    (``meta.points_scatter_mm``), else measured on ``points`` (those frames' clouds; a capture converted before
+    the converter stated it). A stated list that is not one finite number per frame is one line naming the
+    capture."""
+    stated = (getattr(capture, "meta", None) or {}).get("points_scatter_mm")
+    if stated is None:
+        return float(np.mean([frame_scatter_mm(P) for P in points if len(P)]))
+    ok = (
+        isinstance(stated, list)
+        and len(stated) == capture.n_frames
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v >= 0 for v in stated)
+    )
+    if not ok:
+        raise ClothFitError(
+            f"capture {capture.root}: meta.points_scatter_mm must hold one number >= 0 per frame "
+            f"({capture.n_frames}), got {str(stated)[:80]}"
+        )
+    return float(np.mean([stated[k] for k in fidx]))
