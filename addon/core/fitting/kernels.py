@@ -12,7 +12,7 @@ import numpy as np
 
 from ..observation.silhouette_kernels import eval_frames
 from ..physics.jit import JIT, PARALLEL, njit, prange
-from ..physics.paper_kernels import simulate_one
+from ..physics.paper_kernels import simulate_candidate
 
 
 class Views(NamedTuple):
@@ -63,55 +63,11 @@ def work_buffers(span_cap, max_h, max_w):
 def objective_population(P, sheet, moves, views, esil, codes):
     """Simulate and score every candidate (its own key positions and events, as
     ``paper_kernels.population_arrays`` gives them): esil[p, c, f]; codes[p] != 0 = exploded."""
-    (
-        nx,
-        ny,
-        rest,
-        springs,
-        rest_factor,
-        hv,
-        key_start,
-        key_times,
-        release,
-        n_frames,
-        gravity,
-        settle_rate,
-        safety,
-        centre,
-        limit,
-        max_strain,
-        max_steps,
-    ) = sheet
-    key_pos, events, n_events, frame_of_event = moves
     Ks, Rs, ts, dists, Hs, Ws, pre, pofs, bbs, ipre, ipofs, ibbs, areas, tris, max_h, max_w, span_cap = views
-    V = rest.shape[0]
+    V = sheet.rest.shape[0]
     for p in prange(P.shape[0]):
-        X = np.zeros((n_frames, V, 3))
-        ne = n_events[p]
-        code, st = simulate_one(
-            P[p],
-            nx,
-            ny,
-            rest,
-            springs,
-            rest_factor,
-            hv,
-            key_start,
-            key_times,
-            key_pos[p],
-            release,
-            events[p, :ne],
-            frame_of_event[p, :ne],
-            n_frames,
-            gravity,
-            settle_rate,
-            safety,
-            centre,
-            limit,
-            max_strain,
-            max_steps,
-            X,
-        )
+        X = np.zeros((sheet.n_frames, V, 3))
+        code, st = simulate_candidate(P[p], sheet, moves, p, X)
         codes[p] = code
         if code != 0:
             continue

@@ -214,10 +214,10 @@ def simulate_one(
     return 0, steps
 
 
-@njit(**PARALLEL)
-def simulate_population(P, sheet, moves, out, codes, steps):
-    """Every candidate p with its own handle keys ``key_pos[p]`` and events ``events[p, :n_events[p]]``
-    (a fit of an uncertain manipulation; otherwise all the same)."""
+@njit(**JIT)
+def simulate_candidate(row, sheet, moves, p, out):
+    """Candidate ``p`` of a population (``row``: its m, k, l, d; its own handle keys ``moves.key_pos[p]`` and
+    events ``moves.events[p, :moves.n_events[p]]``) simulated into ``out`` (n_frames, V, 3): (code, steps)."""
     (
         nx,
         ny,
@@ -238,32 +238,39 @@ def simulate_population(P, sheet, moves, out, codes, steps):
         max_steps,
     ) = sheet
     key_pos, events, n_events, frame_of_event = moves
+    ne = n_events[p]
+    return simulate_one(
+        row,
+        nx,
+        ny,
+        rest,
+        springs,
+        rest_factor,
+        hv,
+        key_start,
+        key_times,
+        key_pos[p],
+        release,
+        events[p, :ne],
+        frame_of_event[p, :ne],
+        n_frames,
+        gravity,
+        settle_rate,
+        safety,
+        centre,
+        limit,
+        max_strain,
+        max_steps,
+        out,
+    )
+
+
+@njit(**PARALLEL)
+def simulate_population(P, sheet, moves, out, codes, steps):
+    """Every candidate p with its own handle keys ``key_pos[p]`` and events ``events[p, :n_events[p]]``
+    (a fit of an uncertain manipulation; otherwise all the same)."""
     for p in prange(P.shape[0]):
-        ne = n_events[p]
-        code, st = simulate_one(
-            P[p],
-            nx,
-            ny,
-            rest,
-            springs,
-            rest_factor,
-            hv,
-            key_start,
-            key_times,
-            key_pos[p],
-            release,
-            events[p, :ne],
-            frame_of_event[p, :ne],
-            n_frames,
-            gravity,
-            settle_rate,
-            safety,
-            centre,
-            limit,
-            max_strain,
-            max_steps,
-            out[p],
-        )
+        code, st = simulate_candidate(P[p], sheet, moves, p, out[p])
         codes[p] = code
         steps[p] = st
 
