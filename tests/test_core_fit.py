@@ -68,6 +68,81 @@ def test_objective_backends_agree(small_problem):
     assert fa[1] > fa[0] >= 0
 
 
+class _Crumpled:
+    """A model whose candidates are given positions (the rest sheet crumpled by random offsets): the
+    scoring alone, on quads that project convex, concave, twisted and folded over."""
+
+    name = "paper"
+    row_names = ("seed",)
+
+    def __init__(self, grid, n_frames, amplitude):
+        self.grid, self.n_frames, self.amplitude = grid, n_frames, amplitude
+
+    def to_dict(self):
+        return {"name": self.name}
+
+    def simulate(self, scenario, rows, backend="auto", offsets=None):
+        from clothfit.core.physics.paper import SimResult
+
+        X = []
+        for r in np.asarray(rows).reshape(-1):
+            rng = np.random.default_rng(int(r))
+            shake = rng.normal(0.0, self.amplitude, (self.n_frames,) + self.grid.rest.shape)
+            X.append(self.grid.rest[None] + shake)
+        return SimResult(np.array(X), np.zeros(len(X), dtype=bool), np.zeros(len(X), dtype=int), [""] * len(X))
+
+
+@needs_numba
+@pytest.mark.parametrize("crop", [False, True])
+def test_the_numba_scoring_counts_every_pixel_of_crumpled_cloth_as_the_reference_raster(rig, crop):
+    """The numba kernels cut each quad that projects convex into one span per row and any other into
+    its two triangles; the pixels scored must be exactly the reference raster's triangles' pixels."""
+    from clothfit.core.physics.crop import CropPlane
+    from clothfit.core.physics.scenario import ClothGrid, Scenario
+
+    base = paper_scenario(ClothGrid(9), frame_times=[0.1, 0.2, 0.3])
+    plane = CropPlane.parse({"point": [0.0, 0.0, D.CLOTH_HEIGHT], "normal": [0.0, 0.3, 1.0]}) if crop else None
+    sc = Scenario(base.grid, base.handles, base.frame_times, 0.2, base.gravity, crop=plane)
+    cams = [rig[i].resized(H, W) for i in (0, 5, 9, 16)]
+    model = _Crumpled(sc.grid, 3, 0.6 * sc.grid.spacing)
+    # observations: other crumpled sheets, so that model and observation overlap partly
+    obs_sim = _Crumpled(sc.grid, 3, 0.6 * sc.grid.spacing).simulate(sc, [99])
+    obs = [
+        [raster.silhouette(c, obs_sim.positions[0, f], sc.grid.triangles, crop=plane) for f in range(3)] for c in cams
+    ]
+    # pixels of unknown truth: a band of columns across every image (model pixels there leave the XOR)
+    band = np.zeros((H, W), dtype=bool)
+    band[:, 70:90] = True
+    ignore = [[band] * 3 for _ in cams]
+    rows = np.arange(6.0)[:, None]
+    ea, _ = SilhouetteObjective(sc, cams, obs, backend="numpy", model=model, ignore=ignore).per_image(rows)
+    eb, _ = SilhouetteObjective(sc, cams, obs, backend="numba", model=model, ignore=ignore).per_image(rows)
+    assert np.all(np.isfinite(ea)) and ea.min() > 0.05
+    np.testing.assert_array_equal(eb, ea)
+    # the crumpling gives both kinds of quads: convex ones (one span per row) and others (two triangles)
+    uv = cams[0].project(model.simulate(sc, [0]).positions[0, 0])[sc.grid.quads]  # (Q, 4, 2)
+    e = np.roll(uv, -1, axis=1) - uv
+    turn = e[:, :, 0] * np.roll(e, -1, axis=1)[:, :, 1] - e[:, :, 1] * np.roll(e, -1, axis=1)[:, :, 0]
+    convex = np.all(turn > 0, axis=1) | np.all(turn < 0, axis=1)
+    assert 0.2 < convex.mean() < 0.9
+
+
+def test_a_meshs_triangles_pair_into_quads_that_hold_the_same_triangles():
+    """A scene's mesh comes as Blender tessellates it (each quad's corners 0-1-2 then 0-2-3): consecutive
+    triangles across a shared edge become one quad whose two triangles are exactly those; others stay alone."""
+    from clothfit.core.physics.scenario import ClothGrid
+
+    g = ClothGrid(5)
+    tris = np.concatenate([g.quads[:, [0, 1, 2]], g.quads[:, [0, 2, 3]]], 1).reshape(-1, 3)
+    tris = np.concatenate([tris, [[0, 6, 12]]])  # and a triangle on its own
+    q = raster.paired_quads(tris)
+    assert q.shape == (17, 4) and np.all(q[:16, 3] >= 0) and q[16, 3] == -1
+    halves = [sorted(r[[0, 1, 2]]) for r in q] + [sorted(r[[0, 2, 3]]) for r in q[:16]]
+    assert sorted(map(tuple, halves)) == sorted(tuple(sorted(t)) for t in tris)
+    # the grid's own triangle list (one block of halves, then the other) pairs nowhere: all alone
+    assert np.all(raster.paired_quads(g.triangles)[:, 3] == -1)
+
+
 def test_objective_per_image_is_e_sil_of_the_model_silhouette(small_problem):
     """The numpy objective's per-image value equals metrics.e_sil of a separately rasterised model."""
     from clothfit.core.observation.metrics import e_sil

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..core.errors import ClothFitError
 from ..core.location import qualified
+from ..core.observation.raster import paired_quads
 from ..core.physics import blender as B
 from ..core.physics.paper import SimResult
 from .executors import make_executor
@@ -29,10 +30,15 @@ WORKER = qualified("blender.scene_worker:BlendScene")
 
 @dataclass
 class SceneMesh:
-    """What the rasteriser needs of the scene's cloth."""
+    """What the rasteriser needs of the scene's cloth: its triangles, the same in pairs (``quads``:
+    ``raster.paired_quads``) and its vertex count."""
 
     triangles: np.ndarray
     n_vertices: int
+
+    @property
+    def quads(self) -> np.ndarray:
+        return paired_quads(self.triangles)
 
 
 @dataclass

@@ -23,8 +23,9 @@ from ..errors import ClothFitError
 from ..observation.coverage import refuse_full_silhouettes
 from ..observation.floor import resample_ignore, resample_silhouette
 from ..observation.raster import rasterize, rasterize_window
+from ..observation.silhouette_kernels import pack_rows
 from ..physics import jit, paper_kernels
-from ..physics.crop import clip_mesh, clipped_triangles
+from ..physics.crop import clip_mesh, clipped_quads, clipped_triangles
 from ..physics.models import PaperModel, get_model
 from ..physics.paper import simulate_numpy
 from ..physics.scenario import Offsets
@@ -90,10 +91,10 @@ class SilhouetteObjective:
         self.backend = backend
         self.evaluations = 0
         if backend == "numba":
-            # per image: bounding box of the observed silhouette (and of the ignore mask) and per-row
-            # prefix sums inside it
-            self._pre, self._pofs, self._bbs = _prefix_sums(obs, C, F)
-            self._ipre, self._ipofs, self._ibbs = _prefix_sums(ign, C, F)
+            # per image: the observed silhouette (and the ignore mask) in rows of 64-bit words over its
+            # bounding box
+            self._bits, self._bofs, self._bbs = pack_rows(obs, C, F)
+            self._ibits, self._ibofs, self._ibbs = pack_rows(ign, C, F)
             self._Ks = np.array([c.K for c in self.cameras])
             self._Rs = np.array([c.R for c in self.cameras])
             self._ts = np.array([c.t for c in self.cameras])
@@ -110,8 +111,7 @@ class SilhouetteObjective:
             self._Ws = np.array([c.width for c in self.cameras], dtype=np.int64)
             self._maxh = int(max(c.height for c in self.cameras))
             self._maxw = int(max(c.width for c in self.cameras))
-            self._tris = np.ascontiguousarray(self._mesh_triangles(), dtype=np.int64)
-            self._span_cap = int(self._tris.shape[0] * (self._maxh + 1))
+            self._quads = np.ascontiguousarray(self._mesh_quads(), dtype=np.int64)
 
     def _views(self):
         """The training images as the scoring kernels take them (``kernels.Views``)."""
@@ -122,17 +122,16 @@ class SilhouetteObjective:
             self._dists,
             self._Hs,
             self._Ws,
-            self._pre,
-            self._pofs,
+            self._bits,
+            self._bofs,
             self._bbs,
-            self._ipre,
-            self._ipofs,
+            self._ibits,
+            self._ibofs,
             self._ibbs,
             self.areas,
-            self._tris,
+            self._quads,
             self._maxh,
             self._maxw,
-            self._span_cap,
         )
 
     @property
@@ -227,6 +226,12 @@ class SilhouetteObjective:
         tris = self.scenario.grid.triangles
         return tris if self.crop is None else clipped_triangles(tris.shape[0])
 
+    def _mesh_quads(self) -> np.ndarray:
+        """``_mesh_triangles`` in pairs, the quads the scoring kernels cut into row spans (corners a b c d:
+        the triangles a b c and a c d)."""
+        grid = self.scenario.grid
+        return grid.quads if self.crop is None else clipped_quads(grid.triangles.shape[0])
+
     def _mesh_points(self, X: np.ndarray) -> np.ndarray:
         """The points of ``_mesh_triangles`` for cloth positions ``X`` (..., V, 3)."""
         return X if self.crop is None else clip_mesh(X, self.scenario.grid.triangles, self.crop)[0]
@@ -245,32 +250,6 @@ class SilhouetteObjective:
         e = esil.sum(axis=(1, 2))
         e[exploded | ~np.isfinite(e)] = np.inf
         return e
-
-
-def _prefix_sums(images, C, F):
-    """Per-row prefix sums of each image (C*F of them, None = nothing) over its bounding box:
-    ``(pre, pofs (C, F), bbs (C, F, 4))``; an empty image gets the empty box rows 0..-1."""
-    pofs = np.zeros((C, F), dtype=np.int64)
-    bbs = np.zeros((C, F, 4), dtype=np.int64)
-    bbs[:, :, 1] = -1
-    bbs[:, :, 3] = -1
-    pres, o = [np.zeros(1, dtype=np.int32)], 1
-    for c in range(C):
-        for f in range(F):
-            im = images[c * F + f]
-            if im is None or not im.any():
-                continue
-            rows = np.flatnonzero(im.any(1))
-            cols = np.flatnonzero(im.any(0))
-            r0, r1, c0, c1 = rows[0], rows[-1], cols[0], cols[-1]
-            crop = im[r0 : r1 + 1, c0 : c1 + 1].astype(np.int32)
-            pre = np.zeros((crop.shape[0], crop.shape[1] + 1), dtype=np.int32)
-            np.cumsum(crop, axis=1, out=pre[:, 1:])
-            pofs[c, f] = o
-            bbs[c, f] = (r0, r1, c0, c1)
-            pres.append(pre.ravel())
-            o += pre.size
-    return np.concatenate(pres), pofs, bbs
 
 
 def load_observed(

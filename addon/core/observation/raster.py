@@ -27,6 +27,32 @@ if TYPE_CHECKING:
     from .camera import Camera
 
 
+def paired_quads(tris: np.ndarray) -> np.ndarray:
+    """A triangle list as quads ``(a, b, c, d)``, the triangles ``a b c`` and ``a c d``: each two consecutive
+    triangles that share an edge (a quad as Blender tessellates it, corners 0-1-2 and 0-2-3) become one quad
+    across it, any other triangle stays alone as ``(a, b, c, -1)``. The fit's scoring kernels cut a quad that
+    projects convex into one span per pixel row; the pixels are the triangles' either way."""
+    tris = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    out, i = [], 0
+    while i < len(tris):
+        t = [int(v) for v in tris[i]]
+        if i + 1 < len(tris):
+            u = [int(v) for v in tris[i + 1]]
+            shared = [v for v in t if v in u]
+            if len(shared) == 2 and len(set(t)) == 3 and len(set(u)) == 3:
+                # the shared edge a-b, t's corner c off it and u's corner d: the quad a c b d, whose
+                # triangles a c b (t) and a b d (u) meet along its diagonal a-b
+                k = next(j for j in range(3) if t[j] not in shared)
+                a, b, c = t[(k + 1) % 3], t[(k + 2) % 3], t[k]
+                d = next(v for v in u if v not in shared)
+                out.append((a, c, b, d))
+                i += 2
+                continue
+        out.append((t[0], t[1], t[2], -1))
+        i += 1
+    return np.array(out, dtype=np.int64).reshape(-1, 4)
+
+
 def triangle_spans(
     pts: np.ndarray, tris: np.ndarray, height: int, width: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

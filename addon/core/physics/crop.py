@@ -81,10 +81,16 @@ def _three(v: Any, what: str) -> list[float]:
     return out
 
 
+def clipped_quads(n_triangles: int) -> np.ndarray:
+    """The quads (T, 4) of a clipped mesh of ``n_triangles`` triangles (``clip_mesh``'s points): what is
+    kept of each triangle, as the two triangles ``clipped_triangles`` gives, corners 0-1-2 and 0-2-3."""
+    return 4 * np.arange(n_triangles, dtype=np.int64)[:, None] + np.arange(4, dtype=np.int64)
+
+
 def clipped_triangles(n_triangles: int) -> np.ndarray:
     """The triangles (2T, 3) of a clipped mesh of ``n_triangles`` triangles (``clip_mesh``'s points)."""
-    q = 4 * np.arange(n_triangles, dtype=np.int64)[:, None]
-    return np.concatenate([q + np.array([0, 1, 2]), q + np.array([0, 2, 3])]).astype(np.int64)
+    q = clipped_quads(n_triangles)
+    return np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]]).astype(np.int64)
 
 
 def clip_mesh(X: ArrayLike, tris: ArrayLike, crop: CropPlane) -> tuple[np.ndarray, np.ndarray]:
