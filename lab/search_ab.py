@@ -400,6 +400,7 @@ class Bench:
             "truth_x": [float(v) for v in self.truth],
             "load": os.getloadavg()[0],
             "first_runs": getattr(opt, "first_runs", None),
+            "looks": opt.looks() if hasattr(opt, "looks") else None,
             "first_best_pct": None
             if getattr(opt, "first_best_f", None) is None
             else opt.first_best_f / obj.n_images * 100,

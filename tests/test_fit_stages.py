@@ -274,6 +274,12 @@ def test_a_staged_fits_rungs_resettle_its_strong_settings_first_and_resume_exact
     assert again.state.stage == "rung" and again.evaluations == job.evaluations
     r = again.run()
     assert r["quality_choice"] == ref["quality_choice"] and r["best_E_all"] == ref["best_E_all"]
+    # the main search's starts, and how many ended in the best one's basin, kept through the checkpoint
+    lk = ref["looks"]
+    assert lk["starts"] == len(lk["ended_E_sil_pct"]) >= 1 and 1 <= lk["agreeing"] <= lk["starts"]
+    assert lk["settings"] == FREE and r["looks"] == lk
+    search = next(x for x in ref["stages"] if x["stage"] == "search")
+    assert lk["ended_E_sil_pct"] == [100.0 * f / ref["n_train_images"] for f in search["looks"]["ended"]]
 
 
 def test_runs_again_settle_later_where_a_quality_ladder_follows(caps):

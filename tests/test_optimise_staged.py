@@ -589,3 +589,63 @@ def test_runs_again_can_start_each_at_another_level_of_one_coordinate():
     d["first_restart_vary"] = "x4"
     with pytest.raises(ClothFitError, match="checkpoint"):
         optimizer_from_state(d)
+
+
+def two_basins(X):
+    """x0: two basins, at -2 (0.5 worse) and at 2; x1 a bowl at 1; x2..x4 weak."""
+    X = np.atleast_2d(X)
+    basins = np.minimum((X[:, 0] - 2.0) ** 2, (X[:, 0] + 2.0) ** 2 + 0.5)
+    return basins + (X[:, 1] - 1.0) ** 2 + 0.01 * np.sum((X[:, 2:] - 2.0) ** 2, axis=1)
+
+
+def test_the_search_says_how_many_of_its_starts_ended_in_the_best_ones_basin():
+    """Runs again from one start land in either basin; ``looks`` counts the starts, keeps each one's best
+    value, and counts those that ended in the best one's basin; a resumed search keeps them; a spoiled
+    record is refused in one line."""
+    runs_again = {"first_restart_step": 0.05, "first_fraction": 0.72, "first_explore": 0.56}
+    start = np.array([0.0, 0.0, 0.0, 0.0, 0.0])
+    seen = {}
+    for seed in range(8):
+        opt = StagedCMA(space(), seed=seed, first=["x0", "x1"], initial=[start], budget=1200, **runs_again)
+        ends = []  # each converged run's best value and x0, x1 as it ended
+        resumed = None
+        while opt.stage == 1:
+            runs, c = opt.first_runs, opt.children[-1]
+            assert opt.looks() is None  # before the first stage has ended
+            X = opt.ask()
+            opt.tell(X, two_basins(X))
+            if opt.first_runs > runs:
+                ends.append((c.best_f, c.best_x[:2].copy()))
+            if resumed is None and opt.first_runs == 2 and opt.stage == 1:  # a checkpoint between runs
+                resumed = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+                assert resumed.run_ends == opt.run_ends and len(opt.run_ends) == 1
+        lk = opt.looks()
+        assert lk["starts"] == opt.first_runs == len(lk["ended"]) and lk["settings"] == ["x0", "x1"]
+        assert sorted(lk["ended"])[0] == pytest.approx(min(f for f, _ in opt.run_ends))
+        assert [f for f, _ in ends] == lk["ended"][: len(ends)]  # the converged runs, in order
+        # the last run (cut by the first stage's end, or gone on past first_explore) is the last one kept
+        at = [x for _, x in ends] + [-5.0 + 10.0 * np.array(opt.run_ends[-1][1])]  # x0, x1 range from -5 to 5
+        best = at[int(np.argmin(lk["ended"]))]
+        assert lk["agreeing"] == sum(np.all(np.abs(x - best) <= 10 * D.LOOKS_AGREE_UNIT + 1e-9) for x in at)
+        assert len(at) == lk["starts"]
+        seen[seed] = (lk["starts"], lk["agreeing"])
+        if resumed is not None:  # the resumed search ends the same
+            while resumed.stage == 1:
+                X = resumed.ask()
+                resumed.tell(X, two_basins(X))
+            assert resumed.looks() == lk
+    assert any(k < n for n, k in seen.values()) and all(n >= 2 for n, _ in seen.values())
+    # no first stage (every coordinate searched at once): no starts to count
+    whole = StagedCMA(space(), seed=0, budget=300)
+    while whole.evaluations < 100:
+        X = whole.ask()
+        whole.tell(X, two_basins(X))
+    assert whole.looks() is None
+    # a checkpoint from before the runs' ends were kept resumes with none; a spoiled one is one line
+    d = json.loads(json.dumps(opt.state_dict()))
+    del d["run_ends"]
+    assert optimizer_from_state(d).run_ends == []
+    for bad in ([[0.1, [0.5]]], [[0.1, [0.5, 1.5]]], "x", [[0.1, [0.5, 0.5]]] * 99):
+        d["run_ends"] = bad
+        with pytest.raises(ClothFitError, match="run_ends"):
+            optimizer_from_state(d)

@@ -253,3 +253,20 @@ def test_a_blender_model_fit_says_on_stderr_which_frame_rate_it_took(caps, tmp_p
     rc, so, err = _run("fit", caps["clean"], "--model", "blender", "--fps", 30, "--out", tmp_path / "b30.json", *args)
     assert rc == 0, err
     assert "frame rate 30 fps (given)" in err.splitlines()
+
+
+def test_the_verdict_says_how_many_of_the_searchs_starts_ended_in_its_basin():
+    below = 0.5 * D.FLOOR_FAR_ABOVE
+    looks = {"starts": 3, "agreeing": 3, "ended_E_sil_pct": [1.0, 1.01, 1.02], "settings": ["tension_stiffness"]}
+    kind, line = verdict({"floor": _floor(below, below), "looks": looks})
+    assert kind == "at_floor" and "; all 3 starts of the search ended in this basin (no proof" in line
+    looks = dict(looks, agreeing=1)
+    kind, line = verdict({"floor": _floor(1.0, 3.0, likely_cause="search"), "looks": looks})
+    assert kind == "far_above" and "1 of 3 starts of the search ended in this basin, the others in worse ones" in line
+    # one start says nothing; a fit without a floor report has no verdict to add it to
+    assert (
+        "1 of 2 starts of the search ended in this basin, the other in a worse one"
+        in verdict({"floor": _floor(below, below), "looks": dict(looks, starts=2)})[1]
+    )
+    assert "starts" not in verdict({"floor": _floor(below, below), "looks": dict(looks, starts=1, agreeing=1)})[1]
+    assert "starts" not in verdict({"cancelled": True, "evaluations": 5, "looks": looks})[1]

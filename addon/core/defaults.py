@@ -264,6 +264,9 @@ STAGED_FIRST_RESTART_VARY = None  # cma-staged, runs again: a first-stage coordi
 STAGED_FIRST_RESTART_LEVELS = (0.2, 0.8, 0.35, 0.65, 0.5)
 STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only within this share of the budget;
 # then the run with the best point goes on to the end of the first stage's share
+LOOKS_AGREE_UNIT = 0.05  # cma-staged, runs again: two first-stage runs ended in the same basin when every strong
+# setting of one lies within this share of its search range (unit cube, log-scaled settings) of the other's: the
+# result's "looks" says how many of the search's starts reached the basin of the best one
 STAGED_SECOND_SIGMA = 0.05  # cma-staged: the step of the run over every setting from the first stage's best
 STAGED_SECOND_WARM = False  # cma-staged: the second stage starts with the first stage's steps on its coordinates
 # (its covariance, at most STAGED_SECOND_SIGMA) and STAGED_SECOND_SIGMA on the others, not that step on all

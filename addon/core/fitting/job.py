@@ -546,6 +546,9 @@ class FitJob:
                 "best_f": _finite(self.opt.best_f) if self.opt.best_x is not None else None,
                 "stop": "converged" if self.opt.stopped else "budget",
             }
+            looks = self.opt.looks() if s.stage == "search" else None
+            if looks is not None:  # the search's independent starts and how many reached the best one's basin
+                record["looks"] = looks
             s.end_stage(record, self.opt_history(), self.opt.evaluations)
             if self.ladder is not None and s.stage_quality in s.best_by_quality:
                 self.ladder.record(s.stage_quality, s.best_by_quality[s.stage_quality][0])

@@ -11,7 +11,8 @@ key). ``FitResult`` is a ``dict`` underneath, so readers that index it (``res["b
 Keys (the reference: docs/api.md, "A fit: configuration and result"): ``format``/``version``; what was fitted (``capture``,
 ``capture_hash``, ``silhouettes_hash``, ``train_cameras``, ``train_times``, ``resolution``,
 ``model``); the search (``optimizer``, ``seed``, ``evaluations``, ``generations``, ``stop_reason``,
-``stages``, ``history``...); the answer (paper: ``params``, ``identifiable``; Blender:
+``stages``, ``looks``: the search's independent starts and how many ended in the best one's basin,
+``history``...); the answer (paper: ``params``, ``identifiable``; Blender:
 ``blender_cloth``, ``blender_scene``: ``fps`` and ``fps_source``); ``settings_at_bound`` and ``at_bound``
 (the free settings, then the offsets, that ended at their bounds); the errors (``best_E_sil_mean_pct``,
 ``floor``...) and the one-line ``verdict`` with its ``verdict_kind`` (``verdict.verdict``); the
@@ -25,6 +26,7 @@ import math
 import os
 from typing import TYPE_CHECKING, Any
 
+from .. import defaults as D
 from ..errors import ClothFitError
 from ..jsonio import read_json, write_json
 from ..physics.paper import Params, identifiable
@@ -238,6 +240,21 @@ def uncertainty_caveat(res: dict) -> str | None:
     )
 
 
+def search_looks(looks: dict, n_images: int) -> dict:
+    """The result's ``looks``: the main search's independent starts (``StagedCMA.looks``), each start's best
+    training error as a mean E_sil in %, and how many ended in the basin of the best one."""
+    return {
+        "starts": looks["starts"],
+        "agreeing": looks["agreeing"],
+        "ended_E_sil_pct": [100.0 * float(f) / n_images for f in looks["ended"]],
+        "settings": looks["settings"],
+        "rule": (
+            f"a start agrees when each of {', '.join(looks['settings'])} ends within {D.LOOKS_AGREE_UNIT:g} of its "
+            f"search range (log-scaled) of the best start's"
+        ),
+    }
+
+
 def job_result(job: FitJob, paper: bool) -> FitResult:
     """The result of ``job`` (a ``fitting.job.FitJob``) so far: what a fit writes. ``paper``: a fit of
     the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``)."""
@@ -291,6 +308,9 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
             res.update(job.par.describe(job.best_x[: job.npar]))
             if job.start_x is not None:  # what the fit was given (verdict ``start_better``: keep them)
                 res["start_settings"] = job.par.describe(job.start_x[: job.npar]).get("blender_cloth")
+    looks = next((r["looks"] for r in job.state.records if r["stage"] == "search" and "looks" in r), None)
+    if looks is not None:
+        res["looks"] = search_looks(looks, n_img)
     if job.ladder is not None and job.ladder.tried:
         res["quality_choice"] = job.ladder.describe(n_img)
         if isinstance(res.get("blender_cloth"), dict):

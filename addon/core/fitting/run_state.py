@@ -253,6 +253,24 @@ def _is_record(r):
         and _is_int(r.get("generations"))
         and (r.get("best_f") is None or _is_num(r.get("best_f")))
         and r.get("stop") in ("converged", "budget")
+        and ("looks" not in r or _is_looks(r["looks"]))
+    )
+
+
+def _is_looks(lk):
+    """A search record's ``looks`` (``StagedCMA.looks``): starts, each run's best value, how many agreed."""
+    return (
+        isinstance(lk, dict)
+        and set(lk) == {"starts", "ended", "agreeing", "settings"}
+        and _is_int(lk["starts"])
+        and lk["starts"] >= 1
+        and isinstance(lk["ended"], list)
+        and 1 <= len(lk["ended"]) <= lk["starts"]
+        and all(_is_num(v) for v in lk["ended"])
+        and _is_int(lk["agreeing"])
+        and 1 <= lk["agreeing"] <= len(lk["ended"])
+        and isinstance(lk["settings"], list)
+        and all(isinstance(n, str) for n in lk["settings"])
     )
 
 

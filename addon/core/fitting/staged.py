@@ -63,6 +63,19 @@ def _vary(name, levels, first, w) -> tuple:
     return name, lv
 
 
+def _is_run_end(e, k) -> bool:
+    """A saved first-stage run's end: [best value, its point in the strong settings' cube (k numbers)]."""
+    return (
+        isinstance(e, list)
+        and len(e) == 2
+        and isinstance(e[0], (int, float, str))
+        and not isinstance(e[0], bool)
+        and isinstance(e[1], list)
+        and len(e[1]) == k
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0 for v in e[1])
+    )
+
+
 class StagedCMA(Optimizer):
     """CMA-ES over ``first`` (the others held), then over everything from the best point.
 
@@ -179,6 +192,7 @@ class StagedCMA(Optimizer):
         self.first_runs = 1
         self.first_explore = checked_number(first_explore, f"{w}: first_explore", 0.0, 1.0)
         self.first_best_run = None  # the converged run with the best point so far (its CMA-ES state)
+        self.run_ends: list = []  # each first-stage run's end: [best value, its point in the strong settings' cube]
         self.first_restart_vary, self.first_restart_levels = _vary(
             first_restart_vary, first_restart_levels, self.first, w
         )
@@ -303,6 +317,28 @@ class StagedCMA(Optimizer):
         step = self.first_restart_step
         return bool(step > 0 and np.all(c.sigma * np.sqrt(np.diag(c.C)) < step))
 
+    def _run_ended(self, c: CMAES) -> None:
+        """Keep a first-stage run's end (its best value and point) for ``looks``."""
+        if c.best_x is not None and len(self.run_ends) < self.first_runs:
+            self.run_ends.append([float(c.best_f), [float(v) for v in np.clip(c.space.encode(c.best_x), 0.0, 1.0)]])
+
+    def looks(self) -> dict | None:
+        """The first stage's starts (runs again: docs/search.md, "Runs again"): ``starts``, the runs made;
+        ``ended``, the best value each found; ``agreeing``, how many ended in the best one's basin (every strong
+        setting within ``LOOKS_AGREE_UNIT`` of its search range of the best one's); None without a first stage
+        or before it has ended."""
+        if len(self.first) >= self.space.n or self.stage == 1 or not self.run_ends:
+            return None
+        best = min(self.run_ends, key=lambda e: e[0])
+        u = np.array(best[1])
+        agree = sum(1 for e in self.run_ends if np.all(np.abs(np.array(e[1]) - u) <= D.LOOKS_AGREE_UNIT))
+        return {
+            "starts": int(self.first_runs),
+            "ended": [float_to_json(e[0]) for e in self.run_ends],
+            "agreeing": int(agree),
+            "settings": list(self.first),
+        }
+
     def _scan_batch(self) -> np.ndarray:
         """The best point so far with one first-stage coordinate at ``scan_points`` values evenly across
         its range (in the unit cube: log-scaled settings at even ratios)."""
@@ -317,6 +353,8 @@ class StagedCMA(Optimizer):
             self.scanned = True
             self.scan_left = list(self.first)
             return
+        if self.first_runs > len(self.run_ends) and self.children:  # the last run, cut by the stage's end
+            self._run_ended(self.children[-1])
         self.stage = 2
         self.first_best_f = None if self._best_u is None else float(self.best_f)
         self.stall_mark = None if self._best_u is None else [int(self.evaluations), float(self.best_f)]
@@ -402,6 +440,7 @@ class StagedCMA(Optimizer):
                 if self._converged(c):
                     # another run from where the first began, with a new random stream: the first stage's
                     # runs settle early, each in one of a few basins (docs/search.md, "Runs again")
+                    self._run_ended(c)
                     if self.first_best_run is None or c.best_f < float_from_json(self.first_best_run["best_f"]):
                         self.first_best_run = c.state_dict()
                     self.first_runs += 1
@@ -415,6 +454,7 @@ class StagedCMA(Optimizer):
                     self.children[-1] = self._child(sub, c.popsize, self.sigma0, init)
             elif self.first_best_run is not None:
                 # the runs are over: the one with the best point goes on, to the end of the first stage
+                self._run_ended(c)
                 if float_from_json(self.first_best_run["best_f"]) < c.best_f:
                     self.children[-1] = CMAES.from_state(self.first_best_run)
                 self.first_best_run = None
@@ -476,6 +516,7 @@ class StagedCMA(Optimizer):
         "first_runs",
         "first_explore",
         "first_best_run",
+        "run_ends",
         "first_restart_vary",
         "first_restart_levels",
         "second_warm",
@@ -521,6 +562,7 @@ class StagedCMA(Optimizer):
                 "first_runs": self.first_runs,
                 "first_explore": self.first_explore,
                 "first_best_run": self.first_best_run,
+                "run_ends": [[float_to_json(f), list(u)] for f, u in self.run_ends],
                 "first_restart_vary": self.first_restart_vary,
                 "first_restart_levels": list(self.first_restart_levels),
                 "second_warm": self.second_warm,
@@ -558,6 +600,12 @@ class StagedCMA(Optimizer):
             if CMAES.from_state(kept).space.state_dict() != self._subspace().state_dict():
                 raise ClothFitError(f"checkpoint: {w} 'first_best_run' holds a run of another search space")
         self.first_best_run = kept
+        # the runs' ends came after runs again: none kept in older checkpoints
+        ends = d.get("run_ends", [])
+        k = len(self.first)
+        if not isinstance(ends, list) or len(ends) > self.first_runs or not all(_is_run_end(e, k) for e in ends):
+            raise ClothFitError(f"checkpoint: {w} 'run_ends' must list [value, {k} numbers in [0, 1]] per run")
+        self.run_ends = [[float_from_json(e[0]), [float(v) for v in e[1]]] for e in ends]
         # runs again at other levels of a coordinate came after the stall rule: all where the first began before
         self.first_restart_vary, self.first_restart_levels = _vary(
             d.get("first_restart_vary"),

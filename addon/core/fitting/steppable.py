@@ -95,6 +95,11 @@ class Optimizer:
         """``best_x`` as {name: value}, None before any finite value."""
         return None if self._best_u is None else self.space.to_dict(self.best_x)
 
+    def looks(self) -> dict | None:
+        """How many independent starts the search made and how many ended in the basin of the best one
+        (``StagedCMA``'s runs again), or None where it does not make several."""
+        return None
+
     @property
     def stopped(self) -> bool:
         """True when the algorithm itself has nothing more to do (never for SPX + MGG)."""

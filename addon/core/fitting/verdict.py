@@ -21,6 +21,9 @@ these it is:
   it means nothing, so the line gives the errors beside a one-pixel shift of the outline instead;
 * ``unfinished`` (cancelled, or stopped before its floor report) and ``failed`` (an error).
 
+Every line but the last two ends by saying how many of the search's independent starts (the result's ``looks``)
+ended in the basin of its best one, where it made more than one.
+
 ``settings_at_bound(par, x)`` is the check behind ``at_bound`` for the free settings (the result's
 ``settings_at_bound``; the manipulation's offsets have their own, ``ManipulationParameters.at_bound``).
 """
@@ -112,8 +115,32 @@ def _pct(v: Any) -> str:
     return f"{v:.2f} %" if isinstance(v, (int, float)) else "?"
 
 
+def looks_text(result: dict) -> str:
+    """How many of the search's independent starts ended in the basin of its best one (the result's ``looks``), or
+    '' for a search of one start."""
+    lk = result.get("looks")
+    if not isinstance(lk, dict) or not isinstance(lk.get("starts"), int) or lk["starts"] < 2:
+        return ""
+    n, k = lk["starts"], lk.get("agreeing")
+    if k == n:
+        return (
+            f"all {n} starts of the search ended in this basin (no proof that it is the cloth's: the floor says that)"
+        )
+    rest = "the other in a worse one" if n - k == 1 else "the others in worse ones"
+    return f"{k} of {n} starts of the search ended in this basin, {rest}: a basin no start reached may fit better"
+
+
 def verdict(result: dict) -> tuple[str, str]:
-    """(kind, line) of a fit's result dict (see the module's text; ``kind`` is one of ``KINDS``)."""
+    """(kind, line) of a fit's result dict (see the module's text; ``kind`` is one of ``KINDS``), with how many
+    of the search's starts ended in its basin (``looks_text``)."""
+    kind, line = _verdict(result)
+    looks = looks_text(result)
+    if looks and kind not in ("failed", "unfinished"):
+        line = f"{line}; {looks}"
+    return kind, line
+
+
+def _verdict(result: dict) -> tuple[str, str]:
     if result.get("error"):
         return "failed", f"failed: {result['error']}"
     fl = result.get("floor") or {}
