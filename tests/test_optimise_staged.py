@@ -504,6 +504,13 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     o = FitJob(cap, again).opt
     assert isinstance(o, StagedCMA) and (o.first_restart_step, o.first_fraction, o.first_explore) == (0.0, 0.72, 0.56)
     assert o.warm_tail_stuck is True
+    # runs again from a grid over bending and air damping: the default's, or as --search asks
+    assert opt.first_restart_grid == (list(D.FIT_RESTART_GRID) if D.FIT_RESTART_GRID_ON else None)
+    for on in (True, False):
+        g = FitJob(cap, FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid=on)).opt
+        assert g.first_restart_grid == (list(D.FIT_RESTART_GRID) if on else None)
+    with pytest.raises(ClothFitError, match="staged_restart_grid must be true or false"):
+        FitConfig(staged_restart_grid="yes").checked()
     assert opt.second_warm is D.STAGED_SECOND_WARM and o.second_warm is not D.STAGED_SECOND_WARM
     with pytest.raises(ClothFitError, match="staged_second_warm must be true or false"):
         FitConfig(staged_second_warm=1).checked()
@@ -649,3 +656,60 @@ def test_the_search_says_how_many_of_its_starts_ended_in_the_best_ones_basin():
         d["run_ends"] = bad
         with pytest.raises(ClothFitError, match="run_ends"):
             optimizer_from_state(d)
+
+
+def test_runs_again_start_at_the_best_cells_of_a_grid_over_two_coordinates():
+    """With ``first_restart_grid``, the first run's end is followed by a grid over two first-stage coordinates
+    (the others at that run's best point); the next run starts at the grid's best cell, the one after at the next
+    cell no run has ended in, with the grid's own step; a checkpoint taken while the grid waits resumes exactly;
+    a bad grid is refused in one line."""
+    kw = {"first_restart_step": 0.05, "first_fraction": 0.72, "first_explore": 0.56}
+    grid = {"first_restart_grid": ["x0", "x1"], "first_restart_grid_points": 6, "first_restart_grid_sigma": 0.07}
+    start = np.array([-2.0, 0.0, 0.0, 0.0, 0.0])  # in the worse basin of x0
+    opt = StagedCMA(space(), seed=2, first=["x0", "x1"], initial=[start], budget=1500, **kw, **grid)
+    resumed, starts = None, []
+    while opt.stage == 1:
+        X = opt.ask()
+        if opt.grid_pending is not None:
+            assert len(X) == 36 and resumed is None
+            # the grid's two coordinates at the cells' centres, every other where the search holds it
+            centres = -5.0 + 10.0 * (np.arange(6) + 0.5) / 6
+            assert np.allclose(X[:, 2:], X[0, 2:]) and X[0, 2:] == pytest.approx(0.0)
+            assert X[:, 0] == pytest.approx(np.repeat(centres, 6)) and X[:, 1] == pytest.approx(np.tile(centres, 6))
+            resumed = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+            assert np.array_equal(resumed.ask(), X)
+            f = two_basins(X)
+            best_cell = X[int(np.argmin(f)), :2]
+            runs = opt.first_runs
+            opt.tell(X, f)
+            resumed.tell(X, f)
+            c = opt.children[-1]
+            assert opt.first_runs == runs and c.sigma == pytest.approx(0.07)
+            starts.append((c.mean, best_cell))
+            continue
+        if resumed is not None:
+            assert np.array_equal(resumed.ask(), X)
+            resumed.tell(X, two_basins(X))
+        opt.tell(X, two_basins(X))
+    assert opt.grid_done and len(starts) == 1 and opt.first_runs >= 2
+    mean, cell = starts[0]
+    assert opt.space.subspace(["x0", "x1"]).decode(mean[None])[0] == pytest.approx(cell)
+    assert cell[0] == pytest.approx(-5.0 + 10.0 * 4.5 / 6) and cell[1] == pytest.approx(-5.0 + 10.0 * 3.5 / 6)
+    # the search found the better basin of x0, which its first run missed
+    assert opt.run_ends[0][1][0] < 0.5 and opt.best_x[0] == pytest.approx(2.0, abs=0.05)
+    assert resumed.state_dict() == opt.state_dict()
+    # runs after the grid's: the next best cell no run has ended in
+    assert all(
+        abs(s[0] - opt.run_ends[-1][1][0]) > 1 / 6 or abs(s[1] - opt.run_ends[-1][1][1]) > 1 / 6
+        for s in opt.grid_starts
+    )
+    for bad in (["x0"], ["x0", "x0"], ["x0", "x3"], "x0"):
+        with pytest.raises(ClothFitError, match="first_restart_grid"):
+            StagedCMA(space(), seed=0, first=["x0", "x1"], first_restart_grid=bad)
+    d = json.loads(json.dumps(opt.state_dict()))
+    d["grid_starts"] = [[0.5, 2.0]]
+    with pytest.raises(ClothFitError, match="grid_starts"):
+        optimizer_from_state(d)
+    del d["grid_starts"], d["first_restart_grid"], d["grid_points"], d["grid_sigma"], d["grid_done"], d["grid_pending"]
+    old = optimizer_from_state(d)  # a checkpoint from before the grid: none
+    assert old.first_restart_grid is None and old.grid_starts == [] and old.grid_pending is None

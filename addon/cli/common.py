@@ -282,7 +282,7 @@ def search_args(s):
         default=[],
         metavar="NAME=VALUE",
         help="an optimiser setting, repeatable: sigma0, cma_active (true/false), tolx, tolfun_per_image, "
-        "staged_second_warm (true/false), ga_eps, ga_stall, portfolio_runs, staged_restart_step, ... (FitConfig's search options; default: the "
+        "staged_second_warm (true/false), staged_restart_grid (true/false), ga_eps, ga_stall, portfolio_runs, staged_restart_step, ... (FitConfig's search options; default: the "
         "optimiser's)",
     )
     s.add_argument(

@@ -264,6 +264,16 @@ STAGED_FIRST_RESTART_VARY = None  # cma-staged, runs again: a first-stage coordi
 STAGED_FIRST_RESTART_LEVELS = (0.2, 0.8, 0.35, 0.65, 0.5)
 STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only within this share of the budget;
 # then the run with the best point goes on to the end of the first stage's share
+STAGED_FIRST_RESTART_GRID = None  # cma-staged, runs again: two first-stage coordinates (e.g. bending and air
+# damping) tried on a grid at the first run's best point once it has converged; the runs after it start at the grid's
+# best cells, none where a run has already ended (None: every run starts where the first began)
+STAGED_FIRST_RESTART_GRID_POINTS = 8  # cma-staged: that grid's points per coordinate
+STAGED_FIRST_RESTART_GRID_SIGMA = 0.1  # cma-staged: the step (unit cube) of a run started at a grid cell
+FIT_RESTART_GRID = ("bending_stiffness", "air_damping")  # a fit of Blender's cloth: the grid's two settings (the
+# first stage's slice whose valleys cross at the truth: docs/search.md, "Why the first stage misses the truth's basin")
+FIT_RESTART_GRID_ON = (
+    False  # a fit of Blender's cloth: runs again from that grid (fit --search staged_restart_grid=...)
+)
 LOOKS_AGREE_UNIT = 0.05  # cma-staged, runs again: two first-stage runs ended in the same basin when every strong
 # setting of one lies within this share of its search range (unit cube, log-scaled settings) of the other's: the
 # result's "looks" says how many of the search's starts reached the basin of the best one

@@ -36,6 +36,7 @@ SEARCH_OPTIONS = {
     "staged_second_warm": ("second_warm", ("cma-staged",)),
     "staged_warm_tail": ("warm_tail", ("cma-staged",)),
     "staged_warm_tail_stuck": ("warm_tail_stuck", ("cma-staged",)),
+    "staged_restart_grid": ("first_restart_grid", ("cma-staged",)),
 }
 
 
@@ -107,6 +108,7 @@ class FitConfig:
     staged_second_warm: bool | None = None  # cma-staged: the second stage keeps the first's steps
     staged_warm_tail: float | None = None  # cma-staged: budget share of a third, warm run (D.STAGED_WARM_TAIL)
     staged_warm_tail_stuck: bool | None = None  # cma-staged: that run only if the second stage found nothing better
+    staged_restart_grid: bool | None = None  # cma-staged: runs again from a grid over D.FIT_RESTART_GRID (D's default)
 
     @classmethod
     def from_dict(cls, d: Any) -> FitConfig:
@@ -219,7 +221,7 @@ class FitConfig:
         intval("ga_stall", 1)
         intval("portfolio_runs", 1, 64)
         intval("portfolio_max_polishes", 1, 10**6)
-        for name in ("cma_active", "staged_second_warm", "staged_warm_tail_stuck"):
+        for name in ("cma_active", "staged_second_warm", "staged_warm_tail_stuck", "staged_restart_grid"):
             if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
                 raise ClothFitError(f"fit config: {name} must be true or false, got {getattr(self, name)!r}")
         if self.portfolio_polish not in (None, "cma", "coord"):

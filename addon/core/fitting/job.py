@@ -299,8 +299,11 @@ class FitJob:
             kw["stall_evaluations"] = D.FIT_GA_STALL
         for name, value in cfg.search_options().items():  # the config's own settings of this optimiser
             key, optimizers = SEARCH_OPTIONS[name]
-            if name in ("sigma0", "tolx", "tolfun_per_image") or self.optimizer_name not in optimizers:
-                continue  # set above (a rung's sigma0 stays the warm start's)
+            if (
+                name in ("sigma0", "tolx", "tolfun_per_image", "staged_restart_grid")
+                or self.optimizer_name not in optimizers
+            ):
+                continue  # set above (a rung's sigma0 stays the warm start's) or in _staged_kw (the grid's names)
             kw[key] = value
         if cfg.sigma0 is not None and warm_x is None:
             kw["sigma0"] = cfg.sigma0
@@ -323,6 +326,9 @@ class FitJob:
             kw["warm_tail_stuck"] = D.STAGED_WARM_TAIL_STUCK_UNKNOWNS
         if self.ladder is not None:  # the rungs share the budget: shorter runs again cost time there (D's note)
             kw["first_restart_step"] = D.STAGED_FIRST_RESTART_STEP_LADDER
+        grid = self.config.staged_restart_grid
+        if (D.FIT_RESTART_GRID_ON if grid is None else grid) and all(n in strong for n in D.FIT_RESTART_GRID):
+            kw["first_restart_grid"] = list(D.FIT_RESTART_GRID)  # runs again from the grid's best cells
         if strong:
             kw["first"] = strong + [n for n in list(self.space.names)[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]
             if par.initial is None:

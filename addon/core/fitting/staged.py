@@ -76,6 +76,22 @@ def _is_run_end(e, k) -> bool:
     )
 
 
+def _grid_names(names, first, w) -> list | None:
+    """``first_restart_grid``: None, or two distinct coordinates of the first stage."""
+    if names is None:
+        return None
+    if (
+        not isinstance(names, (list, tuple))
+        or len(names) != 2
+        or len(set(names)) != 2
+        or any(n not in first for n in names)
+    ):
+        raise ClothFitError(
+            f"{w}: 'first_restart_grid' must name two coordinates of the first stage ({', '.join(first)})"
+        )
+    return [str(n) for n in names]
+
+
 class StagedCMA(Optimizer):
     """CMA-ES over ``first`` (the others held), then over everything from the best point.
 
@@ -99,7 +115,11 @@ class StagedCMA(Optimizer):
     quality ladder follows). ``first_restart_vary``: a first-stage coordinate that each run after the
     first starts at another of ``first_restart_levels`` (unit cube, in turn), the others where the first began
     (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
-    bendings"). Race and scan were both tried against the bending valley that first stages miss and not kept
+    bendings"). ``first_restart_grid``: two first-stage coordinates tried on a ``first_restart_grid_points`` x
+    ``first_restart_grid_points`` grid across their ranges, the others at the first run's best point, once that run
+    has converged; each later run starts at the grid's best cell that no run has ended in (within one cell), with the
+    step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
+    from a grid"). Race and scan were both tried against the bending valley that first stages miss and not kept
     (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
     to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
     Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
@@ -145,6 +165,9 @@ class StagedCMA(Optimizer):
         warm_tail_stuck: bool = D.STAGED_WARM_TAIL_STUCK,
         warm_tail_stall: float = D.STAGED_WARM_TAIL_STALL,
         warm_tail_stall_gain: float = D.STAGED_WARM_TAIL_STALL_GAIN,
+        first_restart_grid=D.STAGED_FIRST_RESTART_GRID,
+        first_restart_grid_points: int = D.STAGED_FIRST_RESTART_GRID_POINTS,
+        first_restart_grid_sigma: float = D.STAGED_FIRST_RESTART_GRID_SIGMA,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -196,6 +219,14 @@ class StagedCMA(Optimizer):
         self.first_restart_vary, self.first_restart_levels = _vary(
             first_restart_vary, first_restart_levels, self.first, w
         )
+        self.first_restart_grid = _grid_names(first_restart_grid, self.first, w)
+        self.grid_points = checked_integer(first_restart_grid_points, f"{w}: first_restart_grid_points", 2, 64)
+        self.grid_sigma = checked_number(
+            first_restart_grid_sigma, f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True
+        )
+        self.grid_pending = None  # the grid's points (strong settings' cube) while it waits to be evaluated
+        self.grid_starts: list = []  # where the runs after the grid start, best cell first
+        self.grid_done = False
         self.second_warm = checked_flag(second_warm, f"{w}: second_warm")
         self.warm_tail = checked_number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
         self.warm_tail_stuck = checked_flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
@@ -398,6 +429,8 @@ class StagedCMA(Optimizer):
             if self._scan_pending is None:
                 self._scan_pending = self._scan_batch()
             return self.space.decode(self._scan_pending)
+        if self.grid_pending is not None:
+            return self.space.decode(self._full_u(self.grid_pending))
         c = self._current
         Xc = c.ask()
         if not self._staging:
@@ -417,6 +450,16 @@ class StagedCMA(Optimizer):
             self.scan_left.pop(0)
             if not self.scan_left:
                 self._end_first_stage()
+            return
+        if self.grid_pending is not None:
+            U = self._full_u(self.grid_pending)
+            self._check_told(X, U)
+            f = sanitize_fitness(f, len(U))
+            self._record(U, f)
+            order = np.argsort(f, kind="stable")
+            self.grid_starts = [[float(v) for v in self.grid_pending[i]] for i in order if np.isfinite(f[i])]
+            self.grid_pending = None
+            self._next_run(self.children[-1])
             return
         c = self._current
         if c._pending is None:
@@ -444,14 +487,12 @@ class StagedCMA(Optimizer):
                     if self.first_best_run is None or c.best_f < float_from_json(self.first_best_run["best_f"]):
                         self.first_best_run = c.state_dict()
                     self.first_runs += 1
-                    init = None if self.first_init is None else [np.array(self.first_init)]
-                    sub = self._subspace()
-                    if self.first_restart_vary is not None:  # this run at another level of that coordinate
-                        u = np.full(sub.n, 0.5) if init is None else sub.encode(init[0][None])[0]
-                        levels = self.first_restart_levels
-                        u[self.first.index(self.first_restart_vary)] = levels[(self.first_runs - 2) % len(levels)]
-                        init = [sub.decode(u[None])[0]]
-                    self.children[-1] = self._child(sub, c.popsize, self.sigma0, init)
+                    if self.first_restart_grid is not None and not self.grid_done:
+                        # the grid first (first_restart_grid): the next run starts at its best cell
+                        self.grid_done = True
+                        self.grid_pending = self._grid_batch(c)
+                    else:
+                        self._next_run(c)
             elif self.first_best_run is not None:
                 # the runs are over: the one with the best point goes on, to the end of the first stage
                 self._run_ended(c)
@@ -462,6 +503,47 @@ class StagedCMA(Optimizer):
             self._start_tail()
         elif c.stopped:
             self._stopped = True
+
+    def _grid_batch(self, c: CMAES) -> np.ndarray:
+        """``first_restart_grid``: the converged run's best point (strong settings' cube) with the two named
+        coordinates at the centres of an n x n grid across their ranges."""
+        sub = self._subspace()
+        u = np.clip(sub.encode(np.asarray(c.best_x)[None])[0], 0.0, 1.0)
+        n = self.grid_points
+        g = (np.arange(n) + 0.5) / n
+        a, b = (self.first.index(x) for x in self.first_restart_grid)
+        U = np.repeat(u[None], n * n, 0)
+        A, B = np.meshgrid(g, g, indexing="ij")
+        U[:, a], U[:, b] = A.ravel(), B.ravel()
+        return U
+
+    def _next_run(self, c: CMAES) -> None:
+        """Runs again: the next first-stage run, from the grid's best cell that no run has ended in yet
+        (``first_restart_grid``), else where the first began (at another level of ``first_restart_vary``)."""
+        sub = self._subspace()
+        if self.grid_starts:
+            a, b = (self.first.index(x) for x in self.first_restart_grid)
+            cell = 1.0 / self.grid_points
+            ends = [e[1] for e in self.run_ends]
+            left = [
+                s
+                for s in self.grid_starts
+                if not any(abs(s[a] - e[a]) <= cell and abs(s[b] - e[b]) <= cell for e in ends)
+            ]
+            if left:
+                self.grid_starts = left[1:]
+                self.children[-1] = self._child(
+                    sub, c.popsize, self.grid_sigma, [sub.decode(np.array(left[0])[None])[0]]
+                )
+                return
+            self.grid_starts = []
+        init = None if self.first_init is None else [np.array(self.first_init)]
+        if self.first_restart_vary is not None:  # this run at another level of that coordinate
+            u = np.full(sub.n, 0.5) if init is None else sub.encode(init[0][None])[0]
+            levels = self.first_restart_levels
+            u[self.first.index(self.first_restart_vary)] = levels[(self.first_runs - 2) % len(levels)]
+            init = [sub.decode(u[None])[0]]
+        self.children[-1] = self._child(sub, c.popsize, self.sigma0, init)
 
     def _tail_due(self, c: CMAES) -> bool:
         """The second stage gives way to the warm tail: its run has stopped or the tail's share is reached
@@ -519,6 +601,12 @@ class StagedCMA(Optimizer):
         "run_ends",
         "first_restart_vary",
         "first_restart_levels",
+        "first_restart_grid",
+        "grid_points",
+        "grid_sigma",
+        "grid_pending",
+        "grid_starts",
+        "grid_done",
         "second_warm",
         "warm_tail",
         "warm_tail_stuck",
@@ -565,6 +653,12 @@ class StagedCMA(Optimizer):
                 "run_ends": [[float_to_json(f), list(u)] for f, u in self.run_ends],
                 "first_restart_vary": self.first_restart_vary,
                 "first_restart_levels": list(self.first_restart_levels),
+                "first_restart_grid": self.first_restart_grid,
+                "grid_points": self.grid_points,
+                "grid_sigma": self.grid_sigma,
+                "grid_pending": None if self.grid_pending is None else self.grid_pending.tolist(),
+                "grid_starts": [list(s) for s in self.grid_starts],
+                "grid_done": self.grid_done,
                 "second_warm": self.second_warm,
                 "warm_tail": self.warm_tail,
                 "warm_tail_stuck": self.warm_tail_stuck,
@@ -613,6 +707,31 @@ class StagedCMA(Optimizer):
             self.first,
             f"checkpoint: {w}",
         )
+        # the grid before runs again came after the runs' ends: none in older checkpoints
+        self.first_restart_grid = _grid_names(d.get("first_restart_grid"), self.first, f"checkpoint: {w}")
+        self.grid_points = (
+            saved_value(d, "grid_points", w, int, 2, 64) if "grid_points" in d else D.STAGED_FIRST_RESTART_GRID_POINTS
+        )
+        self.grid_sigma = (
+            saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
+        )
+        self.grid_done = saved_bool(d, "grid_done", w) if "grid_done" in d else False
+        n2, k = self.grid_points**2, len(self.first)
+        self.grid_pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
+        starts = d.get("grid_starts", [])
+        if (
+            not isinstance(starts, list)
+            or len(starts) > n2
+            or not all(_is_run_end([0.0, s], k) for s in starts)
+            or (self.grid_pending is not None and (not self.grid_done or starts))
+            or ((self.grid_pending is not None or starts) and self.first_restart_grid is None)
+        ):
+            raise ClothFitError(
+                f"checkpoint: {w} 'grid_starts' must list points of {k} numbers in [0, 1] after the grid"
+            )
+        if self.grid_pending is not None and (np.any(self.grid_pending < 0.0) or np.any(self.grid_pending > 1.0)):
+            raise ClothFitError(f"checkpoint: {w} 'grid_pending' must lie in the unit cube")
+        self.grid_starts = [[float(v) for v in s] for s in starts]
 
     @classmethod
     def from_state(cls, d: dict) -> StagedCMA:
