@@ -146,6 +146,9 @@ STRATEGIES = {
     # the same recipe by hand, as first tried with two `fit` commands: CMA-ES (IPOP restarts) over D.STAGED_STRONG
     # alone, every other setting at Blender's default, for STAGED_FIRST of the budget; then the
     # baseline over all eight from that point with a step of STAGED_SIGMA
+    # runs again from the best cells of a bending x air-damping grid at the first run's end (tried: docs/search.md,
+    # "Runs again from a grid")
+    "staged-grid": ("cma-staged", dict(STEP01, first_restart_grid=["bending_stiffness", "air_damping"])),
     "staged-recipe": ("staged-recipe", {}),
 }
 STAGED_FIRST = D.STAGED_FIRST_FRACTION
@@ -675,6 +678,7 @@ def summary(rows):
                 "best_ratio": float(ratios.min()),
                 "worst_ratio": float(ratios.max()),
                 "within_1_2": int(np.sum(ratios <= 1.2)),
+                "within_1_4": int(np.sum(ratios <= 1.4)),
                 "within_1_5": int(np.sum(ratios <= 1.5)),
                 "median_heldout_pct": float(np.median([r["heldout_pct"] for r in rs])),
                 "floor_pct": rs[0]["floor_pct"],

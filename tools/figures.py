@@ -319,6 +319,20 @@ SOURCES = {
         "of search_step and search_rs_tail, seeds 5-9 those of search_step10_rows.jsonl (drop --only-reused to run "
         "the missing ones)",
     },
+    "search_grid": {
+        "argv": _search_ab_reused(
+            "staged-rs48-step01,staged-grid",
+            "docs/figures/search_grid_rows.jsonl",
+            captures=["out/fit_goals/exact"],
+            seeds="0-9",
+        ),
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "runs again from a grid: the first run's end followed by an 8 x 8 grid over bending and air damping, the "
+        "later runs started at its best cells ('staged-grid', fit --search staged_restart_grid=true) against the "
+        "default ('staged-rs48-step01'), seeds 0-9 on the goal's capture: the fits of the rows file (drop "
+        "--only-reused to run them again)",
+    },
     "search_bend": {
         "argv": _search_ab_reused(
             "staged-rs48-step01,staged-rs48-step01-bend",
