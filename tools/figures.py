@@ -333,6 +333,18 @@ SOURCES = {
         "default ('staged-rs48-step01'), seeds 0-9 on the goal's capture: the fits of the rows file (drop "
         "--only-reused to run them again)",
     },
+    "search_grid4": {
+        "argv": _search_ab_reused(
+            "staged-rs48-step01,staged-grid",
+            "docs/figures/search_grid4_rows.jsonl",
+            captures=["synth:fresh", "synth:stiff", "synth:damped", "synth:soft"],
+        ),
+        "cost": "cheap",
+        "rtol": 0,
+        "what": "runs again from a grid ('staged-grid') against the default ('staged-rs48-step01') on the four other "
+        "captures of search_runs, seeds 0-4, run side by side in one session: the fits of the rows file (drop "
+        "--only-reused to run them again)",
+    },
     "search_bend": {
         "argv": _search_ab_reused(
             "staged-rs48-step01,staged-rs48-step01-bend",
