@@ -22,6 +22,7 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from .evolution_strategy import CMA_STOPS, CMAES
+from .restart_grid import grid_names, is_run_end, restore_grid
 from .space import (
     SearchSpace,
     checked_flag,
@@ -61,35 +62,6 @@ def _vary(name, levels, first, w) -> tuple:
     if not lv or not all(0.0 <= v <= 1.0 for v in lv):
         raise ClothFitError(f"{w}: first_restart_levels must be one or more numbers in [0, 1], got {levels!r}")
     return name, lv
-
-
-def _is_run_end(e, k) -> bool:
-    """A saved first-stage run's end: [best value, its point in the strong settings' cube (k numbers)]."""
-    return (
-        isinstance(e, list)
-        and len(e) == 2
-        and isinstance(e[0], (int, float, str))
-        and not isinstance(e[0], bool)
-        and isinstance(e[1], list)
-        and len(e[1]) == k
-        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0 for v in e[1])
-    )
-
-
-def _grid_names(names, first, w) -> list | None:
-    """``first_restart_grid``: None, or two distinct coordinates of the first stage."""
-    if names is None:
-        return None
-    if (
-        not isinstance(names, (list, tuple))
-        or len(names) != 2
-        or len(set(names)) != 2
-        or any(n not in first for n in names)
-    ):
-        raise ClothFitError(
-            f"{w}: 'first_restart_grid' must name two coordinates of the first stage ({', '.join(first)})"
-        )
-    return [str(n) for n in names]
 
 
 class StagedCMA(Optimizer):
@@ -219,7 +191,7 @@ class StagedCMA(Optimizer):
         self.first_restart_vary, self.first_restart_levels = _vary(
             first_restart_vary, first_restart_levels, self.first, w
         )
-        self.first_restart_grid = _grid_names(first_restart_grid, self.first, w)
+        self.first_restart_grid = grid_names(first_restart_grid, self.first, w)
         self.grid_points = checked_integer(first_restart_grid_points, f"{w}: first_restart_grid_points", 2, 64)
         self.grid_sigma = checked_number(
             first_restart_grid_sigma, f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True
@@ -697,7 +669,7 @@ class StagedCMA(Optimizer):
         # the runs' ends came after runs again: none kept in older checkpoints
         ends = d.get("run_ends", [])
         k = len(self.first)
-        if not isinstance(ends, list) or len(ends) > self.first_runs or not all(_is_run_end(e, k) for e in ends):
+        if not isinstance(ends, list) or len(ends) > self.first_runs or not all(is_run_end(e, k) for e in ends):
             raise ClothFitError(f"checkpoint: {w} 'run_ends' must list [value, {k} numbers in [0, 1]] per run")
         self.run_ends = [[float_from_json(e[0]), [float(v) for v in e[1]]] for e in ends]
         # runs again at other levels of a coordinate came after the stall rule: all where the first began before
@@ -708,30 +680,9 @@ class StagedCMA(Optimizer):
             f"checkpoint: {w}",
         )
         # the grid before runs again came after the runs' ends: none in older checkpoints
-        self.first_restart_grid = _grid_names(d.get("first_restart_grid"), self.first, f"checkpoint: {w}")
-        self.grid_points = (
-            saved_value(d, "grid_points", w, int, 2, 64) if "grid_points" in d else D.STAGED_FIRST_RESTART_GRID_POINTS
-        )
-        self.grid_sigma = (
-            saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
-        )
-        self.grid_done = saved_bool(d, "grid_done", w) if "grid_done" in d else False
-        n2, k = self.grid_points**2, len(self.first)
-        self.grid_pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
-        starts = d.get("grid_starts", [])
-        if (
-            not isinstance(starts, list)
-            or len(starts) > n2
-            or not all(_is_run_end([0.0, s], k) for s in starts)
-            or (self.grid_pending is not None and (not self.grid_done or starts))
-            or ((self.grid_pending is not None or starts) and self.first_restart_grid is None)
-        ):
-            raise ClothFitError(
-                f"checkpoint: {w} 'grid_starts' must list points of {k} numbers in [0, 1] after the grid"
-            )
-        if self.grid_pending is not None and (np.any(self.grid_pending < 0.0) or np.any(self.grid_pending > 1.0)):
-            raise ClothFitError(f"checkpoint: {w} 'grid_pending' must lie in the unit cube")
-        self.grid_starts = [[float(v) for v in s] for s in starts]
+        g = restore_grid(d, self.first, w)
+        self.first_restart_grid, self.grid_points, self.grid_sigma = g["names"], g["points"], g["sigma"]
+        self.grid_done, self.grid_pending, self.grid_starts = g["done"], g["pending"], g["starts"]
 
     @classmethod
     def from_state(cls, d: dict) -> StagedCMA:

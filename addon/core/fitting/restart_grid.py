@@ -1,0 +1,64 @@
+"""Runs again from a grid (``StagedCMA``'s ``first_restart_grid``): the checks of its settings and of its saved
+state, and a saved first-stage run's end (docs/search.md, "Runs again from a grid")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import defaults as D
+from ..errors import ClothFitError
+from .space import saved_array, saved_bool, saved_value
+
+
+def is_run_end(e: object, k: int) -> bool:
+    """A saved first-stage run's end: [best value, its point in the strong settings' cube (k numbers)]."""
+    return (
+        isinstance(e, list)
+        and len(e) == 2
+        and isinstance(e[0], (int, float, str))
+        and not isinstance(e[0], bool)
+        and isinstance(e[1], list)
+        and len(e[1]) == k
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0 for v in e[1])
+    )
+
+
+def grid_names(names: object, first: list, w: str) -> list | None:
+    """``first_restart_grid``: None, or two distinct coordinates of the first stage."""
+    if names is None:
+        return None
+    if (
+        not isinstance(names, (list, tuple))
+        or len(names) != 2
+        or len(set(names)) != 2
+        or any(n not in first for n in names)
+    ):
+        raise ClothFitError(
+            f"{w}: 'first_restart_grid' must name two coordinates of the first stage ({', '.join(first)})"
+        )
+    return [str(n) for n in names]
+
+
+def restore_grid(d: dict, first: list, w: str) -> dict:
+    """The grid's part of a saved ``StagedCMA`` (checked; none in checkpoints from before it): ``names``,
+    ``points`` per coordinate, ``sigma``, ``done``, ``pending`` (the points waiting to be evaluated, or None) and
+    ``starts`` (the later runs' starts left, best cell first)."""
+    names = grid_names(d.get("first_restart_grid"), first, f"checkpoint: {w}")
+    points = saved_value(d, "grid_points", w, int, 2, 64) if "grid_points" in d else D.STAGED_FIRST_RESTART_GRID_POINTS
+    sigma = saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
+    done = saved_bool(d, "grid_done", w) if "grid_done" in d else False
+    n2, k = points**2, len(first)
+    pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
+    starts = d.get("grid_starts", [])
+    if (
+        not isinstance(starts, list)
+        or len(starts) > n2
+        or not all(is_run_end([0.0, s], k) for s in starts)
+        or (pending is not None and (not done or starts))
+        or ((pending is not None or starts) and names is None)
+    ):
+        raise ClothFitError(f"checkpoint: {w} 'grid_starts' must list points of {k} numbers in [0, 1] after the grid")
+    if pending is not None and (np.any(pending < 0.0) or np.any(pending > 1.0)):
+        raise ClothFitError(f"checkpoint: {w} 'grid_pending' must lie in the unit cube")
+    starts = [[float(v) for v in s] for s in starts]
+    return {"names": names, "points": points, "sigma": sigma, "done": done, "pending": pending, "starts": starts}
