@@ -64,6 +64,11 @@ def _vary(name, levels, first, w) -> tuple:
     return name, lv
 
 
+def _centres(n: int) -> np.ndarray:
+    """The centres of n equal cells across the unit interval (the scan's values, the grid's rows)."""
+    return (np.arange(n) + 0.5) / n
+
+
 class StagedCMA(Optimizer):
     """CMA-ES over ``first`` (the others held), then over everything from the best point.
 
@@ -347,7 +352,7 @@ class StagedCMA(Optimizer):
         its range (in the unit cube: log-scaled settings at even ratios)."""
         idx = self._idx
         U_sub = np.repeat(self._best_u[idx][None], self.scan_points, 0)
-        U_sub[:, self.first.index(self.scan_left[0])] = (np.arange(self.scan_points) + 0.5) / self.scan_points
+        U_sub[:, self.first.index(self.scan_left[0])] = _centres(self.scan_points)
         return self._full_u(U_sub)  # held coordinates held, tied ones following, as in the first stage
 
     def _end_first_stage(self) -> None:
@@ -482,7 +487,7 @@ class StagedCMA(Optimizer):
         sub = self._subspace()
         u = np.clip(sub.encode(np.asarray(c.best_x)[None])[0], 0.0, 1.0)
         n = self.grid_points
-        g = (np.arange(n) + 0.5) / n
+        g = _centres(n)
         a, b = (self.first.index(x) for x in self.first_restart_grid)
         U = np.repeat(u[None], n * n, 0)
         A, B = np.meshgrid(g, g, indexing="ij")
