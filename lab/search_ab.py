@@ -661,16 +661,42 @@ def oracle(b, samples=128, seed=5, relative=(1e-7, 1e-5, 1e-3), best_of=(1, 4, 1
     return {"capture": b.path, "floor_pct": b.floor, "train_floor_pct": b.train_floor, "rows": out}
 
 
-def summary(rows):
-    """Per (capture, strategy): seeds, median / best / worst ratio, seeds <= 1.2x, mean CPU."""
+def jitter_spread(b, samples=40, seed=7):
+    """The jitter floor's spread: the held-out ratio of ``samples`` points a part in 10^7 from the truth
+    (every setting, random signs). One median hides how far that jitter alone throws a fit: where the
+    trajectory is chaotic the truth's own neighbours land anywhere from 1.6x to 3x the floor, and fits
+    there are judged against this spread (within its 90th percentile: as close as the truth's neighbours)."""
+    rng = np.random.default_rng(seed)
+    X = b.truth[None] * (1 + 1e-7 * rng.choice([-1.0, 1.0], size=(samples, b.truth.size)))
+    r = np.sort(b.hjob.objective(b.job.par.rows(X)) / b.hjob.objective.n_images * 100 / b.floor)
+    return {
+        "capture": capture_key(b.path),
+        "floor_pct": b.floor,
+        "samples": samples,
+        "ratios": [float(v) for v in r],
+        "p10": float(np.quantile(r, 0.1)),
+        "p50": float(np.quantile(r, 0.5)),
+        "p90": float(np.quantile(r, 0.9)),
+        "max": float(r[-1]),
+    }
+
+
+def summary(rows, spread=None):
+    """Per (capture, strategy): seeds, median / best / worst ratio, seeds <= 1.2x, mean CPU; with ``spread``
+    (capture name -> jitter_spread's result) also the seeds within the jitter spread's 90th percentile."""
     groups = {}
     for r in rows:
         groups.setdefault((r["capture"], r["strategy"]), []).append(r)
     out = []
     for (cap, strat), rs in sorted(groups.items()):
         ratios = np.array([r["ratio"] for r in rs])
+        js = (spread or {}).get(capture_key(cap))
+        extra = (
+            {} if js is None else {"jitter_p90_ratio": js["p90"], "within_jitter_p90": int(np.sum(ratios <= js["p90"]))}
+        )
         out.append(
             {
+                **extra,
                 "capture": cap,
                 "strategy": strat,
                 "seeds": len(rs),
@@ -749,6 +775,15 @@ def main(argv=None):
     )
     ap.add_argument("--samples", type=int, default=128, help="with --oracle: points per distance")
     ap.add_argument(
+        "--jitter-spread",
+        help="instead of fits: the held-out ratios of 40 points a part in 10^7 from the truth per capture "
+        "(their 10th, 50th, 90th percentiles and maximum), written as JSON here",
+    )
+    ap.add_argument(
+        "--spread",
+        help="a --jitter-spread JSON: the summary counts the seeds within each capture's 90th percentile",
+    )
+    ap.add_argument(
         "--slice",
         help="instead of fits: the first stage's slice (bending x air damping over their ranges, tension and "
         "shear at the truth and moved by 0.01 of the unit cube), written as JSON here",
@@ -801,6 +836,15 @@ def main(argv=None):
             out.append(d)
         write_json(a.landscape, {"captures": out})
         return
+    if a.jitter_spread:
+        from clothfit.core.jsonio import write_json
+
+        out = []
+        for c in a.captures:
+            out.append(jitter_spread(Bench(capture_path(c))))
+            print(json.dumps({k: v for k, v in out[-1].items() if k != "ratios"}), file=sys.stderr, flush=True)
+        write_json(a.jitter_spread, {"captures": out})
+        return
     if a.summary:
         rows = [json.loads(line) for p in a.summary for line in open(p) if line.strip()]
     else:
@@ -844,7 +888,12 @@ def main(argv=None):
                     if a.out:
                         with open(a.out, "a") as fh:
                             fh.write(json.dumps(r) + "\n")
-    summ = summary(rows)
+    spread = None
+    if a.spread:
+        from clothfit.core.jsonio import read_json
+
+        spread = {c["capture"]: c for c in read_json(a.spread)["captures"]}
+    summ = summary(rows, spread)
     print_table(summ)
     if a.json_summary:
         from clothfit.core.jsonio import write_json

@@ -333,6 +333,14 @@ SOURCES = {
         "default ('staged-rs48-step01'), seeds 0-9 on the goal's capture: the fits of the rows file (drop "
         "--only-reused to run them again)",
     },
+    "search_jitter_spread": {
+        "argv": ["{py}", "lab/search_ab.py", *SEARCH_RUNS_CAPTURES, "--jitter-spread", "{out}"],
+        "cost": "cheap",
+        "rtol": 1e-6,
+        "what": "the jitter floor's spread on the five captures of search_runs (the goal's made by lab/fit_goals.py "
+        "exact): the held-out ratio of 40 points a part in 10^7 from the truth, its 10th, 50th and 90th percentiles "
+        "and maximum (a few seconds per capture)",
+    },
     "search_grid4": {
         "argv": _search_ab_reused(
             "staged-rs48-step01,staged-grid",
