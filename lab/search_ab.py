@@ -320,6 +320,8 @@ class Bench:
             kw.setdefault("warm_tail_stuck", False)
             kw.setdefault("first_restart_step", 0.0)
             kw.setdefault("warm_tail_stall", 0.0)
+            if "first_restart_grid" not in STRATEGIES[strategy][1]:
+                kw["first_restart_grid"] = None  # runs again from a grid (the default's since) only where named
             if strategy == "staged-tie" and "compression_stiffness" in self.job.space.names:
                 kw["tie"] = {"compression_stiffness": "tension_stiffness"}
         return make_optimizer(name, self.job.space, seed=seed, **kw)
@@ -892,7 +894,9 @@ def main(argv=None):
     if a.spread:
         from clothfit.core.jsonio import read_json
 
-        spread = {c["capture"]: c for c in read_json(a.spread)["captures"]}
+        d = read_json(a.spread)
+        d = d.get("data", d)  # a recorded figure (tools/figures.py) or the tool's own JSON
+        spread = {c["capture"]: c for c in d["captures"]}
     summ = summary(rows, spread)
     print_table(summ)
     if a.json_summary:

@@ -96,10 +96,11 @@ def _offsets_with(*search):
 SEARCH_RUNS_CAPTURES = ["out/fit_goals/exact", "synth:fresh", "synth:damped", "synth:soft", "synth:stiff"]
 
 
-def _search_ab_reused(strategies, *rows, captures=SEARCH_RUNS_CAPTURES, seeds="0-4"):
+def _search_ab_reused(strategies, *rows, captures=SEARCH_RUNS_CAPTURES, seeds="0-4", spread=None):
     """lab/search_ab.py's strategies x ``seeds`` on ``captures`` (default: seeds 0-4 on the five captures of
-    search_runs): the fits of the rows files (drop --only-reused to run the missing ones)."""
-    return [
+    search_runs): the fits of the rows files (drop --only-reused to run the missing ones); ``spread``: a recorded
+    jitter spread (search_jitter_spread), the summary's seeds within its 90th percentile."""
+    argv = [
         "{py}",
         "lab/search_ab.py",
         *captures,
@@ -113,6 +114,7 @@ def _search_ab_reused(strategies, *rows, captures=SEARCH_RUNS_CAPTURES, seeds="0
         "--json-summary",
         "{out}",
     ]
+    return argv + (["--spread", spread] if spread else [])
 
 
 SOURCES = {
@@ -325,6 +327,7 @@ SOURCES = {
             "docs/figures/search_grid_rows.jsonl",
             captures=["out/fit_goals/exact"],
             seeds="0-9",
+            spread="docs/figures/search_jitter_spread.json",
         ),
         "cost": "cheap",
         "rtol": 0,
@@ -346,12 +349,15 @@ SOURCES = {
             "staged-rs48-step01,staged-grid",
             "docs/figures/search_grid4_rows.jsonl",
             captures=["synth:fresh", "synth:stiff", "synth:damped", "synth:soft"],
+            seeds="0-9",
+            spread="docs/figures/search_jitter_spread.json",
         ),
         "cost": "cheap",
         "rtol": 0,
         "what": "runs again from a grid ('staged-grid') against the default ('staged-rs48-step01') on the four other "
-        "captures of search_runs, seeds 0-4, run side by side in one session: the fits of the rows file (drop "
-        "--only-reused to run them again)",
+        "captures of search_runs, seeds 0-9 (0-4 and 5-9 each run side by side in one session), with the seeds within "
+        "each capture's jitter spread (search_jitter_spread): the fits of the rows file (drop --only-reused to run "
+        "them again)",
     },
     "search_bend": {
         "argv": _search_ab_reused(
