@@ -271,9 +271,9 @@ STAGED_FIRST_RESTART_GRID_POINTS = 8  # cma-staged: that grid's points per coord
 STAGED_FIRST_RESTART_GRID_SIGMA = 0.1  # cma-staged: the step (unit cube) of a run started at a grid cell
 FIT_RESTART_GRID = ("bending_stiffness", "air_damping")  # a fit of Blender's cloth: the grid's two settings (the
 # first stage's slice whose valleys cross at the truth: docs/search.md, "Why the first stage misses the truth's basin")
-FIT_RESTART_GRID_ON = (
-    False  # a fit of Blender's cloth: runs again from that grid (fit --search staged_restart_grid=...)
-)
+FIT_RESTART_GRID_ON = True  # a fit of Blender's cloth: runs again from that grid (fit --search staged_restart_grid=...;
+# the default since it was no worse on any of five captures judged against their jitter spread: docs/search.md, "Runs
+# again from a grid")
 LOOKS_AGREE_UNIT = 0.05  # cma-staged, runs again: two first-stage runs ended in the same basin when every strong
 # setting of one lies within this share of its search range (unit cube, log-scaled settings) of the other's: the
 # result's "looks" says how many of the search's starts reached the basin of the best one
