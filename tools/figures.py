@@ -336,6 +336,13 @@ SOURCES = {
         "default ('staged-rs48-step01'), seeds 0-9 on the goal's capture: the fits of the rows file (drop "
         "--only-reused to run them again)",
     },
+    "quick_start": {
+        "argv": ["{py}", "lab/quick_start.py", "--seeds", "0-4", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the README's Quick start as a new user runs it (synth --model blender at 120 x 160, fit --cameras n:4), "
+        "the fit's seeds 0-4 (0: the command as written): each setting against the capture's truth, its interval, the "
+        "held-out ratio to the stated floor, the verdict (about 6 min)",
+    },
     "search_jitter_spread": {
         "argv": ["{py}", "lab/search_ab.py", *SEARCH_RUNS_CAPTURES, "--jitter-spread", "{out}"],
         "cost": "cheap",

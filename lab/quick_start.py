@@ -1,0 +1,117 @@
+"""The README's Quick start as a new user runs it, over several seeds of the fit's search.
+
+Runs the Quick start's first two commands in a scratch folder (``synth --model blender --resolution 120x160``,
+then ``fit CAP --model blender --cameras n:4 [--seed S]``) in subprocesses (this driver never imports bpy) and
+scores each fit against the capture's own truth (``meta.true_blender_cloth``): every free setting's ratio to the
+truth, whether its 90 % interval holds the truth and whether the fit calls it undetermined, the held-out ratio to
+the floor the fit states, the verdict's kind, the search's starts and how many agreed, wall and CPU seconds.
+
+    python lab/quick_start.py --seeds 0-4 --json out/quick_start.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "lab"))
+
+from fit_goals import parse_seeds  # noqa: E402  (the lab: the one seed-list parser)
+
+
+def _clothfit(*args, cwd):
+    r = subprocess.run([sys.executable, "-m", "clothfit", *map(str, args)], cwd=cwd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit(f"clothfit {' '.join(map(str, args))}: exit {r.returncode}: {r.stderr.strip()[-400:]}")
+
+
+def one(work: str, seed: int) -> dict:
+    """One fit of the Quick start's capture with ``--seed seed`` (0: no --seed, as the README has it)."""
+    res = os.path.join(work, f"fit_s{seed}.json")
+    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.monotonic()
+    _clothfit(
+        "fit", "capture", "--model", "blender", "--cameras", "n:4", "--out", res, *(["--seed", seed] if seed else []),
+        cwd=work,
+    )  # fmt: skip
+    wall = time.monotonic() - t0
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    with open(res) as fh:
+        fit = json.load(fh)
+    with open(os.path.join(work, "capture", "capture.json")) as fh:
+        truth = json.load(fh)["meta"]["true_blender_cloth"]
+    settings = {}
+    for name, (lo, hi) in fit["intervals"].items():
+        if name not in truth or name not in fit["blender_cloth"]:
+            continue  # a manipulation offset (none in this capture)
+        t = float(truth[name])
+        settings[name] = {
+            "truth": t,
+            "fitted": float(fit["blender_cloth"][name]),
+            "ratio": float(fit["blender_cloth"][name]) / t,
+            "interval": [lo, hi],
+            "holds_truth": bool(lo <= t <= hi),
+            "undetermined": name in fit.get("undetermined", []),
+        }
+    floor = fit["floor"]
+    return {
+        "seed": seed,
+        "settings": settings,
+        "bending_ratio": settings["bending_stiffness"]["ratio"],
+        "heldout_ratio": floor["heldout_ratio"],
+        "train_ratio": floor.get("train_ratio"),
+        "verdict_kind": fit["verdict_kind"],
+        "looks": fit.get("looks"),
+        "intervals_holding": sum(s["holds_truth"] for s in settings.values()),
+        "intervals": len(settings),
+        "wall_s": wall,
+        "cpu_s": (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime),
+        "load": os.getloadavg()[0],
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="0-4", help="the fit's seeds, e.g. 0-4 (0: the README's command as written)")
+    ap.add_argument("--json", required=True, help="write the rows and their summary here")
+    a = ap.parse_args(argv)
+    seeds = parse_seeds(a.seeds)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="quick_start_") as work:
+        _clothfit("synth", "--model", "blender", "--out", "capture", "--resolution", "120x160", cwd=work)
+        for s in seeds:
+            rows.append(one(work, s))
+            r = rows[-1]
+            print(
+                f"seed {s}: bending {r['bending_ratio']:.3f} of the truth, held-out {r['heldout_ratio']:.2f}x its floor, "
+                f"{r['verdict_kind']}, intervals holding the truth {r['intervals_holding']}/{r['intervals']}, "
+                f"{r['wall_s']:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+    summary = {
+        "seeds": len(rows),
+        "bending_within_10pct": sum(abs(r["bending_ratio"] - 1) <= 0.1 for r in rows),
+        "bending_within_2x": sum(0.5 <= r["bending_ratio"] <= 2 for r in rows),
+        "worst_bending_ratio": min(min(r["bending_ratio"], 1 / r["bending_ratio"]) for r in rows),
+        "median_heldout_ratio": sorted(r["heldout_ratio"] for r in rows)[len(rows) // 2],
+        "worst_heldout_ratio": max(r["heldout_ratio"] for r in rows),
+        "intervals_holding": sum(r["intervals_holding"] for r in rows),
+        "intervals": sum(r["intervals"] for r in rows),
+    }
+    sys.path.insert(0, ROOT)
+    from clothfit.core.jsonio import write_json
+
+    write_json(a.json, {"summary": summary, "rows": rows})
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()
