@@ -288,18 +288,27 @@ class Bench:
         self.truth = np.array([par._coord(n, t[n]) for n in par.free])
         self.floor = self.held(self.truth)
         self.train_floor = self.train(self.truth)
-        rng = np.random.default_rng(12345)
-        X = self.truth[None] * (1 + 1e-7 * rng.choice([-1.0, 1.0], size=(jitter_samples, len(self.truth))))
-        hs = self.hjob.objective(self.job.par.rows(X)) / self.hjob.objective.n_images * 100
-        self.jitter = float(np.median(hs))
+        self.jitter = float(np.median(self.held_many(self.near_truth(np.random.default_rng(12345), jitter_samples))))
+
+    def near_truth(self, rng, samples, rel=1e-7):
+        """``samples`` points round the truth: every setting off by +-``rel`` (relative), random signs."""
+        return self.truth[None] * (1 + rel * rng.choice([-1.0, 1.0], size=(samples, self.truth.size)))
+
+    def train_many(self, X):
+        """The training error of each row of ``X`` (E_sil per image, %)."""
+        o = self.job.objective
+        return o(self.job.par.rows(np.asarray(X))) / o.n_images * 100
+
+    def held_many(self, X):
+        """The held-out error of each row of ``X`` (E_sil per image, %)."""
+        o = self.hjob.objective
+        return o(self.job.par.rows(np.asarray(X))) / o.n_images * 100
 
     def train(self, x):
-        o = self.job.objective
-        return float(o(self.job.par.rows(np.asarray(x)[None]))[0] / o.n_images * 100)
+        return float(self.train_many(np.asarray(x)[None])[0])
 
     def held(self, x):
-        o = self.hjob.objective
-        return float(o(self.job.par.rows(np.asarray(x)[None]))[0] / o.n_images * 100)
+        return float(self.held_many(np.asarray(x)[None])[0])
 
     def make(self, strategy, seed, **extra):
         name, kw = STRATEGIES[strategy]
@@ -435,8 +444,7 @@ def landscape(b, samples=4, seed=1):
         for rel in RELATIVE:
             X = np.repeat(b.truth[None], samples, axis=0)
             X[:, idx] *= 1 + rel * rng.choice([-1.0, 1.0], size=(samples, len(idx)))
-            tr = b.job.objective(b.job.par.rows(X)) / b.job.objective.n_images * 100
-            he = b.hjob.objective(b.job.par.rows(X)) / b.hjob.objective.n_images * 100
+            tr, he = b.train_many(X), b.held_many(X)
             out.append(
                 {
                     "group": group,
@@ -473,14 +481,13 @@ def slice_grid(b, n=16, shifts=(0.0, 0.01)):
     it, ish = (names.index(x) for x in SLICE_AT)
     ut = sp.encode(b.truth)
     g = (np.arange(n) + 0.5) / n
-    obj = b.job.objective
     out = []
     for d in shifts:
         U = np.repeat(opt.hold_u[None], n * n, 0)
         U[:, it], U[:, ish] = ut[it] + d, ut[ish] + d
         B, A = np.meshgrid(g, g, indexing="ij")
         U[:, ib], U[:, ia] = B.ravel(), A.ravel()
-        F = (obj(b.job.par.rows(sp.decode(U))) / obj.n_images * 100).reshape(n, n)
+        F = b.train_many(sp.decode(U)).reshape(n, n)
         i, j = np.unravel_index(int(np.argmin(F)), F.shape)
         moved = sp.decode(np.where(np.isin(np.arange(sp.n), [it, ish]), ut + d, ut))
         out.append(
@@ -635,9 +642,8 @@ def oracle(b, samples=128, seed=5, relative=(1e-7, 1e-5, 1e-3), best_of=(1, 4, 1
     rng = np.random.default_rng(seed)
     out = []
     for rel in relative:
-        X = b.truth[None] * (1 + rel * rng.choice([-1.0, 1.0], size=(samples, b.truth.size)))
-        tr = b.job.objective(b.job.par.rows(X)) / b.job.objective.n_images * 100
-        ratio = b.hjob.objective(b.job.par.rows(X)) / b.hjob.objective.n_images * 100 / b.floor
+        X = b.near_truth(rng, samples, rel)
+        tr, ratio = b.train_many(X), b.held_many(X) / b.floor
         sel = []
         for n in best_of:
             picked = np.array([ratio[i : i + n][np.argmin(tr[i : i + n])] for i in range(0, samples - n + 1, n)])
@@ -668,9 +674,7 @@ def jitter_spread(b, samples=40, seed=7):
     (every setting, random signs). One median hides how far that jitter alone throws a fit: where the
     trajectory is chaotic the truth's own neighbours land anywhere from 1.6x to 3x the floor, and fits
     there are judged against this spread (within its 90th percentile: as close as the truth's neighbours)."""
-    rng = np.random.default_rng(seed)
-    X = b.truth[None] * (1 + 1e-7 * rng.choice([-1.0, 1.0], size=(samples, b.truth.size)))
-    r = np.sort(b.hjob.objective(b.job.par.rows(X)) / b.hjob.objective.n_images * 100 / b.floor)
+    r = np.sort(b.held_many(b.near_truth(np.random.default_rng(seed), samples)) / b.floor)
     return {
         "capture": capture_key(b.path),
         "floor_pct": b.floor,
