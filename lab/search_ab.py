@@ -687,6 +687,74 @@ def jitter_spread(b, samples=40, seed=7):
     }
 
 
+def jitter_check(b, fits, p90, quantiles=(0.5, 0.75, 0.9)):
+    """The jitter floor the product measures at a fit (``fitting/jitter.py``: the noise floor plus the
+    silhouettes' difference between the fit and its neighbours a part in 10^7 away), checked where the truth is
+    known. At the truth: its 10th / 50th / 90th percentiles beside those of the truth's own neighbours' errors
+    (``jitter_spread``). At each fit of ``fits`` (rows of this tool): the held-out and training ratios beside
+    the floor allowed at each of ``quantiles`` (never below ``FLOOR_FAR_ABOVE``), and whether the fit is within
+    the truth's own spread (its held-out ratio at most ``p90``, the spread's 90th percentile): a rule that calls
+    a fit outside that spread "at the floor" hides a wrong basin."""
+    from clothfit.core.fitting.jitter import jitter
+
+    def floors(job, x):
+        o = job.objective
+        j = jitter(job, x, o, o.silhouettes(job.par.rows(np.asarray(x)[None])[0]))
+        return np.asarray(j["pct"])
+
+    spread = jitter_spread(b)
+    jh, jt = floors(b.hjob, b.truth), floors(b.job, b.truth)
+    out = {
+        "capture": capture_key(b.path),
+        "truth_neighbours_ratio": [spread["p10"], spread["p50"], spread["p90"]],
+        "truth_jitter_floor_ratio": [float(v) for v in np.quantile((b.floor + jh) / b.floor, (0.1, 0.5, 0.9))],
+        "truth_jitter_floor_train_ratio": [
+            float(v) for v in np.quantile((b.train_floor + jt) / b.train_floor, (0.1, 0.5, 0.9))
+        ],
+        "spread_p90": p90,
+        "fits": [],
+    }
+    for r in fits:
+        x = np.asarray(r["best_x"])
+        h, t = b.held(x) / b.floor, b.train(x) / b.train_floor
+        jh, jt = floors(b.hjob, x), floors(b.job, x)
+        allow = {
+            str(q): [
+                max(D.FLOOR_FAR_ABOVE, float(np.quantile(b.floor + jh, q)) / b.floor),
+                max(D.FLOOR_FAR_ABOVE, float(np.quantile(b.train_floor + jt, q)) / b.train_floor),
+            ]
+            for q in quantiles
+        }
+        out["fits"].append(
+            {
+                "seed": r["seed"],
+                "strategy": r["strategy"],
+                "heldout_ratio": h,
+                "train_ratio": t,
+                "within_truth_spread": bool(h <= p90),
+                "allowed": allow,
+                "at_floor": {q: bool(h <= a[0] and t <= a[1]) for q, a in allow.items()},
+                "at_floor_2x": bool(max(h, t) <= D.FLOOR_FAR_ABOVE),
+            }
+        )
+    return out
+
+
+def jitter_check_table(caps):
+    """Per rule (the 2x rule, then each quantile): fits at the floor within the truth's spread (TP), outside it
+    (FP: a wrong basin called fine), and the fits within it called far (FN), outside it called far (TN)."""
+    fits = [f for c in caps for f in c["fits"]]
+    rules = {"2x": lambda f: f["at_floor_2x"]}
+    rules.update({q: (lambda f, q=q: f["at_floor"][q]) for q in fits[0]["at_floor"]} if fits else {})
+    table = {}
+    for name, rule in rules.items():
+        c = {"TP": 0, "FP": 0, "FN": 0, "TN": 0}
+        for f in fits:
+            c[("T" if rule(f) == f["within_truth_spread"] else "F") + ("P" if rule(f) else "N")] += 1
+        table[name] = c
+    return table
+
+
 def summary(rows, spread=None):
     """Per (capture, strategy): seeds, median / best / worst ratio, seeds <= 1.2x, mean CPU; with ``spread``
     (capture name -> jitter_spread's result) also the seeds within the jitter spread's 90th percentile."""
@@ -786,6 +854,11 @@ def main(argv=None):
         "(their 10th, 50th, 90th percentiles and maximum), written as JSON here",
     )
     ap.add_argument(
+        "--jitter-check",
+        help="instead of fits: the jitter floor measured at the truth and at the fits of --reuse (--strategies, "
+        "--seeds), beside the truth's own spread (--spread) and the rules that call a fit at the floor, as JSON here",
+    )
+    ap.add_argument(
         "--spread",
         help="a --jitter-spread JSON: the summary counts the seeds within each capture's 90th percentile",
     )
@@ -850,6 +923,27 @@ def main(argv=None):
             out.append(jitter_spread(Bench(capture_path(c))))
             print(json.dumps({k: v for k, v in out[-1].items() if k != "ratios"}), file=sys.stderr, flush=True)
         write_json(a.jitter_spread, {"captures": out})
+        return
+    if a.jitter_check:
+        from clothfit.core.jsonio import read_json, write_json
+
+        d = read_json(a.spread)
+        p90 = {c["capture"]: c["p90"] for c in d.get("data", d)["captures"]}
+        rows = [json.loads(line) for p in a.reuse for line in open(p) if line.strip()]
+        strategies, seeds = a.strategies.split(","), parse_seeds(a.seeds)
+        out = []
+        for c in a.captures:
+            key = capture_key(c.split(":", 1)[1] if c.startswith("synth:") else c)
+            fits = [
+                r
+                for r in rows
+                if capture_key(r["capture"]) == key and r["strategy"] in strategies and r["seed"] in seeds
+            ]
+            out.append(jitter_check(Bench(capture_path(c)), fits, p90[key]))
+            print(json.dumps({k: v for k, v in out[-1].items() if k != "fits"}), file=sys.stderr, flush=True)
+        table = jitter_check_table(out)
+        print(json.dumps(table), file=sys.stderr)
+        write_json(a.jitter_check, {"captures": out, "rules": table})
         return
     if a.summary:
         rows = [json.loads(line) for p in a.summary for line in open(p) if line.strip()]

@@ -351,6 +351,31 @@ SOURCES = {
         "exact): the held-out ratio of 40 points a part in 10^7 from the truth, its 10th, 50th and 90th percentiles "
         "and maximum (a few seconds per capture)",
     },
+    "search_jitter_check": {
+        "argv": [
+            "{py}",
+            "lab/search_ab.py",
+            *SEARCH_RUNS_CAPTURES,
+            "--jitter-check",
+            "{out}",
+            "--reuse",
+            "docs/figures/search_grid_rows.jsonl",
+            "docs/figures/search_grid4_rows.jsonl",
+            "--strategies",
+            "staged-grid",
+            "--seeds",
+            "0-9",
+            "--spread",
+            "docs/figures/search_jitter_spread.json",
+        ],
+        "cost": "expensive",
+        "rtol": 1e-6,
+        "what": "the jitter floor a fit states (fitting/jitter.py: the noise floor plus the silhouettes' difference "
+        "between the fit and 40 neighbours a part in 10^7 away), checked where the truth is known: at the truth beside "
+        "the truth's own neighbours' errors, and at the 50 fits of search_grid and search_grid4 (the default search, "
+        "seeds 0-9) the rules that call a fit at the floor (2x alone; 2x or the jitter floor at its 50th, 75th, 90th "
+        "percentile) against the truth's own spread (about 6 min)",
+    },
     "search_grid4": {
         "argv": _search_ab_reused(
             "staged-rs48-step01,staged-grid",

@@ -3,8 +3,10 @@
 ``report(job)`` (called once when a ``FitJob`` finishes) scores the best candidate on the training
 images and on held-out ones (the capture's cameras and frames the fit did not see: other cameras at
 other frames where both exist), and puts each beside the floor estimated from those images alone
-(``observation/floor.py``: no truth needed). A fit more than ``FLOOR_FAR_ABOVE`` times its floor says
-so, with the likely cause among those it can test by a few evaluations of the best settings:
+(``observation/floor.py``: no truth needed), and beside the floor the take's own chaos allows (``jitter.py``:
+the noise floor plus the jitter of the fit's neighbours a part in 10^7 away, also no truth needed). A fit more
+than ``FLOOR_FAR_ABOVE`` times its noise floor and above that jitter floor says so, with the likely cause among
+those it can test by a few evaluations of the best settings:
 
 * **quality**: the ladder's error still fell at its highest rung; or the rungs chose a quality that fits
   far better (``QUALITY_BASIN_GAIN``) than the start, where the search ran and from whose settings every
@@ -36,9 +38,10 @@ from ..errors import ClothFitError
 from ..observation.floor import capture_floor
 from ..physics import blender as B
 from .alone import alone_note, disagreement_text
+from .jitter import allowed, floor_with_jitter, jitter
 from .objective import SilhouetteObjective
 from .takes import TakeView
-from .verdict import settings_at_bound
+from .verdict import jitter_text, settings_at_bound
 
 if TYPE_CHECKING:
     from .job import FitJob
@@ -80,6 +83,23 @@ def _model_silhouettes(job, x, obj):
     X = np.atleast_2d(np.asarray(x, dtype=np.float64))
     off = None if job.manip is None else job.manip.offsets(X[:, job.npar :])
     return obj.silhouettes(job.par.rows(X[:, : job.npar])[0], offsets=off)
+
+
+def _jitter_floor(job, x, obj, sils, floor_pct, side) -> dict:
+    """The floor the take's own chaos allows on one side (``side``: "train" or "heldout"; ``jitter.py``):
+    ``{side}_jitter_floor_pct`` (the images' noise floor plus the jitter of the fit's neighbours: 10th, 50th and
+    90th percentiles) and ``{side}_allowed_ratio`` (that floor at ``JITTER_QUANTILE``, over the noise floor), or
+    nothing where it cannot be measured."""
+    jit = jitter(job, x, obj, sils)
+    q, lim = floor_with_jitter(floor_pct, jit), allowed(floor_pct, jit)
+    if q is None or lim is None or not floor_pct:
+        return {}
+    return {
+        f"{side}_jitter_floor_pct": q,
+        f"{side}_allowed_ratio": lim / floor_pct,
+        "jitter_samples": jit["samples"],
+        "jitter_relative": jit["relative"],
+    }
 
 
 def _probes(job, x, f0):
@@ -207,7 +227,8 @@ def report(job: FitJob) -> dict:
     cap, res = job.capture, job.config.resolution
     n = job.objective.n_images
     f0 = float(job.best_error)
-    tf = capture_floor(cap, job.train_cameras, job.train_frames, res, model=_model_silhouettes(job, x, job.objective))
+    mt = _model_silhouettes(job, x, job.objective)
+    tf = capture_floor(cap, job.train_cameras, job.train_frames, res, model=mt)
     d = {
         "train_E_sil_pct": 100.0 * f0 / n,
         "train_floor_pct": 100.0 * tf.floor,
@@ -219,13 +240,16 @@ def report(job: FitJob) -> dict:
     # a floor of (nearly) 0: noise-free silhouettes at the fit's resolution, where a ratio to it means nothing
     d["floor_zero"] = _is_zero(tf)
     d["train_ratio"] = d["train_E_sil_pct"] / d["train_floor_pct"] if not d["floor_zero"] else None
+    if not d["floor_zero"]:
+        d.update(_jitter_floor(job, x, job.objective, mt, d["train_floor_pct"], "train"))
     ho = _heldout(job)
     if ho is not None:
         cams, fidx = ho
         try:
             obj = _objective(job, cams, fidx)
             e = float(job.evaluate(x[None], objective=obj)[0]) / obj.n_images
-            hf = capture_floor(cap, cams, fidx, res, model=_model_silhouettes(job, x, obj))
+            mh = _model_silhouettes(job, x, obj)
+            hf = capture_floor(cap, cams, fidx, res, model=mh)
             d.update(
                 heldout_cameras=[cap.cameras[c].name for c in cams],
                 heldout_n_frames=len(fidx),
@@ -239,11 +263,19 @@ def report(job: FitJob) -> dict:
                 if not _is_zero(hf) and d["heldout_E_sil_pct"] is not None
                 else None
             )
+            if d["heldout_ratio"] is not None:
+                d.update(_jitter_floor(job, x, obj, mh, d["heldout_floor_pct"], "heldout"))
             d.update(_start_beside(job, x, obj, e))
         except ClothFitError as err:
             d["heldout_error"] = str(err)
     ratios = [r for r in (d.get("train_ratio"), d.get("heldout_ratio")) if r is not None]
-    d["far_above"] = bool(ratios) and max(ratios) > D.FLOOR_FAR_ABOVE
+    # far above: above 2x the noise floor and above the floor the take's own jitter allows, on either side
+    d["far_above"] = any(
+        d[f"{k}_ratio"] > max(D.FLOOR_FAR_ABOVE, d.get(f"{k}_allowed_ratio") or 0.0)
+        for k in ("train", "heldout")
+        if d.get(f"{k}_ratio") is not None
+    )
+    d["at_jitter_floor"] = bool(ratios) and not d["far_above"] and max(ratios) > D.FLOOR_FAR_ABOVE
     d["likely_cause"] = None
     d["warning"] = None
     d["settings_at_bound"] = bound = settings_at_bound(job.par, x)
@@ -290,6 +322,7 @@ def report(job: FitJob) -> dict:
                 else ""
             )
             + f"): likely cause: {d['likely_cause']}"
+            + (f"; {jitter_text(d)}" if jitter_text(d) else "")
         )
     return d
 
@@ -358,6 +391,7 @@ def report_takes(job: FitJob) -> tuple[dict, list[dict]]:
         if b.get("far_above")
     ]
     d["far_above"] = bool(far) or len(ok) < len(per)
+    d["at_jitter_floor"] = not d["far_above"] and any(b.get("at_jitter_floor") for b in ok)
     d["likely_cause"] = None
     d["warning"] = None
     if far and d["takes_note"]:  # the takes disagree: that is the cause a search of all of them cannot remove

@@ -158,11 +158,7 @@ def _evaluate(job, st, U):
 def _phase_jitter(job, st):
     u0 = np.array(st["u0"])
     x0 = job.space.decode(u0)
-    J = D.INTERVAL_JITTER
-    signs = np.random.default_rng(D.INTERVAL_SEED).choice([-1.0, 1.0], size=(J, len(x0)))
-    span = job.space.hi - job.space.lo
-    tiny = np.where(job.space.log, np.abs(x0), span) * D.PROFILE_JITTER_RELATIVE
-    X = job.space.clip(x0 + signs * tiny)
+    X = job.space.neighbours(x0, D.INTERVAL_JITTER, D.PROFILE_JITTER_RELATIVE, D.INTERVAL_SEED)
     U = job.space.encode(X)
     f = _evaluate(job, st, U)
     fj = f[np.isfinite(f)]

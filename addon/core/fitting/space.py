@@ -328,6 +328,17 @@ class SearchSpace:
         """Real values clipped to the bounds."""
         return np.clip(self._rows(X, "clip"), self.lo, self.hi)
 
+    def neighbours(self, x: ArrayLike, n: int, relative: float, seed: int) -> np.ndarray:
+        """``n`` copies of a real vector ``x`` whose first ``self.n`` values (this space's parameters; any
+        after them are kept) each move by ``relative`` of their size (log-scaled) or of their range (linear),
+        random signs drawn from ``seed``, clipped to the bounds: the chaos probe of the jitter and intervals."""
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        signs = np.random.default_rng(seed).choice([-1.0, 1.0], size=(n, self.n))
+        tiny = np.where(self.log, np.abs(x[: self.n]), self.hi - self.lo) * relative
+        X = np.repeat(x[None], n, axis=0)
+        X[:, : self.n] = self.clip(x[None, : self.n] + signs * tiny)
+        return X
+
     def to_dict(self, x: ArrayLike) -> dict[str, float]:
         """One real vector -> {name: value}."""
         x = self._rows(x, "to_dict").reshape(self.n)

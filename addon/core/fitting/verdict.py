@@ -3,8 +3,10 @@
 ``verdict(result)`` reads a result dict (a fit's, as written to its file: old files too) and says which of
 these it is:
 
-* ``at_floor``: training and held-out errors within ``FLOOR_FAR_ABOVE`` of the images' noise floor, no free
-  setting or offset at its bound and none the capture leaves undetermined;
+* ``at_floor``: training and held-out errors within ``FLOOR_FAR_ABOVE`` of the images' noise floor, or within the
+  floor a chaotic take allows (the floor block's ``at_jitter_floor``: the noise floor plus the jitter of the
+  fit's neighbours, ``jitter.py``; the line then says "at the jitter floor" with its figures), no free setting or
+  offset at its bound and none the capture leaves undetermined;
 * ``at_floor_undetermined``: at the floor, but the result's ``undetermined`` list (free settings whose
   interval is too wide to mean anything) is not empty: it names them and what would determine them;
 * ``at_bound``: at the floor, but a free setting (or a manipulation offset) ended at its search bound: the
@@ -115,6 +117,20 @@ def _pct(v: Any) -> str:
     return f"{v:.2f} %" if isinstance(v, (int, float)) else "?"
 
 
+def jitter_text(fl: dict) -> str:
+    """What the take's chaos allows (a floor block's ``*_jitter_floor_pct``, ``jitter.py``), held-out where it was
+    measured there, else training: the noise floor plus the jitter of the fit's neighbours over the noise floor,
+    or ''."""
+    for side, label in (("heldout", "held-out"), ("train", "training")):
+        q, f = fl.get(f"{side}_jitter_floor_pct"), fl.get(f"{side}_floor_pct")
+        if isinstance(q, dict) and isinstance(f, (int, float)) and f > 0:
+            return (
+                f"settings a part in 10^7 from the fit's score {q['p10'] / f:.1f}-{q['p90'] / f:.1f}x the noise "
+                f"floor ({label}, median {q['p50'] / f:.1f}x): the floor this take's chaos allows"
+            )
+    return ""
+
+
 def looks_text(result: dict) -> str:
     """How many of the search's independent starts ended in the basin of its best one (the result's ``looks``), or
     '' for a search of one start."""
@@ -194,10 +210,14 @@ def _verdict(result: dict) -> tuple[str, str]:
     if fl.get("far_above"):
         cause = fl.get("likely_cause") or "not tested"
         extra = f"; {bounds}" if bounds and "bound" not in cause else ""
-        return "far_above", f"far above the floor ({ratios}): likely cause: {cause}{extra}" + (
+        chaos = f"; {jitter_text(fl)}" if jitter_text(fl) else ""
+        return "far_above", f"far above the floor ({ratios}{chaos}): likely cause: {cause}{extra}" + (
             f"; {undet}" if undet else ""
         )
     at = f"at the floor ({ratios})" if ratios else "at the floor"
+    if fl.get("at_jitter_floor"):
+        why = jitter_text(fl) or "each take within the floor its own chaos allows (the result's takes)"
+        at = f"at the jitter floor ({ratios} the noise floor; {why})"
     if bounds:
         return "at_bound", f"{at}, but {bounds}" + (f"; {undet}" if undet else "")
     if undet:
