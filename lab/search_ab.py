@@ -719,7 +719,7 @@ def jitter_check(b, fits, p90, quantiles=(0.5, 0.75, 0.9)):
         h, t = b.held(x) / b.floor, b.train(x) / b.train_floor
         jh, jt = floors(b.hjob, x), floors(b.job, x)
         allow = {
-            str(q): [
+            f"q{round(100 * q)}": [
                 max(D.FLOOR_FAR_ABOVE, float(np.quantile(b.floor + jh, q)) / b.floor),
                 max(D.FLOOR_FAR_ABOVE, float(np.quantile(b.train_floor + jt, q)) / b.train_floor),
             ]
@@ -741,7 +741,7 @@ def jitter_check(b, fits, p90, quantiles=(0.5, 0.75, 0.9)):
 
 
 def jitter_check_table(caps):
-    """Per rule (the 2x rule, then each quantile): fits at the floor within the truth's spread (TP), outside it
+    """Per rule (the 2x rule, then each quantile: q75 = the 75th percentile): fits at the floor within the truth's spread (TP), outside it
     (FP: a wrong basin called fine), and the fits within it called far (FN), outside it called far (TN)."""
     fits = [f for c in caps for f in c["fits"]]
     rules = {"2x": lambda f: f["at_floor_2x"]}
