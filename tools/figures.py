@@ -713,6 +713,12 @@ SOURCES = {
         "cost": "expensive",
         "what": "the offsets goal with the default fit over seeds 0-2 (one fit each, about 4 min)",
     },
+    "fit_goals_offsets_jitter": {
+        "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-4", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the release/pins goal's capture fitted with the default, seeds 0-4: each result's floor block with the "
+        "jitter floor measured at the fit (the check of the jitter rule on fits it was not chosen on; about 7 min)",
+    },
     "fit_goals_offsets_e4000": {
         "argv": [
             "{py}",
