@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+from clothfit.core import defaults as D
 from clothfit.core.errors import ClothFitError
 from clothfit.core.fitting.evaluate import UNSEEN, evaluate
 from clothfit.core.fitting.job import FitConfig, FitJob
@@ -73,6 +74,13 @@ def test_a_fit_of_two_takes_reports_each_take_and_resumes_exactly(takes, tmp_pat
     for e in entries:
         assert e["floor"]["train_floor_pct"] > 0 and e["heldout_E_sil_pct"] > 0
         assert e["verdict_kind"] in ("at_floor", "far_above")
+        # each take's own jitter floor, measured at the shared settings with the take's own unknowns
+        q = e["floor"]["heldout_jitter_floor_pct"]
+        assert e["floor"]["heldout_floor_pct"] <= q["p10"] <= q["p50"] <= q["p90"]
+        assert e["floor"]["at_jitter_floor"] == (
+            not e["floor"]["far_above"]
+            and max(e["floor"]["train_ratio"], e["floor"]["heldout_ratio"]) > D.FLOOR_FAR_ABOVE
+        )
     n = [e["n_train_images"] for e in entries]
     mean = sum(e["train_E_sil_pct"] * k for e, k in zip(entries, n)) / sum(n)
     assert r1["floor"]["train_E_sil_pct"] == pytest.approx(mean, rel=1e-6)
