@@ -755,6 +755,55 @@ def jitter_check_table(caps):
     return table
 
 
+def looks_check(caps, quantile="q75"):
+    """What looking again would give, from a --jitter-check's fits alone (no new fit): a fit whose training error
+    is above the floor its own jitter allows (``quantile``, the product's rule on the training side, which a
+    fit knows when its search ends) is searched again with another seed, and the look with the lower training
+    error is kept. Another seed's search is any other seed's fit of the same capture, so the expected outcome is
+    the mean over the nine others (and, for a third look where the better of two is still above its floor,
+    over the eight left). Per capture and in total: the fits within the truth's own spread with one look, with a
+    second look where the first is above its floor, with up to three, and with two looks always; and how many
+    fits look again."""
+    out, total = [], {"one": 0.0, "second": 0.0, "third": 0.0, "always_two": 0.0, "looked_again": 0, "fits": 0}
+    for c in caps:
+        fits = c["fits"]
+        p90 = c["spread_p90"]
+
+        def inside(f, p90=p90):
+            return f["heldout_ratio"] <= p90
+
+        def above(f):
+            return f["train_ratio"] > f["allowed"][quantile][1]
+
+        def better(f, g):
+            return f if f["train_ratio"] <= g["train_ratio"] else g
+
+        row = {"capture": c["capture"], "one": 0.0, "second": 0.0, "third": 0.0, "always_two": 0.0, "looked_again": 0}
+        for f in fits:
+            others = [g for g in fits if g is not f]
+            row["one"] += inside(f)
+            row["always_two"] += float(np.mean([inside(better(f, g)) for g in others]))
+            if not above(f):
+                row["second"] += inside(f)
+                row["third"] += inside(f)
+                continue
+            row["looked_again"] += 1
+            row["second"] += float(np.mean([inside(better(f, g)) for g in others]))
+            third = []
+            for g in others:
+                b = better(f, g)
+                if not above(b):
+                    third.append(inside(b))
+                else:
+                    third.append(float(np.mean([inside(better(b, h)) for h in others if h is not g])))
+            row["third"] += float(np.mean(third))
+        row["fits"] = len(fits)
+        for k in total:
+            total[k] += row[k]
+        out.append(row)
+    return {"quantile": quantile, "captures": out, "total": total}
+
+
 def summary(rows, spread=None):
     """Per (capture, strategy): seeds, median / best / worst ratio, seeds <= 1.2x, mean CPU; with ``spread``
     (capture name -> jitter_spread's result) also the seeds within the jitter spread's 90th percentile."""
@@ -859,6 +908,13 @@ def main(argv=None):
         "--seeds), beside the truth's own spread (--spread) and the rules that call a fit at the floor, as JSON here",
     )
     ap.add_argument(
+        "--looks-check",
+        nargs=2,
+        metavar=("JITTER_CHECK", "OUT"),
+        help="instead of fits: from a --jitter-check JSON (or its recording), what a second or third look would give "
+        "where a fit ends above its own jitter floor (no new fit), as JSON here",
+    )
+    ap.add_argument(
         "--spread",
         help="a --jitter-spread JSON: the summary counts the seeds within each capture's 90th percentile",
     )
@@ -923,6 +979,14 @@ def main(argv=None):
             out.append(jitter_spread(Bench(capture_path(c))))
             print(json.dumps({k: v for k, v in out[-1].items() if k != "ratios"}), file=sys.stderr, flush=True)
         write_json(a.jitter_spread, {"captures": out})
+        return
+    if a.looks_check:
+        from clothfit.core.jsonio import read_json, write_json
+
+        d = read_json(a.looks_check[0])
+        r = looks_check(d.get("data", d)["captures"])
+        print(json.dumps(r["total"]), file=sys.stderr)
+        write_json(a.looks_check[1], r)
         return
     if a.jitter_check:
         from clothfit.core.jsonio import read_json, write_json

@@ -376,6 +376,14 @@ SOURCES = {
         "seeds 0-9) the rules that call a fit at the floor (2x alone; 2x or the jitter floor at its 50th, 75th, 90th "
         "percentile) against the truth's own spread (about 6 min)",
     },
+    "search_looks": {
+        "argv": ["{py}", "lab/search_ab.py", "--looks-check", "docs/figures/search_jitter_check.json", "{out}"],
+        "cost": "cheap",
+        "rtol": 1e-9,
+        "what": "looking again where a fit ends above its own jitter floor (the training side, as a fit knows it when its "
+        "search ends), from search_jitter_check's 50 fits alone: the fits within the truth's own spread with one "
+        "look, a second look, up to three, two always (another seed's search = the mean over the other seeds' fits)",
+    },
     "search_grid4": {
         "argv": _search_ab_reused(
             "staged-rs48-step01,staged-grid",
