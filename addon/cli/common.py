@@ -277,6 +277,14 @@ def search_args(s):
         "--population", type=int, default=None, help="optimiser population (default: GA 7n = 21, CMA-ES 4 + 3 ln n = 7)"
     )
     s.add_argument(
+        "--searches",
+        type=int,
+        default=None,
+        help=f"searches at most: a search that ends above the floor its own jitter allows searches again from another "
+        f"seed, adding its budget (default: {D.FIT_SEARCHES}; 1: never; fits of under "
+        f"{D.SEARCH_AGAIN_MIN_BUDGET} evaluations search once)",
+    )
+    s.add_argument(
         "--search",
         action="append",
         default=[],

@@ -125,6 +125,7 @@ def _fit_config(a, cap):
         resolution=res(a.resolution),
         cloth_mass=a.cloth_mass,
         population=a.population,
+        searches=getattr(a, "searches", None),
     )
     backend = getattr(a, "backend", None)
     if backend is not None:

@@ -159,6 +159,12 @@ JITTER_QUANTILE = 0.75  # a fit within the images' noise floor plus its neighbou
 # fixed first: the most fits within the truth's own spread called at the floor, with no fit outside it called so that
 # the 2x rule alone did not (0.75: 29 of 34 within, against 20 for 2x alone; 0.9: 33 but four more outside;
 # lab/search_ab.py --jitter-check, figure search_jitter_check)
+FIT_SEARCHES = 3  # a fit whose search ends above the floor its own jitter allows on the training images searches again
+# from another seed, up to this many searches in all, and keeps the best (fit --searches; docs/search.md, "Searching
+# again": on the search captures' 50 fits, 34 within the truth's own spread with one search, 41.7 expected with up to
+# two, 44.6 with up to three, 16 of 50 fits searching again; lab/search_ab.py --looks-check, figure search_looks)
+SEARCH_AGAIN_SEED = 1000  # ... the n-th search again runs with the fit's seed + n times this
+SEARCH_AGAIN_MIN_BUDGET = 1000  # ... only in a fit of at least this many evaluations (a shorter one is a quick look)
 START_HELDOUT_MARGIN = 0.05  # a fit that started from a user's settings (a scene's Cloth modifier, a warm start)
 # must predict its held-out cameras and frames more than 5 % better than those settings do, or the verdict says that
 # it is no better than what it was given (``start_better``): a contact scene's chaos alone moves the error that much

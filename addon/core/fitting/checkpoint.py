@@ -164,8 +164,9 @@ def load_stages(job: FitJob, st: Any, outcome: dict[str, Any], path: str | os.Pa
         raise bad("quality ladder")
     if state.stage == "rung" and (ladder is None or not ladder.allows(state.stage_quality)):
         raise bad("a rung outside the ladder")
-    if state.stage == "search":  # the search's end follows the budget asked for now
-        state.stage_end = job.state.stage_end
+    if state.stage == "search":  # the search's end follows the budget asked for now (a search again's: from its start)
+        again = state.again or {}
+        state.stage_end = again["start"] + job.search_end if again.get("searches") else job.state.stage_end
     if ladder is not None and state.stage_quality is not None and not ladder.allows(state.stage_quality):
         raise bad("stage_quality outside the ladder")
     job.state, job.alone_opt = state, None
@@ -260,15 +261,19 @@ def resume(
         )
     opt = optimizer_from_state(ck["optimizer_state"])
     load_stages(job, ck["stages"], ck, path)
-    main = job.state.stage == "search" or (job.state.stage in ("done", "profile") and len(job.state.records) == 1)
+    recs = job.state.records
+    main = job.state.stage == "search" or (
+        job.state.stage in ("done", "profile") and bool(recs) and all(r["stage"] == "search" for r in recs)
+    )
+    ref = job.main_optimizer() if (job.state.again or {}).get("searches") else job.opt  # a search again's seed
     mine = (
-        type(job.opt),
-        job.opt.space.state_dict(),
-        job.opt.seed,
-        _int_attr(job.opt, "popsize"),
-        _int_attr(job.opt, "population"),
-        _int_attr(job.opt, "children"),
-        _int_attr(job.opt, "restarts"),
+        type(ref),
+        ref.space.state_dict(),
+        ref.seed,
+        _int_attr(ref, "popsize"),
+        _int_attr(ref, "population"),
+        _int_attr(ref, "children"),
+        _int_attr(ref, "restarts"),
     )
     theirs = (
         type(opt),

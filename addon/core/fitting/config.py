@@ -82,6 +82,8 @@ class FitConfig:
     restarts: int | None = None  # cma-es: IPOP restarts after convergence (population doubled each);
     # None = the model's default (paper 0, blender BLENDER_FIT_RESTARTS)
     intervals: bool = True  # end with each setting's and offset's interval (fitting/intervals.py)
+    searches: int | None = None  # searches at most: a search that ends above the floor its jitter allows searches
+    # again from another seed (None: D.FIT_SEARCHES; 1: never; each search again adds its budget to the fit's)
     uncertain: object = None  # the manipulation's unknowns to estimate: None = the capture's
     # 'uncertain' block; "none" = nothing; "time_offset=S,handles=M" or an
     # object {time_offset, handles} (physics/scenario.Uncertainty)
@@ -219,6 +221,7 @@ class FitConfig:
         ):
             numval(name, lo, hi)
         intval("ga_stall", 1)
+        intval("searches", 1, 10)
         intval("portfolio_runs", 1, 64)
         intval("portfolio_max_polishes", 1, 10**6)
         for name in ("cma_active", "staged_second_warm", "staged_warm_tail_stuck", "staged_restart_grid"):

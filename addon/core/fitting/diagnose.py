@@ -102,6 +102,28 @@ def _jitter_floor(job, x, obj, sils, floor_pct, side) -> dict:
     }
 
 
+def above_jitter_floor(job: FitJob, x: np.ndarray, f: float) -> str | None:
+    """Why a search that ended at ``x`` with training error ``f`` (``E_all``, at the running quality) should search
+    again: its error is above ``FLOOR_FAR_ABOVE`` times the training images' noise floor and above the floor its
+    own jitter allows there (``_jitter_floor``: what a fit knows when its search ends, no held-out image used); None
+    when it is within, or neither can be measured (a scene evaluator's fit, a floor of 0)."""
+    obj = job.objective
+    mt = _model_silhouettes(job, x, obj)
+    if mt is None:
+        return None
+    tf = capture_floor(job.capture, job.train_cameras, job.train_frames, job.config.resolution, model=mt)
+    if _is_zero(tf):
+        return None
+    e, floor = 100.0 * float(f) / obj.n_images, 100.0 * tf.floor
+    allow = max(D.FLOOR_FAR_ABOVE, _jitter_floor(job, x, obj, mt, floor, "train").get("train_allowed_ratio") or 0.0)
+    if e <= allow * floor:
+        return None
+    return (
+        f"the search ended at {e / floor:.1f}x the training images' noise floor, above the {allow:.1f}x its own "
+        f"jitter allows"
+    )
+
+
 def _probes(job, x, f0):
     """[(cause, what, error ratio to the best)] of the tests that apply to this fit."""
     out = []
@@ -170,10 +192,11 @@ def _still_improving(job):
     """A description when the main search stopped on its budget while its best still fell by more
     than ``CLEARLY`` over its last fifth, else None."""
     rec = [r for r in job.state.records if r["stage"] == "search"]
-    if not rec or rec[0]["stop"] != "budget":
+    if not rec or rec[-1]["stop"] != "budget":
         return None
-    n = rec[0]["evaluations"]
-    hist = [(e, f) for e, f in job.state.history_prev if e <= n and f is not None]
+    n = rec[-1]["evaluations"]  # the last search (a fit that searched again: the one that ran last)
+    start = (job.state.again or {}).get("start", 0)
+    hist = [(e - start, f) for e, f in job.state.history_prev if start <= e <= start + n and f is not None]
     if len(hist) < 2:
         return None
     before = [f for e, f in hist if e <= 0.8 * n]

@@ -45,6 +45,7 @@ from ..physics.blender_settings import rate_factor
 from ..physics.models import BlenderModel
 from ..safeio import exclusive_lock  # noqa: F401 (re-exported for the CLI)
 from . import checkpoint
+from .again import extra_budget, searches_result, start_again
 from .alone import alone_budget, alone_step
 from .checkpoint import STOP_REASONS, capture_hash, identity_diff, read_checkpoint, silhouettes_hash  # noqa: F401 (re-exported)  # noqa: F401 (re-exported for the CLI and tests)
 from .config import (  # noqa: F401 (re-exported)
@@ -346,8 +347,16 @@ class FitJob:
         return getattr(self, "search_end", self.config.max_evaluations)
 
     def main_optimizer(self) -> Any:
-        """The main search's optimiser, as configured (a fresh one: the checkpoint's identity names it)."""
-        return make_optimizer(self.optimizer_name, self.space, self.config.seed, **self._optimizer_kw())
+        """The main search's optimiser, as configured (a fresh one: the checkpoint's identity names it); a
+        search again (``again.py``) from the seed ``SEARCH_AGAIN_SEED`` on for each."""
+        seed = self.config.seed + D.SEARCH_AGAIN_SEED * (self.state.again or {}).get("searches", 0)
+        return make_optimizer(self.optimizer_name, self.space, seed, **self._optimizer_kw())
+
+    @property
+    def budget(self) -> int:
+        """The fit's evaluations in all: ``max_evaluations``, and the first search's share for each search
+        again."""
+        return self.config.max_evaluations + extra_budget(self)
 
     def rung_optimizer_name(self) -> str:
         """A rung's optimiser: CMA-ES from the warm start (a local search whatever the main optimiser was),
@@ -465,7 +474,7 @@ class FitJob:
 
     @property
     def progress(self) -> float:
-        return 1.0 if self.state.finished else min(1.0, self.evaluations / max(1, self.config.max_evaluations))
+        return 1.0 if self.state.finished else min(1.0, self.evaluations / max(1, self.budget))
 
     def chosen_quality(self) -> int | None:
         if self.ladder is None:
@@ -534,8 +543,7 @@ class FitJob:
         elif self.state.stage in ("search", "rung") and (self.opt.stopped or self.evaluations >= self.state.stage_end):
             self._next_stage()
         elif self.state.stage == "done" or (
-            self.evaluations >= self.config.max_evaluations
-            and self.state.stage not in ("profile", "alone", "intervals")
+            self.evaluations >= self.budget and self.state.stage not in ("profile", "alone", "intervals")
         ):
             self._next_stage()
         self.state.finished = self.state.stop_reason is not None
@@ -560,9 +568,14 @@ class FitJob:
                 self.ladder.record(s.stage_quality, s.best_by_quality[s.stage_quality][0])
 
     def _next_stage(self):
-        """End the running stage; start a rung, the profile, the intervals, each take alone, or finish."""
+        """End the running stage; search again, or start a rung, the profile, the intervals, each take alone,
+        or finish."""
         self._end_running()
-        left = self.config.max_evaluations - self.state.done_evals - self.profile_reserve  # the profile's kept
+        if self.state.stage == "search" and start_again(self):  # above the floor its jitter allows (again.py)
+            self.opt = self.main_optimizer()
+            self.state.stage_end = self.state.done_evals + self.search_end
+            return
+        left = self.budget - self.state.done_evals - self.profile_reserve  # the profile's kept
         if self.state.stage in ("search", "rung") and self.ladder is not None and self.state.best_by_quality:
             q = self.ladder.next()
             rung = self._rung_budget()
@@ -714,7 +727,7 @@ class FitJob:
 
     def result(self) -> FitResult:
         """The result so far (``result.FitResult``; ``to_json()`` is what the result file holds)."""
-        return job_result(self, isinstance(self.par, PaperParameters))
+        return job_result(self, isinstance(self.par, PaperParameters), searches_result(self))
 
     def save_result(self, path: str | os.PathLike) -> None:
         self.result().save(path)

@@ -44,7 +44,7 @@ def free_settings(job: Any) -> dict[str, float]:
 def progress_line(job: Any, seconds: float, rate: float) -> str:
     """One line: evaluations / budget, best E_sil per training image, the time spent (``seconds``) and
     the time left at ``rate`` evaluations per second, then the free settings by name."""
-    n, budget = int(job.evaluations), int(job.config.max_evaluations)
+    n, budget = int(job.evaluations), int(getattr(job, "budget", job.config.max_evaluations))
     best = job.best_error
     err = f"{100 * best / job.objective.n_images:.3f} %" if math.isfinite(best) else "none yet"
     settings = " ".join(f"{k} {v:.4g}" for k, v in free_settings(job).items())

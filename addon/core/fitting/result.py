@@ -255,9 +255,10 @@ def search_looks(looks: dict, n_images: int) -> dict:
     }
 
 
-def job_result(job: FitJob, paper: bool) -> FitResult:
+def job_result(job: FitJob, paper: bool, searches: dict | None = None) -> FitResult:
     """The result of ``job`` (a ``fitting.job.FitJob``) so far: what a fit writes. ``paper``: a fit of
-    the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``)."""
+    the paper's sheet (``params``), else of Blender's cloth (``blender_cloth``); ``searches``: the searches
+    again (``again.searches_result``)."""
     bp = job.best_params
     n_img = job.objective.n_images
     history = job.state.history_prev + (
@@ -308,7 +309,11 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
             res.update(job.par.describe(job.best_x[: job.npar]))
             if job.start_x is not None:  # what the fit was given (verdict ``start_better``: keep them)
                 res["start_settings"] = job.par.describe(job.start_x[: job.npar]).get("blender_cloth")
-    looks = next((r["looks"] for r in job.state.records if r["stage"] == "search" and "looks" in r), None)
+    # the starts of the search that found the best point (a fit that searched again: the lowest of its searches)
+    searched = [r for r in job.state.records if r["stage"] == "search" and "looks" in r]
+    looks = (
+        min(searched, key=lambda r: math.inf if r.get("best_f") is None else r["best_f"])["looks"] if searched else None
+    )
     if looks is not None:
         res["looks"] = search_looks(looks, n_img)
     if job.ladder is not None and job.ladder.tried:
@@ -356,5 +361,6 @@ def job_result(job: FitJob, paper: bool) -> FitResult:
             res["identifiable_error_pct"] = {
                 k: (100.0 * abs(est[k] - tru[k]) / abs(tru[k]) if tru[k] else None) for k in est
             }
+    res.update(searches or {})
     res["verdict_kind"], res["verdict"] = verdict(res)
     return FitResult(res)

@@ -34,7 +34,7 @@ SAVED_FIELDS = (
     "profile",
     "start_f",
 )
-LATER_FIELDS = ("polish_rounds", "polish_scale", "intervals", "alone", "cut_batches")  # absent from older ones
+LATER_FIELDS = ("polish_rounds", "polish_scale", "intervals", "alone", "cut_batches", "again")  # absent from older ones
 OUTCOME_FIELDS = ("elapsed", "exploded", "finished", "cancelled", "stop_reason", "error")
 
 
@@ -48,7 +48,9 @@ class RunState:
     ``search_stop``: why the main search stopped; ``profile``: the manipulation unknowns' profile
     (``offset_profile``), with ``polish_rounds`` done at step ``polish_scale``; ``start_f``: the user's own
     settings' error (the fit never answers worse); ``intervals``: the intervals stage's state
-    (``intervals``); ``alone``: the each-take-alone stage's (``alone``). The outcome: ``elapsed`` seconds
+    (``intervals``); ``alone``: the each-take-alone stage's (``alone``); ``again``: the searches again (a search
+    that ended above the floor its own jitter allows: ``searches`` started again, the evaluation ``start`` of the
+    running one, ``why`` each began and ``ended`` how the last check came out). The outcome: ``elapsed`` seconds
     stepping, ``exploded`` candidates, ``cut_batches`` (last batches cut to a budget), ``finished``,
     ``cancelled``, ``stop_reason`` (``STOP_REASONS``), ``error``; ``final`` and ``take_finals``: the errors
     beside the floor made once at the end (``diagnose``; not saved: made again from the best point)."""
@@ -67,6 +69,7 @@ class RunState:
     start_f: float | None = None
     intervals: dict | None = None
     alone: dict | None = None
+    again: dict | None = None
     elapsed: float = 0.0
     exploded: int = 0
     cut_batches: int = 0
@@ -104,6 +107,7 @@ class RunState:
         self.polish_rounds = 0
         self.polish_scale = 1.0
         self.intervals = None
+        self.again = None
         self.stage = "search"
         self.stage_end = search_end
         self.stop_reason = None
@@ -131,6 +135,7 @@ class RunState:
             if self.alone is None
             else dict(self.alone, opt=alone_opt_state if alone_opt_state is not None else self.alone.get("opt")),
             "cut_batches": self.cut_batches,
+            "again": self.again,
         }
 
     def saved_outcome(self) -> dict[str, Any]:
@@ -161,6 +166,7 @@ class RunState:
             intervals=check_intervals_state(st.get("intervals"), fit.n, bad),
             alone=check_alone_state(st.get("alone"), fit.n_takes, bad),
             cut_batches=st.get("cut_batches", 0),
+            again=check_again_state(st.get("again"), bad),
             elapsed=float(outcome["elapsed"]),
             exploded=int(outcome["exploded"]),
         )
@@ -312,6 +318,25 @@ def check_intervals_state(st: Any, n: int, bad: Callable[[str], ClothFitError]) 
     if not ok:
         raise bad("intervals")
     return st
+
+
+def check_again_state(st: Any, bad: Callable[[str], ClothFitError]) -> dict | None:
+    """The searches again (``RunState.again``), checked: None, or the state."""
+    if st is None:
+        return None
+    ok = (
+        isinstance(st, dict)
+        and set(st) == {"searches", "start", "why", "ended"}
+        and _is_int(st["searches"])
+        and _is_int(st["start"])
+        and isinstance(st["why"], list)
+        and len(st["why"]) == st["searches"]
+        and all(isinstance(w, str) for w in st["why"])
+        and (st["ended"] is None or isinstance(st["ended"], str))
+    )
+    if not ok:
+        raise bad("again")
+    return {"searches": st["searches"], "start": st["start"], "why": list(st["why"]), "ended": st["ended"]}
 
 
 def check_alone_state(st: Any, n_takes: int, bad: Callable[[str], ClothFitError]) -> dict | None:

@@ -23,8 +23,9 @@ these it is:
   it means nothing, so the line gives the errors beside a one-pixel shift of the outline instead;
 * ``unfinished`` (cancelled, or stopped before its floor report) and ``failed`` (an error).
 
-Every line but the last two ends by saying how many of the search's independent starts (the result's ``looks``)
-ended in the basin of its best one, where it made more than one.
+Every line but the last two ends by saying how many times the fit searched, where it searched again
+(``searches``: ``again.py``), and how many of the search's independent starts (the result's ``looks``) ended in
+the basin of its best one, where it made more than one.
 
 ``settings_at_bound(par, x)`` is the check behind ``at_bound`` for the free settings (the result's
 ``settings_at_bound``; the manipulation's offsets have their own, ``ManipulationParameters.at_bound``).
@@ -146,13 +147,22 @@ def looks_text(result: dict) -> str:
     return f"{k} of {n} starts of the search ended in this basin, {rest}: a basin no start reached may fit better"
 
 
+def searches_text(result: dict) -> str:
+    """How many times the fit searched (the result's ``searches``, ``again.py``), or '' for one search."""
+    sr = result.get("searches")
+    if not isinstance(sr, dict) or not isinstance(sr.get("count"), int) or sr["count"] < 2:
+        return ""
+    why = sr.get("why") or ["?"]
+    end = f"; the last ended {sr['ended']}" if sr.get("ended") else ""
+    return f"searched {sr['count']} times from different seeds, the best point of all kept (first: {why[0]}){end}"
+
+
 def verdict(result: dict) -> tuple[str, str]:
     """(kind, line) of a fit's result dict (see the module's text; ``kind`` is one of ``KINDS``), with how many
-    of the search's starts ended in its basin (``looks_text``)."""
+    times it searched (``searches_text``) and how many of the search's starts ended in its basin (``looks_text``)."""
     kind, line = _verdict(result)
-    looks = looks_text(result)
-    if looks and kind not in ("failed", "unfinished"):
-        line = f"{line}; {looks}"
+    if kind not in ("failed", "unfinished"):
+        line = "; ".join([line] + [t for t in (searches_text(result), looks_text(result)) if t])
     return kind, line
 
 
