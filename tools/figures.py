@@ -727,6 +727,18 @@ SOURCES = {
         "what": "the release/pins goal's capture fitted with the default, seeds 0-4: each result's floor block with the "
         "jitter floor measured at the fit (the check of the jitter rule on fits it was not chosen on; about 7 min)",
     },
+    "fit_goals_exact_seeds_0_4": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "0-4", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the exact-model goal's capture fitted as a user fits it (fit --cameras n:4, the default search, which "
+        "searches again where a search ends above its own jitter floor), seeds 0-4: held-out ratio to the truth's "
+        "error per seed (about 12 min)",
+    },
+    "fit_goals_exact_seeds_5_9": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the same, seeds 5-9 (run side by side with seeds 0-4; about 12 min)",
+    },
     "fit_goals_offsets_e4000": {
         "argv": [
             "{py}",
