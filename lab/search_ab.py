@@ -725,8 +725,16 @@ def jitter_check(b, fits, p90, quantiles=(0.5, 0.75, 0.9)):
             ]
             for q in quantiles
         }
+        raw = {  # the jitter floor alone, over the floor (before the 2x): what searching again compares with
+            f"q{round(100 * q)}": [
+                float(np.quantile(b.floor + jh, q)) / b.floor,
+                float(np.quantile(b.train_floor + jt, q)) / b.train_floor,
+            ]
+            for q in quantiles
+        }
         out["fits"].append(
             {
+                "allowed_raw": raw,
                 "seed": r["seed"],
                 "strategy": r["strategy"],
                 "heldout_ratio": h,
