@@ -763,7 +763,7 @@ def jitter_check_table(caps):
     return table
 
 
-def looks_check(caps, quantile="q75"):
+def looks_check(caps, quantile="q75", margin=None):
     """What looking again would give, from a --jitter-check's fits alone (no new fit): a fit whose training error
     is above the floor its own jitter allows (``quantile``, the product's rule on the training side, which a
     fit knows when its search ends) is searched again with another seed, and the look with the lower training
@@ -771,7 +771,8 @@ def looks_check(caps, quantile="q75"):
     the mean over the nine others (and, for a third look where the better of two is still above its floor,
     over the eight left). Per capture and in total: the fits within the truth's own spread with one look, with a
     second look where the first is above its floor, with up to three, and with two looks always; and how many
-    fits look again."""
+    fits look again. With ``margin``: a fit also looks again above ``margin`` times its jitter floor alone where
+    that is below the 2x (a fit between its own jitter floor and 2x may be in another basin)."""
     out, total = [], {"one": 0.0, "second": 0.0, "third": 0.0, "always_two": 0.0, "looked_again": 0, "fits": 0}
     for c in caps:
         fits = c["fits"]
@@ -781,7 +782,10 @@ def looks_check(caps, quantile="q75"):
             return f["heldout_ratio"] <= p90
 
         def above(f):
-            return f["train_ratio"] > f["allowed"][quantile][1]
+            limit = f["allowed"][quantile][1]
+            if margin is not None:  # also above ``margin`` times the jitter floor alone, where that is lower
+                limit = min(limit, margin * f["allowed_raw"][quantile][1])
+            return f["train_ratio"] > limit
 
         def better(f, g):
             return f if f["train_ratio"] <= g["train_ratio"] else g
@@ -992,7 +996,12 @@ def main(argv=None):
         from clothfit.core.jsonio import read_json, write_json
 
         d = read_json(a.looks_check[0])
-        r = looks_check(d.get("data", d)["captures"])
+        caps = d.get("data", d)["captures"]
+        r = looks_check(caps)
+        if all("allowed_raw" in f for c in caps for f in c["fits"]):
+            r["margin"] = looks_check(caps, margin=D.SEARCH_AGAIN_MARGIN)
+            r["margin"]["margin"] = D.SEARCH_AGAIN_MARGIN
+            print(json.dumps(r["margin"]["total"]), file=sys.stderr)
         print(json.dumps(r["total"]), file=sys.stderr)
         write_json(a.looks_check[1], r)
         return
