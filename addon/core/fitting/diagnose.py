@@ -104,9 +104,10 @@ def _jitter_floor(job, x, obj, sils, floor_pct, side) -> dict:
 
 def above_jitter_floor(job: FitJob, x: np.ndarray, f: float) -> str | None:
     """Why a search that ended at ``x`` with training error ``f`` (``E_all``, at the running quality) should search
-    again: its error is above ``FLOOR_FAR_ABOVE`` times the training images' noise floor and above the floor its
-    own jitter allows there (``_jitter_floor``: what a fit knows when its search ends, no held-out image used); None
-    when it is within, or neither can be measured (a scene evaluator's fit, a floor of 0)."""
+    again: its error is above the floor its own jitter allows on the training images (``_jitter_floor``: what a fit
+    knows when its search ends, no held-out image used) by more than ``SEARCH_AGAIN_MARGIN``, or above both that floor
+    and ``FLOOR_FAR_ABOVE`` times the noise floor; None when it is within, or neither can be measured (a scene
+    evaluator's fit, a floor of 0)."""
     obj = job.objective
     mt = _model_silhouettes(job, x, obj)
     if mt is None:
@@ -115,7 +116,12 @@ def above_jitter_floor(job: FitJob, x: np.ndarray, f: float) -> str | None:
     if _is_zero(tf):
         return None
     e, floor = 100.0 * float(f) / obj.n_images, 100.0 * tf.floor
-    allow = max(D.FLOOR_FAR_ABOVE, _jitter_floor(job, x, obj, mt, floor, "train").get("train_allowed_ratio") or 0.0)
+    raw = _jitter_floor(job, x, obj, mt, floor, "train").get("train_allowed_ratio")
+    # the verdict's rule (2x or the jitter floor), and SEARCH_AGAIN_MARGIN times the jitter floor where that is lower:
+    # a search between the two may be in another basin, and searching again costs time, not a wrong answer
+    allow = max(D.FLOOR_FAR_ABOVE, raw or 0.0)
+    if raw:
+        allow = min(allow, D.SEARCH_AGAIN_MARGIN * raw)
     if e <= allow * floor:
         return None
     return (
