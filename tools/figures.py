@@ -739,6 +739,11 @@ SOURCES = {
         "cost": "expensive",
         "what": "the same, seeds 5-9 (run side by side with seeds 0-4; about 12 min)",
     },
+    "fit_goals_exact_seeds_10_14": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "10-14", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the same, seeds 10-14: seeds no variant of the search was compared on (about 12 min)",
+    },
     "fit_goals_offsets_e4000": {
         "argv": [
             "{py}",
