@@ -21,9 +21,7 @@ TIMES = [0.1, 0.2, 0.3, 0.4]
 def cap(tmp_path_factory):
     """A blender-model capture with the usual boundary noise (ring of 8 cameras, 90 x 120)."""
     path = tmp_path_factory.mktemp("again") / "noisy"
-    synth_capture(
-        str(path), TRUTH, model={"name": "blender", "fps": 24}, rig="ring8", resolution=(90, 120), noise=0.05
-    )
+    synth_capture(str(path), TRUTH, model={"name": "blender", "fps": 24}, rig="ring8", resolution=(90, 120), noise=0.05)
     return load_capture(str(path))
 
 
