@@ -137,7 +137,7 @@ def _probes(job, x, f0):
     if lad is not None and lad.tried and not lad.probe_only:
         top = max(lad.tried)
         if job.chosen_quality() == top and lad.next() is None and top < max(lad.rungs):
-            up = lad._above(top)
+            up = lad.above(top)
             out.append(
                 (
                     "quality",

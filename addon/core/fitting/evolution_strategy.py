@@ -166,6 +166,11 @@ class CMAES(Optimizer):
     def run_popsize(self) -> int:
         return self.lam
 
+    @property
+    def pending_unit(self) -> np.ndarray | None:
+        """The batch asked but not told, in the unit cube (reflected as ``ask`` decodes it); None when none is."""
+        return None if self._pending is None else reflect_unit(self._pending)
+
     def ask(self) -> np.ndarray:
         """Candidates (lambda, n) in real space; asking again before tell() returns the same batch."""
         if self._pending is None:

@@ -54,7 +54,8 @@ class Ladder:
         e = float(error)
         self.tried[q] = min(e, self.tried.get(q, float("inf")))
 
-    def _above(self, q):
+    def above(self, q):
+        """The rung above quality ``q`` (one of the rungs), or None at the top."""
         i = self.rungs.index(q)
         return self.rungs[i + 1] if i + 1 < len(self.rungs) else None
 
@@ -72,7 +73,7 @@ class Ladder:
         c = self.chosen()  # above the start (next() asks only then)
         if c not in self.rungs:
             return None
-        up = self._above(c)
+        up = self.above(c)
         if up is None or up not in self.tried:
             return None
         m = int(round((c * up) ** 0.5))
@@ -83,10 +84,10 @@ class Ladder:
         if self.start not in self.tried or len(self.order) - 1 >= self.max_rungs:
             return None
         if self.probe_only:
-            up = self._above(self.start)
+            up = self.above(self.start)
             return up if up is not None and up not in self.tried else None
         top = max(self.tried)
-        up = self._above(top)
+        up = self.above(top)
         if len(self.tried) == 1 and up is not None:  # first rung: one above the start
             return up
         lower = [e for q, e in self.tried.items() if q < top]

@@ -50,7 +50,7 @@ class RunState:
     settings' error (the fit never answers worse); ``intervals``: the intervals stage's state
     (``intervals``); ``alone``: the each-take-alone stage's (``alone``); ``again``: the searches again (a search
     that ended above the floor its own jitter allows: ``searches`` started again, the evaluation ``start`` of the
-    running one, ``why`` each began and ``ended`` how the last check came out). The outcome: ``elapsed`` seconds
+    running one, ``why`` each began, ``ended`` how the last check came out and ``ends`` where each search ended). The outcome: ``elapsed`` seconds
     stepping, ``exploded`` candidates, ``cut_batches`` (last batches cut to a budget), ``finished``,
     ``cancelled``, ``stop_reason`` (``STOP_REASONS``), ``error``; ``final`` and ``take_finals``: the errors
     beside the floor made once at the end (``diagnose``; not saved: made again from the best point)."""
@@ -321,22 +321,46 @@ def check_intervals_state(st: Any, n: int, bad: Callable[[str], ClothFitError]) 
 
 
 def check_again_state(st: Any, bad: Callable[[str], ClothFitError]) -> dict | None:
-    """The searches again (``RunState.again``), checked: None, or the state."""
+    """The searches again (``RunState.again``), checked: None, or the state (``ends``, each ended search's
+    compared settings and unit-cube point, absent from older checkpoints: [])."""
     if st is None:
         return None
     ok = (
         isinstance(st, dict)
-        and set(st) == {"searches", "start", "why", "ended"}
+        and set(st) - {"ends"} == {"searches", "start", "why", "ended"}
         and _is_int(st["searches"])
         and _is_int(st["start"])
         and isinstance(st["why"], list)
         and len(st["why"]) == st["searches"]
         and all(isinstance(w, str) for w in st["why"])
         and (st["ended"] is None or isinstance(st["ended"], str))
+        and isinstance(st.get("ends", []), list)
+        and all(_is_end(e) for e in st.get("ends", []))
     )
     if not ok:
         raise bad("again")
-    return {"searches": st["searches"], "start": st["start"], "why": list(st["why"]), "ended": st["ended"]}
+    return {
+        "searches": st["searches"],
+        "start": st["start"],
+        "why": list(st["why"]),
+        "ended": st["ended"],
+        "ends": [list(e) for e in st.get("ends", [])],
+    }
+
+
+def _is_end(e: Any) -> bool:
+    """A search's end in ``again["ends"]``: [] or [names, unit-cube values], as long as each other."""
+    if e == []:
+        return True
+    return (
+        isinstance(e, list)
+        and len(e) == 2
+        and isinstance(e[0], list)
+        and isinstance(e[1], list)
+        and len(e[0]) == len(e[1])
+        and all(isinstance(n, str) for n in e[0])
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in e[1])
+    )
 
 
 def check_alone_state(st: Any, n_takes: int, bad: Callable[[str], ClothFitError]) -> dict | None:

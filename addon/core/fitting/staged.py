@@ -30,7 +30,6 @@ from .space import (
     checked_number,
     float_from_json,
     float_to_json,
-    reflect_unit,
     rng_state_from_json,
     sanitize_fitness,
     saved_active,
@@ -412,7 +411,7 @@ class StagedCMA(Optimizer):
         Xc = c.ask()
         if not self._staging:
             return Xc
-        X = self.space.decode(self._full_u(reflect_unit(c._pending)))
+        X = self.space.decode(self._full_u(c.pending_unit))
         X[:, self._idx] = Xc
         return X
 
@@ -439,10 +438,10 @@ class StagedCMA(Optimizer):
             self._next_run(self.children[-1])
             return
         c = self._current
-        if c._pending is None:
+        U = c.pending_unit
+        if U is None:
             raise ClothFitError("tell() called without a pending ask()")
         staging = self._staging
-        U = reflect_unit(c._pending)
         if staging:
             U = self._full_u(U)
         self._check_told(X, U)
