@@ -56,6 +56,8 @@ def test_reopening_the_search_forgets_the_stages_after_it():
         (lambda st: st["best_by_quality"][0][2].pop(), "best_by_quality"),
         (lambda st: st.update(profile={"handle_0": {"separated": True}}), "profile"),
         (lambda st: st.update(cut_batches=-1), "cut_batches"),
+        (lambda st: st.update(again={**AGAIN, "ends": [[1.5, [0.1, "y"]]]}), "again"),
+        (lambda st: st.update(again={**AGAIN, "ends": [[float("nan"), [0.1]]]}), "again"),
     ],
 )
 def test_a_saved_state_that_does_not_fit_the_fit_is_refused_in_one_line(spoil, what):
@@ -65,6 +67,18 @@ def test_a_saved_state_that_does_not_fit_the_fit_is_refused_in_one_line(spoil, w
         RunState.from_saved(stages, outcome, SHAPE, "ck.json")
     msg = str(e.value)
     assert "\n" not in msg and msg.startswith("checkpoint ck.json: bad 'stages'") and what in msg
+
+
+AGAIN = {"searches": 1, "start": 40, "why": ["above"], "ended": None}
+
+
+def test_the_searches_again_and_where_each_ended_read_back_and_an_older_state_without_them_too():
+    s = _running()
+    s.again = dict(AGAIN, ends=[[1.5, [0.25, 0.5]], []])
+    stages, outcome = _saved(s)
+    assert RunState.from_saved(stages, outcome, SHAPE, "ck.json")[0].again == s.again
+    stages["again"] = dict(AGAIN)  # saved before the searches' ends were kept
+    assert RunState.from_saved(stages, outcome, SHAPE, "ck.json")[0].again == dict(AGAIN, ends=[])
 
 
 def test_a_state_saved_before_cut_batches_were_recorded_still_reads():

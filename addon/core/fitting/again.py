@@ -7,9 +7,8 @@ the images' noise floor plus the jitter of its neighbours (``jitter.py``). Where
 searches again from another seed (``SEARCH_AGAIN_SEED`` apart), with the first search's budget added to the fit's,
 up to ``searches`` in all (``FitConfig.searches``, default ``FIT_SEARCHES``), and keeps the best point of all
 (``RunState.track``); the ladder, the profile and the intervals start from it. A search that ends in the basin of
-an earlier one (its strong settings within ``LOOKS_AGREE_UNIT`` of their range, as the result's ``looks`` counts a
-search's starts) ends the searching: another seed found the same basin, so the basin is not what keeps the fit above
-its floor. A fit of less than
+an earlier one (no ridge on the line between their best points: ``one_basin``) ends the searching: another seed found
+the same basin, so the basin is not what keeps the fit above its floor. A fit of less than
 ``SEARCH_AGAIN_MIN_BUDGET`` evaluations (a quick look), several takes, or a scene's own solver never searches again.
 
 ``start_again(job)`` makes that decision when a search ends (``FitJob._next_stage``) and records it in
@@ -44,22 +43,25 @@ def searches_allowed(job: FitJob) -> int:
 def start_again(job: FitJob) -> bool:
     """At the end of a search: whether to search again (and ``job.state.again`` says why, or how the check
     ended). The caller builds the new search's optimiser (``FitJob.main_optimizer``: the seed moves with
-    ``job.state.again``). A search that ends in the basin an earlier one ended in (``agreeing``) is not
-    followed by another: two searches from different seeds found one basin, so what keeps the fit above its
-    floor is not the basin (the manipulation's unknowns, the search's precision, the model), and a third
-    search costs its budget for nothing."""
+    ``job.state.again``). A search that ends in the basin an earlier one ended in (``one_basin``: no barrier
+    on the line between their best points) is not followed by another: two searches from different seeds found
+    one basin, so what keeps the fit above its floor is not the basin (the manipulation's unknowns, the search's
+    precision, the model), and a third search would cost its budget for nothing."""
     s = job.state
     ag = s.again or {"searches": 0, "start": 0, "why": [], "ended": None, "ends": []}
     if ag["searches"] + 1 >= searches_allowed(job) or s.stage_quality not in s.best_by_quality:
         return False
     f, x = s.best_by_quality[s.stage_quality]
     why = above_jitter_floor(job, np.asarray(x, dtype=np.float64), f)
-    ends = list(ag.get("ends") or []) + [ended_point(job)]
+    opt = job.opt
+    ends = list(ag.get("ends") or []) + [
+        [] if opt.best_x is None else [float(opt.best_f), [float(v) for v in opt.best_x]]
+    ]
     if why is None:
         if ag["searches"]:  # a search again that reached the floor: said in the result
             s.again = dict(ag, ended="at the floor its jitter allows", ends=ends)
         return False
-    same = agreeing(job, ends)
+    same = one_basin(job, ends)
     if same is not None:
         s.again = dict(ag, ends=ends, ended=same)
         return False
@@ -68,32 +70,37 @@ def start_again(job: FitJob) -> bool:
     return True
 
 
-def ended_point(job: FitJob) -> list:
-    """The search that just ended: ``[names compared, its best point's coordinates in the unit cube]`` (the
-    search's strong settings where it reports its starts' agreement, else every coordinate), or [] before any."""
-    opt = job.opt
-    if opt.best_x is None:
-        return []
-    looks = opt.looks()
-    names = list(looks["settings"]) if looks else list(job.space.names)
-    u = job.space.encode(np.asarray(opt.best_x, dtype=np.float64)[None])[0]
-    return [names, [float(u[job.space.names.index(n)]) for n in names]]
-
-
-def agreeing(job: FitJob, ends: list) -> str | None:
-    """Where the last of the searches' ``ends`` lies in the basin of an earlier one (every compared setting
-    within ``LOOKS_AGREE_UNIT`` of its search range, log-scaled, as the result's ``looks`` counts starts): how the
-    check ended, for the result; else None."""
-    if len(ends) < 2 or not ends[-1]:
+def one_basin(job: FitJob, ends: list) -> str | None:
+    """Whether the last of the searches' ``ends`` ([best error, best point] each) lies in the basin of the best
+    earlier one: the points a quarter, half and three quarters of the way between the two (in the unit cube:
+    log-scaled settings at even ratios) all score within ``SEARCH_AGAIN_BARRIER`` times the worse end (a basin's
+    floor can be a long valley along a setting the capture hardly sees; two basins have a ridge between them).
+    The check's evaluations are counted and a better point is kept. Returns how the check ended, for the result,
+    or None (another basin, or nothing to compare)."""
+    earlier = [(k, e) for k, e in enumerate(ends[:-1]) if e]
+    if not ends or not ends[-1] or not earlier:
         return None
-    names, u = ends[-1]
-    for k, e in enumerate(ends[:-1]):
-        if e and e[0] == names and np.all(np.abs(np.array(e[1]) - np.array(u)) <= D.LOOKS_AGREE_UNIT):
-            return (
-                f"in the basin search {k + 1} ended in (each of {', '.join(names)} within {D.LOOKS_AGREE_UNIT:g} "
-                f"of its search range): what keeps it above its floor is not the basin, so no search again"
-            )
-    return None
+    k, (fa, xa) = min(earlier, key=lambda ke: ke[1][0])
+    fb, xb = ends[-1]
+    sp = job.space
+    ua, ub = sp.encode(np.asarray([xa, xb], dtype=np.float64))
+    t = np.array(D.SEARCH_AGAIN_LINE)[:, None]
+    X = sp.decode(ua[None] + t * (ub - ua)[None])
+    f = job.evaluate(X)
+    s = job.state
+    s.done_evals += len(X)
+    s.exploded += int(np.sum(~np.isfinite(f)))
+    for fi, xi in zip(f, X):
+        if np.isfinite(fi):
+            s.track(s.stage_quality, float(fi), xi)
+    worst = max(fa, fb)
+    ridge = float(np.max(np.where(np.isfinite(f), f, np.inf))) / worst if worst > 0 else np.inf
+    if not ridge <= D.SEARCH_AGAIN_BARRIER:
+        return None
+    return (
+        f"in the basin search {k + 1} ended in (the points between their best score at most {ridge:.2f}x the worse "
+        f"of the two): what keeps it above its floor is not the basin, so no search again"
+    )
 
 
 def extra_budget(job: FitJob) -> int:

@@ -50,7 +50,7 @@ class RunState:
     settings' error (the fit never answers worse); ``intervals``: the intervals stage's state
     (``intervals``); ``alone``: the each-take-alone stage's (``alone``); ``again``: the searches again (a search
     that ended above the floor its own jitter allows: ``searches`` started again, the evaluation ``start`` of the
-    running one, ``why`` each began, ``ended`` how the last check came out and ``ends`` where each search ended). The outcome: ``elapsed`` seconds
+    running one, ``why`` each began, ``ended`` how the last check came out and ``ends`` each search's best error and point). The outcome: ``elapsed`` seconds
     stepping, ``exploded`` candidates, ``cut_batches`` (last batches cut to a budget), ``finished``,
     ``cancelled``, ``stop_reason`` (``STOP_REASONS``), ``error``; ``final`` and ``take_finals``: the errors
     beside the floor made once at the end (``diagnose``; not saved: made again from the best point)."""
@@ -321,8 +321,8 @@ def check_intervals_state(st: Any, n: int, bad: Callable[[str], ClothFitError]) 
 
 
 def check_again_state(st: Any, bad: Callable[[str], ClothFitError]) -> dict | None:
-    """The searches again (``RunState.again``), checked: None, or the state (``ends``, each ended search's
-    compared settings and unit-cube point, absent from older checkpoints: [])."""
+    """The searches again (``RunState.again``), checked: None, or the state (``ends``, each ended search's best
+    error and point, absent from older checkpoints: [])."""
     if st is None:
         return None
     ok = (
@@ -344,23 +344,25 @@ def check_again_state(st: Any, bad: Callable[[str], ClothFitError]) -> dict | No
         "start": st["start"],
         "why": list(st["why"]),
         "ended": st["ended"],
-        "ends": [list(e) for e in st.get("ends", [])],
+        "ends": [[] if not e else [float(e[0]), [float(v) for v in e[1]]] for e in st.get("ends", [])],
     }
 
 
 def _is_end(e: Any) -> bool:
-    """A search's end in ``again["ends"]``: [] or [names, unit-cube values], as long as each other."""
+    """A search's end in ``again["ends"]``: [] (it found nothing) or [best error, best point]."""
     if e == []:
         return True
     return (
         isinstance(e, list)
         and len(e) == 2
-        and isinstance(e[0], list)
+        and _is_finite(e[0])
         and isinstance(e[1], list)
-        and len(e[0]) == len(e[1])
-        and all(isinstance(n, str) for n in e[0])
-        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in e[1])
+        and all(_is_finite(v) for v in e[1])
     )
+
+
+def _is_finite(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def check_alone_state(st: Any, n_takes: int, bad: Callable[[str], ClothFitError]) -> dict | None:
