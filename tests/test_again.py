@@ -123,6 +123,24 @@ def test_a_search_again_resumes_to_the_same_fit(cap, above, tmp_path):
     assert r["searches"] == ref["searches"]
 
 
+def test_a_fit_that_searched_again_resumes_in_its_quality_ladder_and_when_finished(cap, above, tmp_path):
+    """A rung's optimiser keeps the fit's seed, whatever the searches again's: a checkpoint taken in a rung, or at
+    the end, resumes."""
+    cfg = _cfg(quality="auto")
+    ck = str(tmp_path / "ck.json")
+    job = FitJob(cap, cfg, checkpoint=ck)
+    while job.state.stage != "rung":
+        assert job.step()
+    job.step()
+    job.save_checkpoint(ck)
+    resumed = FitJob.resume(ck, capture=cap, config=cfg)
+    assert resumed.state.stage == "rung" and resumed.state.again["searches"] == D.FIT_SEARCHES - 1
+    r = resumed.run().to_json()
+    assert r["searches"]["count"] == D.FIT_SEARCHES
+    resumed.save_checkpoint(ck)
+    assert FitJob.resume(ck, capture=cap, config=cfg).state.finished
+
+
 def test_a_search_at_its_jitter_floor_a_short_fit_and_a_fit_of_one_search_search_once(cap, monkeypatch):
     monkeypatch.setattr(D, "SEARCH_AGAIN_MIN_BUDGET", 100)
     monkeypatch.setattr(A, "above_jitter_floor", lambda job, x, f: None)

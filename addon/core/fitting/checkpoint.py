@@ -265,7 +265,8 @@ def resume(
     main = job.state.stage == "search" or (
         job.state.stage in ("done", "profile") and bool(recs) and all(r["stage"] == "search" for r in recs)
     )
-    ref = job.main_optimizer() if (job.state.again or {}).get("searches") else job.opt  # a search again's seed
+    # a search again's optimiser has its own seed (a rung's keeps the fit's)
+    ref = job.main_optimizer() if main and (job.state.again or {}).get("searches") else job.opt
     mine = (
         type(ref),
         ref.space.state_dict(),
