@@ -744,6 +744,13 @@ SOURCES = {
         "cost": "expensive",
         "what": "the same, seeds 10-14: seeds no variant of the search was compared on (about 12 min)",
     },
+    "search_again_line": {
+        "argv": ["{py}", "lab/search_again_line.py", "out/fit_goals/exact", "--seeds", "9,12", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the training error on the line between where a fit's two searches ended, on the exact goal's seeds 9 "
+        "and 12 (the first search in another basin than the truth's, the second at the floor): is there a ridge a "
+        "rule could see (about 6 min)",
+    },
     "fit_goals_offsets_e4000": {
         "argv": [
             "{py}",

@@ -168,11 +168,6 @@ SEARCH_AGAIN_MARGIN = 1.25  # ... also above this times the jitter floor alone w
 # than that is not at the floor its take allows, even below 2x (the goal's capture, seeds 0-14 of fit: the searches in
 # the truth's basin end at 0.54-1.01x their jitter floor, the one in another basin at 1.52x)
 SEARCH_AGAIN_SEED = 1000  # ... the n-th search again runs with the fit's seed + n times this
-SEARCH_AGAIN_LINE = (0.25, 0.5, 0.75)  # ... but not after a search that ends in the basin of an earlier one: the
-# points this far along the line between their best points (unit cube) are scored, and where none is above
-SEARCH_AGAIN_BARRIER = 1.25  # ... this times the worse of the two ends, no ridge parts them: one basin (a quarter is
-# what the chaos of a take alone moves an error by between points of one basin: the jitter floor's allowed ratio is
-# 1.1-1.4x on the exact-model captures, docs/noise_floor.md)
 SEARCH_AGAIN_MIN_BUDGET = 1000  # ... only in a fit of at least this many evaluations (a shorter one is a quick look)
 START_HELDOUT_MARGIN = 0.05  # a fit that started from a user's settings (a scene's Cloth modifier, a warm start)
 # must predict its held-out cameras and frames more than 5 % better than those settings do, or the verdict says that

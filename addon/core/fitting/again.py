@@ -6,9 +6,7 @@ search ends, from the training images alone: ``diagnose.above_jitter_floor`` put
 the images' noise floor plus the jitter of its neighbours (``jitter.py``). Where it is above both, the fit
 searches again from another seed (``SEARCH_AGAIN_SEED`` apart), with the first search's budget added to the fit's,
 up to ``searches`` in all (``FitConfig.searches``, default ``FIT_SEARCHES``), and keeps the best point of all
-(``RunState.track``); the ladder, the profile and the intervals start from it. A search that ends in the basin of
-an earlier one (no ridge on the line between their best points: ``one_basin``) ends the searching: another seed found
-the same basin, so the basin is not what keeps the fit above its floor. A fit of less than
+(``RunState.track``); the ladder, the profile and the intervals start from it. A fit of less than
 ``SEARCH_AGAIN_MIN_BUDGET`` evaluations (a quick look), several takes, or a scene's own solver never searches again.
 
 ``start_again(job)`` makes that decision when a search ends (``FitJob._next_stage``) and records it in
@@ -41,66 +39,28 @@ def searches_allowed(job: FitJob) -> int:
 
 
 def start_again(job: FitJob) -> bool:
-    """At the end of a search: whether to search again (and ``job.state.again`` says why, or how the check
-    ended). The caller builds the new search's optimiser (``FitJob.main_optimizer``: the seed moves with
-    ``job.state.again``). A search that ends in the basin an earlier one ended in (``one_basin``: no barrier
-    on the line between their best points) is not followed by another: two searches from different seeds found
-    one basin, so what keeps the fit above its floor is not the basin (the manipulation's unknowns, the search's
-    precision, the model), and a third search would cost its budget for nothing."""
+    """At the end of a search: whether to search again (and ``job.state.again`` says why, how the check ended,
+    and where each search ended: ``ends``, [best error, best point] each). The caller builds the new search's
+    optimiser (``FitJob.main_optimizer``: the seed moves with ``job.state.again``)."""
     s = job.state
     ag = s.again or {"searches": 0, "start": 0, "why": [], "ended": None, "ends": []}
-    if ag["searches"] + 1 >= searches_allowed(job) or s.stage_quality not in s.best_by_quality:
-        return False
-    f, x = s.best_by_quality[s.stage_quality]
-    why = above_jitter_floor(job, np.asarray(x, dtype=np.float64), f)
     opt = job.opt
     ends = list(ag.get("ends") or []) + [
         [] if opt.best_x is None else [float(opt.best_f), [float(v) for v in opt.best_x]]
     ]
+    if ag["searches"] + 1 >= searches_allowed(job) or s.stage_quality not in s.best_by_quality:
+        if ag["searches"]:  # the last search allowed: where it ended, for the result
+            s.again = dict(ag, ends=ends)
+        return False
+    f, x = s.best_by_quality[s.stage_quality]
+    why = above_jitter_floor(job, np.asarray(x, dtype=np.float64), f)
     if why is None:
         if ag["searches"]:  # a search again that reached the floor: said in the result
             s.again = dict(ag, ended="at the floor its jitter allows", ends=ends)
         return False
-    same = one_basin(job, ends)
-    if same is not None:
-        s.again = dict(ag, ends=ends, ended=same)
-        return False
     s.again = {"searches": ag["searches"] + 1, "start": s.done_evals, "why": ag["why"] + [why], "ended": None}
     s.again["ends"] = ends
     return True
-
-
-def one_basin(job: FitJob, ends: list) -> str | None:
-    """Whether the last of the searches' ``ends`` ([best error, best point] each) lies in the basin of the best
-    earlier one: the points a quarter, half and three quarters of the way between the two (in the unit cube:
-    log-scaled settings at even ratios) all score within ``SEARCH_AGAIN_BARRIER`` times the worse end (a basin's
-    floor can be a long valley along a setting the capture hardly sees; two basins have a ridge between them).
-    The check's evaluations are counted and a better point is kept. Returns how the check ended, for the result,
-    or None (another basin, or nothing to compare)."""
-    earlier = [(k, e) for k, e in enumerate(ends[:-1]) if e]
-    if not ends or not ends[-1] or not earlier:
-        return None
-    k, (fa, xa) = min(earlier, key=lambda ke: ke[1][0])
-    fb, xb = ends[-1]
-    sp = job.space
-    ua, ub = sp.encode(np.asarray([xa, xb], dtype=np.float64))
-    t = np.array(D.SEARCH_AGAIN_LINE)[:, None]
-    X = sp.decode(ua[None] + t * (ub - ua)[None])
-    f = job.evaluate(X)
-    s = job.state
-    s.done_evals += len(X)
-    s.exploded += int(np.sum(~np.isfinite(f)))
-    for fi, xi in zip(f, X):
-        if np.isfinite(fi):
-            s.track(s.stage_quality, float(fi), xi)
-    worst = max(fa, fb)
-    ridge = float(np.max(np.where(np.isfinite(f), f, np.inf))) / worst if worst > 0 else np.inf
-    if not ridge <= D.SEARCH_AGAIN_BARRIER:
-        return None
-    return (
-        f"in the basin search {k + 1} ended in (the points between their best score at most {ridge:.2f}x the worse "
-        f"of the two): what keeps it above its floor is not the basin, so no search again"
-    )
 
 
 def extra_budget(job: FitJob) -> int:
@@ -108,9 +68,15 @@ def extra_budget(job: FitJob) -> int:
     return (job.state.again or {}).get("searches", 0) * job.search_end
 
 
+def _settings(job: FitJob, x: list) -> dict:
+    """A point's free settings in the result's units (``blender_cloth``'s, or the paper's m, k, l, d)."""
+    return dict(job.par.reported(name, x[k]) for k, name in enumerate(job.par.free))
+
+
 def searches_result(job: FitJob) -> dict:
     """The result's ``searches`` block: how many searches ran, why each again, their best training errors
-    (E_sil per image, %); {} for a fit of one search."""
+    (E_sil per image, %) and where each ended (``ended_at``: each search's best settings in the result's units, so
+    a user sees whether the searches found one basin); {} for a fit of one search."""
     ag = job.state.again
     if not ag or not ag["searches"]:
         return {}
@@ -122,6 +88,7 @@ def searches_result(job: FitJob) -> dict:
             "why": ag["why"],
             "ended": ag["ended"],
             "best_E_sil_pct": [None if f is None else 100.0 * float(f) / n for f in ends],
+            "ended_at": [_settings(job, e[1]) if e else None for e in ag.get("ends") or []],
             "note": f"a search that ends above the floor its own jitter allows searches again from another seed "
             f"(up to {searches_allowed(job)} in all, fit --searches): the best point of all is kept",
         }
