@@ -744,6 +744,19 @@ SOURCES = {
         "cost": "expensive",
         "what": "the same, seeds 10-14: seeds no variant of the search was compared on (about 12 min)",
     },
+    "generation_cost": {
+        "argv": ["{py}", "lab/generation_cost.py", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 1.0,
+        "what": "what a generation of the search costs by its size on this machine (the default fit's workload, one "
+        "batch of 1 to 32 candidates): wall and CPU ms, and wall over one candidate's (about 1 min)",
+    },
+    "fit_goals_continuum_again": {
+        "argv": ["{py}", "lab/fit_goals.py", "continuum", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the continuum goal (Warp's cotton and silk, fitted as a new user would) with the default that searches "
+        "again where a search ends above its jitter floor: a truth our model did not make (about 15 min)",
+    },
     "search_again_line": {
         "argv": ["{py}", "lab/search_again_line.py", "out/fit_goals/exact", "--seeds", "9,12", "--json", "{out}"],
         "cost": "expensive",
