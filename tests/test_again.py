@@ -122,6 +122,26 @@ def test_the_check_puts_the_search_beside_its_noise_floor_and_its_jitter(cap):
     assert above_jitter_floor(job, truth, ft) is None
 
 
+def test_the_training_floor_and_its_jitter_are_measured_once_per_point(cap, monkeypatch):
+    """The check for searching again and the report at the end measure the same thing where the point is the same:
+    measured once (deterministic, so the figures are the same either way)."""
+    from clothfit.core.fitting import diagnose
+
+    job = FitJob(cap, _cfg(max_evaluations=40, searches=1))
+    job.run()
+    f, x = job.state.best_by_quality[job.state.stage_quality]
+    calls = []
+    real = diagnose.jitter
+    monkeypatch.setattr(diagnose, "jitter", lambda *a: calls.append(1) or real(*a))
+    x1, x2 = np.asarray(x) * (1 + 1e-3), np.asarray(x) * (1 - 1e-3)
+    first = above_jitter_floor(job, x1, f)
+    assert above_jitter_floor(job, x1, f) == first and len(calls) == 1
+    above_jitter_floor(job, x2, f)
+    assert len(calls) == 2
+    job.floor_cache = {}
+    assert above_jitter_floor(job, x1, f) == first and len(calls) == 3  # measured again: the same figures
+
+
 def test_searches_is_checked():
     with pytest.raises(Exception, match="searches must be an integer in 1..10"):
         FitConfig(searches=0).checked()

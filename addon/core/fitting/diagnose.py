@@ -102,6 +102,31 @@ def _jitter_floor(job, x, obj, sils, floor_pct, side) -> dict:
     }
 
 
+def _train_floor(job, x) -> dict:
+    """The training side's floor at ``x`` on the running objective: ``{"mt": the clean silhouettes, "tf": the
+    images' noise floor}``, and ``"jitter"`` once measured (``_jitter_floor``'s block). Kept in ``job.floor_cache``
+    for the last point asked, so that the report at the end does not measure again what the check for searching
+    again measured at the same point and quality (the measurement is deterministic)."""
+    key = (np.asarray(x, dtype=np.float64).tobytes(), job.state.stage_quality, id(job.objective))
+    cache = getattr(job, "floor_cache", None)  # a take's view of a fit of several takes keeps none
+    hit = None if cache is None else cache.get(key)
+    if hit is None:
+        mt = _model_silhouettes(job, x, job.objective)
+        tf = capture_floor(job.capture, job.train_cameras, job.train_frames, job.config.resolution, model=mt)
+        hit = {"mt": mt, "tf": tf}
+        if cache is not None:
+            job.floor_cache = {key: hit}
+    return hit
+
+
+def _train_jitter(job, x, floor_pct) -> dict:
+    """``_jitter_floor`` on the training side at ``x``, measured once per point (``_train_floor``)."""
+    hit = _train_floor(job, x)
+    if "jitter" not in hit:
+        hit["jitter"] = _jitter_floor(job, x, job.objective, hit["mt"], floor_pct, "train")
+    return hit["jitter"]
+
+
 def above_jitter_floor(job: FitJob, x: np.ndarray, f: float) -> str | None:
     """Why a search that ended at ``x`` with training error ``f`` (``E_all``, at the running quality) should search
     again: its error is above the floor its own jitter allows on the training images (``_jitter_floor``: what a fit
@@ -109,14 +134,14 @@ def above_jitter_floor(job: FitJob, x: np.ndarray, f: float) -> str | None:
     and ``FLOOR_FAR_ABOVE`` times the noise floor; None when it is within, or neither can be measured (a scene
     evaluator's fit, a floor of 0)."""
     obj = job.objective
-    mt = _model_silhouettes(job, x, obj)
-    if mt is None:
+    tr = _train_floor(job, x)
+    if tr["mt"] is None:
         return None
-    tf = capture_floor(job.capture, job.train_cameras, job.train_frames, job.config.resolution, model=mt)
+    tf = tr["tf"]
     if _is_zero(tf):
         return None
     e, floor = 100.0 * float(f) / obj.n_images, 100.0 * tf.floor
-    raw = _jitter_floor(job, x, obj, mt, floor, "train").get("train_allowed_ratio")
+    raw = _train_jitter(job, x, floor).get("train_allowed_ratio")
     # the verdict's rule (2x or the jitter floor), and SEARCH_AGAIN_MARGIN times the jitter floor where that is lower:
     # a search between the two may be in another basin, and searching again costs time, not a wrong answer
     allow = max(D.FLOOR_FAR_ABOVE, raw or 0.0)
@@ -256,8 +281,7 @@ def report(job: FitJob) -> dict:
     cap, res = job.capture, job.config.resolution
     n = job.objective.n_images
     f0 = float(job.best_error)
-    mt = _model_silhouettes(job, x, job.objective)
-    tf = capture_floor(cap, job.train_cameras, job.train_frames, res, model=mt)
+    tf = _train_floor(job, x)["tf"]
     d = {
         "train_E_sil_pct": 100.0 * f0 / n,
         "train_floor_pct": 100.0 * tf.floor,
@@ -270,7 +294,7 @@ def report(job: FitJob) -> dict:
     d["floor_zero"] = _is_zero(tf)
     d["train_ratio"] = d["train_E_sil_pct"] / d["train_floor_pct"] if not d["floor_zero"] else None
     if not d["floor_zero"]:
-        d.update(_jitter_floor(job, x, job.objective, mt, d["train_floor_pct"], "train"))
+        d.update(_train_jitter(job, x, d["train_floor_pct"]))
     ho = _heldout(job)
     if ho is not None:
         cams, fidx = ho

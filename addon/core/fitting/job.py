@@ -183,6 +183,7 @@ class FitJob:
         if self.intervals_note is None:  # kept like the profile's: no rung eats into it
             self.profile_reserve += interval_budget(self.space.n)
         self.alone_opt = None  # several takes: the running optimiser of each take searched alone (alone.py)
+        self.floor_cache: dict = {}  # the training floor at the last point checked (diagnose.py; not checkpointed)
         self.profile_reserve += alone_budget(self)
         reserved += self.profile_reserve
         self.search_end = cfg.max_evaluations - reserved
