@@ -80,9 +80,10 @@ def test_a_search_again_resumes_to_the_same_fit(cap, above, tmp_path):
     assert r["searches"] == ref["searches"]
 
 
-def test_a_fit_that_searched_again_resumes_in_its_quality_ladder_and_when_finished(cap, above, tmp_path):
+def test_a_fit_that_searched_again_resumes_in_its_quality_ladder_and_when_finished(cap, above, tmp_path, monkeypatch):
     """A rung's optimiser keeps the fit's seed, whatever the searches again's: a checkpoint taken in a rung, or at
     the end, resumes."""
+    monkeypatch.setattr(A, "searches_allowed", lambda job: D.FIT_SEARCHES)  # (a fit with a ladder searches once)
     cfg = _cfg(quality="auto")
     ck = str(tmp_path / "ck.json")
     job = FitJob(cap, cfg, checkpoint=ck)
@@ -105,6 +106,9 @@ def test_a_search_at_its_jitter_floor_a_short_fit_and_a_fit_of_one_search_search
     assert "searches" not in r and len([s for s in r["stages"] if s["stage"] == "search"]) == 1
     monkeypatch.setattr(A, "above_jitter_floor", lambda job, x, f: "above")
     assert "searches" not in FitJob(cap, _cfg(searches=1)).run().to_json()
+    r = FitJob(cap, _cfg(quality="auto")).run().to_json()  # the quality still to be chosen
+    assert "searches" not in r and len([s for s in r["stages"] if s["stage"] == "search"]) == 1
+    assert len([s for s in r["stages"] if s["stage"] == "rung"]) >= 1
     monkeypatch.setattr(D, "SEARCH_AGAIN_MIN_BUDGET", 1000)
     assert "searches" not in FitJob(cap, _cfg()).run().to_json()  # a quick look of 240 evaluations
 

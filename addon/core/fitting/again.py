@@ -7,7 +7,8 @@ the images' noise floor plus the jitter of its neighbours (``jitter.py``). Where
 searches again from another seed (``SEARCH_AGAIN_SEED`` apart), with the first search's budget added to the fit's,
 up to ``searches`` in all (``FitConfig.searches``, default ``FIT_SEARCHES``), and keeps the best point of all
 (``RunState.track``); the ladder, the profile and the intervals start from it. A fit of less than
-``SEARCH_AGAIN_MIN_BUDGET`` evaluations (a quick look), several takes, or a scene's own solver never searches again.
+``SEARCH_AGAIN_MIN_BUDGET`` evaluations (a quick look), several takes, a scene's own solver, or a quality still to be
+chosen never searches again.
 
 ``start_again(job)`` makes that decision when a search ends (``FitJob._next_stage``) and records it in
 ``job.state.again``: ``searches`` started again, the evaluation ``start`` of the running one, ``why`` each began,
@@ -29,11 +30,19 @@ if TYPE_CHECKING:
 
 def searches_allowed(job: FitJob) -> int:
     """How many searches this fit may run in all: ``FitConfig.searches`` (default ``FIT_SEARCHES``), or 1 (it never
-    searches again) for a fit of less than ``SEARCH_AGAIN_MIN_BUDGET`` evaluations, with a scene's own solver, or
-    of several takes."""
+    searches again) for a fit of less than ``SEARCH_AGAIN_MIN_BUDGET`` evaluations, with a scene's own solver, of
+    several takes, or whose quality is still to be chosen: there the search runs at the ladder's start quality,
+    whose error also holds what that quality cannot follow, so its end beside the jitter floor cannot tell a wrong
+    basin from a wrong quality (docs/search.md: Warp's cotton searched three times at its start quality, the three
+    within a few per cent of each other, before the ladder halved the error)."""
     cfg = job.config
     n = D.FIT_SEARCHES if cfg.searches is None else int(cfg.searches)
-    if cfg.max_evaluations < D.SEARCH_AGAIN_MIN_BUDGET or job.evaluator is not None or len(job.takes) > 1:
+    if (
+        cfg.max_evaluations < D.SEARCH_AGAIN_MIN_BUDGET
+        or job.evaluator is not None
+        or len(job.takes) > 1
+        or job.ladder is not None
+    ):
         return 1
     return n
 

@@ -230,7 +230,9 @@ class FitJob:
         if self.par.initial is not None:
             x = np.asarray(self.par.initial[0], dtype=np.float64)
         elif self.evaluator is not None:
-            x = self.par.space.clip(np.array([self.par._coord(n, self.par.fixed[n]) for n in self.par.free])[None])[0]
+            x = self.par.space.clip(np.array([self.par.coordinate(n, self.par.fixed[n]) for n in self.par.free])[None])[
+                0
+            ]
         if x is None:
             return None
         return np.concatenate([x, np.zeros(self.space.n - self.npar)])
@@ -334,7 +336,7 @@ class FitJob:
         if strong:
             kw["first"] = strong + [n for n in list(self.space.names)[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]
             if par.initial is None:
-                kw["hold"] = {n: par._coord(n, par.fixed[n]) for n in par.free if n not in strong}
+                kw["hold"] = {n: par.coordinate(n, par.fixed[n]) for n in par.free if n not in strong}
         return kw
 
     def _strong_free(self) -> list:

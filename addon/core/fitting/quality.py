@@ -54,7 +54,7 @@ class Ladder:
         e = float(error)
         self.tried[q] = min(e, self.tried.get(q, float("inf")))
 
-    def above(self, q):
+    def above(self, q: int) -> int | None:
         """The rung above quality ``q`` (one of the rungs), or None at the top."""
         i = self.rungs.index(q)
         return self.rungs[i + 1] if i + 1 < len(self.rungs) else None
