@@ -757,6 +757,12 @@ SOURCES = {
         "what": "the continuum goal (Warp's cotton and silk, fitted as a new user would) with the default that searches "
         "again where a search ends above its jitter floor: a truth our model did not make (about 15 min)",
     },
+    "fit_goals_continuum_once": {
+        "argv": ["{py}", "lab/fit_goals.py", "continuum", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the continuum goal with the default since a fit whose quality is still to be chosen searches once "
+        "(the same command as fit_goals_continuum_again, a later commit; about 13 min)",
+    },
     "search_again_line": {
         "argv": ["{py}", "lab/search_again_line.py", "out/fit_goals/exact", "--seeds", "9,12", "--json", "{out}"],
         "cost": "expensive",
