@@ -76,6 +76,7 @@ def _report_with_jitter(job, monkeypatch, pct):
     monkeypatch.setattr(
         diagnose, "jitter", lambda *a: {"samples": 3, "relative": D.JITTER_RELATIVE, "pct": [pct, pct, pct]}
     )
+    job.floor_cache = {}  # the fit's own measurement at this point is kept (deterministic): replaced here
     return diagnose.report(job)
 
 

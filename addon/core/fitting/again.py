@@ -79,7 +79,7 @@ def extra_budget(job: FitJob) -> int:
 
 def _settings(job: FitJob, x: list) -> dict:
     """A point's free settings in the result's units (``blender_cloth``'s, or the paper's m, k, l, d)."""
-    return dict(job.par.reported(name, x[k]) for k, name in enumerate(job.par.free))
+    return dict(job.par.reported(name, x[k]) for k, name in enumerate(list(job.space.names)[: job.npar]))
 
 
 def searches_result(job: FitJob) -> dict:
