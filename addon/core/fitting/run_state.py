@@ -355,14 +355,10 @@ def _is_end(e: Any) -> bool:
     return (
         isinstance(e, list)
         and len(e) == 2
-        and _is_finite(e[0])
+        and _is_num(e[0])
         and isinstance(e[1], list)
-        and all(_is_finite(v) for v in e[1])
+        and all(_is_num(v) for v in e[1])
     )
-
-
-def _is_finite(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def check_alone_state(st: Any, n_takes: int, bad: Callable[[str], ClothFitError]) -> dict | None:
