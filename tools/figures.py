@@ -763,6 +763,19 @@ SOURCES = {
         "what": "the continuum goal with the default since a fit whose quality is still to be chosen searches once "
         "(the same command as fit_goals_continuum_again, a later commit; about 13 min)",
     },
+    "early_window_landscape": {
+        "argv": ["{py}", "lab/early_window.py", "landscape", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 0.05,
+        "what": "the default fit's capture: the truth's training error in three windows of the training frames with "
+        "one strong setting scaled from 1 + 1e-6 to 0.1 (which frames can lead a search to the truth; about 1 min)",
+    },
+    "early_window_fits": {
+        "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the default fit beside a fit in two steps of the same budget (the first five training frames alone, "
+        "then all from there), seeds 0-3 of the default fit's capture (about 20 min)",
+    },
     "search_again_line": {
         "argv": ["{py}", "lab/search_again_line.py", "out/fit_goals/exact", "--seeds", "9,12", "--json", "{out}"],
         "cost": "expensive",

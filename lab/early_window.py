@@ -1,0 +1,161 @@
+"""Whether the first frames of a take make a smoother search objective than all of them, on the default fit's capture.
+
+The default fit (``bench --default-fit``: a 21 x 21 cloth of Blender's model, 4 cameras x 15 frames at 480 x 640,
+quality chosen, the manipulation's unknowns estimated) ends about 14x its held-out floor, its settings near the
+truth's but bending 8x low. Two measurements:
+
+* ``landscape``: the truth's training error in three windows of the training frames (0.1-0.5 s, 0.6-1.0 s,
+  1.1-1.5 s) with one strong setting scaled by factors from 1 + 1e-6 to 0.1, the others at the truth. Where the
+  error in a window does not grow as the setting moves away, that window's frames cannot lead a search to it.
+* ``fits``: per seed, the default fit (``clothfit fit CAPTURE --cameras n:4 --times train``: quality chosen,
+  one search) beside a fit in two steps of the same total budget: the first five training frames alone at the
+  ladder's start quality (``--times 0.1,...,0.5 --quality 5 --searches 1``, 1000 evaluations), then all training
+  frames from its settings (``--init``, quality chosen, 1500 evaluations). Held-out ratio to the floor, the
+  strong settings, wall and CPU time of each.
+
+    python lab/early_window.py landscape --json OUT
+    python lab/early_window.py fits --seeds 0-3 --json OUT
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from clothfit.core.fitting.job import FitConfig, FitJob  # noqa: E402
+from clothfit.core.observation.camera import select_training  # noqa: E402
+from clothfit.core.observation.capture import load_capture  # noqa: E402
+from generation_cost import workload  # noqa: E402
+
+TRUTH = {  # the capture's settings (generation_cost.workload), Blender's defaults for the others, at mass 0.3
+    "tension_stiffness": 15.0,
+    "compression_stiffness": 15.0,
+    "shear_stiffness": 5.0,
+    "bending_stiffness": 0.5,
+    "tension_damping": 5.0,
+    "shear_damping": 5.0,
+    "bending_damping": 0.5,
+    "air_damping": 1.0,
+}
+MASS = 0.3  # Blender's default vertex mass: the search's settings are per unit mass
+WINDOWS = {
+    "0.1-0.5 s": [0.1, 0.2, 0.3, 0.4, 0.5],
+    "0.6-1.0 s": [0.6, 0.7, 0.8, 0.9, 1.0],
+    "1.1-1.5 s": [1.1, 1.2, 1.3, 1.4, 1.5],
+}
+FACTORS = [1.0, 1 + 1e-6, 1 + 1e-4, 1 + 1e-3, 1.01, 1.1, 1.5, 0.5, 0.2, 0.1]
+STRONG = ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damping")
+EARLY = "0.1,0.2,0.3,0.4,0.5"
+
+
+def landscape(root: str) -> dict:
+    cap = load_capture(root)
+    train, _ = select_training(cap.cameras, 4)
+    jobs = {
+        w: FitJob(cap, FitConfig(train_cameras=train, train_times=t, seed=0, quality=5)) for w, t in WINDOWS.items()
+    }
+    names = next(iter(jobs.values())).space.names
+    x0 = np.array([TRUTH.get(n, 0.0) / MASS if n in TRUTH else 0.0 for n in names])
+    rows = []
+    for s in STRONG:
+        X = np.repeat(x0[None], len(FACTORS), 0)
+        X[:, names.index(s)] *= np.array(FACTORS)
+        for w, j in jobs.items():
+            e = 100.0 * j.evaluate(X) / j.objective.n_images
+            rows.append({"setting": s, "window": w, "factors": FACTORS, "E_sil_pct": [float(v) for v in e]})
+            print(f"{s:18s} {w}: " + " ".join(f"{v:.3f}" for v in e), flush=True)
+    return {"factors": FACTORS, "windows": WINDOWS, "rows": rows}
+
+
+def _fit(argv: list[str]) -> tuple[float, float]:
+    """Run ``clothfit fit`` as a user would: its wall and CPU time."""
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    subprocess.run(
+        [sys.executable, "-m", "clothfit", "fit", *argv, "--force", "--quiet"], check=True, stdout=subprocess.DEVNULL
+    )
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.perf_counter() - t0, (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime)
+
+
+def _summary(path: str, wall: float, cpu: float) -> dict:
+    with open(path, encoding="utf-8") as fh:
+        r = json.load(fh)
+    fl = r.get("floor") or {}
+    bc = r["blender_cloth"]
+    return {
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "evaluations": r["evaluations"],
+        "train_E_sil_pct": r["best_E_sil_mean_pct"],
+        "heldout_ratio": fl.get("heldout_ratio"),
+        "train_ratio": fl.get("train_ratio"),
+        "quality": bc.get("quality"),
+        "settings": {k: bc[k] for k in STRONG},
+        "bending_over_truth": bc["bending_stiffness"] / TRUTH["bending_stiffness"],
+    }
+
+
+def fits(root: str, seeds: list[int], tmp: str) -> list[dict]:
+    rows = []
+    base = [root, "--cameras", "n:4"]
+    for s in seeds:
+        load = os.getloadavg()[0]
+        out = os.path.join(tmp, f"default{s}.json")
+        w, c = _fit([*base, "--times", "train", "--seed", str(s), "--out", out])
+        default = _summary(out, w, c)
+        early = os.path.join(tmp, f"early{s}.json")
+        w1, c1 = _fit(
+            [*base, "--times", EARLY, "--quality", "5", "--searches", "1", "--max-evaluations", "1000"]
+            + ["--seed", str(s), "--out", early]
+        )
+        full = os.path.join(tmp, f"then_all{s}.json")
+        w2, c2 = _fit(
+            [*base, "--times", "train", "--init", early, "--max-evaluations", "1500", "--seed", str(s), "--out", full]
+        )
+        two = _summary(full, w1 + w2, c1 + c2)
+        two["early_step"] = _summary(early, w1, c1)
+        rows.append({"seed": s, "load_1min_at_start": load, "default": default, "early_then_all": two})
+        print(
+            f"seed {s}: default {default['heldout_ratio']:.2f}x held-out floor, bending {default['bending_over_truth']:.3g}x "
+            f"the truth's, {default['wall_s']:.0f} s; early then all {two['heldout_ratio']:.2f}x, bending "
+            f"{two['bending_over_truth']:.3g}x, {two['wall_s']:.0f} s (load {load:.2f})",
+            flush=True,
+        )
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("what", choices=("landscape", "fits"))
+    ap.add_argument("--seeds", default="0-3", help="fits: seeds A-B")
+    ap.add_argument("--json")
+    a = ap.parse_args(argv)
+    tmp = tempfile.mkdtemp(prefix="early_window_")
+    workload(tmp)  # the default fit's capture
+    root = os.path.join(tmp, "default21")
+    if a.what == "landscape":
+        out = landscape(root)
+    else:
+        lo, _, hi = a.seeds.partition("-")
+        seeds = list(range(int(lo), int(hi or lo) + 1))
+        out = {"seeds": seeds, "fits": fits(root, seeds, tmp)}
+    if a.json:
+        with open(a.json, "w", encoding="utf-8") as fh:
+            json.dump(out, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
