@@ -7,11 +7,11 @@ truth's but bending 8x low. Two measurements:
 * ``landscape``: the truth's training error in three windows of the training frames (0.1-0.5 s, 0.6-1.0 s,
   1.1-1.5 s) with one strong setting scaled by factors from 1 + 1e-6 to 0.1, the others at the truth. Where the
   error in a window does not grow as the setting moves away, that window's frames cannot lead a search to it.
-* ``fits``: per seed, the default fit (``clothfit fit CAPTURE --cameras n:4 --times train``: quality chosen,
-  one search) beside a fit in two steps of the same total budget: the first five training frames alone at the
-  ladder's start quality (``--times 0.1,...,0.5 --quality 5 --searches 1``, 1000 evaluations), then all training
-  frames from its settings (``--init``, quality chosen, 1500 evaluations). Held-out ratio to the floor, the
-  strong settings, wall and CPU time of each.
+* ``fits``: per seed, the default fit as ``bench --default-fit`` runs it (``clothfit fit CAPTURE --cameras n:4
+  --times train --quality auto``: the quality chosen by the fit, one search) beside a fit in two steps of the same
+  total budget: the first five training frames alone at the ladder's start quality (``--times 0.1,...,0.5
+  --quality 5 --searches 1``, 1000 evaluations), then all training frames from its settings (``--init``, quality
+  chosen, 1500 evaluations). Held-out ratio to the floor, the strong settings, wall and CPU time of each.
 
     python lab/early_window.py landscape --json OUT
     python lab/early_window.py fits --seeds 0-3 --json OUT
@@ -113,7 +113,7 @@ def fits(root: str, seeds: list[int], tmp: str) -> list[dict]:
     for s in seeds:
         load = os.getloadavg()[0]
         out = os.path.join(tmp, f"default{s}.json")
-        w, c = _fit([*base, "--times", "train", "--seed", str(s), "--out", out])
+        w, c = _fit([*base, "--times", "train", "--quality", "auto", "--seed", str(s), "--out", out])
         default = _summary(out, w, c)
         early = os.path.join(tmp, f"early{s}.json")
         w1, c1 = _fit(
@@ -122,7 +122,8 @@ def fits(root: str, seeds: list[int], tmp: str) -> list[dict]:
         )
         full = os.path.join(tmp, f"then_all{s}.json")
         w2, c2 = _fit(
-            [*base, "--times", "train", "--init", early, "--max-evaluations", "1500", "--seed", str(s), "--out", full]
+            [*base, "--times", "train", "--quality", "auto", "--init", early, "--max-evaluations", "1500"]
+            + ["--seed", str(s), "--out", full]
         )
         two = _summary(full, w1 + w2, c1 + c2)
         two["early_step"] = _summary(early, w1, c1)
