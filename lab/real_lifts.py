@@ -3,7 +3,7 @@ user fits them: converted with ``clothfit points-to-capture``, each trial fitted
 with ``clothfit evaluate`` on the cameras and frames the fit did not see and against the real points themselves.
 
     python lab/real_lifts.py convert [--diffcloud out/diffcloud_real2sim] [--out out/real_lifts] [--fabrics paper,navy]
-    python lab/real_lifts.py trials [--diffcloud DIR] [--out out/real_lifts] [--fabrics paper,navy] --json FILE
+    python lab/real_lifts.py trials [--diffcloud DIR] [--out out/real_lifts] [--fabrics paper,navy] [--seed N] [--trials T,..] --json FILE
     python lab/real_lifts.py pairs [--diffcloud DIR] [--out out/real_lifts] [--fabrics paper,navy] --json FILE
     python lab/real_lifts.py pictures [--out out/real_lifts] [--fabrics paper,navy] [--images docs/img]
 
@@ -161,14 +161,16 @@ def splat_floor(cap_dir: str, fit: str, seed: int = 0) -> float:
     return 100.0 * float(np.nanmean(P))
 
 
-def _fit(fit: str, caps: list) -> tuple[dict, float | None, float | None]:
-    """(the result, wall s, CPU s) of the fit of ``caps`` together as a user fits them; a finished ``fit`` is reused
-    (then no times)."""
+def _fit(fit: str, caps: list, seed: int = 0) -> tuple[dict, float | None, float | None]:
+    """(the result, wall s, CPU s) of the fit of ``caps`` together as a user fits them (``--seed`` where not 0); a
+    finished ``fit`` is reused (then no times)."""
     wall = cpu = None
     if not os.path.exists(fit):
         with open(fit[: -len(".json")] + ".log", "w") as log:
             _, wall, cpu = _clothfit(
-                ["fit", *caps, "--model", "blender", "--cameras", "n:4", "--times", "even", "--out", fit], log
+                ["fit", *caps, "--model", "blender", "--cameras", "n:4", "--times", "even", "--out", fit]
+                + (["--seed", str(seed)] if seed else []),
+                log,
             )
     with open(fit) as f:
         return json.load(f), wall, cpu
@@ -253,18 +255,21 @@ def pairs(a) -> None:
 
 def trials(a) -> None:
     convert(a)  # the captures not made yet
-    fits = os.path.join(a.out, "fits")
+    fits = os.path.join(a.out, "fits" if not a.seed else f"fits_seed{a.seed}")
     os.makedirs(fits, exist_ok=True)
     rows = []
     for fabric in a.fabrics.split(","):
         for trial in TRIALS[fabric]:
+            if a.trials and trial not in a.trials.split(","):
+                continue
             cap, fit = os.path.join(a.out, trial), os.path.join(fits, f"{trial}.json")
             load = os.getloadavg()
-            fr, wall, cpu = _fit(fit, [cap])
+            fr, wall, cpu = _fit(fit, [cap], a.seed)
             fl = fr.get("floor") or {}
             row = {
                 "fabric": fabric,
                 "trial": trial,
+                "seed": a.seed,
                 "train_E_sil_pct": fl.get("train_E_sil_pct"),
                 "train_floor_pct": fl.get("train_floor_pct"),
                 "heldout_floor_pct": fl.get("heldout_floor_pct"),
@@ -332,6 +337,8 @@ def main(argv=None) -> None:
     c = sub.add_parser("convert")
     t = sub.add_parser("trials")
     t.add_argument("--json", required=True)
+    t.add_argument("--seed", type=int, default=0, help="the fits' seed (fits of another seed in OUT/fits_seed<N>)")
+    t.add_argument("--trials", help="only these trials (comma separated), e.g. navy,navy2")
     pr = sub.add_parser("pairs")
     pr.add_argument("--json", required=True)
     pic = sub.add_parser("pictures")

@@ -694,6 +694,24 @@ SOURCES = {
         "scored on its held-out cameras and frames and against the real points (a finished fit in "
         "out/real_lifts/fits is reused: about 30 min without them)",
     },
+    "real_lifts_navy_seed1": {
+        "argv": [
+            "{py}",
+            "lab/real_lifts.py",
+            "trials",
+            "--fabrics",
+            "navy",
+            "--trials",
+            "navy,navy2",
+            "--seed",
+            "1",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the two navy trials whose fits ended far above the third's (45 % held-out against 25 %) fitted again "
+        "with another seed: how much of their error is the search's (out/real_lifts/fits_seed1; about 10 min)",
+    },
     "real_lifts_pairs": {
         "argv": ["{py}", "lab/real_lifts.py", "pairs", "--fabrics", "paper,navy", "--json", "{out}"],
         "cost": "expensive",
