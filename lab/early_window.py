@@ -13,8 +13,12 @@ truth's but bending 8x low. Two measurements:
   --quality 5 --searches 1``, 1000 evaluations), then all training frames from its settings (``--init``, quality
   chosen, 1500 evaluations). Held-out ratio to the floor, the strong settings, wall and CPU time of each.
 
+* ``cameras``: per seed, the default fit with more training cameras (``--cameras n:N``), the same budget: more
+  views of the one take, against the same floor's ratio (held-out on the cameras it did not train on).
+
     python lab/early_window.py landscape --json OUT
     python lab/early_window.py fits --seeds 0-3 --json OUT
+    python lab/early_window.py cameras --n 8 --seeds 0-3 --json OUT
 """
 
 from __future__ import annotations
@@ -137,9 +141,28 @@ def fits(root: str, seeds: list[int], tmp: str) -> list[dict]:
     return rows
 
 
+def cameras(root: str, seeds: list[int], n: int, tmp: str) -> list[dict]:
+    rows = []
+    for s in seeds:
+        load = os.getloadavg()[0]
+        out = os.path.join(tmp, f"cameras{n}_{s}.json")
+        w, c = _fit(
+            [root, "--cameras", f"n:{n}", "--times", "train", "--quality", "auto", "--seed", str(s), "--out", out]
+        )
+        r = _summary(out, w, c)
+        rows.append({"seed": s, "cameras": n, "load_1min_at_start": load, "fit": r})
+        print(
+            f"seed {s}, {n} cameras: {r['heldout_ratio']:.2f}x held-out floor, bending {r['bending_over_truth']:.3g}x "
+            f"the truth's, {r['wall_s']:.0f} s (load {load:.2f})",
+            flush=True,
+        )
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("landscape", "fits"))
+    ap.add_argument("what", choices=("landscape", "fits", "cameras"))
+    ap.add_argument("--n", type=int, default=8, help="cameras: training cameras")
     ap.add_argument("--seeds", default="0-3", help="fits: seeds A-B")
     ap.add_argument("--json")
     a = ap.parse_args(argv)
@@ -151,7 +174,10 @@ def main(argv=None) -> int:
     else:
         lo, _, hi = a.seeds.partition("-")
         seeds = list(range(int(lo), int(hi or lo) + 1))
-        out = {"seeds": seeds, "fits": fits(root, seeds, tmp)}
+        if a.what == "fits":
+            out = {"seeds": seeds, "fits": fits(root, seeds, tmp)}
+        else:
+            out = {"seeds": seeds, "cameras": a.n, "fits": cameras(root, seeds, a.n, tmp)}
     if a.json:
         with open(a.json, "w", encoding="utf-8") as fh:
             json.dump(out, fh, indent=1)

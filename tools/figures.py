@@ -794,6 +794,12 @@ SOURCES = {
         "what": "the default fit beside a fit in two steps of the same budget (the first five training frames alone, "
         "then all from there), seeds 0-3 of the default fit's capture (about 20 min)",
     },
+    "early_window_cameras": {
+        "argv": ["{py}", "lab/early_window.py", "cameras", "--n", "8", "--seeds", "0-3", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the default fit of the time goal's capture with 8 training cameras instead of 4, seeds 0-3: more "
+        "views of one take against the low-bending basin (about 12 min)",
+    },
     "search_again_line": {
         "argv": ["{py}", "lab/search_again_line.py", "out/fit_goals/exact", "--seeds", "9,12", "--json", "{out}"],
         "cost": "expensive",
