@@ -107,7 +107,7 @@ def _train_floor(job, x) -> dict:
     images' noise floor}``, and ``"jitter"`` once measured (``_jitter_floor``'s block). Kept in ``job.floor_cache``
     for the last point asked, so that the report at the end does not measure again what the check for searching
     again measured at the same point and quality (the measurement is deterministic)."""
-    key = (np.asarray(x, dtype=np.float64).tobytes(), job.state.stage_quality, id(job.objective))
+    key = (np.asarray(x, dtype=np.float64).tobytes(), job.state.stage_quality)
     cache = getattr(job, "floor_cache", None)  # a take's view of a fit of several takes keeps none
     hit = None if cache is None else cache.get(key)
     if hit is None:

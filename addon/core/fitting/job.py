@@ -230,9 +230,8 @@ class FitJob:
         if self.par.initial is not None:
             x = np.asarray(self.par.initial[0], dtype=np.float64)
         elif self.evaluator is not None:
-            x = self.par.space.clip(np.array([self.par.coordinate(n, self.par.fixed[n]) for n in self.par.free])[None])[
-                0
-            ]
+            scene = np.array([self.par.coordinate(n, self.par.fixed[n]) for n in self.par.free])
+            x = self.par.space.clip(scene[None])[0]
         if x is None:
             return None
         return np.concatenate([x, np.zeros(self.space.n - self.npar)])
