@@ -16,9 +16,14 @@ truth's but bending 8x low. Two measurements:
 * ``cameras``: per seed, the default fit with more training cameras (``--cameras n:N``), the same budget: more
   views of the one take, against the same floor's ratio (held-out on the cameras it did not train on).
 
+* ``frames``: per seed, the fit on the first ``--k`` training frames alone (4 cameras, quality chosen, the default
+  budget): the last frames left out, the weight the landscape suggests; scored on the held-out cameras at every
+  training time beside the truth's own error there (``clothfit evaluate``).
+
     python lab/early_window.py landscape --json OUT
     python lab/early_window.py fits --seeds 0-3 --json OUT
     python lab/early_window.py cameras --n 8 --seeds 0-3 --json OUT
+    python lab/early_window.py frames --k 10 --seeds 0-3 --json OUT
 """
 
 from __future__ import annotations
@@ -159,9 +164,45 @@ def cameras(root: str, seeds: list[int], n: int, tmp: str) -> list[dict]:
     return rows
 
 
+def _heldout_all(root: str, params: str | None, tmp: str) -> float:
+    """E_sil [%] on the cameras a 4-camera fit does not train on, at every training time (the truth's without
+    ``params``)."""
+    out = os.path.join(tmp, "evaluate.json")
+    argv = ["evaluate", root, "--cameras", "heldout:4", "--times", "train", "--json", out, "--force"]
+    subprocess.run(
+        [sys.executable, "-m", "clothfit", *argv, *(["--params", params] if params else [])],
+        check=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    with open(out, encoding="utf-8") as fh:
+        return float(json.load(fh)["silhouette_error_pct"])
+
+
+def frames(root: str, seeds: list[int], k: int, tmp: str) -> dict:
+    times = ",".join(f"{0.1 * (i + 1):.1f}" for i in range(k))
+    truth = _heldout_all(root, None, tmp)
+    rows = []
+    for s in seeds:
+        load = os.getloadavg()[0]
+        out = os.path.join(tmp, f"frames{k}_{s}.json")
+        w, c = _fit([root, "--cameras", "n:4", "--times", times, "--quality", "auto", "--seed", str(s), "--out", out])
+        r = _summary(out, w, c)
+        r["heldout_all_times_pct"] = _heldout_all(root, out, tmp)
+        r["heldout_all_times_over_truth"] = r["heldout_all_times_pct"] / truth
+        rows.append({"seed": s, "frames": k, "load_1min_at_start": load, "fit": r})
+        print(
+            f"seed {s}, first {k} frames: held-out at every training time {r['heldout_all_times_over_truth']:.2f}x the "
+            f"truth's, bending {r['bending_over_truth']:.3g}x the truth's, {r['wall_s']:.0f} s (load {load:.2f})",
+            flush=True,
+        )
+    return {"times": times, "truth_heldout_all_times_pct": truth, "fits": rows}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("landscape", "fits", "cameras"))
+    ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames"))
+    ap.add_argument("--k", type=int, default=10, help="frames: the first K training frames")
     ap.add_argument("--n", type=int, default=8, help="cameras: training cameras")
     ap.add_argument("--seeds", default="0-3", help="fits: seeds A-B")
     ap.add_argument("--json")
@@ -176,6 +217,8 @@ def main(argv=None) -> int:
         seeds = list(range(int(lo), int(hi or lo) + 1))
         if a.what == "fits":
             out = {"seeds": seeds, "fits": fits(root, seeds, tmp)}
+        elif a.what == "frames":
+            out = {"seeds": seeds, "frames": a.k, **frames(root, seeds, a.k, tmp)}
         else:
             out = {"seeds": seeds, "cameras": a.n, "fits": cameras(root, seeds, a.n, tmp)}
     if a.json:

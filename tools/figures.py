@@ -800,6 +800,12 @@ SOURCES = {
         "what": "the default fit of the time goal's capture with 8 training cameras instead of 4, seeds 0-3: more "
         "views of one take against the low-bending basin (about 12 min)",
     },
+    "early_window_first_ten": {
+        "argv": ["{py}", "lab/early_window.py", "frames", "--k", "10", "--seeds", "0-3", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the time goal's capture fitted on its first 10 training frames alone (the last five, which blur "
+        "bending, left out), seeds 0-3, scored on the held-out cameras at every training time (about 10 min)",
+    },
     "search_again_line": {
         "argv": ["{py}", "lab/search_again_line.py", "out/fit_goals/exact", "--seeds", "9,12", "--json", "{out}"],
         "cost": "expensive",
