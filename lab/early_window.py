@@ -2,7 +2,7 @@
 
 The default fit (``bench --default-fit``: a 21 x 21 cloth of Blender's model, 4 cameras x 15 frames at 480 x 640,
 quality chosen, the manipulation's unknowns estimated) ends about 14x its held-out floor, its settings near the
-truth's but bending 8x low. Two measurements:
+truth's but bending 8x low. Four measurements:
 
 * ``landscape``: the truth's training error in three windows of the training frames (0.1-0.5 s, 0.6-1.0 s,
   1.1-1.5 s) with one strong setting scaled by factors from 1 + 1e-6 to 0.1, the others at the truth. Where the
@@ -12,10 +12,8 @@ truth's but bending 8x low. Two measurements:
   total budget: the first five training frames alone at the ladder's start quality (``--times 0.1,...,0.5
   --quality 5 --searches 1``, 1000 evaluations), then all training frames from its settings (``--init``, quality
   chosen, 1500 evaluations). Held-out ratio to the floor, the strong settings, wall and CPU time of each.
-
 * ``cameras``: per seed, the default fit with more training cameras (``--cameras n:N``), the same budget: more
   views of the one take, against the same floor's ratio (held-out on the cameras it did not train on).
-
 * ``frames``: per seed, the fit on the first ``--k`` training frames alone (4 cameras, quality chosen, the default
   budget): the last frames left out, the weight the landscape suggests; scored on the held-out cameras at every
   training time beside the truth's own error there (``clothfit evaluate``).
@@ -29,7 +27,6 @@ truth's but bending 8x low. Two measurements:
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import resource
 import subprocess
@@ -43,6 +40,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from clothfit.core.fitting.job import FitConfig, FitJob  # noqa: E402
+from clothfit.core.jsonio import read_json, write_json  # noqa: E402
 from clothfit.core.observation.camera import select_training  # noqa: E402
 from clothfit.core.observation.capture import load_capture  # noqa: E402
 from generation_cost import workload  # noqa: E402
@@ -75,7 +73,7 @@ def landscape(root: str) -> dict:
         w: FitJob(cap, FitConfig(train_cameras=train, train_times=t, seed=0, quality=5)) for w, t in WINDOWS.items()
     }
     names = next(iter(jobs.values())).space.names
-    x0 = np.array([TRUTH.get(n, 0.0) / MASS if n in TRUTH else 0.0 for n in names])
+    x0 = np.array([TRUTH.get(n, 0.0) / MASS for n in names])  # the manipulation's unknowns at 0
     rows = []
     for s in STRONG:
         X = np.repeat(x0[None], len(FACTORS), 0)
@@ -99,8 +97,7 @@ def _fit(argv: list[str]) -> tuple[float, float]:
 
 
 def _summary(path: str, wall: float, cpu: float) -> dict:
-    with open(path, encoding="utf-8") as fh:
-        r = json.load(fh)
+    r = read_json(path, "fit result")
     fl = r.get("floor") or {}
     bc = r["blender_cloth"]
     return {
@@ -175,8 +172,7 @@ def _heldout_all(root: str, params: str | None, tmp: str) -> float:
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    with open(out, encoding="utf-8") as fh:
-        return float(json.load(fh)["silhouette_error_pct"])
+    return float(read_json(out, "evaluate output")["silhouette_error_pct"])
 
 
 def frames(root: str, seeds: list[int], k: int, tmp: str) -> dict:
@@ -204,7 +200,7 @@ def main(argv=None) -> int:
     ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames"))
     ap.add_argument("--k", type=int, default=10, help="frames: the first K training frames")
     ap.add_argument("--n", type=int, default=8, help="cameras: training cameras")
-    ap.add_argument("--seeds", default="0-3", help="fits: seeds A-B")
+    ap.add_argument("--seeds", default="0-3", help="fits, cameras, frames: seeds A-B")
     ap.add_argument("--json")
     a = ap.parse_args(argv)
     tmp = tempfile.mkdtemp(prefix="early_window_")
@@ -222,8 +218,7 @@ def main(argv=None) -> int:
         else:
             out = {"seeds": seeds, "cameras": a.n, "fits": cameras(root, seeds, a.n, tmp)}
     if a.json:
-        with open(a.json, "w", encoding="utf-8") as fh:
-            json.dump(out, fh, indent=1)
+        write_json(a.json, out)
     return 0
 
 

@@ -13,7 +13,6 @@ wall ms per candidate, and the load.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import tempfile
@@ -83,8 +82,7 @@ def main(argv=None) -> int:
         "rows": rows,
     }
     if a.json:
-        with open(a.json, "w", encoding="utf-8") as fh:
-            json.dump(out, fh, indent=1)
+        write_json(a.json, out)
     return 0
 
 
