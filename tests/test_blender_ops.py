@@ -342,7 +342,9 @@ def test_panel_sections_draw(state, tmp_path):
         p.fit_verdict_kind = "far_above"
         p.fit_verdict = "far above the floor (training 5.0x): likely cause: bounds (k_over_m at its upper bound 1e+05)"
         p.fit_intervals = (
-            "90 % intervals (from the error's own noise)\nk 9 [8.5, 9.6]\nd 0.0001 [1e-05, 0.001]  UNDETERMINED"
+            "90 % intervals (from the error's own noise)\nCAUTION: the fit ends 5.0x above its floor, perhaps in "
+            "another basin than the cloth's: these intervals describe that basin, and the cloth's settings may lie "
+            "outside them\nk 9 [8.5, 9.6]\nd 0.0001 [1e-05, 0.001]  UNDETERMINED"
         )
     drawn = []
     for _key, _label, func in panel.SECTIONS:
@@ -364,6 +366,10 @@ def test_panel_sections_draw(state, tmp_path):
         assert p.fit_verdict in " ".join(x for k, x in drawn if k == "label")
         # and each setting's interval, one label each, the undetermined one flagged
         assert {"k 9 [8.5, 9.6]", "d 0.0001 [1e-05, 0.001]  UNDETERMINED"} <= {x for k, x in drawn if k == "label"}
+        # what the intervals cannot say, wrapped over labels of the panel's width
+        labels = [x for k, x in drawn if k == "label"]
+        start = labels.index(next(x for x in labels if x.startswith("CAUTION")))
+        assert max(len(x) for x in labels[start : start + 4]) <= 56 and "outside them" in " ".join(labels[start:])
     if state == "empties":
         assert ("list", "CLOTHFIT_UL_handles") in drawn
         assert ("label", "r0 c15 (#15)") in drawn and ("prop", "release_time") in drawn

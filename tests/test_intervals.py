@@ -114,6 +114,41 @@ def test_a_round_whose_every_point_fails_keeps_the_last_proposal():
     assert r["intervals"]["a"][0] <= 0.4 <= r["intervals"]["a"][1]
 
 
+def test_the_axis_reach_is_the_conditional_90_percent_interval_of_a_quadratic_error():
+    # E = T (u - u0)^2 / (2 s^2) rises by T h^2 / (2 s^2) at a step h: the reach is u0 -+ z s
+    s, h, T = 0.05, 0.1, 1.0
+    r = T * h * h / (2 * s * s)
+    st = {"u0": [0.3], "rise": [[h, r, 4 * r]], "threshold": 0.1, "temperature": T}
+    lo, hi = intervals.axis_reach(st, 0)
+    assert 0.3 - lo == pytest.approx(D.INTERVAL_Z * s) and hi - 0.3 == pytest.approx(D.INTERVAL_Z * s / 2)
+    st["rise"] = [[h, 0.0, None]]  # no rise within the noise: at least the threshold's reach; a failed side: none
+    lo, hi = intervals.axis_reach(st, 0)
+    assert 0.3 - lo == pytest.approx(D.INTERVAL_Z * h * math.sqrt(T / 0.2)) and hi == 0.3
+    assert intervals.axis_reach({"u0": [0.3]}, 0) is None  # a state from before the axes were kept
+
+
+def test_weights_that_rest_on_one_lucky_point_do_not_make_an_interval_narrower_than_its_axis():
+    job = QuadraticJob()
+    good = job.evaluate
+
+    def lucky(X):  # the sampled point nearest the best in a scores far below everything: its weight is all
+        f = good(X)
+        st = job.state.intervals
+        if st and st["phase"] == "sample" and st["round"] == 0:
+            f[int(np.argmin(np.abs(np.atleast_2d(X)[:, 0] - 0.4)))] -= 100 * job.T
+        return f
+
+    job.evaluate = lucky
+    r = run_stage(job)
+    assert r["interval_method"]["effective_points"] < 1.5
+    # with b held, a's error is quadratic with sd 1 / sqrt(1 / s1^2 + 1 / s2^2), at the stage's temperature
+    scale = math.sqrt(r["interval_method"]["temperature"] / job.T)
+    cond = D.INTERVAL_Z * scale / math.sqrt(1 / job.s1**2 + 1 / job.s2**2)
+    lo, hi = r["intervals"]["a"]
+    assert hi - lo > 0.7 * 2 * cond
+    assert r["interval_method"]["details"]["a"]["axis_widened"]
+
+
 def test_the_stage_stays_within_its_budget():
     job = QuadraticJob()
     run_stage(job)
@@ -199,6 +234,10 @@ def test_the_intervals_are_shown_to_people_and_the_undetermined_marked(cap, tmp_
     ha, hb = cv2.imread(plain[-1]).shape[0], cv2.imread(shown[-1]).shape[0]
     assert hb >= ha + 18 * len(lines)
     assert interval_lines({"intervals": None, "intervals_note": "why"}) == ["no intervals: why"]
+    assert not [x for x in lines if x.startswith("CAUTION")]
+    res["floor"] = dict(res["floor"], far_above=True, heldout_ratio=6.5)  # a fit far above its floor
+    (caution,) = [x for x in interval_lines(res) if x.startswith("CAUTION")]
+    assert "6.5x above its floor" in caution and "outside them" in caution
 
 
 def test_the_export_keeps_every_value_and_marks_the_undetermined(cap, tmp_path, capsys):
@@ -221,3 +260,11 @@ def test_the_export_keeps_every_value_and_marks_the_undetermined(cap, tmp_path, 
     preset = tmp_path / "fitted.py"
     assert cli.main(["export-blender-cloth", str(path), "--preset", str(preset)]) == 0
     assert f"# {FREE[1]} " in preset.read_text()
+    capsys.readouterr()
+    assert "intervals_caveat" not in out and "CAUTION" not in script
+    res["floor"] = dict(res["floor"], far_above=True, heldout_ratio=6.5)  # far above: the intervals say so
+    res.save(str(path))
+    assert cli.main(["export-blender-cloth", str(path)]) == 0
+    assert "6.5x above its floor" in json.loads(capsys.readouterr().out)["intervals_caveat"]
+    assert cli.main(["export-blender-cloth", str(path), "--python"]) == 0
+    assert "# CAUTION: the fit ends 6.5x above its floor" in capsys.readouterr().out

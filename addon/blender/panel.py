@@ -243,6 +243,10 @@ def draw_verdict(layout, p, width=56):
     if p.fit_intervals:  # how sure each setting is; the undetermined ones flagged
         col = box.column(align=True)
         for line in p.fit_intervals.split("\n"):
+            if line.startswith("CAUTION"):  # what the intervals cannot say (a fit far above its floor), wrapped
+                for k, part in enumerate(textwrap.wrap(line, width)):
+                    col.label(text=part, icon="ERROR" if k == 0 else "NONE")
+                continue
             col.label(text=line, icon="ERROR" if line.endswith("UNDETERMINED") else "NONE")
 
 

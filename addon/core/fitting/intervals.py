@@ -19,7 +19,10 @@ scale for every scale setting), one batch of evaluations per step, in three phas
    ``exp(-(E - E_ref) / T)`` over the density it was drawn from (all rounds' proposals as one
    mixture); points outside the search's bounds weigh nothing. Each coordinate's interval is the 5 % and
    95 % weighted quantiles of the points: **marginal** (every other setting and offset free), not the
-   error's curvature with everything else held.
+   error's curvature with everything else held. The weights of a chaotic take's errors often rest on a few
+   points (the result's ``effective_points``), and a quantile of two points says little: every interval is
+   therefore at least as wide as the axes phase's own rise allows (``axis_reach``: the 90 % interval of a
+   quadratic error along that coordinate alone; a marginal is never narrower than a conditional).
 
 The temperature comes from the capture's own noise, not from a choice: two evaluations that differ by
 jitter alone differ by more than ``INTERVAL_Z * sqrt(2) * sigma`` one time in twenty, so a rise of that
@@ -183,8 +186,10 @@ def _phase_axes(job, st):
     f = _evaluate(job, st, U)
     thr, c = st["threshold"], st["centre"]
     settled, flat = list(st["settled"]), list(st["flat"])
+    rises = st.setdefault("rise", [None] * n)  # per coordinate: [step, rise at -step, rise at +step], the last
     for k, i in enumerate(todo):
         sides = f[2 * k : 2 * k + 2]
+        rises[i] = [float(h[i])] + [_finite(v - c) for v in sides[::-1]]
         rise = float(np.max(np.where(np.isfinite(sides), sides - c, np.inf)))
         flat[i] = False
         if rise < thr and h[i] < D.INTERVAL_AXIS_MAX:  # within the noise: not yet a rise
@@ -286,6 +291,24 @@ def _phase_sample(job, st):
         st["phase"] = "done"
 
 
+def axis_reach(st: dict, i: int) -> tuple[float, float] | None:
+    """The ends (unit cube) the error's rise along coordinate ``i`` alone allows, every other coordinate held:
+    on each side, the 90 % end of a quadratic error that rises by what the axes phase measured at its last step
+    (a rise within the noise counts as the threshold: the error is at least that flat). A marginal is never
+    narrower than this conditional interval; where the sample's weights rest on few points, their quantiles
+    can be. None where the axes phase did not measure the coordinate."""
+    rise = (st.get("rise") or [None] * (i + 1))[i]
+    if rise is None:
+        return None
+    step, below, above = rise
+    u0 = st["u0"][i]
+    ends = []
+    for r in (below, above):
+        r = math.inf if r is None else max(r, st["threshold"])
+        ends.append(D.INTERVAL_Z * step * math.sqrt(st["temperature"] / (2.0 * r)))
+    return u0 - ends[0], u0 + ends[1]
+
+
 def _quantile(x, w, q):
     o = np.argsort(x)
     c = np.cumsum(w[o])
@@ -308,7 +331,11 @@ def summarise(job: FitJob, st: dict) -> dict:
             lo_u, hi_u = _quantile(U[:, i], w, tail), _quantile(U[:, i], w, 1.0 - tail)
         else:  # flat along its own axis across the widest step: its marginal is at least as wide
             lo_u, hi_u = 0.0, 1.0
-        lo_u, hi_u = min(lo_u, u0[i]), max(hi_u, u0[i])
+        reach = axis_reach(st, i) if i in act else None
+        widened = reach is not None and (reach[0] < lo_u or reach[1] > hi_u)
+        if reach is not None:  # never narrower than the coordinate's own axis allows
+            lo_u, hi_u = min(lo_u, reach[0]), max(hi_u, reach[1])
+        lo_u, hi_u = max(0.0, min(lo_u, u0[i])), min(1.0, max(hi_u, u0[i]))
         at_lo, at_hi = lo_u <= edge, hi_u >= 1.0 - edge
         pair = []
         for v in (lo_u, hi_u):
@@ -328,7 +355,14 @@ def summarise(job: FitJob, st: dict) -> dict:
         wide = factor > D.INTERVAL_UNDETERMINED_FACTOR if factor is not None else share > D.INTERVAL_UNDETERMINED_SHARE
         bound = [s for s, hit in (("low", at_lo), ("high", at_hi)) if hit]
         intervals[rname] = [lo, hi]
-        details[rname] = {"value": best, "at_bound": bound, "factor": factor, "share": share, "flat": i not in act}
+        details[rname] = {
+            "value": best,
+            "at_bound": bound,
+            "factor": factor,
+            "share": share,
+            "flat": i not in act,
+            "axis_widened": widened,
+        }
         if setting and (bound or wide):
             undetermined.append(rname)
     return {
@@ -337,7 +371,8 @@ def summarise(job: FitJob, st: dict) -> dict:
         "interval_method": {
             "level": D.INTERVAL_LEVEL,
             "kind": "marginal: weighted quantiles of points sampled around the fit (every setting and offset "
-            "free), weighted by exp(-(E - E_ref) / T)",
+            "free), weighted by exp(-(E - E_ref) / T), never narrower than the rise along the setting's own axis "
+            "allows",
             "jitter_sd": st["sigma"],
             "threshold": st["threshold"],
             "temperature": st["temperature"],

@@ -188,6 +188,9 @@ class FitResult(dict):
         if self.get("intervals"):  # how sure each setting is (fitting/intervals.py); undetermined ones keep values
             out["intervals"] = {n: v for n, v in self["intervals"].items() if n in s}
             out["undetermined"] = list(self.get("undetermined") or [])
+            caveat = intervals_caveat(self)
+            if caveat:
+                out["intervals_caveat"] = caveat
         return out
 
 
@@ -206,10 +209,31 @@ def interval_lines(res: dict) -> list[str]:
     values = dict(res.get("params") or {}, **(res.get("blender_cloth") or {}))
     und = set(res.get("undetermined") or [])
     out = ["90 % intervals (from the error's own noise)"]
+    caveat = intervals_caveat(res)
+    if caveat:
+        out.append(f"CAUTION: {caveat}")
     for n, (lo, hi) in iv.items():
         if n in values:
             out.append(f"{n} {values[n]:.4g} [{lo:.4g}, {hi:.4g}]" + ("  UNDETERMINED" if n in und else ""))
     return out
+
+
+def intervals_caveat(res: dict) -> str | None:
+    """What a result's intervals cannot say, where it ends far above its floor: they describe the neighbourhood
+    of the fit, and a fit far above its floor may sit in another basin than the cloth's (the intervals stage
+    cannot see that: ``intervals.py``), so the cloth's settings may lie outside them. None otherwise (an
+    export's own ``intervals_caveat``, which carries it without the floor, is returned as it is)."""
+    if res.get("intervals_caveat"):
+        return res["intervals_caveat"]
+    fl = res.get("floor") or {}
+    if not fl.get("far_above"):
+        return None
+    ratio = fl.get("heldout_ratio") if fl.get("heldout_ratio") is not None else fl.get("train_ratio")
+    at = f"{ratio:.1f}x" if isinstance(ratio, (int, float)) else "far"
+    return (
+        f"the fit ends {at} above its floor, perhaps in another basin than the cloth's: these intervals describe "
+        "that basin, and the cloth's settings may lie outside them"
+    )
 
 
 def uncertainty_caveat(res: dict) -> str | None:
