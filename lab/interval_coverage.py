@@ -69,7 +69,8 @@ def one(root: str, seed: int) -> dict:
     truth = cap.meta["true_blender_cloth"]
     x_t = np.array([job.par.coordinate(n, truth[n]) for n in job.par.free])
     e_truth = float(job.evaluate(x_t[None])[0])
-    thr = (res.get("interval_method") or {}).get("threshold") or 0.0
+    im = res.get("interval_method") or {}
+    thr = im.get("threshold") or 0.0
     rows = []
     for n in job.par.free:
         lo, hi = res["intervals"][n] if res["intervals"] else (None, None)
@@ -81,6 +82,7 @@ def one(root: str, seed: int) -> dict:
                 "interval": [lo, hi],
                 "holds": lo is not None and lo * (1 - 1e-9) <= truth[n] <= hi * (1 + 1e-9),
                 "undetermined": n in (res["undetermined"] or []),
+                "axis_widened": bool(im.get("details", {}).get(n, {}).get("axis_widened")),
             }
         )
     return {
@@ -90,6 +92,7 @@ def one(root: str, seed: int) -> dict:
         "train_E_all": res["best_E_all"],
         "truth_E_all": e_truth,
         "threshold": thr,
+        "effective_points": im.get("effective_points"),
         "truth_basin": bool(e_truth >= res["best_E_all"] - 2 * thr),
         "rows": rows,
     }
@@ -113,6 +116,7 @@ def summary(fits: list) -> dict:
         "fits": len(fits),
         "fits_in_truth_basin": sum(f["truth_basin"] for f in fits),
         "undetermined_pairs": sum(r["undetermined"] for r in every),
+        "axis_widened_pairs": sum(bool(r.get("axis_widened")) for r in every),
     }
 
 
