@@ -13,7 +13,9 @@ truth's but bending 8x low. Four measurements:
   --quality 5 --searches 1``, 1000 evaluations), then all training frames from its settings (``--init``, quality
   chosen, 1500 evaluations). Held-out ratio to the floor, the strong settings, wall and CPU time of each.
 * ``cameras``: per seed, the default fit with more training cameras (``--cameras n:N``), the same budget: more
-  views of the one take, against the same floor's ratio (held-out on the cameras it did not train on).
+  views of the one take, against the same floor's ratio (held-out on the cameras it did not train on). With
+  ``--n 4`` it is the default fit itself, and its record says what the user is told of how sure each setting is
+  (every mode records each fit's intervals of the strong settings, whether they hold the truth, and their caveat).
 * ``frames``: per seed, the fit on the first ``--k`` training frames alone (4 cameras, quality chosen, the default
   budget): the last frames left out, the weight the landscape suggests; scored on the held-out cameras at every
   training time beside the truth's own error there (``clothfit evaluate``).
@@ -40,6 +42,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from clothfit.core.fitting.job import FitConfig, FitJob  # noqa: E402
+from clothfit.core.fitting.result import intervals_caveat  # noqa: E402
 from clothfit.core.jsonio import read_json, write_json  # noqa: E402
 from clothfit.core.observation.camera import select_training  # noqa: E402
 from clothfit.core.observation.capture import load_capture  # noqa: E402
@@ -110,6 +113,14 @@ def _summary(path: str, wall: float, cpu: float) -> dict:
         "quality": bc.get("quality"),
         "settings": {k: bc[k] for k in STRONG},
         "bending_over_truth": bc["bending_stiffness"] / TRUTH["bending_stiffness"],
+        # what the user is told of how sure each setting is: the intervals, and what they cannot say
+        "intervals": {k: r["intervals"][k] for k in STRONG} if r.get("intervals") else None,
+        "truth_inside": {k: r["intervals"][k][0] <= TRUTH[k] <= r["intervals"][k][1] for k in STRONG}
+        if r.get("intervals")
+        else None,
+        "undetermined": r.get("undetermined"),
+        "effective_points": (r.get("interval_method") or {}).get("effective_points"),
+        "intervals_caveat": intervals_caveat(r),
     }
 
 

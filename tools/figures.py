@@ -800,6 +800,13 @@ SOURCES = {
         "what": "the default fit of the time goal's capture with 8 training cameras instead of 4, seeds 0-3: more "
         "views of one take against the low-bending basin (about 12 min)",
     },
+    "default_fit_intervals": {
+        "argv": ["{py}", "lab/early_window.py", "cameras", "--n", "4", "--seeds", "0-3", "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the default fit of the time goal's capture as a user runs it (4 training cameras, quality chosen), "
+        "seeds 0-3: where it ends, and what its intervals tell the user of how sure each strong setting is "
+        "(about 10 min)",
+    },
     "early_window_first_ten": {
         "argv": ["{py}", "lab/early_window.py", "frames", "--k", "10", "--seeds", "0-3", "--json", "{out}"],
         "cost": "expensive",
