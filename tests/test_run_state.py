@@ -58,6 +58,8 @@ def test_reopening_the_search_forgets_the_stages_after_it():
         (lambda st: st.update(cut_batches=-1), "cut_batches"),
         (lambda st: st.update(again={**AGAIN, "ends": [[1.5, [0.1, "y"]]]}), "again"),
         (lambda st: st.update(again={**AGAIN, "ends": [[float("nan"), [0.1]]]}), "again"),
+        (lambda st: st.update(intervals=dict(INTERVALS, rise=[[0.1, 0.2, "x"], None, None])), "intervals"),
+        (lambda st: st.update(intervals=dict(INTERVALS, rise=[[0.1, 0.2, 0.3]])), "intervals"),
     ],
 )
 def test_a_saved_state_that_does_not_fit_the_fit_is_refused_in_one_line(spoil, what):
@@ -70,6 +72,17 @@ def test_a_saved_state_that_does_not_fit_the_fit_is_refused_in_one_line(spoil, w
 
 
 AGAIN = {"searches": 1, "start": 40, "why": ["above"], "ended": None}
+# an intervals stage in its sampling phase (three coordinates), as ``intervals.start`` and its axes leave it
+INTERVALS = {"phase": "sample", "u0": [0.5] * 3, "h": [0.03] * 3, "U": [], "F": [], "round": 0, "props": []}
+
+
+def test_the_intervals_stage_and_its_axes_rises_read_back_and_an_older_state_without_them_too():
+    s = _running()
+    s.intervals = dict(INTERVALS, rise=[[0.03, 0.5, None], None, [0.09, 0.0, 1.2]])
+    stages, outcome = _saved(s)
+    assert RunState.from_saved(stages, outcome, SHAPE, "ck.json")[0].intervals == s.intervals
+    stages["intervals"] = dict(INTERVALS)  # saved before the rises were kept
+    assert RunState.from_saved(stages, outcome, SHAPE, "ck.json")[0].intervals == INTERVALS
 
 
 def test_the_searches_again_and_where_each_ended_read_back_and_an_older_state_without_them_too():

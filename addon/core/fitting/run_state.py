@@ -314,10 +314,37 @@ def check_intervals_state(st: Any, n: int, bad: Callable[[str], ClothFitError]) 
         and all(v is None or (isinstance(v, (int, float)) and math.isfinite(v)) for v in st["F"])
         and isinstance(st.get("round"), int)
         and isinstance(st.get("props"), list)
+        and _is_rises(st.get("rise"), n)
     )
     if not ok:
         raise bad("intervals")
     return st
+
+
+def _is_rises(rise: Any, n: int) -> bool:
+    """The axes phase's rises (``intervals``: per coordinate None or [step, rise below, rise above], a rise None
+    where its evaluation failed); absent from older checkpoints."""
+
+    def num(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    if rise is None:
+        return True
+    return (
+        isinstance(rise, list)
+        and len(rise) == n
+        and all(
+            r is None
+            or (
+                isinstance(r, list)
+                and len(r) == 3
+                and num(r[0])
+                and r[0] > 0
+                and all(v is None or num(v) for v in r[1:])
+            )
+            for r in rise
+        )
+    )
 
 
 def check_again_state(st: Any, bad: Callable[[str], ClothFitError]) -> dict | None:
