@@ -102,6 +102,30 @@ def test_a_lower_point_found_by_the_stage_becomes_the_fits_best():
     f, x = job.state.best_by_quality[None]
     assert f < job.best_error and r["interval_method"]["improved_best"]["to"] == f
     assert abs(x[0] - 0.4) < abs(job.best_x[0] - 0.4)
+    assert r["interval_method"]["details"]["a"]["value"] == pytest.approx(x[0])  # the values: the new best's
+
+
+def test_an_interval_reaches_around_a_lower_point_the_stage_found_as_around_the_searchs_end():
+    job = QuadraticJob()
+    good = job.evaluate
+
+    def lucky(X):  # the sampled point furthest from the best in a scores far below everything
+        f = good(X)
+        st = job.state.intervals
+        if st and st["phase"] == "sample" and st["round"] == 0:
+            f[int(np.argmax(np.abs(np.atleast_2d(X)[:, 0] - 0.4)))] -= 100 * job.T
+        return f
+
+    job.evaluate = lucky
+    r = run_stage(job)
+    f, x = job.state.best_by_quality[None]
+    st = job.state.intervals
+    assert r["interval_method"]["improved_best"]["to"] == f and abs(x[0] - 0.4) > 0.01
+    below, above = np.subtract(intervals.axis_reach(st, 0), 0.4) * [-1, 1]
+    lo, hi = r["intervals"]["a"]
+    assert r["interval_method"]["details"]["a"]["value"] == pytest.approx(x[0])
+    # not an interval with the reported value at one end: its axis's reach on both sides of it
+    assert lo <= x[0] - below * (1 - 1e-9) and hi >= x[0] + above * (1 - 1e-9)
 
 
 def test_a_round_whose_every_point_fails_keeps_the_last_proposal():

@@ -23,6 +23,8 @@ scale for every scale setting), one batch of evaluations per step, in three phas
    points (the result's ``effective_points``), and a quantile of two points says little: every interval is
    therefore at least as wide as the axes phase's own rise allows (``axis_reach``: the 90 % interval of a
    quadratic error along that coordinate alone; a marginal is never narrower than a conditional).
+   Where a point of the stage scored lower than the search's end, it becomes the fit's best (the result's
+   ``improved_best``): the values reported are its, and each interval holds it with the same reach around it.
 
 The temperature comes from the capture's own noise, not from a choice: two evaluations that differ by
 jitter alone differ by more than ``INTERVAL_Z * sqrt(2) * sigma`` one time in twenty, so a rise of that
@@ -320,7 +322,9 @@ def summarise(job: FitJob, st: dict) -> dict:
     space = job.space
     u0 = np.array(st["u0"])
     act = st["active"] or []
-    x_best = space.decode(u0)
+    u_low = lowest_point(st)  # where the result's values end: the stage's lowest point where it beat the fit's
+    u_low = u0 if u_low is None else np.array(u_low)
+    x_best = space.decode(u_low)
     U, w = _weighted(st) if act and st["sample_start"] is not None else (np.zeros((0, len(u0))), np.zeros(0))
     ess = float(1.0 / np.sum(w**2)) if np.sum(w) > 0 else 0.0
     tail = (1.0 - D.INTERVAL_LEVEL) / 2
@@ -332,10 +336,12 @@ def summarise(job: FitJob, st: dict) -> dict:
         else:  # flat along its own axis across the widest step: its marginal is at least as wide
             lo_u, hi_u = 0.0, 1.0
         reach = axis_reach(st, i) if i in act else None
-        widened = reach is not None and (reach[0] < lo_u or reach[1] > hi_u)
-        if reach is not None:  # never narrower than the coordinate's own axis allows
-            lo_u, hi_u = min(lo_u, reach[0]), max(hi_u, reach[1])
-        lo_u, hi_u = max(0.0, min(lo_u, u0[i])), min(1.0, max(hi_u, u0[i]))
+        widened = False
+        for c in {u0[i], u_low[i]}:  # every interval holds the fit's end and the value reported, with their reach
+            ends = (c, c) if reach is None else (c - (u0[i] - reach[0]), c + (reach[1] - u0[i]))
+            widened = widened or (reach is not None and (ends[0] < lo_u or ends[1] > hi_u))
+            lo_u, hi_u = min(lo_u, ends[0]), max(hi_u, ends[1])
+        lo_u, hi_u = max(0.0, lo_u), min(1.0, hi_u)
         at_lo, at_hi = lo_u <= edge, hi_u >= 1.0 - edge
         pair = []
         for v in (lo_u, hi_u):
@@ -389,23 +395,26 @@ def summarise(job: FitJob, st: dict) -> dict:
 PHASES = {"jitter": _phase_jitter, "axes": _phase_axes, "sample": _phase_sample}
 
 
-def _keep_lowest(job, st):
-    """A point of the stage that scored lower than the fit's best becomes the fit's best (the search had not
-    quite settled there); the result says so."""
+def lowest_point(st: dict) -> list | None:
+    """The stage's lowest point (unit cube) where it scored lower than the fit's best, else None."""
     F = np.array([np.inf if v is None else v for v in st["F"]])
     k = int(np.argmin(F)) if len(F) else -1
-    if k < 0 or not F[k] < st["f0"]:
+    f0 = math.inf if st["f0"] is None else st["f0"]
+    return st["U"][k] if k >= 0 and F[k] < f0 else None
+
+
+def _keep_lowest(job, st):
+    """A point of the stage that scored lower than the fit's best becomes the fit's best (the search had not
+    quite settled there; ``summarise`` already reports its values, each interval around it too); the result
+    says so."""
+    u = lowest_point(st)
+    if u is None:
         return
-    x = job.space.decode(np.array(st["U"][k]))
-    job.state.best_by_quality[job.chosen_quality()] = [float(F[k]), x.tolist()]
-    job.state.history_prev.append([int(job.state.done_evals), float(F[k])])
-    res = st["result"]
-    res["interval_method"]["improved_best"] = {"from": st["f0"], "to": float(F[k])}
-    for i, name in enumerate(job.space.names):  # every interval holds the value the result now reports
-        rname, v = job.par.reported(name, float(x[i])) if i < job.npar else (name, float(x[i]))
-        lo, hi = res["intervals"][rname]
-        res["intervals"][rname] = [min(lo, v), max(hi, v)]
-        res["interval_method"]["details"][rname]["value"] = v
+    f = min(v for v in st["F"] if v is not None)
+    x = job.space.decode(np.array(u))
+    job.state.best_by_quality[job.chosen_quality()] = [float(f), x.tolist()]
+    job.state.history_prev.append([int(job.state.done_evals), float(f)])
+    st["result"]["interval_method"]["improved_best"] = {"from": st["f0"], "to": float(f)}
 
 
 def interval_step(job: FitJob) -> bool:
