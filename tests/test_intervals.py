@@ -57,6 +57,23 @@ def run_stage(job):
     return job.state.intervals["result"]
 
 
+def lucky_job(pick):
+    """A QuadraticJob whose first sampling round has one lucky point, ``pick`` (np.argmin or np.argmax) of the
+    points' distances from the best in a, scoring 100 temperatures below everything else."""
+    job = QuadraticJob()
+    good = job.evaluate
+
+    def lucky(X):
+        f = good(X)
+        st = job.state.intervals
+        if st and st["phase"] == "sample" and st["round"] == 0:
+            f[int(pick(np.abs(np.atleast_2d(X)[:, 0] - 0.4)))] -= 100 * job.T
+        return f
+
+    job.evaluate = lucky
+    return job
+
+
 def test_intervals_are_marginal_and_sized_by_the_errors_own_noise():
     job = QuadraticJob()
     r = run_stage(job)
@@ -106,17 +123,7 @@ def test_a_lower_point_found_by_the_stage_becomes_the_fits_best():
 
 
 def test_an_interval_reaches_around_a_lower_point_the_stage_found_as_around_the_searchs_end():
-    job = QuadraticJob()
-    good = job.evaluate
-
-    def lucky(X):  # the sampled point furthest from the best in a scores far below everything
-        f = good(X)
-        st = job.state.intervals
-        if st and st["phase"] == "sample" and st["round"] == 0:
-            f[int(np.argmax(np.abs(np.atleast_2d(X)[:, 0] - 0.4)))] -= 100 * job.T
-        return f
-
-    job.evaluate = lucky
+    job = lucky_job(np.argmax)  # the sampled point furthest from the best in a scores far below everything
     r = run_stage(job)
     f, x = job.state.best_by_quality[None]
     st = job.state.intervals
@@ -152,17 +159,7 @@ def test_the_axis_reach_is_the_conditional_90_percent_interval_of_a_quadratic_er
 
 
 def test_weights_that_rest_on_one_lucky_point_do_not_make_an_interval_narrower_than_its_axis():
-    job = QuadraticJob()
-    good = job.evaluate
-
-    def lucky(X):  # the sampled point nearest the best in a scores far below everything: its weight is all
-        f = good(X)
-        st = job.state.intervals
-        if st and st["phase"] == "sample" and st["round"] == 0:
-            f[int(np.argmin(np.abs(np.atleast_2d(X)[:, 0] - 0.4)))] -= 100 * job.T
-        return f
-
-    job.evaluate = lucky
+    job = lucky_job(np.argmin)  # the sampled point nearest the best in a scores far below all: its weight is all
     r = run_stage(job)
     assert r["interval_method"]["effective_points"] < 1.5
     # with b held, a's error is quadratic with sd 1 / sqrt(1 / s1^2 + 1 / s2^2), at the stage's temperature
