@@ -322,8 +322,8 @@ def summarise(job: FitJob, st: dict) -> dict:
     space = job.space
     u0 = np.array(st["u0"])
     act = st["active"] or []
-    u_low = lowest_point(st)  # where the result's values end: the stage's lowest point where it beat the fit's
-    u_low = u0 if u_low is None else np.array(u_low)
+    low = lowest_point(st)  # where the result's values end: the stage's lowest point where it beat the fit's
+    u_low = u0 if low is None else np.array(low[1])
     x_best = space.decode(u_low)
     U, w = _weighted(st) if act and st["sample_start"] is not None else (np.zeros((0, len(u0))), np.zeros(0))
     ess = float(1.0 / np.sum(w**2)) if np.sum(w) > 0 else 0.0
@@ -395,26 +395,27 @@ def summarise(job: FitJob, st: dict) -> dict:
 PHASES = {"jitter": _phase_jitter, "axes": _phase_axes, "sample": _phase_sample}
 
 
-def lowest_point(st: dict) -> list | None:
-    """The stage's lowest point (unit cube) where it scored lower than the fit's best, else None."""
+def lowest_point(st: dict) -> tuple[float, list] | None:
+    """The stage's lowest point (its error, its unit-cube point) where it scored lower than the fit's best, else
+    None."""
     F = np.array([np.inf if v is None else v for v in st["F"]])
     k = int(np.argmin(F)) if len(F) else -1
     f0 = math.inf if st["f0"] is None else st["f0"]
-    return st["U"][k] if k >= 0 and F[k] < f0 else None
+    return (float(F[k]), st["U"][k]) if k >= 0 and F[k] < f0 else None
 
 
 def _keep_lowest(job, st):
     """A point of the stage that scored lower than the fit's best becomes the fit's best (the search had not
     quite settled there; ``summarise`` already reports its values, each interval around it too); the result
     says so."""
-    u = lowest_point(st)
-    if u is None:
+    low = lowest_point(st)
+    if low is None:
         return
-    f = min(v for v in st["F"] if v is not None)
+    f, u = low
     x = job.space.decode(np.array(u))
-    job.state.best_by_quality[job.chosen_quality()] = [float(f), x.tolist()]
-    job.state.history_prev.append([int(job.state.done_evals), float(f)])
-    st["result"]["interval_method"]["improved_best"] = {"from": st["f0"], "to": float(f)}
+    job.state.best_by_quality[job.chosen_quality()] = [f, x.tolist()]
+    job.state.history_prev.append([int(job.state.done_evals), f])
+    st["result"]["interval_method"]["improved_best"] = {"from": st["f0"], "to": f}
 
 
 def interval_step(job: FitJob) -> bool:

@@ -218,6 +218,11 @@ def interval_lines(res: dict) -> list[str]:
     return out
 
 
+def _fit_ratio(fl: dict) -> float | None:
+    """A floor block's ratio of the fit's error to its floor: held-out where the fit has held-out images."""
+    return fl.get("heldout_ratio") if fl.get("heldout_ratio") is not None else fl.get("train_ratio")
+
+
 def intervals_caveat(res: dict) -> str | None:
     """What a result's intervals cannot say, where it ends far above its floor: they describe the neighbourhood
     of the fit, and a fit far above its floor may sit in another basin than the cloth's (the intervals stage
@@ -228,7 +233,7 @@ def intervals_caveat(res: dict) -> str | None:
     fl = res.get("floor") or {}
     if not fl.get("far_above"):
         return None
-    ratio = fl.get("heldout_ratio") if fl.get("heldout_ratio") is not None else fl.get("train_ratio")
+    ratio = _fit_ratio(fl)
     at = f"{ratio:.1f}x" if isinstance(ratio, (int, float)) else "far"
     return (
         f"the fit ends {at} above its floor, perhaps in another basin than the cloth's: these intervals describe "
@@ -251,7 +256,7 @@ def uncertainty_caveat(res: dict) -> str | None:
     )
     if not stated:
         return None
-    ratio = fl.get("heldout_ratio") if fl.get("heldout_ratio") is not None else fl.get("train_ratio")
+    ratio = _fit_ratio(fl)
     if fl.get("far_above") and ratio is not None:
         return (
             f"the offsets' uncertainties are the error's curvature at the fitted point, and the fit ends {ratio:.1f}x "

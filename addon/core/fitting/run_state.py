@@ -324,10 +324,6 @@ def check_intervals_state(st: Any, n: int, bad: Callable[[str], ClothFitError]) 
 def _is_rises(rise: Any, n: int) -> bool:
     """The axes phase's rises (``intervals``: per coordinate None or [step, rise below, rise above], a rise None
     where its evaluation failed); absent from older checkpoints."""
-
-    def num(v):
-        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
     if rise is None:
         return True
     return (
@@ -338,9 +334,9 @@ def _is_rises(rise: Any, n: int) -> bool:
             or (
                 isinstance(r, list)
                 and len(r) == 3
-                and num(r[0])
+                and _is_num(r[0])
                 and r[0] > 0
-                and all(v is None or num(v) for v in r[1:])
+                and all(v is None or _is_num(v) for v in r[1:])
             )
             for r in rise
         )
