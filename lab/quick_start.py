@@ -4,7 +4,9 @@ Runs the Quick start's first two commands in a scratch folder (``synth --model b
 then ``fit CAP --model blender --cameras n:4 [--seed S]``) in subprocesses (this driver never imports bpy) and
 scores each fit against the capture's own truth (``meta.true_blender_cloth``): every free setting's ratio to the
 truth, whether its 90 % interval holds the truth and whether the fit calls it undetermined, the held-out ratio to
-the floor the fit states, the verdict's kind, the search's starts and how many agreed, wall and CPU seconds.
+the floor the fit states, the verdict's kind, the search's starts and how many agreed, wall and CPU seconds; and
+the floors the fit states beside the truth's own errors on the same images (``evaluate`` with the capture's truth,
+the fit's training cameras and times, then its held-out ones): the issue's "a floor that is the floor".
 
     python lab/quick_start.py --seeds 0-4 --json out/quick_start.json
 """
@@ -30,6 +32,36 @@ def _clothfit(*args, cwd):
     r = subprocess.run([sys.executable, "-m", "clothfit", *map(str, args)], cwd=cwd, capture_output=True, text=True)
     if r.returncode != 0:
         raise SystemExit(f"clothfit {' '.join(map(str, args))}: exit {r.returncode}: {r.stderr.strip()[-400:]}")
+
+
+def _truth_pct(work: str, cameras: list, times: list) -> float:
+    """The capture's true settings' mean E_sil (%) on ``cameras`` at ``times`` (``evaluate``'s default params)."""
+    r = subprocess.run(
+        [sys.executable, "-m", "clothfit", "evaluate", "capture", "--cameras", ",".join(cameras),
+         "--times", ",".join(f"{t:g}" for t in times)],
+        cwd=work, capture_output=True, text=True,
+    )  # fmt: skip
+    if r.returncode != 0:
+        raise SystemExit(f"clothfit evaluate: exit {r.returncode}: {r.stderr.strip()[-400:]}")
+    return float(json.loads(r.stdout)["silhouette_error_pct"])
+
+
+def _floor_beside_truth(work: str, fit: dict) -> dict:
+    """The fit's stated floors beside the truth's errors on the same training and held-out images."""
+    fl = fit["floor"]
+    times = fit["train_times"]
+    train = _truth_pct(work, fit["train_cameras"], times)
+    held = _truth_pct(work, fl["heldout_cameras"], times)  # the held-out side scores the same frames here
+    if fl.get("heldout_n_frames") != len(times):
+        raise SystemExit(f"the held-out floor covers {fl.get('heldout_n_frames')} frames, the training {len(times)}")
+    return {
+        "truth_train_pct": train,
+        "truth_heldout_pct": held,
+        "train_floor_pct": fl["train_floor_pct"],
+        "heldout_floor_pct": fl["heldout_floor_pct"],
+        "train_floor_over_truth": fl["train_floor_pct"] / train,
+        "heldout_floor_over_truth": fl["heldout_floor_pct"] / held,
+    }
 
 
 def one(work: str, seed: int) -> dict:
@@ -69,6 +101,7 @@ def one(work: str, seed: int) -> dict:
         "train_ratio": floor.get("train_ratio"),
         "verdict_kind": fit["verdict_kind"],
         "looks": fit.get("looks"),
+        "floor_vs_truth": _floor_beside_truth(work, fit),
         "intervals_holding": sum(s["holds_truth"] for s in settings.values()),
         "intervals": len(settings),
         "wall_s": wall,
@@ -105,7 +138,19 @@ def main(argv=None):
         "worst_heldout_ratio": max(r["heldout_ratio"] for r in rows),
         "intervals_holding": sum(r["intervals_holding"] for r in rows),
         "intervals": sum(r["intervals"] for r in rows),
-    }
+        "tension_shear_determined_within_10pct": sum(
+            all(not s["undetermined"] and abs(s["ratio"] - 1) <= 0.1 for n, s in r["settings"].items()
+                if n in ("tension_stiffness", "shear_stiffness"))
+            for r in rows
+        ),  # fmt: skip
+        "holding_or_undetermined": sum(
+            all(s["holds_truth"] or s["undetermined"] for s in r["settings"].values()) for r in rows
+        ),
+        "train_floor_over_truth": [min(r["floor_vs_truth"]["train_floor_over_truth"] for r in rows),
+                                   max(r["floor_vs_truth"]["train_floor_over_truth"] for r in rows)],
+        "heldout_floor_over_truth": [min(r["floor_vs_truth"]["heldout_floor_over_truth"] for r in rows),
+                                     max(r["floor_vs_truth"]["heldout_floor_over_truth"] for r in rows)],
+    }  # fmt: skip
     sys.path.insert(0, ROOT)
     from clothfit.core.jsonio import write_json
 
