@@ -154,13 +154,14 @@ def fits(root: str, seeds: list[int], tmp: str) -> list[dict]:
     return rows
 
 
-def cameras(root: str, seeds: list[int], n: int, tmp: str) -> list[dict]:
+def cameras(root: str, seeds: list[int], n: int, tmp: str, search: list[str] | None = None) -> list[dict]:
     rows = []
     for s in seeds:
         load = os.getloadavg()[0]
         out = os.path.join(tmp, f"cameras{n}_{s}.json")
         w, c = _fit(
             [root, "--cameras", f"n:{n}", "--times", "train", "--quality", "auto", "--seed", str(s), "--out", out]
+            + [x for v in search or [] for x in ("--search", v)]
         )
         r = _summary(out, w, c)
         rows.append({"seed": s, "cameras": n, "load_1min_at_start": load, "fit": r})
@@ -213,6 +214,9 @@ def main(argv=None) -> int:
     ap.add_argument("--n", type=int, default=8, help="cameras: training cameras")
     ap.add_argument("--seeds", default="0-3", help="fits, cameras, frames: seeds A-B")
     ap.add_argument("--json")
+    ap.add_argument(
+        "--search", action="append", default=[], metavar="NAME=VALUE", help="cameras: the fit's --search (repeatable)"
+    )
     a = ap.parse_args(argv)
     tmp = tempfile.mkdtemp(prefix="early_window_")
     workload(tmp)  # the default fit's capture
@@ -227,7 +231,7 @@ def main(argv=None) -> int:
         elif a.what == "frames":
             out = {"seeds": seeds, "frames": a.k, **frames(root, seeds, a.k, tmp)}
         else:
-            out = {"seeds": seeds, "cameras": a.n, "fits": cameras(root, seeds, a.n, tmp)}
+            out = {"seeds": seeds, "cameras": a.n, "search": a.search, "fits": cameras(root, seeds, a.n, tmp, a.search)}
     if a.json:
         write_json(a.json, out)
     return 0

@@ -64,14 +64,15 @@ def _floor_beside_truth(work: str, fit: dict) -> dict:
     }
 
 
-def one(work: str, seed: int) -> dict:
-    """One fit of the Quick start's capture with ``--seed seed`` (0: no --seed, as the README has it)."""
+def one(work: str, seed: int, search: list[str] | None = None) -> dict:
+    """One fit of the Quick start's capture with ``--seed seed`` (0: no --seed, as the README has it) and the
+    fit's ``--search`` options, if any (a variant of the search)."""
     res = os.path.join(work, f"fit_s{seed}.json")
     c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.monotonic()
     _clothfit(
         "fit", "capture", "--model", "blender", "--cameras", "n:4", "--out", res, *(["--seed", seed] if seed else []),
-        cwd=work,
+        *[x for v in search or [] for x in ("--search", v)], cwd=work,
     )  # fmt: skip
     wall = time.monotonic() - t0
     c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -114,13 +115,16 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0-4", help="the fit's seeds, e.g. 0-4 (0: the README's command as written)")
     ap.add_argument("--json", required=True, help="write the rows and their summary here")
+    ap.add_argument(
+        "--search", action="append", default=[], metavar="NAME=VALUE", help="the fit's --search (repeatable)"
+    )
     a = ap.parse_args(argv)
     seeds = parse_seeds(a.seeds)
     rows = []
     with tempfile.TemporaryDirectory(prefix="quick_start_") as work:
         _clothfit("synth", "--model", "blender", "--out", "capture", "--resolution", "120x160", cwd=work)
         for s in seeds:
-            rows.append(one(work, s))
+            rows.append(one(work, s, a.search))
             r = rows[-1]
             print(
                 f"seed {s}: bending {r['bending_ratio']:.3f} of the truth, held-out {r['heldout_ratio']:.2f}x its floor, "
@@ -154,7 +158,7 @@ def main(argv=None):
     sys.path.insert(0, ROOT)
     from clothfit.core.jsonio import write_json
 
-    write_json(a.json, {"summary": summary, "rows": rows})
+    write_json(a.json, {"search": a.search, "summary": summary, "rows": rows})
     print(json.dumps(summary))
 
 

@@ -285,7 +285,11 @@ STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only wit
 STAGED_FIRST_RESTART_GRID = None  # cma-staged, runs again: two first-stage coordinates (e.g. bending and air
 # damping) tried on a grid at the first run's best point once it has converged; the runs after it start at the grid's
 # best cells, none where a run has already ended (None: every run starts where the first began)
-STAGED_FIRST_RESTART_GRID_POINTS = 8  # cma-staged: that grid's points per coordinate
+STAGED_FIRST_RESTART_GRID_POINTS = 8  # cma-staged: that grid's points per coordinate (or [rows, columns]: a column
+# count of 1 holds the second coordinate at the run's own value, a line through the run's end)
+STAGED_FIRST_RESTART_GRID_APART = 0.125  # cma-staged: a run after the grid starts at a cell more than one cell and
+# more than this (unit cube, on both of the grid's coordinates) from where a run has ended (one cell of the 8 x 8 grid:
+# a finer line's cells are narrower than a basin)
 STAGED_FIRST_RESTART_GRID_SIGMA = 0.1  # cma-staged: the step (unit cube) of a run started at a grid cell
 FIT_RESTART_GRID = ("bending_stiffness", "air_damping")  # a fit of Blender's cloth: the grid's two settings (the
 # first stage's slice whose valleys cross at the truth: docs/search.md, "Why the first stage misses the truth's basin")

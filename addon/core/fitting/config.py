@@ -37,6 +37,9 @@ SEARCH_OPTIONS = {
     "staged_warm_tail": ("warm_tail", ("cma-staged",)),
     "staged_warm_tail_stuck": ("warm_tail_stuck", ("cma-staged",)),
     "staged_restart_grid": ("first_restart_grid", ("cma-staged",)),
+    "staged_restart_grid_rows": ("first_restart_grid_points", ("cma-staged",)),
+    "staged_restart_grid_columns": ("first_restart_grid_points", ("cma-staged",)),
+    "staged_restart_grid_sigma": ("first_restart_grid_sigma", ("cma-staged",)),
 }
 
 
@@ -111,6 +114,9 @@ class FitConfig:
     staged_warm_tail: float | None = None  # cma-staged: budget share of a third, warm run (D.STAGED_WARM_TAIL)
     staged_warm_tail_stuck: bool | None = None  # cma-staged: that run only if the second stage found nothing better
     staged_restart_grid: bool | None = None  # cma-staged: runs again from a grid over D.FIT_RESTART_GRID (D's default)
+    staged_restart_grid_rows: int | None = None  # cma-staged: that grid's points along its first setting (bending)
+    staged_restart_grid_columns: int | None = None  # ... along its second (air damping; 1: the run's own value)
+    staged_restart_grid_sigma: float | None = None  # cma-staged: the step of a run started at a grid cell
 
     @classmethod
     def from_dict(cls, d: Any) -> FitConfig:
@@ -218,12 +224,15 @@ class FitConfig:
             ("staged_restart_step", 0.0, 1.0),
             ("staged_explore", 0.0, 1.0),
             ("staged_warm_tail", 0.0, 1.0),
+            ("staged_restart_grid_sigma", 1e-9, 1.0),
         ):
             numval(name, lo, hi)
         intval("ga_stall", 1)
         intval("searches", 1, 10)
         intval("portfolio_runs", 1, 64)
         intval("portfolio_max_polishes", 1, 10**6)
+        intval("staged_restart_grid_rows", 2, 64)
+        intval("staged_restart_grid_columns", 1, 64)
         for name in ("cma_active", "staged_second_warm", "staged_warm_tail_stuck", "staged_restart_grid"):
             if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
                 raise ClothFitError(f"fit config: {name} must be true or false, got {getattr(self, name)!r}")

@@ -304,9 +304,10 @@ class FitJob:
             key, optimizers = SEARCH_OPTIONS[name]
             if (
                 name in ("sigma0", "tolx", "tolfun_per_image", "staged_restart_grid")
+                or name in ("staged_restart_grid_rows", "staged_restart_grid_columns")
                 or self.optimizer_name not in optimizers
             ):
-                continue  # set above (a rung's sigma0 stays the warm start's) or in _staged_kw (the grid's names)
+                continue  # set above (a rung's sigma0 stays the warm start's) or in _staged_kw (the grid's names, shape)
             kw[key] = value
         if cfg.sigma0 is not None and warm_x is None:
             kw["sigma0"] = cfg.sigma0
@@ -332,6 +333,10 @@ class FitJob:
         grid = self.config.staged_restart_grid
         if (D.FIT_RESTART_GRID_ON if grid is None else grid) and all(n in strong for n in D.FIT_RESTART_GRID):
             kw["first_restart_grid"] = list(D.FIT_RESTART_GRID)  # runs again from the grid's best cells
+            rows, cols = self.config.staged_restart_grid_rows, self.config.staged_restart_grid_columns
+            if rows is not None or cols is not None:
+                n = D.STAGED_FIRST_RESTART_GRID_POINTS
+                kw["first_restart_grid_points"] = [n if rows is None else rows, n if cols is None else cols]
         if strong:
             kw["first"] = strong + [n for n in list(self.space.names)[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]
             if par.initial is None:

@@ -39,15 +39,33 @@ def grid_names(names: object, first: list, w: str) -> list | None:
     return [str(n) for n in names]
 
 
+def grid_shape(points: object, w: str) -> tuple[int, int]:
+    """``first_restart_grid_points``: an n x n grid (one count, 2 to 64), or the points along each of the two named
+    coordinates ([rows, columns], 1 to 64 each, rows at least 2): a count of 1 holds that coordinate at the run's own
+    value (a line through the run's end, not a grid)."""
+    pair = [points, points] if isinstance(points, int) and not isinstance(points, bool) else points
+    if (
+        not isinstance(pair, (list, tuple))
+        or len(pair) != 2
+        or not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 64 for v in pair)
+        or pair[0] < 2
+    ):
+        raise ClothFitError(
+            f"{w}: first_restart_grid_points must be a count from 2 to 64 or [rows, columns] of 1 to 64 (rows at "
+            f"least 2), got {points!r}"
+        )
+    return int(pair[0]), int(pair[1])
+
+
 def restore_grid(d: dict, first: list, w: str) -> dict:
     """The grid's part of a saved ``StagedCMA`` (checked; none in checkpoints from before it): ``names``,
-    ``points`` per coordinate, ``sigma``, ``done``, ``pending`` (the points waiting to be evaluated, or None) and
+    ``points`` along each coordinate (``grid_shape``), ``sigma``, ``done``, ``pending`` (the points waiting to be evaluated, or None) and
     ``starts`` (the later runs' starts left, best cell first)."""
     names = grid_names(d.get("first_restart_grid"), first, f"checkpoint: {w}")
-    points = saved_value(d, "grid_points", w, int, 2, 64) if "grid_points" in d else D.STAGED_FIRST_RESTART_GRID_POINTS
+    points = grid_shape(d.get("grid_points", D.STAGED_FIRST_RESTART_GRID_POINTS), f"checkpoint: {w}")
     sigma = saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
     done = saved_bool(d, "grid_done", w) if "grid_done" in d else False
-    n2, k = points**2, len(first)
+    n2, k = points[0] * points[1], len(first)
     pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
     starts = d.get("grid_starts", [])
     if (

@@ -22,7 +22,7 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from .evolution_strategy import CMA_STOPS, CMAES
-from .restart_grid import grid_names, is_run_end, restore_grid
+from .restart_grid import grid_names, grid_shape, is_run_end, restore_grid
 from .space import (
     SearchSpace,
     checked_flag,
@@ -91,9 +91,10 @@ class StagedCMA(Optimizer):
     quality ladder follows). ``first_restart_vary``: a first-stage coordinate that each run after the
     first starts at another of ``first_restart_levels`` (unit cube, in turn), the others where the first began
     (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
-    bendings"). ``first_restart_grid``: two first-stage coordinates tried on a ``first_restart_grid_points`` x
-    ``first_restart_grid_points`` grid across their ranges, the others at the first run's best point, once that run
-    has converged; each later run starts at the grid's best cell that no run has ended in (within one cell), with the
+    bendings"). ``first_restart_grid``: two first-stage coordinates tried on a grid across their ranges
+    (``first_restart_grid_points``: n x n, or [rows, columns], a count of 1 holding that coordinate at the run's own
+    value), the others at the first run's best point, once that run has converged; each later run starts at the
+    grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
     step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
     from a grid"). Race and scan were both tried against the bending valley that first stages miss and not kept
     (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
@@ -142,7 +143,7 @@ class StagedCMA(Optimizer):
         warm_tail_stall: float = D.STAGED_WARM_TAIL_STALL,
         warm_tail_stall_gain: float = D.STAGED_WARM_TAIL_STALL_GAIN,
         first_restart_grid=D.STAGED_FIRST_RESTART_GRID,
-        first_restart_grid_points: int = D.STAGED_FIRST_RESTART_GRID_POINTS,
+        first_restart_grid_points: int | tuple | list = D.STAGED_FIRST_RESTART_GRID_POINTS,
         first_restart_grid_sigma: float = D.STAGED_FIRST_RESTART_GRID_SIGMA,
     ):
         super().__init__(space, seed, initial)
@@ -196,7 +197,7 @@ class StagedCMA(Optimizer):
             first_restart_vary, first_restart_levels, self.first, w
         )
         self.first_restart_grid = grid_names(first_restart_grid, self.first, w)
-        self.grid_points = checked_integer(first_restart_grid_points, f"{w}: first_restart_grid_points", 2, 64)
+        self.grid_points = grid_shape(first_restart_grid_points, w)
         self.grid_sigma = checked_number(
             first_restart_grid_sigma, f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True
         )
@@ -482,14 +483,14 @@ class StagedCMA(Optimizer):
 
     def _grid_batch(self, c: CMAES) -> np.ndarray:
         """``first_restart_grid``: the converged run's best point (strong settings' cube) with the two named
-        coordinates at the centres of an n x n grid across their ranges."""
+        coordinates at the centres of a rows x columns grid across their ranges (one column: the second held at
+        the run's own value)."""
         sub = self._subspace()
         u = np.clip(sub.encode(np.asarray(c.best_x)[None])[0], 0.0, 1.0)
-        n = self.grid_points
-        g = _centres(n)
+        na, nb = self.grid_points
         a, b = (self.first.index(x) for x in self.first_restart_grid)
-        U = np.repeat(u[None], n * n, 0)
-        A, B = np.meshgrid(g, g, indexing="ij")
+        U = np.repeat(u[None], na * nb, 0)
+        A, B = np.meshgrid(_centres(na), _centres(nb) if nb > 1 else u[b : b + 1], indexing="ij")
         U[:, a], U[:, b] = A.ravel(), B.ravel()
         return U
 
@@ -499,12 +500,11 @@ class StagedCMA(Optimizer):
         sub = self._subspace()
         if self.grid_starts:
             a, b = (self.first.index(x) for x in self.first_restart_grid)
-            cell = 1.0 / self.grid_points
+            # one cell apart, and never nearer than STAGED_FIRST_RESTART_GRID_APART (a basin, not a fine grid's cell)
+            da, db = (max(1.0 / n, D.STAGED_FIRST_RESTART_GRID_APART) for n in self.grid_points)
             ends = [e[1] for e in self.run_ends]
             left = [
-                s
-                for s in self.grid_starts
-                if not any(abs(s[a] - e[a]) <= cell and abs(s[b] - e[b]) <= cell for e in ends)
+                s for s in self.grid_starts if not any(abs(s[a] - e[a]) <= da and abs(s[b] - e[b]) <= db for e in ends)
             ]
             if left:
                 self.grid_starts = left[1:]
@@ -630,7 +630,7 @@ class StagedCMA(Optimizer):
                 "first_restart_vary": self.first_restart_vary,
                 "first_restart_levels": list(self.first_restart_levels),
                 "first_restart_grid": self.first_restart_grid,
-                "grid_points": self.grid_points,
+                "grid_points": list(self.grid_points),
                 "grid_sigma": self.grid_sigma,
                 "grid_pending": None if self.grid_pending is None else self.grid_pending.tolist(),
                 "grid_starts": [list(s) for s in self.grid_starts],
