@@ -511,6 +511,30 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
         assert g.first_restart_grid == (list(D.FIT_RESTART_GRID) if on else None)
     with pytest.raises(ClothFitError, match="staged_restart_grid must be true or false"):
         FitConfig(staged_restart_grid="yes").checked()
+    # its shape and step as --search asks: a line of 48 bendings at the run's own air damping
+    line = FitConfig(
+        max_evaluations=40,
+        train_cameras=[0, 2],
+        staged_restart_grid_rows=48,
+        staged_restart_grid_columns=1,
+        staged_restart_grid_sigma=0.02,
+    )
+    g = FitJob(cap, line).opt
+    assert g.grid_points == (48, 1) and g.grid_sigma == 0.02
+    assert opt.grid_points == (D.STAGED_FIRST_RESTART_GRID_POINTS,) * 2
+    assert FitJob(
+        cap, FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_columns=3)
+    ).opt.grid_points == (
+        D.STAGED_FIRST_RESTART_GRID_POINTS,
+        3,
+    )
+    for bad in (
+        {"staged_restart_grid_rows": 1},
+        {"staged_restart_grid_columns": 0},
+        {"staged_restart_grid_sigma": 0.0},
+    ):
+        with pytest.raises(ClothFitError, match=next(iter(bad))):
+            FitConfig(**bad).checked()
     assert opt.second_warm is D.STAGED_SECOND_WARM and o.second_warm is not D.STAGED_SECOND_WARM
     with pytest.raises(ClothFitError, match="staged_second_warm must be true or false"):
         FitConfig(staged_second_warm=1).checked()
@@ -656,6 +680,46 @@ def test_the_search_says_how_many_of_its_starts_ended_in_the_best_ones_basin():
         d["run_ends"] = bad
         with pytest.raises(ClothFitError, match="run_ends"):
             optimizer_from_state(d)
+
+
+def test_a_grid_of_one_column_is_a_line_through_the_run_end():
+    """``first_restart_grid_points`` [rows, 1]: the first named coordinate at ``rows`` cell centres, the second held
+    at the converged run's own value (not at a cell's centre); the runs after it start at the line's best cells, none
+    within a basin's width (``STAGED_FIRST_RESTART_GRID_APART``) of where a run ended; the shape survives a
+    checkpoint, a checkpoint with one count means the square grid it was, and a bad shape is one line."""
+    kw = {"first_restart_step": 0.05, "first_fraction": 0.72, "first_explore": 0.56}
+    grid = {"first_restart_grid": ["x0", "x1"], "first_restart_grid_points": [20, 1], "first_restart_grid_sigma": 0.02}
+    start = np.array([-2.0, 0.0, 0.0, 0.0, 0.0])  # in the worse basin of x0
+    opt = StagedCMA(space(), seed=2, first=["x0", "x1"], initial=[start], budget=1500, **kw, **grid)
+    seen = None
+    while opt.stage == 1:
+        X = opt.ask()
+        if opt.grid_pending is not None and seen is None:
+            run_end = opt.space.subspace(["x0", "x1"]).decode(np.array(opt.run_ends[-1][1])[None])[0]
+            assert len(X) == 20
+            assert X[:, 0] == pytest.approx(-5.0 + 10.0 * (np.arange(20) + 0.5) / 20)
+            assert X[:, 1] == pytest.approx(np.full(20, run_end[1]))  # the run's own x1, not a cell's centre
+            assert abs(run_end[1] - round(run_end[1] * 2) / 2) > 1e-6
+            resumed = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+            assert resumed.grid_points == (20, 1) and np.array_equal(resumed.ask(), X)
+            seen = X
+        opt.tell(X, two_basins(X))
+    assert seen is not None and opt.grid_done
+    # no run started within a basin's width of where another ended
+    apart = D.STAGED_FIRST_RESTART_GRID_APART
+    assert all(abs(s[0] - e[1][0]) > apart for s in opt.grid_starts for e in opt.run_ends)
+    assert opt.best_x[0] == pytest.approx(2.0, abs=0.05)  # the better basin of x0, which its first run missed
+    d = json.loads(json.dumps(opt.state_dict()))
+    d["grid_points"] = 6
+    assert optimizer_from_state(d).grid_points == (6, 6)
+    for bad in (1, [1, 4], [8, 0], [8, 65], [8], "8x1", True):
+        with pytest.raises(ClothFitError, match="first_restart_grid_points"):
+            StagedCMA(
+                space(), seed=0, first=["x0", "x1"], first_restart_grid=["x0", "x1"], first_restart_grid_points=bad
+            )
+    d["grid_points"] = [8, 0]
+    with pytest.raises(ClothFitError, match="first_restart_grid_points"):
+        optimizer_from_state(d)
 
 
 def test_runs_again_start_at_the_best_cells_of_a_grid_over_two_coordinates():
