@@ -24,6 +24,11 @@ truth's but bending 8x low. Four measurements:
     python lab/early_window.py fits --seeds 0-3 --json OUT
     python lab/early_window.py cameras --n 8 --seeds 0-3 --json OUT
     python lab/early_window.py frames --k 10 --seeds 0-3 --json OUT
+    python lab/early_window.py slice --points 48 --json OUT
+
+* ``slice``: the truth's training error with bending at ``--points`` values across the search's range (the values
+  a line of that many rows tries) and shear at 0.95, 1 and 1.05 of the truth's: how narrow the truth's bending
+  valley is at this resolution beside the grid's cells.
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+from clothfit.core import defaults as D  # noqa: E402
 from clothfit.core.fitting.job import FitConfig, FitJob  # noqa: E402
 from clothfit.core.fitting.result import intervals_caveat  # noqa: E402
 from clothfit.core.jsonio import read_json, write_json  # noqa: E402
@@ -88,6 +94,49 @@ def landscape(root: str) -> dict:
     return {"factors": FACTORS, "windows": WINDOWS, "rows": rows}
 
 
+def bending_slice(root: str, points: int, shear_factors: list[float]) -> dict:
+    """The truth's training error (4 cameras, the training frames, quality 5) with bending at ``points`` values across
+    the fit's search range (the centres of equal cells of its log scale: the values a line of that many rows tries)
+    and shear scaled by each of ``shear_factors``, the others at the truth: how wide the truth's bending valley is
+    beside the search's range."""
+    cap = load_capture(root)
+    train, _ = select_training(cap.cameras, 4)
+    job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=0, quality=5))
+    names, space = job.space.names, job.space
+    x0 = np.array([TRUTH.get(n, 0.0) / MASS for n in names])
+    ib, ish = names.index("bending_stiffness"), names.index("shear_stiffness")
+    U = np.repeat(space.encode(x0[None]), points, 0)
+    U[:, ib] = (np.arange(points) + 0.5) / points
+    bend = space.decode(U)[:, ib] * MASS
+    rows = []
+    for k in shear_factors:
+        X = space.decode(U)
+        X[:, ish] *= k
+        e = 100.0 * job.evaluate(X) / job.objective.n_images
+        # the valley: the cells within twice the lowest (the plateau beside it scores several times more)
+        valley = [float(b) for b, v in zip(bend, e) if v < 2.0 * e.min()]
+        rows.append(
+            {
+                "shear_factor": k,
+                "E_sil_pct": [float(v) for v in e],
+                "lowest_pct": float(e.min()),
+                "lowest_bending": float(bend[int(np.argmin(e))]),
+                "valley_bendings": valley,
+                "valley_points": len(valley),
+                "plateau_pct": float(np.median(e[bend < 0.1])),  # the low bendings the wrong basin sits on
+            }
+        )
+        print(f"shear x{k}: lowest {e.min():.3f} % at bending {bend[int(np.argmin(e))]:.3g}", flush=True)
+    truth_pct = float(100.0 * job.evaluate(x0[None])[0] / job.objective.n_images)
+    return {
+        "points": points,
+        "bending": [float(b) for b in bend],
+        "truth_pct": truth_pct,
+        "rows": rows,
+        "range": [float(space.lo[ib] * MASS), float(space.hi[ib] * MASS)],
+    }
+
+
 def _fit(argv: list[str]) -> tuple[float, float]:
     """Run ``clothfit fit`` as a user would: its wall and CPU time."""
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -121,6 +170,8 @@ def _summary(path: str, wall: float, cpu: float) -> dict:
         "undetermined": r.get("undetermined"),
         "effective_points": (r.get("interval_method") or {}).get("effective_points"),
         "intervals_caveat": intervals_caveat(r),
+        # how many independent starts the search made (1: its first run never settled, so no run again, no grid)
+        "looks": r.get("looks"),
     }
 
 
@@ -209,7 +260,8 @@ def frames(root: str, seeds: list[int], k: int, tmp: str) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames"))
+    ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames", "slice"))
+    ap.add_argument("--points", type=int, default=48, help="slice: bendings across the search's range")
     ap.add_argument("--k", type=int, default=10, help="frames: the first K training frames")
     ap.add_argument("--n", type=int, default=8, help="cameras: training cameras")
     ap.add_argument("--seeds", default="0-3", help="fits, cameras, frames: seeds A-B")
@@ -223,6 +275,8 @@ def main(argv=None) -> int:
     root = os.path.join(tmp, "default21")
     if a.what == "landscape":
         out = landscape(root)
+    elif a.what == "slice":
+        out = bending_slice(root, a.points, [0.95, 1.0, 1.05])
     else:
         lo, _, hi = a.seeds.partition("-")
         seeds = list(range(int(lo), int(hi or lo) + 1))

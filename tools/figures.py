@@ -788,6 +788,23 @@ SOURCES = {
         "what": "the default fit's capture: the truth's training error in three windows of the training frames with "
         "one strong setting scaled from 1 + 1e-6 to 0.1 (which frames can lead a search to the truth; about 1 min)",
     },
+    "early_window_slice": {
+        "argv": ["{py}", "lab/early_window.py", "slice", "--points", "48", "--json", "{out}"],
+        "cost": "cheap",
+        "rtol": 0.05,
+        "what": "the default fit's capture: the truth's training error with bending at 48 values across the search's "
+        "range and shear at 0.95, 1 and 1.05 of the truth's (how narrow the truth's bending valley is; under a minute)",
+    },
+    "early_window_line": {
+        "argv": [
+            "{py}", "lab/early_window.py", "cameras", "--n", "4", "--seeds", "0-3",
+            "--search", "staged_restart_grid_rows=48", "--search", "staged_restart_grid_columns=1",
+            "--search", "staged_restart_grid_sigma=0.02", "--search", "staged_restart_step=0.01", "--json", "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the default fit of the time goal's capture with runs again settled at 0.01 of the cube and the grid "
+        "a line of 48 bendings through the first run's end (a variant of the search), seeds 0-3 (about 12 min)",
+    },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
         "cost": "expensive",
