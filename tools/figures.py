@@ -819,6 +819,65 @@ SOURCES = {
         "what": "the default fit of the time goal's capture with runs again settled at 0.01 of the cube and the grid "
         "a line of 48 bendings through the first run's end (a variant of the search), seeds 0-3 (about 12 min)",
     },  # fmt: skip
+    "line_exact": {
+        "argv": [
+            "{py}",
+            "lab/fit_goals.py",
+            "exact",
+            "--seeds",
+            "0-9",
+            "--search",
+            "staged_restart_grid_rows=48",
+            "--search",
+            "staged_restart_grid_columns=1",
+            "--search",
+            "staged_restart_grid_sigma=0.02",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the exact-model goal's capture fitted with the grid a line of 48 bendings through the first run's "
+        "end (a variant of the search), seeds 0-9 (about 20 min)",
+    },
+    "line_offsets": {
+        "argv": [
+            "{py}",
+            "lab/fit_goals.py",
+            "offsets",
+            "--seeds",
+            "0-4",
+            "--search",
+            "staged_restart_grid_rows=48",
+            "--search",
+            "staged_restart_grid_columns=1",
+            "--search",
+            "staged_restart_grid_sigma=0.02",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the release/pins goal's capture fitted with the grid a line of 48 bendings (a variant of the "
+        "search), seeds 0-4 (about 12 min)",
+    },
+    "quick_start_line": {
+        "argv": [
+            "{py}",
+            "lab/quick_start.py",
+            "--seeds",
+            "0-4",
+            "--search",
+            "staged_restart_grid_rows=48",
+            "--search",
+            "staged_restart_grid_columns=1",
+            "--search",
+            "staged_restart_grid_sigma=0.02",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the README's Quick start with the grid a line of 48 bendings (a variant of the search), seeds 0-4 "
+        "(about 6 min)",
+    },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
         "cost": "expensive",
