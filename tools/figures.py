@@ -117,6 +117,16 @@ def _search_ab_reused(strategies, *rows, captures=SEARCH_RUNS_CAPTURES, seeds="0
     return argv + (["--spread", spread] if spread else [])
 
 
+# the search's variant "a line of bendings through the first run's end" (docs/search.md), as its recordings ran it
+LINE_SEARCH = [
+    "--search",
+    "staged_restart_grid_rows=48",
+    "--search",
+    "staged_restart_grid_columns=1",
+    "--search",
+    "staged_restart_grid_sigma=0.02",
+]
+
 SOURCES = {
     "demo": {
         "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
@@ -804,12 +814,7 @@ SOURCES = {
             "4",
             "--seeds",
             "0-3",
-            "--search",
-            "staged_restart_grid_rows=48",
-            "--search",
-            "staged_restart_grid_columns=1",
-            "--search",
-            "staged_restart_grid_sigma=0.02",
+            *LINE_SEARCH,
             "--search",
             "staged_restart_step=0.01",
             "--json",
@@ -826,12 +831,7 @@ SOURCES = {
             "exact",
             "--seeds",
             "0-9",
-            "--search",
-            "staged_restart_grid_rows=48",
-            "--search",
-            "staged_restart_grid_columns=1",
-            "--search",
-            "staged_restart_grid_sigma=0.02",
+            *LINE_SEARCH,
             "--json",
             "{out}",
         ],
@@ -846,12 +846,7 @@ SOURCES = {
             "offsets",
             "--seeds",
             "0-4",
-            "--search",
-            "staged_restart_grid_rows=48",
-            "--search",
-            "staged_restart_grid_columns=1",
-            "--search",
-            "staged_restart_grid_sigma=0.02",
+            *LINE_SEARCH,
             "--json",
             "{out}",
         ],
@@ -865,12 +860,7 @@ SOURCES = {
             "lab/quick_start.py",
             "--seeds",
             "0-4",
-            "--search",
-            "staged_restart_grid_rows=48",
-            "--search",
-            "staged_restart_grid_columns=1",
-            "--search",
-            "staged_restart_grid_sigma=0.02",
+            *LINE_SEARCH,
             "--json",
             "{out}",
         ],

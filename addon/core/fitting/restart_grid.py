@@ -59,8 +59,9 @@ def grid_shape(points: object, w: str) -> tuple[int, int]:
 
 def restore_grid(d: dict, first: list, w: str) -> dict:
     """The grid's part of a saved ``StagedCMA`` (checked; none in checkpoints from before it): ``names``,
-    ``points`` along each coordinate (``grid_shape``), ``sigma``, ``done``, ``pending`` (the points waiting to be evaluated, or None) and
-    ``starts`` (the later runs' starts left, best cell first)."""
+    ``points`` along each coordinate (``grid_shape``; one count in checkpoints from before rows and columns),
+    ``sigma``, ``done``, ``pending`` (the points waiting to be evaluated, or None) and ``starts`` (the later runs'
+    starts left, best cell first)."""
     names = grid_names(d.get("first_restart_grid"), first, f"checkpoint: {w}")
     points = grid_shape(d.get("grid_points", D.STAGED_FIRST_RESTART_GRID_POINTS), f"checkpoint: {w}")
     sigma = saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
