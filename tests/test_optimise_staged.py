@@ -528,6 +528,10 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
         D.STAGED_FIRST_RESTART_GRID_POINTS,
         3,
     )
+    # a shape asked for where no grid runs is refused, not ignored
+    off = FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid=False, staged_restart_grid_rows=48)
+    with pytest.raises(ClothFitError, match="runs no grid"):
+        FitJob(cap, off)
     for bad in (
         {"staged_restart_grid_rows": 1},
         {"staged_restart_grid_columns": 0},
