@@ -75,12 +75,15 @@ STRONG = ("tension_stiffness", "shear_stiffness", "bending_stiffness", "air_damp
 EARLY = "0.1,0.2,0.3,0.4,0.5"
 
 
+def _truth_job(cap, times: list[float]) -> FitJob:
+    """A fit job on ``cap``'s 4 training cameras at ``times``, quality 5 (the capture's own): the truth's errors."""
+    train, _ = select_training(cap.cameras, 4)
+    return FitJob(cap, FitConfig(train_cameras=train, train_times=times, seed=0, quality=5))
+
+
 def landscape(root: str) -> dict:
     cap = load_capture(root)
-    train, _ = select_training(cap.cameras, 4)
-    jobs = {
-        w: FitJob(cap, FitConfig(train_cameras=train, train_times=t, seed=0, quality=5)) for w, t in WINDOWS.items()
-    }
+    jobs = {w: _truth_job(cap, t) for w, t in WINDOWS.items()}
     names = next(iter(jobs.values())).space.names
     x0 = np.array([TRUTH.get(n, 0.0) / MASS for n in names])  # the manipulation's unknowns at 0
     rows = []
@@ -99,9 +102,7 @@ def bending_slice(root: str, points: int, shear_factors: list[float]) -> dict:
     the fit's search range (the centres of equal cells of its log scale: the values a line of that many rows tries)
     and shear scaled by each of ``shear_factors``, the others at the truth: how wide the truth's bending valley is
     beside the search's range."""
-    cap = load_capture(root)
-    train, _ = select_training(cap.cameras, 4)
-    job = FitJob(cap, FitConfig(train_cameras=train, train_times=D.TRAIN_TIMES, seed=0, quality=5))
+    job = _truth_job(load_capture(root), D.TRAIN_TIMES)
     names, space = job.space.names, job.space
     x0 = np.array([TRUTH.get(n, 0.0) / MASS for n in names])
     ib, ish = names.index("bending_stiffness"), names.index("shear_stiffness")

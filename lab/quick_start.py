@@ -14,6 +14,7 @@ the fit's training cameras and times, then its held-out ones): the issue's "a fl
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import resource
@@ -28,32 +29,32 @@ sys.path.insert(0, os.path.join(ROOT, "lab"))
 from fit_goals import parse_seeds  # noqa: E402  (the lab: the one seed-list parser)
 
 
-def _clothfit(*args, cwd):
+def _clothfit(*args, cwd) -> str:
+    """Run ``clothfit ARGS`` in ``cwd``; its stdout (one JSON document), or exit naming the command."""
     r = subprocess.run([sys.executable, "-m", "clothfit", *map(str, args)], cwd=cwd, capture_output=True, text=True)
     if r.returncode != 0:
         raise SystemExit(f"clothfit {' '.join(map(str, args))}: exit {r.returncode}: {r.stderr.strip()[-400:]}")
+    return r.stdout
 
 
-def _truth_pct(work: str, cameras: list, times: list) -> float:
-    """The capture's true settings' mean E_sil (%) on ``cameras`` at ``times`` (``evaluate``'s default params)."""
-    r = subprocess.run(
-        [sys.executable, "-m", "clothfit", "evaluate", "capture", "--cameras", ",".join(cameras),
-         "--times", ",".join(f"{t:g}" for t in times)],
-        cwd=work, capture_output=True, text=True,
-    )  # fmt: skip
-    if r.returncode != 0:
-        raise SystemExit(f"clothfit evaluate: exit {r.returncode}: {r.stderr.strip()[-400:]}")
-    return float(json.loads(r.stdout)["silhouette_error_pct"])
+@functools.cache
+def _truth_pct(work: str, cameras: tuple, times: tuple) -> float:
+    """The capture's true settings' mean E_sil (%) on ``cameras`` at ``times`` (``evaluate``'s default params); the
+    same for every seed's fit on the same images, so evaluated once."""
+    out = _clothfit(
+        "evaluate", "capture", "--cameras", ",".join(cameras), "--times", ",".join(f"{t:g}" for t in times), cwd=work
+    )
+    return float(json.loads(out)["silhouette_error_pct"])
 
 
 def _floor_beside_truth(work: str, fit: dict) -> dict:
     """The fit's stated floors beside the truth's errors on the same training and held-out images."""
     fl = fit["floor"]
-    times = fit["train_times"]
-    train = _truth_pct(work, fit["train_cameras"], times)
-    held = _truth_pct(work, fl["heldout_cameras"], times)  # the held-out side scores the same frames here
+    times = tuple(fit["train_times"])
     if fl.get("heldout_n_frames") != len(times):
         raise SystemExit(f"the held-out floor covers {fl.get('heldout_n_frames')} frames, the training {len(times)}")
+    train = _truth_pct(work, tuple(fit["train_cameras"]), times)
+    held = _truth_pct(work, tuple(fl["heldout_cameras"]), times)  # the held-out side scores the same frames here
     return {
         "truth_train_pct": train,
         "truth_heldout_pct": held,
