@@ -521,6 +521,9 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     )
     g = FitJob(cap, line).opt
     assert g.grid_points == (48, 1) and g.grid_sigma == 0.02
+    assert g.first_run_cap == D.STAGED_FIRST_RUN_CAP  # the run cap: the default's, or as --search asks
+    capped = FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_run_cap=0.16)
+    assert FitJob(cap, capped).opt.first_run_cap == 0.16
     assert opt.grid_points == (D.STAGED_FIRST_RESTART_GRID_POINTS,) * 2
     assert FitJob(
         cap, FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_columns=3)
@@ -536,6 +539,7 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
         {"staged_restart_grid_rows": 1},
         {"staged_restart_grid_columns": 0},
         {"staged_restart_grid_sigma": 0.0},
+        {"staged_run_cap": 1.5},
     ):
         with pytest.raises(ClothFitError, match=next(iter(bad))):
             FitConfig(**bad).checked()
@@ -781,3 +785,36 @@ def test_runs_again_start_at_the_best_cells_of_a_grid_over_two_coordinates():
     del d["grid_starts"], d["first_restart_grid"], d["grid_points"], d["grid_sigma"], d["grid_done"], d["grid_pending"]
     old = optimizer_from_state(d)  # a checkpoint from before the grid: none
     assert old.first_restart_grid is None and old.grid_starts == [] and old.grid_pending is None
+
+
+def test_a_first_run_that_never_settles_ends_at_its_cap():
+    """``first_run_cap``: a first-stage run that has had that share of the budget ends as if it had settled, so
+    the grid and the runs after it happen where no run settles within the explore share (a settle step of 0 here:
+    none ever settles); its end is kept like a settled run's; the cap survives a checkpoint, a checkpoint from
+    before it has none, and a bad cap is one line."""
+    kw = {"first_restart_step": 0.0, "first_fraction": 0.72, "first_explore": 0.56, "budget": 1500}
+    grid = {"first_restart_grid": ["x0", "x1"], "first_restart_grid_points": [20, 1], "first_restart_grid_sigma": 0.02}
+    start = np.array([-2.0, 0.0, 0.0, 0.0, 0.0])  # in the worse basin of x0
+    kw["sigma0"] = 0.1  # a first step that keeps the first run in its start's basin
+    never = StagedCMA(space(), seed=0, first=["x0", "x1"], initial=[start], **kw, **grid)
+    capped = StagedCMA(space(), seed=0, first=["x0", "x1"], initial=[start], first_run_cap=0.2, **kw, **grid)
+    cut = None
+    for opt in (never, capped):
+        while opt.stage == 1:
+            c = opt.children[-1]
+            X = opt.ask()
+            if opt is capped and opt.grid_pending is not None and cut is None:
+                cut = c.evaluations  # the first run, as it was cut
+                resumed = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+                assert resumed.first_run_cap == 0.2 and np.array_equal(resumed.ask(), X)
+            opt.tell(X, two_basins(X))
+    assert never.first_runs == 1 and not never.grid_done and never.best_x[0] < 0  # one look: the worse basin
+    assert 0.2 * 1500 <= cut < 0.2 * 1500 + 12  # the first run ended at its cap, not before
+    assert capped.grid_done and capped.first_runs >= 2 and len(capped.run_ends) >= 2
+    assert capped.best_x[0] == pytest.approx(2.0, abs=0.05)  # the better basin, which the first run missed
+    d = json.loads(json.dumps(StagedCMA(space(), seed=4, first=["x0"]).state_dict()))
+    del d["first_run_cap"]
+    assert optimizer_from_state(d).first_run_cap == 0.0
+    for bad in (-0.1, 1.5, "a"):
+        with pytest.raises(ClothFitError, match="first_run_cap"):
+            StagedCMA(space(), first=["x0"], first_run_cap=bad)

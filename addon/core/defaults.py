@@ -282,6 +282,9 @@ STAGED_FIRST_RESTART_VARY = None  # cma-staged, runs again: a first-stage coordi
 STAGED_FIRST_RESTART_LEVELS = (0.2, 0.8, 0.35, 0.65, 0.5)
 STAGED_FIRST_EXPLORE = 0.36  # cma-staged, runs again: runs start again only within this share of the budget;
 # then the run with the best point goes on to the end of the first stage's share
+STAGED_FIRST_RUN_CAP = 0.0  # cma-staged, runs again: a first-stage run that has had this share of the budget ends
+# as if it had settled, so runs again (and the grid) happen where no run settles within the explore share (0: a run
+# ends only when it settles; docs/search.md, "A cap on the first run")
 STAGED_FIRST_RESTART_GRID = None  # cma-staged, runs again: two first-stage coordinates (e.g. bending and air
 # damping) tried on a grid at the first run's best point once it has converged; the runs after it start at the grid's
 # best cells, none where a run has already ended (None: every run starts where the first began)

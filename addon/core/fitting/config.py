@@ -33,6 +33,7 @@ SEARCH_OPTIONS = {
     "staged_first_fraction": ("first_fraction", ("cma-staged",)),
     "staged_restart_step": ("first_restart_step", ("cma-staged",)),
     "staged_explore": ("first_explore", ("cma-staged",)),
+    "staged_run_cap": ("first_run_cap", ("cma-staged",)),
     "staged_second_warm": ("second_warm", ("cma-staged",)),
     "staged_warm_tail": ("warm_tail", ("cma-staged",)),
     "staged_warm_tail_stuck": ("warm_tail_stuck", ("cma-staged",)),
@@ -110,6 +111,7 @@ class FitConfig:
         None  # cma-staged: a first-stage run converged below this step runs again (0: off)
     )
     staged_explore: float | None = None  # cma-staged, runs again: budget share in which runs start again (0.36)
+    staged_run_cap: float | None = None  # cma-staged, runs again: budget share after which a first-stage run ends
     staged_second_warm: bool | None = None  # cma-staged: the second stage keeps the first's steps
     staged_warm_tail: float | None = None  # cma-staged: budget share of a third, warm run (D.STAGED_WARM_TAIL)
     staged_warm_tail_stuck: bool | None = None  # cma-staged: that run only if the second stage found nothing better
@@ -223,6 +225,7 @@ class FitConfig:
             ("staged_first_fraction", 0.0, 1.0),
             ("staged_restart_step", 0.0, 1.0),
             ("staged_explore", 0.0, 1.0),
+            ("staged_run_cap", 0.0, 1.0),
             ("staged_warm_tail", 0.0, 1.0),
             ("staged_restart_grid_sigma", 1e-9, 1.0),
         ):

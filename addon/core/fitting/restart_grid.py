@@ -81,3 +81,26 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
         raise ClothFitError(f"checkpoint: {w} 'grid_pending' must lie in the unit cube")
     starts = [[float(v) for v in s] for s in starts]
     return {"names": names, "points": points, "sigma": sigma, "done": done, "pending": pending, "starts": starts}
+
+
+def restart_levels(name, levels, first, w) -> tuple:
+    """(coordinate, levels) of ``first_restart_vary``: None, or a first-stage coordinate, with one or more
+    levels in the unit cube; anything else is a one-line error."""
+    if name is None:
+        return None, tuple(D.STAGED_FIRST_RESTART_LEVELS)
+    if not isinstance(name, str) or name not in first:
+        raise ClothFitError(
+            f"{w}: first_restart_vary must name a first-stage coordinate ({', '.join(first)}), got {name!r}"
+        )
+    try:
+        lv = tuple(float(v) for v in levels)
+    except (TypeError, ValueError):
+        lv = ()
+    if not lv or not all(0.0 <= v <= 1.0 for v in lv):
+        raise ClothFitError(f"{w}: first_restart_levels must be one or more numbers in [0, 1], got {levels!r}")
+    return name, lv
+
+
+def centres(n: int) -> np.ndarray:
+    """The centres of n equal cells across the unit interval (the scan's values, the grid's rows)."""
+    return (np.arange(n) + 0.5) / n

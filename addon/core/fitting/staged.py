@@ -22,7 +22,7 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from .evolution_strategy import CMA_STOPS, CMAES
-from .restart_grid import grid_names, grid_shape, is_run_end, restore_grid
+from .restart_grid import centres, grid_names, grid_shape, is_run_end, restart_levels, restore_grid
 from .space import (
     SearchSpace,
     checked_flag,
@@ -45,69 +45,47 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 
-def _vary(name, levels, first, w) -> tuple:
-    """(coordinate, levels) of ``first_restart_vary``: None, or a first-stage coordinate, with one or more
-    levels in the unit cube; anything else is a one-line error."""
-    if name is None:
-        return None, tuple(D.STAGED_FIRST_RESTART_LEVELS)
-    if not isinstance(name, str) or name not in first:
-        raise ClothFitError(
-            f"{w}: first_restart_vary must name a first-stage coordinate ({', '.join(first)}), got {name!r}"
-        )
-    try:
-        lv = tuple(float(v) for v in levels)
-    except (TypeError, ValueError):
-        lv = ()
-    if not lv or not all(0.0 <= v <= 1.0 for v in lv):
-        raise ClothFitError(f"{w}: first_restart_levels must be one or more numbers in [0, 1], got {levels!r}")
-    return name, lv
-
-
-def _centres(n: int) -> np.ndarray:
-    """The centres of n equal cells across the unit interval (the scan's values, the grid's rows)."""
-    return (np.arange(n) + 0.5) / n
-
-
 class StagedCMA(Optimizer):
     """CMA-ES over ``first`` (the others held), then over everything from the best point.
 
-    ``first``: names of the space searched in the first stage (default: all of them); ``hold``:
-    name -> value (real units) of coordinates held during the first stage (default: the mean of
-    ``initial``, else the middle of the unit cube). ``popsize``: the second stage's population
-    (the first stage's is ``first_popsize``, by default Hansen's 4 + 3 ln k for its k coordinates);
-    ``sigma0``, ``restarts``, ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
-    ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
-    ``race``: first-stage runs raced (default 1: none), the others from random points of the strong
-    settings' cube, each given ``race_evals`` (at most a (race + 1)-th of the first stage) before the
-    one with the best point goes on alone. ``scan_points``: between the stages, each first-stage
-    coordinate tried at that many values evenly across its range, the others at the best point
-    (default 0: none). ``first_restart_step``: a first-stage run whose every coordinate's step (sigma
-    times the root of its variance, unit cube) is below this has converged, and another run starts
-    where the first began (``initial``, else the middle), same step and population, new random
-    stream, while the evaluations are within ``first_explore`` of ``budget``; then the run with the
-    best point (kept as it stood when it converged) goes on to the end of the first stage's share, and
-    the second stage starts from the best point of them all (0: one run, as before; the default 0.01, with
-    the warm tail: docs/search.md, "Runs again and the tail" and "Shorter runs again"; FitJob gives 0.005 where a
-    quality ladder follows). ``first_restart_vary``: a first-stage coordinate that each run after the
-    first starts at another of ``first_restart_levels`` (unit cube, in turn), the others where the first began
-    (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
-    bendings"). ``first_restart_grid``: two first-stage coordinates tried on a grid across their ranges
-    (``first_restart_grid_points``: n x n, or [rows, columns], a count of 1 holding that coordinate at the run's own
-    value), the others at the first run's best point, once that run has converged; each later run starts at the
-    grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
-    step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
-    from a grid"). Race and scan were both tried against the bending valley that first stages miss and not kept
-    (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
-    to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
-    Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
-    stage they are free like every other. ``second_warm``: the second stage's first covariance is the first
-    stage's run's on its coordinates (at most ``second_sigma``) and ``second_sigma`` on the others, not
-    ``second_sigma`` on all (tried, not kept). ``warm_tail``: the last share of ``budget`` goes to a third run
-    from the best point with that covariance; with ``warm_tail_stuck`` only if the second stage has not beaten
-    the first stage's best point by then (the defaults: 0.2, off; FitJob turns it on where the fit searches the
-    manipulation's unknowns). ``warm_tail_stall``: the tail also starts as soon as the second stage has gained less
-    than ``warm_tail_stall_gain`` of its best value over that share of ``budget`` (default 0: tried, not kept,
-    docs/search.md, "A tail where the second stage stalls").
+        ``first``: names of the space searched in the first stage (default: all of them); ``hold``:
+        name -> value (real units) of coordinates held during the first stage (default: the mean of
+        ``initial``, else the middle of the unit cube). ``popsize``: the second stage's population
+        (the first stage's is ``first_popsize``, by default Hansen's 4 + 3 ln k for its k coordinates);
+        ``sigma0``, ``restarts``, ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
+        ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
+        ``race``: first-stage runs raced (default 1: none), the others from random points of the strong
+        settings' cube, each given ``race_evals`` (at most a (race + 1)-th of the first stage) before the
+        one with the best point goes on alone. ``scan_points``: between the stages, each first-stage
+        coordinate tried at that many values evenly across its range, the others at the best point
+        (default 0: none). ``first_restart_step``: a first-stage run whose every coordinate's step (sigma
+        times the root of its variance, unit cube) is below this has converged, and another run starts
+        where the first began (``initial``, else the middle), same step and population, new random
+        stream, while the evaluations are within ``first_explore`` of ``budget``; then the run with the
+        best point (kept as it stood when it converged) goes on to the end of the first stage's share, and
+        the second stage starts from the best point of them all (0: one run, as before; the default 0.01, with
+        the warm tail: docs/search.md, "Runs again and the tail" and "Shorter runs again"; FitJob gives 0.005 where a
+        quality ladder follows). ``first_restart_vary``: a first-stage coordinate that each run after the
+        first starts at another of ``first_restart_levels`` (unit cube, in turn), the others where the first began
+        (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
+        bendings"). ``first_restart_grid``: two first-stage coordinates tried on a grid across their ranges
+        (``first_restart_grid_points``: n x n, or [rows, columns], a count of 1 holding that coordinate at the run's own
+        value), the others at the first run's best point, once that run has converged; each later run starts at the
+        grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
+        step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
+        from a grid"). ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had converged
+    (default 0: only when it converges; docs/search.md, "A cap on the first run"). Race and scan were both tried against the bending valley that first stages miss and not kept
+        (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
+        to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
+        Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
+        stage they are free like every other. ``second_warm``: the second stage's first covariance is the first
+        stage's run's on its coordinates (at most ``second_sigma``) and ``second_sigma`` on the others, not
+        ``second_sigma`` on all (tried, not kept). ``warm_tail``: the last share of ``budget`` goes to a third run
+        from the best point with that covariance; with ``warm_tail_stuck`` only if the second stage has not beaten
+        the first stage's best point by then (the defaults: 0.2, off; FitJob turns it on where the fit searches the
+        manipulation's unknowns). ``warm_tail_stall``: the tail also starts as soon as the second stage has gained less
+        than ``warm_tail_stall_gain`` of its best value over that share of ``budget`` (default 0: tried, not kept,
+        docs/search.md, "A tail where the second stage stalls").
     """
 
     name = "cma-staged"
@@ -145,6 +123,7 @@ class StagedCMA(Optimizer):
         first_restart_grid=D.STAGED_FIRST_RESTART_GRID,
         first_restart_grid_points: int | tuple | list = D.STAGED_FIRST_RESTART_GRID_POINTS,
         first_restart_grid_sigma: float = D.STAGED_FIRST_RESTART_GRID_SIGMA,
+        first_run_cap: float = D.STAGED_FIRST_RUN_CAP,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -191,9 +170,10 @@ class StagedCMA(Optimizer):
         self.first_init = None if init is None else [float(v) for v in init[0]]  # where each first-stage run starts
         self.first_runs = 1
         self.first_explore = checked_number(first_explore, f"{w}: first_explore", 0.0, 1.0)
+        self.first_run_cap = checked_number(first_run_cap, f"{w}: first_run_cap", 0.0, 1.0)
         self.first_best_run = None  # the converged run with the best point so far (its CMA-ES state)
         self.run_ends: list = []  # each first-stage run's end: [best value, its point in the strong settings' cube]
-        self.first_restart_vary, self.first_restart_levels = _vary(
+        self.first_restart_vary, self.first_restart_levels = restart_levels(
             first_restart_vary, first_restart_levels, self.first, w
         )
         self.first_restart_grid = grid_names(first_restart_grid, self.first, w)
@@ -325,6 +305,10 @@ class StagedCMA(Optimizer):
         step = self.first_restart_step
         return bool(step > 0 and np.all(c.sigma * np.sqrt(np.diag(c.C)) < step))
 
+    def _capped(self, c: CMAES) -> bool:
+        """A first-stage run (not racing) that has had ``first_run_cap`` of the budget, settled or not."""
+        return bool(self.first_run_cap > 0 and c.evaluations >= self.first_run_cap * self.budget)
+
     def _run_ended(self, c: CMAES) -> None:
         """Keep a first-stage run's end (its best value and point) for ``looks``."""
         if c.best_x is not None and len(self.run_ends) < self.first_runs:
@@ -352,7 +336,7 @@ class StagedCMA(Optimizer):
         its range (in the unit cube: log-scaled settings at even ratios)."""
         idx = self._idx
         U_sub = np.repeat(self._best_u[idx][None], self.scan_points, 0)
-        U_sub[:, self.first.index(self.scan_left[0])] = _centres(self.scan_points)
+        U_sub[:, self.first.index(self.scan_left[0])] = centres(self.scan_points)
         return self._full_u(U_sub)  # held coordinates held, tied ones following, as in the first stage
 
     def _end_first_stage(self) -> None:
@@ -457,7 +441,7 @@ class StagedCMA(Optimizer):
             if c.stopped or self.evaluations >= self.first_fraction * self.budget:
                 self._end_first_stage()
             elif self.evaluations < self.first_explore * self.budget:
-                if self._converged(c):
+                if self._converged(c) or self._capped(c):
                     # another run from where the first began, with a new random stream: the first stage's
                     # runs settle early, each in one of a few basins (docs/search.md, "Runs again")
                     self._run_ended(c)
@@ -490,7 +474,7 @@ class StagedCMA(Optimizer):
         na, nb = self.grid_points
         a, b = (self.first.index(x) for x in self.first_restart_grid)
         U = np.repeat(u[None], na * nb, 0)
-        A, B = np.meshgrid(_centres(na), _centres(nb) if nb > 1 else u[b : b + 1], indexing="ij")
+        A, B = np.meshgrid(centres(na), centres(nb) if nb > 1 else u[b : b + 1], indexing="ij")
         U[:, a], U[:, b] = A.ravel(), B.ravel()
         return U
 
@@ -573,6 +557,7 @@ class StagedCMA(Optimizer):
         "first_init",
         "first_runs",
         "first_explore",
+        "first_run_cap",
         "first_best_run",
         "run_ends",
         "first_restart_vary",
@@ -625,6 +610,7 @@ class StagedCMA(Optimizer):
                 "first_init": self.first_init,
                 "first_runs": self.first_runs,
                 "first_explore": self.first_explore,
+                "first_run_cap": self.first_run_cap,
                 "first_best_run": self.first_best_run,
                 "run_ends": [[float_to_json(f), list(u)] for f, u in self.run_ends],
                 "first_restart_vary": self.first_restart_vary,
@@ -663,6 +649,8 @@ class StagedCMA(Optimizer):
         init = saved_array(d, "first_init", w, (len(self.first),), allow_none=True) if "first_init" in d else None
         self.first_init = None if init is None else init.tolist()
         self.first_explore = saved_value(d, "first_explore", w, float, 0.0, 1.0) if "first_explore" in d else 0.0
+        # the run cap came after the line: none (a run ends only when it settles) in older checkpoints
+        self.first_run_cap = saved_value(d, "first_run_cap", w, float, 0.0, 1.0) if "first_run_cap" in d else 0.0
         kept = d.get("first_best_run")
         if kept is not None:
             if not isinstance(kept, dict) or kept.get("algorithm") != "cma-es":
@@ -677,7 +665,7 @@ class StagedCMA(Optimizer):
             raise ClothFitError(f"checkpoint: {w} 'run_ends' must list [value, {k} numbers in [0, 1]] per run")
         self.run_ends = [[float_from_json(e[0]), [float(v) for v in e[1]]] for e in ends]
         # runs again at other levels of a coordinate came after the stall rule: all where the first began before
-        self.first_restart_vary, self.first_restart_levels = _vary(
+        self.first_restart_vary, self.first_restart_levels = restart_levels(
             d.get("first_restart_vary"),
             d.get("first_restart_levels", D.STAGED_FIRST_RESTART_LEVELS),
             self.first,
