@@ -127,6 +127,9 @@ LINE_SEARCH = [
     "staged_restart_grid_sigma=0.02",
 ]
 
+# the same line with a cap on each first-stage run (docs/search.md, "A cap on the first run"), as its recordings ran it
+CAP_LINE_SEARCH = [*LINE_SEARCH, "--search", "staged_run_cap=0.16"]
+
 SOURCES = {
     "demo": {
         "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
@@ -867,6 +870,35 @@ SOURCES = {
         "cost": "expensive",
         "what": "the README's Quick start with the grid a line of 48 bendings (a variant of the search), seeds 0-4 "
         "(about 6 min)",
+    },  # fmt: skip
+    "early_window_cap_line": {
+        "argv": [
+            "{py}",
+            "lab/early_window.py",
+            "cameras",
+            "--n",
+            "4",
+            "--seeds",
+            "0-3",
+            *CAP_LINE_SEARCH,
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the default fit of the time goal's capture with a line of 48 bendings and each first-stage run cut at "
+        "0.16 of the budget (a variant of the search), seeds 0-3 (about 12 min)",
+    },  # fmt: skip
+    "cap_line_exact": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "0-9", *CAP_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the exact-model goal's capture with a line of 48 bendings and each first-stage run cut at 0.16 of the "
+        "budget (a variant of the search), seeds 0-9 (about 20 min)",
+    },  # fmt: skip
+    "cap_line_offsets": {
+        "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-4", *CAP_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the release/pins goal's capture with a line of 48 bendings and each first-stage run cut at 0.16 of "
+        "the budget (a variant of the search), seeds 0-4 (about 12 min)",
     },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
