@@ -6,7 +6,7 @@ scores each fit against the capture's own truth (``meta.true_blender_cloth``): e
 truth, whether its 90 % interval holds the truth and whether the fit calls it undetermined, the held-out ratio to
 the floor the fit states, the verdict's kind, the search's starts and how many agreed, wall and CPU seconds; and
 the floors the fit states beside the truth's own errors on the same images (``evaluate`` with the capture's truth,
-the fit's training cameras and times, then its held-out ones): the issue's "a floor that is the floor".
+the fit's training cameras and times, then its held-out ones): the goal "a floor that is the floor".
 
     python lab/quick_start.py --seeds 0-4 --json out/quick_start.json
 """

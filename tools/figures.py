@@ -871,6 +871,24 @@ SOURCES = {
         "what": "the README's Quick start with the grid a line of 48 bendings (a variant of the search), seeds 0-4 "
         "(about 6 min)",
     },  # fmt: skip
+    "early_window_cap": {
+        "argv": [
+            "{py}",
+            "lab/early_window.py",
+            "cameras",
+            "--n",
+            "4",
+            "--seeds",
+            "0-3",
+            "--search",
+            "staged_run_cap=0.16",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the default fit of the time goal's capture with each first-stage run cut at 0.16 of the budget (the "
+        "default 8 x 8 grid; a variant of the search), seeds 0-3 (about 17 min)",
+    },
     "early_window_cap_line": {
         "argv": [
             "{py}",
