@@ -912,6 +912,12 @@ SOURCES = {
         "what": "the exact-model goal's capture with a line of 48 bendings and each first-stage run cut at 0.16 of the "
         "budget (a variant of the search), seeds 0-4 (about 20 min on a machine twice as slow as the others' recordings)",
     },  # fmt: skip
+    "cap_line_exact_5_9": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *CAP_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the exact-model goal's capture with a line of 48 bendings and each first-stage run cut at 0.16 of the "
+        "budget (a variant of the search), seeds 5-9 (about 15 min on a machine twice as slow as the others' recordings)",
+    },  # fmt: skip
     "cap_line_offsets": {
         "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-4", *CAP_LINE_SEARCH, "--json", "{out}"],
         "cost": "expensive",
