@@ -17,11 +17,13 @@ from .optimise import FIT_OPTIMIZERS, canonical_name
 CMA_OPTIMIZERS = ("cma-es", "cma-portfolio", "cma-staged")  # the CMA-ES searches (step, active, restarts)
 # FitConfig's optimiser options: field -> (the optimiser's keyword, the optimisers it applies to). None (the
 # default) leaves the optimiser as it has always been built; only options that are set enter the fit's identity.
+# A keyword of None: FitJob reads the option itself (a rung's first step, the tolerances per image, the grid's names
+# and shape), not passed through as it stands.
 SEARCH_OPTIONS = {
-    "sigma0": ("sigma0", CMA_OPTIMIZERS),
+    "sigma0": (None, CMA_OPTIMIZERS),
     "cma_active": ("active", CMA_OPTIMIZERS),
-    "tolx": ("tolx", FIT_OPTIMIZERS),
-    "tolfun_per_image": ("tolfun", FIT_OPTIMIZERS),
+    "tolx": (None, FIT_OPTIMIZERS),
+    "tolfun_per_image": (None, FIT_OPTIMIZERS),
     "ga_eps": ("eps", ("spx-mgg",)),
     "ga_stall": ("stall_evaluations", ("spx-mgg",)),
     "portfolio_runs": ("runs", ("cma-portfolio",)),
@@ -37,9 +39,9 @@ SEARCH_OPTIONS = {
     "staged_second_warm": ("second_warm", ("cma-staged",)),
     "staged_warm_tail": ("warm_tail", ("cma-staged",)),
     "staged_warm_tail_stuck": ("warm_tail_stuck", ("cma-staged",)),
-    "staged_restart_grid": ("first_restart_grid", ("cma-staged",)),
-    "staged_restart_grid_rows": ("first_restart_grid_points", ("cma-staged",)),
-    "staged_restart_grid_columns": ("first_restart_grid_points", ("cma-staged",)),
+    "staged_restart_grid": (None, ("cma-staged",)),
+    "staged_restart_grid_rows": (None, ("cma-staged",)),
+    "staged_restart_grid_columns": (None, ("cma-staged",)),
     "staged_restart_grid_sigma": ("first_restart_grid_sigma", ("cma-staged",)),
 }
 

@@ -302,12 +302,8 @@ class FitJob:
             kw["stall_evaluations"] = D.FIT_GA_STALL
         for name, value in cfg.search_options().items():  # the config's own settings of this optimiser
             key, optimizers = SEARCH_OPTIONS[name]
-            if (
-                name in ("sigma0", "tolx", "tolfun_per_image", "staged_restart_grid")
-                or name in ("staged_restart_grid_rows", "staged_restart_grid_columns")
-                or self.optimizer_name not in optimizers
-            ):
-                continue  # set above (a rung's sigma0 stays the warm start's) or in _staged_kw (the grid's names, shape)
+            if key is None or self.optimizer_name not in optimizers:
+                continue  # read above (a rung's sigma0 stays the warm start's) or in _staged_kw (the grid's names, shape)
             kw[key] = value
         if cfg.sigma0 is not None and warm_x is None:
             kw["sigma0"] = cfg.sigma0
