@@ -127,6 +127,13 @@ LINE_SEARCH = [
     "staged_restart_grid_sigma=0.02",
 ]
 
+
+def window_cameras(*search):
+    """``lab/early_window.py cameras`` as the line's recordings ran it: the time goal's capture, 4 training cameras,
+    seeds 0-3, with these ``--search`` options."""
+    return ["{py}", "lab/early_window.py", "cameras", "--n", "4", "--seeds", "0-3", *search, "--json", "{out}"]
+
+
 # the same line with a cap on each first-stage run (docs/search.md, "A cap on the first run"), as its recordings ran it
 CAP_LINE_SEARCH = [*LINE_SEARCH, "--search", "staged_run_cap=0.16"]
 
@@ -809,20 +816,7 @@ SOURCES = {
         "range and shear at 0.95, 1 and 1.05 of the truth's (how narrow the truth's bending valley is; under a minute)",
     },
     "early_window_line": {
-        "argv": [
-            "{py}",
-            "lab/early_window.py",
-            "cameras",
-            "--n",
-            "4",
-            "--seeds",
-            "0-3",
-            *LINE_SEARCH,
-            "--search",
-            "staged_restart_step=0.01",
-            "--json",
-            "{out}",
-        ],
+        "argv": window_cameras(*LINE_SEARCH, "--search", "staged_restart_step=0.01"),
         "cost": "expensive",
         "what": "the default fit of the time goal's capture with runs again settled at 0.01 of the cube and the grid "
         "a line of 48 bendings through the first run's end (a variant of the search), seeds 0-3 (about 12 min)",
@@ -872,36 +866,13 @@ SOURCES = {
         "(about 6 min)",
     },  # fmt: skip
     "early_window_cap": {
-        "argv": [
-            "{py}",
-            "lab/early_window.py",
-            "cameras",
-            "--n",
-            "4",
-            "--seeds",
-            "0-3",
-            "--search",
-            "staged_run_cap=0.16",
-            "--json",
-            "{out}",
-        ],
+        "argv": window_cameras("--search", "staged_run_cap=0.16"),
         "cost": "expensive",
         "what": "the default fit of the time goal's capture with each first-stage run cut at 0.16 of the budget (the "
         "default 8 x 8 grid; a variant of the search), seeds 0-3 (about 17 min)",
     },
     "early_window_cap_line": {
-        "argv": [
-            "{py}",
-            "lab/early_window.py",
-            "cameras",
-            "--n",
-            "4",
-            "--seeds",
-            "0-3",
-            *CAP_LINE_SEARCH,
-            "--json",
-            "{out}",
-        ],
+        "argv": window_cameras(*CAP_LINE_SEARCH),
         "cost": "expensive",
         "what": "the default fit of the time goal's capture with a line of 48 bendings and each first-stage run cut at "
         "0.16 of the budget (a variant of the search), seeds 0-3 (about 12 min)",
