@@ -83,7 +83,7 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
     return {"names": names, "points": points, "sigma": sigma, "done": done, "pending": pending, "starts": starts}
 
 
-def restart_levels(name, levels, first, w) -> tuple:
+def restart_levels(name: object, levels: object, first: list, w: str) -> tuple:
     """(coordinate, levels) of ``first_restart_vary``: None, or a first-stage coordinate, with one or more
     levels in the unit cube; anything else is a one-line error."""
     if name is None:
