@@ -792,10 +792,10 @@ def test_a_first_run_that_never_settles_ends_at_its_cap():
     the grid and the runs after it happen where no run settles within the explore share (a settle step of 0 here:
     none ever settles); its end is kept like a settled run's; the cap survives a checkpoint, a checkpoint from
     before it has none, and a bad cap is one line."""
-    kw = {"first_restart_step": 0.0, "first_fraction": 0.72, "first_explore": 0.56, "budget": 1500}
+    # a first step of 0.1 keeps the first run in its start's basin
+    kw = {"first_restart_step": 0.0, "first_fraction": 0.72, "first_explore": 0.56, "budget": 1500, "sigma0": 0.1}
     grid = {"first_restart_grid": ["x0", "x1"], "first_restart_grid_points": [20, 1], "first_restart_grid_sigma": 0.02}
     start = np.array([-2.0, 0.0, 0.0, 0.0, 0.0])  # in the worse basin of x0
-    kw["sigma0"] = 0.1  # a first step that keeps the first run in its start's basin
     never = StagedCMA(space(), seed=0, first=["x0", "x1"], initial=[start], **kw, **grid)
     capped = StagedCMA(space(), seed=0, first=["x0", "x1"], initial=[start], first_run_cap=0.2, **kw, **grid)
     cut = None

@@ -48,44 +48,45 @@ if TYPE_CHECKING:
 class StagedCMA(Optimizer):
     """CMA-ES over ``first`` (the others held), then over everything from the best point.
 
-        ``first``: names of the space searched in the first stage (default: all of them); ``hold``:
-        name -> value (real units) of coordinates held during the first stage (default: the mean of
-        ``initial``, else the middle of the unit cube). ``popsize``: the second stage's population
-        (the first stage's is ``first_popsize``, by default Hansen's 4 + 3 ln k for its k coordinates);
-        ``sigma0``, ``restarts``, ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
-        ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
-        ``race``: first-stage runs raced (default 1: none), the others from random points of the strong
-        settings' cube, each given ``race_evals`` (at most a (race + 1)-th of the first stage) before the
-        one with the best point goes on alone. ``scan_points``: between the stages, each first-stage
-        coordinate tried at that many values evenly across its range, the others at the best point
-        (default 0: none). ``first_restart_step``: a first-stage run whose every coordinate's step (sigma
-        times the root of its variance, unit cube) is below this has converged, and another run starts
-        where the first began (``initial``, else the middle), same step and population, new random
-        stream, while the evaluations are within ``first_explore`` of ``budget``; then the run with the
-        best point (kept as it stood when it converged) goes on to the end of the first stage's share, and
-        the second stage starts from the best point of them all (0: one run, as before; the default 0.01, with
-        the warm tail: docs/search.md, "Runs again and the tail" and "Shorter runs again"; FitJob gives 0.005 where a
-        quality ladder follows). ``first_restart_vary``: a first-stage coordinate that each run after the
-        first starts at another of ``first_restart_levels`` (unit cube, in turn), the others where the first began
-        (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
-        bendings"). ``first_restart_grid``: two first-stage coordinates tried on a grid across their ranges
-        (``first_restart_grid_points``: n x n, or [rows, columns], a count of 1 holding that coordinate at the run's own
-        value), the others at the first run's best point, once that run has converged; each later run starts at the
-        grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
-        step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
-        from a grid"). ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had converged
-    (default 0: only when it converges; docs/search.md, "A cap on the first run"). Race and scan were both tried against the bending valley that first stages miss and not kept
-        (docs/search.md). ``tie``: follower -> leader, coordinates held in the first stage at the leader's value (clipped
-        to the follower's bounds) rather than at ``hold`` (e.g. compression following tension, as in
-        Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
-        stage they are free like every other. ``second_warm``: the second stage's first covariance is the first
-        stage's run's on its coordinates (at most ``second_sigma``) and ``second_sigma`` on the others, not
-        ``second_sigma`` on all (tried, not kept). ``warm_tail``: the last share of ``budget`` goes to a third run
-        from the best point with that covariance; with ``warm_tail_stuck`` only if the second stage has not beaten
-        the first stage's best point by then (the defaults: 0.2, off; FitJob turns it on where the fit searches the
-        manipulation's unknowns). ``warm_tail_stall``: the tail also starts as soon as the second stage has gained less
-        than ``warm_tail_stall_gain`` of its best value over that share of ``budget`` (default 0: tried, not kept,
-        docs/search.md, "A tail where the second stage stalls").
+    ``first``: names of the space searched in the first stage (default: all of them); ``hold``:
+    name -> value (real units) of coordinates held during the first stage (default: the mean of
+    ``initial``, else the middle of the unit cube). ``popsize``: the second stage's population
+    (the first stage's is ``first_popsize``, by default Hansen's 4 + 3 ln k for its k coordinates);
+    ``sigma0``, ``restarts``, ``tolx``, ``tolfun``, ``active``: both stages' CMA-ES, except the second stage's step,
+    ``second_sigma``. ``budget`` only shapes the schedule; the caller decides when to stop.
+    ``race``: first-stage runs raced (default 1: none), the others from random points of the strong
+    settings' cube, each given ``race_evals`` (at most a (race + 1)-th of the first stage) before the
+    one with the best point goes on alone. ``scan_points``: between the stages, each first-stage
+    coordinate tried at that many values evenly across its range, the others at the best point
+    (default 0: none). ``first_restart_step``: a first-stage run whose every coordinate's step (sigma
+    times the root of its variance, unit cube) is below this has converged, and another run starts
+    where the first began (``initial``, else the middle), same step and population, new random
+    stream, while the evaluations are within ``first_explore`` of ``budget``; then the run with the
+    best point (kept as it stood when it converged) goes on to the end of the first stage's share, and
+    the second stage starts from the best point of them all (0: one run, as before; the default 0.01, with
+    the warm tail: docs/search.md, "Runs again and the tail" and "Shorter runs again"; FitJob gives 0.005 where a
+    quality ladder follows). ``first_restart_vary``: a first-stage coordinate that each run after the
+    first starts at another of ``first_restart_levels`` (unit cube, in turn), the others where the first began
+    (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
+    bendings"). ``first_restart_grid``: two first-stage coordinates tried on a grid across their ranges
+    (``first_restart_grid_points``: n x n, or [rows, columns], a count of 1 holding that coordinate at the run's own
+    value), the others at the first run's best point, once that run has converged; each later run starts at the
+    grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
+    step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
+    from a grid"). ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had
+    converged (default 0: only when it converges; docs/search.md, "A cap on the first run"). Race and scan were both
+    tried against the bending valley that first stages miss and not kept (docs/search.md). ``tie``: follower ->
+    leader, coordinates held in the first stage at the leader's value (clipped to the follower's bounds) rather than
+    at ``hold`` (e.g. compression following tension, as in
+    Blender's defaults; tried as the fit's default and not kept, docs/search.md); in the second
+    stage they are free like every other. ``second_warm``: the second stage's first covariance is the first
+    stage's run's on its coordinates (at most ``second_sigma``) and ``second_sigma`` on the others, not
+    ``second_sigma`` on all (tried, not kept). ``warm_tail``: the last share of ``budget`` goes to a third run
+    from the best point with that covariance; with ``warm_tail_stuck`` only if the second stage has not beaten
+    the first stage's best point by then (the defaults: 0.2, off; FitJob turns it on where the fit searches the
+    manipulation's unknowns). ``warm_tail_stall``: the tail also starts as soon as the second stage has gained less
+    than ``warm_tail_stall_gain`` of its best value over that share of ``budget`` (default 0: tried, not kept,
+    docs/search.md, "A tail where the second stage stalls").
     """
 
     name = "cma-staged"
