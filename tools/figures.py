@@ -875,7 +875,7 @@ SOURCES = {
         "argv": window_cameras(*CAP_LINE_SEARCH),
         "cost": "expensive",
         "what": "the default fit of the time goal's capture with a line of 48 bendings and each first-stage run cut at "
-        "0.16 of the budget (a variant of the search), seeds 0-3 (about 12 min)",
+        "0.16 of the budget (a variant of the search), seeds 0-3 (about 17 min on a machine twice as slow as the others')",
     },  # fmt: skip
     "cap_line_exact": {
         "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "0-4", *CAP_LINE_SEARCH, "--json", "{out}"],
@@ -893,7 +893,7 @@ SOURCES = {
         "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-4", *CAP_LINE_SEARCH, "--json", "{out}"],
         "cost": "expensive",
         "what": "the release/pins goal's capture with a line of 48 bendings and each first-stage run cut at 0.16 of "
-        "the budget (a variant of the search), seeds 0-4 (about 12 min)",
+        "the budget (a variant of the search), seeds 0-4 (about 33 min on a machine twice as slow as the others')",
     },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
