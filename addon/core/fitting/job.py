@@ -328,15 +328,18 @@ class FitJob:
             kw["first_restart_step"] = D.STAGED_FIRST_RESTART_STEP_LADDER
         grid = self.config.staged_restart_grid
         rows, cols = self.config.staged_restart_grid_rows, self.config.staged_restart_grid_columns
+        near = self.config.staged_restart_grid_near
         if (D.FIT_RESTART_GRID_ON if grid is None else grid) and all(n in strong for n in D.FIT_RESTART_GRID):
             kw["first_restart_grid"] = list(D.FIT_RESTART_GRID)  # runs again from the grid's best cells
             if rows is not None or cols is not None:
                 n = D.STAGED_FIRST_RESTART_GRID_POINTS
                 kw["first_restart_grid_points"] = [n if rows is None else rows, n if cols is None else cols]
-        elif rows is not None or cols is not None:
+            if near is not None:  # the grid also around the run's end in the settings named there that are free
+                kw["first_restart_grid_near"] = {n: near for n in D.FIT_RESTART_NEAR if n in strong}
+        elif rows is not None or cols is not None or near is not None:
             raise ClothFitError(
-                "--search staged_restart_grid_rows/columns: this fit runs no grid (staged_restart_grid is off, or "
-                f"{' and '.join(D.FIT_RESTART_GRID)} are not both free)"
+                "--search staged_restart_grid_rows/columns/near: this fit runs no grid (staged_restart_grid is off, "
+                f"or {' and '.join(D.FIT_RESTART_GRID)} are not both free)"
             )
         if strong:
             kw["first"] = strong + [n for n in list(self.space.names)[self.npar :] if n in D.STAGED_FIRST_UNKNOWNS]

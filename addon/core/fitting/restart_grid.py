@@ -57,16 +57,56 @@ def grid_shape(points: object, w: str) -> tuple[int, int]:
     return int(pair[0]), int(pair[1])
 
 
+def grid_near(near: object, first: list, names: list | None, w: str) -> dict:
+    """``first_restart_grid_near``: first-stage coordinates other than the grid's own -> a step (unit cube, above 0
+    and at most 0.25); the grid is tried at every combination of each of them moved by -step, 0 and +step (None or
+    {}: at the run's own values only)."""
+    near = {} if near is None else near
+    if (
+        not isinstance(near, dict)
+        or any(n not in first or n in (names or ()) for n in near)
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v <= 0.25 for v in near.values())
+    ):
+        raise ClothFitError(
+            f"{w}: first_restart_grid_near must map first-stage coordinates other than the grid's own to a step in "
+            f"(0, 0.25] of the unit cube, got {near!r}"
+        )
+    return {str(n): float(v) for n, v in near.items()}
+
+
+def near_offsets(near: dict, first: list) -> np.ndarray:
+    """The grid's offsets from the run's end (``grid_near``): (3 ** len(near), len(first)), the run's own first."""
+    offsets = np.zeros((1, len(first)))
+    for n, step in near.items():
+        moved = [offsets.copy() for _ in range(3)]
+        for m, sign in zip(moved, (0.0, -1.0, 1.0)):
+            m[:, first.index(n)] = sign * step
+        offsets = np.concatenate(moved)
+    return offsets
+
+
+def grid_batch(u: np.ndarray, a: int, b: int, shape: tuple, offsets: np.ndarray) -> np.ndarray:
+    """The grid's points (unit cube, clipped): ``u`` (a run's end) with coordinates ``a`` and ``b`` at the centres of a
+    rows x columns grid across their ranges (one column: ``b`` held at the run's own value), once at each of
+    ``offsets`` (``near_offsets``)."""
+    na, nb = shape
+    U = np.repeat(u[None], na * nb, 0)
+    A, B = np.meshgrid(centres(na), centres(nb) if nb > 1 else u[b : b + 1], indexing="ij")
+    U[:, a], U[:, b] = A.ravel(), B.ravel()
+    return np.clip(np.concatenate([U + o for o in offsets]), 0.0, 1.0)
+
+
 def restore_grid(d: dict, first: list, w: str) -> dict:
     """The grid's part of a saved ``StagedCMA`` (checked; none in checkpoints from before it): ``names``,
     ``points`` along each coordinate (``grid_shape``; one count in checkpoints from before rows and columns),
-    ``sigma``, ``done``, ``pending`` (the points waiting to be evaluated, or None) and ``starts`` (the later runs'
-    starts left, best cell first)."""
+    ``near`` (``grid_near``; none in checkpoints from before it), ``sigma``, ``done``, ``pending`` (the points
+    waiting to be evaluated, or None) and ``starts`` (the later runs' starts left, best cell first)."""
     names = grid_names(d.get("first_restart_grid"), first, f"checkpoint: {w}")
     points = grid_shape(d.get("grid_points", D.STAGED_FIRST_RESTART_GRID_POINTS), f"checkpoint: {w}")
+    near = grid_near(d.get("grid_near"), first, names, f"checkpoint: {w}")
     sigma = saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
     done = saved_bool(d, "grid_done", w) if "grid_done" in d else False
-    n2, k = points[0] * points[1], len(first)
+    n2, k = points[0] * points[1] * 3 ** len(near), len(first)
     pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
     starts = d.get("grid_starts", [])
     if (
@@ -80,7 +120,15 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
     if pending is not None and (np.any(pending < 0.0) or np.any(pending > 1.0)):
         raise ClothFitError(f"checkpoint: {w} 'grid_pending' must lie in the unit cube")
     starts = [[float(v) for v in s] for s in starts]
-    return {"names": names, "points": points, "sigma": sigma, "done": done, "pending": pending, "starts": starts}
+    return {
+        "names": names,
+        "points": points,
+        "near": near,
+        "sigma": sigma,
+        "done": done,
+        "pending": pending,
+        "starts": starts,
+    }
 
 
 def restart_levels(name: object, levels: object, first: list, w: str) -> tuple:

@@ -22,7 +22,17 @@ import numpy as np
 from .. import defaults as D
 from ..errors import ClothFitError
 from .evolution_strategy import CMA_STOPS, CMAES
-from .restart_grid import centres, grid_names, grid_shape, is_run_end, restart_levels, restore_grid
+from .restart_grid import (
+    centres,
+    grid_batch,
+    grid_names,
+    grid_near,
+    grid_shape,
+    is_run_end,
+    near_offsets,
+    restart_levels,
+    restore_grid,
+)
 from .space import (
     SearchSpace,
     checked_flag,
@@ -70,7 +80,8 @@ class StagedCMA(Optimizer):
     (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
     bendings"). ``first_restart_grid``: two first-stage coordinates tried on a grid across their ranges
     (``first_restart_grid_points``: n x n, or [rows, columns], a count of 1 holding that coordinate at the run's own
-    value), the others at the first run's best point, once that run has converged; each later run starts at the
+    value), the others at the first run's best point (and, with ``first_restart_grid_near``, at each combination of
+    the named coordinates moved by -step, 0 and +step), once that run has converged; each later run starts at the
     grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
     step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
     from a grid"). ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had
@@ -125,6 +136,7 @@ class StagedCMA(Optimizer):
         first_restart_grid_points: int | tuple | list = D.STAGED_FIRST_RESTART_GRID_POINTS,
         first_restart_grid_sigma: float = D.STAGED_FIRST_RESTART_GRID_SIGMA,
         first_run_cap: float = D.STAGED_FIRST_RUN_CAP,
+        first_restart_grid_near: dict | None = D.STAGED_FIRST_RESTART_GRID_NEAR,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -179,6 +191,7 @@ class StagedCMA(Optimizer):
         )
         self.first_restart_grid = grid_names(first_restart_grid, self.first, w)
         self.grid_points = grid_shape(first_restart_grid_points, w)
+        self.grid_near = grid_near(first_restart_grid_near, self.first, self.first_restart_grid, w)
         self.grid_sigma = checked_number(
             first_restart_grid_sigma, f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True
         )
@@ -467,17 +480,10 @@ class StagedCMA(Optimizer):
             self._stopped = True
 
     def _grid_batch(self, c: CMAES) -> np.ndarray:
-        """``first_restart_grid``: the converged run's best point (strong settings' cube) with the two named
-        coordinates at the centres of a rows x columns grid across their ranges (one column: the second held at
-        the run's own value)."""
-        sub = self._subspace()
-        u = np.clip(sub.encode(np.asarray(c.best_x)[None])[0], 0.0, 1.0)
-        na, nb = self.grid_points
+        """``first_restart_grid``: the converged run's best point (strong settings' cube) on the grid (``grid_batch``)."""
+        u = np.clip(self._subspace().encode(np.asarray(c.best_x)[None])[0], 0.0, 1.0)
         a, b = (self.first.index(x) for x in self.first_restart_grid)
-        U = np.repeat(u[None], na * nb, 0)
-        A, B = np.meshgrid(centres(na), centres(nb) if nb > 1 else u[b : b + 1], indexing="ij")
-        U[:, a], U[:, b] = A.ravel(), B.ravel()
-        return U
+        return grid_batch(u, a, b, self.grid_points, near_offsets(self.grid_near, self.first))
 
     def _next_run(self, c: CMAES) -> None:
         """Runs again: the next first-stage run, from the grid's best cell that no run has ended in yet
@@ -565,6 +571,7 @@ class StagedCMA(Optimizer):
         "first_restart_levels",
         "first_restart_grid",
         "grid_points",
+        "grid_near",
         "grid_sigma",
         "grid_pending",
         "grid_starts",
@@ -618,6 +625,7 @@ class StagedCMA(Optimizer):
                 "first_restart_levels": list(self.first_restart_levels),
                 "first_restart_grid": self.first_restart_grid,
                 "grid_points": list(self.grid_points),
+                "grid_near": dict(self.grid_near),
                 "grid_sigma": self.grid_sigma,
                 "grid_pending": None if self.grid_pending is None else self.grid_pending.tolist(),
                 "grid_starts": [list(s) for s in self.grid_starts],
@@ -675,6 +683,7 @@ class StagedCMA(Optimizer):
         # the grid before runs again came after the runs' ends: none in older checkpoints
         g = restore_grid(d, self.first, w)
         self.first_restart_grid, self.grid_points, self.grid_sigma = g["names"], g["points"], g["sigma"]
+        self.grid_near = g["near"]
         self.grid_done, self.grid_pending, self.grid_starts = g["done"], g["pending"], g["starts"]
 
     @classmethod
