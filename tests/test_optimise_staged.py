@@ -13,6 +13,7 @@ import pytest
 from clothfit.core import defaults as D
 from clothfit.core.errors import ClothFitError
 from clothfit.core.fitting.optimise import make_optimizer, optimizer_from_state
+from clothfit.core.fitting.restart_grid import near_offsets
 from clothfit.core.fitting.space import SearchSpace
 from clothfit.core.fitting.staged import StagedCMA
 
@@ -524,6 +525,9 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     assert g.first_run_cap == D.STAGED_FIRST_RUN_CAP  # the run cap: the default's, or as --search asks
     capped = FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_run_cap=0.16)
     assert FitJob(cap, capped).opt.first_run_cap == 0.16
+    # the grid also around the run's end in tension and shear, as --search asks; none by default
+    near = FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_near=0.01)
+    assert FitJob(cap, near).opt.grid_near == {n: 0.01 for n in D.FIT_RESTART_NEAR} and opt.grid_near == {}
     assert opt.grid_points == (D.STAGED_FIRST_RESTART_GRID_POINTS,) * 2
     assert FitJob(
         cap, FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_columns=3)
@@ -535,11 +539,14 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     off = FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid=False, staged_restart_grid_rows=48)
     with pytest.raises(ClothFitError, match="runs no grid"):
         FitJob(cap, off)
+    with pytest.raises(ClothFitError, match="runs no grid"):
+        FitJob(cap, FitConfig(max_evaluations=40, staged_restart_grid=False, staged_restart_grid_near=0.01))
     for bad in (
         {"staged_restart_grid_rows": 1},
         {"staged_restart_grid_columns": 0},
         {"staged_restart_grid_sigma": 0.0},
         {"staged_run_cap": 1.5},
+        {"staged_restart_grid_near": 0.3},
     ):
         with pytest.raises(ClothFitError, match=next(iter(bad))):
             FitConfig(**bad).checked()
@@ -818,3 +825,56 @@ def test_a_first_run_that_never_settles_ends_at_its_cap():
     for bad in (-0.1, 1.5, "a"):
         with pytest.raises(ClothFitError, match="first_run_cap"):
             StagedCMA(space(), first=["x0"], first_run_cap=bad)
+
+
+def test_the_line_is_also_tried_around_the_run_end():
+    """``first_restart_grid_near``: the line is tried again with another first-stage coordinate moved a step either
+    side of the run's end, so a better basin that only shows near the truth's value of that coordinate (here x2,
+    which the worse basin has pulled off) is found; its points survive a checkpoint, a checkpoint from before it
+    has none, and a bad step is one line."""
+
+    def pulled(X):  # a wide worse basin at x0 = -2 with x2 at 1.5; a better one at x0 = 2, deep only near x2 = 1
+        X = np.atleast_2d(X)
+        worse = 1.0 + 0.1 * (X[:, 0] + 2.0) ** 2 + X[:, 1] ** 2 + (X[:, 2] - 1.5) ** 2
+        return np.minimum(worse, 0.5 * (X[:, 0] - 2.0) ** 2 + X[:, 1] ** 2 + 50.0 * (X[:, 2] - 1.0) ** 2)
+
+    kw = {"first_restart_step": 0.05, "first_fraction": 0.72, "first_explore": 0.56, "budget": 1500, "sigma0": 0.1}
+    grid = {"first_restart_grid": ["x0", "x1"], "first_restart_grid_points": [20, 1], "first_restart_grid_sigma": 0.02}
+    start = np.array([-2.0, 0.0, 1.5, 0.0, 0.0])  # in the worse basin
+    first = ["x0", "x1", "x2"]
+    runs = {}
+    for near in (None, {"x2": 0.05}):
+        opt = StagedCMA(space(), seed=0, first=first, initial=[start], first_restart_grid_near=near, **kw, **grid)
+        while opt.stage == 1:
+            X = opt.ask()
+            if opt.grid_pending is not None:
+                end = opt.space.subspace(first).decode(np.array(opt.run_ends[-1][1])[None])[0]
+                assert end[0] == pytest.approx(-2.0, abs=0.2) and end[2] == pytest.approx(1.5, abs=0.1)
+                assert len(X) == (20 if near is None else 60)
+                # the run's own x2 first, then a step (0.05 of the cube: 0.5) below and above it
+                shifts = [0.0] if near is None else [0.0, -0.5, 0.5]
+                assert X[:, 2] == pytest.approx(np.repeat(end[2] + np.array(shifts), 20))
+                assert X[:, 0] == pytest.approx(np.tile(-5.0 + 10.0 * (np.arange(20) + 0.5) / 20, len(shifts)))
+                runs[str(near)] = X[int(np.argmin(pulled(X)))]
+                resumed = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+                assert resumed.grid_near == (near or {}) and np.array_equal(resumed.ask(), X)
+            opt.tell(X, pulled(X))
+        # at the run's own x2 the line's best cell is in the worse basin, and so is the search's end (on this
+        # seed); a step below it, the line's best cell and the search's end are in the better one
+        ends = (opt.best_x[0], opt.best_x[2])
+        if near is None:
+            assert runs["None"][0] < 0.0 and ends == pytest.approx((-2.0, 1.5), abs=0.05)
+        else:
+            assert runs[str(near)][0] > 0.0 and ends == pytest.approx((2.0, 1.0), abs=0.05)
+    # two named coordinates: the run's own values, then each moved by -step and by +step, one at a time
+    two = near_offsets({"x2": 0.05, "x1": 0.1}, first)
+    assert two.tolist() == [[0, 0, 0], [0, 0, -0.05], [0, 0, 0.05], [0, -0.1, 0], [0, 0.1, 0]]
+    d = json.loads(json.dumps(opt.state_dict()))
+    del d["grid_near"]
+    assert optimizer_from_state(d).grid_near == {}  # a checkpoint from before it
+    for bad in ({"x0": 0.05}, {"x4": 0.05}, {"x2": 0.0}, {"x2": 0.3}, {"x2": True}, ["x2"]):
+        with pytest.raises(ClothFitError, match="first_restart_grid_near"):
+            StagedCMA(space(), seed=0, first=first, first_restart_grid=["x0", "x1"], first_restart_grid_near=bad)
+    d["grid_near"] = {"x2": -1}
+    with pytest.raises(ClothFitError, match="first_restart_grid_near"):
+        optimizer_from_state(d)

@@ -295,7 +295,7 @@ STAGED_FIRST_RESTART_GRID_APART = 0.125  # cma-staged: a run after the grid star
 # a finer line's cells are narrower than a basin)
 STAGED_FIRST_RESTART_GRID_SIGMA = 0.1  # cma-staged: the step (unit cube) of a run started at a grid cell
 STAGED_FIRST_RESTART_GRID_NEAR = None  # cma-staged: coordinates -> a step (unit cube): the grid tried again with
-# each moved by -step and +step from the run's end, every combination (None: at the run's own values only)
+# each moved by -step and by +step from the run's end, one at a time (None: at the run's own values only)
 FIT_RESTART_NEAR = ("tension_stiffness", "shear_stiffness")  # a fit of Blender's cloth: the settings the grid is
 # also tried around with fit --search staged_restart_grid_near=S (docs/search.md, "A line near the run's end")
 FIT_RESTART_GRID = ("bending_stiffness", "air_damping")  # a fit of Blender's cloth: the grid's two settings (the

@@ -232,6 +232,7 @@ class FitConfig:
             ("staged_run_cap", 0.0, 1.0),
             ("staged_warm_tail", 0.0, 1.0),
             ("staged_restart_grid_sigma", 1e-9, 1.0),
+            ("staged_restart_grid_near", 1e-9, 0.25),
         ):
             numval(name, lo, hi)
         intval("ga_stall", 1)

@@ -59,7 +59,7 @@ def grid_shape(points: object, w: str) -> tuple[int, int]:
 
 def grid_near(near: object, first: list, names: list | None, w: str) -> dict:
     """``first_restart_grid_near``: first-stage coordinates other than the grid's own -> a step (unit cube, above 0
-    and at most 0.25); the grid is tried at every combination of each of them moved by -step, 0 and +step (None or
+    and at most 0.25); the grid is tried again with each of them moved by -step and by +step, one at a time (None or
     {}: at the run's own values only)."""
     near = {} if near is None else near
     if (
@@ -75,13 +75,11 @@ def grid_near(near: object, first: list, names: list | None, w: str) -> dict:
 
 
 def near_offsets(near: dict, first: list) -> np.ndarray:
-    """The grid's offsets from the run's end (``grid_near``): (3 ** len(near), len(first)), the run's own first."""
-    offsets = np.zeros((1, len(first)))
-    for n, step in near.items():
-        moved = [offsets.copy() for _ in range(3)]
-        for m, sign in zip(moved, (0.0, -1.0, 1.0)):
-            m[:, first.index(n)] = sign * step
-        offsets = np.concatenate(moved)
+    """The grid's offsets from the run's end (``grid_near``): (1 + 2 len(near), len(first)), the run's own first,
+    then each named coordinate moved by -step and +step, one at a time."""
+    offsets = np.zeros((1 + 2 * len(near), len(first)))
+    for i, (n, step) in enumerate(near.items()):
+        offsets[1 + 2 * i : 3 + 2 * i, first.index(n)] = (-step, step)
     return offsets
 
 
@@ -106,7 +104,7 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
     near = grid_near(d.get("grid_near"), first, names, f"checkpoint: {w}")
     sigma = saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
     done = saved_bool(d, "grid_done", w) if "grid_done" in d else False
-    n2, k = points[0] * points[1] * 3 ** len(near), len(first)
+    n2, k = points[0] * points[1] * (1 + 2 * len(near)), len(first)
     pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
     starts = d.get("grid_starts", [])
     if (

@@ -80,8 +80,8 @@ class StagedCMA(Optimizer):
     (default None: every run where the first began; tried on bending, docs/search.md, "Runs again at other
     bendings"). ``first_restart_grid``: two first-stage coordinates tried on a grid across their ranges
     (``first_restart_grid_points``: n x n, or [rows, columns], a count of 1 holding that coordinate at the run's own
-    value), the others at the first run's best point (and, with ``first_restart_grid_near``, at each combination of
-    the named coordinates moved by -step, 0 and +step), once that run has converged; each later run starts at the
+    value), the others at the first run's best point (and, with ``first_restart_grid_near``, again with each named
+    coordinate moved by -step and by +step, one at a time), once that run has converged; each later run starts at the
     grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
     step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
     from a grid"). ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had
