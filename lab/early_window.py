@@ -25,10 +25,15 @@ truth's but bending 8x low. Four measurements:
     python lab/early_window.py cameras --n 8 --seeds 0-3 --json OUT
     python lab/early_window.py frames --k 10 --seeds 0-3 --json OUT
     python lab/early_window.py slice --points 48 --json OUT
+    python lab/early_window.py around --from FITS.json --seeds 2-3 --json OUT
 
 * ``slice``: the truth's training error with bending at ``--points`` values across the search's range (the values
   a line of that many rows tries) and shear at 0.95, 1 and 1.05 of the truth's: how narrow the truth's bending
   valley is at this resolution beside the grid's cells.
+* ``around``: for each seed of a recorded ``cameras`` run (``--from``), the line of 48 bendings through that fit's
+  strong settings (the others at the truth's, the manipulation's unknowns at 0), at the fit's own tension and shear
+  and with each moved by -0.01 and +0.01 of the search's cube, one at a time (the five passes ``fit --search
+  staged_restart_grid_near=0.01`` tries): where the line's lowest cell lies once tension and shear move a step.
 """
 
 from __future__ import annotations
@@ -136,6 +141,58 @@ def bending_slice(root: str, points: int, shear_factors: list[float]) -> dict:
         "rows": rows,
         "range": [float(space.lo[ib] * MASS), float(space.hi[ib] * MASS)],
     }
+
+
+def around(root: str, fits_json: str, seeds: list[int], step: float = 0.01, points: int = 48) -> dict:
+    """The line of ``points`` bendings through each seed's fitted strong settings (``fits_json``: a ``cameras``
+    run's record or its data), at the fit's own tension and shear and with each moved by -``step`` and +``step`` of
+    the search's cube, one at a time."""
+    rec = read_json(fits_json, "fits")
+    fits_by_seed = {f["seed"]: f["fit"] for f in rec.get("data", rec)["fits"]}
+    job = _truth_job(load_capture(root), D.TRAIN_TIMES)
+    names, space = job.space.names, job.space
+    ib = names.index("bending_stiffness")
+    truth_row = None
+    rows = []
+    for seed in seeds:
+        fit = fits_by_seed[seed]
+        x0 = np.array([fit["settings"].get(n, TRUTH.get(n, 0.0)) / MASS for n in names])
+        U = np.repeat(space.encode(x0[None]), points, 0)
+        U[:, ib] = (np.arange(points) + 0.5) / points
+        bend = space.decode(U)[:, ib] * MASS
+        truth_row = int(np.argmin(np.abs(np.log(bend / TRUTH["bending_stiffness"]))))
+        passes = []
+        for moved, d in [(None, 0.0)] + [
+            (n, d) for n in ("tension_stiffness", "shear_stiffness") for d in (-step, step)
+        ]:
+            V = U.copy()
+            if moved is not None:
+                V[:, names.index(moved)] += d
+            e = 100.0 * job.evaluate(space.decode(V)) / job.objective.n_images
+            k = int(np.argmin(e))
+            passes.append(
+                {
+                    "moved": moved,
+                    "by": d,
+                    "value": None if moved is None else float(space.decode(V[:1])[0, names.index(moved)] * MASS),
+                    "lowest_pct": float(e[k]),
+                    "lowest_bending": float(bend[k]),
+                    "truth_row_pct": float(e[truth_row]),
+                    "plateau_pct": float(np.median(e[bend < 0.1])),
+                }
+            )
+            print(f"seed {seed}, {moved or 'own'} {d:+.2f}: lowest {e[k]:.3f} % at bending {bend[k]:.3g}", flush=True)
+        best = min(passes, key=lambda p: p["lowest_pct"])
+        rows.append(
+            {
+                "seed": seed,
+                "settings": fit["settings"],
+                "passes": passes,
+                "own_lowest_bending": passes[0]["lowest_bending"],
+                "best_pass": best,
+            }
+        )
+    return {"step": step, "points": points, "truth_row_bending": float(bend[truth_row]), "seeds": rows}
 
 
 def _fit(argv: list[str]) -> tuple[float, float]:
@@ -261,12 +318,13 @@ def frames(root: str, seeds: list[int], k: int, tmp: str) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames", "slice"))
+    ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames", "slice", "around"))
     ap.add_argument("--points", type=int, default=48, help="slice: bendings across the search's range")
     ap.add_argument("--k", type=int, default=10, help="frames: the first K training frames")
     ap.add_argument("--n", type=int, default=8, help="cameras: training cameras")
     ap.add_argument("--seeds", default="0-3", help="fits, cameras, frames: seeds A-B")
     ap.add_argument("--json")
+    ap.add_argument("--from", dest="fits_json", help="around: a recorded cameras run (its JSON)")
     ap.add_argument(
         "--search", action="append", default=[], metavar="NAME=VALUE", help="cameras: the fit's --search (repeatable)"
     )
@@ -283,6 +341,8 @@ def main(argv=None) -> int:
         seeds = list(range(int(lo), int(hi or lo) + 1))
         if a.what == "fits":
             out = {"seeds": seeds, "fits": fits(root, seeds, tmp)}
+        elif a.what == "around":
+            out = around(root, a.fits_json, seeds)
         elif a.what == "frames":
             out = {"seeds": seeds, "frames": a.k, **frames(root, seeds, a.k, tmp)}
         else:

@@ -905,6 +905,23 @@ SOURCES = {
         "with shear 0.01 of the cube either side of the run's end, the first run cut at 0.10 of the budget (a variant "
         "of the search), seeds 0-3 (about 20 min on a machine twice as slow as the others')",
     },  # fmt: skip
+    "early_window_around": {
+        "argv": [
+            "{py}",
+            "lab/early_window.py",
+            "around",
+            "--from",
+            "docs/figures/early_window_cap_line.json",
+            "--seeds",
+            "2-3",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the line of 48 bendings through the capped line's fits that ended in other basins (seeds 2-3 of the "
+        "time goal's capture), at their own tension and shear and with each moved 0.01 of the cube either way "
+        "(about 3 min)",
+    },  # fmt: skip
     "near_line_exact_5_9": {
         "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *NEAR_LINE_SEARCH, "--json", "{out}"],
         "cost": "expensive",
