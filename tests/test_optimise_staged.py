@@ -528,6 +528,10 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     # the grid also around the run's end in tension and shear, as --search asks; none by default
     near = FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_near=0.01)
     assert FitJob(cap, near).opt.grid_near == {n: 0.01 for n in D.FIT_RESTART_NEAR} and opt.grid_near == {}
+    at_end = FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_at_end=True)
+    assert FitJob(cap, at_end).opt.grid_at_end is True and opt.grid_at_end is False
+    with pytest.raises(ClothFitError, match="staged_restart_grid_at_end must be true or false"):
+        FitConfig(staged_restart_grid_at_end="yes").checked()
     assert opt.grid_points == (D.STAGED_FIRST_RESTART_GRID_POINTS,) * 2
     assert FitJob(
         cap, FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_columns=3)
@@ -878,3 +882,49 @@ def test_the_line_is_also_tried_around_the_run_end():
     d["grid_near"] = {"x2": -1}
     with pytest.raises(ClothFitError, match="first_restart_grid_near"):
         optimizer_from_state(d)
+
+
+def test_the_grid_can_wait_for_the_first_stage_end():
+    """``first_restart_grid_at_end``: no grid at the first run's end; once the first stage's share is spent, the grid
+    (here the line, also a step either side in x2) through the stage's best point, and the second stage from the best
+    point of all, the grid's cells among them, so a better basin that only the grid sees is where the search goes on;
+    resume is exact while the grid waits, and a checkpoint from before it has the grid at the first run's end."""
+
+    def pulled(X):  # as in the test above: the better basin of x0 shows only near x2 = 1, a step off the worse one's
+        X = np.atleast_2d(X)
+        worse = 1.0 + 0.1 * (X[:, 0] + 2.0) ** 2 + X[:, 1] ** 2 + (X[:, 2] - 1.5) ** 2
+        return np.minimum(worse, 0.5 * (X[:, 0] - 2.0) ** 2 + X[:, 1] ** 2 + 50.0 * (X[:, 2] - 1.0) ** 2)
+
+    kw = {"first_restart_step": 0.0, "first_fraction": 0.5, "budget": 1500, "sigma0": 0.1}
+    grid = {
+        "first_restart_grid": ["x0", "x1"],
+        "first_restart_grid_points": [20, 1],
+        "first_restart_grid_near": {"x2": 0.05},
+        "first_restart_grid_at_end": True,
+    }
+    first = ["x0", "x1", "x2"]
+    opt = StagedCMA(space(), seed=0, first=first, initial=[np.array([-2.0, 0.0, 1.5, 0.0, 0.0])], **kw, **grid)
+    seen = None
+    while opt.stage == 1:
+        X = opt.ask()
+        if opt.grid_pending is not None:
+            assert seen is None and opt.evaluations >= 0.5 * 1500 and opt.first_runs == 1
+            end = opt.best_x
+            assert X[:, 2] == pytest.approx(np.repeat(end[2] + np.array([0.0, -0.5, 0.5]), 20))
+            assert np.allclose(X[:, 3:], end[3:])
+            resumed = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+            assert resumed.grid_at_end and np.array_equal(resumed.ask(), X)
+            seen = X
+        opt.tell(X, pulled(X))
+    assert seen is not None and opt.first_runs == 1  # no runs from the grid's cells: the second stage instead
+    cell = seen[int(np.argmin(pulled(seen)))]
+    assert cell[0] > 0.0 and opt.space.decode(opt.children[-1].mean[None])[0] == pytest.approx(cell)
+    while not opt.stopped and opt.evaluations < 1500:
+        X = opt.ask()
+        opt.tell(X, pulled(X))
+    assert opt.best_x[:3] == pytest.approx([2.0, 0.0, 1.0], abs=0.05)
+    d = json.loads(json.dumps(opt.state_dict()))
+    del d["grid_at_end"]
+    assert optimizer_from_state(d).grid_at_end is False
+    with pytest.raises(ClothFitError, match="first_restart_grid_at_end"):
+        StagedCMA(space(), seed=0, first=first, first_restart_grid=["x0", "x1"], first_restart_grid_at_end="yes")

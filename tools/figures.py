@@ -139,6 +139,14 @@ CAP_LINE_SEARCH = [*LINE_SEARCH, "--search", "staged_run_cap=0.16"]
 # that line, also tried with tension and with shear 0.01 of the cube either side of the run's end (one at a time),
 # the first run cut at 0.10 of the budget so that the line's five passes fit in the share of runs again
 NEAR_LINE_SEARCH = [*LINE_SEARCH, "--search", "staged_run_cap=0.1", "--search", "staged_restart_grid_near=0.01"]
+# the same five passes once, at the first stage's end through its best point; the second stage from the best of all
+END_LINE_SEARCH = [
+    *LINE_SEARCH,
+    "--search",
+    "staged_restart_grid_near=0.01",
+    "--search",
+    "staged_restart_grid_at_end=true",
+]
 
 SOURCES = {
     "demo": {
@@ -921,6 +929,20 @@ SOURCES = {
         "what": "the line of 48 bendings through the capped line's fits that ended in other basins (seeds 2-3 of the "
         "time goal's capture), at their own tension and shear and with each moved 0.01 of the cube either way "
         "(about 3 min)",
+    },  # fmt: skip
+    "early_window_end_line": {
+        "argv": window_cameras(*END_LINE_SEARCH),
+        "cost": "expensive",
+        "what": "the default fit of the time goal's capture with the line of 48 bendings, also with tension and with "
+        "shear 0.01 of the cube either side, run once at the first stage's end through its best point (a variant of the "
+        "search), seeds 0-3 (about 20 min on a machine twice as slow as the others')",
+    },  # fmt: skip
+    "end_line_exact_5_9": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *END_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the exact-model goal's capture with the line of 48 bendings, also with tension and with shear 0.01 of "
+        "the cube either side, run once at the first stage's end through its best point (a variant of the search), "
+        "seeds 5-9 (about 15 min on a machine twice as slow as the others' recordings)",
     },  # fmt: skip
     "near_line_exact_5_9": {
         "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *NEAR_LINE_SEARCH, "--json", "{out}"],

@@ -44,7 +44,17 @@ SEARCH_OPTIONS = {
     "staged_restart_grid_columns": (None, ("cma-staged",)),
     "staged_restart_grid_sigma": ("first_restart_grid_sigma", ("cma-staged",)),
     "staged_restart_grid_near": (None, ("cma-staged",)),
+    "staged_restart_grid_at_end": ("first_restart_grid_at_end", ("cma-staged",)),
 }
+
+# the search options that are true or false
+FLAG_OPTIONS = (
+    "cma_active",
+    "staged_second_warm",
+    "staged_warm_tail_stuck",
+    "staged_restart_grid",
+    "staged_restart_grid_at_end",
+)
 
 
 def resolve_optimizer(name: str, stageable: bool) -> str:
@@ -122,6 +132,9 @@ class FitConfig:
     staged_restart_grid_rows: int | None = None  # cma-staged: that grid's points along its first setting (bending)
     staged_restart_grid_columns: int | None = None  # ... along its second (air damping; 1: the run's own value)
     staged_restart_grid_sigma: float | None = None  # cma-staged: the step of a run started at a grid cell
+    staged_restart_grid_at_end: bool | None = (
+        None  # cma-staged: that grid at the first stage's end, not its first run's
+    )
     staged_restart_grid_near: float | None = None  # cma-staged: the grid also at D.FIT_RESTART_NEAR moved by -S and +S
 
     @classmethod
@@ -241,7 +254,7 @@ class FitConfig:
         intval("portfolio_max_polishes", 1, 10**6)
         intval("staged_restart_grid_rows", 2, 64)
         intval("staged_restart_grid_columns", 1, 64)
-        for name in ("cma_active", "staged_second_warm", "staged_warm_tail_stuck", "staged_restart_grid"):
+        for name in FLAG_OPTIONS:
             if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
                 raise ClothFitError(f"fit config: {name} must be true or false, got {getattr(self, name)!r}")
         if self.portfolio_polish not in (None, "cma", "coord"):

@@ -97,13 +97,15 @@ def grid_batch(u: np.ndarray, a: int, b: int, shape: tuple, offsets: np.ndarray)
 def restore_grid(d: dict, first: list, w: str) -> dict:
     """The grid's part of a saved ``StagedCMA`` (checked; none in checkpoints from before it): ``names``,
     ``points`` along each coordinate (``grid_shape``; one count in checkpoints from before rows and columns),
-    ``near`` (``grid_near``; none in checkpoints from before it), ``sigma``, ``done``, ``pending`` (the points
+    ``near`` (``grid_near``; none in checkpoints from before it), ``at_end`` (whether the grid waits for the first
+    stage's end; not in checkpoints from before it), ``sigma``, ``done``, ``pending`` (the points
     waiting to be evaluated, or None) and ``starts`` (the later runs' starts left, best cell first)."""
     names = grid_names(d.get("first_restart_grid"), first, f"checkpoint: {w}")
     points = grid_shape(d.get("grid_points", D.STAGED_FIRST_RESTART_GRID_POINTS), f"checkpoint: {w}")
     near = grid_near(d.get("grid_near"), first, names, f"checkpoint: {w}")
     sigma = saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
     done = saved_bool(d, "grid_done", w) if "grid_done" in d else False
+    at_end = saved_bool(d, "grid_at_end", w) if "grid_at_end" in d else False
     n2, k = points[0] * points[1] * (1 + 2 * len(near)), len(first)
     pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
     starts = d.get("grid_starts", [])
@@ -122,6 +124,7 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
         "names": names,
         "points": points,
         "near": near,
+        "at_end": at_end,
         "sigma": sigma,
         "done": done,
         "pending": pending,

@@ -172,6 +172,21 @@ def saved_stop_reason(d: dict, where: str, allowed: Iterable[str]) -> str | None
     return v
 
 
+def checked_tie(tie: object, names: list, first: list, w: str) -> dict:
+    """A staged search's ``tie``: follower -> leader, each follower a coordinate held in the first stage, its leader
+    one searched there; in the space's order (anything else is a one-line error)."""
+    if not isinstance(tie, dict):
+        raise ClothFitError(f"{w}: 'tie' must map a held coordinate to a searched one")
+    out = {}
+    for f, lead in tie.items():
+        if f not in names or f in first or lead not in first:
+            raise ClothFitError(
+                f"{w}: 'tie' {f!r} -> {lead!r} must map a held coordinate to one searched in the first stage"
+            )
+        out[str(f)] = str(lead)
+    return {f: out[f] for f in names if f in out}
+
+
 def saved_bool(d: dict, key: str, where: str) -> bool:
     """A checkpoint's required true/false field ``key``."""
     v = saved_field(d, key, where)

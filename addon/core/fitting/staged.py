@@ -38,6 +38,7 @@ from .space import (
     checked_flag,
     checked_integer,
     checked_number,
+    checked_tie,
     float_from_json,
     float_to_json,
     rng_state_from_json,
@@ -84,7 +85,8 @@ class StagedCMA(Optimizer):
     coordinate moved by -step and by +step, one at a time), once that run has converged; each later run starts at the
     grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
     step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
-    from a grid"). ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had
+    from a grid"); with ``first_restart_grid_at_end``, the grid once at the first stage's end through its best point
+    instead, and the second stage from the best point of all. ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had
     converged (default 0: only when it converges; docs/search.md, "A cap on the first run"). Race and scan were both
     tried against the bending valley that first stages miss and not kept (docs/search.md). ``tie``: follower ->
     leader, coordinates held in the first stage at the leader's value (clipped to the follower's bounds) rather than
@@ -137,6 +139,7 @@ class StagedCMA(Optimizer):
         first_restart_grid_sigma: float = D.STAGED_FIRST_RESTART_GRID_SIGMA,
         first_run_cap: float = D.STAGED_FIRST_RUN_CAP,
         first_restart_grid_near: dict | None = D.STAGED_FIRST_RESTART_GRID_NEAR,
+        first_restart_grid_at_end: bool = D.STAGED_FIRST_RESTART_GRID_AT_END,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -165,7 +168,7 @@ class StagedCMA(Optimizer):
             x[names.index(n)] = float(v)
         # a held value outside the search range (a scene's zero damping) is held at its bound
         self.hold_u = np.clip(space.encode(space.clip(x)), 0.0, 1.0)
-        self.tie = self._check_tie(tie or {}, names, self.first, w)
+        self.tie = checked_tie(tie or {}, names, self.first, w)
         self.stage = 1
         self._stopped = False
         sub = self._subspace()
@@ -192,6 +195,7 @@ class StagedCMA(Optimizer):
         self.first_restart_grid = grid_names(first_restart_grid, self.first, w)
         self.grid_points = grid_shape(first_restart_grid_points, w)
         self.grid_near = grid_near(first_restart_grid_near, self.first, self.first_restart_grid, w)
+        self.grid_at_end = checked_flag(first_restart_grid_at_end, f"{w}: first_restart_grid_at_end")
         self.grid_sigma = checked_number(
             first_restart_grid_sigma, f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True
         )
@@ -218,19 +222,6 @@ class StagedCMA(Optimizer):
         self.scan_left: list = []  # the first stage's coordinates still to scan (between the stages)
         self.scanned = False
         self._scan_pending = None
-
-    @staticmethod
-    def _check_tie(tie, names, first, w):
-        if not isinstance(tie, dict):
-            raise ClothFitError(f"{w}: 'tie' must map a held coordinate to a searched one")
-        out = {}
-        for f, lead in tie.items():
-            if f not in names or f in first or lead not in first:
-                raise ClothFitError(
-                    f"{w}: 'tie' {f!r} -> {lead!r} must map a held coordinate to one searched in the first stage"
-                )
-            out[str(f)] = str(lead)
-        return {f: out[f] for f in names if f in out}  # in the space's order
 
     def _full_u(self, U_sub):
         """The first stage's points in the whole unit cube: held coordinates at ``hold_u``, tied ones at
@@ -434,7 +425,11 @@ class StagedCMA(Optimizer):
             order = np.argsort(f, kind="stable")
             self.grid_starts = [[float(v) for v in self.grid_pending[i]] for i in order if np.isfinite(f[i])]
             self.grid_pending = None
-            self._next_run(self.children[-1])
+            if self.grid_at_end:  # the second stage, from the best point of all (the grid's cells among them)
+                self.grid_starts = []
+                self._end_first_stage()
+            else:
+                self._next_run(self.children[-1])
             return
         c = self._current
         U = c.pending_unit
@@ -453,7 +448,12 @@ class StagedCMA(Optimizer):
         if staging and not self.racing:
             c = self.children[-1]
             if c.stopped or self.evaluations >= self.first_fraction * self.budget:
-                self._end_first_stage()
+                if self.grid_at_end and self.first_restart_grid is not None and not self.grid_done:
+                    # the grid at the stage's end (first_restart_grid_at_end), through the stage's best point
+                    self.grid_done = True
+                    self.grid_pending = self._grid_batch(self._best_u[self._idx])
+                else:
+                    self._end_first_stage()
             elif self.evaluations < self.first_explore * self.budget:
                 if self._converged(c) or self._capped(c):
                     # another run from where the first began, with a new random stream: the first stage's
@@ -462,10 +462,10 @@ class StagedCMA(Optimizer):
                     if self.first_best_run is None or c.best_f < float_from_json(self.first_best_run["best_f"]):
                         self.first_best_run = c.state_dict()
                     self.first_runs += 1
-                    if self.first_restart_grid is not None and not self.grid_done:
+                    if self.first_restart_grid is not None and not (self.grid_done or self.grid_at_end):
                         # the grid first (first_restart_grid): the next run starts at its best cell
                         self.grid_done = True
-                        self.grid_pending = self._grid_batch(c)
+                        self.grid_pending = self._grid_batch(self._subspace().encode(np.asarray(c.best_x)[None])[0])
                     else:
                         self._next_run(c)
             elif self.first_best_run is not None:
@@ -479,9 +479,10 @@ class StagedCMA(Optimizer):
         elif c.stopped:
             self._stopped = True
 
-    def _grid_batch(self, c: CMAES) -> np.ndarray:
-        """``first_restart_grid``: the converged run's best point (strong settings' cube) on the grid (``grid_batch``)."""
-        u = np.clip(self._subspace().encode(np.asarray(c.best_x)[None])[0], 0.0, 1.0)
+    def _grid_batch(self, u: np.ndarray) -> np.ndarray:
+        """``first_restart_grid``: a point of the strong settings' cube (a converged run's best, or the stage's) on
+        the grid (``grid_batch``)."""
+        u = np.clip(u, 0.0, 1.0)
         a, b = (self.first.index(x) for x in self.first_restart_grid)
         return grid_batch(u, a, b, self.grid_points, near_offsets(self.grid_near, self.first))
 
@@ -572,6 +573,7 @@ class StagedCMA(Optimizer):
         "first_restart_grid",
         "grid_points",
         "grid_near",
+        "grid_at_end",
         "grid_sigma",
         "grid_pending",
         "grid_starts",
@@ -626,6 +628,7 @@ class StagedCMA(Optimizer):
                 "first_restart_grid": self.first_restart_grid,
                 "grid_points": list(self.grid_points),
                 "grid_near": dict(self.grid_near),
+                "grid_at_end": self.grid_at_end,
                 "grid_sigma": self.grid_sigma,
                 "grid_pending": None if self.grid_pending is None else self.grid_pending.tolist(),
                 "grid_starts": [list(s) for s in self.grid_starts],
@@ -683,7 +686,7 @@ class StagedCMA(Optimizer):
         # the grid before runs again came after the runs' ends: none in older checkpoints
         g = restore_grid(d, self.first, w)
         self.first_restart_grid, self.grid_points, self.grid_sigma = g["names"], g["points"], g["sigma"]
-        self.grid_near = g["near"]
+        self.grid_near, self.grid_at_end = g["near"], g["at_end"]
         self.grid_done, self.grid_pending, self.grid_starts = g["done"], g["pending"], g["starts"]
 
     @classmethod
@@ -716,7 +719,7 @@ class StagedCMA(Optimizer):
         if np.any(opt.hold_u < 0.0) or np.any(opt.hold_u > 1.0):
             raise ClothFitError(f"checkpoint: {w} 'hold_u' must lie in the unit cube")
         # 'tie' came after the first checkpoints of this search: none there
-        opt.tie = cls._check_tie(d.get("tie", {}), list(space.names), opt.first, f"checkpoint: {w}")
+        opt.tie = checked_tie(d.get("tie", {}), list(space.names), opt.first, f"checkpoint: {w}")
         opt.stage = saved_value(d, "stage", w, int, 1, 3)
         opt._stopped = saved_bool(d, "stopped", w)
         # the race came after the first checkpoints of this search: none there
