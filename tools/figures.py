@@ -944,20 +944,6 @@ SOURCES = {
         "the cube either side, run once at the first stage's end through its best point (a variant of the search), "
         "seeds 5-9 (about 15 min on a machine twice as slow as the others' recordings)",
     },  # fmt: skip
-    "near_line_exact_5_9": {
-        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *NEAR_LINE_SEARCH, "--json", "{out}"],
-        "cost": "expensive",
-        "what": "the exact-model goal's capture with the line of 48 bendings tried also with tension and with shear "
-        "0.01 of the cube either side of the run's end, the first run cut at 0.10 of the budget (a variant of the "
-        "search), seeds 5-9 (about 15 min on a machine twice as slow as the others' recordings)",
-    },  # fmt: skip
-    "near_line_offsets": {
-        "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-4", *NEAR_LINE_SEARCH, "--json", "{out}"],
-        "cost": "expensive",
-        "what": "the release/pins goal's capture with the line of 48 bendings tried also with tension and with shear "
-        "0.01 of the cube either side of the run's end, the first run cut at 0.10 of the budget (a variant of the "
-        "search), seeds 0-4 (about 33 min on a machine twice as slow as the others')",
-    },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
         "cost": "expensive",

@@ -132,9 +132,7 @@ class FitConfig:
     staged_restart_grid_rows: int | None = None  # cma-staged: that grid's points along its first setting (bending)
     staged_restart_grid_columns: int | None = None  # ... along its second (air damping; 1: the run's own value)
     staged_restart_grid_sigma: float | None = None  # cma-staged: the step of a run started at a grid cell
-    staged_restart_grid_at_end: bool | None = (
-        None  # cma-staged: that grid at the first stage's end, not its first run's
-    )
+    staged_restart_grid_at_end: bool | None = None  # cma-staged: that grid at the first stage's end, not the run's
     staged_restart_grid_near: float | None = None  # cma-staged: the grid also at D.FIT_RESTART_NEAR moved by -S and +S
 
     @classmethod

@@ -98,8 +98,8 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
     """The grid's part of a saved ``StagedCMA`` (checked; none in checkpoints from before it): ``names``,
     ``points`` along each coordinate (``grid_shape``; one count in checkpoints from before rows and columns),
     ``near`` (``grid_near``; none in checkpoints from before it), ``at_end`` (whether the grid waits for the first
-    stage's end; not in checkpoints from before it), ``sigma``, ``done``, ``pending`` (the points
-    waiting to be evaluated, or None) and ``starts`` (the later runs' starts left, best cell first)."""
+    stage's end; false in checkpoints from before it), ``sigma``, ``done``, ``pending`` (the points waiting to be
+    evaluated, or None) and ``starts`` (the later runs' starts left, best cell first)."""
     names = grid_names(d.get("first_restart_grid"), first, f"checkpoint: {w}")
     points = grid_shape(d.get("grid_points", D.STAGED_FIRST_RESTART_GRID_POINTS), f"checkpoint: {w}")
     near = grid_near(d.get("grid_near"), first, names, f"checkpoint: {w}")

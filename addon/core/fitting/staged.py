@@ -86,8 +86,9 @@ class StagedCMA(Optimizer):
     grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
     step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
     from a grid"); with ``first_restart_grid_at_end``, the grid once at the first stage's end through its best point
-    instead, and the second stage from the best point of all. ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had
-    converged (default 0: only when it converges; docs/search.md, "A cap on the first run"). Race and scan were both
+    instead, and the second stage from the best point of all (docs/search.md, "A line near the run's end").
+    ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had converged (default
+    0: only when it converges; docs/search.md, "A cap on the first run"). Race and scan were both
     tried against the bending valley that first stages miss and not kept (docs/search.md). ``tie``: follower ->
     leader, coordinates held in the first stage at the leader's value (clipped to the follower's bounds) rather than
     at ``hold`` (e.g. compression following tension, as in
