@@ -149,3 +149,22 @@ def test_the_training_floor_and_its_jitter_are_measured_once_per_point(cap, monk
 def test_searches_is_checked():
     with pytest.raises(Exception, match="searches must be an integer in 1..10"):
         FitConfig(searches=0).checked()
+
+
+def test_a_fit_that_searched_again_resumes_in_its_intervals(cap, above, tmp_path, monkeypatch):
+    """After searches alone (no rung), the intervals keep the last search's optimiser, whose seed is a search
+    again's: a checkpoint taken while the intervals are measured resumes to the same fit (it was refused as a rung's
+    optimiser of another seed)."""
+    monkeypatch.setattr(D, "INTERVAL_BUDGET_FACTOR", 0)  # (a short fit may measure its intervals)
+    cfg = _cfg(intervals=True)
+    ref = FitJob(cap, cfg).run().to_json()
+    ck = str(tmp_path / "ck.json")
+    job = FitJob(cap, cfg, checkpoint=ck)
+    while job.state.stage != "intervals":
+        assert job.step()
+    job.step()
+    job.save_checkpoint(ck)
+    resumed = FitJob.resume(ck, capture=cap, config=cfg)
+    assert resumed.state.stage == "intervals" and resumed.state.again["searches"] == D.FIT_SEARCHES - 1
+    r = resumed.run().to_json()
+    assert r["best_E_all"] == ref["best_E_all"] and r["intervals"] == ref["intervals"]

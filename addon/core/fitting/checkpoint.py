@@ -262,8 +262,9 @@ def resume(
     opt = optimizer_from_state(ck["optimizer_state"])
     load_stages(job, ck["stages"], ck, path)
     recs = job.state.records
+    # after the searches alone (no rung), the stages that follow keep the last search's optimiser
     main = job.state.stage == "search" or (
-        job.state.stage in ("done", "profile") and bool(recs) and all(r["stage"] == "search" for r in recs)
+        job.state.stage in ("done", "profile", "intervals") and bool(recs) and all(r["stage"] == "search" for r in recs)
     )
     # a search again's optimiser has its own seed (a rung's keeps the fit's)
     ref = job.main_optimizer() if main and (job.state.again or {}).get("searches") else job.opt
