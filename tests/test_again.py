@@ -39,6 +39,18 @@ def _cfg(**kw):
     return FitConfig(**cfg)
 
 
+def _resumed_in(stage, cap, cfg, tmp_path):
+    """A fit stepped into ``stage`` and one step on, its checkpoint saved there and resumed: (the resumed job, the
+    checkpoint's path)."""
+    ck = str(tmp_path / "ck.json")
+    job = FitJob(cap, cfg, checkpoint=ck)
+    while job.state.stage != stage:
+        assert job.step()
+    job.step()
+    job.save_checkpoint(ck)
+    return FitJob.resume(ck, capture=cap, config=cfg), ck
+
+
 @pytest.fixture
 def above(monkeypatch):
     """Every search ends above the floor its jitter allows (whatever its error), and short fits may search
@@ -85,13 +97,7 @@ def test_a_fit_that_searched_again_resumes_in_its_quality_ladder_and_when_finish
     the end, resumes."""
     monkeypatch.setattr(A, "searches_allowed", lambda job: D.FIT_SEARCHES)  # (a fit with a ladder searches once)
     cfg = _cfg(quality="auto")
-    ck = str(tmp_path / "ck.json")
-    job = FitJob(cap, cfg, checkpoint=ck)
-    while job.state.stage != "rung":
-        assert job.step()
-    job.step()
-    job.save_checkpoint(ck)
-    resumed = FitJob.resume(ck, capture=cap, config=cfg)
+    resumed, ck = _resumed_in("rung", cap, cfg, tmp_path)
     assert resumed.state.stage == "rung" and resumed.state.again["searches"] == D.FIT_SEARCHES - 1
     r = resumed.run().to_json()
     assert r["searches"]["count"] == D.FIT_SEARCHES
@@ -158,13 +164,7 @@ def test_a_fit_that_searched_again_resumes_in_its_intervals(cap, above, tmp_path
     monkeypatch.setattr(D, "INTERVAL_BUDGET_FACTOR", 0)  # (a short fit may measure its intervals)
     cfg = _cfg(intervals=True)
     ref = FitJob(cap, cfg).run().to_json()
-    ck = str(tmp_path / "ck.json")
-    job = FitJob(cap, cfg, checkpoint=ck)
-    while job.state.stage != "intervals":
-        assert job.step()
-    job.step()
-    job.save_checkpoint(ck)
-    resumed = FitJob.resume(ck, capture=cap, config=cfg)
+    resumed, _ = _resumed_in("intervals", cap, cfg, tmp_path)
     assert resumed.state.stage == "intervals" and resumed.state.again["searches"] == D.FIT_SEARCHES - 1
     r = resumed.run().to_json()
     assert r["best_E_all"] == ref["best_E_all"] and r["intervals"] == ref["intervals"]
