@@ -148,6 +148,11 @@ END_LINE_SEARCH = [
     "staged_restart_grid_at_end=true",
 ]
 
+# the same, the first stage cut to 0.3 of the budget so that the line's 240 evaluations come out of it, not the second
+SHORT_END_LINE_SEARCH = [*END_LINE_SEARCH, "--search", "staged_first_fraction=0.3"]
+# the line alone (no passes either side) once at the first stage's end: 48 evaluations
+CENTRE_END_LINE_SEARCH = [*LINE_SEARCH, "--search", "staged_restart_grid_at_end=true"]
+
 SOURCES = {
     "demo": {
         "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
@@ -943,6 +948,24 @@ SOURCES = {
         "what": "the exact-model goal's capture with the line of 48 bendings, also with tension and with shear 0.01 of "
         "the cube either side, run once at the first stage's end through its best point (a variant of the search), "
         "seeds 5-9 (about 15 min on a machine twice as slow as the others' recordings)",
+    },  # fmt: skip
+    "early_window_end_line_short": {
+        "argv": window_cameras(*SHORT_END_LINE_SEARCH),
+        "cost": "expensive",
+        "what": "early_window_end_line's search with the first stage cut to 0.3 of the budget (the line paid by the "
+        "first stage, not the second), seeds 0-3 (about 30 min beside the CI)",
+    },  # fmt: skip
+    "end_line_short_exact_5_9": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *SHORT_END_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "end_line_exact_5_9's search with the first stage cut to 0.3 of the budget, seeds 5-9 (about 25 min "
+        "beside the CI)",
+    },  # fmt: skip
+    "early_window_end_centre": {
+        "argv": window_cameras(*CENTRE_END_LINE_SEARCH),
+        "cost": "expensive",
+        "what": "the default fit of the time goal's capture with the line of 48 bendings alone (no passes either side), "
+        "once at the first stage's end through its best point, seeds 0-3 (about 30 min beside the CI)",
     },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
