@@ -967,6 +967,12 @@ SOURCES = {
         "what": "the default fit of the time goal's capture with the line of 48 bendings alone (no passes either side), "
         "once at the first stage's end through its best point, seeds 0-3 (about 30 min beside the CI)",
     },  # fmt: skip
+    "end_centre_exact_5_9": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *CENTRE_END_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the exact-model goal's capture with the line of 48 bendings alone, once at the first stage's end "
+        "through its best point, seeds 5-9 (about 25 min beside other work)",
+    },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
         "cost": "expensive",
