@@ -973,6 +973,12 @@ SOURCES = {
         "what": "the exact-model goal's capture with the line of 48 bendings alone, once at the first stage's end "
         "through its best point, seeds 5-9 (about 25 min beside other work)",
     },  # fmt: skip
+    "end_line_short_offsets_0_2": {
+        "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-2", *SHORT_END_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "the release/pins goal's capture with end_line_short_exact_5_9's search, seeds 0-2 (about 25 min beside "
+        "other work)",
+    },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
         "cost": "expensive",
