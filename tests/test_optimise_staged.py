@@ -210,7 +210,7 @@ def test_a_warm_second_stage_keeps_the_first_stages_steps_on_its_coordinates():
     assert np.allclose(plain.children[-1].C, np.eye(5))  # the default: one step for all
     # a first-stage run that has just restarted (steps as large as its sigma0) is scaled down to second_sigma
     opt = StagedCMA(space(), seed=3, first=["x0", "x1"], budget=600, second_warm=True, second_sigma=0.05)
-    C = opt._warm_covariance(opt.children[-1])
+    C = opt.children[-1].warm_covariance(opt.second_sigma, [0, 1], 5)
     assert np.isclose(np.sqrt(np.diag(C)).max(), 1.0) and np.allclose(C[2:, 2:], np.eye(3))
     # a checkpoint from before the option resumes without it
     d = json.loads(json.dumps(opt.state_dict()))
@@ -532,6 +532,12 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     assert FitJob(cap, at_end).opt.grid_at_end is True and opt.grid_at_end is False
     with pytest.raises(ClothFitError, match="staged_restart_grid_at_end must be true or false"):
         FitConfig(staged_restart_grid_at_end="yes").checked()
+    end_run = FitConfig(
+        max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_at_end=True, staged_restart_grid_end_run=0.1
+    )
+    assert FitJob(cap, end_run).opt.grid_end_run == 0.1 and opt.grid_end_run == 0.0
+    with pytest.raises(ClothFitError, match="staged_restart_grid_end_run"):
+        FitConfig(staged_restart_grid_end_run=1.5).checked()
     assert opt.grid_points == (D.STAGED_FIRST_RESTART_GRID_POINTS,) * 2
     assert FitJob(
         cap, FitConfig(max_evaluations=40, train_cameras=[0, 2], staged_restart_grid_columns=3)
@@ -928,3 +934,64 @@ def test_the_grid_can_wait_for_the_first_stage_end():
     assert optimizer_from_state(d).grid_at_end is False
     with pytest.raises(ClothFitError, match="first_restart_grid_at_end"):
         StagedCMA(space(), seed=0, first=first, first_restart_grid=["x0", "x1"], first_restart_grid_at_end="yes")
+
+
+def test_a_run_from_the_grid_at_the_stage_end():
+    """``first_restart_grid_end_run``: after the grid at the first stage's end, one more first-stage run from the best
+    point of all (the grid's best cell here), for that share of the budget, counted as a start of ``looks``; then the
+    second stage. Resume is exact during that run; a checkpoint from before it has none; bad values are refused."""
+
+    def pulled(X):  # as above: the better basin of x0 shows only near x2 = 1, a step off the worse one's
+        X = np.atleast_2d(X)
+        worse = 1.0 + 0.1 * (X[:, 0] + 2.0) ** 2 + X[:, 1] ** 2 + (X[:, 2] - 1.5) ** 2
+        return np.minimum(worse, 0.5 * (X[:, 0] - 2.0) ** 2 + X[:, 1] ** 2 + 50.0 * (X[:, 2] - 1.0) ** 2)
+
+    kw = {"first_restart_step": 0.0, "first_fraction": 0.3, "budget": 1500, "sigma0": 0.1}
+    grid = {
+        "first_restart_grid": ["x0", "x1"],
+        "first_restart_grid_points": [20, 1],
+        "first_restart_grid_near": {"x2": 0.05},
+        "first_restart_grid_at_end": True,
+        "first_restart_grid_end_run": 0.1,
+    }
+    first = ["x0", "x1", "x2"]
+    opt = StagedCMA(space(), seed=0, first=first, initial=[np.array([-2.0, 0.0, 1.5, 0.0, 0.0])], **kw, **grid)
+    cell = after_grid = None
+    while opt.stage == 1:
+        X = opt.ask()
+        grid_now = opt.grid_pending is not None
+        if opt.grid_end_until is not None and after_grid is None:
+            after_grid = opt.evaluations
+            # one more first-stage run, from the grid's best cell, at the grid's step, over the strong settings only
+            assert opt.first_runs == 2 and len(opt.run_ends) == 1 and opt.grid_end_until == after_grid + 150
+            start = opt.space.subspace(first).decode(opt.children[-1].mean[None])[0]
+            assert start == pytest.approx(cell[:3]) and np.allclose(X[:, 3:], cell[3:])
+            resumed = optimizer_from_state(json.loads(json.dumps(opt.state_dict())))
+            assert resumed.grid_end_until == opt.grid_end_until and np.array_equal(resumed.ask(), X)
+        opt.tell(X, pulled(X))
+        if grid_now:
+            cell = X[int(np.argmin(pulled(X)))]
+            assert cell[0] > 0.0 and opt.stage == 1  # the better basin's cell; the first stage goes on
+    assert after_grid is not None and opt.evaluations <= opt.grid_end_until + opt.children[0].popsize
+    assert opt.evaluations >= opt.grid_end_until or opt.children[0].stopped
+    looks = opt.looks()  # the first run ended in the worse basin, the run from the cell in the better one
+    assert looks["starts"] == 2 and looks["agreeing"] == 1 and looks["ended"][1] < looks["ended"][0]
+    # the run from the cell went on down the better basin: the second stage starts at its best point, below the cell's
+    assert opt.best_f < pulled(cell)[0] and opt.best_x[0] > 0.0
+    assert opt.space.decode(opt.children[-1].mean[None])[0] == pytest.approx(opt.best_x)
+    while not opt.stopped and opt.evaluations < 1500:
+        X = opt.ask()
+        opt.tell(X, pulled(X))
+    assert opt.best_x[:3] == pytest.approx([2.0, 0.0, 1.0], abs=0.02)
+    d = json.loads(json.dumps(opt.state_dict()))
+    del d["grid_end_run"], d["grid_end_until"]
+    old = optimizer_from_state(d)  # a checkpoint from before it
+    assert old.grid_end_run == 0.0 and old.grid_end_until is None
+    d = json.loads(json.dumps(opt.state_dict()))
+    d["grid_end_run"] = 0.0
+    with pytest.raises(ClothFitError, match="grid_end_run"):
+        optimizer_from_state(d)
+    no_end = {k: v for k, v in grid.items() if k != "first_restart_grid_at_end"}
+    for bad in ({**grid, "first_restart_grid_end_run": 1.5}, no_end):
+        with pytest.raises(ClothFitError, match="first_restart_grid_end_run"):
+            StagedCMA(space(), seed=0, first=first, **bad)

@@ -296,6 +296,9 @@ STAGED_FIRST_RESTART_GRID_APART = 0.125  # cma-staged: a run after the grid star
 STAGED_FIRST_RESTART_GRID_SIGMA = 0.1  # cma-staged: the step (unit cube) of a run started at a grid cell
 STAGED_FIRST_RESTART_GRID_AT_END = False  # cma-staged: the grid once, at the first stage's end through its best
 # point, the second stage from the best point of all (False: at the first run's end, the later runs from its cells)
+STAGED_FIRST_RESTART_GRID_END_RUN = 0.0  # cma-staged: with the grid at the first stage's end, one more first-stage
+# run from the best point of all for this share of the budget before the second stage (0: none; docs/search.md,
+# "Paying for the line")
 STAGED_FIRST_RESTART_GRID_NEAR = None  # cma-staged: coordinates -> a step (unit cube): the grid tried again with
 # each moved by -step and by +step from the run's end, one at a time (None: at the run's own values only)
 FIT_RESTART_NEAR = ("tension_stiffness", "shear_stiffness")  # a fit of Blender's cloth: the settings the grid is

@@ -45,6 +45,7 @@ SEARCH_OPTIONS = {
     "staged_restart_grid_sigma": ("first_restart_grid_sigma", ("cma-staged",)),
     "staged_restart_grid_near": (None, ("cma-staged",)),
     "staged_restart_grid_at_end": ("first_restart_grid_at_end", ("cma-staged",)),
+    "staged_restart_grid_end_run": ("first_restart_grid_end_run", ("cma-staged",)),
 }
 
 # the search options that are true or false
@@ -134,6 +135,7 @@ class FitConfig:
     staged_restart_grid_sigma: float | None = None  # cma-staged: the step of a run started at a grid cell
     staged_restart_grid_at_end: bool | None = None  # cma-staged: that grid at the first stage's end, not the run's
     staged_restart_grid_near: float | None = None  # cma-staged: the grid also at D.FIT_RESTART_NEAR moved by -S and +S
+    staged_restart_grid_end_run: float | None = None  # cma-staged: after the grid at the end, a run of this share
 
     @classmethod
     def from_dict(cls, d: Any) -> FitConfig:
@@ -244,6 +246,7 @@ class FitConfig:
             ("staged_warm_tail", 0.0, 1.0),
             ("staged_restart_grid_sigma", 1e-9, 1.0),
             ("staged_restart_grid_near", 1e-9, 0.25),
+            ("staged_restart_grid_end_run", 0.0, 1.0),
         ):
             numval(name, lo, hi)
         intval("ga_stall", 1)

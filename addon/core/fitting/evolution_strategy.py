@@ -139,6 +139,21 @@ class CMAES(Optimizer):
         self.run_bests = []  # generation bests of this run, the last 2 * stag_window
         self.last_fvals = []  # this generation's finite values (for tolfun)
 
+    def warm_covariance(self, sigma: float, idx: list, n: int) -> np.ndarray:
+        """A first covariance (in units of ``sigma``) for a run over ``n`` coordinates that goes on from this one,
+        whose coordinates are ``idx`` of them: this run's covariance (sigma^2 C), scaled down where a step exceeds
+        ``sigma`` (a run that has just restarted), and the identity on the others. ``StagedCMA``'s second stage and
+        tail start with it: the strong settings are then varied by the steps at which their run converged, the held
+        ones by ``sigma``, where one step for all would throw the strong ones off the narrow valley they were found
+        in."""
+        S = self.sigma**2 * self.C
+        top = float(np.sqrt(np.diag(S)).max())
+        if top > sigma:
+            S = S * (sigma / top) ** 2
+        C = np.eye(n)
+        C[np.ix_(idx, idx)] = S / sigma**2
+        return C
+
     def shape_start(self, C: ArrayLike) -> None:
         """This run's first covariance (n x n, symmetric positive definite, in units of ``sigma0``) instead
         of the identity: a run that starts where another left off keeps the steps that run learned. Only

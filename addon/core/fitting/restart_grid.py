@@ -3,11 +3,13 @@ state, and a saved first-stage run's end (docs/search.md, "Runs again from a gri
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .space import saved_array, saved_bool, saved_value
+from .space import checked_number, saved_array, saved_bool, saved_value
 
 
 def is_run_end(e: object, k: int) -> bool:
@@ -94,18 +96,63 @@ def grid_batch(u: np.ndarray, a: int, b: int, shape: tuple, offsets: np.ndarray)
     return np.clip(np.concatenate([U + o for o in offsets]), 0.0, 1.0)
 
 
+def end_run_share(share: object, at_end: bool, names: list | None, w: str) -> float:
+    """``first_restart_grid_end_run``: a share of the budget in [0, 1], more than 0 only with a grid at the first
+    stage's end."""
+    share = checked_number(share, f"{w}: first_restart_grid_end_run", 0.0, 1.0)
+    if share > 0 and not (at_end and names):
+        raise ClothFitError(f"{w}: first_restart_grid_end_run needs the grid at the first stage's end")
+    return share
+
+
+GRID_KEYS = (
+    "first_restart_grid",
+    "grid_points",
+    "grid_near",
+    "grid_at_end",
+    "grid_end_run",
+    "grid_end_until",
+    "grid_sigma",
+    "grid_pending",
+    "grid_starts",
+    "grid_done",
+)
+
+
+def grid_state(opt: Any) -> dict:
+    """The grid's part of a saved ``StagedCMA`` (``GRID_KEYS``; ``restore_grid`` reads it back)."""
+    return {
+        "first_restart_grid": opt.first_restart_grid,
+        "grid_points": list(opt.grid_points),
+        "grid_near": dict(opt.grid_near),
+        "grid_at_end": opt.grid_at_end,
+        "grid_end_run": opt.grid_end_run,
+        "grid_end_until": opt.grid_end_until,
+        "grid_sigma": opt.grid_sigma,
+        "grid_pending": None if opt.grid_pending is None else opt.grid_pending.tolist(),
+        "grid_starts": [list(s) for s in opt.grid_starts],
+        "grid_done": opt.grid_done,
+    }
+
+
 def restore_grid(d: dict, first: list, w: str) -> dict:
     """The grid's part of a saved ``StagedCMA`` (checked; none in checkpoints from before it): ``names``,
     ``points`` along each coordinate (``grid_shape``; one count in checkpoints from before rows and columns),
     ``near`` (``grid_near``; none in checkpoints from before it), ``at_end`` (whether the grid waits for the first
-    stage's end; false in checkpoints from before it), ``sigma``, ``done``, ``pending`` (the points waiting to be
-    evaluated, or None) and ``starts`` (the later runs' starts left, best cell first)."""
+    stage's end; false in checkpoints from before it), ``end_run`` and ``end_until`` (the run from the grid's best point
+    at the stage's end: its share of the budget and the evaluation it ends at, or None; 0 and None in checkpoints from
+    before it), ``sigma``, ``done``, ``pending`` (the points waiting to be evaluated, or None) and ``starts`` (the
+    later runs' starts left, best cell first)."""
     names = grid_names(d.get("first_restart_grid"), first, f"checkpoint: {w}")
     points = grid_shape(d.get("grid_points", D.STAGED_FIRST_RESTART_GRID_POINTS), f"checkpoint: {w}")
     near = grid_near(d.get("grid_near"), first, names, f"checkpoint: {w}")
     sigma = saved_value(d, "grid_sigma", w, float, 0.0, 1.0) if "grid_sigma" in d else D.STAGED_FIRST_RESTART_GRID_SIGMA
     done = saved_bool(d, "grid_done", w) if "grid_done" in d else False
     at_end = saved_bool(d, "grid_at_end", w) if "grid_at_end" in d else False
+    end_run = end_run_share(d.get("grid_end_run", 0.0), at_end, names, f"checkpoint: {w}")
+    end_until = saved_value(d, "grid_end_until", w, int, 0, 10**9, allow_none=True) if "grid_end_until" in d else None
+    if end_until is not None and not (end_run > 0 and done):
+        raise ClothFitError(f"checkpoint: {w} 'grid_end_until' needs first_restart_grid_end_run and the grid run")
     n2, k = points[0] * points[1] * (1 + 2 * len(near)), len(first)
     pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
     starts = d.get("grid_starts", [])
@@ -125,6 +172,8 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
         "points": points,
         "near": near,
         "at_end": at_end,
+        "end_run": end_run,
+        "end_until": end_until,
         "sigma": sigma,
         "done": done,
         "pending": pending,

@@ -23,11 +23,14 @@ from .. import defaults as D
 from ..errors import ClothFitError
 from .evolution_strategy import CMA_STOPS, CMAES
 from .restart_grid import (
+    GRID_KEYS,
     centres,
+    end_run_share,
     grid_batch,
     grid_names,
     grid_near,
     grid_shape,
+    grid_state,
     is_run_end,
     near_offsets,
     restart_levels,
@@ -85,7 +88,8 @@ class StagedCMA(Optimizer):
     coordinate moved by -step and by +step, one at a time), once that run has converged; each later run starts at the
     grid's best cell that no run has ended near (one cell, at least ``STAGED_FIRST_RESTART_GRID_APART``), with the
     step ``first_restart_grid_sigma``, until the cells run out (default None: no grid; docs/search.md, "Runs again
-    from a grid"); with ``first_restart_grid_at_end``, the grid once at the first stage's end through its best point
+    from a grid"); with ``first_restart_grid_at_end``, the grid once at the first stage's end through its best point (then, with
+    ``first_restart_grid_end_run``, a first-stage run from the best point of all for that share of the budget)
     instead, and the second stage from the best point of all (docs/search.md, "A line near the run's end").
     ``first_run_cap``: a first-stage run that has had this share of ``budget`` ends as if it had converged (default
     0: only when it converges; docs/search.md, "A cap on the first run"). Race and scan were both
@@ -141,6 +145,7 @@ class StagedCMA(Optimizer):
         first_run_cap: float = D.STAGED_FIRST_RUN_CAP,
         first_restart_grid_near: dict | None = D.STAGED_FIRST_RESTART_GRID_NEAR,
         first_restart_grid_at_end: bool = D.STAGED_FIRST_RESTART_GRID_AT_END,
+        first_restart_grid_end_run: float = D.STAGED_FIRST_RESTART_GRID_END_RUN,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -197,12 +202,13 @@ class StagedCMA(Optimizer):
         self.grid_points = grid_shape(first_restart_grid_points, w)
         self.grid_near = grid_near(first_restart_grid_near, self.first, self.first_restart_grid, w)
         self.grid_at_end = checked_flag(first_restart_grid_at_end, f"{w}: first_restart_grid_at_end")
+        self.grid_end_run = end_run_share(first_restart_grid_end_run, self.grid_at_end, self.first_restart_grid, w)
         self.grid_sigma = checked_number(
             first_restart_grid_sigma, f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True
         )
-        self.grid_pending = None  # the grid's points (strong settings' cube) while it waits to be evaluated
-        self.grid_starts: list = []  # where the runs after the grid start, best cell first
-        self.grid_done = False
+        # the grid's points (strong settings' cube) while it waits to be evaluated; where the runs after it start,
+        # best cell first; whether it has run; the evaluation at which the run from its best point (at the end) ends
+        self.grid_pending, self.grid_starts, self.grid_done, self.grid_end_until = None, [], False, None
         self.second_warm = checked_flag(second_warm, f"{w}: second_warm")
         self.warm_tail = checked_number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
         self.warm_tail_stuck = checked_flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
@@ -363,7 +369,7 @@ class StagedCMA(Optimizer):
             else self._child(self.space, self.popsize, self.sigma0, None)
         )
         if self.second_warm and first is not None and self._best_u is not None and len(self.first) < self.space.n:
-            self.children[-1].shape_start(self._warm_covariance(first))
+            self.children[-1].shape_start(first.warm_covariance(self.second_sigma, self._idx, self.space.n))
 
     def _start_tail(self) -> None:
         """The third stage (``warm_tail``): a run over everything from the best point so far, the first
@@ -372,22 +378,7 @@ class StagedCMA(Optimizer):
         self.children.append(
             self._child(self.space, self.popsize, self.second_sigma, [self.space.decode(self._best_u)])
         )
-        self.children[-1].shape_start(self._warm_covariance(self.children[0]))
-
-    def _warm_covariance(self, first: CMAES) -> np.ndarray:
-        """The second stage's first covariance (in units of ``second_sigma``): on the first stage's
-        coordinates the covariance its run ended with (sigma^2 C), scaled down where a step exceeds
-        ``second_sigma`` (a run that has just restarted); the identity on the others. The strong settings
-        are then varied by the steps at which their run converged, the held ones by ``second_sigma``, where
-        one step for all would throw the strong ones off the narrow valley they were found in."""
-        S = first.sigma**2 * first.C
-        top = float(np.sqrt(np.diag(S)).max())
-        if top > self.second_sigma:
-            S = S * (self.second_sigma / top) ** 2
-        C = np.eye(self.space.n)
-        idx = self._idx
-        C[np.ix_(idx, idx)] = S / self.second_sigma**2
-        return C
+        self.children[-1].shape_start(self.children[0].warm_covariance(self.second_sigma, self._idx, self.space.n))
 
     def ask(self) -> np.ndarray:
         if self._stopped:
@@ -428,7 +419,10 @@ class StagedCMA(Optimizer):
             self.grid_pending = None
             if self.grid_at_end:  # the second stage, from the best point of all (the grid's cells among them)
                 self.grid_starts = []
-                self._end_first_stage()
+                if self.grid_end_run > 0 and self._best_u is not None:
+                    self._end_run()  # one more first-stage run from the best point of all, then the second stage
+                else:
+                    self._end_first_stage()
             else:
                 self._next_run(self.children[-1])
             return
@@ -448,14 +442,14 @@ class StagedCMA(Optimizer):
             self._next_turn()
         if staging and not self.racing:
             c = self.children[-1]
-            if c.stopped or self.evaluations >= self.first_fraction * self.budget:
+            if c.stopped or self.evaluations >= max(self.first_fraction * self.budget, self.grid_end_until or 0):
                 if self.grid_at_end and self.first_restart_grid is not None and not self.grid_done:
                     # the grid at the stage's end (first_restart_grid_at_end), through the stage's best point
                     self.grid_done = True
                     self.grid_pending = self._grid_batch(self._best_u[self._idx])
                 else:
                     self._end_first_stage()
-            elif self.evaluations < self.first_explore * self.budget:
+            elif self.evaluations < self.first_explore * self.budget and self.grid_end_until is None:
                 if self._converged(c) or self._capped(c):
                     # another run from where the first began, with a new random stream: the first stage's
                     # runs settle early, each in one of a few basins (docs/search.md, "Runs again")
@@ -486,6 +480,18 @@ class StagedCMA(Optimizer):
         u = np.clip(u, 0.0, 1.0)
         a, b = (self.first.index(x) for x in self.first_restart_grid)
         return grid_batch(u, a, b, self.grid_points, near_offsets(self.grid_near, self.first))
+
+    def _end_run(self) -> None:
+        """``first_restart_grid_end_run``: after the grid at the stage's end, one more first-stage run (a start of
+        ``looks``) from the best point of all, at the grid's step, for that share of the budget."""
+        if self.first_runs > len(self.run_ends) and self.children:  # the last run, cut by the stage's end
+            self._run_ended(self.children[-1])
+        self.first_best_run = None
+        self.first_runs += 1
+        sub = self._subspace()
+        start = sub.decode(self._best_u[self._idx][None])[0]
+        self.children[-1] = self._child(sub, self.children[-1].popsize, self.grid_sigma, [start])
+        self.grid_end_until = int(self.evaluations + self.grid_end_run * self.budget)
 
     def _next_run(self, c: CMAES) -> None:
         """Runs again: the next first-stage run, from the grid's best cell that no run has ended in yet
@@ -571,14 +577,7 @@ class StagedCMA(Optimizer):
         "run_ends",
         "first_restart_vary",
         "first_restart_levels",
-        "first_restart_grid",
-        "grid_points",
-        "grid_near",
-        "grid_at_end",
-        "grid_sigma",
-        "grid_pending",
-        "grid_starts",
-        "grid_done",
+        *GRID_KEYS,
         "second_warm",
         "warm_tail",
         "warm_tail_stuck",
@@ -626,14 +625,7 @@ class StagedCMA(Optimizer):
                 "run_ends": [[float_to_json(f), list(u)] for f, u in self.run_ends],
                 "first_restart_vary": self.first_restart_vary,
                 "first_restart_levels": list(self.first_restart_levels),
-                "first_restart_grid": self.first_restart_grid,
-                "grid_points": list(self.grid_points),
-                "grid_near": dict(self.grid_near),
-                "grid_at_end": self.grid_at_end,
-                "grid_sigma": self.grid_sigma,
-                "grid_pending": None if self.grid_pending is None else self.grid_pending.tolist(),
-                "grid_starts": [list(s) for s in self.grid_starts],
-                "grid_done": self.grid_done,
+                **grid_state(self),
                 "second_warm": self.second_warm,
                 "warm_tail": self.warm_tail,
                 "warm_tail_stuck": self.warm_tail_stuck,
@@ -688,6 +680,7 @@ class StagedCMA(Optimizer):
         g = restore_grid(d, self.first, w)
         self.first_restart_grid, self.grid_points, self.grid_sigma = g["names"], g["points"], g["sigma"]
         self.grid_near, self.grid_at_end = g["near"], g["at_end"]
+        self.grid_end_run, self.grid_end_until = g["end_run"], g["end_until"]
         self.grid_done, self.grid_pending, self.grid_starts = g["done"], g["pending"], g["starts"]
 
     @classmethod
