@@ -153,6 +153,9 @@ SHORT_END_LINE_SEARCH = [*END_LINE_SEARCH, "--search", "staged_first_fraction=0.
 # the line alone (no passes either side) once at the first stage's end: 48 evaluations
 CENTRE_END_LINE_SEARCH = [*LINE_SEARCH, "--search", "staged_restart_grid_at_end=true"]
 
+# that, then a run over the strong settings alone from the best point of all for 0.1 of the budget, before the second
+END_RUN_SEARCH = [*SHORT_END_LINE_SEARCH, "--search", "staged_restart_grid_end_run=0.1"]
+
 SOURCES = {
     "demo": {
         "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
@@ -977,6 +980,18 @@ SOURCES = {
         "argv": ["{py}", "lab/fit_goals.py", "offsets", "--seeds", "0-2", *SHORT_END_LINE_SEARCH, "--json", "{out}"],
         "cost": "expensive",
         "what": "the release/pins goal's capture with end_line_short_exact_5_9's search, seeds 0-2 (about 25 min beside "
+        "other work)",
+    },  # fmt: skip
+    "early_window_end_run": {
+        "argv": window_cameras(*END_RUN_SEARCH),
+        "cost": "expensive",
+        "what": "early_window_end_line_short's search, then a run over the strong settings alone from the best point "
+        "of all for 0.1 of the budget before the second stage, seeds 0-3 (about 30 min beside the CI)",
+    },  # fmt: skip
+    "end_run_exact_5_9": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *END_RUN_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "early_window_end_run's search on the exact-model goal's capture, seeds 5-9 (about 25 min beside "
         "other work)",
     },  # fmt: skip
     "early_window_fits": {
