@@ -837,16 +837,28 @@ def test_a_first_run_that_never_settles_ends_at_its_cap():
             StagedCMA(space(), first=["x0"], first_run_cap=bad)
 
 
+def pulled(X):
+    """A wide worse basin at x0 = -2 with x2 at 1.5, and a better one at x0 = 2 that is deep only near x2 = 1: a step
+    off the worse basin's x2 (the grid's tests)."""
+    X = np.atleast_2d(X)
+    worse = 1.0 + 0.1 * (X[:, 0] + 2.0) ** 2 + X[:, 1] ** 2 + (X[:, 2] - 1.5) ** 2
+    return np.minimum(worse, 0.5 * (X[:, 0] - 2.0) ** 2 + X[:, 1] ** 2 + 50.0 * (X[:, 2] - 1.0) ** 2)
+
+
+# the line of x0 (20 cells) at the first stage's end, also a step either side in x2 (the grid-at-the-end tests)
+AT_END_LINE = {
+    "first_restart_grid": ["x0", "x1"],
+    "first_restart_grid_points": [20, 1],
+    "first_restart_grid_near": {"x2": 0.05},
+    "first_restart_grid_at_end": True,
+}
+
+
 def test_the_line_is_also_tried_around_the_run_end():
     """``first_restart_grid_near``: the line is tried again with another first-stage coordinate moved a step either
     side of the run's end, so a better basin that only shows near the truth's value of that coordinate (here x2,
     which the worse basin has pulled off) is found; its points survive a checkpoint, a checkpoint from before it
     has none, and a bad step is one line."""
-
-    def pulled(X):  # a wide worse basin at x0 = -2 with x2 at 1.5; a better one at x0 = 2, deep only near x2 = 1
-        X = np.atleast_2d(X)
-        worse = 1.0 + 0.1 * (X[:, 0] + 2.0) ** 2 + X[:, 1] ** 2 + (X[:, 2] - 1.5) ** 2
-        return np.minimum(worse, 0.5 * (X[:, 0] - 2.0) ** 2 + X[:, 1] ** 2 + 50.0 * (X[:, 2] - 1.0) ** 2)
 
     kw = {"first_restart_step": 0.05, "first_fraction": 0.72, "first_explore": 0.56, "budget": 1500, "sigma0": 0.1}
     grid = {"first_restart_grid": ["x0", "x1"], "first_restart_grid_points": [20, 1], "first_restart_grid_sigma": 0.02}
@@ -896,18 +908,8 @@ def test_the_grid_can_wait_for_the_first_stage_end():
     point of all, the grid's cells among them, so a better basin that only the grid sees is where the search goes on;
     resume is exact while the grid waits, and a checkpoint from before it has the grid at the first run's end."""
 
-    def pulled(X):  # as in the test above: the better basin of x0 shows only near x2 = 1, a step off the worse one's
-        X = np.atleast_2d(X)
-        worse = 1.0 + 0.1 * (X[:, 0] + 2.0) ** 2 + X[:, 1] ** 2 + (X[:, 2] - 1.5) ** 2
-        return np.minimum(worse, 0.5 * (X[:, 0] - 2.0) ** 2 + X[:, 1] ** 2 + 50.0 * (X[:, 2] - 1.0) ** 2)
-
     kw = {"first_restart_step": 0.0, "first_fraction": 0.5, "budget": 1500, "sigma0": 0.1}
-    grid = {
-        "first_restart_grid": ["x0", "x1"],
-        "first_restart_grid_points": [20, 1],
-        "first_restart_grid_near": {"x2": 0.05},
-        "first_restart_grid_at_end": True,
-    }
+    grid = AT_END_LINE
     first = ["x0", "x1", "x2"]
     opt = StagedCMA(space(), seed=0, first=first, initial=[np.array([-2.0, 0.0, 1.5, 0.0, 0.0])], **kw, **grid)
     seen = None
@@ -941,19 +943,8 @@ def test_a_run_from_the_grid_at_the_stage_end():
     point of all (the grid's best cell here), for that share of the budget, counted as a start of ``looks``; then the
     second stage. Resume is exact during that run; a checkpoint from before it has none; bad values are refused."""
 
-    def pulled(X):  # as above: the better basin of x0 shows only near x2 = 1, a step off the worse one's
-        X = np.atleast_2d(X)
-        worse = 1.0 + 0.1 * (X[:, 0] + 2.0) ** 2 + X[:, 1] ** 2 + (X[:, 2] - 1.5) ** 2
-        return np.minimum(worse, 0.5 * (X[:, 0] - 2.0) ** 2 + X[:, 1] ** 2 + 50.0 * (X[:, 2] - 1.0) ** 2)
-
     kw = {"first_restart_step": 0.0, "first_fraction": 0.3, "budget": 1500, "sigma0": 0.1}
-    grid = {
-        "first_restart_grid": ["x0", "x1"],
-        "first_restart_grid_points": [20, 1],
-        "first_restart_grid_near": {"x2": 0.05},
-        "first_restart_grid_at_end": True,
-        "first_restart_grid_end_run": 0.1,
-    }
+    grid = {**AT_END_LINE, "first_restart_grid_end_run": 0.1}
     first = ["x0", "x1", "x2"]
     opt = StagedCMA(space(), seed=0, first=first, initial=[np.array([-2.0, 0.0, 1.5, 0.0, 0.0])], **kw, **grid)
     cell = after_grid = None
