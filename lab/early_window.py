@@ -143,13 +143,17 @@ def bending_slice(root: str, points: int, shear_factors: list[float]) -> dict:
     }
 
 
-def around(root: str, fits_json: str, seeds: list[int], step: float = 0.01, points: int = 48) -> dict:
+def around(
+    root: str, fits_json: str, seeds: list[int], step: float = 0.01, points: int = 48, k: int | None = None
+) -> dict:
     """The line of ``points`` bendings through each seed's fitted strong settings (``fits_json``: a ``cameras``
     run's record or its data), at the fit's own tension and shear and with each moved by -``step`` and +``step`` of
-    the search's cube, one at a time."""
+    the search's cube, one at a time; scored on the training frames, or on the first ``k`` of them (a cheaper line:
+    the simulation stops there)."""
     rec = read_json(fits_json, "fits")
     fits_by_seed = {f["seed"]: f["fit"] for f in rec.get("data", rec)["fits"]}
-    job = _truth_job(load_capture(root), D.TRAIN_TIMES)
+    times = D.TRAIN_TIMES if k is None else [round(0.1 * (i + 1), 2) for i in range(k)]
+    job = _truth_job(load_capture(root), times)
     names, space = job.space.names, job.space
     ib = names.index("bending_stiffness")
     truth_row = None
@@ -192,7 +196,13 @@ def around(root: str, fits_json: str, seeds: list[int], step: float = 0.01, poin
                 "best_pass": best,
             }
         )
-    return {"step": step, "points": points, "truth_row_bending": float(bend[truth_row]), "seeds": rows}
+    return {
+        "step": step,
+        "points": points,
+        "times": list(times),
+        "truth_row_bending": float(bend[truth_row]),
+        "seeds": rows,
+    }
 
 
 def _fit(argv: list[str]) -> tuple[float, float]:
@@ -320,7 +330,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames", "slice", "around"))
     ap.add_argument("--points", type=int, default=48, help="slice: bendings across the search's range")
-    ap.add_argument("--k", type=int, default=10, help="frames: the first K training frames")
+    ap.add_argument("--k", type=int, default=10, help="frames (and around with --first): the first K training frames")
+    ap.add_argument("--first", action="store_true", help="around: score the line on the first K frames only")
     ap.add_argument("--n", type=int, default=8, help="cameras: training cameras")
     ap.add_argument("--seeds", default="0-3", help="fits, cameras, frames: seeds A-B")
     ap.add_argument("--json")
@@ -342,7 +353,7 @@ def main(argv=None) -> int:
         if a.what == "fits":
             out = {"seeds": seeds, "fits": fits(root, seeds, tmp)}
         elif a.what == "around":
-            out = around(root, a.fits_json, seeds)
+            out = around(root, a.fits_json, seeds, k=a.k if a.first else None)
         elif a.what == "frames":
             out = {"seeds": seeds, "frames": a.k, **frames(root, seeds, a.k, tmp)}
         else:

@@ -994,6 +994,41 @@ SOURCES = {
         "what": "early_window_end_run's search on the exact-model goal's capture, seeds 5-9 (about 25 min beside "
         "other work)",
     },  # fmt: skip
+    "around_default_all": {
+        "argv": [
+            "{py}",
+            "lab/early_window.py",
+            "around",
+            "--from",
+            "docs/figures/default_fit_intervals.json",
+            "--seeds",
+            "0-3",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "the line of 48 bendings (and its four passes a step either side in tension and shear) through the "
+        "default fit's ends on the time goal's capture, seeds 0-3, scored on every training frame (about 3 min)",
+    },  # fmt: skip
+    "around_default_first5": {
+        "argv": [
+            "{py}",
+            "lab/early_window.py",
+            "around",
+            "--from",
+            "docs/figures/default_fit_intervals.json",
+            "--seeds",
+            "0-3",
+            "--first",
+            "--k",
+            "5",
+            "--json",
+            "{out}",
+        ],
+        "cost": "expensive",
+        "what": "around_default_all's lines scored on the first 5 training frames only (the simulation a third as "
+        "long; about 1.5 min)",
+    },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
         "cost": "expensive",
