@@ -299,6 +299,10 @@ STAGED_FIRST_RESTART_GRID_AT_END = False  # cma-staged: the grid once, at the fi
 STAGED_FIRST_RESTART_GRID_END_RUN = 0.0  # cma-staged: with the grid at the first stage's end, one more first-stage
 # run from the best point of all for this share of the budget before the second stage (0: none; docs/search.md,
 # "Paying for the line")
+STAGED_FIRST_RESTART_GRID_FRAMES = 0  # cma-staged: with the grid at the first stage's end, score its cells on the
+# first this many training frames only (the simulation stops there), then the best cells again on every frame (0: all
+# frames; docs/search.md, "The line on the first frames")
+STAGED_FIRST_RESTART_GRID_RESCORE = 6  # cma-staged: how many of those cells are scored again on every frame
 STAGED_FIRST_RESTART_GRID_NEAR = None  # cma-staged: coordinates -> a step (unit cube): the grid tried again with
 # each moved by -step and by +step from the run's end, one at a time (None: at the run's own values only)
 FIT_RESTART_NEAR = ("tension_stiffness", "shear_stiffness")  # a fit of Blender's cloth: the settings the grid is

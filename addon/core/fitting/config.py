@@ -46,6 +46,7 @@ SEARCH_OPTIONS = {
     "staged_restart_grid_near": (None, ("cma-staged",)),
     "staged_restart_grid_at_end": ("first_restart_grid_at_end", ("cma-staged",)),
     "staged_restart_grid_end_run": ("first_restart_grid_end_run", ("cma-staged",)),
+    "staged_restart_grid_frames": ("first_restart_grid_frames", ("cma-staged",)),
 }
 
 # the search options that are true or false
@@ -136,6 +137,7 @@ class FitConfig:
     staged_restart_grid_at_end: bool | None = None  # cma-staged: that grid at the first stage's end, not the run's
     staged_restart_grid_near: float | None = None  # cma-staged: the grid also at D.FIT_RESTART_NEAR moved by -S and +S
     staged_restart_grid_end_run: float | None = None  # cma-staged: after the grid at the end, a run of this share
+    staged_restart_grid_frames: int | None = None  # cma-staged: the grid at the end on the first K frames (0: all)
 
     @classmethod
     def from_dict(cls, d: Any) -> FitConfig:
@@ -255,6 +257,7 @@ class FitConfig:
         intval("portfolio_max_polishes", 1, 10**6)
         intval("staged_restart_grid_rows", 2, 64)
         intval("staged_restart_grid_columns", 1, 64)
+        intval("staged_restart_grid_frames", 0, 10**6)
         for name in FLAG_OPTIONS:
             if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
                 raise ClothFitError(f"fit config: {name} must be true or false, got {getattr(self, name)!r}")

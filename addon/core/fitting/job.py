@@ -84,6 +84,8 @@ from .takes import (
     selection,
     take_names,
     takes_entries,
+    window_objective,
+    window_share,
 )
 
 if TYPE_CHECKING:
@@ -158,6 +160,7 @@ class FitJob:
         )
         self.take_scales = self._take_rates(cfg)
         self._objectives = {}
+        self.windows: dict = {}  # the running objective on the first frames (takes.window_objective)
         self.objective = self._build_objective(None)
         self.m, self.m_source = self.par.m, self.par.m_source
         if len(self.takes) == 1:
@@ -336,6 +339,8 @@ class FitJob:
                 kw["first_restart_grid_points"] = [n if rows is None else rows, n if cols is None else cols]
             if near is not None:  # the grid also around the run's end in the settings named there that are free
                 kw["first_restart_grid_near"] = {n: near for n in D.FIT_RESTART_NEAR if n in strong}
+            if self.config.staged_restart_grid_frames:  # what an evaluation on the first frames costs
+                kw["first_restart_grid_window_share"] = window_share(self.takes, self.config.staged_restart_grid_frames)
         elif rows is not None or cols is not None or near is not None:
             raise ClothFitError(
                 "--search staged_restart_grid_rows/columns/near: this fit runs no grid (staged_restart_grid is off, "
@@ -662,8 +667,8 @@ class FitJob:
             left = self.state.stage_end - self.evaluations
             left = math.inf if left <= 0 and self.best_x is None else left
             self.opt, X, whole = ask_within(self.opt, left)
-            if whole:
-                f = self.evaluate(X)
+            if whole:  # on every training frame, or on the first ones where the optimiser asks (its window)
+                f = self.evaluate(X, window_objective(self, self.opt.window))
                 self.state.exploded += int(np.sum(~np.isfinite(f)))
                 self.opt.tell(X, f)
                 self._track()

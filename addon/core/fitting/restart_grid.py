@@ -9,7 +9,7 @@ import numpy as np
 
 from .. import defaults as D
 from ..errors import ClothFitError
-from .space import checked_number, saved_array, saved_bool, saved_value
+from .space import checked_flag, checked_integer, checked_number, saved_array, saved_bool, saved_value
 
 
 def is_run_end(e: object, k: int) -> bool:
@@ -96,6 +96,15 @@ def grid_batch(u: np.ndarray, a: int, b: int, shape: tuple, offsets: np.ndarray)
     return np.clip(np.concatenate([U + o for o in offsets]), 0.0, 1.0)
 
 
+def starts_left(starts: list, ends: list, first: list, names: list, points: tuple) -> list:
+    """The grid's cells (``starts``, best first) that no first-stage run has ended in (``ends``: [value, point]):
+    not within one cell of a run's end, nor within ``STAGED_FIRST_RESTART_GRID_APART`` (a basin, not a fine grid's
+    cell), along both of the grid's coordinates (``names``, ``points`` along each)."""
+    a, b = (first.index(x) for x in names)
+    da, db = (max(1.0 / n, D.STAGED_FIRST_RESTART_GRID_APART) for n in points)
+    return [s for s in starts if not any(abs(s[a] - e[1][a]) <= da and abs(s[b] - e[1][b]) <= db for e in ends)]
+
+
 def end_run_share(share: object, at_end: bool, names: list | None, w: str) -> float:
     """``first_restart_grid_end_run``: a share of the budget in [0, 1], more than 0 only with a grid at the first
     stage's end."""
@@ -103,6 +112,50 @@ def end_run_share(share: object, at_end: bool, names: list | None, w: str) -> fl
     if share > 0 and not (at_end and names):
         raise ClothFitError(f"{w}: first_restart_grid_end_run needs the grid at the first stage's end")
     return share
+
+
+def window_frames(frames: object, share: object, at_end: bool, w: str) -> tuple[int, float]:
+    """``first_restart_grid_frames`` (the first K training frames the grid at the stage's end is scored on; 0: all
+    of them) and ``first_restart_grid_window_share`` (what one such evaluation costs in evaluations on every frame,
+    in (0, 1]; the fit measures it from the frame times)."""
+    k = checked_integer(frames, f"{w}: first_restart_grid_frames", 0, 10**6)
+    share = checked_number(share, f"{w}: first_restart_grid_window_share", 0.0, 1.0, lo_open=True)
+    if k and not at_end:
+        raise ClothFitError(f"{w}: first_restart_grid_frames needs the grid at the first stage's end")
+    return k, share
+
+
+def window_best(pending: np.ndarray, f: np.ndarray, n: int) -> np.ndarray | None:
+    """The ``n`` cells of the grid (``pending``) with the lowest values on the first frames (``f``), best first, to
+    be scored again on every frame; None if none was finite."""
+    order = [i for i in np.argsort(f, kind="stable") if np.isfinite(f[i])][:n]
+    return pending[order] if order else None
+
+
+def grid_settings(opt: Any, w: str, **kw: Any) -> dict:
+    """The grid's settings of a new ``StagedCMA`` (``kw``: its ``first_restart_grid*`` arguments without the prefix),
+    checked, as its attributes, and the grid's state before it has run."""
+    names = grid_names(kw["grid"], opt.first, w)
+    at_end = checked_flag(kw["grid_at_end"], f"{w}: first_restart_grid_at_end")
+    frames, share = window_frames(kw["grid_frames"], kw["grid_window_share"], at_end, w)
+    return {
+        "first_restart_grid": names,
+        "grid_points": grid_shape(kw["grid_points"], w),
+        "grid_near": grid_near(kw["grid_near"], opt.first, names, w),
+        "grid_at_end": at_end,
+        "grid_end_run": end_run_share(kw["grid_end_run"], at_end, names, w),
+        "grid_sigma": checked_number(kw["grid_sigma"], f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True),
+        "grid_frames": frames,
+        "grid_window_share": share,
+        # the grid's points (strong settings' cube) while they wait to be evaluated, on the first frames or on all;
+        # where the runs after it start, best cell first; whether it has run; the evaluation at which the run from
+        # its best point (at the end) ends
+        "grid_pending": None,
+        "grid_windowed": False,
+        "grid_starts": [],
+        "grid_done": False,
+        "grid_end_until": None,
+    }
 
 
 GRID_KEYS = (
@@ -113,7 +166,10 @@ GRID_KEYS = (
     "grid_end_run",
     "grid_end_until",
     "grid_sigma",
+    "grid_frames",
+    "grid_window_share",
     "grid_pending",
+    "grid_windowed",
     "grid_starts",
     "grid_done",
 )
@@ -129,20 +185,22 @@ def grid_state(opt: Any) -> dict:
         "grid_end_run": opt.grid_end_run,
         "grid_end_until": opt.grid_end_until,
         "grid_sigma": opt.grid_sigma,
+        "grid_frames": opt.grid_frames,
+        "grid_window_share": opt.grid_window_share,
         "grid_pending": None if opt.grid_pending is None else opt.grid_pending.tolist(),
+        "grid_windowed": opt.grid_windowed,
         "grid_starts": [list(s) for s in opt.grid_starts],
         "grid_done": opt.grid_done,
     }
 
 
 def restore_grid(d: dict, first: list, w: str) -> dict:
-    """The grid's part of a saved ``StagedCMA`` (checked; none in checkpoints from before it): ``names``,
-    ``points`` along each coordinate (``grid_shape``; one count in checkpoints from before rows and columns),
-    ``near`` (``grid_near``; none in checkpoints from before it), ``at_end`` (whether the grid waits for the first
-    stage's end; false in checkpoints from before it), ``end_run`` and ``end_until`` (the run from the grid's best point
-    at the stage's end: its share of the budget and the evaluation it ends at, or None; 0 and None in checkpoints from
-    before it), ``sigma``, ``done``, ``pending`` (the points waiting to be evaluated, or None) and ``starts`` (the
-    later runs' starts left, best cell first)."""
+    """The grid's part of a saved ``StagedCMA`` (checked), as its attributes (``grid_settings``). Checkpoints from
+    before a field restore it as: no grid; one count of points (before rows and columns); no ``near``; the grid at
+    each run's end (before ``at_end``); no run from its best point (before ``end_run``); every frame (before the first
+    frames' window). ``grid_pending`` holds the points waiting to be evaluated (on the first frames if
+    ``grid_windowed``; after them, their best cells again on every frame), ``grid_starts`` the later runs' starts
+    left, best cell first."""
     names = grid_names(d.get("first_restart_grid"), first, f"checkpoint: {w}")
     points = grid_shape(d.get("grid_points", D.STAGED_FIRST_RESTART_GRID_POINTS), f"checkpoint: {w}")
     near = grid_near(d.get("grid_near"), first, names, f"checkpoint: {w}")
@@ -153,8 +211,15 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
     end_until = saved_value(d, "grid_end_until", w, int, 0, 10**9, allow_none=True) if "grid_end_until" in d else None
     if end_until is not None and not (end_run > 0 and done):
         raise ClothFitError(f"checkpoint: {w} 'grid_end_until' needs first_restart_grid_end_run and the grid run")
+    frames, share = window_frames(d.get("grid_frames", 0), d.get("grid_window_share", 1.0), at_end, f"checkpoint: {w}")
+    windowed = saved_bool(d, "grid_windowed", w) if "grid_windowed" in d else False
     n2, k = points[0] * points[1] * (1 + 2 * len(near)), len(first)
-    pending = saved_array(d, "grid_pending", w, (n2, k), allow_none=True) if "grid_pending" in d else None
+    pending = saved_array(d, "grid_pending", w, (None, k), allow_none=True) if "grid_pending" in d else None
+    rescoring = pending is not None and frames > 0 and not windowed  # the best cells again, on every frame
+    if pending is not None and len(pending) != (min(n2, D.STAGED_FIRST_RESTART_GRID_RESCORE) if rescoring else n2):
+        raise ClothFitError(f"checkpoint: {w} 'grid_pending' holds {len(pending)} points, not the grid's")
+    if windowed and (pending is None or not frames):
+        raise ClothFitError(f"checkpoint: {w} 'grid_windowed' needs first_restart_grid_frames and a grid waiting")
     starts = d.get("grid_starts", [])
     if (
         not isinstance(starts, list)
@@ -166,18 +231,20 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
         raise ClothFitError(f"checkpoint: {w} 'grid_starts' must list points of {k} numbers in [0, 1] after the grid")
     if pending is not None and (np.any(pending < 0.0) or np.any(pending > 1.0)):
         raise ClothFitError(f"checkpoint: {w} 'grid_pending' must lie in the unit cube")
-    starts = [[float(v) for v in s] for s in starts]
     return {
-        "names": names,
-        "points": points,
-        "near": near,
-        "at_end": at_end,
-        "end_run": end_run,
-        "end_until": end_until,
-        "sigma": sigma,
-        "done": done,
-        "pending": pending,
-        "starts": starts,
+        "first_restart_grid": names,
+        "grid_points": points,
+        "grid_near": near,
+        "grid_at_end": at_end,
+        "grid_end_run": end_run,
+        "grid_end_until": end_until,
+        "grid_sigma": sigma,
+        "grid_frames": frames,
+        "grid_window_share": share,
+        "grid_pending": pending,
+        "grid_windowed": windowed,
+        "grid_starts": [[float(v) for v in s] for s in starts],
+        "grid_done": done,
     }
 
 

@@ -15,6 +15,7 @@ first*, has the A/B). Same ask/tell and exact-resume contract as the other optim
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,16 +26,15 @@ from .evolution_strategy import CMA_STOPS, CMAES
 from .restart_grid import (
     GRID_KEYS,
     centres,
-    end_run_share,
     grid_batch,
-    grid_names,
-    grid_near,
-    grid_shape,
+    grid_settings,
     grid_state,
     is_run_end,
     near_offsets,
     restart_levels,
     restore_grid,
+    starts_left,
+    window_best,
 )
 from .space import (
     SearchSpace,
@@ -146,6 +146,8 @@ class StagedCMA(Optimizer):
         first_restart_grid_near: dict | None = D.STAGED_FIRST_RESTART_GRID_NEAR,
         first_restart_grid_at_end: bool = D.STAGED_FIRST_RESTART_GRID_AT_END,
         first_restart_grid_end_run: float = D.STAGED_FIRST_RESTART_GRID_END_RUN,
+        first_restart_grid_frames: int = D.STAGED_FIRST_RESTART_GRID_FRAMES,
+        first_restart_grid_window_share: float = 1.0,
     ):
         super().__init__(space, seed, initial)
         w = "cma-staged"
@@ -198,17 +200,19 @@ class StagedCMA(Optimizer):
         self.first_restart_vary, self.first_restart_levels = restart_levels(
             first_restart_vary, first_restart_levels, self.first, w
         )
-        self.first_restart_grid = grid_names(first_restart_grid, self.first, w)
-        self.grid_points = grid_shape(first_restart_grid_points, w)
-        self.grid_near = grid_near(first_restart_grid_near, self.first, self.first_restart_grid, w)
-        self.grid_at_end = checked_flag(first_restart_grid_at_end, f"{w}: first_restart_grid_at_end")
-        self.grid_end_run = end_run_share(first_restart_grid_end_run, self.grid_at_end, self.first_restart_grid, w)
-        self.grid_sigma = checked_number(
-            first_restart_grid_sigma, f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True
+        grid = grid_settings(
+            self,
+            w,
+            grid=first_restart_grid,
+            grid_points=first_restart_grid_points,
+            grid_near=first_restart_grid_near,
+            grid_at_end=first_restart_grid_at_end,
+            grid_end_run=first_restart_grid_end_run,
+            grid_sigma=first_restart_grid_sigma,
+            grid_frames=first_restart_grid_frames,
+            grid_window_share=first_restart_grid_window_share,
         )
-        # the grid's points (strong settings' cube) while it waits to be evaluated; where the runs after it start,
-        # best cell first; whether it has run; the evaluation at which the run from its best point (at the end) ends
-        self.grid_pending, self.grid_starts, self.grid_done, self.grid_end_until = None, [], False, None
+        vars(self).update(grid)
         self.second_warm = checked_flag(second_warm, f"{w}: second_warm")
         self.warm_tail = checked_number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
         self.warm_tail_stuck = checked_flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
@@ -413,6 +417,14 @@ class StagedCMA(Optimizer):
             U = self._full_u(self.grid_pending)
             self._check_told(X, U)
             f = sanitize_fitness(f, len(U))
+            if self.grid_windowed:  # values on the first frames only: not the search's; the best cells again
+                self.evaluations += math.ceil(len(f) * self.grid_window_share)
+                self.generation += 1
+                self.grid_windowed = False
+                self.grid_pending = window_best(self.grid_pending, f, D.STAGED_FIRST_RESTART_GRID_RESCORE)
+                if self.grid_pending is None:
+                    self._end_first_stage()
+                return
             self._record(U, f)
             order = np.argsort(f, kind="stable")
             self.grid_starts = [[float(v) for v in self.grid_pending[i]] for i in order if np.isfinite(f[i])]
@@ -445,7 +457,7 @@ class StagedCMA(Optimizer):
             if c.stopped or self.evaluations >= max(self.first_fraction * self.budget, self.grid_end_until or 0):
                 if self.grid_at_end and self.first_restart_grid is not None and not self.grid_done:
                     # the grid at the stage's end (first_restart_grid_at_end), through the stage's best point
-                    self.grid_done = True
+                    self.grid_done, self.grid_windowed = True, self.grid_frames > 0
                     self.grid_pending = self._grid_batch(self._best_u[self._idx])
                 else:
                     self._end_first_stage()
@@ -474,6 +486,12 @@ class StagedCMA(Optimizer):
         elif c.stopped:
             self._stopped = True
 
+    @property
+    def window(self) -> int | None:
+        """The first training frames the batch asked for is to be scored on (``first_restart_grid_frames``), or
+        None: on every frame."""
+        return self.grid_frames if self.grid_windowed and self.grid_pending is not None else None
+
     def _grid_batch(self, u: np.ndarray) -> np.ndarray:
         """``first_restart_grid``: a point of the strong settings' cube (a converged run's best, or the stage's) on
         the grid (``grid_batch``)."""
@@ -498,20 +516,13 @@ class StagedCMA(Optimizer):
         (``first_restart_grid``), else where the first began (at another level of ``first_restart_vary``)."""
         sub = self._subspace()
         if self.grid_starts:
-            a, b = (self.first.index(x) for x in self.first_restart_grid)
-            # one cell apart, and never nearer than STAGED_FIRST_RESTART_GRID_APART (a basin, not a fine grid's cell)
-            da, db = (max(1.0 / n, D.STAGED_FIRST_RESTART_GRID_APART) for n in self.grid_points)
-            ends = [e[1] for e in self.run_ends]
-            left = [
-                s for s in self.grid_starts if not any(abs(s[a] - e[a]) <= da and abs(s[b] - e[b]) <= db for e in ends)
-            ]
+            left = starts_left(self.grid_starts, self.run_ends, self.first, self.first_restart_grid, self.grid_points)
+            self.grid_starts = left[1:]
             if left:
-                self.grid_starts = left[1:]
                 self.children[-1] = self._child(
                     sub, c.popsize, self.grid_sigma, [sub.decode(np.array(left[0])[None])[0]]
                 )
                 return
-            self.grid_starts = []
         init = None if self.first_init is None else [np.array(self.first_init)]
         if self.first_restart_vary is not None:  # this run at another level of that coordinate
             u = np.full(sub.n, 0.5) if init is None else sub.encode(init[0][None])[0]
@@ -677,11 +688,7 @@ class StagedCMA(Optimizer):
             f"checkpoint: {w}",
         )
         # the grid before runs again came after the runs' ends: none in older checkpoints
-        g = restore_grid(d, self.first, w)
-        self.first_restart_grid, self.grid_points, self.grid_sigma = g["names"], g["points"], g["sigma"]
-        self.grid_near, self.grid_at_end = g["near"], g["at_end"]
-        self.grid_end_run, self.grid_end_until = g["end_run"], g["end_until"]
-        self.grid_done, self.grid_pending, self.grid_starts = g["done"], g["pending"], g["starts"]
+        vars(self).update(restore_grid(d, self.first, w))
 
     @classmethod
     def from_state(cls, d: dict) -> StagedCMA:

@@ -52,6 +52,7 @@ class Optimizer:
     """Common steppable ask/tell machinery: counters, best-so-far, history, run loop, state."""
 
     name = "optimizer"
+    window: int | None = None  # the batch asked for is scored on the first this many training frames (None: all)
 
     def __init__(self, space: SearchSpace, seed=None, initial=None):
         if not isinstance(space, SearchSpace):

@@ -113,6 +113,7 @@ class Take:
             self.scenario = evaluator.scenario(self.train_times, capture.scenario.crop)
         else:
             self.scenario = capture.scenario.with_frames(self.train_times)
+        self.evaluator = evaluator
         self.manip, self.manip_note = take_manipulation(capture, cfg, self.scenario, self.train_times, evaluator)
         self.fps = None
         self.fps_source = None
@@ -123,6 +124,53 @@ class Take:
         return SilhouetteObjective(
             self.scenario, cameras, observed, backend=backend, names=names, model=model, ignore=ignore
         )
+
+    def window(self, k: int, model: Any, backend: str) -> SilhouetteObjective:
+        """The take's training objective on its first ``k`` training frames only (every one if it has no more):
+        the simulation stops at the last of them."""
+        cameras, observed, ignore, names = self.images
+        times = self.train_times[:k]
+        if self.evaluator is not None:
+            scenario = self.evaluator.scenario(times, self.capture.scenario.crop)
+        else:
+            scenario = self.scenario.with_frames(times)
+        return SilhouetteObjective(
+            scenario,
+            cameras,
+            [o[:k] for o in observed],
+            backend=backend,
+            names=[n[:k] for n in names],
+            model=model,
+            ignore=None if ignore is None else [None if g is None else g[:k] for g in ignore],
+        )
+
+    def window_share(self, k: int) -> float:
+        """What an evaluation on the first ``k`` training frames costs beside one on every frame: the larger of
+        their share of the frames and of the simulated time (from the settle's start)."""
+        t, settle = self.train_times, self.capture.scenario.settle_time
+        k = min(k, len(t))
+        return max(k / len(t), (t[k - 1] + settle) / (t[-1] + settle))
+
+
+def window_objective(job: Any, k: int | None) -> SilhouetteObjective | TakesObjective | None:
+    """``job``'s running objective (``FitJob``) on each take's first ``k`` training frames, or None for ``k`` None:
+    every frame (the optimiser's ``window``). Kept once built, until the running objective changes."""
+    if k is None:
+        return None
+    obj = job.objective
+    kept = job.windows.get(k)
+    if kept is None or kept[0] is not obj:
+        parts = obj.objectives if isinstance(obj, TakesObjective) else [obj]
+        w = [t.window(k, o.model, o.backend) for t, o in zip(job.takes, parts)]
+        kept = (obj, w[0] if len(w) == 1 else TakesObjective(w, obj.scales))
+        job.windows[k] = kept
+    return kept[1]
+
+
+def window_share(takes: Sequence[Take], k: int) -> float:
+    """What an evaluation on every take's first ``k`` training frames costs beside one on every frame (the dearest
+    take's ``Take.window_share``)."""
+    return max(t.window_share(k) for t in takes)
 
 
 def take_manipulation(
