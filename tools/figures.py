@@ -156,6 +156,10 @@ CENTRE_END_LINE_SEARCH = [*LINE_SEARCH, "--search", "staged_restart_grid_at_end=
 # that, then a run over the strong settings alone from the best point of all for 0.1 of the budget, before the second
 END_RUN_SEARCH = [*SHORT_END_LINE_SEARCH, "--search", "staged_restart_grid_end_run=0.1"]
 
+# the line at the first stage's end (with its passes) scored on the first 5 training frames, its best 6 cells again on
+# every frame: the line at about 0.6 of its cost, the first stage at its default length
+FRAMES_END_LINE_SEARCH = [*END_LINE_SEARCH, "--search", "staged_restart_grid_frames=5"]
+
 SOURCES = {
     "demo": {
         "argv": ["{py}", "demo_blend/build_demo.py", "--out", "out/demo", "--blend", "out/demo/demo.blend"],
@@ -992,6 +996,19 @@ SOURCES = {
         "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *END_RUN_SEARCH, "--json", "{out}"],
         "cost": "expensive",
         "what": "early_window_end_run's search on the exact-model goal's capture, seeds 5-9 (about 25 min beside "
+        "other work)",
+    },  # fmt: skip
+    "early_window_end_frames": {
+        "argv": window_cameras(*FRAMES_END_LINE_SEARCH),
+        "cost": "expensive",
+        "what": "early_window_end_line's search with the line scored on the first 5 training frames and its best 6 "
+        "cells again on every frame (the line at about 0.6 of its cost), the first stage at its default length, seeds "
+        "0-3 (about 40 min beside the CI)",
+    },  # fmt: skip
+    "end_frames_exact_5_9": {
+        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *FRAMES_END_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "early_window_end_frames's search on the exact-model goal's capture, seeds 5-9 (about 25 min beside "
         "other work)",
     },  # fmt: skip
     "around_default_all": {
