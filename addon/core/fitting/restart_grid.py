@@ -133,18 +133,20 @@ def window_best(pending: np.ndarray, f: np.ndarray, n: int) -> np.ndarray | None
 
 
 def grid_settings(opt: Any, w: str, **kw: Any) -> dict:
-    """The grid's settings of a new ``StagedCMA`` (``kw``: its ``first_restart_grid*`` arguments without the prefix),
+    """The grid's settings of a new ``StagedCMA`` (``kw``: its ``first_restart_grid*`` arguments),
     checked, as its attributes, and the grid's state before it has run."""
-    names = grid_names(kw["grid"], opt.first, w)
-    at_end = checked_flag(kw["grid_at_end"], f"{w}: first_restart_grid_at_end")
-    frames, share = window_frames(kw["grid_frames"], kw["grid_window_share"], at_end, w)
+    names = grid_names(kw["first_restart_grid"], opt.first, w)
+    at_end = checked_flag(kw["first_restart_grid_at_end"], f"{w}: first_restart_grid_at_end")
+    frames, share = window_frames(kw["first_restart_grid_frames"], kw["first_restart_grid_window_share"], at_end, w)
     return {
         "first_restart_grid": names,
-        "grid_points": grid_shape(kw["grid_points"], w),
-        "grid_near": grid_near(kw["grid_near"], opt.first, names, w),
+        "grid_points": grid_shape(kw["first_restart_grid_points"], w),
+        "grid_near": grid_near(kw["first_restart_grid_near"], opt.first, names, w),
         "grid_at_end": at_end,
-        "grid_end_run": end_run_share(kw["grid_end_run"], at_end, names, w),
-        "grid_sigma": checked_number(kw["grid_sigma"], f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True),
+        "grid_end_run": end_run_share(kw["first_restart_grid_end_run"], at_end, names, w),
+        "grid_sigma": checked_number(
+            kw["first_restart_grid_sigma"], f"{w}: first_restart_grid_sigma", 0.0, 1.0, lo_open=True
+        ),
         "grid_frames": frames,
         "grid_window_share": share,
         # the grid's points (strong settings' cube) while they wait to be evaluated, on the first frames or on all;

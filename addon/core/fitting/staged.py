@@ -200,19 +200,9 @@ class StagedCMA(Optimizer):
         self.first_restart_vary, self.first_restart_levels = restart_levels(
             first_restart_vary, first_restart_levels, self.first, w
         )
-        grid = grid_settings(
-            self,
-            w,
-            grid=first_restart_grid,
-            grid_points=first_restart_grid_points,
-            grid_near=first_restart_grid_near,
-            grid_at_end=first_restart_grid_at_end,
-            grid_end_run=first_restart_grid_end_run,
-            grid_sigma=first_restart_grid_sigma,
-            grid_frames=first_restart_grid_frames,
-            grid_window_share=first_restart_grid_window_share,
-        )
-        vars(self).update(grid)
+        # the grid's settings (the first_restart_grid* arguments), checked, and its state before it has run
+        grid = {k: v for k, v in locals().items() if k.startswith("first_restart_grid")}
+        vars(self).update(grid_settings(self, w, **grid))
         self.second_warm = checked_flag(second_warm, f"{w}: second_warm")
         self.warm_tail = checked_number(warm_tail, f"{w}: warm_tail", 0.0, 1.0)
         self.warm_tail_stuck = checked_flag(warm_tail_stuck, f"{w}: warm_tail_stuck")
