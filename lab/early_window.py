@@ -26,6 +26,7 @@ truth's but bending 8x low. Four measurements:
     python lab/early_window.py frames --k 10 --seeds 0-3 --json OUT
     python lab/early_window.py slice --points 48 --json OUT
     python lab/early_window.py around --from FITS.json --seeds 2-3 --json OUT
+    python lab/early_window.py inside --seeds 0-1 --search ... --json OUT
 
 * ``slice``: the truth's training error with bending at ``--points`` values across the search's range (the values
   a line of that many rows tries) and shear at 0.95, 1 and 1.05 of the truth's: how narrow the truth's bending
@@ -34,6 +35,10 @@ truth's but bending 8x low. Four measurements:
   strong settings (the others at the truth's, the manipulation's unknowns at 0), at the fit's own tension and shear
   and with each moved by -0.01 and +0.01 of the search's cube, one at a time (the five passes ``fit --search
   staged_restart_grid_near=0.01`` tries): where the line's lowest cell lies once tension and shear move a step.
+* ``inside``: per seed, the default fit with ``--search`` options that score the line at the first stage's end on
+  the first frames (``staged_restart_grid_frames``), run to that line in this process; the line then scored on every
+  frame too: whether the cells the first frames keep beat the stage's best point, and where every frame's best cell
+  ranks on the first frames (the line in the search's own state, not at the truth's weak settings as in ``around``).
 """
 
 from __future__ import annotations
@@ -326,9 +331,65 @@ def frames(root: str, seeds: list[int], k: int, tmp: str) -> dict:
     return {"times": times, "truth_heldout_all_times_pct": truth, "fits": rows}
 
 
+def inside(root: str, seeds: list[int], search: list[str]) -> list[dict]:
+    """Per seed, the default fit (4 cameras, quality chosen) with ``search`` (its --search, the line at the first
+    stage's end on the first frames among them) run in this process to that line; the line's cells then scored
+    on every training frame too: whether the first frames' best cells (the ones scored again) beat the stage's best
+    point, and where every frame's best cell ranks on the first frames."""
+    from clothfit.cli import build_parser
+    from clothfit.cli.fitting import fit_config
+    from clothfit.core.fitting.takes import window_objective
+
+    cap = load_capture(root)
+    rows = []
+    for s in seeds:
+        argv = ["fit", root, "--cameras", "n:4", "--times", "train", "--quality", "auto", "--seed", str(s)]
+        a = build_parser().parse_args([*argv, "--out", "unused.json", *[x for v in search for x in ("--search", v)]])
+        job = FitJob(cap, fit_config(a, cap).checked())
+        while not (job.state.stage == "search" and job.opt.window is not None):
+            if not job.step():
+                raise SystemExit(
+                    f"seed {s}: the fit ended before its line (is the line on the first frames asked for?)"
+                )
+        X = job.opt.ask()
+        ib = list(job.space.names).index("bending_stiffness")
+        bend = X[:, ib] * MASS / TRUTH["bending_stiffness"]
+        win = window_objective(job, job.opt.window)
+        fw = 100.0 * job.evaluate(X, win) / win.n_images
+        ff = 100.0 * job.evaluate(X) / job.objective.n_images
+        stage = 100.0 * job.opt.best_f / job.objective.n_images
+        order, best = np.argsort(fw, kind="stable"), int(np.argmin(ff))
+        kept = order[: D.STAGED_FIRST_RESTART_GRID_RESCORE]
+        rows.append(
+            {
+                "seed": s,
+                "line_cells": len(X),
+                "stage_best_pct": float(stage),
+                "stage_best_bending": float(job.opt.best_x[ib] * MASS / TRUTH["bending_stiffness"]),
+                "kept_bending": [float(bend[i]) for i in kept],
+                "kept_best_pct": float(ff[kept].min()),
+                "kept_beat_stage": bool(ff[kept].min() < stage),
+                "all_best_pct": float(ff[best]),
+                "all_best_bending": float(bend[best]),
+                "all_best_rank_on_first_frames": int(np.flatnonzero(order == best)[0]),
+                "all_best_beat_stage": bool(ff[best] < stage),
+                "first_frames_spread_below_bending_2": float(np.ptp(fw[bend < 2.0])),
+                "every_frame_spread_below_bending_2": float(np.ptp(ff[bend < 2.0])),
+            }
+        )
+        r = rows[-1]
+        print(
+            f"seed {s}: stage best {stage:.3f} % (bending {r['stage_best_bending']:.3g}x); the first frames' best "
+            f"{len(kept)} cells {r['kept_best_pct']:.3f} % on every frame; every frame's best cell {ff[best]:.3f} % "
+            f"(bending {bend[best]:.3g}x), rank {r['all_best_rank_on_first_frames']} of {len(X)} on the first frames",
+            flush=True,
+        )
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames", "slice", "around"))
+    ap.add_argument("what", choices=("landscape", "fits", "cameras", "frames", "slice", "around", "inside"))
     ap.add_argument("--points", type=int, default=48, help="slice: bendings across the search's range")
     ap.add_argument("--k", type=int, default=10, help="frames (and around with --first): the first K training frames")
     ap.add_argument("--first", action="store_true", help="around: score the line on the first K frames only")
@@ -354,6 +415,8 @@ def main(argv=None) -> int:
             out = {"seeds": seeds, "fits": fits(root, seeds, tmp)}
         elif a.what == "around":
             out = around(root, a.fits_json, seeds, k=a.k if a.first else None)
+        elif a.what == "inside":
+            out = {"seeds": seeds, "search": a.search, "lines": inside(root, seeds, a.search)}
         elif a.what == "frames":
             out = {"seeds": seeds, "frames": a.k, **frames(root, seeds, a.k, tmp)}
         else:

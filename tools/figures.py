@@ -1011,6 +1011,12 @@ SOURCES = {
         "what": "early_window_end_frames's search on the exact-model goal's capture, seeds 5-9 (about 25 min beside "
         "other work)",
     },  # fmt: skip
+    "inside_end_frames": {
+        "argv": ["{py}", "lab/early_window.py", "inside", "--seeds", "0-3", *FRAMES_END_LINE_SEARCH, "--json", "{out}"],
+        "cost": "expensive",
+        "what": "early_window_end_frames's fits run to their line at the first stage's end, the line scored on the "
+        "first 5 frames and on every frame: which cells each keeps, seeds 0-3 (about 25 min)",
+    },  # fmt: skip
     "around_default_all": {
         "argv": [
             "{py}",

@@ -303,6 +303,7 @@ STAGED_FIRST_RESTART_GRID_FRAMES = 0  # cma-staged: with the grid at the first s
 # first this many training frames only (the simulation stops there), then the best cells again on every frame (0: all
 # frames; docs/search.md, "The line on the first frames")
 STAGED_FIRST_RESTART_GRID_RESCORE = 6  # cma-staged: how many of those cells are scored again on every frame
+BENCH_FIRST_FRAMES = 5  # bench: the blender model also on the first this many training frames (their cost)
 STAGED_FIRST_RESTART_GRID_NEAR = None  # cma-staged: coordinates -> a step (unit cube): the grid tried again with
 # each moved by -step and by +step from the run's end, one at a time (None: at the run's own values only)
 FIT_RESTART_NEAR = ("tension_stiffness", "shear_stiffness")  # a fit of Blender's cloth: the settings the grid is

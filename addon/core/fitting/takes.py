@@ -145,11 +145,16 @@ class Take:
         )
 
     def window_share(self, k: int) -> float:
-        """What an evaluation on the first ``k`` training frames costs beside one on every frame: the larger of
-        their share of the frames and of the simulated time (from the settle's start)."""
-        t, settle = self.train_times, self.capture.scenario.settle_time
-        k = min(k, len(t))
-        return max(k / len(t), (t[k - 1] + settle) / (t[-1] + settle))
+        """What an evaluation on the first ``k`` training frames costs beside one on every frame
+        (``first_frames_share``)."""
+        return first_frames_share(self.train_times, self.capture.scenario.settle_time, k)
+
+
+def first_frames_share(times: Sequence[float], settle: float, k: int) -> float:
+    """What an evaluation on the first ``k`` of the frames at ``times`` costs beside one on all of them: the larger of
+    their share of the frames (the silhouettes) and of the simulated time from the settle's start (the simulation)."""
+    k = min(k, len(times))
+    return max(k / len(times), (times[k - 1] + settle) / (times[-1] + settle))
 
 
 def window_objective(job: Any, k: int | None) -> SilhouetteObjective | TakesObjective | None:
