@@ -1049,8 +1049,8 @@ SOURCES = {
             "{out}",
         ],
         "cost": "expensive",
-        "what": "around_default_all's lines scored on the first 5 training frames only (the simulation a third as "
-        "long; about 1.5 min)",
+        "what": "around_default_all's lines scored on the first 5 training frames only (the simulation stops at 0.5 s "
+        "instead of 1.5 s, after the same 1 s of settling; about 1.5 min)",
     },  # fmt: skip
     "early_window_fits": {
         "argv": ["{py}", "lab/early_window.py", "fits", "--seeds", "0-3", "--json", "{out}"],
