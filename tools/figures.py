@@ -1005,12 +1005,6 @@ SOURCES = {
         "cells again on every frame (the line at about 0.6 of its cost), the first stage at its default length, seeds "
         "0-3 (about 40 min beside the CI)",
     },  # fmt: skip
-    "end_frames_exact_5_9": {
-        "argv": ["{py}", "lab/fit_goals.py", "exact", "--seeds", "5-9", *FRAMES_END_LINE_SEARCH, "--json", "{out}"],
-        "cost": "expensive",
-        "what": "early_window_end_frames's search on the exact-model goal's capture, seeds 5-9 (about 25 min beside "
-        "other work)",
-    },  # fmt: skip
     "inside_end_frames": {
         "argv": ["{py}", "lab/early_window.py", "inside", "--seeds", "0-3", *FRAMES_END_LINE_SEARCH, "--json", "{out}"],
         "cost": "expensive",

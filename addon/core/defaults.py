@@ -301,7 +301,7 @@ STAGED_FIRST_RESTART_GRID_END_RUN = 0.0  # cma-staged: with the grid at the firs
 # "Paying for the line")
 STAGED_FIRST_RESTART_GRID_FRAMES = 0  # cma-staged: with the grid at the first stage's end, score its cells on the
 # first this many training frames only (the simulation stops there), then the best cells again on every frame (0: all
-# frames; docs/search.md, "The line on the first frames")
+# frames; docs/search.md, "The line on the first frames, inside the search")
 STAGED_FIRST_RESTART_GRID_RESCORE = 6  # cma-staged: how many of those cells are scored again on every frame
 BENCH_FIRST_FRAMES = 5  # bench: the blender model also on the first this many training frames (their cost)
 STAGED_FIRST_RESTART_GRID_NEAR = None  # cma-staged: coordinates -> a step (unit cube): the grid tried again with
