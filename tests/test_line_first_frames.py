@@ -134,18 +134,9 @@ def test_fitjob_scores_the_line_on_the_first_frames(tmp_path):
     (the same values a job trained on those frames alone gives), counted at their share of the simulation."""
     from clothfit.core.fitting.job import FitConfig, FitJob
     from clothfit.core.fitting.takes import window_objective
-    from clothfit.core.observation.capture import load_capture
-    from clothfit.core.observation.synth import synth_capture
+    from staged_support import small_blender_capture
 
-    synth_capture(
-        str(tmp_path / "cap"),
-        {"tension_stiffness": 15.0, "shear_stiffness": 5.0},
-        model={"name": "blender", "fps": 24, "quality": 5},
-        rig="ring8",
-        resolution=(45, 60),
-        noise=0.0,
-    )
-    cap = load_capture(str(tmp_path / "cap"))
+    cap = small_blender_capture(tmp_path)
     times = [0.1, 0.2, 0.3, 0.4]
     common = {"max_evaluations": 60, "train_cameras": [0, 2], "optimizer": "cma-staged", "seed": 3}
     line = {"staged_restart_grid_rows": 8, "staged_restart_grid_columns": 1, "staged_restart_grid_at_end": True}

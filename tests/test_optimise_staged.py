@@ -456,19 +456,9 @@ def test_fitjob_searches_the_strong_settings_first(tmp_path):
     """FitJob with --optimizer cma-staged: the four strong settings first, the others at the defaults
     the fit would have fixed them at; a checkpoint resumes it."""
     from clothfit.core.fitting.job import FitConfig, FitJob
-    from clothfit.core.observation.synth import synth_capture
+    from staged_support import small_blender_capture
 
-    synth_capture(
-        str(tmp_path / "cap"),
-        {"tension_stiffness": 15.0, "shear_stiffness": 5.0},
-        model={"name": "blender", "fps": 24, "quality": 5},
-        rig="ring8",
-        resolution=(45, 60),
-        noise=0.0,
-    )
-    from clothfit.core.observation.capture import load_capture
-
-    cap = load_capture(str(tmp_path / "cap"))
+    cap = small_blender_capture(tmp_path)
     ck = str(tmp_path / "fit.json.checkpoint.json")
     cfg = FitConfig(optimizer="cma-staged", max_evaluations=40, train_cameras=[0, 2, 4, 6], train_times=[0.3, 0.6])
     look = FitJob(cap, cfg)
