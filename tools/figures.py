@@ -1006,7 +1006,18 @@ SOURCES = {
         "0-3 (about 40 min beside the CI)",
     },  # fmt: skip
     "early_window_end_line_cameras8": {
-        "argv": ["{py}", "lab/early_window.py", "cameras", "--n", "8", "--seeds", "0-3", *END_LINE_SEARCH, "--json", "{out}"],
+        "argv": [
+            "{py}",
+            "lab/early_window.py",
+            "cameras",
+            "--n",
+            "8",
+            "--seeds",
+            "0-3",
+            *END_LINE_SEARCH,
+            "--json",
+            "{out}",
+        ],
         "cost": "expensive",
         "what": "early_window_end_line's search with 8 training cameras instead of 4 (more views of the one take, "
         "the held-out floor on the cameras left), seeds 0-3 (about 40 min beside the CI)",
