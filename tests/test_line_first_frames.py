@@ -106,6 +106,26 @@ def test_a_line_whose_first_frames_all_explode_ends_the_stage():
     assert opt.grid_done
 
 
+def test_cells_that_explode_on_the_first_frames_are_not_scored_again():
+    kw = {"first_restart_step": 0.0, "first_fraction": 0.3, "budget": 600, "sigma0": 0.1}
+    opt = StagedCMA(space(), seed=2, first=FIRST, **kw, **WINDOW_LINE)
+    while opt.window is None:
+        X = opt.ask()
+        opt.tell(X, pulled(X))
+    X = opt.ask()
+    f = early(X)
+    f[np.argsort(f, kind="stable")[2:]] = np.inf  # all but the two best explode
+    opt.tell(X, f)
+    R = opt.ask()
+    assert len(R) == 2 and np.allclose(R, X[np.argsort(early(X), kind="stable")[:2]])
+    resumed = roundtrip(opt)  # a checkpoint holding the two cells left
+    assert np.array_equal(resumed.ask(), R)
+    d = json.loads(json.dumps(opt.state_dict()))
+    d["grid_pending"] = []
+    with pytest.raises(ClothFitError, match="grid_pending"):
+        optimizer_from_state(d)
+
+
 def test_older_checkpoints_and_bad_values():
     opt = StagedCMA(space(), seed=0, first=FIRST, **WINDOW_LINE)
     d = json.loads(json.dumps(opt.state_dict()))

@@ -218,7 +218,9 @@ def restore_grid(d: dict, first: list, w: str) -> dict:
     n2, k = points[0] * points[1] * (1 + 2 * len(near)), len(first)
     pending = saved_array(d, "grid_pending", w, (None, k), allow_none=True) if "grid_pending" in d else None
     rescoring = pending is not None and frames > 0 and not windowed  # the best cells again, on every frame
-    if pending is not None and len(pending) != (min(n2, D.STAGED_FIRST_RESTART_GRID_RESCORE) if rescoring else n2):
+    # the grid's points, or after the first frames the best of them (fewer where some exploded there)
+    most = min(n2, D.STAGED_FIRST_RESTART_GRID_RESCORE) if rescoring else n2
+    if pending is not None and not (1 <= len(pending) <= most if rescoring else len(pending) == n2):
         raise ClothFitError(f"checkpoint: {w} 'grid_pending' holds {len(pending)} points, not the grid's")
     if windowed and (pending is None or not frames):
         raise ClothFitError(f"checkpoint: {w} 'grid_windowed' needs first_restart_grid_frames and a grid waiting")
